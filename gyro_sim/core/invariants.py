@@ -1,0 +1,64 @@
+"""First integrals and other monitors of the motion, from the state alone.
+
+- energy: T + V, T by eq (33) summed over the chain, V = -g . sum m^k r_c^k.
+  Conserved with a fixed base, no speed rotors and zero commands.
+- vertical_momentum: angular momentum about the vertical through O^1 (eq 79), component along
+  the upward vertical -nu (+z without gravity). Conserved with a fixed base whose first joint
+  is spherical (commands are internal moments).
+- jacobi (scenes with speed rotors): T2 + V + sum_torque A_i p_i^2 / 2, the Jacobi integral of
+  the rheonomic constraint kappa_i' = const: conserved when the energy is not.
+- linear_momentum, angular_momentum (free base): total momentum and angular momentum about
+  the chain's centre of mass; the latter is conserved under gravity, both without it.
+- Lagrange chains (all spherical, axisymmetric, fixed base): the paper's own integrals
+  (82), (85) from :mod:`gyro_sim.core.lagrange`, which check the two above independently.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .dynamics import Data, cross, lam, matvec
+from .model import Model
+
+
+def conserved(model: Model) -> tuple[str, ...]:
+    """Names of the invariants the exact motion keeps in this scene (commands zero)."""
+    names = []
+    if model.base_type != "moving":
+        names.append("jacobi" if len(model.speed_body) else "energy")
+    if model.base_type == "fixed" and not model.is_hinge[0]:
+        names.append("vertical_momentum")
+    if model.free:
+        names.append("angular_momentum")
+        if model.gravity is None:
+            names.append("linear_momentum")
+    return tuple(names)
+
+
+def invariants(model: Model, data: Data, p: np.ndarray | None, t: float) -> dict:
+    """All monitors of the current kinematics in `data` (positions and velocities filled)."""
+    m, h, J, w, v = model.mass, data.h, data.J, data.w, data.v_o
+    lam_w, _ = lam(model, data, p, None)
+    ang = matvec(J, w) + cross(h, v)  # angular momentum about the origin, lambda excluded
+    lin = m[:, None] * v + cross(w, h)
+    # (33): 2T = w.A.w + 2 m v0.(w x c) + m v0^2 (here about the origin) + rotor terms
+    T = 0.5 * float(np.sum(w * ang) + np.sum(v * lin))
+    lam_speed_dot = 0.0
+    if model.lam_speed is not None:
+        lam_speed_dot = float(np.sum(w * matvec(data.R, model.lam_speed)))  # 2 sum A_i (w.e_i) kappa_i' / 2
+        T += lam_speed_dot + 0.5 * float(np.sum(model.speed_A * model.speed_rate**2))
+    if p is not None:
+        T += 0.5 * float(np.sum(model.torque_A * p**2))
+    V = 0.0 if model.gravity is None else -float(model.gravity @ h.sum(axis=0))
+    out = {"energy": T + V, "kinetic": T, "potential": V}
+    if model.lam_speed is not None:
+        out["jacobi"] = T + V - lam_speed_dot - float(np.sum(model.speed_A * model.speed_rate**2))
+    L = ang.sum(axis=0) + (0.0 if lam_w is None else lam_w.sum(axis=0))
+    P = lin.sum(axis=0)
+    O1 = data.O[0]
+    up = -model.down[:, 2]
+    out["vertical_momentum"] = float(up @ (L - np.cross(O1, P)))  # (79)
+    if model.free:
+        rc = h.sum(axis=0) / m.sum()
+        out["linear_momentum"] = P
+        out["angular_momentum"] = L - np.cross(rc, P)
+    return out

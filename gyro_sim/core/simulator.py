@@ -1,0 +1,293 @@
+"""The Simulator: the stable Python API of SPEC.md over model, dynamics and integrators."""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from . import dynamics as dyn
+from . import invariants as inv
+from .model import Model, compile_model, initial_state
+from .rotations import matrix_to_euler, omega_to_euler_rates
+from .scene import Scene
+
+
+class SimulationError(RuntimeError):
+    """The integration failed (non-finite state, step-size collapse); the state is kept."""
+
+
+@dataclass(frozen=True)
+class JointStates:
+    """As sensor_msgs/JointState: parallel lists."""
+
+    name: list[str]
+    position: list[float]
+    velocity: list[float]
+    effort: list[float]
+
+
+@dataclass(frozen=True)
+class Wrench:
+    """Reaction of body k-1 (or the base) on body k at O^k: R^k (eq 40), L^k (eq 48)."""
+
+    joint: str
+    frame: str  # the frame of the components: the body's own frame
+    force: np.ndarray  # (3,)
+    moment: np.ndarray  # (3,)
+
+
+@dataclass(frozen=True)
+class BodyState:
+    name: str
+    position: np.ndarray  # O^k, world
+    rotation: np.ndarray  # world_R_body (3, 3)
+    quaternion: np.ndarray  # (w, x, y, z), world from body
+    angular_velocity: np.ndarray  # w^k, world
+    velocity: np.ndarray  # velocity of O^k, world
+
+
+class ChainODE:
+    """The chain as an ODE system for the integrators: y' = f(t, y) with inputs held.
+
+    Inputs (commanded hinge moments, rotor torques) are constant between calls of
+    `hold`: the zero-order hold of `Simulator.advance`. Torque-rotor spins are not states:
+    p_i(t) = p_i(t0) + (L_i / A_i) (t - t0) (eq 29).
+    """
+
+    def __init__(self, model: Model):
+        self.model = model
+        self.data = dyn.Data(model)
+        self.size = model.size
+        self.quat_index = model.i_quat
+        self.hinge_tau: np.ndarray | None = None
+        self.L_rotor: np.ndarray | None = None
+        self.t0 = 0.0
+        self.p0 = model.torque_p0.copy() if len(model.torque_body) else None
+        self._ydot = np.zeros(model.size)
+        self.nfev = 0
+
+    def hold(self, t0: float, p0: np.ndarray | None, hinge_tau, L_rotor) -> None:
+        self.t0, self.p0, self.hinge_tau, self.L_rotor = t0, p0, hinge_tau, L_rotor
+
+    def spins(self, t: float) -> np.ndarray | None:
+        """Absolute torque-rotor spins p_i(t) (eq 29 integrated over the hold)."""
+        if self.p0 is None:
+            return None
+        if self.L_rotor is None:
+            return self.p0
+        return self.p0 + (self.L_rotor / self.model.torque_A) * (t - self.t0)
+
+    def rhs(self, t: float, y: np.ndarray, out: dyn.Evaluation | None = None) -> np.ndarray:
+        m, d = self.model, self.data
+        self.nfev += 1
+        p = self.spins(t)
+        udot = dyn.forward(m, d, t, y, self.hinge_tau, p, self.L_rotor, out)
+        u = y[m.i_vel]
+        ydot = np.empty(m.size)
+        if m.free:
+            ydot[m.i_r0] = u[m.col_base]
+        if len(m.sph_bodies):
+            # q' = 1/2 (0, w) (x) q, w in world components
+            w = d.w[m.sph_bodies]
+            q = y[m.i_quat]
+            qd = np.empty_like(q)
+            qd[:, 0] = -0.5 * np.einsum("ni,ni->n", w, q[:, 1:])
+            qd[:, 1:] = 0.5 * (q[:, :1] * w + dyn.cross(w, q[:, 1:]))
+            ydot[m.i_quat] = qd
+        ydot[m.i_phi] = u[m.col_hinge]
+        ydot[m.i_vel] = udot
+        if p is not None:
+            # kappa_i' = p_i - w . e_i (eq 18-19)
+            e_w = dyn.matvec(d.R[m.torque_body], m.torque_axis)
+            ydot[m.i_kappa] = p - np.einsum("ni,ni->n", d.w[m.torque_body], e_w)
+        return ydot
+
+    def project(self, y: np.ndarray) -> None:
+        if len(self.quat_index):
+            q = y[self.quat_index]
+            y[self.quat_index] = q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+class Simulator:
+    """Simulate a scene. See SPEC.md, "Python API".
+
+    Parameters
+    ----------
+    scene : Scene, path or mapping
+    integrator : name of the integration method (see `gyro_sim.core.integrators.INTEGRATORS`)
+    rtol, atol : tolerances of adaptive methods
+    step : step of fixed-step methods (s)
+    """
+
+    def __init__(
+        self,
+        scene: Scene | str | os.PathLike | Mapping,
+        integrator: str = "dop853",
+        rtol: float = 1e-10,
+        atol: float = 1e-12,
+        step: float = 1e-3,
+    ):
+        if not isinstance(scene, Scene):
+            from .scene_load import load_scene
+
+            scene = load_scene(scene)
+        self.scene = scene
+        self.model = compile_model(scene)
+        self.system = ChainODE(self.model)
+        self.integrator_name = integrator
+        from .integrators import make_integrator
+
+        self.integrator = make_integrator(integrator, self.system, rtol=rtol, atol=atol, step=step)
+        self.reset()
+
+    # --- state -----------------------------------------------------------------------------
+    def reset(self) -> None:
+        """Back to the scene's initial state, commands zero."""
+        m = self.model
+        self._t = 0.0
+        self._y = initial_state(m)
+        self._p = m.torque_p0.copy() if len(m.torque_body) else None
+        self._moments = np.zeros(len(m.axis_names))
+        self._cache = None
+        self.integrator.reset()
+
+    @property
+    def time(self) -> float:
+        return self._t
+
+    @property
+    def state(self) -> np.ndarray:
+        """A copy of the state vector (layout: gyro_sim.core.model)."""
+        return self._y.copy()
+
+    @property
+    def axis_names(self) -> list[str]:
+        return list(self.model.axis_names)
+
+    def set_axis_moments(self, values: Sequence[float]) -> None:
+        """Commanded axis moments (N m), one per axis in `axis_names` order, held until changed."""
+        v = np.asarray(values, dtype=float).ravel()
+        if v.shape != (len(self.model.axis_names),):
+            raise ValueError(f"expected {len(self.model.axis_names)} axis moments {self.axis_names}, got {v.size}")
+        if not np.all(np.isfinite(v)):
+            raise ValueError("axis moments must be finite")
+        self._moments = v.copy()
+
+    def _inputs(self):
+        m, v = self.model, self._moments
+        hinge_tau = L_rotor = None
+        if len(v):
+            hinge_tau = np.zeros(len(m.hinge_bodies))
+            sel = m.axis_hinge >= 0
+            hinge_tau[m.axis_hinge[sel]] = v[sel]
+            if len(m.torque_body):
+                L_rotor = np.zeros(len(m.torque_body))
+                sel = m.axis_rotor >= 0
+                L_rotor[m.axis_rotor[sel]] = v[sel]
+        return hinge_tau, L_rotor
+
+    def advance(self, dt: float) -> None:
+        """Integrate `dt` seconds of simulated time with the commands held (zero-order hold)."""
+        if not (dt > 0 and math.isfinite(dt)):
+            raise ValueError(f"dt must be a positive finite number, got {dt!r}")
+        hinge_tau, L_rotor = self._inputs()
+        self.system.hold(self._t, self._p, hinge_tau, L_rotor)
+        try:
+            y = self.integrator.advance(self._t, self._y, self._t + dt)
+        except (FloatingPointError, np.linalg.LinAlgError, ArithmeticError) as exc:
+            raise SimulationError(f"t = {self._t:.6g} s: {exc}") from exc
+        if not np.all(np.isfinite(y)):
+            raise SimulationError(f"t = {self._t:.6g} s: the state became non-finite; state kept at t = {self._t}")
+        self._p = self.system.spins(self._t + dt)
+        self._t += dt
+        self._y = y
+        self._cache = None
+
+    # --- outputs (computed on request only) ------------------------------------------------
+    def _evaluate(self) -> dyn.Evaluation:
+        """One dynamics evaluation at the current state, with everything outputs need."""
+        if self._cache is None:
+            hinge_tau, L_rotor = self._inputs()
+            self.system.hold(self._t, self._p, hinge_tau, L_rotor)
+            ev = dyn.Evaluation()
+            self.system.rhs(self._t, self._y, out=ev)
+            self._cache = ev
+        return self._cache
+
+    def _kinematics(self) -> dyn.Data:
+        d = self.system.data
+        dyn.positions(self.model, d, self._t, self._y)
+        dyn.velocities(self.model, d, self._t, self._y[self.model.i_vel])
+        return d
+
+    def body_states(self) -> list[BodyState]:
+        from .rotations import matrix_to_quat
+
+        d = self._kinematics()
+        return [
+            BodyState(name, d.O[k].copy(), d.R[k].copy(), matrix_to_quat(d.R[k]), d.w[k].copy(), d.vO[k].copy())
+            for k, name in enumerate(self.model.names)
+        ]
+
+    def joint_states(self) -> JointStates:
+        """Euler angles of spherical joints, hinge angles, rotor angles (SPEC.md)."""
+        m = self.model
+        ev = self._evaluate() if len(m.speed_body) else None
+        d = self._kinematics()
+        hinge_tau, L_rotor = self._inputs()
+        names, pos, vel, eff = [], [], [], []
+        ih = 0
+        t_of = {}
+        for i, k in enumerate(m.torque_body):
+            t_of.setdefault(int(k), []).append(i)
+        v_of = {}
+        for i, k in enumerate(m.speed_body):
+            v_of.setdefault(int(k), []).append(i)
+        y, u = self._y, self._y[m.i_vel]
+        for k, body in enumerate(m.names):
+            if m.is_hinge[k]:
+                names.append(body)
+                pos.append(float(y[m.i_phi][ih]))
+                vel.append(float(u[m.col_hinge][ih]))
+                eff.append(0.0 if hinge_tau is None else float(hinge_tau[ih]))
+                ih += 1
+            else:
+                e = matrix_to_euler(d.R[k], m.down)
+                r = omega_to_euler_rates(e, d.w[k], m.down)
+                names += [f"{body}_psi", f"{body}_theta", f"{body}_phi"]
+                pos += e.tolist()
+                vel += r.tolist()
+                eff += [0.0, 0.0, 0.0]
+            for i in t_of.get(k, []):
+                e_w = d.R[k] @ m.torque_axis[i]
+                names.append(m.torque_names[i])
+                pos.append(float(y[m.i_kappa][i]))
+                vel.append(float(self._p[i] - d.w[k] @ e_w))
+                eff.append(0.0 if L_rotor is None else float(L_rotor[i]))
+            for i in v_of.get(k, []):
+                e_w = d.R[k] @ m.speed_axis[i]
+                names.append(m.speed_names[i])
+                pos.append(float(m.speed_rate[i] * self._t))
+                vel.append(float(m.speed_rate[i]))
+                # the motor keeps kappa_i' constant: L_i = A_i p_i' = A_i (w' . e_i)
+                eff.append(float(m.speed_A[i] * (ev.acc_w[k] @ e_w)))
+        return JointStates(names, pos, vel, eff)
+
+    def wrenches(self) -> list[Wrench]:
+        """R^k (eq 40) and L^k (eq 48) at every joint, in the body's own frame."""
+        ev = self._evaluate()
+        d = self.system.data
+        R, L = dyn.reactions(self.model, d, ev.f_ang, ev.f_lin)
+        out = []
+        for k, name in enumerate(self.model.names):
+            Rk = d.R[k]
+            out.append(Wrench(name, name, Rk.T @ R[k], Rk.T @ L[k]))
+        return out
+
+    def invariants(self) -> dict[str, float]:
+        """Energy (eq 33 + gravity potential), vertical momentum about O^1, and what else applies."""
+        d = self._kinematics()
+        return inv.invariants(self.model, d, self._p, self._t)
