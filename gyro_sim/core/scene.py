@@ -17,7 +17,7 @@ BASE_TYPES = ("fixed", "moving", "free")
 ROTOR_MODES = ("torque", "speed")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Rotor:
     """A balanced, axially symmetric rotor on a carrier (THEORY.md section 1)."""
 
@@ -32,7 +32,7 @@ class Rotor:
     actuated: bool  # torque rotors only: the axial torque L_i is a commanded axis moment
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Joint:
     """The joint at O^k between body k-1 (or the base) and body k."""
 
@@ -40,7 +40,7 @@ class Joint:
     axis: np.ndarray | None = None  # hinge only: (3,) unit axis in the parent's frame
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Initial:
     """Initial state of one body's joint, as written in the scene.
 
@@ -58,7 +58,7 @@ class Initial:
     rate: float = 0.0  # hinge
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Body:
     """The carrier S_0^k of gyrostat k with its rotors."""
 
@@ -73,7 +73,7 @@ class Body:
     visual_radius: float | None = None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Base:
     """Where the chain hangs: O^1."""
 
@@ -84,7 +84,7 @@ class Base:
     velocity: np.ndarray | None = None  # free: initial velocity of O^1, world frame
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Scene:
     """A whole validated scene. `source` is the mapping it was loaded from (for logs)."""
 

@@ -1,0 +1,31 @@
+"""Finding the package's own files (config/ scenes) in every install layout.
+
+`pip install -e .` skips data_files (../shared/ROS_ON_PYPI.md), so the source tree is tried
+first, then the data_files location under sys.prefix, then the ament index.
+"""
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+
+def config_dirs() -> list[Path]:
+    dirs = [Path(__file__).resolve().parents[1] / "config", Path(sys.prefix) / "share" / "gyro_sim" / "config"]
+    for prefix in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
+        if prefix:
+            dirs.append(Path(prefix) / "share" / "gyro_sim" / "config")
+    return [d for d in dirs if d.is_dir()]
+
+
+def find_scene(name: str | os.PathLike) -> Path:
+    """A scene file by path, or by name (`double_gyro_plus` or `double_gyro_plus.yaml`) in config/."""
+    p = Path(name)
+    if p.is_file():
+        return p
+    stem = p.name if p.suffix in (".yaml", ".yml") else p.name + ".yaml"
+    for d in config_dirs():
+        if (d / stem).is_file():
+            return d / stem
+    known = sorted({f.stem for d in config_dirs() for f in d.glob("*.yaml")})
+    raise FileNotFoundError(f"scene {str(name)!r} not found (shipped scenes: {', '.join(known) or 'none'})")
