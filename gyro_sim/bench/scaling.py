@@ -1,0 +1,180 @@
+"""`gyro-sim bench scaling`: cost per dynamics evaluation and per simulated second vs chain length.
+
+Each row times one evaluation of the chain dynamics (eqs 48, 52-54 solved for u') on a
+spherical chain of n links, the cost of one simulated second with RK4 at 1 kHz (the node's
+real-time configuration), and, in the same run, Pinocchio's `aba` on the same chain when the
+`pin` package is installed (a C++ O(n) articulated-body algorithm, called from Python).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.model import compile_model, initial_state
+from ..core.scene_load import load_scene
+from ..core.simulator import ChainODE, Simulator
+from .scenes import spherical_chain
+
+DEFAULT_SIZES = (1, 2, 5, 10, 20, 50, 100)
+QUICK_SIZES = (1, 2, 5)
+RK4_STEP = 1e-3  # s: 1 kHz
+
+
+@dataclass
+class Row:
+    n: int
+    eval_us: float
+    sim_second_s: float
+    pin_aba_us: float | None
+
+    @property
+    def ratio(self) -> float | None:
+        return None if self.pin_aba_us is None else self.eval_us / self.pin_aba_us
+
+
+def best_time(fn, min_time: float = 0.2, repeats: int = 5) -> float:
+    """Best per-call time (s) over `repeats` batches of about `min_time` seconds each."""
+    fn()
+    number = 1
+    while True:
+        t0 = time.perf_counter()
+        for _ in range(number):
+            fn()
+        dt = time.perf_counter() - t0
+        if dt >= min_time / repeats or number > 1_000_000:
+            break
+        number *= 4
+    best = dt / number
+    for _ in range(repeats - 1):
+        t0 = time.perf_counter()
+        for _ in range(number):
+            fn()
+        best = min(best, (time.perf_counter() - t0) / number)
+    return best
+
+
+def pin_aba_time(scene_dict: dict, min_time: float) -> float | None:
+    """Per-call time of pinocchio.aba on the same chain, or None without pinocchio."""
+    try:
+        import pinocchio as pin
+    except ImportError:
+        return None
+    model = pin.Model()
+    parent = 0
+    for k, b in enumerate(scene_dict["bodies"]):
+        placement = pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.0 if k == 0 else 0.2]))
+        parent = model.addJoint(parent, pin.JointModelSpherical(), placement, b["name"])
+        m, c = b["mass"], np.array(b["com"])
+        I_O = np.diag([b["inertia"]["transverse"]] * 2 + [b["inertia"]["axial"]])
+        I_c = I_O - m * (c @ c * np.eye(3) - np.outer(c, c))
+        model.appendBodyToJoint(parent, pin.Inertia(m, c, I_c), pin.SE3.Identity())
+    model.gravity.linear = np.array([0.0, 0.0, -9.81])
+    data = model.createData()
+    q = pin.randomConfiguration(model, -np.ones(model.nq), np.ones(model.nq))
+    v = np.random.default_rng(0).normal(size=model.nv)
+    tau = np.zeros(model.nv)
+    return best_time(lambda: pin.aba(model, data, q, v, tau), min_time)
+
+
+def measure(sizes=DEFAULT_SIZES, min_time: float = 0.3, progress=None) -> list[Row]:
+    rows = []
+    for i, n in enumerate(sizes):
+        sd = spherical_chain(n)
+        scene = load_scene(sd)
+        model = compile_model(scene)
+        system = ChainODE(model)
+        y = initial_state(model)
+        t_eval = best_time(lambda: system.rhs(0.0, y), min_time)
+        sim = Simulator(scene, integrator="rk4", step=RK4_STEP)
+        span = max(RK4_STEP, min(1.0, 0.05 / (4 * t_eval * 1000)))  # about 50 ms of CPU
+        span = round(span / RK4_STEP) * RK4_STEP
+        t0 = time.process_time()
+        sim.advance(span)
+        sim_second = (time.process_time() - t0) / span
+        rows.append(Row(n, t_eval * 1e6, sim_second, None if (p := pin_aba_time(sd, min_time)) is None else p * 1e6))
+        if progress:
+            progress(i + 1, len(sizes))
+    return rows
+
+
+def table(rows: list[Row]) -> str:
+    lines = [
+        "| n | one evaluation (us) | one simulated second, RK4 1 kHz (s) | pinocchio aba (us) | ratio |",
+        "|---:|---:|---:|---:|---:|",
+    ]
+    for r in rows:
+        pin_s = "n/a" if r.pin_aba_us is None else f"{r.pin_aba_us:.2f}"
+        ratio = "n/a" if r.ratio is None else f"{r.ratio:.0f}x"
+        lines.append(f"| {r.n} | {r.eval_us:.1f} | {r.sim_second_s:.3f} | {pin_s} | {ratio} |")
+    if len(rows) >= 2:
+        a, b = rows[-2], rows[-1]
+        slope = np.log(b.eval_us / a.eval_us) / np.log(b.n / a.n)
+        lines.append("")
+        lines.append(f"Growth of one evaluation between n = {a.n} and {b.n}: O(n^{slope:.2f}).")
+    return "\n".join(lines)
+
+
+def plot(rows: list[Row], path: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = [r.n for r in rows]
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.loglog(n, [r.eval_us for r in rows], "o-", label="gyro_sim, one evaluation")
+    if all(r.pin_aba_us is not None for r in rows):
+        ax.loglog(n, [r.pin_aba_us for r in rows], "s--", label="pinocchio aba")
+    ax.set_xlabel("chain length n (spherical joints)")
+    ax.set_ylabel("time per evaluation (us)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+FEATURE_N = 10
+
+
+def features(quick: bool = False) -> list[tuple[str, float, float]]:
+    """Evaluation time of a scene without a feature vs with the feature present but zero."""
+    min_time = 0.05 if quick else 0.3
+    out = []
+    cases = [
+        ("gravity", spherical_chain(FEATURE_N, gravity=False), _zero_gravity(spherical_chain(FEATURE_N, gravity=False))),
+        ("rotors", spherical_chain(FEATURE_N), _zero_rotors(spherical_chain(FEATURE_N))),
+    ]
+    for name, without, with_zero in cases:
+        times = []
+        for sd in (without, with_zero):
+            model = compile_model(load_scene(sd))
+            system = ChainODE(model)
+            y = initial_state(model)
+            times.append(best_time(lambda: system.rhs(0.0, y), min_time) * 1e6)
+        out.append((name, times[0], times[1]))
+    return out
+
+
+def _zero_gravity(sd: dict) -> dict:
+    sd["gravity"] = [0.0, 0.0, 0.0]
+    return sd
+
+
+def _zero_rotors(sd: dict) -> dict:
+    zero = spherical_chain(FEATURE_N, zero_features=True)
+    for b, bz in zip(sd["bodies"], zero["bodies"]):
+        b["rotors"] = bz["rotors"]
+    return sd
+
+
+def features_table(rows) -> str:
+    lines = [
+        f"| feature (n = {FEATURE_N}) | without (us) | present but zero (us) | saved |",
+        "|---|---:|---:|---:|",
+    ]
+    for name, t0, t1 in rows:
+        lines.append(f"| {name} | {t0:.1f} | {t1:.1f} | {100 * (1 - t0 / t1):.0f} % |")
+    return "\n".join(lines)

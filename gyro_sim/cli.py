@@ -1,0 +1,130 @@
+"""`gyro-sim`: command-line tools over the core (run, bench)."""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+class Progress:
+    """A one-line progress bar on stderr (a line per 10 % when stderr is not a terminal)."""
+
+    WIDTH = 30
+
+    def __init__(self, label: str, stream=sys.stderr):
+        self.label, self.stream = label, stream
+        self.tty = stream.isatty()
+        self._last_decile = -1
+        self.t0 = time.perf_counter()
+
+    def __call__(self, done: float, total: float, extra: str = "") -> None:
+        frac = 0.0 if total <= 0 else min(1.0, done / total)
+        if self.tty:
+            bar = "#" * int(frac * self.WIDTH)
+            self.stream.write(f"\r{self.label} [{bar:<{self.WIDTH}}] {100 * frac:5.1f}% {extra}")
+            if frac >= 1.0:
+                self.stream.write("\n")
+            self.stream.flush()
+        elif int(frac * 10) > self._last_decile:
+            self._last_decile = int(frac * 10)
+            self.stream.write(f"{self.label}: {100 * frac:.0f}% {extra}\n")
+            self.stream.flush()
+
+
+def _drift(a, b) -> float:
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    scale = max(float(np.max(np.abs(a))), 1e-300)
+    return float(np.max(np.abs(b - a))) / scale
+
+
+def cmd_run(args) -> int:
+    from .core.invariants import conserved
+    from .core.scene_load import SceneError, load_scene
+    from .core.simulator import SimulationError, Simulator
+    from .paths import find_scene
+
+    try:
+        scene = load_scene(find_scene(args.scene))
+    except (SceneError, FileNotFoundError) as exc:
+        print(f"gyro-sim run: {exc}", file=sys.stderr)
+        return 2
+    sim = Simulator(scene, integrator=args.integrator, rtol=args.rtol, atol=args.atol, step=args.step)
+    inv0 = sim.invariants()
+    chunk = min(args.chunk, args.duration)
+    steps = max(1, int(round(args.duration / chunk)))
+    bar = Progress(f"{scene.name}")
+    wall0, cpu0 = time.perf_counter(), time.process_time()
+    try:
+        for i in range(steps):
+            sim.advance(args.duration / steps)
+            bar(i + 1, steps, f"t = {sim.time:.3f} s")
+    except SimulationError as exc:
+        print(f"gyro-sim run: stopped: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"\ngyro-sim run: interrupted at t = {sim.time:.3f} s", file=sys.stderr)
+    wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
+    inv1 = sim.invariants()
+    integ = sim.integrator
+    print(f"scene:                     {scene.name} ({len(scene.bodies)} bodies, {sim.model.N} velocities)")
+    print(f"integrator:                {args.integrator} (rtol {args.rtol:g}, atol {args.atol:g}, step {args.step:g} s)")
+    print(f"simulated:                 {sim.time:.6g} s in {cpu:.3f} s CPU, {wall:.3f} s wall: real-time factor {sim.time / max(wall, 1e-9):.1f}")
+    print(f"work:                      {integ.nsteps} steps, {integ.nrejected} rejected, {sim.system.nfev} dynamics evaluations")
+    for name in conserved(sim.model):
+        print(f"{name + ' drift:':<26}{_drift(inv0[name], inv1[name]):.3e} (relative, conserved in this scene)")
+    for name in ("energy", "vertical_momentum"):
+        if name not in conserved(sim.model):
+            print(f"{name + ':':<26}{inv0[name]:.6g} -> {inv1[name]:.6g} (not conserved in this scene)")
+    return 0
+
+
+def cmd_bench_scaling(args) -> int:
+    from .bench import scaling
+
+    sizes = scaling.QUICK_SIZES if args.quick else tuple(args.sizes or scaling.DEFAULT_SIZES)
+    rows = scaling.measure(sizes, min_time=0.05 if args.quick else 0.3, progress=Progress("scaling"))
+    text = "### Scaling: cost against chain length\n\n" + scaling.table(rows)
+    feat = scaling.features(quick=args.quick)
+    text += "\n\n### Leaving out what a scene does not have\n\n" + scaling.features_table(feat)
+    print(text)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "scaling.md").write_text(text + "\n")
+    try:
+        scaling.plot(rows, str(out / "scaling.png"))
+        print(f"\nwrote {out / 'scaling.md'} and {out / 'scaling.png'}")
+    except ImportError:
+        print(f"\nwrote {out / 'scaling.md'} (install matplotlib for the plot)")
+    return 0
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="gyro-sim", description="Chains of gyrostats: offline runs and reports.")
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    r = sub.add_parser("run", help="simulate a scene offline, as fast as possible")
+    r.add_argument("--scene", required=True, help="scene file, or the name of a shipped scene (config/)")
+    r.add_argument("--duration", type=float, required=True, help="simulated seconds")
+    r.add_argument("--integrator", default="dop853", help="rk4 | dop853 | radau | lie4")
+    r.add_argument("--rtol", type=float, default=1e-10)
+    r.add_argument("--atol", type=float, default=1e-12)
+    r.add_argument("--step", type=float, default=1e-3, help="step of fixed-step methods (s)")
+    r.add_argument("--chunk", type=float, default=0.01, help="simulated seconds per advance() call")
+    r.set_defaults(fn=cmd_run)
+    b = sub.add_parser("bench", help="benchmarks and reports")
+    bsub = b.add_subparsers(dest="bench", required=True)
+    s = bsub.add_parser("scaling", help="cost per evaluation and per simulated second against chain length")
+    s.add_argument("--sizes", type=int, nargs="+")
+    s.add_argument("--quick", action="store_true", help="small sizes, short timings (CI)")
+    s.add_argument("--out", default="out/bench", help="directory for scaling.md and scaling.png")
+    s.set_defaults(fn=cmd_bench_scaling)
+    args = ap.parse_args(argv)
+    if getattr(args, "duration", 1.0) is not None and getattr(args, "duration", 1.0) <= 0:
+        ap.error("--duration must be > 0")
+    return args.fn(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
