@@ -31,11 +31,13 @@ from .rotations import quat_to_matrix
 EYE3 = np.eye(3)
 
 
+_P = np.array([1, 2, 0])
+_Q = np.array([2, 0, 1])
+
+
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise cross product of (..., 3) arrays (np.cross is slower for small stacks)."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack((a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0), axis=-1)
+    """Row-wise cross product of (..., 3) arrays (np.cross is several times slower on small stacks)."""
+    return a.take(_P, axis=-1) * b.take(_Q, axis=-1) - a.take(_Q, axis=-1) * b.take(_P, axis=-1)
 
 
 def matvec(A: np.ndarray, x: np.ndarray) -> np.ndarray:
