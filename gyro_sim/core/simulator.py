@@ -141,6 +141,9 @@ class Simulator:
         from .integrators import make_integrator
 
         self.integrator = make_integrator(integrator, self.system, rtol=rtol, atol=atol, step=step)
+        from .lagrange import LagrangeChain
+
+        self._lagrange = LagrangeChain.from_scene(scene)  # None unless a chain of Lagrange gyroscopes
         self.reset()
 
     # --- state -----------------------------------------------------------------------------
@@ -288,6 +291,19 @@ class Simulator:
         return out
 
     def invariants(self) -> dict[str, float]:
-        """Energy (eq 33 + gravity potential), vertical momentum about O^1, and what else applies."""
+        """Energy (eq 33 + gravity potential), vertical momentum about O^1, and what else applies.
+
+        Chains of Lagrange gyroscopes add the paper's own integrals in Euler angles:
+        "lagrange_82" (eq 82, = -vertical_momentum) and "lagrange_85" (eq 85, = 2 (energy - const),
+        see :func:`gyro_sim.core.lagrange.physical_invariants`).
+        """
         d = self._kinematics()
-        return inv.invariants(self.model, d, self._p, self._t)
+        out = inv.invariants(self.model, d, self._p, self._t)
+        if self._lagrange is not None:
+            from .lagrange import energy_integral_85, vertical_momentum_82
+
+            euler = np.array([matrix_to_euler(R, self.model.down) for R in d.R])
+            rates = np.array([omega_to_euler_rates(e, w, self.model.down) for e, w in zip(euler, d.w)])
+            out["lagrange_82"] = vertical_momentum_82(self._lagrange, euler, rates)  # = -vertical_momentum
+            out["lagrange_85"] = energy_integral_85(self._lagrange, euler, rates)  # = 2 (T + V - const)
+        return out

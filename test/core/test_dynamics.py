@@ -117,3 +117,14 @@ def test_commands_are_validated():
         sim.set_axis_moments([np.nan] * n)
     with pytest.raises(ValueError):
         sim.advance(-1.0)
+
+
+def test_lagrange_chain_reports_the_papers_integrals():
+    """(82) is -vertical_momentum; (85) moves with 2 x energy (eq 85 = 2 (T + V) - const)."""
+    sim = Simulator(load_scene("config/double_gyro_minus.yaml"), rtol=1e-12, atol=1e-13)
+    i0 = sim.invariants()
+    assert i0["lagrange_82"] == pytest.approx(-i0["vertical_momentum"], rel=1e-12)
+    sim2 = Simulator(load_scene("config/heavy_top.yaml"))
+    assert set(sim2.invariants()) >= {"energy", "vertical_momentum", "lagrange_82", "lagrange_85"}
+    hinge = Simulator(load_scene("config/hinge_chain.yaml")).invariants()
+    assert "lagrange_82" not in hinge
