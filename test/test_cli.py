@@ -1,0 +1,44 @@
+"""The `gyro-sim` command line: offline run and the scaling bench (quick mode)."""
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def gyro_sim(*args, **kw):
+    return subprocess.run(
+        [sys.executable, "-m", "gyro_sim.cli", *args], cwd=ROOT, capture_output=True, text=True, **kw
+    )
+
+
+def test_run_prints_summary_with_drift():
+    r = gyro_sim("run", "--scene", "heavy_top", "--duration", "0.5")
+    assert r.returncode == 0, r.stderr
+    assert "100%" in r.stderr  # progress
+    m = re.search(r"energy drift:\s+([0-9.e+-]+)", r.stdout)
+    assert m and float(m.group(1)) < 1e-8, r.stdout
+    assert "real-time factor" in r.stdout
+
+
+def test_run_refuses_bad_scene(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: x\nbase: {type: fixed}\nbodies:\n  - {name: a, joint: {type: spherical}, mass: -1, inertia: {axial: 1, transverse: 1}}\n")
+    r = gyro_sim("run", "--scene", str(bad), "--duration", "1")
+    assert r.returncode == 2
+    assert "bodies[0].mass" in r.stderr
+    r = gyro_sim("run", "--scene", "no_such_scene", "--duration", "1")
+    assert r.returncode == 2 and "shipped scenes" in r.stderr
+
+
+def test_bench_scaling_quick(tmp_path):
+    r = gyro_sim("bench", "scaling", "--quick", "--out", str(tmp_path))
+    assert r.returncode == 0, r.stderr
+    text = (tmp_path / "scaling.md").read_text()
+    rows = [line for line in text.splitlines() if re.match(r"\| \d+ \|", line)]
+    assert [int(line.split("|")[1]) for line in rows] == [1, 2, 5]
+    for line in rows:
+        cells = [c.strip() for c in line.split("|")[1:-1]]
+        assert float(cells[1]) > 0 and float(cells[2]) > 0
+    assert "| gravity |" in text and "| rotors |" in text
