@@ -40,20 +40,39 @@ def quat_conj(q: np.ndarray) -> np.ndarray:
     return q * np.array([1.0, -1.0, -1.0, -1.0])
 
 
+def _quat_outer_map() -> np.ndarray:
+    """(16, 9) map from the outer product q q^T (flattened) to |q|^2 R (flattened)."""
+    terms = {  # R[i, j] = sum of c q_a q_b over (a, b, c); indices w=0, x=1, y=2, z=3
+        (0, 0): [(0, 0, 1), (1, 1, 1), (2, 2, -1), (3, 3, -1)],
+        (0, 1): [(1, 2, 2), (0, 3, -2)],
+        (0, 2): [(1, 3, 2), (0, 2, 2)],
+        (1, 0): [(1, 2, 2), (0, 3, 2)],
+        (1, 1): [(0, 0, 1), (1, 1, -1), (2, 2, 1), (3, 3, -1)],
+        (1, 2): [(2, 3, 2), (0, 1, -2)],
+        (2, 0): [(1, 3, 2), (0, 2, -2)],
+        (2, 1): [(2, 3, 2), (0, 1, 2)],
+        (2, 2): [(0, 0, 1), (1, 1, -1), (2, 2, -1), (3, 3, 1)],
+    }
+    M = np.zeros((16, 9))
+    for (i, j), row in terms.items():
+        for a, b, c in row:
+            M[4 * a + b, 3 * i + j] += c
+    return M
+
+
+_QUAT_OUTER = _quat_outer_map()
+
+
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:
-    """Rotation matrices (..., 3, 3) of unit quaternions (..., 4)."""
-    w, x, y, z = np.moveaxis(q, -1, 0)
-    R = np.empty(q.shape[:-1] + (3, 3))
-    R[..., 0, 0] = 1.0 - 2.0 * (y * y + z * z)
-    R[..., 0, 1] = 2.0 * (x * y - w * z)
-    R[..., 0, 2] = 2.0 * (x * z + w * y)
-    R[..., 1, 0] = 2.0 * (x * y + w * z)
-    R[..., 1, 1] = 1.0 - 2.0 * (x * x + z * z)
-    R[..., 1, 2] = 2.0 * (y * z - w * x)
-    R[..., 2, 0] = 2.0 * (x * z - w * y)
-    R[..., 2, 1] = 2.0 * (y * z + w * x)
-    R[..., 2, 2] = 1.0 - 2.0 * (x * x + y * y)
-    return R
+    """Rotation matrices (..., 3, 3) of quaternions (..., 4).
+
+    The homogeneous form (|q|^2 R is quadratic in q) divided by |q|^2, so the result is a
+    rotation even for the slightly non-unit quaternions of intermediate integrator stages.
+    """
+    q = np.asarray(q, dtype=float)
+    qq = q[..., :, None] * q[..., None, :]
+    R = (qq.reshape(q.shape[:-1] + (16,)) @ _QUAT_OUTER).reshape(q.shape[:-1] + (3, 3))
+    return R / np.einsum("...i,...i->...", q, q)[..., None, None]
 
 
 def matrix_to_quat(R: np.ndarray) -> np.ndarray:
