@@ -1,0 +1,1 @@
+"""The ROS 2 side (rclpy node and tools). Only this package may import rclpy."""
