@@ -107,8 +107,21 @@ def cmd_bench_scaling(args) -> int:
     return 0
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="gyro-sim", description="Chains of gyrostats: offline runs and reports.")
+# Modules that add their own subcommands: each has `register(sub, bench)` (sub: the top-level
+# subparsers, bench: the `gyro-sim bench` subparsers) and imports heavy dependencies lazily.
+PLUGINS = (
+    "gyro_sim.io.commands",  # run --record, view, replay, recover
+    "gyro_sim.ros.commands",  # cmd (publish axis moments)
+    "gyro_sim.bench.accuracy",
+    "gyro_sim.bench.stability",
+    "gyro_sim.bench.realtime",
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    import importlib
+
+    ap = argparse.ArgumentParser(prog="gyro-sim", description="Chains of gyrostats: offline runs, logs and reports.")
     sub = ap.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("run", help="simulate a scene offline, as fast as possible")
     r.add_argument("--scene", required=True, help="scene file, or the name of a shipped scene (config/)")
@@ -126,8 +139,21 @@ def main(argv=None) -> int:
     s.add_argument("--quick", action="store_true", help="small sizes, short timings (CI)")
     s.add_argument("--out", default="out/bench", help="directory for scaling.md and scaling.png")
     s.set_defaults(fn=cmd_bench_scaling)
+    for name in PLUGINS:
+        try:
+            mod = importlib.import_module(name)
+        except ModuleNotFoundError as exc:
+            if exc.name == name:  # not built yet
+                continue
+            raise
+        mod.register(sub, bsub)
+    return ap
+
+
+def main(argv=None) -> int:
+    ap = build_parser()
     args = ap.parse_args(argv)
-    if getattr(args, "duration", 1.0) is not None and getattr(args, "duration", 1.0) <= 0:
+    if getattr(args, "duration", None) is not None and args.duration <= 0:
         ap.error("--duration must be > 0")
     return args.fn(args)
 
