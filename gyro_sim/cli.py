@@ -143,7 +143,7 @@ def build_parser() -> argparse.ArgumentParser:
         try:
             mod = importlib.import_module(name)
         except ModuleNotFoundError as exc:
-            if exc.name == name:  # not built yet
+            if exc.name and name.startswith(exc.name):  # not built yet
                 continue
             raise
         mod.register(sub, bsub)
