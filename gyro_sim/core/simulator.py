@@ -170,6 +170,17 @@ class Simulator:
     def axis_names(self) -> list[str]:
         return list(self.model.axis_names)
 
+    @property
+    def axis_moments(self) -> np.ndarray:
+        """The commanded axis moments now in force (a copy)."""
+        return self._moments.copy()
+
+    @property
+    def error_estimate(self) -> float | None:
+        """The integrator's weighted local error norm of its last accepted step (adaptive
+        methods; None for fixed-step ones): below 1 means within rtol/atol."""
+        return self.integrator.error_estimate
+
     def set_axis_moments(self, values: Sequence[float]) -> None:
         """Commanded axis moments (N m), one per axis in `axis_names` order, held until changed."""
         v = np.asarray(values, dtype=float).ravel()
