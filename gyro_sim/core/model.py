@@ -20,7 +20,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .rotations import down_frame, euler_rates_to_omega, euler_to_matrix, matrix_to_quat, quat_to_matrix
+from .rotations import (
+    axis_angle_matrix,
+    down_frame,
+    euler_rates_to_omega,
+    euler_to_matrix,
+    matrix_to_quat,
+    quat_to_matrix,
+)
 from .scene import Scene
 
 
@@ -233,8 +240,6 @@ def initial_state(model: Model) -> np.ndarray:
     for k, b in enumerate(bodies):
         ini = b.initial
         if model.is_hinge[k]:
-            from .rotations import axis_angle_matrix
-
             R = R_parent @ axis_angle_matrix(model.hinge_axis[k], ini.angle)
             w = w_parent + (R @ model.hinge_axis[k]) * ini.rate  # (50)
             phi[ihin], phid[ihin] = ini.angle, ini.rate

@@ -212,9 +212,11 @@ class Simulator:
         try:
             y = self.integrator.advance(self._t, self._y, self._t + dt)
         except (FloatingPointError, np.linalg.LinAlgError, ArithmeticError) as exc:
-            raise SimulationError(f"t = {self._t:.6g} s: {exc}") from exc
+            self.integrator.reset()  # its step-size memory is meaningless after a failure
+            raise SimulationError(f"t = {self._t:.6g} s: {exc}; state kept at t = {self._t:.6g} s") from exc
         if not np.all(np.isfinite(y)):
-            raise SimulationError(f"t = {self._t:.6g} s: the state became non-finite; state kept at t = {self._t}")
+            self.integrator.reset()
+            raise SimulationError(f"t = {self._t:.6g} s: the state became non-finite; state kept at t = {self._t:.6g} s")
         self._p = self.system.spins(self._t + dt)
         self._t += dt
         self._y = y
