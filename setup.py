@@ -7,7 +7,7 @@ package_name = "gyro_sim"
 # ROS 2 Jazzy from PyPI; a user with an apt-installed ROS skips this extra
 ROS = ["ros-jazzy-rclpy", "ros-jazzy-common-interfaces", "ros-jazzy-rmw-fastrtps-cpp"]
 # rerun-sdk (~500 MB): the 3D view of logs; kept out of the core's imports
-VIZ = ["rerun-sdk>=0.20"]
+VIZ = ["rerun-sdk>=0.41"]
 # report plots, and the peer engines the reports compare against
 BENCH = ["matplotlib>=3.6", "mujoco>=3", "pin>=3"]
 # pin (Pinocchio): the independent engine of the cross-check tests; rosbags: an independent
@@ -18,14 +18,14 @@ setup(
     name=package_name,
     version="0.1.0",
     packages=find_packages(exclude=["test", "test.*"]),
-    package_data={"gyro_sim": ["io/msg/*.msg"]},
+    package_data={"gyro_sim": ["io/msg/*/*.msg"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", glob("config/*.yaml")),
     ],
     # mcap + mcap-ros2-support: logs are written and read without ROS installed
-    install_requires=["numpy>=1.24", "scipy>=1.10", "PyYAML>=6", "mcap>=1.1", "mcap-ros2-support>=0.5"],
+    install_requires=["numpy>=1.24", "scipy>=1.10", "PyYAML>=6", "mcap>=1.6", "mcap-ros2-support>=0.5"],
     extras_require={"ros": ROS, "viz": VIZ, "bench": BENCH, "test": TEST},
     python_requires=">=3.10",
     zip_safe=True,

@@ -50,6 +50,8 @@ def cmd_run(args) -> int:
     from .core.invariants import conserved
     from .core.scene_load import SceneError, load_scene
     from .core.simulator import SimulationError, Simulator
+    from .io.mcap_log import LogError
+    from .io.messages import NonFiniteError
     from .paths import find_scene
 
     try:
@@ -63,12 +65,38 @@ def cmd_run(args) -> int:
     steps = max(1, int(round(args.duration / chunk)))
     bar = Progress(f"{scene.name}")
     wall0, cpu0 = time.perf_counter(), time.process_time()
+    record = None
     try:
-        for i in range(steps):
-            sim.advance(args.duration / steps)
-            bar(i + 1, steps, f"t = {sim.time:.3f} s")
+        if args.record:
+            import signal
+
+            from .io.record import record_run
+
+            # SIGINT / SIGTERM end the run at the next step and the log is closed cleanly
+            stop = []
+            handler = lambda signum, frame: stop.append(signum)  # noqa: E731
+            old = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+            try:
+                record = record_run(sim, args.record, duration=args.duration, chunk=chunk,
+                                    publish_rate=args.publish_rate, flush_period=args.flush_period,
+                                    progress=lambda t, total: bar(t, total, f"t = {t:.3f} s"),
+                                    stop=lambda: bool(stop))
+            finally:
+                for sig, h in old.items():
+                    signal.signal(sig, h)
+            if record.interrupted:
+                print(f"\ngyro-sim run: interrupted at t = {sim.time:.3f} s (log closed)", file=sys.stderr)
+        else:
+            for i in range(steps):
+                sim.advance(args.duration / steps)
+                bar(i + 1, steps, f"t = {sim.time:.3f} s")
     except SimulationError as exc:
         print(f"gyro-sim run: stopped: {exc}", file=sys.stderr)
+        if args.record:
+            print(f"gyro-sim run: the log up to t = {sim.time:.6g} s is in {args.record}", file=sys.stderr)
+        return 1
+    except (LogError, NonFiniteError, OSError) as exc:
+        print(f"gyro-sim run: log {args.record}: {exc}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print(f"\ngyro-sim run: interrupted at t = {sim.time:.3f} s", file=sys.stderr)
@@ -84,6 +112,10 @@ def cmd_run(args) -> int:
     for name in ("energy", "vertical_momentum"):
         if name not in conserved(sim.model):
             print(f"{name + ':':<26}{inv0[name]:.6g} -> {inv1[name]:.6g} (not conserved in this scene)")
+    if record is not None:
+        from .io.record import print_record
+
+        print_record(record)
     return 0
 
 
@@ -131,6 +163,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--atol", type=float, default=1e-12)
     r.add_argument("--step", type=float, default=1e-3, help="step of fixed-step methods (s)")
     r.add_argument("--chunk", type=float, default=0.01, help="simulated seconds per advance() call")
+    r.add_argument("--record", metavar="OUT.mcap", help="record an MCAP log (ROS 2 messages; view with gyro-sim view)")
+    r.add_argument("--publish-rate", type=float, default=100.0, help="messages per simulated second in the log (Hz)")
+    r.add_argument("--flush-period", type=float, default=1.0,
+                   help="wall-clock seconds between flushes of the log (what a crash can lose)")
     r.set_defaults(fn=cmd_run)
     b = sub.add_parser("bench", help="benchmarks and reports")
     bsub = b.add_subparsers(dest="bench", required=True)

@@ -1,0 +1,36 @@
+"""Shared fixtures of the log tests: a short recorded run with non-zero commands."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+#: hinge_chain has spherical joints, hinges, an actuated rotor: every kind of joint state
+SCENE = ROOT / "config" / "hinge_chain.yaml"
+#: (t, axis moments) for hinge_chain's axes (wheel2, arm3, arm4)
+SCHEDULE = [(0.0, [0.001, 0.0, 0.0]), (0.1, [0.0, 0.02, -0.01]), (0.23, [-0.002, -0.01, 0.03])]
+DURATION = 0.4
+PUBLISH_RATE = 50.0
+CHUNK = 0.005
+
+
+def gyro_sim(*args, timeout=120, **kw):
+    """Run the CLI in a subprocess (the whole environment passed on: ROS_ON_PYPI.md)."""
+    return subprocess.run([sys.executable, "-m", "gyro_sim.cli", *map(str, args)], cwd=ROOT,
+                          capture_output=True, text=True, timeout=timeout, env=dict(os.environ), **kw)
+
+
+@pytest.fixture(scope="session")
+def recorded(tmp_path_factory):
+    """(path, RunRecord) of a 0.4 s hinge_chain run with commands, published at 50 Hz."""
+    from gyro_sim import Simulator, load_scene
+    from gyro_sim.io.record import record_run
+
+    path = tmp_path_factory.mktemp("log") / "run.mcap"
+    sim = Simulator(load_scene(SCENE))
+    rec = record_run(sim, path, duration=DURATION, chunk=CHUNK, publish_rate=PUBLISH_RATE, schedule=SCHEDULE)
+    return path, rec
