@@ -2,6 +2,7 @@
 
 - energy: T + V, T by eq (33) summed over the chain, V = -g . sum m^k r_c^k.
   Conserved with a fixed base, no speed rotors and zero commands.
+- angular_momentum_O1: the angular momentum vector about O^1 (3,), world frame.
 - vertical_momentum: angular momentum about the vertical through O^1 (eq 79), component along
   the upward vertical -nu (+z without gravity). Conserved with a fixed base whose first joint
   is spherical (commands are internal moments).
@@ -56,7 +57,9 @@ def invariants(model: Model, data: Data, p: np.ndarray | None, t: float) -> dict
     P = lin.sum(axis=0)
     O1 = data.O[0]
     up = -model.down[:, 2]
-    out["vertical_momentum"] = float(up @ (L - np.cross(O1, P)))  # (79)
+    H_O1 = L - np.cross(O1, P)  # angular momentum about O^1, rotors included
+    out["angular_momentum_O1"] = H_O1
+    out["vertical_momentum"] = float(up @ H_O1)  # (79)
     if model.free:
         rc = h.sum(axis=0) / m.sum()
         out["linear_momentum"] = P

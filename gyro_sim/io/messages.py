@@ -245,25 +245,12 @@ def diagnostic_numbers(msg) -> dict[str, float]:
     return out
 
 
-def angular_momentum_O1(sim) -> np.ndarray | None:
+def angular_momentum_O1(sim) -> np.ndarray:
     """Total angular momentum of the chain about O^1, world frame (3,), rotors included.
 
-    The vector whose vertical component is `invariants()["vertical_momentum"]` (eq 79):
-    H = sum_k (J^k w^k + h^k x v_o^k + lambda^k) - O^1 x P. Reads the simulator's kinematics
-    workspace; None if that is not available.
+    The vector whose vertical component is `invariants()["vertical_momentum"]` (eq 79).
     """
-    try:
-        from ..core import dynamics as dyn
-
-        m = sim.model
-        d = sim._kinematics()  # noqa: SLF001 - the core has no public vector of it yet
-        lam_w, _ = dyn.lam(m, d, sim._p, None)  # noqa: SLF001
-        ang = dyn.matvec(d.J, d.w) + dyn.cross(d.h, d.v_o)
-        lin = m.mass[:, None] * d.v_o + dyn.cross(d.w, d.h)
-        L = ang.sum(axis=0) + (0.0 if lam_w is None else lam_w.sum(axis=0))
-        return L - np.cross(d.O[0], lin.sum(axis=0))
-    except (AttributeError, ImportError):
-        return None
+    return np.asarray(sim.invariants()["angular_momentum_O1"], dtype=float)
 
 
 class Snapshot:
@@ -287,7 +274,7 @@ class Snapshot:
         self.messages[POSES] = pose_array(bodies, t)
         self.messages[TF] = tf_message(bodies, t)
         self.messages[CLOCK] = clock(t)
-        values = diagnostic_values(sim.invariants(), reference, angular_momentum_O1(sim), sim.error_estimate)
+        values = diagnostic_values(sim.invariants(), reference, None, sim.error_estimate)
         values["time"] = sim.time
         if extra:
             values.update(extra)
