@@ -18,6 +18,16 @@ def config_dirs() -> list[Path]:
     return [d for d in dirs if d.is_dir()]
 
 
+#: files in config/ that are not scenes (ROS parameter files for the node)
+NOT_SCENES = ("params.yaml",)
+
+
+def shipped_scenes() -> list[Path]:
+    """The scene files of the first config/ directory found (the source tree when present)."""
+    dirs = config_dirs()
+    return [] if not dirs else sorted(p for p in dirs[0].glob("*.yaml") if p.name not in NOT_SCENES)
+
+
 def find_scene(name: str | os.PathLike) -> Path:
     """A scene file by path, or by name (`double_gyro_plus` or `double_gyro_plus.yaml`) in config/."""
     p = Path(name)
@@ -27,5 +37,5 @@ def find_scene(name: str | os.PathLike) -> Path:
     for d in config_dirs():
         if (d / stem).is_file():
             return d / stem
-    known = sorted({f.stem for d in config_dirs() for f in d.glob("*.yaml")})
+    known = sorted({f.stem for d in config_dirs() for f in d.glob("*.yaml") if f.name not in NOT_SCENES})
     raise FileNotFoundError(f"scene {str(name)!r} not found (shipped scenes: {', '.join(known) or 'none'})")

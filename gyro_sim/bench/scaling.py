@@ -1,9 +1,11 @@
 """`gyro-sim bench scaling`: cost per dynamics evaluation and per simulated second vs chain length.
 
 Each row times one evaluation of the chain dynamics (eqs 48, 52-54 solved for u') on a
-spherical chain of n links, the cost of one simulated second with RK4 at 1 kHz (the node's
-real-time configuration), and, in the same run, Pinocchio's `aba` on the same chain when the
-`pin` package is installed (a C++ O(n) articulated-body algorithm, called from Python).
+spherical chain of n links with both backends (the numpy reference and the numba-compiled
+articulated-body recursion), the cost of one simulated second with RK4 at 1 kHz (the node's
+real-time configuration, default backend), and, in the same run, Pinocchio's `aba` on the
+same chain when the `pin` package is installed (C++ O(n) articulated-body algorithm, called
+from Python).
 """
 from __future__ import annotations
 
@@ -14,6 +16,7 @@ import numpy as np
 
 from ..core.model import compile_model, initial_state
 from ..core.scene_load import load_scene
+from ..core.fast import make_system
 from ..core.simulator import ChainODE, Simulator
 from .scenes import spherical_chain
 
@@ -25,7 +28,9 @@ RK4_STEP = 1e-3  # s: 1 kHz
 @dataclass
 class Row:
     n: int
-    eval_us: float
+    numpy_us: float
+    eval_us: float  # default backend (numba when available)
+    backend: str
     sim_second_s: float
     pin_aba_us: float | None
 
@@ -84,8 +89,11 @@ def measure(sizes=DEFAULT_SIZES, min_time: float = 0.3, progress=None) -> list[R
         sd = spherical_chain(n)
         scene = load_scene(sd)
         model = compile_model(scene)
-        system = ChainODE(model)
         y = initial_state(model)
+        reference = ChainODE(model)
+        t_numpy = best_time(lambda: reference.rhs(0.0, y), min_time)
+        system = make_system(model, "auto")
+        backend = "numpy" if isinstance(system, ChainODE) else "numba"
         t_eval = best_time(lambda: system.rhs(0.0, y), min_time)
         sim = Simulator(scene, integrator="rk4", step=RK4_STEP)
         span = max(RK4_STEP, min(1.0, 0.05 / (4 * t_eval * 1000)))  # about 50 ms of CPU
@@ -93,26 +101,29 @@ def measure(sizes=DEFAULT_SIZES, min_time: float = 0.3, progress=None) -> list[R
         t0 = time.process_time()
         sim.advance(span)
         sim_second = (time.process_time() - t0) / span
-        rows.append(Row(n, t_eval * 1e6, sim_second, None if (p := pin_aba_time(sd, min_time)) is None else p * 1e6))
+        pin_t = pin_aba_time(sd, min_time)
+        rows.append(Row(n, t_numpy * 1e6, t_eval * 1e6, backend, sim_second, None if pin_t is None else pin_t * 1e6))
         if progress:
             progress(i + 1, len(sizes))
     return rows
 
 
 def table(rows: list[Row]) -> str:
+    backend = rows[0].backend if rows else "numba"
     lines = [
-        "| n | one evaluation (us) | one simulated second, RK4 1 kHz (s) | pinocchio aba (us) | ratio |",
-        "|---:|---:|---:|---:|---:|",
+        f"| n | numpy, one evaluation (us) | {backend}, one evaluation (us) | one simulated second, RK4 1 kHz (s) "
+        f"| pinocchio aba (us) | {backend} / aba |",
+        "|---:|---:|---:|---:|---:|---:|",
     ]
     for r in rows:
         pin_s = "n/a" if r.pin_aba_us is None else f"{r.pin_aba_us:.2f}"
-        ratio = "n/a" if r.ratio is None else f"{r.ratio:.0f}x"
-        lines.append(f"| {r.n} | {r.eval_us:.1f} | {r.sim_second_s:.3f} | {pin_s} | {ratio} |")
+        ratio = "n/a" if r.ratio is None else f"{r.ratio:.1f}x"
+        lines.append(f"| {r.n} | {r.numpy_us:.1f} | {r.eval_us:.1f} | {r.sim_second_s:.3f} | {pin_s} | {ratio} |")
     if len(rows) >= 2:
         a, b = rows[-2], rows[-1]
         slope = np.log(b.eval_us / a.eval_us) / np.log(b.n / a.n)
         lines.append("")
-        lines.append(f"Growth of one evaluation between n = {a.n} and {b.n}: O(n^{slope:.2f}).")
+        lines.append(f"Growth of one {a.backend} evaluation between n = {a.n} and {b.n}: O(n^{slope:.2f}).")
     return "\n".join(lines)
 
 
@@ -124,7 +135,8 @@ def plot(rows: list[Row], path: str) -> None:
 
     n = [r.n for r in rows]
     fig, ax = plt.subplots(figsize=(6, 4))
-    ax.loglog(n, [r.eval_us for r in rows], "o-", label="gyro_sim, one evaluation")
+    ax.loglog(n, [r.numpy_us for r in rows], "o-", label="gyro_sim numpy reference")
+    ax.loglog(n, [r.eval_us for r in rows], "^-", label=f"gyro_sim {rows[0].backend}")
     if all(r.pin_aba_us is not None for r in rows):
         ax.loglog(n, [r.pin_aba_us for r in rows], "s--", label="pinocchio aba")
     ax.set_xlabel("chain length n (spherical joints)")
@@ -151,7 +163,7 @@ def features(quick: bool = False) -> list[tuple[str, float, float]]:
         times = []
         for sd in (without, with_zero):
             model = compile_model(load_scene(sd))
-            system = ChainODE(model)
+            system = ChainODE(model)  # the numpy reference: its cost follows the terms present
             y = initial_state(model)
             times.append(best_time(lambda: system.rhs(0.0, y), min_time) * 1e6)
         out.append((name, times[0], times[1]))
@@ -172,7 +184,7 @@ def _zero_rotors(sd: dict) -> dict:
 
 def features_table(rows) -> str:
     lines = [
-        f"| feature (n = {FEATURE_N}) | without (us) | present but zero (us) | saved |",
+        f"| feature (n = {FEATURE_N}, numpy reference) | without (us) | present but zero (us) | saved |",
         "|---|---:|---:|---:|",
     ]
     for name, t0, t1 in rows:

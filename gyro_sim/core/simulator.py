@@ -120,6 +120,8 @@ class Simulator:
     integrator : name of the integration method (see `gyro_sim.core.integrators.INTEGRATORS`)
     rtol, atol : tolerances of adaptive methods
     step : step of fixed-step methods (s)
+    backend : "auto" (numba-compiled O(n) articulated-body recursion when numba is there, else
+        numpy), "numba", or "numpy" (the vectorised reference of gyro_sim.core.dynamics)
     """
 
     def __init__(
@@ -129,6 +131,7 @@ class Simulator:
         rtol: float = 1e-10,
         atol: float = 1e-12,
         step: float = 1e-3,
+        backend: str = "auto",
     ):
         if not isinstance(scene, Scene):
             from .scene_load import load_scene
@@ -136,7 +139,9 @@ class Simulator:
             scene = load_scene(scene)
         self.scene = scene
         self.model = compile_model(scene)
-        self.system = ChainODE(self.model)
+        from .fast import make_system
+
+        self.system = make_system(self.model, backend)  # numba-compiled, or the numpy reference
         self.integrator_name = integrator
         from .integrators import make_integrator
 

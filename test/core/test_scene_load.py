@@ -13,9 +13,10 @@ import yaml
 
 from gyro_sim.core.scene import Scene
 from gyro_sim.core.scene_load import SceneError, load_scene
+from gyro_sim.paths import NOT_SCENES
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"
-SCENE_FILES = sorted(CONFIG.glob("*.yaml"))
+SCENE_FILES = sorted(p for p in CONFIG.glob("*.yaml") if p.name not in NOT_SCENES)
 
 # A valid scene using every feature: both inertia forms, both initial forms of a spherical
 # joint, a hinge, torque and speed rotors, visual, a fixed base with a position.

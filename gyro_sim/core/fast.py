@@ -1,0 +1,765 @@
+"""The chain dynamics compiled with numba: an O(n) articulated-body recursion (THEORY.md sec. 5).
+
+`FastChainODE` is a drop-in replacement of :class:`gyro_sim.core.simulator.ChainODE` for the
+integrators. Its `rhs(t, y)` computes what `ChainODE.rhs` computes (eqs 34-54 solved for u',
+the quaternion derivatives, the torque-rotor angle rates of eqs 18-19 and 29), but in one
+compiled kernel instead of some hundred numpy calls: the numpy path costs ~150 us of call
+overhead per evaluation for any short chain, the kernel a few microseconds.
+
+Same equations, same velocity basis, state layout and signs as :mod:`gyro_sim.core.model` and
+:mod:`gyro_sim.core.dynamics` (world components; spherical joints move with the relative
+angular velocity in world components). Two things differ, neither visible in the results
+beyond round-off (test/core/test_fast.py):
+
+- the spatial quantities of body k are taken about its own joint point O^k (world axes)
+  instead of the world origin, so neighbouring bodies differ by the translation s^k only
+  and no quantity grows with the distance from the origin;
+- the closure rows are solved by the articulated-body algorithm (Featherstone, "Rigid Body
+  Dynamics Algorithms", Springer 2008, Table 7.1) instead of forming the composite-inertia
+  matrix M (O(n^2)) and solving with it (O(n^3)): the joints are eliminated from the tip to
+  the base, then u' is recovered from the base to the tip, O(n). A spherical joint
+  transmits no moment (eq 44), so what passes through it is a 3x3 apparent mass.
+
+The articulated inertias are kept exactly symmetric: their antisymmetric round-off grows
+geometrically along a chain in this recursion (x2.5 per link on `spherical_chain`, ~1e-5 at
+n = 20, O(1) at n = 30 before the fix), while symmetric round-off does not.
+
+Pipeline of one evaluation (`_rhs_kernel`), all about O^k in world axes:
+    positions    y        -> R^k, s^k, m^k c^k, A^k (world), hinge axes e^k   (eqs 30, 50)
+    velocities   y, t     -> w^k, v(O^k), joint biases c^k = S_k' u_k         (eqs 34, 50, 53)
+    bias forces  w, v, t  -> spatial inertias, forces at u' = 0               (eqs 29, 31, 36-39, 58)
+    ABA          I, p, c  -> u'                                               (eqs 44, 51, 54)
+    y'           u', w    -> quaternion rates, phi', u', rotor angle rates    (eqs 18-19)
+
+Reactions (eqs 40, 48) are outputs and stay on the numpy path: `rhs(t, y, out=ev)` delegates
+to the `ChainODE` held inside, which fills `data` and `ev` exactly as before.
+
+Backend selection: `make_system(model, backend)` with backend "auto", "numba" or "numpy";
+`available()` tells whether numba imports. Without numba this module still imports (its
+kernels stay plain Python, far too slow to use), `FastChainODE` raises ImportError and
+"auto" gives `ChainODE`. Compilation: one signature serves every scene (model differences
+are array contents and flags), ~9 s of CPU the first time, then ~0.3 s from numba's disk
+cache (`cache=True`: `__pycache__` beside this file, a user-wide cache directory if that is
+not writable, or NUMBA_CACHE_DIR); any edit of this file invalidates the cache.
+"""
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+
+from . import dynamics as dyn
+from .model import Model
+
+try:
+    import numba
+    import numba.core.errors
+except ImportError:  # pragma: no cover - exercised only where numba is missing
+    numba = None
+
+# base kinds, as the kernel sees them
+BASE_FIXED, BASE_MOVING, BASE_FREE = 0, 1, 2
+#: the largest joint: a free base's three translations with the first body's three rotations
+MAX_JOINT_DOF = 6
+#: columns of a spherical joint (a rotation about O^k)
+SPHERICAL_DOF = 3
+#: per body, floats of the workspace: R 9, s 3, m c 3, A 9, e 3, w 3, v(O) 3, c 6, I 36, p 6,
+#: D^-1 36, lambda 3, lambda' 3
+WORK_PER_BODY = 123
+#: per velocity column: S 6, U 6, U D^-1 6, u 1
+WORK_PER_COLUMN = 19
+
+
+#: what `make_system` accepts: "auto" (numba if it works, else numpy), "numba", "numpy"
+BACKENDS = ("auto", "numba", "numpy")
+
+
+def available() -> bool:
+    """True if numba imports, i.e. `FastChainODE` can be built."""
+    return numba is not None
+
+
+def make_system(model: Model, backend: str = "auto"):
+    """The ODE system of `model` for the integrators: FastChainODE or ChainODE.
+
+    backend: "numpy" -> ChainODE; "numba" -> FastChainODE, compiled (or loaded from the disk
+    cache) now, so the first integration step does not pay for it; ImportError without numba.
+    "auto" -> as "numba" if numba imports and the kernels compile, else ChainODE with a
+    warning when numba is there but failed.
+    """
+    from .simulator import ChainODE
+
+    if backend not in BACKENDS:
+        raise ValueError(f"unknown backend {backend!r}; valid: {', '.join(BACKENDS)}")
+    if backend == "numpy" or (backend == "auto" and not available()):
+        return ChainODE(model)
+    if not available():
+        raise ImportError("the numba backend needs numba; use backend 'numpy' or 'auto'")
+    try:
+        system = FastChainODE(model)
+        system.warm_up()
+    except numba.core.errors.NumbaError as exc:
+        if backend == "numba":
+            raise
+        warnings.warn(f"numba backend unavailable ({type(exc).__name__}); using numpy",
+                      RuntimeWarning, stacklevel=2)
+        return ChainODE(model)
+    return system
+
+
+def _njit(fn):
+    """Compiled in nopython mode and cached on disk. IEEE arithmetic (no fastmath: results
+    must equal the numpy reference to round-off); numpy's error model (x / 0 -> inf rather
+    than an exception: non-finite states are caught by the integrators and the Simulator)."""
+    if numba is None:
+        return fn
+    return numba.njit(cache=True, error_model="numpy")(fn)
+
+
+# --- small fixed-size helpers (inlined by LLVM) ----------------------------------------------
+@_njit
+def _cross(a, b, out):
+    """out = a x b (3,); out must not alias a or b."""
+    out[0] = a[1] * b[2] - a[2] * b[1]
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
+
+
+@_njit
+def _cross_add(a, b, out):
+    """out += a x b (3,); out must not alias a or b."""
+    out[0] += a[1] * b[2] - a[2] * b[1]
+    out[1] += a[2] * b[0] - a[0] * b[2]
+    out[2] += a[0] * b[1] - a[1] * b[0]
+
+
+@_njit
+def _matvec(A, x, out):
+    """out = A x for A (3, 3), x (3,)."""
+    for i in range(3):
+        out[i] = A[i, 0] * x[0] + A[i, 1] * x[1] + A[i, 2] * x[2]
+
+
+@_njit
+def _dot6(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] + a[4] * b[4] + a[5] * b[5]
+
+
+@_njit
+def _skew(d, D):
+    """D = d x (the matrix of the cross product with d)."""
+    D[0, 0], D[0, 1], D[0, 2] = 0.0, -d[2], d[1]
+    D[1, 0], D[1, 1], D[1, 2] = d[2], 0.0, -d[0]
+    D[2, 0], D[2, 1], D[2, 2] = -d[1], d[0], 0.0
+
+
+@_njit
+def _quat_to_matrix(q0, q1, q2, q3, R):
+    """R (3, 3) of a quaternion (w, x, y, z), divided by |q|^2 as rotations.quat_to_matrix does
+    (a rotation even for the non-unit quaternions of integrator stages)."""
+    nn = q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3
+    R[0, 0] = (q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3) / nn
+    R[0, 1] = 2.0 * (q1 * q2 - q0 * q3) / nn
+    R[0, 2] = 2.0 * (q1 * q3 + q0 * q2) / nn
+    R[1, 0] = 2.0 * (q1 * q2 + q0 * q3) / nn
+    R[1, 1] = (q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3) / nn
+    R[1, 2] = 2.0 * (q2 * q3 - q0 * q1) / nn
+    R[2, 0] = 2.0 * (q1 * q3 - q0 * q2) / nn
+    R[2, 1] = 2.0 * (q2 * q3 + q0 * q1) / nn
+    R[2, 2] = (q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3) / nn
+
+
+@_njit
+def _inv3_sym(J, out):
+    """out = J^-1 for a symmetric positive definite J (3, 3) (adjugate; exactly symmetric)."""
+    c00 = J[1, 1] * J[2, 2] - J[1, 2] * J[1, 2]
+    c01 = J[0, 2] * J[1, 2] - J[0, 1] * J[2, 2]
+    c02 = J[0, 1] * J[1, 2] - J[0, 2] * J[1, 1]
+    c11 = J[0, 0] * J[2, 2] - J[0, 2] * J[0, 2]
+    c12 = J[0, 1] * J[0, 2] - J[0, 0] * J[1, 2]
+    c22 = J[0, 0] * J[1, 1] - J[0, 1] * J[0, 1]
+    inv_det = 1.0 / (J[0, 0] * c00 + J[0, 1] * c01 + J[0, 2] * c02)
+    out[0, 0], out[0, 1], out[0, 2] = c00 * inv_det, c01 * inv_det, c02 * inv_det
+    out[1, 0], out[1, 1], out[1, 2] = out[0, 1], c11 * inv_det, c12 * inv_det
+    out[2, 0], out[2, 1], out[2, 2] = out[0, 2], out[1, 2], c22 * inv_det
+
+
+@_njit
+def _spd_inverse(D, nk):
+    """In-place inverse of the symmetric positive definite D[:nk, :nk], nk <= MAX_JOINT_DOF
+    (Gauss-Jordan; SPD needs no pivoting)."""
+    for p in range(nk):
+        piv = 1.0 / D[p, p]
+        D[p, p] = 1.0
+        for j in range(nk):
+            D[p, j] *= piv
+        for i in range(nk):
+            if i != p:
+                f = D[i, p]
+                D[i, p] = 0.0
+                for j in range(nk):
+                    D[i, j] -= f * D[p, j]
+
+
+@_njit
+def _shift_inertia(I, d, out, Dx, T, G):
+    """out += I moved from point P to Q = P - d (world axes): X^T I X, X = [[1, 0], [-d x, 1]].
+
+    With I = [[J, H], [H^T, M]] about P: H_Q = H + d x M, J_Q = J - G - G^T - (d x M) d x with
+    G = H d x, M_Q = M. Only the upper triangles are computed: out stays exactly symmetric.
+    Dx, T, G: (3, 3) scratch.
+    """
+    _skew(d, Dx)
+    for a in range(3):
+        for b in range(3):
+            T[a, b] = Dx[a, 0] * I[3, 3 + b] + Dx[a, 1] * I[4, 3 + b] + Dx[a, 2] * I[5, 3 + b]
+            G[a, b] = I[a, 3] * Dx[0, b] + I[a, 4] * Dx[1, b] + I[a, 5] * Dx[2, b]
+    for a in range(3):
+        for b in range(3):
+            HQ = I[a, 3 + b] + T[a, b]
+            out[a, 3 + b] += HQ
+            out[3 + b, a] += HQ
+        for b in range(a, 3):
+            JQ = I[a, b] - G[a, b] - G[b, a] - (T[a, 0] * Dx[0, b] + T[a, 1] * Dx[1, b] + T[a, 2] * Dx[2, b])
+            out[a, b] += JQ
+            out[3 + a, 3 + b] += I[3 + a, 3 + b]
+            if b != a:
+                out[b, a] += JQ
+                out[3 + b, 3 + a] += I[3 + a, 3 + b]
+
+
+@_njit
+def _shift_mass(Ma, d, out, Dx, T):
+    """out += [[0, 0], [0, Ma]] moved from P to Q = P - d: the apparent mass Ma (3, 3) passed
+    through a spherical joint at P. H_Q = d x Ma, J_Q = -(d x Ma) d x, M_Q = Ma (symmetric)."""
+    _skew(d, Dx)
+    for a in range(3):
+        for b in range(3):
+            T[a, b] = Dx[a, 0] * Ma[0, b] + Dx[a, 1] * Ma[1, b] + Dx[a, 2] * Ma[2, b]
+    for a in range(3):
+        for b in range(3):
+            out[a, 3 + b] += T[a, b]
+            out[3 + b, a] += T[a, b]
+        for b in range(a, 3):
+            JQ = -(T[a, 0] * Dx[0, b] + T[a, 1] * Dx[1, b] + T[a, 2] * Dx[2, b])
+            out[a, b] += JQ
+            out[3 + a, 3 + b] += Ma[a, b]
+            if b != a:
+                out[b, a] += JQ
+                out[3 + b, 3 + a] += Ma[a, b]
+
+
+# --- stages -----------------------------------------------------------------------------------
+@_njit
+def _positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, hk, Aw, e_w):
+    """World components of each body's constants: R^k (quaternion, or eq 50 for a hinge),
+    s^k, h^k = m^k c^k, the inertia A^k about O^k (eq 30) and the hinge axis e^k."""
+    n = s.shape[0]
+    Rrel = np.empty((3, 3))
+    K = np.empty((3, 3))
+    for k in range(n):
+        i = qrow[k]
+        if is_hinge[k]:
+            # (50): body k is its parent turned by phi_k about e^k: Rrel = 1 + sin K + (1 - cos) K^2
+            phi = y[i]
+            sp, cp = math.sin(phi), 1.0 - math.cos(phi)
+            e = hinge_axis[k]
+            _skew(e, K)
+            for a in range(3):
+                for b in range(3):
+                    K2 = K[a, 0] * K[0, b] + K[a, 1] * K[1, b] + K[a, 2] * K[2, b]
+                    Rrel[a, b] = (1.0 if a == b else 0.0) + sp * K[a, b] + cp * K2
+            for a in range(3):
+                for b in range(3):
+                    if k == 0:
+                        R[0, a, b] = Rrel[a, b]
+                    else:
+                        R[k, a, b] = (R[k - 1, a, 0] * Rrel[0, b] + R[k - 1, a, 1] * Rrel[1, b]
+                                      + R[k - 1, a, 2] * Rrel[2, b])
+            _matvec(R[k], e, e_w[k])
+        else:
+            _quat_to_matrix(y[i], y[i + 1], y[i + 2], y[i + 3], R[k])
+            e_w[k, :] = 0.0
+        _matvec(R[k], s[k], s_w[k])
+        _matvec(R[k], first_moment[k], hk[k])
+        # R A R^T, exactly symmetric (see the module docstring)
+        Rk, Ak = R[k], inertia[k]
+        for a in range(3):
+            for b in range(3):
+                K[a, b] = Rk[a, 0] * Ak[0, b] + Rk[a, 1] * Ak[1, b] + Rk[a, 2] * Ak[2, b]
+        for a in range(3):
+            for b in range(a, 3):
+                Aw[k, a, b] = K[a, 0] * Rk[b, 0] + K[a, 1] * Rk[b, 1] + K[a, 2] * Rk[b, 2]
+                Aw[k, b, a] = Aw[k, a, b]
+
+
+@_njit
+def _velocities(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, i_vel,
+                s_w, e_w, w, vO, c):
+    """w^k (prefix sums of the joint rates, eqs 50, 53), v(O^k) (eq 34) and the joint bias
+    accelerations c^k = S_k' u_k about O^k (dyn.bias_accelerations are their prefix sums about
+    the origin):
+
+        spherical joint (world-component axes do not turn): c = (0, v(O^k) x w_rel)
+        hinge, (e^k)' = w^{k-1} x e^k: c = (w^{k-1} x e^k phi', v(O^k) x e^k phi')
+    """
+    n = s_w.shape[0]
+    wp = np.zeros(3)  # w^{k-1}
+    da = np.empty(3)
+    wrel = np.empty(3)
+    for k in range(n):
+        if k == 0:
+            # v(O^1): free base (a state), moving base (a W cos(W t)) or fixed
+            if base_type == BASE_FREE:
+                for a in range(3):
+                    vO[0, a] = y[i_vel + a]
+            elif base_type == BASE_MOVING:
+                cw = base_omega * math.cos(base_omega * t)
+                for a in range(3):
+                    vO[0, a] = base_amplitude[a] * cw
+            else:
+                vO[0, :] = 0.0
+        else:
+            # (34): v0^k = v0^{k-1} + w^{k-1} x s^{k-1}
+            _cross(w[k - 1], s_w[k - 1], vO[k])
+            for a in range(3):
+                vO[k, a] += vO[k - 1, a]
+        j = i_vel + own_col[k]
+        if is_hinge[k]:
+            ph = y[j]
+            for a in range(3):
+                wrel[a] = e_w[k, a] * ph  # (50): e^k phi_k'
+            _cross(wp, wrel, da)
+        else:
+            for a in range(3):
+                wrel[a] = y[j + a]
+            da[:] = 0.0
+        for a in range(3):
+            w[k, a] = wp[a] + wrel[a]
+            c[k, a] = da[a]
+        _cross(vO[k], wrel, c[k, 3:])
+        for a in range(3):
+            wp[a] = w[k, a]
+
+
+@_njit
+def _bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
+                 torque_A, p, L_rotor, has_gravity, gravity, lam_b, dlam_b, I6, pb):
+    """Spatial inertias I6 (n, 6, 6) and body forces at zero acceleration pb (n, 6) about O^k,
+    as dyn.body_forces with acc = 0 (eqs 36-39, 58; h = m c in world components):
+
+        I = [[A, h x], [(h x)^T, m 1]],  pb = V x* (I V + (lambda, 0)) + (lambda', 0) - (h x g, m g)
+
+    lambda^k = R (lam_speed^k + sum_i A_i p_i e_i) (eq 31), lambda' = R sum_i L_i e_i (eq 29).
+    lam_b, dlam_b (n, 3): scratch.
+    """
+    n = mass.shape[0]
+    if has_lam:
+        for k in range(n):
+            for a in range(3):
+                lam_b[k, a] = lam_speed[k, a]
+                dlam_b[k, a] = 0.0
+        for i in range(torque_body.shape[0]):
+            k = torque_body[i]
+            for a in range(3):
+                lam_b[k, a] += torque_A[i] * p[i] * torque_axis[i, a]
+                dlam_b[k, a] += L_rotor[i] * torque_axis[i, a]
+    mom_a = np.empty(3)
+    mom_l = np.empty(3)
+    tmp = np.empty(3)
+    for k in range(n):
+        m = mass[k]
+        hh, wk, vk = hk[k], w[k], vO[k]
+        I6[k, :, :] = 0.0
+        _skew(hh, I6[k, :3, 3:])
+        for a in range(3):
+            I6[k, 3 + a, 3 + a] = m
+            for b in range(3):
+                I6[k, a, b] = Aw[k, a, b]
+                I6[k, 3 + a, b] = I6[k, b, 3 + a]
+        # momentum about O^k: (A w + h x v + lambda, m v + w x h)
+        _matvec(Aw[k], wk, mom_a)
+        _cross_add(hh, vk, mom_a)
+        if has_lam:
+            _matvec(R[k], lam_b[k], tmp)
+            for a in range(3):
+                mom_a[a] += tmp[a]
+        _cross(wk, hh, mom_l)
+        for a in range(3):
+            mom_l[a] += m * vk[a]
+        # V x* momentum = (w x ang + v x lin, w x lin)
+        _cross(wk, mom_a, pb[k, :3])
+        _cross_add(vk, mom_l, pb[k, :3])
+        _cross(wk, mom_l, pb[k, 3:])
+        if has_lam:
+            _matvec(R[k], dlam_b[k], tmp)
+            for a in range(3):
+                pb[k, a] += tmp[a]
+        if has_gravity:
+            _cross(hh, gravity, tmp)
+            for a in range(3):
+                pb[k, a] -= tmp[a]
+                pb[k, 3 + a] -= m * gravity[a]
+
+
+@_njit
+def _joint_columns(is_hinge, own_col, base_type, e_w, S):
+    """Unit motions S_j (N, 6) of the velocity columns about their body's O^k (dyn.joint_columns
+    moved there): spherical (e_i, 0), hinge (e^k, 0), free base (0, e_i)."""
+    S[:, :] = 0.0
+    if base_type == BASE_FREE:
+        for a in range(3):
+            S[a, 3 + a] = 1.0
+    for k in range(e_w.shape[0]):
+        j = own_col[k]
+        if is_hinge[k]:
+            for a in range(3):
+                S[j, a] = e_w[k, a]
+        else:
+            for a in range(3):
+                S[j + a, a] = 1.0
+
+
+@_njit
+def _aba(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot):
+    """Articulated-body algorithm: u' (N,) of the closure rows S_j . F_subtree(k(j)) = tau_j
+    (eqs 44, 51, 54; Featherstone 2008, Table 7.1), about each body's O^k in world axes.
+
+    IA (n, 6, 6) and pA (n, 6) enter as the bodies' own inertias and bias forces and leave as
+    the articulated ones. c (n, 6): joint bias accelerations; a_base (6,): acceleration of the
+    base at O^1; tau (N,): generalized forces of the columns. U, W (N, 6), u (N,),
+    Dinv (n, 6, 6): scratch. A spherical joint (S = (1, 0)) is eliminated in closed form:
+    D = J, and only the apparent mass M - H^T J^-1 H passes to the parent.
+    """
+    n = IA.shape[0]
+    Ia = np.empty((6, 6))
+    pa = np.empty(6)
+    Ma = np.empty((3, 3))
+    JiH = np.empty((3, 3))
+    Dx = np.empty((3, 3))
+    T = np.empty((3, 3))
+    G = np.empty((3, 3))
+    # backward: I^a = I^A - U D^-1 U^T, p^a = p^A + I^a c + U D^-1 u, to the parent's O^{k-1}
+    for k in range(n - 1, -1, -1):
+        j0, j1 = col_start[k], col_start[k + 1]
+        nk = j1 - j0
+        IAk, pAk, D = IA[k], pA[k], Dinv[k]
+        if nk == SPHERICAL_DOF and not is_hinge[k]:
+            _inv3_sym(IAk[:3, :3], D)  # D = J
+            for a in range(3):
+                u[j0 + a] = tau[j0 + a] - pAk[a]
+            if k == 0:
+                continue
+            # Ma = M - H^T J^-1 H;  p^a = (tau, p^A_lin + Ma c_lin + (J^-1 H)^T u)
+            for a in range(3):
+                for b in range(3):
+                    JiH[a, b] = D[a, 0] * IAk[0, 3 + b] + D[a, 1] * IAk[1, 3 + b] + D[a, 2] * IAk[2, 3 + b]
+            for a in range(3):
+                for b in range(a, 3):
+                    Ma[a, b] = IAk[3 + a, 3 + b] - (IAk[0, 3 + a] * JiH[0, b] + IAk[1, 3 + a] * JiH[1, b]
+                                                    + IAk[2, 3 + a] * JiH[2, b])
+                    Ma[b, a] = Ma[a, b]
+            for a in range(3):
+                pa[a] = tau[j0 + a]
+                pa[3 + a] = pAk[3 + a] + (Ma[a, 0] * c[k, 3] + Ma[a, 1] * c[k, 4] + Ma[a, 2] * c[k, 5]) \
+                    + (JiH[0, a] * u[j0] + JiH[1, a] * u[j0 + 1] + JiH[2, a] * u[j0 + 2])
+            _shift_mass(Ma, s_w[k - 1], IA[k - 1], Dx, T)
+        else:
+            for j in range(j0, j1):
+                for r in range(6):
+                    U[j, r] = _dot6(IAk[r], S[j])
+                u[j] = tau[j] - _dot6(S[j], pAk)
+            for a in range(nk):
+                for b in range(a, nk):
+                    D[a, b] = _dot6(S[j0 + a], U[j0 + b])
+                    D[b, a] = D[a, b]
+            _spd_inverse(D, nk)
+            for a in range(nk):
+                for r in range(6):
+                    acc = 0.0
+                    for b in range(nk):
+                        acc += U[j0 + b, r] * D[b, a]
+                    W[j0 + a, r] = acc
+            if k == 0:
+                continue
+            for r in range(6):
+                for q in range(r, 6):
+                    acc = IAk[r, q]
+                    for a in range(nk):
+                        acc -= W[j0 + a, r] * U[j0 + a, q]
+                    Ia[r, q] = acc
+                    Ia[q, r] = acc
+            for r in range(6):
+                acc = pAk[r] + _dot6(Ia[r], c[k])
+                for a in range(nk):
+                    acc += W[j0 + a, r] * u[j0 + a]
+                pa[r] = acc
+            _shift_inertia(Ia, s_w[k - 1], IA[k - 1], Dx, T, G)
+        # forces to O^{k-1} = O^k - s^{k-1}: (n + s x f, f)
+        _cross_add(s_w[k - 1], pa[3:], pA[k - 1, :3])
+        for r in range(6):
+            pA[k - 1, r] += pa[r]
+    # forward: a = A^{k-1} + c^k, u'_k = D^-1 (u - U^T a), A^k = a + S u'_k
+    A = np.empty(6)
+    for r in range(6):
+        A[r] = a_base[r]
+    x = np.empty(MAX_JOINT_DOF)
+    for k in range(n):
+        j0, j1 = col_start[k], col_start[k + 1]
+        nk = j1 - j0
+        IAk, D = IA[k], Dinv[k]
+        if k > 0:
+            # motions from O^{k-1} to O^k: (alpha, a + alpha x s^{k-1})
+            _cross_add(A[:3], s_w[k - 1], A[3:])
+        for r in range(6):
+            A[r] += c[k, r]
+        if nk == SPHERICAL_DOF and not is_hinge[k]:
+            # U^T a = J alpha + H a_lin
+            for a in range(3):
+                x[a] = u[j0 + a] - _dot6(IAk[a], A)
+            for a in range(3):
+                udot[j0 + a] = D[a, 0] * x[0] + D[a, 1] * x[1] + D[a, 2] * x[2]
+                A[a] += udot[j0 + a]
+        else:
+            for a in range(nk):
+                x[a] = u[j0 + a] - _dot6(U[j0 + a], A)
+            for a in range(nk):
+                acc = 0.0
+                for b in range(nk):
+                    acc += D[a, b] * x[b]
+                udot[j0 + a] = acc
+            for a in range(nk):
+                for r in range(6):
+                    A[r] += S[j0 + a, r] * udot[j0 + a]
+
+
+@_njit
+def _rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
+                flags, base, t0, p0, pdot, L_rotor, tau):
+    """y' (size,) at (t, y) into ydot: what ChainODE.rhs computes.
+
+    work: float workspace of n WORK_PER_BODY + N WORK_PER_COLUMN.
+    flags (int, 7): base type, has gravity, has lambda (rotors), i_r0, i_vel, i_kappa, N.
+    base (float, 7): moving-base amplitude (3), W = 2 pi f, gravity (3).
+    Held inputs: torque-rotor spins p_i = p0_i + pdot_i (t - t0) (eq 29), their torques
+    L_rotor, the generalized forces tau (N,) of the columns (hinge commands, eq 51).
+    """
+    base_type, has_gravity, has_lam = flags[0], flags[1] != 0, flags[2] != 0
+    i_r0, i_vel, i_kap, N = flags[3], flags[4], flags[5], flags[6]
+    base_amplitude, base_omega, gravity = base[0:3], base[3], base[4:7]
+    n = mass.shape[0]
+    nt = torque_body.shape[0]
+    # workspace views
+    o = 0
+    R = work[o:o + 9 * n].reshape((n, 3, 3))
+    o += 9 * n
+    s_w = work[o:o + 3 * n].reshape((n, 3))
+    o += 3 * n
+    hk = work[o:o + 3 * n].reshape((n, 3))
+    o += 3 * n
+    Aw = work[o:o + 9 * n].reshape((n, 3, 3))
+    o += 9 * n
+    e_w = work[o:o + 3 * n].reshape((n, 3))
+    o += 3 * n
+    w = work[o:o + 3 * n].reshape((n, 3))
+    o += 3 * n
+    vO = work[o:o + 3 * n].reshape((n, 3))
+    o += 3 * n
+    c = work[o:o + 6 * n].reshape((n, 6))
+    o += 6 * n
+    I6 = work[o:o + 36 * n].reshape((n, 6, 6))
+    o += 36 * n
+    pb = work[o:o + 6 * n].reshape((n, 6))
+    o += 6 * n
+    Dinv = work[o:o + 36 * n].reshape((n, 6, 6))
+    o += 36 * n
+    lam_b = work[o:o + 3 * n].reshape((n, 3))
+    o += 3 * n
+    dlam_b = work[o:o + 3 * n].reshape((n, 3))
+    o += 3 * n
+    S = work[o:o + 6 * N].reshape((N, 6))
+    o += 6 * N
+    U = work[o:o + 6 * N].reshape((N, 6))
+    o += 6 * N
+    W = work[o:o + 6 * N].reshape((N, 6))
+    o += 6 * N
+    u = work[o:o + N]
+
+    # positions, velocities
+    _positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, hk, Aw, e_w)
+    _velocities(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, i_vel, s_w, e_w, w, vO, c)
+    # bias forces: p_i(t) = p_i(t0) + (L_i / A_i)(t - t0) (eq 29)
+    p = np.empty(nt)
+    for i in range(nt):
+        p[i] = p0[i] + pdot[i] * (t - t0)
+    _bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
+                 torque_A, p, L_rotor, has_gravity, gravity, lam_b, dlam_b, I6, pb)
+    # ABA
+    _joint_columns(is_hinge, own_col, base_type, e_w, S)
+    a_base = np.zeros(6)
+    if base_type == BASE_MOVING:
+        sw = -base_omega * base_omega * math.sin(base_omega * t)
+        for a in range(3):
+            a_base[3 + a] = base_amplitude[a] * sw
+    _aba(is_hinge, col_start, S, I6, pb, c, tau, a_base, s_w, U, W, u, Dinv, ydot[i_vel:i_vel + N])
+    # y'
+    if base_type == BASE_FREE:
+        for a in range(3):
+            ydot[i_r0 + a] = y[i_vel + a]
+    for k in range(n):
+        i = qrow[k]
+        if is_hinge[k]:
+            ydot[i] = y[i_vel + own_col[k]]  # phi_k'
+        else:
+            # q' = 1/2 (0, w) (x) q, w in world components
+            q0, q1, q2, q3 = y[i], y[i + 1], y[i + 2], y[i + 3]
+            w0, w1, w2 = w[k, 0], w[k, 1], w[k, 2]
+            ydot[i] = -0.5 * (w0 * q1 + w1 * q2 + w2 * q3)
+            ydot[i + 1] = 0.5 * (q0 * w0 + (w1 * q3 - w2 * q2))
+            ydot[i + 2] = 0.5 * (q0 * w1 + (w2 * q1 - w0 * q3))
+            ydot[i + 3] = 0.5 * (q0 * w2 + (w0 * q2 - w1 * q1))
+    e = np.empty(3)
+    for i in range(nt):
+        # kappa_i' = p_i - w . e_i (eqs 18-19)
+        k = torque_body[i]
+        _matvec(R[k], torque_axis[i], e)
+        ydot[i_kap + i] = p[i] - (w[k, 0] * e[0] + w[k, 1] * e[1] + w[k, 2] * e[2])
+
+
+@_njit
+def _normalize_quaternions(y, i_q0, nq):
+    """Quaternions y[i_q0 + 4 j : i_q0 + 4 j + 4], j < nq, to unit length in place."""
+    for j in range(nq):
+        i = i_q0 + 4 * j
+        nrm = math.sqrt(y[i] * y[i] + y[i + 1] * y[i + 1] + y[i + 2] * y[i + 2] + y[i + 3] * y[i + 3])
+        for a in range(4):
+            y[i + a] /= nrm
+
+
+class FastChainODE:
+    """The chain as an ODE system y' = f(t, y) for the integrators, compiled with numba.
+
+    Same interface and results as :class:`gyro_sim.core.simulator.ChainODE`: `size`,
+    `quat_index`, `rhs(t, y[, out])`, `project(y)`, `hold(t0, p0, hinge_tau, L_rotor)`,
+    `spins(t)`, `nfev`, `model`, `data`. `rhs(t, y)` runs the compiled kernel and returns a
+    new array (size,); `rhs(t, y, out=ev)` (outputs: reactions, rotor torques) runs the numpy
+    reference, which fills `ev` and `data` as ChainODE does.
+
+    Raises ImportError if numba is not available (see `available`).
+    """
+
+    def __init__(self, model: Model):
+        if not available():
+            raise ImportError("FastChainODE needs numba; use ChainODE")
+        from .simulator import ChainODE
+
+        self.model = model
+        self._ref = ChainODE(model)  # the numpy path: outputs; also keeps the held inputs
+        self.data = self._ref.data
+        self.size = model.size
+        self.quat_index = model.i_quat
+        self.nfev = 0
+        m, n = model, model.n
+        # per body: the y index of its quaternion (spherical) or of phi_k (hinge); the first
+        # velocity column of its own joint; the range of all its columns (a free base's
+        # translations belong to body 0)
+        qrow = np.empty(n, dtype=np.int64)
+        qrow[m.sph_bodies] = m.i_quat[:, 0]
+        qrow[m.hinge_bodies] = m.i_phi.start + np.arange(len(m.hinge_bodies))
+        own_col = np.empty(n, dtype=np.int64)
+        own_col[m.sph_bodies] = m.col_sph[:, 0]
+        own_col[m.hinge_bodies] = m.col_hinge
+        col_start = np.searchsorted(m.col_body, np.arange(n + 1)).astype(np.int64)
+        if np.any(np.diff(col_start) > MAX_JOINT_DOF):
+            raise ValueError("a joint has more than six velocity columns")
+        base_type = {"fixed": BASE_FIXED, "moving": BASE_MOVING, "free": BASE_FREE}[m.base_type]
+        has_lam = len(m.torque_body) > 0 or m.lam_speed is not None
+        flags = np.array([base_type, m.gravity is not None, has_lam, m.i_r0.start, m.i_vel.start,
+                          m.i_kappa.start, m.N], dtype=np.int64)
+        base = np.zeros(7)
+        if m.base_amplitude is not None:
+            base[0:3] = m.base_amplitude
+        base[3] = m.base_omega
+        if m.gravity is not None:
+            base[4:7] = m.gravity
+        nt = len(m.torque_body)
+
+        def f64(a, shape):
+            return np.ascontiguousarray(np.asarray(a, dtype=np.float64).reshape(shape))
+
+        self._model_args = (
+            np.ascontiguousarray(m.is_hinge, dtype=np.bool_),
+            qrow,
+            own_col,
+            col_start,
+            f64(m.hinge_axis, (n, 3)),
+            f64(m.s, (n, 3)),
+            f64(m.mass, (n,)),
+            f64(m.first_moment, (n, 3)),
+            f64(m.inertia, (n, 3, 3)),
+            f64(np.zeros((n, 3)) if m.lam_speed is None else m.lam_speed, (n, 3)),
+            np.ascontiguousarray(m.torque_body, dtype=np.int64),
+            f64(m.torque_axis, (nt, 3)),
+            f64(m.torque_A, (nt,)),
+            flags,
+            base,
+        )
+        self._work = np.zeros(n * WORK_PER_BODY + m.N * WORK_PER_COLUMN)
+        self._i_q0 = int(m.i_quat[0, 0]) if len(m.sph_bodies) else 0
+        self._nq = len(m.sph_bodies)
+        self._set_inputs(self._ref.t0, self._ref.p0, None, None)
+
+    # --- inputs ------------------------------------------------------------------------------
+    def _set_inputs(self, t0, p0, hinge_tau, L_rotor) -> None:
+        """The held inputs as kernel arguments: t0, p0, pdot = L / A, L (nt,), tau (N,)."""
+        m = self.model
+        nt = len(m.torque_body)
+        p0_ = np.zeros(nt) if p0 is None else np.array(p0, dtype=np.float64).reshape(nt)
+        L = np.zeros(nt) if L_rotor is None else np.array(L_rotor, dtype=np.float64).reshape(nt)
+        pdot = L / m.torque_A if nt else np.zeros(0)
+        tau = np.zeros(m.N)
+        if hinge_tau is not None:
+            tau[m.col_hinge] = hinge_tau  # (51): e^k . L^k = L_k
+        self._args = (self._work, *self._model_args, float(t0), p0_, pdot, L, tau)
+
+    def hold(self, t0: float, p0: np.ndarray | None, hinge_tau, L_rotor) -> None:
+        """Hold the inputs from t0 on (the zero-order hold of `Simulator.advance`)."""
+        self._ref.hold(t0, p0, hinge_tau, L_rotor)
+        self._set_inputs(t0, p0, hinge_tau, L_rotor)
+
+    def spins(self, t: float) -> np.ndarray | None:
+        """Absolute torque-rotor spins p_i(t) (eq 29 integrated over the hold)."""
+        return self._ref.spins(t)
+
+    # --- the ODE -------------------------------------------------------------------------------
+    def rhs(self, t: float, y: np.ndarray, out: dyn.Evaluation | None = None) -> np.ndarray:
+        """y' (size,) at (t, y); with `out`, by the numpy reference, which also fills `out` and
+        `data`. y: float64 (size,), contiguous and writeable as the integrators pass it (another
+        layout is correct too, but compiles one more specialization of the kernel)."""
+        self.nfev += 1
+        if out is not None:
+            return self._ref.rhs(t, y, out)
+        if y.shape != (self.size,):  # the kernel does not check its indices
+            raise ValueError(f"y must have shape ({self.size},), got {y.shape}")
+        ydot = np.empty(self.size)
+        _rhs_kernel(float(t), y, ydot, *self._args)
+        return ydot
+
+    def warm_up(self) -> None:
+        """Compile the kernels (or load them from the disk cache) by one evaluation at the
+        model's initial state; not counted in nfev."""
+        from .model import initial_state
+
+        y = initial_state(self.model)
+        self.rhs(self._ref.t0, y)
+        self.project(y)
+        self.nfev -= 1
+
+    def project(self, y: np.ndarray) -> None:
+        """Renormalise the quaternions of y (size,) in place."""
+        if y.shape != (self.size,):
+            raise ValueError(f"y must have shape ({self.size},), got {y.shape}")
+        if self._nq:
+            _normalize_quaternions(y, self._i_q0, self._nq)
