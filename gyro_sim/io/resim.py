@@ -20,6 +20,8 @@ from .mcap_log import LogError, read_info
 from .record import machine_params
 
 REQUIRED = ("integrator", "rtol", "atol", "step", "advance_dt")
+#: the node's event when command_timeout passes without a good command: moments back to zero
+COMMAND_TIMEOUT_EVENT = "command timeout"
 
 
 @dataclass
@@ -32,6 +34,7 @@ class Resimulation:
     compared: int = 0  # joint-state messages compared
     off_boundary: int = 0  # joint states not at a step boundary (not compared)
     commands: int = 0
+    rejected: int = 0  # logged commands the simulator refuses (wrong length, non-finite)
     resets: int = 0
     steps: int = 0
     sim_time: float = 0.0
@@ -99,12 +102,18 @@ def resimulate(path: str | os.PathLike, *, integrator: str | None = None, rtol: 
         elif topic == cmd_topic:
             if here_ns != t:
                 out.notes.append(f"command at t = {t / 1e9:.9g} s is not at a step boundary: applied at the next one")
-            sim.set_axis_moments(list(msg.data))
+            try:
+                sim.set_axis_moments(list(msg.data))
+            except ValueError:  # the node logs rejected commands too, and refused them the same way
+                out.rejected += 1
+                continue
             out.commands += 1
         elif topic == M.EVENTS and msg.data == "reset":
             sim.reset()
             offset = t
             out.resets += 1
+        elif topic == M.EVENTS and msg.data.startswith(COMMAND_TIMEOUT_EVENT):
+            sim.set_axis_moments([0.0] * len(sim.axis_names))
     out.sim_time = (offset + M.time_ns(sim.time)) / 1e9
     if out.compared == 0:
         out.notes.append("no joint states were compared")

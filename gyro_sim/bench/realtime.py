@@ -1,0 +1,208 @@
+"""`gyro-sim bench realtime`: the node at physics 1 kHz / publish 100 Hz, real-time factor 1.
+
+For each chain length n (spherical chains of gyro_sim.bench.scenes, RK4) the node runs in its
+own process and ROS domain, without and with recording, for a bounded simulated time, and
+writes its timing statistics (`stats_file`). Reported per run:
+
+- step time p50 / p99: wall time of one physics step (RK4, 4 dynamics evaluations);
+- publication jitter p50 / p99: |interval between two publications - 10 ms|, publisher side;
+- CPU share: CPU seconds of the node process (all threads) per wall second (1.0 = one core);
+- achieved real-time factor (simulated / wall time) and deadline misses;
+- with recording: records written, the writer thread's CPU.
+
+Nobody subscribes in these runs, so without recording the node computes joint states only;
+with recording it also computes wrenches and poses (everything published is recorded).
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+DEFAULT_SIZES = (2, 10, 20)
+QUICK_SIZES = (2,)
+PHYSICS_RATE = 1000.0
+PUBLISH_RATE = 100.0
+DEFAULT_SECONDS = 10.0
+QUICK_SECONDS = 2.0
+#: achieved real-time factor that counts as holding real time
+HOLDS = 0.99
+
+
+@dataclass
+class Run:
+    n: int
+    record: bool
+    stats: dict
+
+    def get(self, key: str, default=float("nan")):
+        v = self.stats.get(key)
+        return default if v is None else v
+
+    @property
+    def holds(self) -> bool:
+        return self.get("real_time_factor_achieved", 0.0) >= HOLDS
+
+
+def _domain(i: int) -> int:
+    return 100 + (os.getpid() * 13 + i) % 100
+
+
+#: how the node is started (another command, e.g. an installed `gyro_sim_node`, can be given)
+NODE_COMMAND = (sys.executable, "-m", "gyro_sim.ros.node")
+
+
+def run_node(n: int, record: bool, seconds: float, workdir: Path, index: int = 0, node_command=NODE_COMMAND,
+             backend: str = "auto") -> Run:
+    """One node run on spherical_chain(n); its statistics."""
+    import yaml
+
+    from .scenes import spherical_chain
+
+    scene = workdir / f"chain_{n}.yaml"
+    scene.write_text(yaml.safe_dump(spherical_chain(n), sort_keys=False))
+    stats = workdir / f"stats_{n}_{int(record)}.json"
+    params = [f"scene:={scene}", f"physics_rate:={PHYSICS_RATE}", f"publish_rate:={PUBLISH_RATE}",
+              "real_time_factor:=1.0", "integrator:=rk4", f"backend:={backend}", f"duration:={seconds}",
+              f"stats_file:={stats}"]
+    if record:
+        params.append(f"record:={workdir / f'chain_{n}.mcap'}")
+    cmd = [*node_command, "--ros-args"]
+    for p in params:
+        cmd += ["-p", p]
+    env = dict(os.environ, ROS_DOMAIN_ID=str(_domain(index)), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               ROS_LOG_DIR=str(workdir / "ros_log"), OPENBLAS_NUM_THREADS="1")
+    root = str(Path(__file__).resolve().parents[2])
+    env["PYTHONPATH"] = os.pathsep.join([root, env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        out, err = proc.communicate(timeout=3 * seconds + 20)  # an overloaded run is cut short
+    except subprocess.TimeoutExpired:
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=30)
+    if proc.returncode != 0 or not stats.exists():
+        raise RuntimeError(f"gyro_sim_node failed (n = {n}, record = {record}, exit {proc.returncode}):\n{err[-2000:]}")
+    return Run(n, record, json.loads(stats.read_text()))
+
+
+def measure(sizes=DEFAULT_SIZES, seconds: float = DEFAULT_SECONDS, progress=None, node_command=NODE_COMMAND,
+            backend: str = "auto") -> list[Run]:
+    runs = []
+    with tempfile.TemporaryDirectory(prefix="gyro_sim_realtime_") as tmp:
+        cases = [(n, rec) for n in sizes for rec in (False, True)]
+        for i, (n, rec) in enumerate(cases):
+            runs.append(run_node(n, rec, seconds, Path(tmp), i, node_command, backend))
+            if progress:
+                progress(i + 1, len(cases), f"n = {n}{' recording' if rec else ''}")
+    return runs
+
+
+def table(runs: list[Run]) -> str:
+    lines = [
+        "| n | recording | step p50 (us) | step p99 (us) | publish jitter p50 (us) | publish jitter p99 (us) "
+        "| CPU share | achieved RTF | deadline misses |",
+        "|---:|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in runs:
+        lines.append(
+            f"| {r.n} | {'yes' if r.record else 'no'} | {r.get('step_time_p50_us'):.0f} | {r.get('step_time_p99_us'):.0f} "
+            f"| {r.get('publish_jitter_p50_us'):.0f} | {r.get('publish_jitter_p99_us'):.0f} "
+            f"| {100 * r.get('cpu_share'):.0f} % | {r.get('real_time_factor_achieved'):.3f} "
+            f"| {int(r.get('deadline_misses', 0))} |"
+        )
+    held = [r.n for r in runs if r.holds and not r.record]
+    held_rec = [r.n for r in runs if r.holds and r.record]
+    lines.append("")
+    lines.append(
+        "Largest n holding real time (achieved RTF >= " + f"{HOLDS:g}): "
+        + (f"{max(held)}" if held else f"none of n = {sorted({r.n for r in runs})}")
+        + " without recording, " + (f"{max(held_rec)}" if held_rec else "none") + " with recording."
+    )
+    rec = [r for r in runs if r.record]
+    if rec:
+        lines.append("Recording: " + "; ".join(
+            f"n = {r.n}: {int(r.get('records_written', 0))} records, writer thread {r.get('recorder_thread_cpu_s'):.2f} s CPU "
+            f"in {r.get('wall_s'):.1f} s" for r in rec) + ".")
+    return "\n".join(lines)
+
+
+def plot(runs: list[Run], path: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4))
+    for rec, style in ((False, "o-"), (True, "s--")):
+        rs = [r for r in runs if r.record == rec]
+        if not rs:
+            continue
+        n = [r.n for r in rs]
+        label = "recording" if rec else "no recording"
+        a1.plot(n, [r.get("step_time_p50_us") for r in rs], style, label=f"p50, {label}")
+        a1.plot(n, [r.get("step_time_p99_us") for r in rs], style, alpha=0.5, label=f"p99, {label}")
+        a2.plot(n, [r.get("real_time_factor_achieved") for r in rs], style, label=f"achieved RTF, {label}")
+        a2.plot(n, [r.get("cpu_share") for r in rs], style, alpha=0.5, label=f"CPU share, {label}")
+    sizes = sorted({r.n for r in runs})
+    for ax in (a1, a2):
+        ax.set_xticks(sizes)
+    a1.axhline(1e6 / PHYSICS_RATE, color="k", lw=0.8, ls=":", label="physics period")
+    a1.set_xlabel("chain length n")
+    a1.set_ylabel("step time (us)")
+    a1.legend(fontsize=8)
+    a1.grid(alpha=0.3)
+    a2.axhline(1.0, color="k", lw=0.8, ls=":")
+    a2.set_xlabel("chain length n")
+    a2.set_ylabel("real-time factor / CPU share (1 = one core)")
+    a2.legend(fontsize=8)
+    a2.grid(alpha=0.3)
+    backends = ", ".join(sorted({str(r.stats.get("backend")) for r in runs}))
+    fig.suptitle(f"gyro_sim_node, physics {PHYSICS_RATE:g} Hz, publish {PUBLISH_RATE:g} Hz, RK4, {backends} dynamics")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def cmd_bench_realtime(args) -> int:
+    from ..cli import Progress
+
+    sizes = QUICK_SIZES if args.quick else tuple(args.sizes or DEFAULT_SIZES)
+    seconds = QUICK_SECONDS if args.quick else args.seconds
+    t0 = time.perf_counter()
+    try:
+        runs = measure(sizes, seconds, progress=Progress("realtime"), backend=args.backend)
+    except RuntimeError as exc:
+        print(f"gyro-sim bench realtime: {exc}", file=sys.stderr)
+        return 1
+    backends = ", ".join(sorted({str(r.stats.get("backend")) for r in runs}))
+    text = (f"### Real time: the node at physics {PHYSICS_RATE:g} Hz, publish {PUBLISH_RATE:g} Hz, RK4 "
+            f"({backends} dynamics), {seconds:g} s simulated per run\n\n" + table(runs))
+    print(text)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "realtime.md").write_text(text + "\n")
+    (out / "realtime.json").write_text(json.dumps([{"n": r.n, "record": r.record, **r.stats} for r in runs],
+                                                  indent=1, default=str))
+    try:
+        plot(runs, str(out / "realtime.png"))
+        print(f"\nwrote {out / 'realtime.md'}, realtime.json and realtime.png in {time.perf_counter() - t0:.0f} s")
+    except ImportError:
+        print(f"\nwrote {out / 'realtime.md'} and realtime.json (install matplotlib for the plot)")
+    return 0
+
+
+def register(sub, bench) -> None:
+    """Add `gyro-sim bench realtime`."""
+    r = bench.add_parser("realtime", help="the node's step time, jitter, CPU share and real-time factor (needs rclpy)")
+    r.add_argument("--sizes", type=int, nargs="+", help=f"chain lengths (default {' '.join(map(str, DEFAULT_SIZES))})")
+    r.add_argument("--seconds", type=float, default=DEFAULT_SECONDS, help="simulated seconds per run")
+    r.add_argument("--quick", action="store_true", help=f"n = 2 only, {QUICK_SECONDS:g} s runs (CI)")
+    r.add_argument("--backend", default="auto", help="dynamics of the node: auto | numba | numpy")
+    r.add_argument("--out", default="out/bench", help="directory for realtime.md, realtime.json, realtime.png")
+    r.set_defaults(fn=cmd_bench_realtime)

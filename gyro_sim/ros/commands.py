@@ -1,0 +1,130 @@
+"""`gyro-sim cmd`: publish axis-moment commands to the node (there is no `ros2 topic pub` here).
+
+    gyro-sim cmd constant 0.0 0.05 -0.03                  # one value per axis, in sim.axis_names order
+    gyro-sim cmd step --before 0 0 0 --after 0 0.05 0 --at 2
+    gyro-sim cmd sine --amplitude 0.002 0.05 0 --frequency 0.5 --seconds 10
+    gyro-sim cmd --scene hinge_chain constant 0 0.05 0    # checks the count, prints the axis names
+
+Values are N m, one per axis (with --scene, a single value stands for every axis). Commands are sent
+at --rate Hz (keep it above 1 / command_timeout of the node) from the moment the node's
+subscription is seen, the profile's time being wall seconds since then.
+"""
+from __future__ import annotations
+
+import math
+import sys
+import time
+
+import numpy as np
+
+DEFAULT_TOPIC = "/gyro_sim/axis_moments"
+DISCOVERY_TIMEOUT = 15.0
+
+
+def profile(args):
+    """f(t) -> moments (one per axis) for the chosen mode."""
+    if args.mode == "constant":
+        v = np.asarray(args.values, dtype=float)
+        return lambda t: v
+    if args.mode == "step":
+        before, after = _broadcast(args.before, args.after)
+        return lambda t: before if t < args.at else after
+    amp, freq, off = _broadcast(args.amplitude, args.frequency, args.offset)
+    return lambda t: off + amp * np.sin(2.0 * math.pi * freq * t)
+
+
+def _broadcast(*lists):
+    n = max(len(x) for x in lists)
+    out = []
+    for x in lists:
+        a = np.asarray(x, dtype=float)
+        if a.size not in (1, n):
+            raise SystemExit(f"gyro-sim cmd: per-axis lists must have one value or {n}, got {list(x)}")
+        out.append(np.broadcast_to(a, (n,)).copy())
+    return out
+
+
+def cmd_publish(args) -> int:
+    f = profile(args)
+    n = len(f(0.0))
+    if args.scene:
+        from ..core.simulator import Simulator
+        from ..paths import find_scene
+
+        axes = Simulator(find_scene(args.scene), integrator="rk4").axis_names
+        if n not in (1, len(axes)):
+            print(f"gyro-sim cmd: scene {args.scene} has {len(axes)} axes {axes}, got {n} values", file=sys.stderr)
+            return 2
+        if n == 1:
+            f0 = f
+            f = lambda t: np.broadcast_to(f0(t), (len(axes),))  # noqa: E731
+        print(f"axes: {', '.join(axes)}")
+    if not args.rate > 0:
+        print("gyro-sim cmd: --rate must be > 0", file=sys.stderr)
+        return 2
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+    from std_msgs.msg import Float64MultiArray
+
+    rclpy.init()
+    node = rclpy.create_node("gyro_sim_cmd")
+    pub = node.create_publisher(Float64MultiArray, args.topic, 10)
+    try:
+        t0 = time.monotonic()
+        while pub.get_subscription_count() == 0:
+            if time.monotonic() - t0 > DISCOVERY_TIMEOUT:
+                print(f"gyro-sim cmd: nobody subscribes to {args.topic} (is gyro_sim_node running, "
+                      f"same ROS_DOMAIN_ID?)", file=sys.stderr)
+                return 1
+            time.sleep(0.05)
+        print(f"publishing {args.mode} commands to {args.topic} at {args.rate:g} Hz"
+              + (f" for {args.seconds:g} s" if args.seconds > 0 else " (Ctrl-C to stop)"))
+        t0 = time.monotonic()
+        k = 0
+        while rclpy.ok():
+            t = k / args.rate
+            if args.seconds > 0 and t > args.seconds:
+                break
+            delay = t0 + t - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            values = [float(v) for v in f(t)]
+            pub.publish(Float64MultiArray(data=values))
+            if args.verbose:
+                print(f"t = {t:7.3f} s: {values}")
+            k += 1
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+def register(sub, bench) -> None:
+    """Add `gyro-sim cmd` to the top-level subcommands."""
+    c = sub.add_parser("cmd", help="publish axis-moment commands to a running gyro_sim_node",
+                       description=__doc__.split("\n\n", 1)[1], formatter_class=_RawFormatter)
+    c.add_argument("--topic", default=DEFAULT_TOPIC)
+    c.add_argument("--rate", type=float, default=50.0, help="messages per second (default 50)")
+    c.add_argument("--seconds", type=float, default=0.0, help="seconds to publish; 0 = until Ctrl-C")
+    c.add_argument("--scene", help="check the number of values against this scene's axes")
+    c.add_argument("-v", "--verbose", action="store_true", help="print every command sent")
+    modes = c.add_subparsers(dest="mode", required=True)
+    k = modes.add_parser("constant", help="the same moments all the time")
+    k.add_argument("values", type=float, nargs="+", help="one per axis (N m)")
+    s = modes.add_parser("step", help="--before until --at seconds, then --after")
+    s.add_argument("--before", type=float, nargs="+", default=[0.0])
+    s.add_argument("--after", type=float, nargs="+", required=True)
+    s.add_argument("--at", type=float, default=1.0, help="seconds after the start (default 1)")
+    w = modes.add_parser("sine", help="offset + amplitude sin(2 pi frequency t), per axis")
+    w.add_argument("--amplitude", type=float, nargs="+", required=True)
+    w.add_argument("--frequency", type=float, nargs="+", default=[1.0], help="Hz")
+    w.add_argument("--offset", type=float, nargs="+", default=[0.0])
+    c.set_defaults(fn=cmd_publish)
+
+
+def _RawFormatter(prog):
+    import argparse
+
+    return argparse.RawDescriptionHelpFormatter(prog)

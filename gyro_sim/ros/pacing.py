@@ -1,0 +1,149 @@
+"""Pacing a fixed-step simulation against the wall clock, and the timing statistics (no rclpy).
+
+The loop computes ahead: the state at a chunk boundary is computed *before* the wall clock
+reaches it, then the loop sleeps until the boundary's wall deadline and publishes. So a
+published stamp equals the wall time (scaled by the real-time factor) up to the wake-up
+latency of one `time.sleep`, and no timer callback per physics step is needed.
+
+A boundary reached more than one physics period after its deadline is a *deadline miss*
+(simulated and wall time then disagree by more than a step). A short lateness, up to
+MAX_CATCH_UP of wall time (a wake-up delayed by the OS on a busy machine), is made up: the
+due steps run back to back, at most MAX_CATCH_UP worth, and simulated time does not drift.
+Beyond that (the CPU does not keep up) the schedule *slips*: the wall origin moves forward by
+the whole lateness, which is never made up by a burst of steps. Simulated time then falls
+behind wall time by exactly the accumulated slips, which the achieved real-time factor shows.
+"""
+from __future__ import annotations
+
+import time
+from collections import deque
+
+import numpy as np
+
+#: longest wall time between two wake-ups of the physics loop (s): the latency of a command
+MAX_WAKE_PERIOD = 2e-3
+#: largest wall lateness (s) made up by running due steps back to back; beyond it the schedule slips
+MAX_CATCH_UP = 0.02
+#: cap on the samples kept for whole-run percentiles
+MAX_SAMPLES = 1_000_000
+
+
+def chunk_steps(steps_per_publish: int, dt: float, rtf: float) -> int:
+    """Physics steps per wake-up: the largest divisor of `steps_per_publish` (so publication
+    times fall on wake-ups) whose wall duration stays within MAX_WAKE_PERIOD; all of them when
+    running as fast as possible (rtf 0)."""
+    if rtf <= 0:
+        return steps_per_publish
+    best = 1
+    for k in range(1, steps_per_publish + 1):
+        if steps_per_publish % k == 0 and k * dt / rtf <= MAX_WAKE_PERIOD * (1 + 1e-9):
+            best = k
+    return best
+
+
+class Pacer:
+    """Wall-clock deadlines of chunk boundaries for a real-time factor (0: no waiting).
+
+    Parameters
+    ----------
+    rtf : simulated seconds per wall second (0: as fast as possible).
+    tolerance : wall lateness (s) that is not a miss: one physics period of wall time.
+    catch_up : wall lateness (s) made up without slipping (at least `tolerance`).
+    clock, sleep : injectable for tests (time.monotonic, time.sleep).
+    """
+
+    def __init__(self, rtf: float, tolerance: float, catch_up: float = MAX_CATCH_UP, clock=time.monotonic,
+                 sleep=time.sleep):
+        self.rtf = float(rtf)
+        self.tolerance = float(tolerance)
+        self.catch_up = max(float(catch_up), self.tolerance)
+        self.clock, self.sleep = clock, sleep
+        self.misses = 0
+        self.slipped = 0.0  # wall seconds given up in total
+        self.restart(0.0)
+
+    def restart(self, sim_time: float) -> None:
+        """Make `sim_time` the simulated time of now (start, after a pause or a reset)."""
+        self.origin = self.clock()
+        self.sim0 = float(sim_time)
+
+    def deadline(self, sim_time: float) -> float:
+        """The wall time (clock units) at which `sim_time` is due."""
+        return self.origin + (sim_time - self.sim0) / self.rtf
+
+    def lag(self, sim_time: float, now: float | None = None) -> float:
+        """Wall-mapped simulated time minus `sim_time` (s of simulated time): > 0 when behind."""
+        if self.rtf <= 0:
+            return 0.0
+        now = self.clock() if now is None else now
+        return (now - self.origin) * self.rtf - (sim_time - self.sim0)
+
+    def wait(self, sim_time: float) -> bool:
+        """Wait until `sim_time` is due. Returns False on a deadline miss (slipping if far behind)."""
+        if self.rtf <= 0:
+            return True
+        deadline = self.deadline(sim_time)
+        now = self.clock()
+        if now < deadline:
+            while now < deadline:
+                self.sleep(deadline - now)
+                now = self.clock()
+            return True
+        late = now - deadline
+        if late <= self.tolerance:
+            return True
+        self.misses += 1
+        if late > self.catch_up:
+            self.slipped += late
+            self.origin += late
+        return False
+
+
+class Samples:
+    """Durations (s) kept for a sliding window and for the whole run."""
+
+    def __init__(self, window: int):
+        self.window: deque[float] = deque(maxlen=window)
+        self.all: list[float] = []
+
+    def add(self, x: float) -> None:
+        self.window.append(x)
+        if len(self.all) < MAX_SAMPLES:
+            self.all.append(x)
+
+    @staticmethod
+    def _pct(xs, qs) -> list[float]:
+        if not len(xs):
+            return [float("nan")] * len(qs)
+        return [float(v) for v in np.percentile(np.fromiter(xs, float), qs)]
+
+    def window_percentiles(self, *qs) -> list[float]:
+        return self._pct(self.window, qs)
+
+    def run_percentiles(self, *qs) -> list[float]:
+        return self._pct(self.all, qs)
+
+
+class RateMeter:
+    """Simulated time against wall time over a sliding window: the achieved real-time factor."""
+
+    def __init__(self, clock=time.monotonic):
+        self.clock = clock
+        self.mark(0.0)
+        self.total_sim = 0.0
+        self.total_wall = 0.0
+
+    def mark(self, sim_time: float) -> None:
+        self._wall0, self._sim0 = self.clock(), sim_time
+
+    def window_rtf(self, sim_time: float) -> float:
+        """Achieved factor since the last mark; marks now."""
+        now = self.clock()
+        wall, sim = now - self._wall0, sim_time - self._sim0
+        self.total_sim += sim
+        self.total_wall += wall
+        self._wall0, self._sim0 = now, sim_time
+        return sim / wall if wall > 0 else float("nan")
+
+    def run_rtf(self) -> float:
+        return self.total_sim / self.total_wall if self.total_wall > 0 else float("nan")

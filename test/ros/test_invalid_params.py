@@ -1,0 +1,63 @@
+"""Invalid parameters stop the node at start, with a clear message, before anything is published."""
+from __future__ import annotations
+
+import subprocess
+import time
+
+import pytest
+
+pytest.importorskip("rclpy", reason="the ROS 2 node needs rclpy (pip install '.[ros]')")
+
+from sensor_msgs.msg import JointState  # noqa: E402
+
+from .helpers import ROOT, Client, new_domain_id, node_command, ros_env  # noqa: E402
+
+CASES = {
+    "physics_rate:=-5.0": "physics_rate: must be >= 1",
+    "publish_rate:=300.0": "publish_rate: physics_rate / publish_rate = 3.33333 must be a whole number",
+    "integrator:=euler": "integrator: unknown 'euler'; valid: rk4",
+    "scene:=no_such_scene": "scene 'no_such_scene' not found (shipped scenes:",
+    "record:=/no/such/dir/x.mcap": "record: directory /no/such/dir does not exist",
+    "real_time_factor:=fast": "real_time_factor: expected a number, got 'fast'",
+    "command_timeout:=0.0": "command_timeout: must be >= 0.001",
+    "publish_poses:=3": "publish_poses:",
+    "backend:=gpu": "backend: unknown 'gpu'; valid:",
+}
+
+
+def test_invalid_parameters_refused_before_publishing(tmp_path):
+    domain = new_domain_id()
+    client = Client(domain)
+    try:
+        client.subscribe("/joint_states", JointState)
+        env = ros_env(domain, tmp_path)
+        t0 = time.monotonic()
+        procs = {arg: subprocess.Popen(node_command(arg, "duration:=30.0"), cwd=ROOT, env=env, text=True,
+                                       stdout=subprocess.PIPE, stderr=subprocess.PIPE) for arg in CASES}
+        for arg, p in procs.items():
+            out, err = p.communicate(timeout=60)
+            assert p.returncode == 2, (arg, p.returncode, err)
+            assert "invalid parameters, nothing started" in err and CASES[arg] in err, (arg, err)
+            assert "simulated" not in out
+        assert time.monotonic() - t0 < 60
+        # a bad scene file: the scene loader's message names the key
+        bad = tmp_path / "bad.yaml"
+        bad.write_text("name: x\nbase: {type: fixed}\nbodies:\n"
+                       "  - {name: a, joint: {type: spherical}, mass: -1, inertia: {axial: 1, transverse: 1}}\n")
+        r = subprocess.run(node_command(f"scene:={bad}"), cwd=ROOT, env=env, text=True, capture_output=True,
+                           timeout=60)
+        assert r.returncode == 2 and "bodies[0].mass" in r.stderr, r.stderr
+        assert client.messages("/joint_states") == []
+    finally:
+        client.close()
+
+
+def test_shipped_params_file_runs(tmp_path):
+    """config/params.yaml starts the node (a later -p overrides it) and a bounded run exits 0."""
+    domain = new_domain_id()
+    r = subprocess.run(node_command("duration:=0.3", "physics_rate:=200.0", "publish_rate:=20.0",
+                                    params_file=ROOT / "config" / "params.yaml"),
+                       cwd=ROOT, env=ros_env(domain, tmp_path), text=True, capture_output=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert "gyro_sim_node: simulated 0.300 s" in r.stdout
+    assert "scene 'hinge chain with commanded moments" in r.stderr  # the node's log line (rclpy logs to stderr)

@@ -1,0 +1,151 @@
+"""The physics loop without ROS: pacing against a fake clock, commands, timeout, reset, pause."""
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from gyro_sim.core.simulator import Simulator
+from gyro_sim.paths import find_scene
+from gyro_sim.ros.loop import Request, SimLoop, check_command
+from gyro_sim.ros.pacing import Pacer, chunk_steps
+from gyro_sim.ros.params import ParameterError, validate
+
+
+class FakeClock:
+    """A time.monotonic / time.sleep pair: time passes only by sleeping (or as a test says)."""
+
+    def __init__(self):
+        self.t = 100.0
+
+    def __call__(self):
+        return self.t
+
+    def sleep(self, s):
+        self.t += max(s, 0.0) + 5e-5  # a sleep overshoots a little
+
+
+class Outputs:
+    def __init__(self):
+        self.states, self.events, self.commands, self.diags = [], [], [], []
+
+    def prepare_state(self, t, sim):
+        return (t, np.array(sim.joint_states().position), list(sim.axis_moments))
+
+    def send(self, t, batch):
+        self.states.append(batch)
+
+    def publish_diagnostics(self, t, level, message, values):
+        self.diags.append((t, level, message, values))
+
+    def record_command(self, t, raw):
+        self.commands.append((t, raw))
+
+    def event(self, t, text):
+        self.events.append((t, text))
+
+
+def make_loop(clock, step_cost=0.0, **params):
+    cfg = validate({"scene": "hinge_chain", "physics_rate": 250.0, "publish_rate": 50.0, **params})
+    sim = Simulator(cfg.scene, integrator=cfg.integrator, step=cfg.dt)
+    if step_cost:
+        advance = sim.advance
+
+        def slow(dt):
+            advance(dt)
+            clock.t += step_cost
+
+        sim.advance = slow
+    out = Outputs()
+    return SimLoop(sim, cfg, out, clock=clock, sleep=clock.sleep), out
+
+
+def test_chunk_steps():
+    assert chunk_steps(10, 1e-3, 1.0) == 2  # 1 kHz / 100 Hz: wake every 2 ms
+    assert chunk_steps(5, 4e-3, 1.0) == 1
+    assert chunk_steps(10, 1e-3, 0.0) == 10  # as fast as possible: a publication per wake-up
+    assert chunk_steps(10, 1e-4, 1.0) == 10
+
+
+def test_pacer_absorbs_jitter_catches_up_a_little_and_slips_when_far_behind():
+    clock = FakeClock()
+    p = Pacer(1.0, tolerance=1e-3, catch_up=0.02, clock=clock, sleep=clock.sleep)
+    assert p.wait(0.002) and clock.t == pytest.approx(100.002, abs=1e-4)
+    clock.t += 0.0025  # 0.5 ms late: within a physics period, not a miss
+    assert p.wait(0.004) and p.misses == 0
+    clock.t += 0.007  # 5 ms late (a delayed wake-up): a miss, made up without slipping
+    assert not p.wait(0.006) and p.misses == 1 and p.slipped == 0
+    assert p.lag(0.006) == pytest.approx(0.005, abs=1e-3)
+    assert not p.wait(0.008) and p.misses == 2  # due at once: the steps run back to back
+    clock.t += 0.050  # far behind: a miss, the schedule slips, no catching up
+    assert not p.wait(0.010) and p.misses == 3
+    assert p.slipped == pytest.approx(0.053, abs=2e-3) and p.lag(0.010) == pytest.approx(0.0, abs=1e-9)
+    assert p.wait(0.012) and clock.t == pytest.approx(p.deadline(0.012), abs=1e-4)
+
+
+def run_until(loop, cond, limit=10_000):
+    """Run the loop's thread body until `cond()` (the fake clock makes it deterministic)."""
+    loop._stop.clear()
+    th = threading.Thread(target=loop._run, daemon=True)
+    th.start()
+    t0 = time.monotonic()
+    while not cond() and time.monotonic() - t0 < 60:
+        time.sleep(0.001)
+    loop._stop.set()
+    th.join(10)
+
+
+def test_loop_tracks_wall_time_and_applies_commands_at_the_next_step():
+    clock = FakeClock()
+    loop, out = make_loop(clock, command_timeout=1e6)
+    loop.submit_command(b"x", [0.0, 0.05, -0.03])
+    assert loop.submit_command(b"bad", [1.0]) and loop.submit_command(b"nan", [np.nan, 0, 0])
+    run_until(loop, lambda: len(out.states) >= 50)
+    t = np.array([s[0] for s in out.states])
+    assert np.all(np.diff(t) == 20_000_000)  # ns
+    assert loop.pacer.misses == 0 and abs(loop.pacer.lag(loop.node_time)) <= loop.dt
+    assert [c[0] for c in out.commands] == [0.0, 0.0, 0.0]  # recorded at the step they took effect
+    assert out.states[0][2] == [0.0, 0.0, 0.0] and out.states[1][2] == [0.0, 0.05, -0.03]
+    assert loop.counters.accepted == 1 and loop.counters.rejected == 2
+
+
+def test_loop_slow_cpu_counts_misses_and_never_bursts():
+    clock = FakeClock()
+    loop, out = make_loop(clock, step_cost=6e-3)  # a step costs 6 ms of wall time for 4 ms simulated
+    run_until(loop, lambda: len(out.states) >= 20)
+    s = loop.summary()
+    assert loop.pacer.misses > 10
+    assert s["real_time_factor_achieved"] == pytest.approx(4 / 6, rel=0.05)
+
+
+def test_loop_timeout_zeroes_moments_and_reset_restarts():
+    clock = FakeClock()
+    loop, out = make_loop(clock, command_timeout=0.1)
+    loop.submit_command(b"x", [0.0, 0.05, 0.0])
+    run_until(loop, lambda: loop.node_time > 0.3)
+    assert loop.counters.timeouts == 1 and np.all(loop.sim.axis_moments == 0)
+    assert any("timeout" in e for _, e in out.events)
+    n = len(out.states)
+    loop.requests.append(Request("reset"))
+    run_until(loop, lambda: len(out.states) > n + 2)
+    t_reset = [t for t, e in out.events if e == "reset"][0]
+    assert loop.offset_ns == t_reset
+    ref = Simulator(find_scene("hinge_chain"), integrator="rk4", step=0.004)
+    after = [s for s in out.states if s[0] > t_reset][0]
+    for _ in range(round((after[0] - t_reset) / 4e6)):
+        ref.advance(0.004)
+    assert np.max(np.abs(after[1] - np.array(ref.joint_states().position))) < 1e-12
+
+
+def test_check_command_and_validate():
+    assert check_command([1.0, 2.0], 2) is None
+    assert "expected 2" in check_command([1.0], 2)
+    assert "NaN" in check_command([np.inf, 0.0], 2)
+    with pytest.raises(ParameterError) as e:
+        validate({"physics_rate": 0.0, "publish_rate": 7.0, "integrator": "x", "scene": ""})
+    msg = str(e.value)
+    assert "physics_rate: must be >= 1" in msg and "integrator: unknown 'x'" in msg and "scene: empty" in msg
+    cfg = validate({"physics_rate": 1000, "duration": 5})  # integers accepted for numbers
+    assert cfg.physics_rate == 1000.0 and cfg.steps_per_publish == 10
