@@ -160,6 +160,7 @@ class Simulator:
         self._p = m.torque_p0.copy() if len(m.torque_body) else None
         self._moments = np.zeros(len(m.axis_names))
         self._cache = None
+        self._kin_ok = False
         self.integrator.reset()
 
     @property
@@ -194,6 +195,7 @@ class Simulator:
         if not np.all(np.isfinite(v)):
             raise ValueError("axis moments must be finite")
         self._moments = v.copy()
+        self._cache = None  # reactions and efforts depend on the commands
 
     def _inputs(self):
         m, v = self.model, self._moments
@@ -226,6 +228,7 @@ class Simulator:
         self._t += dt
         self._y = y
         self._cache = None
+        self._kin_ok = False
 
     # --- outputs (computed on request only) ------------------------------------------------
     def _evaluate(self) -> dyn.Evaluation:
@@ -236,12 +239,17 @@ class Simulator:
             ev = dyn.Evaluation()
             self.system.rhs(self._t, self._y, out=ev)
             self._cache = ev
+            self._kin_ok = True  # the evaluation left the current state's kinematics in data
         return self._cache
 
     def _kinematics(self) -> dyn.Data:
+        """Positions and velocities of the current state in the output workspace, computed once
+        per state (outputs asked together share them; advance() and reset() invalidate)."""
         d = self.system.data
-        dyn.positions(self.model, d, self._t, self._y)
-        dyn.velocities(self.model, d, self._t, self._y[self.model.i_vel])
+        if not self._kin_ok:
+            dyn.positions(self.model, d, self._t, self._y)
+            dyn.velocities(self.model, d, self._t, self._y[self.model.i_vel])
+            self._kin_ok = True
         return d
 
     def body_states(self) -> list[BodyState]:
