@@ -190,3 +190,26 @@ def omega_to_euler_rates(euler: np.ndarray, omega: np.ndarray, down: np.ndarray)
     dphi = (wx * s - wy * c) / st if abs(st) > EULER_SINGULAR_SIN else 0.0
     dpsi = wz - dphi * np.cos(theta)
     return np.array([dpsi, dtheta, dphi])
+
+
+def matrices_to_euler(R: np.ndarray, down: np.ndarray) -> np.ndarray:
+    """Euler angles (n, 3) of a stack of world_R_body (n, 3, 3); as :func:`matrix_to_euler`."""
+    D = down.T @ R
+    theta = np.arccos(np.clip(D[:, 2, 2], -1.0, 1.0))
+    regular = np.hypot(D[:, 0, 2], D[:, 1, 2]) >= EULER_SINGULAR_SIN
+    psi = np.where(regular, np.arctan2(D[:, 0, 2], -D[:, 1, 2]), np.arctan2(D[:, 1, 0], D[:, 0, 0]))
+    phi = np.where(regular, np.arctan2(D[:, 2, 0], D[:, 2, 1]), 0.0)
+    return np.stack([psi, theta, phi], axis=1)
+
+
+def omegas_to_euler_rates(euler: np.ndarray, omega: np.ndarray, down: np.ndarray) -> np.ndarray:
+    """Euler rates (n, 3) from Euler angles (n, 3) and world angular velocities (n, 3)."""
+    psi, theta = euler[:, 0], euler[:, 1]
+    w = omega @ down  # rows: down.T @ omega_k
+    c, s = np.cos(psi), np.sin(psi)
+    dtheta = w[:, 0] * c + w[:, 1] * s
+    st = np.sin(theta)
+    regular = np.abs(st) > EULER_SINGULAR_SIN
+    dphi = np.where(regular, (w[:, 0] * s - w[:, 1] * c) / np.where(regular, st, 1.0), 0.0)
+    dpsi = w[:, 2] - dphi * np.cos(theta)
+    return np.stack([dpsi, dtheta, dphi], axis=1)

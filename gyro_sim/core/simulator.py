@@ -11,7 +11,7 @@ import numpy as np
 from . import dynamics as dyn
 from . import invariants as inv
 from .model import Model, compile_model, initial_state
-from .rotations import matrix_to_euler, omega_to_euler_rates
+from .rotations import matrices_to_euler, omegas_to_euler_rates
 from .scene import Scene
 
 
@@ -149,6 +149,12 @@ class Simulator:
         from .lagrange import LagrangeChain
 
         self._lagrange = LagrangeChain.from_scene(scene)  # None unless a chain of Lagrange gyroscopes
+        m = self.model
+        # rotors of each body, in scene order: (torque rotor indices, speed rotor indices)
+        self._rotors_of = [
+            (np.flatnonzero(m.torque_body == k).tolist(), np.flatnonzero(m.speed_body == k).tolist())
+            for k in range(m.n)
+        ]
         self.reset()
 
     # --- state -----------------------------------------------------------------------------
@@ -255,11 +261,23 @@ class Simulator:
     def body_states(self) -> list[BodyState]:
         from .rotations import matrix_to_quat
 
+        m = self.model
         d = self._kinematics()
+        q = np.empty((m.n, 4))
+        if len(m.sph_bodies):
+            qs = self._y[m.i_quat]
+            q[m.sph_bodies] = qs / np.linalg.norm(qs, axis=1, keepdims=True)
+        for k in m.hinge_bodies:
+            q[k] = matrix_to_quat(d.R[k])
         return [
-            BodyState(name, d.O[k].copy(), d.R[k].copy(), matrix_to_quat(d.R[k]), d.w[k].copy(), d.vO[k].copy())
-            for k, name in enumerate(self.model.names)
+            BodyState(name, d.O[k].copy(), d.R[k].copy(), q[k], d.w[k].copy(), d.vO[k].copy())
+            for k, name in enumerate(m.names)
         ]
+
+    def _euler(self, d: dyn.Data) -> tuple[np.ndarray, np.ndarray]:
+        """Euler angles and rates (n, 3) of every body (output only)."""
+        euler = matrices_to_euler(d.R, self.model.down)
+        return euler, omegas_to_euler_rates(euler, d.w, self.model.down)
 
     def joint_states(self) -> JointStates:
         """Euler angles of spherical joints, hinge angles, rotor angles (SPEC.md)."""
@@ -267,42 +285,40 @@ class Simulator:
         ev = self._evaluate() if len(m.speed_body) else None
         d = self._kinematics()
         hinge_tau, L_rotor = self._inputs()
+        euler, rates = self._euler(d)
+        y, u = self._y, self._y[m.i_vel]
+        phi, phid = y[m.i_phi], u[m.col_hinge]
+        kappa = y[m.i_kappa]
+        if len(m.torque_body):  # kappa_i' = p_i - w . e_i (eq 19)
+            e_t = dyn.matvec(d.R[m.torque_body], m.torque_axis)
+            kdot_t = self._p - np.einsum("ni,ni->n", d.w[m.torque_body], e_t)
+        if len(m.speed_body):  # the motor keeps kappa_i' constant: L_i = A_i (w' . e_i)
+            e_v = dyn.matvec(d.R[m.speed_body], m.speed_axis)
+            L_v = m.speed_A * np.einsum("ni,ni->n", ev.acc_w[m.speed_body], e_v)
         names, pos, vel, eff = [], [], [], []
         ih = 0
-        t_of = {}
-        for i, k in enumerate(m.torque_body):
-            t_of.setdefault(int(k), []).append(i)
-        v_of = {}
-        for i, k in enumerate(m.speed_body):
-            v_of.setdefault(int(k), []).append(i)
-        y, u = self._y, self._y[m.i_vel]
         for k, body in enumerate(m.names):
             if m.is_hinge[k]:
                 names.append(body)
-                pos.append(float(y[m.i_phi][ih]))
-                vel.append(float(u[m.col_hinge][ih]))
+                pos.append(float(phi[ih]))
+                vel.append(float(phid[ih]))
                 eff.append(0.0 if hinge_tau is None else float(hinge_tau[ih]))
                 ih += 1
             else:
-                e = matrix_to_euler(d.R[k], m.down)
-                r = omega_to_euler_rates(e, d.w[k], m.down)
                 names += [f"{body}_psi", f"{body}_theta", f"{body}_phi"]
-                pos += e.tolist()
-                vel += r.tolist()
+                pos += euler[k].tolist()
+                vel += rates[k].tolist()
                 eff += [0.0, 0.0, 0.0]
-            for i in t_of.get(k, []):
-                e_w = d.R[k] @ m.torque_axis[i]
+            for i in self._rotors_of[k][0]:
                 names.append(m.torque_names[i])
-                pos.append(float(y[m.i_kappa][i]))
-                vel.append(float(self._p[i] - d.w[k] @ e_w))
+                pos.append(float(kappa[i]))
+                vel.append(float(kdot_t[i]))
                 eff.append(0.0 if L_rotor is None else float(L_rotor[i]))
-            for i in v_of.get(k, []):
-                e_w = d.R[k] @ m.speed_axis[i]
+            for i in self._rotors_of[k][1]:
                 names.append(m.speed_names[i])
                 pos.append(float(m.speed_rate[i] * self._t))
                 vel.append(float(m.speed_rate[i]))
-                # the motor keeps kappa_i' constant: L_i = A_i p_i' = A_i (w' . e_i)
-                eff.append(float(m.speed_A[i] * (ev.acc_w[k] @ e_w)))
+                eff.append(float(L_v[i]))
         return JointStates(names, pos, vel, eff)
 
     def wrenches(self) -> list[Wrench]:
@@ -310,11 +326,9 @@ class Simulator:
         ev = self._evaluate()
         d = self.system.data
         R, L = dyn.reactions(self.model, d, ev.f_ang, ev.f_lin)
-        out = []
-        for k, name in enumerate(self.model.names):
-            Rk = d.R[k]
-            out.append(Wrench(name, name, Rk.T @ R[k], Rk.T @ L[k]))
-        return out
+        Rt = d.R.transpose(0, 2, 1)
+        R_b, L_b = dyn.matvec(Rt, R), dyn.matvec(Rt, L)
+        return [Wrench(name, name, R_b[k], L_b[k]) for k, name in enumerate(self.model.names)]
 
     def invariants(self) -> dict[str, float]:
         """Energy (eq 33 + gravity potential), vertical momentum about O^1, and what else applies.
@@ -328,8 +342,7 @@ class Simulator:
         if self._lagrange is not None:
             from .lagrange import energy_integral_85, vertical_momentum_82
 
-            euler = np.array([matrix_to_euler(R, self.model.down) for R in d.R])
-            rates = np.array([omega_to_euler_rates(e, w, self.model.down) for e, w in zip(euler, d.w)])
+            euler, rates = self._euler(d)
             out["lagrange_82"] = vertical_momentum_82(self._lagrange, euler, rates)  # = -vertical_momentum
             out["lagrange_85"] = energy_integral_85(self._lagrange, euler, rates)  # = 2 (T + V - const)
         return out
