@@ -117,7 +117,8 @@ class Simulator:
     Parameters
     ----------
     scene : Scene, path or mapping
-    integrator : name of the integration method (see `gyro_sim.core.integrators.INTEGRATORS`)
+    integrator : name of the integration method (see `gyro_sim.core.integrators.INTEGRATORS`);
+        the default "auto" is dop853 that switches to radau when the scene turns out stiff
     rtol, atol : tolerances of adaptive methods
     step : step of fixed-step methods (s)
     backend : "auto" (numba-compiled O(n) articulated-body recursion when numba is there, else
@@ -127,7 +128,7 @@ class Simulator:
     def __init__(
         self,
         scene: Scene | str | os.PathLike | Mapping,
-        integrator: str = "dop853",
+        integrator: str = "auto",
         rtol: float = 1e-10,
         atol: float = 1e-12,
         step: float = 1e-3,

@@ -224,3 +224,21 @@ def test_make_system_falls_back_without_numba(monkeypatch):
     assert type(fast.make_system(model, "auto")) is ChainODE
     with pytest.raises(ImportError):
         fast.make_system(model, "numba")
+
+
+def test_auto_backend_keeps_numpy_for_a_heavy_tip():
+    """The articulated-body projection loses digits as the mass ratio squared: "auto" keeps the
+    reference for a heavy tip, and the numba error there is what the limit guards against."""
+    from gyro_sim.bench.extreme import mass_ratio_chain
+    from gyro_sim.core.fast import NUMBA_MASS_RATIO_LIMIT, heavy_subtree_ratio, make_system
+    from gyro_sim.core.model import compile_model, initial_state
+    from gyro_sim.core.simulator import ChainODE
+
+    heavy = compile_model(load_scene(mass_ratio_chain(1e6)))
+    assert heavy_subtree_ratio(heavy) > NUMBA_MASS_RATIO_LIMIT
+    assert isinstance(make_system(heavy, "auto"), ChainODE)
+    y = initial_state(heavy)
+    err = np.abs(make_system(heavy, "numba").rhs(0.0, y) - ChainODE(heavy).rhs(0.0, y)).max()
+    assert err > 1e-6  # the loss is real (so the guard matters)
+    light = compile_model(load_scene(mass_ratio_chain(1e-6)))
+    assert not isinstance(make_system(light, "auto"), ChainODE)

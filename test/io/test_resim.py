@@ -39,7 +39,7 @@ def test_another_integrator_shows_a_deviation_and_says_why(recorded):
     assert 0 < res.max_deviation < 1e-2
     assert any("differs from the recorded" in n for n in res.notes)
     r = gyro_sim("replay", "--resimulate", path, "--integrator", "rk4")
-    assert r.returncode == 1 and "differs from the recorded dop853" in r.stdout
+    assert r.returncode == 1 and "differs from the recorded" in r.stdout
 
 
 def test_a_one_ulp_change_in_the_log_is_found(tmp_path):

@@ -87,7 +87,7 @@ def test_every_type_is_in_the_log(log):
     expected = M.topic_types([b.name for b in scene.bodies]) | {M.ROBOT_DESCRIPTION: "std_msgs/msg/String"}
     assert info.topics == expected
     assert info.message_count == sum(len(v) for v in written.values())
-    assert info.params["integrator"] == "dop853" and info.params["advance_dt"] == 0.01
+    assert info.params["integrator"] == "auto" and info.params["advance_dt"] == 0.01  # the default
     assert load_scene(info.scene_source()).name == scene.name
 
 

@@ -1,0 +1,613 @@
+"""`gyro-sim bench stability`: stiff and extreme cases, a verdict per integrator.
+
+Every case (:func:`items`, scenes from :mod:`gyro_sim.bench.extreme`) runs with every
+integrator at the settings of :data:`SETTINGS` (the fixed-step methods at the node's 1 kHz,
+the adaptive ones at rtol 1e-8), node-like: `Simulator.advance` in CHUNK-second calls,
+commands set between calls. A run gets one verdict:
+
+- **fails**: `Simulator.advance` raised SimulationError (divergence, NaN, step-size
+  collapse); the message is shown, no number of that run is;
+- **too slow**: its CPU time passed the case's budget before the horizon (how far it got
+  is shown);
+- **drifts**: it finished, but an invariant the exact motion keeps drifted by more than
+  DRIFT_TOL (relative), or its final state is further than ERROR_TOL from the reference
+  (exact where known, else dop853 at REF_RTOL in the same chunks, checked by a run at
+  CHECK_RTOL: if the two differ by more than REF_AGREE the final state is not reproducible
+  and no error is judged), or (Kapitza) the rod did the opposite of what the classical
+  condition predicts;
+- **stable**: it finished within all of these.
+
+The long-horizon item is separate: RK4 and Lie4 for 1e6 steps (1e4 in quick mode) on a
+small scene, the energy recorded on the way; the growth of |E(t) - E(0)| is classified as
+bounded, random-walk (t^1/2) or linear (t^1) by its log-log slope over the last two decades
+of time, and its rate fitted.
+"""
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import signal
+import time
+import warnings
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from ..core.invariants import conserved
+from ..core.model import compile_model
+from ..core.scene_load import load_scene
+from ..core.simulator import SimulationError, Simulator
+from . import extreme as ex
+from .accuracy import (ATOL_FACTOR, chain_length, invariant_error, invariant_scales, precession_exact,
+                       state_error)
+from .peers import frames_of_state
+from .scenes import spherical_chain
+
+#: seconds of simulated time per `advance` call (a node publishing at 100 Hz)
+CHUNK = 0.01
+#: the integrators and their settings (fixed steps: the node's 1 kHz physics rate)
+SETTINGS: dict[str, dict[str, float]] = {
+    "rk4": {"step": 1e-3},
+    "lie4": {"step": 1e-3},
+    "dop853": {"rtol": 1e-8},
+    "radau": {"rtol": 1e-8},
+    "auto": {"rtol": 1e-8},
+}
+#: verdict thresholds: relative drift of a conserved invariant, final-state error
+DRIFT_TOL = 1e-5
+ERROR_TOL = 1e-3
+#: the reference of cases without an exact solution, and the check run that estimates its
+#: error: if they differ by more than REF_AGREE, the final state is not reproducible (the
+#: motion amplifies round-off) and errors are not judged
+REF_RTOL, CHECK_RTOL = 1e-11, 1e-10
+REF_AGREE = 0.1 * 1e-3
+NO_REF_HEAVY = ("no reference: its rhs is only accurate to ~1e-7 relative (numpy backend; numba ~1e-3): "
+                "a tight run cannot be had")
+#: Kapitza: the upright rod "falls" once its tilt from the upward vertical passes FALLEN
+#: (below the horizontal), else it "stays up" (Kapitza's effective potential
+#: cos(tilt) + (margin / 2) sin(tilt)^2 keeps a margin > 1 rod below its barrier at
+#: cos(tilt) = 1 / margin: 0.64 rad at margin 1.25)
+FALLEN = math.pi / 2
+#: long horizon: scene, step and how often the energy is recorded
+LONG_STEP = 1e-3
+LONG_SAMPLES = 200
+
+
+@dataclass(frozen=True)
+class Item:
+    """One stability case."""
+
+    key: str
+    title: str
+    build: Callable[[], dict]
+    horizon: float  # s
+    budget: float  # CPU s per run
+    moments: tuple[float, ...] | None = None
+    moments_at: float = 0.0  # the step time of the moments
+    exact: bool = False
+    kapitza_margin: float | None = None
+    integrators: tuple[str, ...] = tuple(SETTINGS)
+    why: str = ""
+    backend: str | None = None  # overrides the report's backend
+    no_reference: str = ""  # why there is no reference run (then errors are not judged)
+
+
+def items(quick: bool = False) -> list[Item]:
+    """The suite. Quick mode: shorter horizons, small budgets, no n = 200, two Kapitza margins."""
+    q = quick
+    budget = 2.0 if q else 60.0
+    abrupt_scene, abrupt_moments = ex.abrupt_commands()
+    ratio = 1e4
+    w_n, w_p = ex.fast_rotor_frequencies(ex.fast_rotor_spin(ratio))
+    out = [
+        Item("fast_rotor", f"fast rotor, nutation {w_n:.0f} rad/s = {ratio:.0e} x precession {w_p:.3f} rad/s",
+             lambda: ex.fast_rotor_precession(ratio), 0.2 if q else 2.0, budget, exact=True,
+             why="gyroscopic stiffness (eigenvalues +-1080i); exact regular precession"),
+        Item("light_tip", "light tip, mass ratio 1e-6", lambda: ex.mass_ratio_chain(1e-6), 0.2 if q else 1.0,
+             budget, why="the tip is 1e-6 of its neighbour: cond(M) ~ 2e9"),
+        Item("heavy_tip", "heavy tip, mass ratio 1e6", lambda: ex.mass_ratio_chain(1e6), 0.02 if q else 0.1,
+             budget / 2, no_reference=NO_REF_HEAVY,
+             why="two light links carry a 3e5 kg tip: cond(M) ~ 4e9, the links whip when the chain straightens"),
+    ]
+    if _default_backend() == "numba":
+        out.append(Item("heavy_tip_numpy", "heavy tip, mass ratio 1e6, numpy backend", lambda: ex.mass_ratio_chain(1e6),
+                        0.02 if q else 0.1, budget / 2, backend="numpy", no_reference=NO_REF_HEAVY,
+                        why="the same with the numpy backend (composite-inertia matrix and a dense solve)"))
+    out.append(Item("chain_100", "long chain, n = 100", lambda: spherical_chain(100), 0.01 if q else 0.05, budget,
+                    why="700 states: radau's finite-difference Jacobian costs 700 evaluations"))
+    if not q:
+        out.append(Item("chain_200", "long chain, n = 200", lambda: spherical_chain(200), 0.05, 3 * budget,
+                        why="1400 states"))
+    for margin in ((0.5, 3.77) if q else (0.5, 0.8, 1.25, 2.0, 3.77)):
+        f = ex.kapitza_threshold_frequency() * math.sqrt(margin)
+        out.append(Item(f"kapitza_{margin:g}", f"Kapitza, base at {f:.1f} Hz, (a W)^2 = {margin:g} x 2 g I / (m c)",
+                        (lambda m=margin: ex.kapitza(m)), 1.0 if q else 3.0, budget, kapitza_margin=margin,
+                        why=f"inverted rod, base vibrating at {f:.1f} Hz; Kapitza: "
+                            f"{'stable' if margin > 1 else 'unstable'}"))
+    out += [
+        Item("looping_top", "axis through theta = 0 and pi (looping top)", ex.looping_top, 0.3 if q else 2.0,
+             budget, why="starts at theta = 0 exactly, loops over theta = pi (Euler-angle singularities)"),
+        Item("near_spherical", "near-degenerate inertia, A = B (1 + 1e-9)", ex.near_spherical_top,
+             0.3 if q else 2.0, budget, why="spherical inertia to 1e-9: undefined principal axes"),
+        Item("thin_rod", "very thin body, A = 1e-8 B", ex.thin_rod_top, 0.3 if q else 2.0, budget,
+             why="axial inertia 1e-8 of the transverse: cond(M) 1e8"),
+        Item("flat_disc", "very flat body, A_c = 2 B_c (1 - 1e-9)", ex.flat_disc_top, 0.3 if q else 2.0, budget,
+             why="at the triangle-inequality limit"),
+        Item("abrupt", f"step moments {ex.ABRUPT_FACTOR:g} x gravity torque (hinge chain)",
+             lambda: abrupt_scene, 0.02 if q else 0.05, budget, moments=tuple(abrupt_moments), moments_at=0.01,
+             why=f"at t = 0.01 s the hinge chain's axes get {ex.ABRUPT_FACTOR:g} x their gravity torque "
+                 f"({', '.join(f'{m:.0f}' for m in abrupt_moments)} N m)"),
+    ]
+    return out
+
+
+def _default_backend() -> str:
+    """The backend "auto" resolves to: numba when it imports, else numpy."""
+    from ..core.fast import available
+
+    return "numba" if available() else "numpy"
+
+
+# ---------------------------------------------------------------------------------- runs
+@dataclass
+class Run:
+    item: str
+    integrator: str
+    verdict: str = ""
+    t_reached: float = 0.0
+    drift: float | None = None  # largest relative drift of the conserved invariants
+    energy_drift: float | None = None
+    error: float | None = None
+    nsteps: int = 0
+    nrejected: int = 0
+    nfev: int = 0
+    cpu: float = 0.0
+    note: str = ""
+    max_tilt: float | None = None  # Kapitza
+    switches: list = field(default_factory=list)
+
+
+def _names(model, moments) -> tuple[str, ...]:
+    names = conserved(model)
+    if moments is not None:
+        names = tuple(n for n in names if n not in ("energy", "jacobi"))
+    return names
+
+
+def _tilt(sim: Simulator) -> float:
+    """Angle (rad) between the first body's axis and the upward vertical."""
+    axis = sim.body_states()[0].rotation[:, 2]
+    up = -sim.model.down[:, 2]
+    return float(np.arccos(np.clip(axis @ up, -1.0, 1.0)))
+
+
+class _OverBudget(Exception):
+    """The CPU budget of a run is spent (raised from a SIGPROF handler, inside `advance`)."""
+
+
+@contextlib.contextmanager
+def cpu_limit(seconds: float):
+    """Raise _OverBudget in this (main) thread once `seconds` of process CPU time have passed.
+
+    A timer on CPU time (setitimer ITIMER_PROF), so that a single `advance` call that never
+    returns (an integrator grinding at a tiny step) is stopped too. Where there is no such
+    timer (Windows, other threads), nothing is armed and the caller's checks between calls
+    remain.
+    """
+    def handler(signum, frame):
+        raise _OverBudget()
+
+    try:
+        old = signal.signal(signal.SIGPROF, handler)
+        signal.setitimer(signal.ITIMER_PROF, max(seconds, 1e-3))
+    except (AttributeError, ValueError, OSError):
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_PROF, 0.0)
+        signal.signal(signal.SIGPROF, old)
+
+
+def simulate(item: Item, scene, integrator: str, settings: dict, budget: float,
+             backend: str = "auto") -> tuple[Run, Simulator]:
+    """One node-like run of `item` (see the module docstring); the run and the simulator."""
+    rtol = settings.get("rtol", 1e-8)
+    sim = Simulator(scene, integrator=integrator, rtol=rtol, atol=rtol * ATOL_FACTOR,
+                    step=settings.get("step", 1e-3), backend=item.backend or backend)
+    run = Run(item.key, integrator)
+    n = max(1, round(item.horizon / CHUNK))
+    dt = item.horizon / n
+    tilt = _tilt(sim) if item.kapitza_margin is not None else None
+    cpu0 = time.process_time()
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the auto integrator's switches are read from it
+        try:
+            with cpu_limit(budget):
+                for i in range(n):
+                    if item.moments is not None and i * dt >= item.moments_at - 1e-12 and \
+                            not np.any(sim.axis_moments):
+                        sim.set_axis_moments(item.moments)
+                    try:
+                        sim.advance(dt)
+                    except SimulationError as exc:
+                        run.verdict = "fails"
+                        run.note = str(exc)
+                        break
+                    if tilt is not None:
+                        tilt = max(tilt, _tilt(sim))
+                    if time.process_time() - cpu0 > budget and i < n - 1:
+                        raise _OverBudget()
+        except _OverBudget:
+            pass
+        if run.verdict == "" and sim.time < item.horizon * (1 - 1e-9):
+            run.verdict = "too slow"
+            run.note = f"budget {budget:g} s CPU spent at t = {sim.time:.3g} s of {item.horizon:g} s"
+    run.cpu = time.process_time() - cpu0
+    run.t_reached = sim.time
+    integ = sim.integrator
+    run.nsteps, run.nrejected, run.nfev = integ.nsteps, integ.nrejected, integ.nfev
+    run.max_tilt = tilt
+    run.switches = [(round(t, 6), a, b, why) for t, a, b, why in getattr(integ, "switches", [])]
+    return run, sim
+
+
+@dataclass
+class ItemResult:
+    item: Item
+    runs: list[Run]
+    reference: str  # what the errors are against
+    predicted: str | None = None  # Kapitza: "stays up" / "falls"
+
+
+def run_item(item: Item, integrators=None, progress=None, backend: str = "auto") -> ItemResult:
+    scene = load_scene(item.build())
+    model = compile_model(scene)
+    names = _names(model, item.moments)
+    sim0 = Simulator(scene)
+    inv0 = sim0.invariants()
+    scales = invariant_scales(inv0, names)
+    length, free = chain_length(model), model.free
+    # the reference: exact, or a tight dop853 run in the same chunks, checked by a second one
+    ref_frames, ref_kind = None, "none"
+    if item.exact:
+        exact = precession_exact(scene, model)
+        ref_frames = frames_of_state(model, item.horizon, exact(item.horizon))
+        ref_kind = "exact"
+    elif item.no_reference:
+        ref_kind = item.no_reference
+    else:
+        runs = [simulate(item, scene, "dop853", {"rtol": r}, item.budget, backend) for r in (REF_RTOL, CHECK_RTOL)]
+        if all(r.verdict == "" for r, _ in runs):
+            ref_frames, check = (frames_of_state(model, sim.time, sim.state) for _, sim in runs)
+            agree = state_error(check, ref_frames, length, free)
+            ref_kind = f"dop853 rtol {REF_RTOL:g}, within {agree:.0e} of rtol {CHECK_RTOL:g}"
+            if agree > REF_AGREE:
+                ref_kind = (f"none: dop853 at rtol {REF_RTOL:g} and {CHECK_RTOL:g} differ by {agree:.1g} "
+                            "(the final state is not reproducible)")
+                ref_frames = None
+        else:
+            ref_kind = f"none (dop853 rtol {REF_RTOL:g}: {runs[0][0].verdict or runs[1][0].verdict})"
+    result = ItemResult(item, [], ref_kind)
+    if item.kapitza_margin is not None:
+        result.predicted = "stays up" if item.kapitza_margin > 1.0 else "falls"
+    for name in integrators or item.integrators:
+        run, sim = simulate(item, scene, name, SETTINGS[name], item.budget, backend)
+        if run.verdict == "":
+            inv1 = sim.invariants()
+            run.drift = invariant_error(inv0, inv1, names, scales)
+            if "energy" in names:
+                run.energy_drift = invariant_error(inv0, inv1, ("energy",), scales)
+            if ref_frames is not None:
+                run.error = state_error(frames_of_state(model, sim.time, sim.state), ref_frames, length, free)
+            run.verdict, run.note = _verdict(run, result.predicted)
+        if progress:
+            progress(run)
+        result.runs.append(run)
+    return result
+
+
+def _verdict(run: Run, predicted: str | None) -> tuple[str, str]:
+    notes = []
+    if run.switches:
+        notes.append("; ".join(f"{a} -> {b} at t = {t:.3g} s" for t, a, b, _ in run.switches))
+    bad = []
+    if run.drift is not None and not run.drift <= DRIFT_TOL:
+        bad.append(f"invariant drift {run.drift:.1e}")
+    if run.error is not None and not run.error <= ERROR_TOL:
+        bad.append(f"error {run.error:.1e}")
+    if predicted is not None:
+        outcome = kapitza_outcome(run.max_tilt)
+        notes.append(f"{outcome} (max tilt {run.max_tilt:.3f} rad)")
+        if outcome != predicted:
+            bad.append(f"Kapitza predicts: {predicted}")
+    return ("drifts" if bad else "stable"), "; ".join(bad + notes)
+
+
+def kapitza_outcome(max_tilt: float) -> str:
+    return "falls" if max_tilt > FALLEN else "stays up"
+
+
+# -------------------------------------------------------------------------- long horizon
+@dataclass
+class LongRun:
+    integrator: str
+    steps: int
+    step: float
+    t: list[float]
+    drift: list[float]  # (E(t) - E(0)) / (T0 + |V0|)
+    cpu: float
+    growth: str = ""
+    slope: float = math.nan  # log-log slope of max |drift| over the last two decades
+    rate: float = math.nan  # fitted d(drift)/dt, per second
+    failed: str | None = None
+
+
+def long_horizon(steps: int, integrators=("rk4", "lie4"), progress=None, backend: str = "auto") -> list[LongRun]:
+    """`steps` fixed steps of LONG_STEP on :func:`extreme.nutating_top`, energy sampled."""
+    scene = load_scene(ex.nutating_top())
+    out = []
+    for name in integrators:
+        sim = Simulator(scene, integrator=name, step=LONG_STEP, backend=backend)
+        inv0 = sim.invariants()
+        scale = abs(inv0["kinetic"]) + abs(inv0["potential"])
+        per = max(1, steps // LONG_SAMPLES)
+        run = LongRun(name, steps, LONG_STEP, [0.0], [0.0], 0.0)
+        cpu0 = time.process_time()
+        done = 0
+        try:
+            while done < steps:
+                k = min(per, steps - done)
+                sim.advance(k * LONG_STEP)
+                done += k
+                run.t.append(sim.time)
+                run.drift.append((sim.invariants()["energy"] - inv0["energy"]) / scale)
+                if progress:
+                    progress(name, done, steps)
+        except SimulationError as exc:
+            run.failed = str(exc)
+        run.cpu = time.process_time() - cpu0
+        _classify(run)
+        out.append(run)
+    return out
+
+
+def _classify(run: LongRun) -> None:
+    t, d = np.array(run.t[1:]), np.abs(np.array(run.drift[1:]))
+    if t.size < 4:
+        return
+    running = np.maximum.accumulate(d)
+    sel = t >= t[-1] / 100.0  # the last two decades
+    if sel.sum() >= 3 and np.all(running[sel] > 0):
+        run.slope = float(np.polyfit(np.log(t[sel]), np.log(running[sel]), 1)[0])
+    run.rate = float(np.polyfit(np.array(run.t), np.array(run.drift), 1)[0])
+    if math.isnan(run.slope):
+        run.growth = "n/a"
+    elif run.slope < 0.25:
+        run.growth = "bounded"
+    elif run.slope < 0.75:
+        run.growth = "random walk (~ t^1/2)"
+    else:
+        run.growth = "linear (~ t)"
+
+
+# ------------------------------------------------------------------------------- tables
+def _g(x: float | None, fmt: str = ".1e") -> str:
+    return "" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, fmt)
+
+
+def verdict_table(results: list[ItemResult]) -> str:
+    lines = [
+        "| case | integrator | verdict | energy drift | invariant drift | error | steps | rejected | CPU (s) | note |",
+        "|---|---|---|---:|---:|---:|---:|---:|---:|---|",
+    ]
+    for res in results:
+        for r in res.runs:
+            note = r.note.replace("|", "/")
+            if r.verdict == "fails" and len(note) > 160:
+                note = note[:157] + "..."
+            lines.append(f"| {res.item.key} | {r.integrator} | **{r.verdict}** | {_g(r.energy_drift)} | "
+                         f"{_g(r.drift)} | {_g(r.error)} | {r.nsteps} | {r.nrejected} | {r.cpu:.2f} | {note} |")
+    return "\n".join(lines)
+
+
+def overview_table(results: list[ItemResult]) -> str:
+    names = list(SETTINGS)
+    lines = ["| case | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
+    for res in results:
+        v = {r.integrator: r.verdict for r in res.runs}
+        lines.append(f"| {res.item.title} | " + " | ".join(v.get(n, "") for n in names) + " |")
+    return "\n".join(lines)
+
+
+def cases_table(results: list[ItemResult]) -> str:
+    lines = ["| case | horizon (s) | reference | what makes it hard |", "|---|---:|---|---|"]
+    for res in results:
+        lines.append(f"| {res.item.key} | {res.item.horizon:g} | {res.reference} | {res.item.why or res.item.title} |")
+    return "\n".join(lines)
+
+
+def kapitza_table(results: list[ItemResult]) -> str:
+    lines = ["| (a W)^2 / (2 g I / (m c)) | base frequency (Hz) | Kapitza predicts | "
+             + " | ".join(SETTINGS) + " |", "|---:|---:|---|" + "---|" * len(SETTINGS)]
+    for res in results:
+        if res.item.kapitza_margin is None:
+            continue
+        m = res.item.kapitza_margin
+        cells = []
+        for n in SETTINGS:
+            r = next((r for r in res.runs if r.integrator == n), None)
+            if r is None or r.max_tilt is None or r.verdict in ("fails", "too slow"):
+                cells.append(r.verdict if r else "")
+            else:
+                o = kapitza_outcome(r.max_tilt)
+                cells.append(f"{o} ({r.max_tilt:.2f})" + ("" if o == res.predicted else " WRONG"))
+        f = ex.kapitza_threshold_frequency() * math.sqrt(m)
+        lines.append(f"| {m:g} | {f:.1f} | {res.predicted} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def long_table(runs: list[LongRun]) -> str:
+    lines = ["| integrator | steps (h = 1 ms) | simulated (s) | final energy drift | growth | log-log slope |"
+             " rate (per s) | rate (per hour) | CPU (s) |",
+             "|---|---:|---:|---:|---|---:|---:|---:|---:|"]
+    for r in runs:
+        if r.failed:
+            lines.append(f"| {r.integrator} | {r.steps} | {r.t[-1]:.3g} | failed: {r.failed[:80]} | | | | | "
+                         f"{r.cpu:.1f} |")
+            continue
+        lines.append(f"| {r.integrator} | {r.steps:.0e} | {r.t[-1]:.4g} | {r.drift[-1]:.2e} | {r.growth} | "
+                     f"{_g(r.slope, '.2f')} | {_g(r.rate, '.2e')} | {_g(r.rate * 3600, '.2e')} | {r.cpu:.1f} |")
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------------- plot
+def plot(results: list[ItemResult], long_runs: list[LongRun], path: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(14, 5), gridspec_kw={"width_ratios": [1.6, 1]})
+    names = list(SETTINGS)
+    colors = {"stable": "#4caf50", "drifts": "#ffb300", "fails": "#e53935", "too slow": "#8e8e8e"}
+    keys = [r.item.key for r in results]
+    for i, res in enumerate(results):
+        for r in res.runs:
+            j = names.index(r.integrator)
+            ax0.add_patch(plt.Rectangle((j, i), 1, 1, color=colors.get(r.verdict, "white")))
+            ax0.text(j + 0.5, i + 0.5, f"{r.verdict}\n{r.cpu:.2g} s", ha="center", va="center", fontsize=6)
+    ax0.set_xlim(0, len(names))
+    ax0.set_ylim(len(keys), 0)
+    ax0.set_xticks(np.arange(len(names)) + 0.5, names)
+    ax0.set_yticks(np.arange(len(keys)) + 0.5, keys, fontsize=7)
+    ax0.set_title("verdict and CPU time per case and integrator")
+    for r in long_runs:
+        if len(r.t) > 1:
+            t, d = np.array(r.t[1:]), np.abs(np.array(r.drift[1:]))
+            ax1.loglog(t, np.maximum(d, 1e-17), label=f"{r.integrator}: {r.growth}")
+    ax1.set_xlabel("simulated time (s)")
+    ax1.set_ylabel("|E(t) - E(0)| / (T + |V|)")
+    ax1.set_title(f"long horizon, h = {LONG_STEP * 1e3:g} ms, nutating top")
+    ax1.grid(True, which="both", alpha=0.3)
+    ax1.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+# ------------------------------------------------------------------------------- report
+@dataclass
+class Report:
+    results: list[ItemResult]
+    long_runs: list[LongRun]
+    cpu_total: float
+    quick: bool
+    backend: str = "numpy"
+
+    def markdown(self) -> str:
+        mode = "quick mode (short horizons, small budgets)" if self.quick else "full run"
+        settings = ", ".join(f"{k} " + ", ".join(f"{a} {b:g}" for a, b in v.items()) for k, v in SETTINGS.items())
+        return "\n".join([
+            "### Stability: stiff and extreme cases",
+            "",
+            f"`gyro-sim bench stability{' --quick' if self.quick else ''}`, {mode}, {self.cpu_total:.0f} s of CPU, "
+            f"{self.backend} backend. "
+            f"Settings: {settings} (atol = 1e-2 rtol); `advance` in {CHUNK * 1e3:g} ms calls. Verdicts: "
+            f"*stable* (finished, conserved invariants within {DRIFT_TOL:g} relative, final state within "
+            f"{ERROR_TOL:g} of the reference), *drifts* (finished outside those), *fails* (SimulationError: "
+            "the run stopped, nothing of it reaches an output), *too slow* (CPU budget spent before the "
+            "horizon).",
+            "",
+            overview_table(self.results),
+            "",
+            f"Kapitza's pendulum, inverted, tilted {ex.KAPITZA_TILT:g} rad: the classical condition "
+            "(a W)^2 > 2 g I / (m c) "
+            "against what each integrator shows (max tilt from the upward vertical in rad; falls: past "
+            "the horizontal):",
+            "",
+            kapitza_table(self.results),
+            "",
+            "Long horizon: energy drift of the fixed-step methods (growth from the log-log slope of "
+            "max |drift| over the last two decades of time):",
+            "",
+            long_table(self.long_runs),
+            "",
+            "The numbers behind the verdicts:",
+            "",
+            verdict_table(self.results),
+            "",
+            "The cases:",
+            "",
+            cases_table(self.results),
+            "",
+        ])
+
+
+def build(quick: bool = False, keys=None, integrators=None, long_steps: int | None = None,
+          progress=None, backend: str = "auto") -> Report:
+    cpu0 = time.process_time()
+    chosen = [it for it in items(quick) if keys is None or it.key in keys]
+    total = sum(len(integrators or it.integrators) for it in chosen)
+    done = [0]
+
+    def tick(run: Run) -> None:
+        done[0] += 1
+        if progress:
+            progress(done[0], total, f"{run.item} {run.integrator}: {run.verdict}")
+
+    results = [run_item(it, integrators, tick, backend) for it in chosen]
+    steps = long_steps if long_steps is not None else (10_000 if quick else 1_000_000)
+    long_runs = long_horizon(steps, backend=backend) if steps > 0 else []
+    resolved = _default_backend() if backend == "auto" else backend
+    return Report(results, long_runs, time.process_time() - cpu0, quick, resolved)
+
+
+def to_json(report: Report) -> dict[str, Any]:
+    return {
+        "quick": report.quick,
+        "cpu_total": report.cpu_total,
+        "items": [{"key": r.item.key, "title": r.item.title, "horizon": r.item.horizon, "reference": r.reference,
+                   "kapitza_margin": r.item.kapitza_margin, "predicted": r.predicted,
+                   "runs": [asdict(x) for x in r.runs]} for r in report.results],
+        "long_horizon": [asdict(r) for r in report.long_runs],
+    }
+
+
+def main(args) -> int:
+    from ..cli import Progress
+
+    bar = Progress("stability")
+    report = build(quick=args.quick, keys=args.cases, long_steps=args.long_steps, progress=bar,
+                   backend=args.backend)
+    text = report.markdown()
+    print(text)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "stability.md").write_text(text + "\n")
+    (out / "stability.json").write_text(json.dumps(to_json(report), indent=1, default=float))
+    written = [out / "stability.md", out / "stability.json"]
+    try:
+        plot(report.results, report.long_runs, str(out / "stability.png"))
+        written.append(out / "stability.png")
+    except ImportError:
+        print("(install matplotlib for the plot)")
+    print("\nwrote " + ", ".join(str(w) for w in written))
+    return 0
+
+
+def register(sub, bench) -> None:
+    """`gyro-sim bench stability` (cli.PLUGINS)."""
+    p = bench.add_parser("stability", help="stiff and extreme cases: a verdict per integrator")
+    p.add_argument("--quick", action="store_true", help="short horizons, small budgets, 1e4 long steps (CI)")
+    p.add_argument("--out", default="out/bench", help="directory for stability.md, stability.json, stability.png")
+    p.add_argument("--cases", nargs="+", choices=[it.key for it in items()], help="a subset of the cases")
+    p.add_argument("--long-steps", type=int, default=None,
+                   help="steps of the long-horizon runs (default 1e6, quick 1e4; 0: skip)")
+    p.add_argument("--backend", default="auto", choices=("auto", "numba", "numpy"),
+                   help="the Simulator's dynamics backend (default auto: numba when it imports)")
+    p.set_defaults(fn=main)
