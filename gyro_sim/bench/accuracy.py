@@ -29,11 +29,9 @@ local error norm of the last step) with the true error, on the exact scenes
 """
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
@@ -49,6 +47,7 @@ from ..core.simulator import SimulationError, Simulator
 from . import peers
 from .extreme import load_dict
 from .peers import Frames, frames_of_state
+from .report import write_report
 
 #: atol = rtol * ATOL_FACTOR for every adaptive run (states are O(1) to O(100))
 ATOL_FACTOR = 1e-2
@@ -737,17 +736,8 @@ def main(args) -> int:
                    progress=Progress("accuracy"))
     text = report.markdown()
     print(text)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "accuracy.md").write_text(text + "\n" + report.all_points())
-    (out / "accuracy.json").write_text(json.dumps(to_json(report), indent=1, default=float))
-    written = [out / "accuracy.md", out / "accuracy.json"]
-    try:
-        plot(report.scenarios, report.points, str(out / "accuracy.png"))
-        written.append(out / "accuracy.png")
-    except ImportError:
-        print("(install matplotlib for the plot)")
-    print("\nwrote " + ", ".join(str(w) for w in written))
+    write_report(args.out, "accuracy", text + "\n" + report.all_points(), to_json(report),
+                 lambda png: plot(report.scenarios, report.points, png))
     return 0
 
 

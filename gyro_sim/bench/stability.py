@@ -25,13 +25,11 @@ of time, and its rate fitted.
 from __future__ import annotations
 
 import contextlib
-import json
 import math
 import signal
 import time
 import warnings
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
@@ -45,6 +43,7 @@ from .accuracy import (ATOL_FACTOR, chain_length, invariant_error, invariant_sca
                        state_error)
 from .peers import frames_of_state
 from .scenes import spherical_chain
+from .report import write_report
 
 #: seconds of simulated time per `advance` call (a node publishing at 100 Hz)
 CHUNK = 0.01
@@ -586,17 +585,8 @@ def main(args) -> int:
                    backend=args.backend)
     text = report.markdown()
     print(text)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "stability.md").write_text(text + "\n")
-    (out / "stability.json").write_text(json.dumps(to_json(report), indent=1, default=float))
-    written = [out / "stability.md", out / "stability.json"]
-    try:
-        plot(report.results, report.long_runs, str(out / "stability.png"))
-        written.append(out / "stability.png")
-    except ImportError:
-        print("(install matplotlib for the plot)")
-    print("\nwrote " + ", ".join(str(w) for w in written))
+    write_report(args.out, "stability", text + "\n", to_json(report),
+                 lambda png: plot(report.results, report.long_runs, png))
     return 0
 
 
