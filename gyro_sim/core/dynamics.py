@@ -58,14 +58,11 @@ class Data:
         self.R = np.zeros((n, 3, 3))  # world_R_body
         self.R[:] = EYE3
         self.O = np.zeros((n, 3))  # joint points O^k
-        self.t = np.nan
         # torque-rotor incidence: lambda^k = sum over rotors on k (eq 31)
         self.rotor_incidence = np.zeros((n, len(model.torque_body)))
         self.rotor_incidence[model.torque_body, np.arange(len(model.torque_body))] = 1.0
         self.hinge_K = np.array([_skew(model.hinge_axis[k]) for k in model.hinge_bodies]).reshape(-1, 3, 3)
         self.hinge_K2 = self.hinge_K @ self.hinge_K
-        # joint-point offsets as a prefix sum needs a leading zero row
-        self._s_w = np.zeros((n, 3))
 
 
 def _skew(a: np.ndarray) -> np.ndarray:
@@ -96,14 +93,13 @@ def positions(model: Model, data: Data, t: float, y: np.ndarray) -> None:
     else:
         O1 = model.base_position
     s_w = matvec(R, model.s)
-    data.s_w = s_w
     data.O = O1 + np.cumsum(s_w, axis=0) - s_w
-    data.h = model.mass[:, None] * data.O + matvec(R, model.first_moment)  # first moments about origin
+    hk = matvec(R, model.first_moment)  # m^k c^k, world components
+    data.h = model.mass[:, None] * data.O + hk  # first moments about the origin
     data.e_w = matvec(R[model.hinge_bodies], model.hinge_axis[model.hinge_bodies])  # hinge axes
     # inertia about the origin: J_O^k (rotated) shifted from O^k to the origin
     A_w = R @ model.inertia @ R.transpose(0, 2, 1)
     O = data.O
-    hk = matvec(R, model.first_moment)
     m = model.mass
     OO = np.einsum("ni,nj->nij", O, O)
     Oh = np.einsum("ni,nj->nij", O, hk)

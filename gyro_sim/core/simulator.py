@@ -66,7 +66,6 @@ class ChainODE:
         self.L_rotor: np.ndarray | None = None
         self.t0 = 0.0
         self.p0 = model.torque_p0.copy() if len(model.torque_body) else None
-        self._ydot = np.zeros(model.size)
         self.nfev = 0
 
     def hold(self, t0: float, p0: np.ndarray | None, hinge_tau, L_rotor) -> None:
