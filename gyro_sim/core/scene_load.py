@@ -14,8 +14,12 @@ Conventions fixed here (beyond the SPEC's example file):
 - inertia tensors must be those of a real mass distribution: symmetric, positive definite,
   principal moments obeying the triangle inequality, both about O^k and about the centre of
   mass (THEORY.md section 6: about the centre of mass the transverse moment is B - m c^2);
-- names are ROS name tokens, unique over bodies and rotors, and so are the joint-state names
-  they produce (``<body>_psi`` ... for spherical joints, SPEC.md "Python API").
+- names are ROS name tokens of at most ``MAX_NAME_LENGTH`` characters (they become topic
+  names ``~/wrench/<name>``), unique over bodies and rotors, and so are the joint-state names
+  they produce (``<body>_psi`` ... for spherical joints, SPEC.md "Python API");
+- crafted input is bounded: YAML at most ``MAX_YAML_DEPTH`` levels deep and ``MAX_YAML_NODES``
+  nodes (aliases counted expanded), every number finite and within the physical sanity bound
+  of its key (``BOUNDS``, stated in the error).
 """
 from __future__ import annotations
 
@@ -44,7 +48,7 @@ from gyro_sim.core.scene import (
     Scene,
 )
 
-__all__ = ["SceneError", "load_scene"]
+__all__ = ["SceneError", "load_scene", "parse_yaml"]
 
 #: relative tolerance of the triangle inequality of principal moments (I1 + I2 >= I3)
 TRIANGLE_RTOL = 1e-9
@@ -57,6 +61,28 @@ NAME_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
 #: joint-state suffixes of a spherical joint's Euler angles (SPEC.md, "Python API")
 EULER_SUFFIXES = ("psi", "theta", "phi")
 MOTION_TYPES = ("sine",)
+#: longest body or rotor name: names become topic names ``/<node>/wrench/<name>``, and ROS
+#: refuses a topic name longer than 247 characters (rmw: 255 - 8; measured with rclpy: a
+#: name of 230 characters under ``/gyro_sim/wrench/``); 64 leaves room for namespaces
+MAX_NAME_LENGTH = 64
+#: deepest nesting of a scene file (a scene needs 6 levels) and most nodes, aliases expanded
+MAX_YAML_DEPTH = 32
+MAX_YAML_NODES = 200_000
+#: physical sanity bounds on magnitudes, by key: (largest |value|, unit). Far beyond any chain
+#: the simulator is meant for, and far below where products of them overflow.
+BOUNDS = {
+    "mass": (1e9, "kg"),
+    "axial": (1e12, "kg m^2"), "transverse": (1e12, "kg m^2"), "inertia_com": (1e12, "kg m^2"),
+    "axial_inertia": (1e12, "kg m^2"), "transverse_inertia": (1e12, "kg m^2"),
+    "com": (1e4, "m"), "next_joint": (1e4, "m"), "position": (1e4, "m"), "radius": (1e4, "m"),
+    "amplitude": (1e3, "m"), "gravity": (1e4, "m/s^2"), "frequency": (1e6, "Hz"),
+    "velocity": (1e6, "m/s"),
+    "spin": (1e7, "rad/s"), "rate": (1e7, "rad/s"), "euler_rates": (1e7, "rad/s"),
+    "angular_velocity": (1e7, "rad/s"),
+    "euler": (1e6, "rad"), "angle": (1e6, "rad"),
+}
+#: bound of any other number (unit vectors before normalisation, quaternions)
+GENERIC_BOUND = 1e15
 
 TOP_KEYS = ("name", "gravity", "base", "bodies")
 BASE_KEYS = ("type", "position", "motion", "velocity")
@@ -157,10 +183,64 @@ _SceneYamlLoader.add_implicit_resolver(
 )
 
 
+def _yaml_bounds_problem(text: str) -> str | None:
+    """Why `text` is too deep or too big to load (aliases counted expanded), or None.
+
+    Walks the parser's events (the parser is iterative; the composer that builds objects is
+    recursive and would raise RecursionError on deep nesting)."""
+    stack: list[list] = []  # open collections: [anchor, nodes so far, deepest below]
+    sizes: dict[str, tuple[int, int]] = {}  # anchor -> (nodes, depth)
+    total = 0
+    for event in yaml.parse(text, Loader=_SceneYamlLoader):
+        if isinstance(event, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
+            stack.append([event.anchor, 0, 0])
+            if len(stack) > MAX_YAML_DEPTH:
+                return (f"YAML nested deeper than {MAX_YAML_DEPTH} levels (line "
+                        f"{event.start_mark.line + 1}); a scene needs about 6")
+            continue
+        if isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
+            anchor, nodes, below = stack.pop()
+            nodes, depth = nodes + 1, below + 1
+        elif isinstance(event, yaml.ScalarEvent):
+            anchor, nodes, depth = event.anchor, 1, 0
+        elif isinstance(event, yaml.AliasEvent):
+            if event.anchor not in sizes:
+                return f"YAML alias *{event.anchor} refers to its own node or an unknown anchor"
+            anchor = None
+            nodes, depth = sizes[event.anchor]
+        else:
+            continue
+        if anchor is not None:
+            sizes[anchor] = (nodes, depth)
+        total += nodes
+        if total > MAX_YAML_NODES:
+            return f"YAML holds more than {MAX_YAML_NODES} nodes (aliases expanded)"
+        if stack:
+            stack[-1][1] += nodes
+            stack[-1][2] = max(stack[-1][2], depth)
+            if len(stack) + depth > MAX_YAML_DEPTH:
+                return f"YAML nested deeper than {MAX_YAML_DEPTH} levels (aliases expanded)"
+    return None
+
+
+def parse_yaml(text: str, where: str = "scene") -> Any:
+    """YAML text -> plain data with the scene loader (safe, no duplicate keys, depth and size
+    bounded); SceneError naming `where` otherwise."""
+    try:
+        problem = _yaml_bounds_problem(text)
+        if problem is not None:
+            raise SceneError([f"{where}: {problem}"], where)
+        return yaml.load(text, Loader=_SceneYamlLoader)  # noqa: S506 (a SafeLoader)
+    except yaml.YAMLError as exc:
+        raise SceneError([f"{where}: {_yaml_message(exc)}"], where) from None
+    except RecursionError:  # a guard: the bounds above keep the composer well inside the limit
+        raise SceneError([f"{where}: YAML nested too deeply"], where) from None
+
+
 def _read_yaml(path: str) -> Any:
     try:
         with open(path, encoding="utf-8") as stream:
-            return yaml.load(stream, Loader=_SceneYamlLoader)  # noqa: S506 (a SafeLoader)
+            text = stream.read()
     except FileNotFoundError:
         raise SceneError([f"{path}: file not found"], path) from None
     except IsADirectoryError:
@@ -170,8 +250,7 @@ def _read_yaml(path: str) -> Any:
     except UnicodeDecodeError as exc:
         raise SceneError([f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})"],
                          path) from None
-    except yaml.YAMLError as exc:
-        raise SceneError([f"{path}: {_yaml_message(exc)}"], path) from None
+    return parse_yaml(text, path)
 
 
 def _yaml_message(exc: yaml.YAMLError) -> str:
@@ -257,8 +336,8 @@ class _Checker:
                 self.fail(_at(path, key), "required, got null")
         return value
 
-    def number(self, value: Any, path: str) -> float | None:
-        """A finite real number (bools and strings refused)."""
+    def number(self, value: Any, path: str, key: str | None = None) -> float | None:
+        """A finite real number (bools and strings refused) within the bound of `key` (BOUNDS)."""
         if isinstance(value, (bool, np.bool_)):
             self.fail(path, f"must be a number, not a boolean (got {value})")
             return None
@@ -272,6 +351,11 @@ class _Checker:
         if not math.isfinite(result):
             self.fail(path, f"must be finite (got {result})")
             return None
+        limit, unit = BOUNDS.get(key, (GENERIC_BOUND, ""))
+        if abs(result) > limit:
+            self.fail(path, f"magnitude must be <= {limit:g}{' ' + unit if unit else ''}, the sanity "
+                            f"bound of {key or 'a number'} (got {result:g})")
+            return None
         return result
 
     def scalar(self, mapping: Mapping, key: str, path: str, default: Any = _REQUIRED, *,
@@ -280,7 +364,7 @@ class _Checker:
         value = mapping.get(key)
         if value is None:
             return None if default is _REQUIRED else default  # missing: reported by mapping()
-        result = self.number(value, _at(path, key))
+        result = self.number(value, _at(path, key), key)
         if result is None or minimum is None:
             return result
         if result < minimum or (strict and result == minimum):
@@ -295,9 +379,9 @@ class _Checker:
         value = mapping.get(key)
         if value is None:
             return None if default is _REQUIRED else default
-        return self.array(value, _at(path, key), size)
+        return self.array(value, _at(path, key), size, key)
 
-    def array(self, value: Any, path: str, size: int) -> np.ndarray | None:
+    def array(self, value: Any, path: str, size: int, key: str | None = None) -> np.ndarray | None:
         if isinstance(value, np.ndarray):
             value = value.tolist() if value.ndim == 1 else value
         if not isinstance(value, (list, tuple)):
@@ -306,7 +390,7 @@ class _Checker:
         if len(value) != size:
             self.fail(path, f"must have {size} components (got {len(value)})")
             return None
-        items = [self.number(item, f"{path}[{i}]") for i, item in enumerate(value)]
+        items = [self.number(item, f"{path}[{i}]", key) for i, item in enumerate(value)]
         if any(item is None for item in items):
             return None
         return np.array(items, dtype=float)
@@ -327,7 +411,7 @@ class _Checker:
         vector = vector / scale
         return vector / np.linalg.norm(vector)
 
-    def matrix(self, value: Any, path: str) -> np.ndarray | None:
+    def matrix(self, value: Any, path: str, key: str | None = None) -> np.ndarray | None:
         """A 3x3 matrix written as three rows of three numbers."""
         if isinstance(value, np.ndarray):
             value = value.tolist()
@@ -338,7 +422,7 @@ class _Checker:
         if len(value) != 3:
             self.fail(path, f"must have 3 rows (got {len(value)})")
             return None
-        rows = [self.array(row, f"{path}[{i}]", 3) for i, row in enumerate(value)]
+        rows = [self.array(row, f"{path}[{i}]", 3, key) for i, row in enumerate(value)]
         if any(row is None for row in rows):
             return None
         return np.array(rows)
@@ -373,8 +457,12 @@ class _Checker:
         elif not value:
             self.fail(_at(path, key), "must not be empty")
         elif not NAME_PATTERN.match(value):
+            shown = value if len(value) <= 40 else value[:37] + "..."
             self.fail(_at(path, key), f"must be a ROS name token: a letter, then letters, "
-                                      f"digits or underscores (got {value!r})")
+                                      f"digits or underscores (got {shown!r})")
+        elif len(value) > MAX_NAME_LENGTH:
+            self.fail(_at(path, key), f"at most {MAX_NAME_LENGTH} characters (got {len(value)}): "
+                                      f"names become topic names ~/wrench/<name>, which ROS limits")
         elif "__" in value:
             self.fail(_at(path, key), f"must not contain repeated underscores, reserved by "
                                       f"ROS (got {value!r})")
@@ -586,7 +674,7 @@ def _body_inertia(ch: _Checker, body: Mapping, path: str, mass: float | None,
     parallel = None if mass is None or com is None else _point_mass_inertia(mass, com)
     if has_com:
         where = _at(path, "inertia_com")
-        inertia_com = ch.matrix(body["inertia_com"], where)
+        inertia_com = ch.matrix(body["inertia_com"], where, "inertia_com")
         if inertia_com is None:
             return None
         scale = float(np.max(np.abs(inertia_com)))

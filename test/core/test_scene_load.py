@@ -569,3 +569,80 @@ def test_missing_file(tmp_path):
 def test_directory_is_not_a_scene(tmp_path):
     with pytest.raises(SceneError, match="is a directory"):
         load_scene(tmp_path)
+
+
+# --- crafted input: bounded (issue 13) ------------------------------------------------------
+
+
+def test_deeply_nested_yaml_is_refused_with_a_scene_error(tmp_path):
+    path = tmp_path / "deep.yaml"
+    path.write_text("name: deep\nbase: {type: fixed}\nbodies: " + "[" * 100_000 + "]" * 100_000 + "\n")
+    with pytest.raises(SceneError, match="nested deeper than"):
+        load_scene(path)
+
+
+def test_alias_expansion_is_bounded(tmp_path):
+    # nine levels of nine aliases: 9^9 nodes once expanded (a "billion laughs")
+    lines = ["a0: &a0 [x, x, x, x, x, x, x, x, x]"]
+    lines += [f"a{i}: &a{i} [" + ", ".join([f"*a{i - 1}"] * 9) + "]" for i in range(1, 10)]
+    path = tmp_path / "laughs.yaml"
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(SceneError, match="more than .* nodes"):
+        load_scene(path)
+
+
+def test_anchors_and_aliases_within_the_bounds_still_load(tmp_path):
+    text = yaml.safe_dump(valid(), sort_keys=False, default_flow_style=True, width=10**6)
+    text = text.replace("com: [0.0, 0.0, 0.1]", "com: &c [0.0, 0.0, 0.1]", 1)
+    text = text.replace("position: [0.0, 0.0, 0.1]", "position: *c", 1)
+    assert "*c" in text and "&c" in text
+    path = tmp_path / "aliased.yaml"
+    path.write_text(text)
+    scene = load_scene(path)
+    assert list(scene.bodies[0].rotors[0].position) == [0.0, 0.0, 0.1]
+
+
+@pytest.mark.parametrize("path, value, bound", [
+    ("bodies[0].mass", 1e308, "1e+09 kg"),
+    ("bodies[1].inertia_com", [[1e308, 0, 0], [0, 1e308, 0], [0, 0, 1e308]], "1e+12 kg m^2"),
+    ("bodies[0].inertia.axial", 1e300, "1e+12 kg m^2"),
+    ("bodies[0].com", [0.0, 0.0, 1e200], "10000 m"),
+    ("bodies[0].rotors[0].spin", 1e30, "1e+07 rad/s"),
+    ("gravity", [0.0, 0.0, -1e12], "10000 m/s^2"),
+])
+def test_numbers_beyond_the_physical_sanity_bounds_are_refused(path, value, bound):
+    data = valid()
+    put(path, value)(data)
+    with pytest.raises(SceneError) as info:
+        load_scene(data)
+    text = str(info.value)
+    assert path in text and bound in text, text
+
+
+def test_inertia_com_1e308_gives_a_scene_error_not_linalg_error():
+    data = valid()
+    put("bodies[1].inertia_com", [[1e308, 1e308, 1e308]] * 3)(data)
+    with pytest.raises(SceneError, match="sanity bound of inertia_com"):
+        load_scene(data)
+
+
+def test_a_name_rclpy_would_refuse_as_a_topic_is_refused_by_the_loader():
+    data = valid()
+    long = "a" * 300
+    put("bodies[0].name", long)(data)
+    with pytest.raises(SceneError, match=r"bodies\[0\]\.name: at most 64 characters \(got 300\)"):
+        load_scene(data)
+    put("bodies[0].name", "a" * 64)(data)
+    load_scene(data)
+
+
+def test_the_name_limit_is_within_what_ros_accepts_for_a_wrench_topic():
+    """The loader's limit against the real one: a topic ~/wrench/<name> of a node gyro_sim."""
+    rclpy = pytest.importorskip("rclpy")
+    from rclpy.validate_full_topic_name import validate_full_topic_name
+
+    from gyro_sim.core.scene_load import MAX_NAME_LENGTH
+
+    validate_full_topic_name("/gyro_sim/wrench/" + "a" * MAX_NAME_LENGTH)
+    with pytest.raises(rclpy.exceptions.InvalidTopicNameException):
+        validate_full_topic_name("/gyro_sim/wrench/" + "a" * 300)
