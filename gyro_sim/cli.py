@@ -14,30 +14,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-
-class Progress:
-    """A one-line progress bar on stderr (a line per 10 % when stderr is not a terminal)."""
-
-    WIDTH = 30
-
-    def __init__(self, label: str, stream=sys.stderr):
-        self.label, self.stream = label, stream
-        self.tty = stream.isatty()
-        self._last_decile = -1
-        self.t0 = time.perf_counter()
-
-    def __call__(self, done: float, total: float, extra: str = "") -> None:
-        frac = 0.0 if total <= 0 else min(1.0, done / total)
-        if self.tty:
-            bar = "#" * int(frac * self.WIDTH)
-            self.stream.write(f"\r{self.label} [{bar:<{self.WIDTH}}] {100 * frac:5.1f}% {extra}")
-            if frac >= 1.0:
-                self.stream.write("\n")
-            self.stream.flush()
-        elif int(frac * 10) > self._last_decile:
-            self._last_decile = int(frac * 10)
-            self.stream.write(f"{self.label}: {100 * frac:.0f}% {extra}\n")
-            self.stream.flush()
+from .progress import Progress  # noqa: E402  (cmd_run, cmd_bench_scaling)
 
 
 def _drift(a, b) -> float:
@@ -59,6 +36,16 @@ def cmd_run(args) -> int:
     except (SceneError, FileNotFoundError) as exc:
         print(f"gyro-sim run: {exc}", file=sys.stderr)
         return 2
+    if args.record:  # no silent overwrite, never the scene file itself (io/safe_paths.py)
+        from .io.safe_paths import OutputError, check_output
+
+        try:
+            check_output(args.record, inputs=[scene.path], force=args.force, what="--record")
+        except OutputError as exc:
+            print(f"gyro-sim run: {exc}", file=sys.stderr)
+            return 2
+        if args.force and os.path.lexists(args.record):
+            os.remove(args.record)  # the LogWriter creates its file ("xb"): --force replaces it
     sim = Simulator(scene, integrator=args.integrator, rtol=args.rtol, atol=args.atol, step=args.step)
     inv0 = sim.invariants()
     chunk = min(args.chunk, args.duration)
@@ -135,8 +122,31 @@ def cmd_bench_scaling(args) -> int:
         scaling.plot(rows, str(out / "scaling.png"))
         print(f"\nwrote {out / 'scaling.md'} and {out / 'scaling.png'}")
     except ImportError:
-        print(f"\nwrote {out / 'scaling.md'} (install matplotlib for the plot)")
+        print(f"\nwrote {out / 'scaling.md'} (no plot: pip install 'gyro_sim[bench]')")
     return 0
+
+
+#: `gyro-sim --help`, after the list of commands (every line that starts with gyro-sim is run or
+#: parsed by test/test_examples.py)
+EXAMPLES = """examples:
+  gyro-sim run --scene double_gyro_plus --duration 10
+  gyro-sim run --scene hinge_chain --duration 10 --record run.mcap
+  gyro-sim view run.mcap --save run.rrd
+  gyro-sim replay --resimulate run.mcap
+  gyro-sim recover broken.mcap -o fixed.mcap
+  gyro-sim cmd --scene hinge_chain --seconds 15 sine --amplitude 0.002 0.05 0.03 --frequency 0.5
+  gyro-sim bench scaling --quick
+
+Each command lists its options with --help after it. Shipped scenes (config/) are taken by
+name from anywhere; the node is gyro_sim_node (gyro_sim_node --help)."""
+
+BENCH_EXAMPLES = """examples:
+  gyro-sim bench scaling --quick
+  gyro-sim bench accuracy --quick --out out/bench
+  gyro-sim bench stability --quick
+  gyro-sim bench realtime --quick
+
+Each writes <report>.md and <report>.png to --out (default out/bench)."""
 
 
 # Modules that add their own subcommands: each has `register(sub, bench)` (sub: the top-level
@@ -153,8 +163,9 @@ PLUGINS = (
 def build_parser() -> argparse.ArgumentParser:
     import importlib
 
-    ap = argparse.ArgumentParser(prog="gyro-sim", description="Chains of gyrostats: offline runs, logs and reports.")
-    sub = ap.add_subparsers(dest="cmd", required=True)
+    ap = argparse.ArgumentParser(prog="gyro-sim", description="Chains of gyrostats: offline runs, logs and reports.",
+                                 epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = ap.add_subparsers(dest="cmd", title="commands", metavar="COMMAND")
     r = sub.add_parser("run", help="simulate a scene offline, as fast as possible")
     r.add_argument("--scene", required=True, help="scene file, or the name of a shipped scene (config/)")
     r.add_argument("--duration", type=float, required=True, help="simulated seconds")
@@ -167,9 +178,12 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--publish-rate", type=float, default=100.0, help="messages per simulated second in the log (Hz)")
     r.add_argument("--flush-period", type=float, default=1.0,
                    help="wall-clock seconds between flushes of the log (what a crash can lose)")
+    r.add_argument("--force", action="store_true", help="replace an existing --record file (never the scene)")
     r.set_defaults(fn=cmd_run)
-    b = sub.add_parser("bench", help="benchmarks and reports")
-    bsub = b.add_subparsers(dest="bench", required=True)
+    b = sub.add_parser("bench", help="benchmarks and reports", epilog=BENCH_EXAMPLES,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    bsub = b.add_subparsers(dest="bench", title="reports", metavar="REPORT")
+    b.set_defaults(fn=None, help_of=b)
     s = bsub.add_parser("scaling", help="cost per evaluation and per simulated second against chain length")
     s.add_argument("--sizes", type=int, nargs="+")
     s.add_argument("--quick", action="store_true", help="small sizes, short timings (CI)")
@@ -183,15 +197,59 @@ def build_parser() -> argparse.ArgumentParser:
                 continue
             raise
         mod.register(sub, bsub)
+    ap.set_defaults(fn=None, help_of=ap)
     return ap
+
+
+#: the extra that installs an optional module (by its top-level import name)
+EXTRAS = {"rerun": "viz", "rclpy": "ros", "rpyutils": "ros", "matplotlib": "bench", "mujoco": "bench",
+          "pinocchio": "bench"}
+
+
+def extra_for(module: str | None) -> str | None:
+    """The gyro_sim extra that provides `module` (ROS message packages: "ros"), else None."""
+    top = (module or "").split(".")[0]
+    if top.endswith(("_msgs", "_srvs", "_interfaces")) or top.startswith("rosidl"):
+        return "ros"
+    return EXTRAS.get(top)
+
+
+def _compile_first(args) -> None:
+    """`run` and `replay --resimulate` build a Simulator: on a cold numba cache, say that the
+    first one compiles (gyro_sim.warmup) instead of staying silent for seconds."""
+    if args.cmd == "run":
+        from .core.scene_load import SceneError, load_scene
+        from .paths import find_scene
+
+        try:
+            load_scene(find_scene(args.scene))
+        except (SceneError, FileNotFoundError):
+            return  # cmd_run reports it, with nothing compiled
+    elif not (args.cmd == "replay" and getattr(args, "resimulate", False) and Path(args.log).is_file()):
+        return
+    from .warmup import precompile
+
+    precompile(sys.stderr, prog=f"gyro-sim {args.cmd}")
 
 
 def main(argv=None) -> int:
     ap = build_parser()
     args = ap.parse_args(argv)
+    if args.fn is None:  # `gyro-sim` or `gyro-sim bench` alone: what there is to choose from
+        args.help_of.print_help(sys.stderr)
+        return 2
     if getattr(args, "duration", None) is not None and args.duration <= 0:
         ap.error("--duration must be > 0")
-    return args.fn(args)
+    try:
+        _compile_first(args)
+        return args.fn(args)
+    except ModuleNotFoundError as exc:
+        extra = extra_for(exc.name)
+        if extra is None:
+            raise
+        print(f"gyro-sim {args.cmd}: needs {exc.name.split('.')[0]}, not installed; "
+              f"install it with: pip install 'gyro_sim[{extra}]'", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """Finding the package's own files (config/ scenes) in every install layout.
 
-`pip install -e .` skips data_files (../shared/ROS_ON_PYPI.md), so the source tree is tried
+`pip install -e .` skips data_files (ROS 2 from PyPI does not install them in develop mode), so the source tree is tried
 first, then the data_files location under sys.prefix, then the ament index.
 """
 from __future__ import annotations
@@ -29,13 +29,21 @@ def shipped_scenes() -> list[Path]:
 
 
 def find_scene(name: str | os.PathLike) -> Path:
-    """A scene file by path, or by name (`double_gyro_plus` or `double_gyro_plus.yaml`) in config/."""
-    p = Path(name)
+    """A scene file by path, or a shipped scene by its bare name (`double_gyro_plus` or
+    `double_gyro_plus.yaml`, from config/ of the source tree or the install, wherever the
+    user stands). A name with a directory part (`/no/such/dir/chain_4.yaml`, `./chain_4.yaml`)
+    is a path and only a path: FileNotFoundError ("no such file") if it is not a file there."""
+    text = os.fspath(name)
+    p = Path(text).expanduser()
     if p.is_file():
         return p
+    if p.exists():
+        raise FileNotFoundError(f"scene {text!r}: not a file")
+    if not text.strip() or Path(text).name != text:
+        raise FileNotFoundError(f"scene {text!r}: no such file")
     stem = p.name if p.suffix in (".yaml", ".yml") else p.name + ".yaml"
     for d in config_dirs():
-        if (d / stem).is_file():
+        if (d / stem).is_file() and stem not in NOT_SCENES:
             return d / stem
     known = sorted({f.stem for d in config_dirs() for f in d.glob("*.yaml") if f.name not in NOT_SCENES})
-    raise FileNotFoundError(f"scene {str(name)!r} not found (shipped scenes: {', '.join(known) or 'none'})")
+    raise FileNotFoundError(f"scene {text!r} not found (shipped scenes: {', '.join(known) or 'none'})")

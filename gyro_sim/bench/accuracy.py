@@ -47,7 +47,7 @@ from ..core.simulator import SimulationError, Simulator
 from . import peers
 from .extreme import load_dict
 from .peers import Frames, frames_of_state
-from .report import write_report
+from .report import add_force_option, refused, write_report
 
 #: atol = rtol * ATOL_FACTOR for every adaptive run (states are O(1) to O(100))
 ATOL_FACTOR = 1e-2
@@ -730,14 +730,16 @@ def to_json(report: Report) -> dict[str, Any]:
 
 # --------------------------------------------------------------------------------- CLI
 def main(args) -> int:
-    from ..cli import Progress
+    from ..progress import Progress
 
+    if refused(args, "accuracy"):
+        return 2
     report = build(quick=args.quick, keys=args.scenes, backend=args.backend,
                    progress=Progress("accuracy"))
     text = report.markdown()
     print(text)
     write_report(args.out, "accuracy", text + "\n" + report.all_points(), to_json(report),
-                 lambda png: plot(report.scenarios, report.points, png))
+                 lambda png: plot(report.scenarios, report.points, png), force=args.force)
     return 0
 
 
@@ -746,6 +748,7 @@ def register(sub, bench) -> None:
     p = bench.add_parser("accuracy", help="work-precision diagrams: error against CPU time, with peers")
     p.add_argument("--quick", action="store_true", help="short horizons, few settings (CI)")
     p.add_argument("--out", default="out/bench", help="directory for accuracy.md, accuracy.json, accuracy.png")
+    add_force_option(p)
     p.add_argument("--scenes", nargs="+", choices=[c.key for c in cases()], help="a subset of the scenes")
     p.add_argument("--backend", default="auto", choices=("auto", "numba", "numpy"),
                    help="the Simulator's dynamics backend (default auto: numba when it imports)")

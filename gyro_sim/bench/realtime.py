@@ -170,8 +170,11 @@ def plot(runs: list[Run], path: str) -> None:
 
 
 def cmd_bench_realtime(args) -> int:
-    from ..cli import Progress
+    from ..progress import Progress
+    from .report import refused, write_report
 
+    if refused(args, "realtime"):
+        return 2
     sizes = QUICK_SIZES if args.quick else tuple(args.sizes or DEFAULT_SIZES)
     seconds = QUICK_SECONDS if args.quick else args.seconds
     t0 = time.perf_counter()
@@ -184,16 +187,9 @@ def cmd_bench_realtime(args) -> int:
     text = (f"### Real time: the node at physics {PHYSICS_RATE:g} Hz, publish {PUBLISH_RATE:g} Hz, RK4 "
             f"({backends} dynamics), {seconds:g} s simulated per run\n\n" + table(runs))
     print(text)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "realtime.md").write_text(text + "\n")
-    (out / "realtime.json").write_text(json.dumps([{"n": r.n, "record": r.record, **r.stats} for r in runs],
-                                                  indent=1, default=str))
-    try:
-        plot(runs, str(out / "realtime.png"))
-        print(f"\nwrote {out / 'realtime.md'}, realtime.json and realtime.png in {time.perf_counter() - t0:.0f} s")
-    except ImportError:
-        print(f"\nwrote {out / 'realtime.md'} and realtime.json (install matplotlib for the plot)")
+    write_report(args.out, "realtime", text + "\n", [{"n": r.n, "record": r.record, **r.stats} for r in runs],
+                 lambda png: plot(runs, png), force=args.force, json_default=str)
+    print(f"in {time.perf_counter() - t0:.0f} s")
     return 0
 
 
@@ -205,4 +201,5 @@ def register(sub, bench) -> None:
     r.add_argument("--quick", action="store_true", help=f"n = 2 only, {QUICK_SECONDS:g} s runs (CI)")
     r.add_argument("--backend", default="auto", help="dynamics of the node: auto | numba | numpy")
     r.add_argument("--out", default="out/bench", help="directory for realtime.md, realtime.json, realtime.png")
+    r.add_argument("--force", action="store_true", help="replace existing report files in --out")
     r.set_defaults(fn=cmd_bench_realtime)

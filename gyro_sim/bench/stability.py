@@ -43,7 +43,7 @@ from .accuracy import (ATOL_FACTOR, chain_length, invariant_error, invariant_sca
                        state_error)
 from .peers import frames_of_state
 from .scenes import spherical_chain
-from .report import write_report
+from .report import add_force_option, refused, write_report
 
 #: seconds of simulated time per `advance` call (a node publishing at 100 Hz)
 CHUNK = 0.01
@@ -578,15 +578,17 @@ def to_json(report: Report) -> dict[str, Any]:
 
 
 def main(args) -> int:
-    from ..cli import Progress
+    from ..progress import Progress
 
+    if refused(args, "stability"):
+        return 2
     bar = Progress("stability")
     report = build(quick=args.quick, keys=args.cases, long_steps=args.long_steps, progress=bar,
                    backend=args.backend)
     text = report.markdown()
     print(text)
     write_report(args.out, "stability", text + "\n", to_json(report),
-                 lambda png: plot(report.results, report.long_runs, png))
+                 lambda png: plot(report.results, report.long_runs, png), force=args.force)
     return 0
 
 
@@ -595,6 +597,7 @@ def register(sub, bench) -> None:
     p = bench.add_parser("stability", help="stiff and extreme cases: a verdict per integrator")
     p.add_argument("--quick", action="store_true", help="short horizons, small budgets, 1e4 long steps (CI)")
     p.add_argument("--out", default="out/bench", help="directory for stability.md, stability.json, stability.png")
+    add_force_option(p)
     p.add_argument("--cases", nargs="+", choices=[it.key for it in items()], help="a subset of the cases")
     p.add_argument("--long-steps", type=int, default=None,
                    help="steps of the long-horizon runs (default 1e6, quick 1e4; 0: skip)")

@@ -2,16 +2,20 @@
 
     gyro-sim cmd constant 0.0 0.05 -0.03                  # one value per axis, in sim.axis_names order
     gyro-sim cmd step --before 0 0 0 --after 0 0.05 0 --at 2
-    gyro-sim cmd sine --amplitude 0.002 0.05 0 --frequency 0.5 --seconds 10
+    gyro-sim cmd --seconds 10 sine --amplitude 0.002 0.05 0 --frequency 0.5
+    gyro-sim cmd sine --amplitude 0.002 0.05 0 --frequency 0.5 --seconds 10   # options go on either side
     gyro-sim cmd --scene hinge_chain constant 0 0.05 0    # checks the count, prints the axis names
 
 Values are N m, one per axis (with --scene, a single value stands for every axis). Commands are sent
 at --rate Hz (keep it above 1 / command_timeout of the node) from the moment the node's
-subscription is seen, the profile's time being wall seconds since then.
+subscription is seen, the profile's time being wall seconds since then. Needs rclpy
+(pip install 'gyro_sim[ros]') and the node in the same ROS_DOMAIN_ID.
 """
 from __future__ import annotations
 
+import argparse
 import math
+import os
 import sys
 import time
 
@@ -51,7 +55,13 @@ def cmd_publish(args) -> int:
         from ..core.simulator import Simulator
         from ..paths import find_scene
 
-        axes = Simulator(find_scene(args.scene), integrator="rk4").axis_names
+        from ..core.scene_load import SceneError
+
+        try:  # the numpy backend: the axis names without compiling anything
+            axes = Simulator(find_scene(args.scene), integrator="rk4", backend="numpy").axis_names
+        except (SceneError, FileNotFoundError) as exc:
+            print(f"gyro-sim cmd: {exc}", file=sys.stderr)
+            return 2
         if n not in (1, len(axes)):
             print(f"gyro-sim cmd: scene {args.scene} has {len(axes)} axes {axes}, got {n} values", file=sys.stderr)
             return 2
@@ -62,15 +72,22 @@ def cmd_publish(args) -> int:
     if not args.rate > 0:
         print("gyro-sim cmd: --rate must be > 0", file=sys.stderr)
         return 2
-    import rclpy
-    from rclpy.executors import ExternalShutdownException
-    from std_msgs.msg import Float64MultiArray
+    try:
+        import rclpy
+        from rclpy.executors import ExternalShutdownException
+        from std_msgs.msg import Float64MultiArray
+    except ImportError as exc:
+        print(f"gyro-sim cmd: needs rclpy ({exc}); install it with: pip install 'gyro_sim[ros]'", file=sys.stderr)
+        return 2
 
     rclpy.init()
     node = rclpy.create_node("gyro_sim_cmd")
     pub = node.create_publisher(Float64MultiArray, args.topic, 10)
     try:
         t0 = time.monotonic()
+        if pub.get_subscription_count() == 0:
+            print(f"waiting for the gyro_sim node (ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')}, "
+                  f"up to {DISCOVERY_TIMEOUT:g} s for a subscriber on {args.topic})", flush=True)
         while pub.get_subscription_count() == 0:
             if time.monotonic() - t0 > DISCOVERY_TIMEOUT:
                 print(f"gyro-sim cmd: nobody subscribes to {args.topic} (is gyro_sim_node running, "
@@ -105,23 +122,36 @@ def register(sub, bench) -> None:
     """Add `gyro-sim cmd` to the top-level subcommands."""
     c = sub.add_parser("cmd", help="publish axis-moment commands to a running gyro_sim_node",
                        description=__doc__.split("\n\n", 1)[1], formatter_class=_RawFormatter)
-    c.add_argument("--topic", default=DEFAULT_TOPIC)
-    c.add_argument("--rate", type=float, default=50.0, help="messages per second (default 50)")
-    c.add_argument("--seconds", type=float, default=0.0, help="seconds to publish; 0 = until Ctrl-C")
-    c.add_argument("--scene", help="check the number of values against this scene's axes")
-    c.add_argument("-v", "--verbose", action="store_true", help="print every command sent")
+    _common_options(c, None)  # and again after the mode (each mode parser), where only given ones are set
     modes = c.add_subparsers(dest="mode", required=True)
     k = modes.add_parser("constant", help="the same moments all the time")
     k.add_argument("values", type=float, nargs="+", help="one per axis (N m)")
+    _common_options(k, argparse.SUPPRESS)
     s = modes.add_parser("step", help="--before until --at seconds, then --after")
     s.add_argument("--before", type=float, nargs="+", default=[0.0])
     s.add_argument("--after", type=float, nargs="+", required=True)
     s.add_argument("--at", type=float, default=1.0, help="seconds after the start (default 1)")
+    _common_options(s, argparse.SUPPRESS)
     w = modes.add_parser("sine", help="offset + amplitude sin(2 pi frequency t), per axis")
     w.add_argument("--amplitude", type=float, nargs="+", required=True)
     w.add_argument("--frequency", type=float, nargs="+", default=[1.0], help="Hz")
     w.add_argument("--offset", type=float, nargs="+", default=[0.0])
+    _common_options(w, argparse.SUPPRESS)
     c.set_defaults(fn=cmd_publish)
+
+
+def _common_options(parser, suppress) -> None:
+    """The options of `gyro-sim cmd`, accepted before and after the mode (`cmd --seconds 10 sine
+    ...` and `cmd sine ... --seconds 10`). With suppress=argparse.SUPPRESS no default is set,
+    so an option given before the mode is not reset by the mode's parser."""
+    def default(value):
+        return suppress if suppress is not None else value
+
+    parser.add_argument("--topic", default=default(DEFAULT_TOPIC), help="topic of the node's commands")
+    parser.add_argument("--rate", type=float, default=default(50.0), help="messages per second (default 50)")
+    parser.add_argument("--seconds", type=float, default=default(0.0), help="seconds to publish; 0 = until Ctrl-C")
+    parser.add_argument("--scene", default=default(None), help="check the number of values against this scene's axes")
+    parser.add_argument("-v", "--verbose", action="store_true", default=default(False), help="print every command sent")
 
 
 def _RawFormatter(prog):
