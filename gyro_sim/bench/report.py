@@ -1,22 +1,61 @@
-"""Writing a report's files: Markdown, JSON and the PNG plot (each `gyro-sim bench` command)."""
+"""Writing a report's files: Markdown, JSON and the PNG plot (each `gyro-sim bench` command).
+
+No silent overwrite (SPEC.md, "Contracts"): existing report files are refused unless
+``--force``, checked before the benchmark starts (:func:`refused`) and again before writing.
+"""
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 from typing import Any, Callable
 
+from ..io.safe_paths import OutputError, check_output
 
-def write_report(out: str | Path, name: str, markdown: str, data: Any, plot: Callable[[str], None]) -> list[Path]:
-    """Write <out>/<name>.md, .json and .png (the plot is skipped without matplotlib); print
-    and return the paths written."""
+#: the files of a report <name>: <out>/<name>.<suffix>
+SUFFIXES = ("md", "json", "png")
+
+
+def add_force_option(parser) -> None:
+    """`--force` on a bench command's parser."""
+    parser.add_argument("--force", action="store_true", help="replace existing report files in --out")
+
+
+def check_report(out: str | Path, name: str, force: bool = False) -> list[Path]:
+    """The paths <out>/<name>.md, .json, .png, checked (OutputError if one exists and not
+    `force`, if --out is a file, or if a path is a directory)."""
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / f"{name}.md").write_text(markdown)
-    (out / f"{name}.json").write_text(json.dumps(data, indent=1, default=float))
-    written = [out / f"{name}.md", out / f"{name}.json"]
+    if out.exists() and not out.is_dir():
+        raise OutputError(f"--out: {out}: is a file, not a directory")
+    paths = [out / f"{name}.{suffix}" for suffix in SUFFIXES]
+    if out.is_dir():
+        for path in paths:
+            check_output(path, force=force, what="--out")
+    return paths
+
+
+def refused(args, name: str) -> bool:
+    """Check the report's outputs before a bench runs: print one line and return True if refused."""
     try:
-        plot(str(out / f"{name}.png"))
-        written.append(out / f"{name}.png")
+        check_report(args.out, name, getattr(args, "force", False))
+    except OutputError as exc:
+        print(f"gyro-sim bench {name}: {exc}", file=sys.stderr)
+        return True
+    return False
+
+
+def write_report(out: str | Path, name: str, markdown: str, data: Any, plot: Callable[[str], None], *,
+                 force: bool = False, json_default: Callable = float) -> list[Path]:
+    """Write <out>/<name>.md, .json and .png (the plot is skipped without matplotlib); print
+    and return the paths written. Existing files are refused (OutputError) unless `force`."""
+    md, js, png = check_report(out, name, force)
+    Path(out).mkdir(parents=True, exist_ok=True)
+    md.write_text(markdown)
+    js.write_text(json.dumps(data, indent=1, default=json_default))
+    written = [md, js]
+    try:
+        plot(str(png))
+        written.append(png)
     except ImportError:
         print("(install matplotlib for the plot)")
     print("\nwrote " + ", ".join(str(w) for w in written))

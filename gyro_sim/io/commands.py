@@ -37,10 +37,21 @@ def cmd_view(args) -> int:
 
     if not _exists("view", args.log):
         return 2
-    try:
+    try:  # rerun_view imports rerun only when it draws: check the optional package here
+        import rerun  # noqa: F401
+
         from ..viz.rerun_view import view
     except ImportError as exc:
         _err("view", f"needs rerun-sdk ({exc}); install it with: pip install 'gyro_sim[viz]'")
+        return 2
+    from .safe_paths import OutputError, check_output
+
+    try:  # no silent overwrite, and never the log itself (SPEC.md, "Contracts")
+        for opt, out in (("--save", args.save), ("--screenshot", args.screenshot)):
+            if out:
+                check_output(out, inputs=[args.log], force=args.force, what=opt)
+    except OutputError as exc:
+        _err("view", exc)
         return 2
     save = args.save
     tmp = None
@@ -50,9 +61,9 @@ def cmd_view(args) -> int:
     try:
         drawn = view(args.log, save=save, spawn=not save,
                      play_state="following" if args.screenshot else ("paused" if args.paused else None))
-    except LogError as exc:
+    except (LogError, OSError) as exc:  # a damaged or crafted log is bad input
         _err("view", exc)
-        return 1
+        return 2
     if args.save:
         print(f"wrote {args.save}: {len(drawn['entities'])} entities, views {', '.join(drawn['views'])}")
         print(f"open it with: rerun {args.save}")
@@ -92,9 +103,12 @@ def cmd_replay(args) -> int:
 
         try:
             res = resimulate(args.log, integrator=args.integrator, rtol=args.rtol, atol=args.atol)
-        except (LogError, SimulationError, ValueError) as exc:
+        except SimulationError as exc:
             _err("replay", exc)
             return 1
+        except (LogError, ValueError, OSError) as exc:  # damaged or crafted log, bad option: bad input
+            _err("replay", exc)
+            return 2
         print(res.report())
         return 0 if (res.max_deviation <= args.tolerance and res.compared) else 1
     try:
@@ -109,9 +123,9 @@ def cmd_replay(args) -> int:
     try:
         stats = replay(args.log, rate=args.rate, loop=args.loop, topics=args.topics,
                        wait_for_subscribers=args.wait_for_subscribers, should_stop=lambda: bool(stop))
-    except LogError as exc:
+    except (LogError, OSError) as exc:
         _err("replay", exc)
-        return 1
+        return 2
     except KeyboardInterrupt:
         return 0
     finally:
@@ -127,12 +141,15 @@ def cmd_recover(args) -> int:
 
     if not _exists("recover", args.log):
         return 2
+    from .safe_paths import OutputError, check_output
+
     out = args.output or str(Path(args.log).with_suffix("")) + ".recovered.mcap"
     try:
-        r = recover(args.log, out)
-    except LogError as exc:
+        check_output(out, inputs=[args.log], force=args.force)
+        r = recover(args.log, out, overwrite=args.force)
+    except (LogError, OutputError, OSError) as exc:
         _err("recover", exc)
-        return 1
+        return 2
     print(r.report())
     print(f"wrote {out}")
     return 0
@@ -146,6 +163,7 @@ def register(sub, bench) -> None:
     v.add_argument("--screenshot", metavar="OUT.png", help="save a PNG of the viewer (headless; needs Vulkan)")
     v.add_argument("--window-size", default="1200x800", help="size of the screenshot, WxH (logical points)")
     v.add_argument("--paused", action="store_true", help="open paused at the start instead of playing")
+    v.add_argument("--force", action="store_true", help="replace an existing --save / --screenshot file")
     v.set_defaults(fn=cmd_view)
 
     r = sub.add_parser("replay", help="publish a log's topics on ROS 2 at recorded pace, or re-simulate it")
@@ -168,4 +186,5 @@ def register(sub, bench) -> None:
     c = sub.add_parser("recover", help="rewrite a log cut short (SIGKILL, power loss) as a well-formed file")
     c.add_argument("log", help="the damaged MCAP file (not modified)")
     c.add_argument("-o", "--output", help="the recovered file (default: <log>.recovered.mcap)")
+    c.add_argument("--force", action="store_true", help="replace an existing output file (never the input)")
     c.set_defaults(fn=cmd_recover)

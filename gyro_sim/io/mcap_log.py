@@ -21,10 +21,18 @@ What a file holds (SPEC.md, "Logs"):
   message indexes, chunk indexes, statistics and summary written on close.
 
 Crash safety: the chunk in progress is finished and handed to the operating system at least
-every `flush_period` seconds of wall time (checked on every write and by a background timer),
-so after SIGKILL everything written before the last flush is in the file and
+every `flush_period` seconds of wall time (``DEFAULT_FLUSH_PERIOD``, 0.25 s; checked on every
+write and by a background timer), so after SIGKILL everything written before the last flush is in the file and
 :func:`gyro_sim.io.recover.recover` gets it back. The file is not fsync'ed: a crash of the
 process loses nothing flushed, a crash of the machine may.
+
+No silent overwrite: the file is created with mode ``"xb"`` (an existing file is refused with
+:class:`~.safe_paths.OutputError`) unless ``overwrite=True``.
+
+Reading verifies (:func:`verify`): :func:`read_info` checks the summary's CRC and every chunk's
+CRC (and that it decompresses) before returning, and :func:`iter_messages` reads with the chunk
+CRCs checked; a damaged log is refused with a :class:`LogError` naming the chunk's byte offset
+and ``gyro-sim recover``.
 
 The writer is thread-safe (one lock around the MCAP writer).
 """
@@ -59,6 +67,8 @@ ROBOT_DESCRIPTION_TOPIC = "/robot_description"
 CHUNK_SIZE = 1 << 20
 #: shortest sleep of the background flush timer (s)
 MIN_TIMER_WAIT = 0.005
+#: default wall-clock seconds between flushes: what SIGKILL can lose (measured cost: README)
+DEFAULT_FLUSH_PERIOD = 0.25
 
 
 class LogError(RuntimeError):
@@ -123,15 +133,17 @@ class LogWriter:
 
     Parameters
     ----------
-    path : file to create (overwritten).
+    path : file to create (refused if it exists, unless `overwrite`).
     scene : the gyro_sim Scene; its ``source`` mapping is embedded as ``scene.yaml``.
     params : run parameters (JSON-serialisable), embedded as metadata ``gyro_sim``/``params``.
     flush_period : wall-clock seconds between flushes of the data to the file (> 0).
     robot_description : also write the scene's URDF on /robot_description at log time 0.
+    overwrite : replace an existing file (default: refuse it, OutputError).
     """
 
-    def __init__(self, path: str | os.PathLike, *, scene, params: dict, flush_period: float = 1.0,
-                 robot_description: bool = True):
+    def __init__(self, path: str | os.PathLike, *, scene, params: dict,
+                 flush_period: float = DEFAULT_FLUSH_PERIOD, robot_description: bool = True,
+                 overwrite: bool = False):
         from mcap.writer import Writer
 
         if not (flush_period > 0 and math.isfinite(flush_period)):
@@ -144,7 +156,12 @@ class LogWriter:
             raise LogError(f"params must be JSON-serialisable and finite: {exc}") from exc
         from .. import __version__
 
-        self._file = open(self.path, "wb")
+        try:
+            self._file = open(self.path, "wb" if overwrite else "xb")
+        except FileExistsError:
+            from .safe_paths import OutputError
+
+            raise OutputError(f"log {self.path}: exists; refused to overwrite it (overwrite=True to replace)") from None
         self._writer = Writer(self._file, chunk_size=CHUNK_SIZE, compression=_compression())
         self._writer.start(profile="ros2", library=f"gyro_sim/{__version__}")
         self._writer.add_metadata(
@@ -374,11 +391,15 @@ class LogInfo:
     end_ns: int | None
 
     def scene_source(self) -> dict:
-        import yaml
+        """The embedded scene file, parsed (safe loader, depth-limited; LogError otherwise)."""
+        from ..core.scene_load import SceneError, parse_yaml
 
         if self.scene_yaml is None:
             raise LogError("the log has no embedded scene (attachment scene.yaml)")
-        return yaml.safe_load(self.scene_yaml)
+        try:
+            return parse_yaml(self.scene_yaml, "scene.yaml")
+        except SceneError as exc:
+            raise LogError(f"the embedded scene does not load: {'; '.join(exc.errors)}") from None
 
     def scene(self):
         """The embedded scene, validated (LogError if it is missing or does not load)."""
@@ -387,44 +408,169 @@ class LogInfo:
         try:
             return load_scene(self.scene_source())
         except SceneError as exc:
-            raise LogError(f"the embedded scene does not load: {exc}") from exc
+            raise LogError(f"the embedded scene does not load: {'; '.join(exc.errors)}") from None
 
 
 def _open(path):
     return open(path, "rb")
 
 
-def read_info(path: str | os.PathLike) -> LogInfo:
-    """Parameters, scene, topics and span of a log (well-formed; see :mod:`.recover` otherwise)."""
+#: largest uncompressed chunk a reader accepts (ours are CHUNK_SIZE; bounds crafted sizes)
+MAX_CHUNK_BYTES = 1 << 28
+#: MCAP record opcodes used here (MCAP specification)
+OP_CHUNK = 0x06
+OP_FOOTER = 0x02
+#: the footer record (opcode, length, summary_start, summary_offset_start, summary_crc) + magic
+FOOTER_BYTES = 1 + 8 + 8 + 8 + 4
+MAGIC_BYTES = 8
+
+
+class ChunkError(Exception):
+    """A chunk that cannot be used: CRC mismatch, undecodable, or of an impossible size."""
+
+
+def decode_chunk(chunk) -> bytes:
+    """The uncompressed records of an mcap ``Chunk``, its CRC checked (ChunkError otherwise)."""
+    import zlib
+
+    size = chunk.uncompressed_size
+    if size > MAX_CHUNK_BYTES:
+        raise ChunkError(f"uncompressed size {size} bytes exceeds the limit of {MAX_CHUNK_BYTES}")
     try:
-        return _read_info(path)
+        if chunk.compression == "zstd":
+            import zstandard
+
+            data = zstandard.ZstdDecompressor().decompressobj().decompress(bytes(chunk.data))
+        elif chunk.compression == "lz4":
+            import lz4.frame
+
+            data = lz4.frame.decompress(bytes(chunk.data))
+        elif chunk.compression == "":
+            data = bytes(chunk.data)
+        else:
+            raise ChunkError(f"unknown compression {chunk.compression[:20]!r}")
+    except ChunkError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - each decompressor has its own errors
+        raise ChunkError(f"does not decompress ({type(exc).__name__}: {exc})") from None
+    if len(data) != size:
+        raise ChunkError(f"decompresses to {len(data)} bytes, its header says {size}")
+    if chunk.uncompressed_crc != 0:
+        crc = zlib.crc32(data)
+        if crc != chunk.uncompressed_crc:
+            raise ChunkError(f"CRC mismatch (stored {chunk.uncompressed_crc:#010x}, computed {crc:#010x})")
+    return data
+
+
+def chunk_records(chunk, data: bytes) -> list:
+    """The Schema, Channel and Message records of a chunk whose records are `data` (decoded)."""
+    from mcap.reader import breakup_chunk
+    from mcap.records import Chunk
+
+    plain = Chunk(compression="", data=data, message_start_time=chunk.message_start_time,
+                  message_end_time=chunk.message_end_time, uncompressed_crc=0, uncompressed_size=len(data))
+    try:
+        return breakup_chunk(plain, validate_crc=False)
+    except Exception as exc:  # noqa: BLE001 - a damaged record inside can fail anywhere
+        raise ChunkError(f"holds an unreadable record ({type(exc).__name__}: {exc})") from None
+
+
+def _damaged(path, where: str, reason: str) -> LogError:
+    return LogError(f"{path}: damaged log: {where}: {reason}; "
+                    f"run `gyro-sim recover {path} -o fixed.mcap` to keep what is intact")
+
+
+def verify(path: str | os.PathLike):
+    """Check a log before reading it: summary present and its CRC, then every chunk's CRC (and
+    that it decompresses). Return the mcap ``Summary``; raise LogError naming the first
+    damaged chunk's byte offset, or OSError if the file cannot be opened."""
+    import io as _io
+    import zlib
+
+    from mcap.data_stream import ReadDataStream
+    from mcap.reader import make_reader
+    from mcap.records import Chunk
+
+    with _open(path) as f:
+        size = os.fstat(f.fileno()).st_size
+        try:
+            summary = make_reader(f, validate_crcs=True).get_summary()
+        except Exception as exc:  # noqa: BLE001 - mcap raises many kinds on a damaged file
+            raise LogError(f"{path}: not a readable MCAP log, no summary ({type(exc).__name__}: {exc}); "
+                           f"if the run was killed, run `gyro-sim recover {path} -o fixed.mcap`") from None
+        if summary is None:
+            raise LogError(f"{path}: no summary (cut short? run `gyro-sim recover {path} -o fixed.mcap`)")
+        f.seek(size - MAGIC_BYTES - FOOTER_BYTES)
+        footer = f.read(FOOTER_BYTES)
+        summary_start = int.from_bytes(footer[9:17], "little")
+        summary_crc = int.from_bytes(footer[25:29], "little")
+        if footer[0] != OP_FOOTER or summary_start > size:
+            raise _damaged(path, f"footer at byte {size - MAGIC_BYTES - FOOTER_BYTES}", "not a footer record")
+        if summary_crc and summary_start:
+            f.seek(summary_start)
+            crc = zlib.crc32(f.read(size - MAGIC_BYTES - 4 - summary_start))
+            if crc != summary_crc:
+                raise _damaged(path, f"summary section at byte {summary_start}",
+                               f"CRC mismatch (stored {summary_crc:#010x}, computed {crc:#010x})")
+        for index in sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
+            off = index.chunk_start_offset
+            try:
+                f.seek(off)
+                head = f.read(9)
+                if len(head) < 9 or head[0] != OP_CHUNK:
+                    raise ChunkError("no chunk record there")
+                length = int.from_bytes(head[1:], "little")
+                if length > size - off:
+                    raise ChunkError(f"record length {length} runs past the end of the file")
+                chunk = Chunk.read(ReadDataStream(_io.BytesIO(f.read(length))))
+                chunk_records(chunk, decode_chunk(chunk))
+            except ChunkError as exc:
+                raise _damaged(path, f"chunk at byte {off}", str(exc)) from None
+            except Exception as exc:  # noqa: BLE001 - a damaged header fails in the record parser
+                raise _damaged(path, f"chunk at byte {off}", f"unreadable ({type(exc).__name__}: {exc})") from None
+    return summary
+
+
+def read_info(path: str | os.PathLike) -> LogInfo:
+    """Parameters, scene, topics and span of a log, after :func:`verify` (every CRC checked).
+
+    LogError for a damaged, cut-short or crafted log; OSError if it cannot be opened."""
+    summary = verify(path)
+    try:
+        return _read_info(path, summary)
     except LogError:
         raise
     except OSError:
         raise
     except Exception as exc:  # noqa: BLE001 - mcap raises many kinds on a damaged file
-        raise LogError(f"{path}: not a readable MCAP log, no summary ({type(exc).__name__}: {exc}); "
-                       f"if the run was killed, run `gyro-sim recover {path} -o fixed.mcap`") from exc
+        raise LogError(f"{path}: not a readable gyro_sim log ({type(exc).__name__}: {exc}); "
+                       f"if it is damaged, run `gyro-sim recover {path} -o fixed.mcap`") from None
 
 
-def _read_info(path) -> LogInfo:
+def _read_info(path, summary) -> LogInfo:
     from mcap.reader import make_reader
 
     with _open(path) as f:
-        reader = make_reader(f)
-        summary = reader.get_summary()
-        if summary is None:
-            raise LogError(f"{path}: no summary (cut short? run `gyro-sim recover {path} -o fixed.mcap`)")
+        reader = make_reader(f, validate_crcs=True)
         params: dict = {}
         meta: dict = {}
         for m in reader.iter_metadata():
             if m.name == METADATA_NAME:
                 meta = dict(m.metadata)
-                params = json.loads(meta.get("params", "{}"))
+                try:
+                    params = json.loads(meta.get("params", "{}"))
+                except ValueError as exc:
+                    raise LogError(f"{path}: metadata {METADATA_NAME}/params is not JSON ({exc})") from None
+                if not isinstance(params, dict):
+                    raise LogError(f"{path}: metadata {METADATA_NAME}/params must be a JSON object, "
+                                   f"got {type(params).__name__}")
         scene = None
         for a in reader.iter_attachments():
             if a.name == SCENE_ATTACHMENT:
-                scene = bytes(a.data).decode()
+                try:
+                    scene = bytes(a.data).decode()
+                except UnicodeDecodeError as exc:
+                    raise LogError(f"{path}: the embedded scene is not UTF-8 text ({exc.reason})") from None
         topics = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()
                   if c.schema_id in summary.schemas}
         st = summary.statistics
@@ -433,11 +579,14 @@ def _read_info(path) -> LogInfo:
                    st.message_start_time if st else None, st.message_end_time if st else None)
 
 
-def iter_messages(path: str | os.PathLike, topics=None, *, decode: bool = True) -> Iterator[tuple[str, str, int, Any]]:
-    """(topic, msgtype, log_time_ns, message) in log-time order (file order among equal times).
+def iter_messages(path: str | os.PathLike, topics=None, *, decode: bool = True,
+                  log_time_order: bool = True) -> Iterator[tuple[str, str, int, Any]]:
+    """(topic, msgtype, log_time_ns, message) in log-time order (file order among equal times;
+    ``log_time_order=False``: file order).
 
     `message` is the decoded message (mcap-ros2-support's dynamic classes, fields as
-    attributes) or, with ``decode=False``, the CDR bytes.
+    attributes) or, with ``decode=False``, the CDR bytes. Chunk CRCs are checked as chunks are
+    read: a damaged chunk, or a message its schema cannot decode, raises LogError.
     """
     from mcap.reader import make_reader
 
@@ -446,14 +595,25 @@ def iter_messages(path: str | os.PathLike, topics=None, *, decode: bool = True) 
         from mcap_ros2.decoder import DecoderFactory
 
         factories = [DecoderFactory()]
-    with _open(path) as f:
-        reader = make_reader(f, decoder_factories=factories)
-        if decode:
-            for schema, channel, message, msg in reader.iter_decoded_messages(topics=topics, log_time_order=True):
-                yield channel.topic, schema.name, message.log_time, msg
-        else:
-            for schema, channel, message in reader.iter_messages(topics=topics, log_time_order=True):
-                yield channel.topic, schema.name if schema else "", message.log_time, bytes(message.data)
+    topic = None
+    try:
+        with _open(path) as f:
+            reader = make_reader(f, validate_crcs=True, decoder_factories=factories)
+            if decode:
+                it = reader.iter_decoded_messages(topics=topics, log_time_order=log_time_order)
+                for schema, channel, message, msg in it:
+                    topic = channel.topic
+                    yield channel.topic, schema.name, message.log_time, msg
+            else:
+                for schema, channel, message in reader.iter_messages(topics=topics, log_time_order=log_time_order):
+                    topic = channel.topic
+                    yield channel.topic, schema.name if schema else "", message.log_time, bytes(message.data)
+    except (LogError, OSError, GeneratorExit):
+        raise
+    except Exception as exc:  # noqa: BLE001 - damaged chunks and crafted schemas fail in many ways
+        verify(path)  # names the damaged chunk's offset if there is one
+        raise LogError(f"{path}: cannot read the messages (after {topic or 'the start'}): "
+                       f"{type(exc).__name__}: {str(exc)[:200]}") from None
 
 
 def describe(path: str | os.PathLike) -> str:

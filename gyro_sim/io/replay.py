@@ -7,15 +7,20 @@ using simulated time follow the replay. Message i goes out at wall time
 ``start + (log_time_i - log_time_0) / rate``. Types whose Python package is not installed
 are skipped with a note (tf2_msgs is not on PyPI, so /tf is skipped unless ROS is installed
 from apt).
+
+A log names the Python packages replay imports (``<pkg>.msg`` of each schema): only message
+packages are imported, a name matching ``MSG_PACKAGE`` or listed in ``MSG_PACKAGES``; any
+other schema's topic is skipped. The log is verified first (:func:`.mcap_log.verify`).
 """
 from __future__ import annotations
 
 import importlib
 import os
+import re
 import time
 from dataclasses import dataclass, field
 
-from .mcap_log import LogError
+from .mcap_log import LogError, iter_messages, verify
 
 #: depth of each publisher's queue
 QOS_DEPTH = 100
@@ -27,6 +32,13 @@ MATCH_SETTLE = 0.5
 #: at the end, wait at most this long for the subscribers to acknowledge the last messages
 #: (a publisher destroyed at once loses what is still in flight)
 ACK_TIMEOUT = 2.0
+#: a ROS message package: lower-case name ending in _msgs (``sensor_msgs``, ``tf2_msgs``)
+MSG_PACKAGE = re.compile(r"[a-z][a-z0-9_]*_msgs\Z")
+#: message packages whose names do not end in _msgs
+MSG_PACKAGES = frozenset({"builtin_interfaces", "rosgraph_msgs", "std_srvs", "rcl_interfaces",
+                          "unique_identifier_msgs", "statistics_msgs"})
+#: a message type name (``Type`` of ``pkg/msg/Type``)
+TYPE_NAME = re.compile(r"[A-Z][A-Za-z0-9]*\Z")
 
 
 @dataclass
@@ -49,8 +61,17 @@ class ReplayStats:
 
 
 def message_class(msgtype: str):
-    """The rclpy message class of ``pkg/msg/Type`` (ImportError if its package is missing)."""
-    pkg, _, name = msgtype.split("/")
+    """The rclpy message class of ``pkg/msg/Type`` (ImportError if its package is missing;
+    ValueError, before any import, if `msgtype` does not name a message of a message package)."""
+    parts = msgtype.split("/")
+    if len(parts) == 2:  # pkg/Type
+        parts.insert(1, "msg")
+    if len(parts) != 3 or parts[1] != "msg" or not TYPE_NAME.match(parts[2]):
+        raise ValueError(f"{msgtype[:80]!r} is not a message type name pkg/msg/Type")
+    pkg, _, name = parts
+    if not (MSG_PACKAGE.match(pkg) or pkg in MSG_PACKAGES):
+        raise ValueError(f"package {pkg[:80]!r} is not a message package (*_msgs or "
+                         f"{', '.join(sorted(MSG_PACKAGES))}): not imported")
     return getattr(importlib.import_module(f"{pkg}.msg"), name)
 
 
@@ -70,15 +91,10 @@ def replay(path: str | os.PathLike, *, rate: float = 1.0, loop: bool = False, to
     """
     if not rate > 0:
         raise LogError(f"rate must be > 0, got {rate}")
-    from mcap.reader import make_reader
-
     import rclpy
 
     stats = ReplayStats()
-    with open(path, "rb") as f:
-        summary = make_reader(f).get_summary()
-    if summary is None:
-        raise LogError(f"{path}: no summary (cut short? run `gyro-sim recover` first)")
+    summary = verify(path)  # CRCs checked; LogError naming the damaged chunk
     wanted = set(topics) if topics else None
     classes = {}
     for ch in summary.channels.values():
@@ -90,7 +106,9 @@ def replay(path: str | os.PathLike, *, rate: float = 1.0, loop: bool = False, to
             continue
         try:
             classes[ch.topic] = message_class(schema.name)
-        except (ImportError, AttributeError, ValueError):
+        except ValueError as exc:
+            stats.skipped[ch.topic] = str(exc)
+        except (ImportError, AttributeError):
             stats.skipped[ch.topic] = f"message type {schema.name} is not installed"
     if wanted:
         for t in sorted(wanted - {c.topic for c in summary.channels.values()}):
@@ -130,29 +148,25 @@ def replay(path: str | os.PathLike, *, rate: float = 1.0, loop: bool = False, to
 
 def _one_pass(path, pubs, rate: float, stats: ReplayStats, should_stop) -> bool:
     """One pass over the log; False when stopped."""
-    from mcap.reader import make_reader
-
     t0 = wall0 = None
     last_wall = None
-    with open(path, "rb") as f:
-        reader = make_reader(f)
-        for _, channel, message in reader.iter_messages(topics=list(pubs), log_time_order=True):
-            if should_stop is not None and should_stop():
-                return False
-            if t0 is None:
-                t0, wall0 = message.log_time, time.perf_counter()
-            due = wall0 + (message.log_time - t0) / 1e9 / rate
-            while True:
-                wait = due - time.perf_counter()
-                if wait <= 0:
-                    break
-                time.sleep(min(wait, SLEEP_SLICE))
-            now = time.perf_counter()
-            stats.max_late = max(stats.max_late, now - due)
-            pubs[channel.topic].publish(bytes(message.data))
-            last_wall = time.perf_counter()
-            stats.published += 1
-            stats.per_topic[channel.topic] = stats.per_topic.get(channel.topic, 0) + 1
-            stats.log_span = (message.log_time - t0) / 1e9
-            stats.wall_span = last_wall - wall0
+    for topic, _, log_time, data in iter_messages(path, topics=list(pubs), decode=False):
+        if should_stop is not None and should_stop():
+            return False
+        if t0 is None:
+            t0, wall0 = log_time, time.perf_counter()
+        due = wall0 + (log_time - t0) / 1e9 / rate
+        while True:
+            wait = due - time.perf_counter()
+            if wait <= 0:
+                break
+            time.sleep(min(wait, SLEEP_SLICE))
+        now = time.perf_counter()
+        stats.max_late = max(stats.max_late, now - due)
+        pubs[topic].publish(data)
+        last_wall = time.perf_counter()
+        stats.published += 1
+        stats.per_topic[topic] = stats.per_topic.get(topic, 0) + 1
+        stats.log_span = (log_time - t0) / 1e9
+        stats.wall_span = last_wall - wall0
     return True

@@ -15,11 +15,15 @@ import math
 import os
 from dataclasses import dataclass, field
 
+from ..progress import plural
 from . import messages as M
-from .mcap_log import LogError, read_info
+from .mcap_log import LogError, iter_messages, read_info
 from .record import machine_params
 
 REQUIRED = ("integrator", "rtol", "atol", "step", "advance_dt")
+#: most steps of `advance_dt` a re-simulation may take (crafted logs: a tiny advance_dt or a
+#: message stamped far in the future would otherwise run for days)
+MAX_RESIM_STEPS = 10**8
 #: the node's event when command_timeout passes without a good command: moments back to zero
 COMMAND_TIMEOUT_EVENT = "command timeout"
 
@@ -43,9 +47,9 @@ class Resimulation:
 
     def report(self) -> str:
         lines = [
-            f"re-simulated {self.sim_time:.6g} s ({self.steps} steps of the recorded size, {self.commands} commands, "
-            f"{self.resets} resets) with {self.integrator}",
-            f"compared {self.compared} joint-state messages"
+            f"re-simulated {self.sim_time:.6g} s ({plural(self.steps, 'step')} of the recorded size, "
+            f"{plural(self.commands, 'command')}, {plural(self.resets, 'reset')}) with {self.integrator}",
+            f"compared {plural(self.compared, 'joint-state message')}"
             + (f" ({self.off_boundary} off the step boundaries, skipped)" if self.off_boundary else ""),
             f"largest deviation: {self.max_deviation:.3e}"
             + (f" ({self.worst[2]} of {self.worst[1]} at t = {self.worst[0]:.6g} s)" if self.worst and self.max_deviation else ""),
@@ -67,6 +71,7 @@ def resimulate(path: str | os.PathLike, *, integrator: str | None = None, rtol: 
     missing = [k for k in REQUIRED if k not in p]
     if missing:
         raise LogError(f"{path}: the parameters lack {', '.join(missing)}: not a re-simulable gyro_sim log")
+    _check_params(path, p)
     scene = info.scene()
     name = integrator or p["integrator"]
     sim = Simulator(scene, integrator=name, rtol=p["rtol"] if rtol is None else rtol,
@@ -87,7 +92,12 @@ def resimulate(path: str | os.PathLike, *, integrator: str | None = None, rtol: 
     end = info.end_ns or 0
     topics = [M.JOINT_STATES, cmd_topic, M.EVENTS]
     # file order is causal order (record.py); log_time_order=False keeps it
-    for topic, _, t, msg in _file_order(path, topics):
+    for topic, _, t, msg in iter_messages(path, topics, log_time_order=False):
+        needed = (t - offset - M.time_ns(sim.time)) / (dt * 1e9)
+        if out.steps + needed > MAX_RESIM_STEPS:
+            raise LogError(f"{path}: a message at log time {t / 1e9:.9g} s would take the re-simulation to "
+                           f"{out.steps + needed:.3g} steps of advance_dt = {dt:g} s; the limit is "
+                           f"{MAX_RESIM_STEPS:.0e}: refused")
         while offset + M.time_ns(sim.time) < t:
             sim.advance(dt)
             out.steps += 1
@@ -120,14 +130,20 @@ def resimulate(path: str | os.PathLike, *, integrator: str | None = None, rtol: 
     return out
 
 
-def _file_order(path, topics):
-    from mcap.reader import make_reader
-    from mcap_ros2.decoder import DecoderFactory
+def _check_params(path, p: dict) -> None:
+    """The recorded parameters re-simulation uses, checked (LogError naming the first bad one)."""
+    from ..core.integrators import INTEGRATORS
 
-    with open(path, "rb") as f:
-        reader = make_reader(f, decoder_factories=[DecoderFactory()])
-        for _, channel, message, msg in reader.iter_decoded_messages(topics=topics, log_time_order=False):
-            yield channel.topic, None, message.log_time, msg
+    if not isinstance(p["integrator"], str) or p["integrator"] not in INTEGRATORS:
+        raise LogError(f"{path}: parameter integrator: {str(p['integrator'])[:40]!r} is not one of "
+                       f"{', '.join(INTEGRATORS)}")
+    for key in ("rtol", "atol", "step", "advance_dt"):
+        v = p[key]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0 \
+                or (v == 0 and key != "atol"):
+            raise LogError(f"{path}: parameter {key}: must be a positive finite number, got {str(v)[:40]!r}")
+    if not isinstance(p.get("commands_topic", M.AXIS_MOMENTS), str):
+        raise LogError(f"{path}: parameter commands_topic: must be a string")
 
 
 def _compare(out: Resimulation, js, logged, t_ns: int) -> None:

@@ -14,6 +14,7 @@ import pytest
 from gyro_sim.io import messages as M
 from gyro_sim.io.mcap_log import LogError, read_info
 from gyro_sim.io.recover import recover
+from gyro_sim.io.safe_paths import OutputError
 
 from .conftest import ROOT, gyro_sim
 
@@ -115,5 +116,5 @@ def test_recover_refuses_what_is_not_a_log(tmp_path):
     bad.write_bytes(b"not an mcap file at all")
     with pytest.raises(LogError):
         recover(bad, tmp_path / "out.mcap")
-    with pytest.raises(LogError):
+    with pytest.raises(OutputError, match="is the input"):  # the input is never the output
         recover(bad, bad)

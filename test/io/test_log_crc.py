@@ -1,0 +1,131 @@
+"""Logs verified when read (issue 13): chunk CRCs checked by every reader, damaged logs refused
+with the chunk's offset, and `recover` keeping every intact chunk after a damaged one."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from gyro_sim.io.mcap_log import LogError, iter_messages, read_info
+from gyro_sim.io.recover import recover
+
+from .conftest import CHUNK, DURATION, PUBLISH_RATE, SCENE, SCHEDULE, gyro_sim
+from .crafted import chunk_offsets, flip, truncate
+
+#: the chunk header's fixed fields before its CRC: start time, end time, uncompressed size
+CRC_FIELD = 9 + 8 + 8 + 8
+
+
+def rosbags_messages(path) -> list[tuple[str, int]]:
+    """(topic, log time) of every message, read and deserialised by rosbags (an independent reader)."""
+    from rosbags.highlevel import AnyReader
+
+    out = []
+    with AnyReader([Path(path)]) as reader:
+        for con, t, raw in reader.messages():
+            reader.deserialize(raw, con.msgtype)
+            out.append((con.topic, t))
+    return out
+
+
+@pytest.fixture(scope="module")
+def chunked(tmp_path_factory):
+    """A recorded log flushed every millisecond of wall time: many chunks."""
+    from gyro_sim import Simulator, load_scene
+    from gyro_sim.io.record import record_run
+
+    path = tmp_path_factory.mktemp("chunked") / "run.mcap"
+    record_run(Simulator(load_scene(SCENE)), path, duration=DURATION, chunk=CHUNK, publish_rate=PUBLISH_RATE,
+               schedule=SCHEDULE, flush_period=1e-3)
+    chunks = chunk_offsets(path)
+    assert len(chunks) >= 4, f"only {len(chunks)} chunks: the test needs a middle one"
+    return path, chunks, rosbags_messages(path)
+
+
+def _middle(chunks):
+    return chunks[len(chunks) // 2]
+
+
+def test_an_intact_log_reads(chunked):
+    path, _, msgs = chunked
+    assert read_info(path).message_count == len(msgs)
+    assert len(list(iter_messages(path))) == len(msgs)
+
+
+@pytest.mark.parametrize("where, reason", [("data", "does not decompress"), ("crc", "CRC mismatch")])
+def test_a_damaged_chunk_is_refused_with_its_offset_by_every_reader(chunked, tmp_path, where, reason):
+    path, chunks, _ = chunked
+    start, length = _middle(chunks)
+    bad = flip(path, tmp_path / "bad.mcap", start + (length - 10 if where == "data" else CRC_FIELD))
+    for read in (read_info, lambda p: list(iter_messages(p)), lambda p: list(iter_messages(p, decode=False))):
+        with pytest.raises(LogError) as info:
+            read(bad)
+        text = str(info.value)
+        assert f"chunk at byte {start}" in text and reason in text and "gyro-sim recover" in text, text
+        assert "\n" not in text
+
+
+def test_recover_skips_a_damaged_chunk_and_keeps_every_intact_one_after_it(chunked, tmp_path):
+    path, chunks, msgs = chunked
+    start, length = _middle(chunks)
+    bad = flip(path, tmp_path / "bad.mcap", start + length - 10)
+    fixed = tmp_path / "fixed.mcap"
+    rec = recover(bad, fixed)
+    assert rec.skipped_chunks == 1 and rec.chunks == len(chunks) - 1
+    assert 0 < rec.skipped_messages and rec.messages + rec.skipped_messages == len(msgs)
+    kept = rosbags_messages(fixed)
+    assert len(kept) == rec.messages
+    assert set(kept) < set(msgs)
+    assert max(t for _, t in kept) == max(t for _, t in msgs)  # the chunks after the damage are there
+    report = rec.report()
+    assert f"at byte {start}" in report and "skipped 1 damaged chunks" in report
+    assert read_info(fixed).message_count == rec.messages  # the output verifies
+
+
+def test_recover_calls_a_crc_failure_a_crc_failure(chunked, tmp_path):
+    path, chunks, msgs = chunked
+    start, _ = _middle(chunks)
+    bad = flip(path, tmp_path / "bad.mcap", start + CRC_FIELD)
+    rec = recover(bad, tmp_path / "fixed.mcap")
+    report = rec.report()
+    assert "CRC mismatch" in report and "incomplete" not in report and "cut short" not in report, report
+    assert rec.complete and rec.messages + rec.skipped_messages == len(msgs)
+
+
+def test_recover_resynchronises_after_a_damaged_record_length(chunked, tmp_path):
+    path, chunks, msgs = chunked
+    start, _ = _middle(chunks)
+    bad = flip(path, tmp_path / "bad.mcap", start + 8)  # the top byte of the chunk's length
+    rec = recover(bad, tmp_path / "fixed.mcap")
+    kept = rosbags_messages(tmp_path / "fixed.mcap")
+    assert rec.chunks == len(chunks) - 1 and len(kept) == rec.messages
+    assert max(t for _, t in kept) == max(t for _, t in msgs)
+
+
+def test_recover_of_a_log_cut_in_a_chunk_keeps_the_chunks_before(chunked, tmp_path):
+    path, chunks, msgs = chunked
+    start, length = _middle(chunks)
+    cut = truncate(path, tmp_path / "cut.mcap", start + length // 2)
+    with pytest.raises(LogError, match="gyro-sim recover"):
+        read_info(cut)
+    rec = recover(cut, tmp_path / "fixed.mcap")
+    assert not rec.complete and rec.stopped_at == start and rec.chunks == chunks.index((start, length))
+    kept = rosbags_messages(tmp_path / "fixed.mcap")
+    assert len(kept) == rec.messages and kept == [m for m in msgs if m in set(kept)]
+    assert "cut short" in rec.report()
+
+
+@pytest.mark.parametrize("command", [("view", "--save", "{out}"), ("replay", "--resimulate")])
+def test_commands_refuse_a_damaged_log_with_exit_2_and_one_line(chunked, tmp_path, command):
+    path, chunks, _ = chunked
+    start, length = _middle(chunks)
+    bad = flip(path, tmp_path / "bad.mcap", start + length - 10)
+    if command[0] == "view":
+        pytest.importorskip("rerun", reason="view needs rerun-sdk")
+    args = [a.format(out=tmp_path / "out.rrd") for a in command]
+    r = gyro_sim(args[0], bad, *args[1:])
+    err = r.stderr.strip()
+    assert r.returncode == 2, (r.returncode, err)
+    assert "Traceback" not in err and f"chunk at byte {start}" in err, err
+    assert len([line for line in err.splitlines() if "gyro-sim" in line]) == 1, err
+    assert not (tmp_path / "out.rrd").exists()

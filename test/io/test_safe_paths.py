@@ -1,0 +1,188 @@
+"""No silent overwrite (issue 13): every output path is checked before anything runs."""
+from __future__ import annotations
+
+import os
+import stat
+
+import pytest
+
+from gyro_sim import load_scene
+from gyro_sim.io.mcap_log import LogWriter, read_info
+from gyro_sim.io.safe_paths import OutputError, check_output
+
+from .conftest import SCENE, gyro_sim
+
+needs_permissions = pytest.mark.skipif(os.geteuid() == 0, reason="root ignores file permissions")
+
+
+def _bytes(path):
+    return path.read_bytes()
+
+
+# --- the check itself -----------------------------------------------------------------------------
+def test_a_new_file_in_a_writable_directory_passes(tmp_path):
+    assert check_output(tmp_path / "new.mcap") == tmp_path / "new.mcap"
+
+
+def test_an_existing_file_is_refused_unless_forced(tmp_path):
+    out = tmp_path / "old.mcap"
+    out.write_bytes(b"previous")
+    with pytest.raises(OutputError, match=r"old\.mcap: exists; refused"):
+        check_output(out)
+    check_output(out, force=True)
+    assert _bytes(out) == b"previous"  # checking writes nothing
+
+
+@pytest.mark.parametrize("link", ["hard", "sym"])
+def test_an_output_that_is_the_input_by_identity_is_refused_even_forced(tmp_path, link):
+    src = tmp_path / "in.mcap"
+    src.write_bytes(b"input")
+    alias = tmp_path / "other_name.mcap"
+    (os.link if link == "hard" else os.symlink)(src, alias)
+    for force in (False, True):
+        with pytest.raises(OutputError, match="is the input"):
+            check_output(alias, inputs=[src], force=force)
+
+
+@pytest.mark.parametrize("make, match", [
+    (lambda p: p.mkdir(), "is a directory"),
+    (lambda p: None, "does not exist"),
+    (lambda p: os.symlink(p.parent / "nowhere", p), "broken symbolic link"),
+])
+def test_directories_missing_parents_and_dangling_links_are_refused(tmp_path, make, match):
+    out = tmp_path / "x" / "out.mcap" if match == "does not exist" else tmp_path / "out.mcap"
+    make(out)
+    with pytest.raises(OutputError, match=match):
+        check_output(out, force=True)
+
+
+@needs_permissions
+def test_an_unwritable_directory_is_refused(tmp_path):
+    d = tmp_path / "ro"
+    d.mkdir()
+    d.chmod(stat.S_IRUSR | stat.S_IXUSR)
+    try:
+        with pytest.raises(OutputError, match="is not writable"):
+            check_output(d / "out.mcap")
+    finally:
+        d.chmod(stat.S_IRWXU)
+
+
+# --- the LogWriter: no code path can clobber a file -------------------------------------------------
+def test_log_writer_refuses_an_existing_file_and_leaves_it_alone(tmp_path):
+    out = tmp_path / "old.mcap"
+    out.write_bytes(b"previous log")
+    scene = load_scene(SCENE)
+    with pytest.raises(OutputError, match="exists"):
+        LogWriter(out, scene=scene, params={})
+    assert _bytes(out) == b"previous log"
+    with LogWriter(out, scene=scene, params={"x": 1}, overwrite=True):
+        pass
+    assert read_info(out).params == {"x": 1}
+
+
+# --- the commands ------------------------------------------------------------------------------------
+def _one_line_no_traceback(r, *needles):
+    err = r.stderr.strip()
+    assert "Traceback" not in err and len(err.splitlines()) == 1, err
+    for n in needles:
+        assert n in err, err
+
+
+def test_run_record_refuses_an_existing_log_and_force_replaces_it(tmp_path):
+    out = tmp_path / "old.mcap"
+    out.write_bytes(b"previous log")
+    r = gyro_sim("run", "--scene", SCENE, "--duration", "0.02", "--record", out)
+    assert r.returncode == 2
+    _one_line_no_traceback(r, str(out), "exists")
+    assert _bytes(out) == b"previous log"
+    r = gyro_sim("run", "--scene", SCENE, "--duration", "0.02", "--record", out, "--force")
+    assert r.returncode == 0, r.stderr
+    assert read_info(out).message_count > 0
+
+
+def test_run_record_never_writes_over_its_scene(tmp_path):
+    scene = tmp_path / "scene.yaml"
+    scene.write_bytes(SCENE.read_bytes())
+    alias = tmp_path / "alias.mcap"
+    os.link(scene, alias)
+    for extra in ((), ("--force",)):
+        r = gyro_sim("run", "--scene", scene, "--duration", "0.02", "--record", alias, *extra)
+        assert r.returncode == 2
+        _one_line_no_traceback(r, "is the input")
+    assert scene.read_bytes() == SCENE.read_bytes()
+
+
+def test_run_record_into_a_directory_or_a_missing_one_is_bad_input(tmp_path):
+    for out, needle in ((tmp_path, "is a directory"), (tmp_path / "no" / "x.mcap", "does not exist")):
+        r = gyro_sim("run", "--scene", SCENE, "--duration", "0.02", "--record", out)
+        assert r.returncode == 2
+        _one_line_no_traceback(r, needle)
+
+
+def test_recover_onto_a_hard_link_of_its_input_is_refused_and_the_input_kept(recorded, tmp_path):
+    log, _ = recorded
+    src = tmp_path / "in.mcap"
+    src.write_bytes(log.read_bytes())
+    alias = tmp_path / "fixed.mcap"
+    os.link(src, alias)
+    before = src.read_bytes()
+    for extra in ((), ("--force",)):
+        r = gyro_sim("recover", src, "-o", alias, *extra)
+        assert r.returncode == 2
+        _one_line_no_traceback(r, "is the input")
+        assert src.read_bytes() == before
+
+
+def test_recover_default_output_is_not_overwritten_without_force(recorded, tmp_path):
+    log, _ = recorded
+    src = tmp_path / "run.mcap"
+    src.write_bytes(log.read_bytes())
+    default = tmp_path / "run.recovered.mcap"
+    default.write_bytes(b"earlier recovery")
+    r = gyro_sim("recover", src)
+    assert r.returncode == 2
+    _one_line_no_traceback(r, str(default), "exists")
+    assert default.read_bytes() == b"earlier recovery"
+    r = gyro_sim("recover", src, "--force")
+    assert r.returncode == 0, r.stderr
+    assert read_info(default).message_count == read_info(src).message_count
+
+
+def test_view_save_refuses_the_log_itself_and_existing_files(recorded, tmp_path):
+    log, _ = recorded
+    src = tmp_path / "run.mcap"
+    src.write_bytes(log.read_bytes())
+    before = src.read_bytes()
+    for extra in ((), ("--force",)):
+        r = gyro_sim("view", src, "--save", src, *extra)
+        assert r.returncode == 2
+        _one_line_no_traceback(r, "is the input")
+    assert src.read_bytes() == before
+    old = tmp_path / "old.rrd"
+    old.write_bytes(b"earlier recording")
+    for opt in ("--save", "--screenshot"):
+        r = gyro_sim("view", src, opt, old)
+        assert r.returncode == 2
+        _one_line_no_traceback(r, opt, "exists")
+    assert old.read_bytes() == b"earlier recording"
+
+
+def test_bench_reports_are_not_replaced_without_force(tmp_path):
+    from gyro_sim.bench.report import write_report
+
+    write_report(tmp_path, "demo", "# first\n", {"a": 1}, lambda png: None)
+    with pytest.raises(OutputError, match=r"demo\.md: exists"):
+        write_report(tmp_path, "demo", "# second\n", {"a": 2}, lambda png: None)
+    assert (tmp_path / "demo.md").read_text() == "# first\n"
+    write_report(tmp_path, "demo", "# second\n", {"a": 2}, lambda png: None, force=True)
+    assert (tmp_path / "demo.md").read_text() == "# second\n"
+
+
+def test_bench_command_refuses_existing_reports_before_running(tmp_path):
+    (tmp_path / "realtime.json").write_text("[]")
+    r = gyro_sim("bench", "realtime", "--quick", "--out", tmp_path, timeout=60)
+    assert r.returncode == 2
+    _one_line_no_traceback(r, "realtime.json: exists")
+    assert (tmp_path / "realtime.json").read_text() == "[]"
+    assert not (tmp_path / "realtime.md").exists()
