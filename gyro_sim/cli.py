@@ -17,12 +17,6 @@ import numpy as np  # noqa: E402
 from .progress import Progress  # noqa: E402  (cmd_run, cmd_bench_scaling)
 
 
-def _drift(a, b) -> float:
-    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-    scale = max(float(np.max(np.abs(a))), 1e-300)
-    return float(np.max(np.abs(b - a))) / scale
-
-
 def cmd_run(args) -> int:
     from .core.invariants import conserved
     from .core.scene_load import SceneError, load_scene
@@ -47,7 +41,16 @@ def cmd_run(args) -> int:
         if args.force and os.path.lexists(args.record):
             os.remove(args.record)  # the LogWriter creates its file ("xb"): --force replaces it
     sim = Simulator(scene, integrator=args.integrator, rtol=args.rtol, atol=args.atol, step=args.step)
-    inv0 = sim.invariants()
+    inv0 = sim.reference_invariants()
+    schedule = []
+    if args.commands:
+        from .io.record import read_schedule
+
+        try:
+            schedule = read_schedule(args.commands, sim.axis_names)
+        except (ValueError, OSError, LogError) as exc:
+            print(f"gyro-sim run: --commands {args.commands}: {exc}", file=sys.stderr)
+            return 2
     chunk = min(args.chunk, args.duration)
     steps = max(1, int(round(args.duration / chunk)))
     bar = Progress(f"{scene.name}")
@@ -64,7 +67,7 @@ def cmd_run(args) -> int:
             handler = lambda signum, frame: stop.append(signum)  # noqa: E731
             old = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
             try:
-                record = record_run(sim, args.record, duration=args.duration, chunk=chunk,
+                record = record_run(sim, args.record, duration=args.duration, chunk=chunk, schedule=schedule,
                                     publish_rate=args.publish_rate, flush_period=args.flush_period,
                                     progress=lambda t, total: bar(t, total, f"t = {t:.3f} s"),
                                     stop=lambda: bool(stop))
@@ -74,7 +77,10 @@ def cmd_run(args) -> int:
             if record.interrupted:
                 print(f"\ngyro-sim run: interrupted at t = {sim.time:.3f} s (log closed)", file=sys.stderr)
         else:
+            pending = list(schedule)
             for i in range(steps):
+                while pending and pending[0][0] <= sim.time + 1e-9 * chunk:
+                    sim.set_axis_moments(pending.pop(0)[1])
                 sim.advance(args.duration / steps)
                 bar(i + 1, steps, f"t = {sim.time:.3f} s")
     except SimulationError as exc:
@@ -88,14 +94,19 @@ def cmd_run(args) -> int:
     except KeyboardInterrupt:
         print(f"\ngyro-sim run: interrupted at t = {sim.time:.3f} s", file=sys.stderr)
     wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
-    inv1 = sim.invariants()
+    snap = sim.snapshot(bodies=False, wrenches=False)
+    inv1 = snap.invariants
     integ = sim.integrator
     print(f"scene:                     {scene.name} ({len(scene.bodies)} bodies, {sim.model.N} velocities)")
     print(f"integrator:                {args.integrator} (rtol {args.rtol:g}, atol {args.atol:g}, step {args.step:g} s)")
     print(f"simulated:                 {sim.time:.6g} s in {cpu:.3f} s CPU, {wall:.3f} s wall: real-time factor {sim.time / max(wall, 1e-9):.1f}")
     print(f"work:                      {integ.nsteps} steps, {integ.nrejected} rejected, {sim.system.nfev} dynamics evaluations")
-    for name in conserved(sim.model):
-        print(f"{name + ' drift:':<26}{_drift(inv0[name], inv1[name]):.3e} (relative, conserved in this scene)")
+    for name, drift in snap.drift.items():
+        print(f"{name + ' drift:':<26}{drift:.3e} (relative, conserved in this scene without commands)")
+    if snap.work:
+        print(f"{'work of the commands:':<26}{snap.work:.6g} J; energy balance E - E0 - W: "
+              f"{snap.energy_balance / snap.energy_scale:.3e} (relative)" if snap.energy_balance is not None
+              else f"{'work of the commands:':<26}{snap.work:.6g} J")
     for name in ("energy", "vertical_momentum"):
         if name not in conserved(sim.model):
             print(f"{name + ':':<26}{inv0[name]:.6g} -> {inv1[name]:.6g} (not conserved in this scene)")
@@ -174,6 +185,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--atol", type=float, default=1e-12)
     r.add_argument("--step", type=float, default=1e-3, help="step of fixed-step methods (s)")
     r.add_argument("--chunk", type=float, default=0.01, help="simulated seconds per advance() call")
+    r.add_argument("--commands", metavar="FILE",
+                   help="axis moments to apply: a YAML list of [t, [one value per axis]], or a gyro_sim log "
+                        "(.mcap) whose /gyro_sim/axis_moments are replayed at their log times")
     r.add_argument("--record", metavar="OUT.mcap", help="record an MCAP log (ROS 2 messages; view with gyro-sim view)")
     r.add_argument("--publish-rate", type=float, default=100.0, help="messages per simulated second in the log (Hz)")
     r.add_argument("--flush-period", type=float, default=1.0,

@@ -21,12 +21,12 @@ ENTRY_KERNELS = ("_rhs_kernel", "_normalize_quaternions")
 
 def kernels() -> dict:
     """The numba dispatchers of gyro_sim.core.fast by name ({} without numba)."""
-    from .core import fast
+    try:
+        from numba.core.dispatcher import Dispatcher
 
-    if not fast.available():
+        from .core import fast
+    except ImportError:
         return {}
-    from numba.core.dispatcher import Dispatcher
-
     return {name: d for name, d in vars(fast).items() if isinstance(d, Dispatcher)}
 
 
@@ -45,7 +45,7 @@ def cache_is_cold() -> bool:
 def precompile(stream=sys.stderr, prog: str = "gyro_sim") -> bool:
     """If the cache is cold, say so, compile every kernel with a line per kernel, and return
     True; otherwise (or without numba) return False at once. Compile errors are left to the
-    backend selection (fast.make_system), which falls back to numpy when it may."""
+    backend selection of the Simulator, which falls back to numpy when it may."""
     ks = kernels()
     if not ks or not cache_is_cold():
         return False
@@ -71,13 +71,10 @@ def precompile(stream=sys.stderr, prog: str = "gyro_sim") -> bool:
     listener = _Listener()
     event.register("numba:compile", listener)
     try:
-        from .core.fast import make_system
-        from .core.model import compile_model
-        from .core.scene_load import load_scene
-        from .paths import find_scene
+        from .core.simulator import Simulator
 
-        try:
-            make_system(compile_model(load_scene(find_scene(WARM_UP_SCENE))), "numba")
+        try:  # building a Simulator on the numba backend compiles (or loads) every kernel
+            Simulator(WARM_UP_SCENE, integrator="rk4", backend="numba")
         except Exception as exc:  # noqa: BLE001 - the real run reports (or falls back) itself
             stream.write(f"{prog}: compiling failed ({type(exc).__name__}); the numpy backend will be used\n")
             return True

@@ -121,8 +121,10 @@ def load_scene(source: str | os.PathLike | Mapping) -> Scene:
     Parameters
     ----------
     source : str, os.PathLike or Mapping
-        A path to a YAML scene file, or a mapping with the same keys (vectors as sequences or
-        numpy arrays).
+        A path to a YAML scene file, the name of a shipped scene (``"hinge_chain"``, found in
+        the installed package's config/ wherever the caller stands; see
+        :func:`gyro_sim.paths.find_scene`), or a mapping with the same keys (vectors as
+        sequences or numpy arrays).
 
     Returns
     -------
@@ -141,6 +143,13 @@ def load_scene(source: str | os.PathLike | Mapping) -> Scene:
         data: Any = source
     elif isinstance(source, (str, os.PathLike)):
         path = os.fspath(source)
+        if not os.path.exists(path) and os.path.basename(path) == path:
+            from gyro_sim.paths import find_scene
+
+            try:  # a bare name: a shipped scene (a path with a directory part stays a path)
+                path = os.fspath(find_scene(path))
+            except FileNotFoundError as exc:
+                raise SceneError([str(exc)], path) from None
         data = _read_yaml(path)
     else:
         raise SceneError([f"scene: must be a file path or a mapping (got {_describe(source)})"])

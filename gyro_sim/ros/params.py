@@ -7,7 +7,6 @@ parameter that is wrong and why, before anything is created or published.
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -51,6 +50,7 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("publish_wrenches", bool, True, "publish ~/wrench/<joint> (computed only while someone listens or records)"),
     Parameter("publish_poses", bool, True, "publish ~/poses (computed only while someone listens or records)"),
     Parameter("stats_file", str, "", "write the run's timing statistics as JSON to this file at exit; empty = none"),
+    Parameter("overwrite", bool, False, "replace existing record / stats_file files (never the scene file)"),
 )
 
 
@@ -73,6 +73,7 @@ class NodeConfig:
     publish_wrenches: bool
     publish_poses: bool
     stats_file: str
+    overwrite: bool = False
 
     @property
     def dt(self) -> float:
@@ -134,7 +135,8 @@ def validate(values: dict) -> NodeConfig:
     if "integrator" not in bad and v["integrator"] not in INTEGRATORS:
         problems.append(f"integrator: unknown {v['integrator']!r}; valid: {', '.join(INTEGRATORS)}")
     if "backend" not in bad:
-        from ..core.fast import BACKENDS, available
+        from ..core.fast import available
+        from ..core.system import BACKENDS
 
         if v["backend"] not in BACKENDS:
             problems.append(f"backend: unknown {v['backend']!r}; valid: {', '.join(BACKENDS)}")
@@ -152,13 +154,18 @@ def validate(values: dict) -> NodeConfig:
                 problems.append(f"scene: {exc}")
             except SceneError as exc:
                 problems.append(f"scene: {scene_path}: {exc}")
+    from ..io.safe_paths import OutputError, check_output
+
+    force = v["overwrite"] if "overwrite" not in bad else False
     for name in ("record", "stats_file"):
         if name not in bad and v[name]:
-            parent = Path(v[name]).expanduser().resolve().parent
-            if not parent.is_dir():
-                problems.append(f"{name}: directory {parent} does not exist")
-            elif not os.access(parent, os.W_OK):
-                problems.append(f"{name}: directory {parent} is not writable")
+            try:  # exists (unless overwrite), the scene file, a directory, parent missing/unwritable
+                check_output(v[name], inputs=[scene_path], force=force, what=name)
+            except OutputError as exc:
+                problems.append(str(exc))
+    if not {"record", "stats_file"} & bad and v["record"] and v["stats_file"] and \
+            Path(v["record"]).expanduser().resolve() == Path(v["stats_file"]).expanduser().resolve():
+        problems.append(f"stats_file: the same file as record ({v['record']})")
     if "record" not in bad and v["record"]:
         try:
             import mcap  # noqa: F401
@@ -172,3 +179,188 @@ def validate(values: dict) -> NodeConfig:
     v["record"] = str(Path(v["record"]).expanduser().resolve()) if v["record"] else ""
     del v["scene"]
     return NodeConfig(scene_path=scene_path, scene=scene, **v)
+
+
+# --- the command line, read before rclpy starts (gyro_sim_node --help, misspelt parameters) ----------
+
+#: node name the overrides must address (params files: `gyro_sim:` or `/gyro_sim:`, or wildcards)
+NODE_NAME = "gyro_sim"
+#: parameters every rclpy node declares itself; overriding them is legitimate
+RCLPY_PARAMETERS = ("use_sim_time", "start_type_description_service")
+#: prefixes of parameters rclpy reads for itself (QoS overrides of publishers and subscriptions)
+RCLPY_PREFIXES = ("qos_overrides.",)
+#: ROS arguments followed by a value that is not a parameter (rcl_arguments.c)
+_ROS_OPTIONS_WITH_VALUE = ("-r", "--remap", "-e", "--enclave", "--log-level", "--log-config-file",
+                           "--log-file-name")
+_HELP_FLAGS = ("-h", "--help")
+_TYPE_NAMES = {float: "double", str: "string", bool: "bool"}
+
+
+def _yaml_value(text: str):
+    """A `-p` value as rcl reads it (YAML), e.g. `500.0` -> 500.0, `true` -> True."""
+    import yaml
+
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError:
+        return text
+
+
+def _node_matches(key: str) -> bool:
+    """Whether a params file's top-level key addresses this node (`gyro_sim`, `/gyro_sim`, `/**`)."""
+    import fnmatch
+
+    pattern = "/" + str(key).lstrip("/")
+    return fnmatch.fnmatchcase("/" + NODE_NAME, pattern.replace("**", "*"))
+
+
+def _flatten(prefix: str, value, out: dict) -> None:
+    """Nested mappings under ros__parameters name dotted parameters (`a: {b: 1}` -> `a.b`)."""
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _flatten(f"{prefix}.{k}" if prefix else str(k), v, out)
+    else:
+        out[prefix] = value
+
+
+def read_params_file(path: str) -> dict:
+    """The parameters a ROS 2 params file gives this node (name -> value); ParameterError if
+    the file is missing or not such a file."""
+    import yaml
+
+    try:
+        with open(path, encoding="utf-8") as f:
+            data = yaml.safe_load(f)
+    except FileNotFoundError:
+        raise ParameterError(f"--params-file {path}: no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ParameterError(f"--params-file {path}: cannot read ({exc})") from None
+    except yaml.YAMLError as exc:
+        raise ParameterError(f"--params-file {path}: not YAML ({str(exc).splitlines()[0]})") from None
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise ParameterError(f"--params-file {path}: expected `{NODE_NAME}: ros__parameters: ...` at the top")
+    values: dict = {}
+    for node, body in data.items():
+        if not _node_matches(node):
+            continue
+        if not isinstance(body, dict) or not isinstance(body.get("ros__parameters", {}), dict):
+            raise ParameterError(f"--params-file {path}: {node}: expected `ros__parameters:` with a mapping")
+        _flatten("", body.get("ros__parameters") or {}, values)
+    return values
+
+
+def parse_ros_argv(argv) -> tuple[bool, dict]:
+    """Read the node's command line as rcl will: (help asked, parameter overrides).
+
+    `argv` is what follows the program name (the program name itself, if first and not an
+    option, is skipped too). Overrides are `-p name:=value` / `--param name:=value` (also
+    `-p gyro_sim:name:=value`) and `--params-file FILE` inside `--ros-args ... [--]`; a later
+    one wins, as in rcl. Help is `-h` or `--help` anywhere. ParameterError for a `-p` without
+    `:=` or a params file that cannot be read.
+    """
+    args = list(argv)
+    help_asked = any(a in _HELP_FLAGS for a in args)
+    values: dict = {}
+    in_ros = False
+    i = 0
+    while i < len(args):
+        a = args[i]
+        if a == "--ros-args":
+            in_ros = True
+        elif a == "--" and in_ros:
+            in_ros = False
+        elif in_ros and a in ("-p", "--param"):
+            if i + 1 >= len(args) or ":=" not in args[i + 1]:
+                raise ParameterError(f"{a} needs NAME:=VALUE, got {args[i + 1] if i + 1 < len(args) else 'nothing'}")
+            name, _, text = args[i + 1].partition(":=")
+            node, _, name = name.rpartition(":")
+            if not node or _node_matches(node):
+                values[name] = _yaml_value(text)
+            i += 1
+        elif in_ros and a == "--params-file":
+            if i + 1 >= len(args):
+                raise ParameterError("--params-file needs a file")
+            values.update(read_params_file(args[i + 1]))
+            i += 1
+        elif in_ros and a in _ROS_OPTIONS_WITH_VALUE:
+            i += 1
+        i += 1
+    return help_asked, values
+
+
+def unknown_parameters(values: dict) -> list[str]:
+    """One line per override that names no parameter of the node, with the closest name."""
+    import difflib
+
+    names = [p.name for p in PARAMETERS]
+    lines = []
+    for name in values:
+        if name in names or name in RCLPY_PARAMETERS or name.startswith(RCLPY_PREFIXES):
+            continue
+        close = difflib.get_close_matches(name, names, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else f" (parameters: {', '.join(names)})"
+        lines.append(f"unknown parameter {name!r}{hint}")
+    return lines
+
+
+def _show(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return repr(v) if v else '""'
+    return repr(float(v))  # as a -p value must be written: 1000.0, not 1000
+
+
+def help_text() -> str:
+    """`gyro_sim_node --help`: usage and every parameter (name, type, default, range), one line each."""
+    rows = []
+    for p in PARAMETERS:
+        rng = "" if p.low is None and p.high is None else (
+            f"[{'' if p.low is None else f'{p.low:g}'}, {'' if p.high is None else f'{p.high:g}'}]")
+        rows.append((p.name, _TYPE_NAMES.get(p.kind, p.kind.__name__), _show(p.default), rng, p.description))
+    widths = [max(len(r[c]) for r in rows) for c in range(4)]
+    head = ("usage: gyro_sim_node [-h] [--ros-args [--params-file FILE] [-p NAME:=VALUE ...]]\n\n"
+            "The gyro_sim node: simulates a chain of gyrostats in real time, takes axis moments on\n"
+            "~/axis_moments, publishes /joint_states, /clock, ~/wrench/<joint>, ~/poses, /diagnostics,\n"
+            "optionally records an MCAP log. A later -p wins over --params-file; an unknown name or an\n"
+            "invalid value stops the node at start (exit 2).\n\n"
+            "example:\n"
+            "  gyro_sim_node --ros-args --params-file config/params.yaml -p record:=live.mcap -p duration:=20.0\n\n"
+            "parameters (name, type, default, range, meaning):\n")
+    lines = ["  " + "  ".join(r[c].ljust(widths[c]) for c in range(4)) + "  " + r[4] for r in rows]
+    return head + "\n".join(line.rstrip() for line in lines) + "\n"
+
+
+def preflight(argv, stream_out=None, stream_err=None) -> int | None:
+    """What gyro_sim_node does before it starts rclpy: `--help` -> print the parameters, 0;
+    an unknown parameter or an unreadable params file -> one line each on stderr, 2; else
+    compile the numba kernels if their cache is cold (saying so) and return None (go on)."""
+    import sys
+
+    out = stream_out or sys.stdout
+    err = stream_err or sys.stderr
+    args = list(argv)
+    if args and not args[0].startswith("-"):
+        args = args[1:]  # the program name (rclpy.init takes sys.argv whole)
+    try:
+        help_asked, values = parse_ros_argv(args)
+    except ParameterError as exc:
+        if any(a in _HELP_FLAGS for a in args):
+            out.write(help_text())
+            return 0
+        err.write(f"gyro_sim_node: {exc}\n")
+        return 2
+    if help_asked:
+        out.write(help_text())
+        return 0
+    unknown = unknown_parameters(values)
+    if unknown:
+        err.write("".join(f"gyro_sim_node: {line}\n" for line in unknown))
+        return 2
+    if values.get("backend", "auto") != "numpy":
+        from ..warmup import precompile
+
+        precompile(err, prog="gyro_sim_node")
+    return None
