@@ -32,10 +32,11 @@ def truncate(src, dst, size: int) -> Path:
 
 
 def rewrite(src, dst, *, params_json: str | None = None, scene_text: str | None = None,
-            schemas: dict | None = None) -> Path:
+            schemas: dict | None = None, retime=None) -> Path:
     """A copy of the log `src` written anew with mcap's own writer, replacing the gyro_sim
     metadata's params (JSON text), the scene attachment's text, or schema definitions
-    ({schema name: definition text})."""
+    ({schema name: definition text}), or log times (``retime(topic, index, t) -> t``; index: the
+    message's rank on its topic)."""
     from mcap.reader import make_reader
     from mcap.writer import Writer
 
@@ -45,8 +46,11 @@ def rewrite(src, dst, *, params_json: str | None = None, scene_text: str | None 
         header = reader.get_header()
         metadata = list(reader.iter_metadata())
         attachments = list(reader.iter_attachments())
-        messages = [(c.id, m.log_time, bytes(m.data), m.publish_time, m.sequence)
-                    for _, c, m in reader.iter_messages(log_time_order=False)]
+        messages, ranks = [], {}
+        for _, c, m in reader.iter_messages(log_time_order=False):
+            rank = ranks[c.topic] = ranks.get(c.topic, -1) + 1
+            t = m.log_time if retime is None else retime(c.topic, rank, m.log_time)
+            messages.append((c.id, t, bytes(m.data), m.publish_time, m.sequence))
     with open(dst, "wb") as g:
         w = Writer(g)
         w.start(profile=header.profile, library=header.library)

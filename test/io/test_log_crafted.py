@@ -1,0 +1,121 @@
+"""Crafted logs are refused in one line (issue 13): embedded scene, parameters, schemas,
+re-simulation work, and the packages `replay` imports."""
+from __future__ import annotations
+
+import importlib
+import json
+import re
+import time
+
+import pytest
+
+from gyro_sim.io.mcap_log import LogError, iter_messages, read_info
+from gyro_sim.io.resim import MAX_RESIM_STEPS, resimulate
+
+from .conftest import gyro_sim
+from .crafted import rewrite
+
+
+def _params(log) -> dict:
+    return dict(read_info(log).params)
+
+
+def _refused_in_one_line(log, *needles):
+    r = gyro_sim("replay", "--resimulate", log)
+    err = r.stderr.strip()
+    assert r.returncode == 2, (r.returncode, err)
+    assert "Traceback" not in err and len(err.splitlines()) == 1, err
+    for n in needles:
+        assert n in err, err
+
+
+def test_a_python_object_tag_in_the_embedded_scene_is_refused_and_never_run(recorded, tmp_path):
+    log, _ = recorded
+    marker = tmp_path / "pwned"
+    text = f"!!python/object/apply:os.system ['touch {marker}']\n"
+    bad = rewrite(log, tmp_path / "tag.mcap", scene_text=text)
+    with pytest.raises(LogError, match="embedded scene does not load"):
+        read_info(bad).scene()
+    _refused_in_one_line(bad, "embedded scene")
+    assert not marker.exists()
+
+
+def test_a_deeply_nested_embedded_scene_is_refused(recorded, tmp_path):
+    log, _ = recorded
+    bad = rewrite(log, tmp_path / "deep.mcap", scene_text="[" * 50_000 + "]" * 50_000)
+    with pytest.raises(LogError, match="nested deeper than"):
+        read_info(bad).scene()
+
+
+@pytest.mark.parametrize("params, needle", [
+    ("null", "must be a JSON object"),
+    ("{not json", "is not JSON"),
+])
+def test_unreadable_parameters_are_refused(recorded, tmp_path, params, needle):
+    log, _ = recorded
+    bad = rewrite(log, tmp_path / "p.mcap", params_json=params)
+    with pytest.raises(LogError, match=needle):
+        read_info(bad)
+    _refused_in_one_line(bad, needle)
+
+
+@pytest.mark.parametrize("key, value", [("step", "abc"), ("advance_dt", -0.01), ("rtol", None),
+                                        ("integrator", "no_such")])
+def test_bad_recorded_parameters_are_refused_naming_the_key(recorded, tmp_path, key, value):
+    log, _ = recorded
+    p = _params(log)
+    p[key] = value
+    bad = rewrite(log, tmp_path / "p.mcap", params_json=json.dumps(p))
+    with pytest.raises(LogError, match=f"parameter {key}"):
+        resimulate(bad)
+    _refused_in_one_line(bad, key)
+
+
+def test_a_recursive_schema_is_refused(recorded, tmp_path):
+    log, _ = recorded
+    loop = ("string data\nfoo_msgs/Loop loop\n" + "=" * 80 + "\nMSG: foo_msgs/Loop\nfoo_msgs/Loop next\n")
+    bad = rewrite(log, tmp_path / "loop.mcap", schemas={"std_msgs/msg/String": loop})
+    with pytest.raises(LogError, match="cannot read the messages"):
+        list(iter_messages(bad))
+
+
+def test_a_tiny_advance_dt_cannot_hang_resimulation(recorded, tmp_path):
+    log, _ = recorded
+    p = _params(log)
+    p["advance_dt"] = 1e-12
+    bad = rewrite(log, tmp_path / "dt.mcap", params_json=json.dumps(p))
+    t0 = time.monotonic()
+    with pytest.raises(LogError, match=re.escape(f"the limit is {MAX_RESIM_STEPS:.0e}")):
+        resimulate(bad)
+    assert time.monotonic() - t0 < 30
+
+
+def test_a_joint_state_stamped_far_in_the_future_cannot_hang_resimulation(recorded, tmp_path):
+    log, _ = recorded
+    bad = rewrite(log, tmp_path / "future.mcap",
+                  retime=lambda topic, i, t: 10**18 if (topic == "/joint_states" and i == 3) else t)
+    t0 = time.monotonic()
+    with pytest.raises(LogError, match=r"log time 1e\+09 s would take the re-simulation to"):
+        resimulate(bad)
+    assert time.monotonic() - t0 < 30
+    _refused_in_one_line(bad, "limit")
+
+
+def test_replay_imports_only_message_packages(monkeypatch):
+    from gyro_sim.io import replay
+
+    imported = []
+
+    def fake_import(name, *a, **kw):
+        imported.append(name)
+        return type("Module", (), {"JointState": "cls", "Time": "cls", "Clock": "cls"})
+
+    monkeypatch.setattr(importlib, "import_module", fake_import)
+    for msgtype in ("os/msg/System", "subprocess/msg/Popen", "evil_msgsx/msg/X", "Sensor_msgs/msg/JointState",
+                    "sensor_msgs/srv/JointState", "sensor_msgs/msg/joint_state", "a/b/c/d", "x_msgs/msg/../y"):
+        with pytest.raises(ValueError):
+            replay.message_class(msgtype)
+    assert imported == []
+    for msgtype in ("sensor_msgs/msg/JointState", "builtin_interfaces/msg/Time", "rosgraph_msgs/msg/Clock"):
+        assert replay.message_class(msgtype) == "cls"
+    assert imported == ["sensor_msgs.msg", "builtin_interfaces.msg", "rosgraph_msgs.msg"]
