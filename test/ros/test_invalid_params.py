@@ -61,3 +61,56 @@ def test_shipped_params_file_runs(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "gyro_sim_node: simulated 0.300 s" in r.stdout
     assert "scene 'hinge chain with commanded moments" in r.stderr  # the node's log line (rclpy logs to stderr)
+
+
+# --- no silent overwrite (issue 13): record and stats_file checked at start --------------------------
+def _validate(**values):
+    from gyro_sim.ros.params import validate
+
+    return validate(values)
+
+
+def test_record_and_stats_file_that_exist_are_refused_unless_overwrite(tmp_path):
+    from gyro_sim.ros.params import ParameterError
+
+    for name in ("record", "stats_file"):
+        old = tmp_path / f"old_{name}"
+        old.write_bytes(b"previous")
+        with pytest.raises(ParameterError, match=f"{name}: {old}: exists"):
+            _validate(**{name: str(old)})
+        assert _validate(**{name: str(old), "overwrite": True}).overwrite is True
+        assert old.read_bytes() == b"previous"  # validation writes nothing
+
+
+def test_record_that_is_the_scene_file_is_refused_even_with_overwrite(tmp_path):
+    from gyro_sim.ros.params import ParameterError
+
+    scene = tmp_path / "scene.yaml"
+    scene.write_bytes((ROOT / "config" / "hinge_chain.yaml").read_bytes())
+    link = tmp_path / "log.mcap"
+    link.hardlink_to(scene)
+    for name in ("record", "stats_file"):
+        with pytest.raises(ParameterError, match="is the input"):
+            _validate(scene=str(scene), overwrite=True, **{name: str(link)})
+
+
+@pytest.mark.parametrize("target, needle", [
+    (lambda d: d, "is a directory"),
+    (lambda d: d / "missing" / "x.mcap", "does not exist"),
+])
+def test_record_and_stats_file_into_directories_are_refused(tmp_path, target, needle):
+    from gyro_sim.ros.params import ParameterError
+
+    for name in ("record", "stats_file"):
+        with pytest.raises(ParameterError, match=f"{name}: .*{needle}"):
+            _validate(**{name: str(target(tmp_path))})
+
+
+def test_the_node_refuses_an_existing_record_file_and_leaves_it_unchanged(tmp_path):
+    old = tmp_path / "previous_log.mcap"
+    old.write_bytes(b"a previous log")
+    r = subprocess.run(node_command(f"record:={old}", "duration:=1.0"), cwd=ROOT, env=ros_env(new_domain_id(), tmp_path),
+                       text=True, capture_output=True, timeout=60)
+    assert r.returncode == 2, r.stderr
+    assert f"record: {old}: exists" in r.stderr and "Traceback" not in r.stderr, r.stderr
+    assert old.read_bytes() == b"a previous log"
