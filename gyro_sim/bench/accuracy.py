@@ -42,7 +42,7 @@ from ..core.model import Model, compile_model
 from ..core.rotations import euler_rates_to_omega, euler_to_matrix, matrix_to_quat
 from ..core.scene import Scene
 from ..core.scene_load import load_scene
-from ..core.fast import make_system
+from ..core.system import make_system
 from ..core.simulator import SimulationError, Simulator
 from . import peers
 from .extreme import load_dict

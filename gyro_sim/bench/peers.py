@@ -31,7 +31,7 @@ from ..core import invariants as inv
 from ..core.model import Model, compile_model, initial_state
 from ..core.rotations import matrix_to_quat
 from ..core.scene import Scene
-from ..core.fast import make_system
+from ..core.system import make_system
 
 
 @dataclass(frozen=True)

@@ -16,8 +16,8 @@ import numpy as np
 
 from ..core.model import compile_model, initial_state
 from ..core.scene_load import load_scene
-from ..core.fast import make_system
-from ..core.simulator import ChainODE, Simulator
+from ..core.simulator import Simulator
+from ..core.system import ChainODE, make_system
 from .scenes import spherical_chain
 
 DEFAULT_SIZES = (1, 2, 5, 10, 20, 50, 100)

@@ -1,10 +1,11 @@
 """The chain dynamics compiled with numba: an O(n) articulated-body recursion (THEORY.md sec. 5).
 
-`FastChainODE` is a drop-in replacement of :class:`gyro_sim.core.simulator.ChainODE` for the
-integrators. Its `rhs(t, y)` computes what `ChainODE.rhs` computes (eqs 34-54 solved for u',
-the quaternion derivatives, the torque-rotor angle rates of eqs 18-19 and 29), but in one
-compiled kernel instead of some hundred numpy calls: the numpy path costs ~150 us of call
-overhead per evaluation for any short chain, the kernel a few microseconds.
+Kernels only. `rhs_kernel` computes what :meth:`gyro_sim.core.system.ChainODE.rhs` computes
+(eqs 34-54 solved for u', the quaternion derivatives, the torque-rotor angle rates of eqs
+18-19 and 29), but in one compiled call instead of some hundred numpy calls: the numpy path
+costs ~150 us of call overhead per evaluation for any short chain, the kernel a few
+microseconds. :class:`gyro_sim.core.system.FastChainODE` is the ODE system built on it
+(`model_arguments`, `input_arguments` and `workspace` give the kernel's arguments).
 
 Same equations, same velocity basis, state layout and signs as :mod:`gyro_sim.core.model` and
 :mod:`gyro_sim.core.dynamics` (world components; spherical joints move with the relative
@@ -24,39 +25,47 @@ The articulated inertias are kept exactly symmetric: their antisymmetric round-o
 geometrically along a chain in this recursion (x2.5 per link on `spherical_chain`, ~1e-5 at
 n = 20, O(1) at n = 30 before the fix), while symmetric round-off does not.
 
-Pipeline of one evaluation (`_rhs_kernel`), all about O^k in world axes:
+Pipeline of one evaluation (`rhs_kernel`), all about O^k in world axes:
     positions    y        -> R^k, s^k, m^k c^k, A^k (world), hinge axes e^k   (eqs 30, 50)
     velocities   y, t     -> w^k, v(O^k), joint biases c^k = S_k' u_k         (eqs 34, 50, 53)
     bias forces  w, v, t  -> spatial inertias, forces at u' = 0               (eqs 29, 31, 36-39, 58)
     ABA          I, p, c  -> u'                                               (eqs 44, 51, 54)
     y'           u', w    -> quaternion rates, phi', u', rotor angle rates    (eqs 18-19)
 
-Reactions (eqs 40, 48) are outputs and stay on the numpy path: `rhs(t, y, out=ev)` delegates
-to the `ChainODE` held inside, which fills `data` and `ev` exactly as before.
+Reactions (eqs 40, 48) are outputs and stay on the numpy path (`FastChainODE.rhs(t, y,
+out=ev)` delegates to the `ChainODE` it holds).
 
-Backend selection: `make_system(model, backend)` with backend "auto", "numba" or "numpy";
+Small formulas have their numpy home elsewhere and a scalar twin here, written in the same
+operations (the kernel inlines it; test/core/test_fast.py checks the twins against their
+homes): `_quat_to_matrix` = :func:`gyro_sim.core.rotations.quat_to_matrix`, `_quat_rate` =
+:func:`gyro_sim.core.rotations.quat_rates`, `_rotor_angle_rate` =
+:func:`gyro_sim.core.dynamics.torque_rotor_rates`. They stay in this file because numba's
+disk cache only notices edits of the file of the cached function, not of the functions it
+calls from other modules (numba docs, "Cache limitations").
+
 `available()` tells whether numba imports. Without numba this module still imports (its
-kernels stay plain Python, far too slow to use), `FastChainODE` raises ImportError and
-"auto" gives `ChainODE`. Compilation: one signature serves every scene (model differences
-are array contents and flags), ~9 s of CPU the first time, then ~0.3 s from numba's disk
-cache (`cache=True`: `__pycache__` beside this file, a user-wide cache directory if that is
-not writable, or NUMBA_CACHE_DIR); any edit of this file invalidates the cache.
+kernels stay plain Python, far too slow to use) and `FastChainODE` raises ImportError.
+Compilation: one signature serves every scene (model differences are array contents and
+flags), ~9 s of CPU the first time, then ~0.3 s from numba's disk cache (`cache=True`:
+`__pycache__` beside this file, a user-wide cache directory if that is not writable, or
+NUMBA_CACHE_DIR); any edit of this file invalidates the cache.
 """
 from __future__ import annotations
 
 import math
-import warnings
 
 import numpy as np
 
-from . import dynamics as dyn
 from .model import Model
 
 try:
     import numba
-    import numba.core.errors
+    from numba.core.errors import NumbaError
 except ImportError:  # pragma: no cover - exercised only where numba is missing
     numba = None
+
+    class NumbaError(Exception):
+        """Stands in for numba's error type where numba is missing (never raised)."""
 
 # base kinds, as the kernel sees them
 BASE_FIXED, BASE_MOVING, BASE_FREE = 0, 1, 2
@@ -71,57 +80,9 @@ WORK_PER_BODY = 123
 WORK_PER_COLUMN = 19
 
 
-#: what `make_system` accepts: "auto" (numba if it works, else numpy), "numba", "numpy"
-BACKENDS = ("auto", "numba", "numpy")
-
-
 def available() -> bool:
-    """True if numba imports, i.e. `FastChainODE` can be built."""
+    """True if numba imports, i.e. `gyro_sim.core.system.FastChainODE` can be built."""
     return numba is not None
-
-
-#: "auto" keeps the numpy reference above this ratio of a subtree's mass to the body carrying
-#: it: the articulated-body projection loses digits as the ratio squared (measured against the
-#: numpy reference, |accelerations| ~ 77: 3e-9 at 1e2, 3e-7 at 1e3, 5e-6 at 1e4, 0.13 at 1e6)
-NUMBA_MASS_RATIO_LIMIT = 1e3
-
-
-def heavy_subtree_ratio(model: Model) -> float:
-    """The largest ratio of the mass of bodies k+1..n to the mass of body k."""
-    m = model.mass
-    after = np.cumsum(m[::-1])[::-1][1:]
-    return float(np.max(after / m[:-1])) if len(m) > 1 else 0.0
-
-
-def make_system(model: Model, backend: str = "auto"):
-    """The ODE system of `model` for the integrators: FastChainODE or ChainODE.
-
-    backend: "numpy" -> ChainODE; "numba" -> FastChainODE, compiled (or loaded from the disk
-    cache) now, so the first integration step does not pay for it; ImportError without numba.
-    "auto" -> as "numba" if numba imports and the kernels compile, else ChainODE with a
-    warning when numba is there but failed; also ChainODE when a subtree is more than
-    NUMBA_MASS_RATIO_LIMIT times heavier than the body carrying it.
-    """
-    from .simulator import ChainODE
-
-    if backend not in BACKENDS:
-        raise ValueError(f"unknown backend {backend!r}; valid: {', '.join(BACKENDS)}")
-    if backend == "numpy" or (backend == "auto" and not available()):
-        return ChainODE(model)
-    if backend == "auto" and heavy_subtree_ratio(model) > NUMBA_MASS_RATIO_LIMIT:
-        return ChainODE(model)  # a heavy tip on light links: keep the accurate reference
-    if not available():
-        raise ImportError("the numba backend needs numba; use backend 'numpy' or 'auto'")
-    try:
-        system = FastChainODE(model)
-        system.warm_up()
-    except numba.core.errors.NumbaError as exc:
-        if backend == "numba":
-            raise
-        warnings.warn(f"numba backend unavailable ({type(exc).__name__}); using numpy",
-                      RuntimeWarning, stacklevel=2)
-        return ChainODE(model)
-    return system
 
 
 def _njit(fn):
@@ -551,10 +512,10 @@ def _aba(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udo
 
 
 @_njit
-def _rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
                 first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
                 flags, base, t0, p0, pdot, L_rotor, tau):
-    """y' (size,) at (t, y) into ydot: what ChainODE.rhs computes.
+    """y' (size,) at (t, y) into ydot: what system.ChainODE.rhs computes.
 
     work: float workspace of n WORK_PER_BODY + N WORK_PER_COLUMN.
     flags (int, 7): base type, has gravity, has lambda (rotors), i_r0, i_vel, i_kappa, N.
@@ -645,7 +606,7 @@ def _rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis
 
 
 @_njit
-def _normalize_quaternions(y, i_q0, nq):
+def normalize_quaternions(y, i_q0, nq):
     """Quaternions y[i_q0 + 4 j : i_q0 + 4 j + 4], j < nq, to unit length in place."""
     for j in range(nq):
         i = i_q0 + 4 * j
@@ -654,128 +615,72 @@ def _normalize_quaternions(y, i_q0, nq):
             y[i + a] /= nrm
 
 
-class FastChainODE:
-    """The chain as an ODE system y' = f(t, y) for the integrators, compiled with numba.
+# --- the kernel's arguments -------------------------------------------------------------------
+def model_arguments(model: Model) -> tuple:
+    """The model as `rhs_kernel` reads it: the arguments from `is_hinge` to `base` (15 arrays).
 
-    Same interface and results as :class:`gyro_sim.core.simulator.ChainODE`: `size`,
-    `quat_index`, `rhs(t, y[, out])`, `project(y)`, `hold(t0, p0, hinge_tau, L_rotor)`,
-    `spins(t)`, `nfev`, `model`, `data`. `rhs(t, y)` runs the compiled kernel and returns a
-    new array (size,); `rhs(t, y, out=ev)` (outputs: reactions, rotor torques) runs the numpy
-    reference, which fills `ev` and `data` as ChainODE does.
-
-    Raises ImportError if numba is not available (see `available`).
+    Per body: the y index of its quaternion (spherical) or of phi_k (hinge) (`qrow`); the first
+    velocity column of its own joint (`own_col`); the range of all its columns (`col_start`,
+    n + 1; a free base's translations belong to body 0). `flags` and `base` as in `rhs_kernel`.
     """
+    m, n = model, model.n
+    qrow = np.empty(n, dtype=np.int64)
+    qrow[m.sph_bodies] = m.i_quat[:, 0]
+    qrow[m.hinge_bodies] = m.i_phi.start + np.arange(len(m.hinge_bodies))
+    own_col = np.empty(n, dtype=np.int64)
+    own_col[m.sph_bodies] = m.col_sph[:, 0]
+    own_col[m.hinge_bodies] = m.col_hinge
+    col_start = np.searchsorted(m.col_body, np.arange(n + 1)).astype(np.int64)
+    if np.any(np.diff(col_start) > MAX_JOINT_DOF):
+        raise ValueError("a joint has more than six velocity columns")
+    base_type = {"fixed": BASE_FIXED, "moving": BASE_MOVING, "free": BASE_FREE}[m.base_type]
+    has_lam = len(m.torque_body) > 0 or m.lam_speed is not None
+    flags = np.array([base_type, m.gravity is not None, has_lam, m.i_r0.start, m.i_vel.start,
+                      m.i_kappa.start, m.N], dtype=np.int64)
+    base = np.zeros(7)
+    if m.base_amplitude is not None:
+        base[0:3] = m.base_amplitude
+    base[3] = m.base_omega
+    if m.gravity is not None:
+        base[4:7] = m.gravity
+    nt = len(m.torque_body)
 
-    def __init__(self, model: Model):
-        if not available():
-            raise ImportError("FastChainODE needs numba; use ChainODE")
-        from .simulator import ChainODE
+    def f64(a, shape):
+        return np.ascontiguousarray(np.asarray(a, dtype=np.float64).reshape(shape))
 
-        self.model = model
-        self._ref = ChainODE(model)  # the numpy path: outputs; also keeps the held inputs
-        self.data = self._ref.data
-        self.size = model.size
-        self.quat_index = model.i_quat
-        self.nfev = 0
-        m, n = model, model.n
-        # per body: the y index of its quaternion (spherical) or of phi_k (hinge); the first
-        # velocity column of its own joint; the range of all its columns (a free base's
-        # translations belong to body 0)
-        qrow = np.empty(n, dtype=np.int64)
-        qrow[m.sph_bodies] = m.i_quat[:, 0]
-        qrow[m.hinge_bodies] = m.i_phi.start + np.arange(len(m.hinge_bodies))
-        own_col = np.empty(n, dtype=np.int64)
-        own_col[m.sph_bodies] = m.col_sph[:, 0]
-        own_col[m.hinge_bodies] = m.col_hinge
-        col_start = np.searchsorted(m.col_body, np.arange(n + 1)).astype(np.int64)
-        if np.any(np.diff(col_start) > MAX_JOINT_DOF):
-            raise ValueError("a joint has more than six velocity columns")
-        base_type = {"fixed": BASE_FIXED, "moving": BASE_MOVING, "free": BASE_FREE}[m.base_type]
-        has_lam = len(m.torque_body) > 0 or m.lam_speed is not None
-        flags = np.array([base_type, m.gravity is not None, has_lam, m.i_r0.start, m.i_vel.start,
-                          m.i_kappa.start, m.N], dtype=np.int64)
-        base = np.zeros(7)
-        if m.base_amplitude is not None:
-            base[0:3] = m.base_amplitude
-        base[3] = m.base_omega
-        if m.gravity is not None:
-            base[4:7] = m.gravity
-        nt = len(m.torque_body)
+    return (
+        np.ascontiguousarray(m.is_hinge, dtype=np.bool_),
+        qrow,
+        own_col,
+        col_start,
+        f64(m.hinge_axis, (n, 3)),
+        f64(m.s, (n, 3)),
+        f64(m.mass, (n,)),
+        f64(m.first_moment, (n, 3)),
+        f64(m.inertia, (n, 3, 3)),
+        f64(np.zeros((n, 3)) if m.lam_speed is None else m.lam_speed, (n, 3)),
+        np.ascontiguousarray(m.torque_body, dtype=np.int64),
+        f64(m.torque_axis, (nt, 3)),
+        f64(m.torque_A, (nt,)),
+        flags,
+        base,
+    )
 
-        def f64(a, shape):
-            return np.ascontiguousarray(np.asarray(a, dtype=np.float64).reshape(shape))
 
-        self._model_args = (
-            np.ascontiguousarray(m.is_hinge, dtype=np.bool_),
-            qrow,
-            own_col,
-            col_start,
-            f64(m.hinge_axis, (n, 3)),
-            f64(m.s, (n, 3)),
-            f64(m.mass, (n,)),
-            f64(m.first_moment, (n, 3)),
-            f64(m.inertia, (n, 3, 3)),
-            f64(np.zeros((n, 3)) if m.lam_speed is None else m.lam_speed, (n, 3)),
-            np.ascontiguousarray(m.torque_body, dtype=np.int64),
-            f64(m.torque_axis, (nt, 3)),
-            f64(m.torque_A, (nt,)),
-            flags,
-            base,
-        )
-        self._work = np.zeros(n * WORK_PER_BODY + m.N * WORK_PER_COLUMN)
-        self._i_q0 = int(m.i_quat[0, 0]) if len(m.sph_bodies) else 0
-        self._nq = len(m.sph_bodies)
-        self._set_inputs(self._ref.t0, self._ref.p0, None, None)
+def input_arguments(model: Model, t0: float, p0, hinge_tau, L_rotor) -> tuple:
+    """The held inputs as `rhs_kernel` reads them: (t0, p0 (nt,), pdot = L / A (nt,),
+    L (nt,), tau (N,)); None stands for zeros."""
+    m = model
+    nt = len(m.torque_body)
+    p0_ = np.zeros(nt) if p0 is None else np.array(p0, dtype=np.float64).reshape(nt)
+    L = np.zeros(nt) if L_rotor is None else np.array(L_rotor, dtype=np.float64).reshape(nt)
+    pdot = L / m.torque_A if nt else np.zeros(0)
+    tau = np.zeros(m.N)
+    if hinge_tau is not None:
+        tau[m.col_hinge] = hinge_tau  # (51): e^k . L^k = L_k
+    return float(t0), p0_, pdot, L, tau
 
-    # --- inputs ------------------------------------------------------------------------------
-    def _set_inputs(self, t0, p0, hinge_tau, L_rotor) -> None:
-        """The held inputs as kernel arguments: t0, p0, pdot = L / A, L (nt,), tau (N,)."""
-        m = self.model
-        nt = len(m.torque_body)
-        p0_ = np.zeros(nt) if p0 is None else np.array(p0, dtype=np.float64).reshape(nt)
-        L = np.zeros(nt) if L_rotor is None else np.array(L_rotor, dtype=np.float64).reshape(nt)
-        pdot = L / m.torque_A if nt else np.zeros(0)
-        tau = np.zeros(m.N)
-        if hinge_tau is not None:
-            tau[m.col_hinge] = hinge_tau  # (51): e^k . L^k = L_k
-        self._args = (self._work, *self._model_args, float(t0), p0_, pdot, L, tau)
 
-    def hold(self, t0: float, p0: np.ndarray | None, hinge_tau, L_rotor) -> None:
-        """Hold the inputs from t0 on (the zero-order hold of `Simulator.advance`)."""
-        self._ref.hold(t0, p0, hinge_tau, L_rotor)
-        self._set_inputs(t0, p0, hinge_tau, L_rotor)
-
-    def spins(self, t: float) -> np.ndarray | None:
-        """Absolute torque-rotor spins p_i(t) (eq 29 integrated over the hold)."""
-        return self._ref.spins(t)
-
-    # --- the ODE -------------------------------------------------------------------------------
-    def rhs(self, t: float, y: np.ndarray, out: dyn.Evaluation | None = None) -> np.ndarray:
-        """y' (size,) at (t, y); with `out`, by the numpy reference, which also fills `out` and
-        `data`. y: float64 (size,), contiguous and writeable as the integrators pass it (another
-        layout is correct too, but compiles one more specialization of the kernel)."""
-        self.nfev += 1
-        if out is not None:
-            return self._ref.rhs(t, y, out)
-        if y.shape != (self.size,):  # the kernel does not check its indices
-            raise ValueError(f"y must have shape ({self.size},), got {y.shape}")
-        ydot = np.empty(self.size)
-        _rhs_kernel(float(t), y, ydot, *self._args)
-        return ydot
-
-    def warm_up(self) -> None:
-        """Compile the kernels (or load them from the disk cache) by one evaluation at the
-        model's initial state; not counted in nfev."""
-        from .model import initial_state
-
-        y = initial_state(self.model)
-        self.rhs(self._ref.t0, y)
-        self.project(y)
-        self.nfev -= 1
-
-    def project(self, y: np.ndarray) -> None:
-        """Renormalise the quaternions of y (size,) in place."""
-        if y.shape != (self.size,):
-            raise ValueError(f"y must have shape ({self.size},), got {y.shape}")
-        if self._nq:
-            _normalize_quaternions(y, self._i_q0, self._nq)
+def workspace(model: Model) -> np.ndarray:
+    """The float workspace of `rhs_kernel`: n WORK_PER_BODY + N WORK_PER_COLUMN."""
+    return np.zeros(model.n * WORK_PER_BODY + model.N * WORK_PER_COLUMN)

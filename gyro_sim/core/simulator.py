@@ -10,7 +10,7 @@ import numpy as np
 
 from . import dynamics as dyn
 from . import invariants as inv
-from .model import Model, compile_model, initial_state
+from .model import compile_model, initial_state
 from .rotations import matrices_to_euler, omegas_to_euler_rates
 from .scene import Scene
 
@@ -49,67 +49,6 @@ class BodyState:
     velocity: np.ndarray  # velocity of O^k, world
 
 
-class ChainODE:
-    """The chain as an ODE system for the integrators: y' = f(t, y) with inputs held.
-
-    Inputs (commanded hinge moments, rotor torques) are constant between calls of
-    `hold`: the zero-order hold of `Simulator.advance`. Torque-rotor spins are not states:
-    p_i(t) = p_i(t0) + (L_i / A_i) (t - t0) (eq 29).
-    """
-
-    def __init__(self, model: Model):
-        self.model = model
-        self.data = dyn.Data(model)
-        self.size = model.size
-        self.quat_index = model.i_quat
-        self.hinge_tau: np.ndarray | None = None
-        self.L_rotor: np.ndarray | None = None
-        self.t0 = 0.0
-        self.p0 = model.torque_p0.copy() if len(model.torque_body) else None
-        self.nfev = 0
-
-    def hold(self, t0: float, p0: np.ndarray | None, hinge_tau, L_rotor) -> None:
-        self.t0, self.p0, self.hinge_tau, self.L_rotor = t0, p0, hinge_tau, L_rotor
-
-    def spins(self, t: float) -> np.ndarray | None:
-        """Absolute torque-rotor spins p_i(t) (eq 29 integrated over the hold)."""
-        if self.p0 is None:
-            return None
-        if self.L_rotor is None:
-            return self.p0
-        return self.p0 + (self.L_rotor / self.model.torque_A) * (t - self.t0)
-
-    def rhs(self, t: float, y: np.ndarray, out: dyn.Evaluation | None = None) -> np.ndarray:
-        m, d = self.model, self.data
-        self.nfev += 1
-        p = self.spins(t)
-        udot = dyn.forward(m, d, t, y, self.hinge_tau, p, self.L_rotor, out)
-        u = y[m.i_vel]
-        ydot = np.empty(m.size)
-        if m.free:
-            ydot[m.i_r0] = u[m.col_base]
-        if len(m.sph_bodies):
-            # q' = 1/2 (0, w) (x) q, w in world components
-            w = d.w[m.sph_bodies]
-            q = y[m.i_quat]
-            qd = np.empty_like(q)
-            qd[:, 0] = -0.5 * np.einsum("ni,ni->n", w, q[:, 1:])
-            qd[:, 1:] = 0.5 * (q[:, :1] * w + dyn.cross(w, q[:, 1:]))
-            ydot[m.i_quat] = qd
-        ydot[m.i_phi] = u[m.col_hinge]
-        ydot[m.i_vel] = udot
-        if p is not None:
-            # kappa_i' = p_i - w . e_i (eq 18-19)
-            e_w = dyn.matvec(d.R[m.torque_body], m.torque_axis)
-            ydot[m.i_kappa] = p - np.einsum("ni,ni->n", d.w[m.torque_body], e_w)
-        return ydot
-
-    def project(self, y: np.ndarray) -> None:
-        if len(self.quat_index):
-            q = y[self.quat_index]
-            y[self.quat_index] = q / np.linalg.norm(q, axis=1, keepdims=True)
-
-
 class Simulator:
     """Simulate a scene. See SPEC.md, "Python API".
 
@@ -139,7 +78,7 @@ class Simulator:
             scene = load_scene(scene)
         self.scene = scene
         self.model = compile_model(scene)
-        from .fast import make_system
+        from .system import make_system
 
         self.system = make_system(self.model, backend)  # numba-compiled, or the numpy reference
         self.integrator_name = integrator

@@ -1,4 +1,4 @@
-"""The numba backend (gyro_sim.core.fast) against the numpy reference (ChainODE).
+"""The numba backend (gyro_sim.core.fast, FastChainODE) against the numpy reference (ChainODE).
 
 Same equations, a different algorithm (articulated-body recursion about each joint point
 instead of a composite-inertia matrix about the origin): the results must agree to
@@ -16,7 +16,14 @@ from gyro_sim.core import dynamics as dyn
 from gyro_sim.core import fast
 from gyro_sim.core.integrators import make_integrator
 from gyro_sim.core.model import compile_model, initial_state
-from gyro_sim.core.simulator import ChainODE
+from gyro_sim.core.system import (
+    BACKENDS,
+    NUMBA_MASS_RATIO_LIMIT,
+    ChainODE,
+    FastChainODE,
+    heavy_subtree_ratio,
+    make_system,
+)
 
 from .chains import random_chain
 
@@ -42,7 +49,7 @@ def chain_scene(seed: int, base: str, **kw) -> dict:
 
 def systems(scene: dict):
     model = compile_model(load_scene(scene))
-    return model, ChainODE(model), fast.FastChainODE(model)
+    return model, ChainODE(model), FastChainODE(model)
 
 
 def hold_random(rng, model, *systems_) -> None:
@@ -178,7 +185,7 @@ def test_unavailable_numba_is_reported(monkeypatch):
     assert not fast.available()
     model = compile_model(load_scene(chain_scene(1, "fixed")))
     with pytest.raises(ImportError):
-        fast.FastChainODE(model)
+        FastChainODE(model)
 
 
 # --- trajectories ----------------------------------------------------------------------------
@@ -205,11 +212,11 @@ def test_wrong_state_size_is_rejected():
         fst.project(np.zeros(model.size + 1))
 
 
-@pytest.mark.parametrize("backend", fast.BACKENDS)
+@pytest.mark.parametrize("backend", BACKENDS)
 def test_make_system(backend):
     model = compile_model(load_scene(chain_scene(2, "free")))
-    system = fast.make_system(model, backend)
-    expected = ChainODE if backend == "numpy" else fast.FastChainODE
+    system = make_system(model, backend)
+    expected = ChainODE if backend == "numpy" else FastChainODE
     assert type(system) is expected
     assert system.nfev == 0
     y = initial_state(model)
@@ -219,20 +226,17 @@ def test_make_system(backend):
 def test_make_system_falls_back_without_numba(monkeypatch):
     model = compile_model(load_scene(chain_scene(2, "fixed")))
     with pytest.raises(ValueError, match="backend"):
-        fast.make_system(model, "cuda")
+        make_system(model, "cuda")
     monkeypatch.setattr(fast, "numba", None)
-    assert type(fast.make_system(model, "auto")) is ChainODE
+    assert type(make_system(model, "auto")) is ChainODE
     with pytest.raises(ImportError):
-        fast.make_system(model, "numba")
+        make_system(model, "numba")
 
 
 def test_auto_backend_keeps_numpy_for_a_heavy_tip():
     """The articulated-body projection loses digits as the mass ratio squared: "auto" keeps the
     reference for a heavy tip, and the numba error there is what the limit guards against."""
     from gyro_sim.bench.extreme import mass_ratio_chain
-    from gyro_sim.core.fast import NUMBA_MASS_RATIO_LIMIT, heavy_subtree_ratio, make_system
-    from gyro_sim.core.model import compile_model, initial_state
-    from gyro_sim.core.simulator import ChainODE
 
     heavy = compile_model(load_scene(mass_ratio_chain(1e6)))
     assert heavy_subtree_ratio(heavy) > NUMBA_MASS_RATIO_LIMIT

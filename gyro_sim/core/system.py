@@ -1,0 +1,235 @@
+"""The chain as an ODE system for the integrators, and the choice of its backend.
+
+    system = make_system(model, backend)        # ChainODE (numpy) or FastChainODE (numba)
+    system.hold(t0, p0, hinge_tau, L_rotor)     # inputs held from t0 on (zero-order hold)
+    ydot = system.rhs(t, y)                     # y' (size,)
+
+:class:`OdeSystem` is all the integrators (:mod:`gyro_sim.core.integrators`) ask of a system.
+Two implementations of it, same equations, same state layout (:mod:`gyro_sim.core.model`),
+same results to round-off (test/core/test_fast.py):
+
+- :class:`ChainODE`: the numpy reference, :mod:`gyro_sim.core.dynamics` (eqs 34-54 with a
+  composite-inertia matrix); it also fills the outputs (reactions, rotor torques);
+- :class:`FastChainODE`: the compiled O(n) articulated-body kernel of
+  :mod:`gyro_sim.core.fast` for `rhs(t, y)`, the numpy reference for outputs.
+
+Backend selection: `make_system(model, backend)` with backend "auto", "numba" or "numpy"
+(:data:`BACKENDS`); `gyro_sim.core.fast.available()` tells whether numba imports.
+
+Imports go one way: simulator -> system -> fast, dynamics, model.
+"""
+from __future__ import annotations
+
+import warnings
+from typing import Protocol
+
+import numpy as np
+
+from . import dynamics as dyn
+from . import fast
+from .model import Model, initial_state
+
+
+class OdeSystem(Protocol):
+    """The system y' = rhs(t, y) the integrators advance.
+
+    Attributes
+    ----------
+    size : length of the state vector y.
+    quat_index : int array (nq, 4), indices in y of unit quaternions (w, x, y, z),
+        world-from-body; nq may be 0. For these blocks rhs returns
+        q' = 1/2 (0, omega) (x) q, omega the world-frame angular velocity.
+
+    Methods
+    -------
+    rhs(t, y) -> (size,) : dy/dt. Assumed expensive; every call is counted in `nfev`.
+    project(y) -> None : renormalise the quaternions of y (size,) in place.
+    jacobian(t, y) -> (size, size) : optional, d rhs / dy; used by implicit methods (radau),
+        which otherwise difference rhs.
+    """
+
+    size: int
+    quat_index: np.ndarray
+
+    def rhs(self, t: float, y: np.ndarray) -> np.ndarray: ...
+
+    def project(self, y: np.ndarray) -> None: ...
+
+
+class ChainODE:
+    """The chain as an ODE system for the integrators: y' = f(t, y) with inputs held.
+
+    Inputs (commanded hinge moments, rotor torques) are constant between calls of
+    `hold`: the zero-order hold of `Simulator.advance`. Torque-rotor spins are not states:
+    p_i(t) = p_i(t0) + (L_i / A_i) (t - t0) (eq 29).
+    """
+
+    def __init__(self, model: Model):
+        self.model = model
+        self.data = dyn.Data(model)
+        self.size = model.size
+        self.quat_index = model.i_quat
+        self.hinge_tau: np.ndarray | None = None
+        self.L_rotor: np.ndarray | None = None
+        self.t0 = 0.0
+        self.p0 = model.torque_p0.copy() if len(model.torque_body) else None
+        self.nfev = 0
+
+    def hold(self, t0: float, p0: np.ndarray | None, hinge_tau, L_rotor) -> None:
+        self.t0, self.p0, self.hinge_tau, self.L_rotor = t0, p0, hinge_tau, L_rotor
+
+    def spins(self, t: float) -> np.ndarray | None:
+        """Absolute torque-rotor spins p_i(t) (eq 29 integrated over the hold)."""
+        if self.p0 is None:
+            return None
+        if self.L_rotor is None:
+            return self.p0
+        return self.p0 + (self.L_rotor / self.model.torque_A) * (t - self.t0)
+
+    def rhs(self, t: float, y: np.ndarray, out: dyn.Evaluation | None = None) -> np.ndarray:
+        m, d = self.model, self.data
+        self.nfev += 1
+        p = self.spins(t)
+        udot = dyn.forward(m, d, t, y, self.hinge_tau, p, self.L_rotor, out)
+        u = y[m.i_vel]
+        ydot = np.empty(m.size)
+        if m.free:
+            ydot[m.i_r0] = u[m.col_base]
+        if len(m.sph_bodies):
+            # q' = 1/2 (0, w) (x) q, w in world components
+            w = d.w[m.sph_bodies]
+            q = y[m.i_quat]
+            qd = np.empty_like(q)
+            qd[:, 0] = -0.5 * np.einsum("ni,ni->n", w, q[:, 1:])
+            qd[:, 1:] = 0.5 * (q[:, :1] * w + dyn.cross(w, q[:, 1:]))
+            ydot[m.i_quat] = qd
+        ydot[m.i_phi] = u[m.col_hinge]
+        ydot[m.i_vel] = udot
+        if p is not None:
+            # kappa_i' = p_i - w . e_i (eq 18-19)
+            e_w = dyn.matvec(d.R[m.torque_body], m.torque_axis)
+            ydot[m.i_kappa] = p - np.einsum("ni,ni->n", d.w[m.torque_body], e_w)
+        return ydot
+
+    def project(self, y: np.ndarray) -> None:
+        if len(self.quat_index):
+            q = y[self.quat_index]
+            y[self.quat_index] = q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+class FastChainODE:
+    """The chain as an ODE system y' = f(t, y) for the integrators, compiled with numba.
+
+    Same interface and results as :class:`ChainODE`: `size`, `quat_index`, `rhs(t, y[, out])`,
+    `project(y)`, `hold(t0, p0, hinge_tau, L_rotor)`, `spins(t)`, `nfev`, `model`, `data`.
+    `rhs(t, y)` runs the compiled kernel (:func:`gyro_sim.core.fast.rhs_kernel`) and returns a
+    new array (size,); `rhs(t, y, out=ev)` (outputs: reactions, rotor torques) runs the numpy
+    reference, which fills `ev` and `data` as ChainODE does.
+
+    Raises ImportError if numba is not available (see `gyro_sim.core.fast.available`).
+    """
+
+    def __init__(self, model: Model):
+        if not fast.available():
+            raise ImportError("FastChainODE needs numba; use ChainODE")
+        self.model = model
+        self._ref = ChainODE(model)  # the numpy path: outputs; also keeps the held inputs
+        self.data = self._ref.data
+        self.size = model.size
+        self.quat_index = model.i_quat
+        self.nfev = 0
+        self._model_args = fast.model_arguments(model)
+        self._work = fast.workspace(model)
+        self._i_q0 = int(model.i_quat[0, 0]) if len(model.sph_bodies) else 0
+        self._nq = len(model.sph_bodies)
+        self._set_inputs(self._ref.t0, self._ref.p0, None, None)
+
+    # --- inputs ------------------------------------------------------------------------------
+    def _set_inputs(self, t0, p0, hinge_tau, L_rotor) -> None:
+        """The kernel's arguments with these held inputs."""
+        inputs = fast.input_arguments(self.model, t0, p0, hinge_tau, L_rotor)
+        self._args = (self._work, *self._model_args, *inputs)
+
+    def hold(self, t0: float, p0: np.ndarray | None, hinge_tau, L_rotor) -> None:
+        """Hold the inputs from t0 on (the zero-order hold of `Simulator.advance`)."""
+        self._ref.hold(t0, p0, hinge_tau, L_rotor)
+        self._set_inputs(t0, p0, hinge_tau, L_rotor)
+
+    def spins(self, t: float) -> np.ndarray | None:
+        """Absolute torque-rotor spins p_i(t) (eq 29 integrated over the hold)."""
+        return self._ref.spins(t)
+
+    # --- the ODE -------------------------------------------------------------------------------
+    def rhs(self, t: float, y: np.ndarray, out: dyn.Evaluation | None = None) -> np.ndarray:
+        """y' (size,) at (t, y); with `out`, by the numpy reference, which also fills `out` and
+        `data`. y: float64 (size,), contiguous and writeable as the integrators pass it (another
+        layout is correct too, but compiles one more specialization of the kernel)."""
+        self.nfev += 1
+        if out is not None:
+            return self._ref.rhs(t, y, out)
+        if y.shape != (self.size,):  # the kernel does not check its indices
+            raise ValueError(f"y must have shape ({self.size},), got {y.shape}")
+        ydot = np.empty(self.size)
+        fast.rhs_kernel(float(t), y, ydot, *self._args)
+        return ydot
+
+    def warm_up(self) -> None:
+        """Compile the kernels (or load them from the disk cache) by one evaluation at the
+        model's initial state; not counted in nfev."""
+        y = initial_state(self.model)
+        self.rhs(self._ref.t0, y)
+        self.project(y)
+        self.nfev -= 1
+
+    def project(self, y: np.ndarray) -> None:
+        """Renormalise the quaternions of y (size,) in place."""
+        if y.shape != (self.size,):
+            raise ValueError(f"y must have shape ({self.size},), got {y.shape}")
+        if self._nq:
+            fast.normalize_quaternions(y, self._i_q0, self._nq)
+
+
+# --- backend selection ---------------------------------------------------------------------
+#: what `make_system` accepts: "auto" (numba if it works, else numpy), "numba", "numpy"
+BACKENDS = ("auto", "numba", "numpy")
+
+#: "auto" keeps the numpy reference above this ratio of a subtree's mass to the body carrying
+#: it: the articulated-body projection loses digits as the ratio squared (measured against the
+#: numpy reference, |accelerations| ~ 77: 3e-9 at 1e2, 3e-7 at 1e3, 5e-6 at 1e4, 0.13 at 1e6)
+NUMBA_MASS_RATIO_LIMIT = 1e3
+
+
+def heavy_subtree_ratio(model: Model) -> float:
+    """The largest ratio of the mass of bodies k+1..n to the mass of body k."""
+    m = model.mass
+    after = np.cumsum(m[::-1])[::-1][1:]
+    return float(np.max(after / m[:-1])) if len(m) > 1 else 0.0
+
+
+def make_system(model: Model, backend: str = "auto") -> ChainODE | FastChainODE:
+    """The ODE system of `model` for the integrators: FastChainODE or ChainODE.
+
+    backend: "numpy" -> ChainODE; "numba" -> FastChainODE, compiled (or loaded from the disk
+    cache) now, so the first integration step does not pay for it; ImportError without numba.
+    "auto" -> as "numba" if numba imports and the kernels compile, else ChainODE with a
+    warning when numba is there but failed; also ChainODE when a subtree is more than
+    NUMBA_MASS_RATIO_LIMIT times heavier than the body carrying it.
+    """
+    if backend not in BACKENDS:
+        raise ValueError(f"unknown backend {backend!r}; valid: {', '.join(BACKENDS)}")
+    if backend == "numpy" or (backend == "auto" and not fast.available()):
+        return ChainODE(model)
+    if backend == "auto" and heavy_subtree_ratio(model) > NUMBA_MASS_RATIO_LIMIT:
+        return ChainODE(model)  # a heavy tip on light links: keep the accurate reference
+    if not fast.available():
+        raise ImportError("the numba backend needs numba; use backend 'numpy' or 'auto'")
+    try:
+        system = FastChainODE(model)
+        system.warm_up()
+    except fast.NumbaError as exc:
+        if backend == "numba":
+            raise
+        warnings.warn(f"numba backend unavailable ({type(exc).__name__}); using numpy",
+                      RuntimeWarning, stacklevel=2)
+        return ChainODE(model)
+    return system
