@@ -65,3 +65,33 @@ def invariants(model: Model, data: Data, p: np.ndarray | None, t: float) -> dict
         out["linear_momentum"] = P
         out["angular_momentum"] = L - np.cross(rc, P)
     return out
+
+
+#: a drift is measured against max(scale, DRIFT_FLOOR): an integral whose scale is zero (a
+#: chain at rest without gravity) still gets a finite, meaningful number
+DRIFT_FLOOR = 1e-12
+
+
+def drift_scale(name: str, reference: dict) -> float:
+    """The magnitude a change of invariant `name` is measured against, from the reference values.
+
+    Energies (energy, jacobi) against T + |V| at the reference, so that an energy near zero
+    (potential measured from the joint) does not inflate the drift; momenta against the whole
+    angular momentum about O^1 (a vertical component near zero is common); vectors against
+    their norm.
+    """
+    ref = np.asarray(reference[name], dtype=float)
+    scale = float(np.linalg.norm(ref))
+    if name in ("energy", "jacobi"):
+        scale = max(scale, abs(float(reference["kinetic"])) + abs(float(reference["potential"])))
+    elif name == "vertical_momentum" and "angular_momentum_O1" in reference:
+        scale = max(scale, float(np.linalg.norm(reference["angular_momentum_O1"])))
+    return max(scale, DRIFT_FLOOR)
+
+
+def relative_drift(name: str, reference: dict, value) -> float:
+    """Change of invariant `name` since `reference`, relative to :func:`drift_scale`: signed
+    for a scalar, the norm of the change for a vector."""
+    d = np.asarray(value, dtype=float) - np.asarray(reference[name], dtype=float)
+    change = float(d) if d.ndim == 0 else float(np.linalg.norm(d))
+    return change / drift_scale(name, reference)

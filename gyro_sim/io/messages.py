@@ -1,9 +1,12 @@
-"""A Simulator's outputs as ROS 2 messages in plain Python (dicts in the messages' field layout).
+"""Every message gyro_sim publishes or logs, from one Snapshot, as CDR bytes (no rclpy here).
 
-The node publishes them (after filling its rclpy message classes) and the recorders encode
-them as CDR (:class:`gyro_sim.io.mcap_log.LogWriter`); nothing here imports rclpy.
+This module owns every topic name, type name, frame name and diagnostics key. The node
+(:mod:`gyro_sim.ros.outputs`) publishes the bytes built here and records the same bytes; the
+offline recorder (:mod:`gyro_sim.io.record`) writes them to its log. Nothing else builds
+message content.
 
-Topics and frames (SPEC.md, "ROS interface"), all stamped with the simulated time:
+Topics and frames (SPEC.md, "ROS interface"), all stamped with the log time (simulated time
+since the start, resets included):
 
 ==================================  ===============================  ==========================
 topic                               type                             frame_id
@@ -20,27 +23,39 @@ topic                               type                             frame_id
 ==================================  ===============================  ==========================
 
 A wrench is R^k (eq 40) and L^k (eq 48) at O^k in body k's own frame. A pose or transform is
-O^k and world_R_body of body k. Diagnostics carry the invariants, their drift since the
-reference (the start of the run, or the last reset) and the total angular momentum about O^1.
+O^k and world_R_body of body k.
+
+Diagnostics: one DiagnosticArray with the status ``gyro_sim: dynamics`` (from the snapshot:
+the same keys from the node and from offline runs) and, when the caller has run figures, the
+status ``gyro_sim: run`` (real-time factor, step times, commands ...). Every number is its own
+key with its unit in the name (vectors as ``_x_``/``_y_``/``_z_`` before the unit) and its
+value written exactly (``repr``); strings only for states and reasons (:data:`STRING_KEYS`).
+A value that does not apply (no data yet) is left out, never written as NaN.
 
 Non-finite numbers never leave here: every builder raises :class:`NonFiniteError`.
 """
 from __future__ import annotations
 
 import math
+import re
+from dataclasses import dataclass
 from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
+from .cdr import NS_PER_S, CdrWriter
+
+# --- names ---------------------------------------------------------------------------------------
 WORLD_FRAME = "world"
+NAMESPACE = "/gyro_sim"  # the node's fully qualified name: ~/x is NAMESPACE/x
 JOINT_STATES = "/joint_states"
-WRENCH_PREFIX = "/gyro_sim/wrench/"
-POSES = "/gyro_sim/poses"
+WRENCH_PREFIX = NAMESPACE + "/wrench/"
+POSES = NAMESPACE + "/poses"
 TF = "/tf"
 CLOCK = "/clock"
 DIAGNOSTICS = "/diagnostics"
-AXIS_MOMENTS = "/gyro_sim/axis_moments"
-EVENTS = "/gyro_sim/events"
+AXIS_MOMENTS = NAMESPACE + "/axis_moments"
+EVENTS = NAMESPACE + "/events"
 ROBOT_DESCRIPTION = "/robot_description"  # the URDF, written once by every log (io.urdf)
 
 JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
@@ -52,32 +67,71 @@ DIAGNOSTICS_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
 COMMAND_TYPE = "std_msgs/msg/Float64MultiArray"
 STRING_TYPE = "std_msgs/msg/String"
 
-#: name of the DiagnosticStatus of the dynamics
-DIAGNOSTIC_NAME = "gyro_sim: dynamics"
+#: names of the two DiagnosticStatus entries
+DYNAMICS_STATUS = "gyro_sim: dynamics"
+RUN_STATUS = "gyro_sim: run"
 #: diagnostic_msgs/DiagnosticStatus levels
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
-#: relative drift is measured against max(|reference|, DRIFT_FLOOR) (an integral near zero)
-DRIFT_FLOOR = 1e-12
-#: the invariants whose drift is reported (the first integrals; not kinetic / potential)
-DRIFT_KEYS = ("energy", "vertical_momentum", "jacobi", "lagrange_82", "lagrange_85")
+#: keys whose values are text (states and reasons); every other value is a number
+STRING_KEYS = frozenset({"integrator", "state", "reason", "backend", "last_reject_reason"})
+#: the invariants (gyro_sim.core.invariants) as diagnostics: key stem and unit
+INVARIANT_KEYS = {
+    "energy": ("energy", "J"),
+    "kinetic": ("kinetic_energy", "J"),
+    "potential": ("potential_energy", "J"),
+    "jacobi": ("jacobi_integral", "J"),
+    "vertical_momentum": ("vertical_momentum", "Nms"),
+    "angular_momentum_O1": ("angular_momentum_O1", "Nms"),
+    "linear_momentum": ("linear_momentum", "Ns"),
+    "angular_momentum": ("angular_momentum_com", "Nms"),
+    "lagrange_82": ("lagrange_82", "Nms"),
+    "lagrange_85": ("lagrange_85", "J"),
+}
+#: work of the commands and the energy balance E - E(0) - W (gyro_sim.core.snapshot)
+WORK_KEY = "work_by_commands_J"
+BALANCE_KEY = "energy_balance_J"
+BALANCE_REL_KEY = "energy_balance_rel"
+DRIFT_SUFFIX = "_drift_rel"
+ERROR_ESTIMATE_KEY = "error_estimate_rel"
+SIM_TIME_KEY = "sim_time_s"
+#: simulated seconds between two /diagnostics (node and offline logs alike)
+DIAGNOSTICS_PERIOD = 0.1
 
-NS_PER_S = 1_000_000_000
+
+def vector_key(stem: str, axis: str, unit: str) -> str:
+    return f"{stem}_{axis}_{unit}"
+
+
+def drift_key(invariant: str) -> str:
+    """Relative drift of a conserved invariant since the reset (gyro_sim.core.invariants)."""
+    return INVARIANT_KEYS.get(invariant, (invariant, ""))[0] + DRIFT_SUFFIX
+
+
+def axis_moment_key(axis: str) -> str:
+    return f"axis_moment_{axis}_Nm"
 
 
 class NonFiniteError(ValueError):
     """A NaN or infinity in an output: refused, it must never reach a topic or a log."""
 
 
-def wrench_topic(joint: str) -> str:
-    return WRENCH_PREFIX + joint
+def topic_token(name: str) -> str:
+    """A body name as a ROS topic token (letters, digits, underscores; not starting with a digit)."""
+    tok = re.sub(r"\W", "_", name)
+    return tok if tok and not tok[0].isdigit() else f"_{tok}"
 
 
-def topic_types(joints: Iterable[str]) -> dict[str, str]:
+def wrench_topic(joint: str, namespace: str = NAMESPACE) -> str:
+    return f"{namespace}/wrench/{topic_token(joint)}"
+
+
+def topic_types(joints: Iterable[str], namespace: str = NAMESPACE) -> dict[str, str]:
     """topic -> message type of everything a simulation publishes (commands and events included)."""
     out = {JOINT_STATES: JOINT_STATE_TYPE}
-    out.update({wrench_topic(j): WRENCH_TYPE for j in joints})
-    out.update({POSES: POSE_ARRAY_TYPE, TF: TF_TYPE, CLOCK: CLOCK_TYPE, DIAGNOSTICS: DIAGNOSTICS_TYPE,
-                AXIS_MOMENTS: COMMAND_TYPE, EVENTS: STRING_TYPE})
+    out.update({wrench_topic(j, namespace): WRENCH_TYPE for j in joints})
+    out.update({f"{namespace}/poses": POSE_ARRAY_TYPE, TF: TF_TYPE, CLOCK: CLOCK_TYPE,
+                DIAGNOSTICS: DIAGNOSTICS_TYPE, f"{namespace}/axis_moments": COMMAND_TYPE,
+                f"{namespace}/events": STRING_TYPE})
     return out
 
 
@@ -89,12 +143,6 @@ def time_ns(t: float) -> int:
     return int(round(t * NS_PER_S))
 
 
-def stamp(t_ns: int) -> dict:
-    """builtin_interfaces/Time of integer nanoseconds."""
-    sec, nanosec = divmod(int(t_ns), NS_PER_S)
-    return {"sec": sec, "nanosec": nanosec}
-
-
 def stamp_ns(st) -> int:
     """Integer nanoseconds of a builtin_interfaces/Time (dict or object)."""
     if isinstance(st, Mapping):
@@ -102,183 +150,197 @@ def stamp_ns(st) -> int:
     return int(st.sec) * NS_PER_S + int(st.nanosec)
 
 
-def header(t_ns: int, frame_id: str = "") -> dict:
-    return {"stamp": stamp(t_ns), "frame_id": frame_id}
+def _finite(a, what: str) -> np.ndarray:
+    a = np.asarray(a, dtype=float)
+    if not np.all(np.isfinite(a)):
+        raise NonFiniteError(f"{what}: non-finite value in {a.tolist()}")
+    return a
 
 
-def _floats(values, what: str) -> list[float]:
-    out = [float(v) for v in np.asarray(values, dtype=float).ravel()]
-    if not all(math.isfinite(v) for v in out):
-        raise NonFiniteError(f"{what}: non-finite value in {out}")
-    return out
+# --- one message each ------------------------------------------------------------------------------
+def joint_state(snap, t_ns: int) -> bytes:
+    """sensor_msgs/JointState: header, name[], position[], velocity[], effort[]."""
+    w = CdrWriter()
+    w.header(t_ns, "")
+    w.strings(snap.joint_names)
+    w.f64_seq(_finite(snap.position, "joint_states.position"))
+    w.f64_seq(_finite(snap.velocity, "joint_states.velocity"))
+    w.f64_seq(_finite(snap.effort, "joint_states.effort"))
+    return bytes(w)
 
 
-def _vec(v, what: str) -> dict:
-    x, y, z = _floats(v, what)
-    return {"x": x, "y": y, "z": z}
+def wrench_stamped(t_ns: int, frame: str, force, moment) -> bytes:
+    """geometry_msgs/WrenchStamped: header, wrench (force, torque)."""
+    w = CdrWriter()
+    w.header(t_ns, frame)
+    w.f64_block(np.concatenate([_finite(force, f"wrench {frame}.force"), _finite(moment, f"wrench {frame}.torque")]))
+    return bytes(w)
 
 
-def _quat(q_wxyz, what: str) -> dict:
-    w, x, y, z = _floats(q_wxyz, what)
-    return {"x": x, "y": y, "z": z, "w": w}
+def _poses_xyzw(snap, what: str) -> np.ndarray:
+    """(n, 7) position and quaternion x, y, z, w of every body (the geometry_msgs order)."""
+    p = _finite(snap.body_position, f"{what}.position")
+    q = _finite(snap.body_quaternion, f"{what}.orientation")
+    return np.concatenate([p, q[:, 1:], q[:, :1]], axis=1)
 
 
-# --- builders --------------------------------------------------------------------------------------
-def joint_state(js, t_ns: int) -> dict:
-    """sensor_msgs/JointState of `Simulator.joint_states()` (name, position, velocity, effort)."""
-    return {
-        "header": header(t_ns),
-        "name": [str(n) for n in js.name],
-        "position": _floats(js.position, "joint_states.position"),
-        "velocity": _floats(js.velocity, "joint_states.velocity"),
-        "effort": _floats(js.effort, "joint_states.effort"),
-    }
+def pose_array(snap, t_ns: int) -> bytes:
+    """geometry_msgs/PoseArray of every body, frame "world"."""
+    poses = _poses_xyzw(snap, "poses")
+    w = CdrWriter()
+    w.header(t_ns, WORLD_FRAME)
+    w.u32(len(poses))
+    w.f64_block(poses)  # Pose = 7 float64, no padding between poses
+    return bytes(w)
 
 
-def wrench_stamped(w, t_ns: int) -> dict:
-    """geometry_msgs/WrenchStamped of one `Simulator.wrenches()` entry (frame: the body)."""
-    return {
-        "header": header(t_ns, w.frame),
-        "wrench": {"force": _vec(w.force, f"wrench {w.joint}.force"),
-                   "torque": _vec(w.moment, f"wrench {w.joint}.torque")},
-    }
-
-
-def pose_array(bodies, t_ns: int) -> dict:
-    """geometry_msgs/PoseArray of every body (`Simulator.body_states()`), frame "world"."""
-    return {
-        "header": header(t_ns, WORLD_FRAME),
-        "poses": [{"position": _vec(b.position, f"pose {b.name}.position"),
-                   "orientation": _quat(b.quaternion, f"pose {b.name}.orientation")} for b in bodies],
-    }
-
-
-def tf_message(bodies, t_ns: int) -> dict:
+def tf_message(snap, t_ns: int) -> bytes:
     """tf2_msgs/TFMessage: world -> each body frame, named after the body."""
-    return {
-        "transforms": [
-            {"header": header(t_ns, WORLD_FRAME), "child_frame_id": b.name,
-             "transform": {"translation": _vec(b.position, f"tf {b.name}.translation"),
-                           "rotation": _quat(b.quaternion, f"tf {b.name}.rotation")}}
-            for b in bodies
-        ]
-    }
+    poses = _poses_xyzw(snap, "tf")
+    w = CdrWriter()
+    w.u32(len(poses))
+    for name, pose in zip(snap.body_names, poses):
+        w.header(t_ns, WORLD_FRAME)
+        w.string(name)  # child_frame_id
+        w.f64_block(pose)  # Transform: translation, rotation
+    return bytes(w)
 
 
-def clock(t_ns: int) -> dict:
+def clock(t_ns: int) -> bytes:
     """rosgraph_msgs/Clock."""
-    return {"clock": stamp(t_ns)}
+    w = CdrWriter()
+    w.time(t_ns)
+    return bytes(w)
 
 
-def axis_moments(values: Sequence[float], names: Sequence[str] | None = None) -> dict:
-    """std_msgs/Float64MultiArray of a command (one value per actuated axis, no layout:
-    the forward-command convention of ros2_controllers)."""
-    data = _floats(values, "axis_moments")
-    if names is not None and len(names) != len(data):
-        raise ValueError(f"{len(data)} axis moments for {len(names)} axes {list(names)}")
-    return {"layout": {"dim": [], "data_offset": 0}, "data": data}
+def axis_moments(values: Sequence[float]) -> bytes:
+    """std_msgs/Float64MultiArray of a command (one value per actuated axis, no layout: the
+    forward-command convention of ros2_controllers)."""
+    w = CdrWriter()
+    w.u32(0)  # layout.dim: empty
+    w.u32(0)  # layout.data_offset
+    w.f64_seq(_finite(values, "axis_moments"))
+    return bytes(w)
 
 
-def string(text: str) -> dict:
-    return {"data": str(text)}
+def string(text: str) -> bytes:
+    """std_msgs/String."""
+    w = CdrWriter()
+    w.string(str(text))
+    return bytes(w)
 
 
-def _drift(value: float, ref: float) -> float:
-    """Signed relative drift (value - ref) / max(|ref|, DRIFT_FLOOR)."""
-    return (value - ref) / max(abs(ref), DRIFT_FLOOR)
-
-
-def diagnostic_values(invariants: Mapping, reference: Mapping | None = None,
-                      momentum_O1=None, error_estimate: float | None = None) -> dict[str, float]:
-    """The numbers of the dynamics' DiagnosticStatus, by key.
-
-    Scalars of `invariants` as they are, vectors by component (``<name>_x`` ...), the first
-    integrals (DRIFT_KEYS) that have a reference also as ``<name>_drift`` (signed, relative:
-    not every one is conserved in every scene, see gyro_sim.core.invariants.conserved); `momentum_O1` (3,) as
-    ``angular_momentum_O1_x`` ...; `error_estimate` when not None.
-    """
-    out: dict[str, float] = {}
-    for name, value in invariants.items():
+# --- diagnostics -------------------------------------------------------------------------------------
+def dynamics_values(snap) -> dict[str, float | str]:
+    """The key-values of the ``gyro_sim: dynamics`` status of a snapshot."""
+    out: dict[str, float | str] = {SIM_TIME_KEY: snap.time, "integrator": snap.integrator}
+    for name, value in (snap.invariants or {}).items():
+        stem, unit = INVARIANT_KEYS[name]
         v = np.asarray(value, dtype=float)
         if v.ndim == 0:
-            out[name] = float(v)
-            if reference is not None and name in reference and name in DRIFT_KEYS:
-                out[f"{name}_drift"] = _drift(float(v), float(reference[name]))
+            out[f"{stem}_{unit}"] = float(v)
         else:
-            for axis, c in zip("xyz", v.ravel()):
-                out[f"{name}_{axis}"] = float(c)
-    if momentum_O1 is not None:
-        for axis, c in zip("xyz", np.asarray(momentum_O1, dtype=float).ravel()):
-            out[f"angular_momentum_O1_{axis}"] = float(c)
-    if error_estimate is not None:
-        out["error_estimate"] = float(error_estimate)
+            for axis, c in zip("xyz", v):
+                out[vector_key(stem, axis, unit)] = float(c)
+    for name, d in (snap.drift or {}).items():
+        out[drift_key(name)] = d
+    if snap.work is not None:
+        out[WORK_KEY] = snap.work
+    if snap.energy_balance is not None:
+        out[BALANCE_KEY] = snap.energy_balance
+        out[BALANCE_REL_KEY] = snap.energy_balance / snap.energy_scale
+    if snap.error_estimate is not None:
+        out[ERROR_ESTIMATE_KEY] = snap.error_estimate
+    for axis, m in zip(snap.axis_names, snap.axis_moments):
+        out[axis_moment_key(axis)] = float(m)
     return out
 
 
-def diagnostic_array(t_ns: int, values: Mapping[str, float | str], *, level: int = OK, message: str = "",
-                     name: str = DIAGNOSTIC_NAME, hardware_id: str = "") -> dict:
-    """diagnostic_msgs/DiagnosticArray with one status; numbers written with repr (exact)."""
-    kv = []
-    for k, v in values.items():
-        if isinstance(v, str):
-            kv.append({"key": str(k), "value": v})
-        else:
-            f = float(v)
-            if not math.isfinite(f):
-                raise NonFiniteError(f"diagnostics {k}: non-finite value {f!r}")
-            kv.append({"key": str(k), "value": repr(f)})
-    status = {"level": int(level), "name": name, "message": message, "hardware_id": hardware_id, "values": kv}
-    return {"header": header(t_ns), "status": [status]}
+@dataclass(frozen=True)
+class Status:
+    """One diagnostic_msgs/DiagnosticStatus."""
+
+    name: str
+    values: Mapping[str, float | int | str]
+    level: int = OK
+    message: str = ""
+    hardware_id: str = ""
+
+
+def diagnostic_array(t_ns: int, statuses: Sequence[Status]) -> bytes:
+    """diagnostic_msgs/DiagnosticArray; numbers written with repr (exact), refused if not finite."""
+    w = CdrWriter()
+    w.header(t_ns, "")
+    w.u32(len(statuses))
+    for st in statuses:
+        w.u8(int(st.level))
+        w.string(st.name)
+        w.string(st.message)
+        w.string(st.hardware_id)
+        w.u32(len(st.values))
+        for k, v in st.values.items():
+            if k in STRING_KEYS:
+                text = str(v)
+            else:
+                if isinstance(v, str) or not math.isfinite(v):
+                    raise NonFiniteError(f"diagnostics {k}: expected a finite number, got {v!r}")
+                text = repr(int(v)) if isinstance(v, (int, np.integer)) else repr(float(v))
+            w.string(k)
+            w.string(text)
+    return bytes(w)
+
+
+def diagnostics(snap, t_ns: int, hardware_id: str, run: Status | None = None) -> bytes:
+    """The /diagnostics message of a snapshot (and the run's figures, when given)."""
+    statuses = [Status(DYNAMICS_STATUS, dynamics_values(snap), hardware_id=hardware_id)]
+    if run is not None:
+        statuses.append(run)
+    return diagnostic_array(t_ns, statuses)
 
 
 def diagnostic_numbers(msg) -> dict[str, float]:
-    """The numeric key-values of a decoded DiagnosticArray (first status), by key."""
+    """The numeric key-values of a decoded DiagnosticArray (every gyro_sim status), by key."""
     status = msg["status"] if isinstance(msg, Mapping) else msg.status
     out = {}
     for st in status:
         for kv in (st["values"] if isinstance(st, Mapping) else st.values):
             key, value = (kv["key"], kv["value"]) if isinstance(kv, Mapping) else (kv.key, kv.value)
-            try:
+            if key not in STRING_KEYS:
                 out[key] = float(value)
-            except ValueError:
-                pass
     return out
 
 
-def angular_momentum_O1(sim) -> np.ndarray:
-    """Total angular momentum of the chain about O^1, world frame (3,), rotors included.
-
-    The vector whose vertical component is `invariants()["vertical_momentum"]` (eq 79).
-    """
-    return np.asarray(sim.invariants()["angular_momentum_O1"], dtype=float)
-
-
-class Snapshot:
-    """Every output of a Simulator at its current time, as messages (topic -> dict).
+# --- a publication ------------------------------------------------------------------------------------
+class Publication:
+    """The messages of one snapshot: [(topic, type, bytes)] in publication order.
 
     Parameters
     ----------
-    sim : the Simulator
-    reference : invariants the drifts are measured against (None: no drifts)
-    extra : more diagnostic values (the node: step time, real-time factor, misses ...)
+    body_names : the scene's bodies (the wrench topics)
+    namespace : the node's fully qualified name (topics ``~/x``)
+    hardware_id : the scene's name (diagnostics)
     """
 
-    def __init__(self, sim, t_ns: int | None = None, reference: Mapping | None = None,
-                 extra: Mapping[str, float | str] | None = None):
-        self.t_ns = time_ns(sim.time) if t_ns is None else int(t_ns)
-        t = self.t_ns
-        bodies = sim.body_states()
-        self.messages: dict[str, dict] = {JOINT_STATES: joint_state(sim.joint_states(), t)}
-        for w in sim.wrenches():
-            self.messages[wrench_topic(w.joint)] = wrench_stamped(w, t)
-        self.messages[POSES] = pose_array(bodies, t)
-        self.messages[TF] = tf_message(bodies, t)
-        self.messages[CLOCK] = clock(t)
-        values = diagnostic_values(sim.invariants(), reference, None, sim.error_estimate)
-        values["time"] = sim.time
-        if extra:
-            values.update(extra)
-        self.messages[DIAGNOSTICS] = diagnostic_array(t, values, hardware_id=sim.scene.name)
+    def __init__(self, body_names: Sequence[str], *, namespace: str = NAMESPACE, hardware_id: str = ""):
+        self.body_names = tuple(body_names)
+        self.wrench_topics = tuple(wrench_topic(b, namespace) for b in self.body_names)
+        self.poses_topic = f"{namespace}/poses"
+        self.hardware_id = hardware_id
 
-    def items(self):
-        return self.messages.items()
+    def messages(self, snap, t_ns: int, *, poses: bool = True, tf: bool = True,
+                 diagnostics_run: Status | None | bool = False) -> list[tuple[str, str, bytes]]:
+        """The snapshot's messages. Wrenches when the snapshot has them; poses and /tf when asked
+        and the snapshot has bodies; diagnostics when `diagnostics_run` is not False (None: the
+        dynamics status only; a Status: that too)."""
+        out = [(JOINT_STATES, JOINT_STATE_TYPE, joint_state(snap, t_ns)), (CLOCK, CLOCK_TYPE, clock(t_ns))]
+        if snap.wrench_force is not None:
+            for topic, frame, f, m in zip(self.wrench_topics, self.body_names, snap.wrench_force, snap.wrench_moment):
+                out.append((topic, WRENCH_TYPE, wrench_stamped(t_ns, frame, f, m)))
+        if snap.body_position is not None:
+            if poses:
+                out.append((self.poses_topic, POSE_ARRAY_TYPE, pose_array(snap, t_ns)))
+            if tf:
+                out.append((TF, TF_TYPE, tf_message(snap, t_ns)))
+        if diagnostics_run is not False:
+            out.append((DIAGNOSTICS, DIAGNOSTICS_TYPE, diagnostics(snap, t_ns, self.hardware_id, diagnostics_run or None)))
+        return out

@@ -70,50 +70,67 @@ def run_params(sim, *, advance_dt: float, publish_rate: float, source: str,
     return p
 
 
-class Recorder:
-    """Writes a Simulator's outputs and commands to a :class:`LogWriter`.
+class LogRecorder:
+    """Writes a Simulator's publications and commands to a :class:`LogWriter` (offline runs).
+
+    The messages are those of :class:`gyro_sim.io.messages.Publication`, the node's own; the
+    diagnostics come with every publication at least `diagnostics_period` simulated seconds
+    after the last one (the node keeps the same rhythm).
 
     Parameters
     ----------
     writer : the log
     sim : the Simulator
-    reference : invariants the drifts are measured against (default: those of `sim` now)
+    diagnostics_period : simulated seconds between two /diagnostics
     """
 
-    def __init__(self, writer: LogWriter, sim, reference: Mapping | None = None):
+    def __init__(self, writer: LogWriter, sim, *, diagnostics_period: float = M.DIAGNOSTICS_PERIOD):
         self.writer, self.sim = writer, sim
-        joints = [b.name for b in sim.scene.bodies]
-        types = M.topic_types(joints)
-        types.pop(M.EVENTS)  # created on the first event
-        self.channels = {topic: writer.add_channel(topic, ty) for topic, ty in types.items()}
-        self.reference = dict(sim.invariants()) if reference is None else dict(reference)
+        self.publication = M.Publication([b.name for b in sim.scene.bodies], hardware_id=sim.scene.name)
+        self.channels: dict[str, int] = {}
         self.offset_ns = 0
         self.messages = 0
+        self.period_ns = M.time_ns(diagnostics_period)
+        self._next_diag_ns = 0
+        sim.reference_invariants()  # the drifts' reference: the state now
 
     def now_ns(self) -> int:
         return self.offset_ns + M.time_ns(self.sim.time)
 
-    def publish(self, extra: Mapping[str, float | str] | None = None) -> M.Snapshot:
-        """Every output of the simulator now, on its topic."""
-        snap = M.Snapshot(self.sim, self.now_ns(), self.reference, extra)
-        for topic, msg in snap.items():
-            self.writer.write(self.channels[topic], snap.t_ns, msg, check_finite=False)
-        self.messages += len(snap.messages)
+    def _write(self, topic: str, msgtype: str, t_ns: int, data: bytes) -> None:
+        ch = self.channels.get(topic)
+        if ch is None:
+            ch = self.channels[topic] = self.writer.add_channel(topic, msgtype)
+        self.writer.write_raw(ch, t_ns, data)
+        self.messages += 1
+
+    def publish(self, run: M.Status | None = None):
+        """Every output of the simulator now, on its topic; returns the Snapshot."""
+        t = self.now_ns()
+        diag = t >= self._next_diag_ns
+        snap = self.sim.snapshot(invariants=diag)
+        if diag:
+            while self._next_diag_ns <= t:
+                self._next_diag_ns += self.period_ns
+        for topic, msgtype, data in self.publication.messages(snap, t, diagnostics_run=run if diag else False):
+            self._write(topic, msgtype, t, data)
         return snap
 
     def command(self, values: Sequence[float]) -> None:
         """The command taking effect for the next step (log it, then call set_axis_moments)."""
-        self.writer.write(self.channels[M.AXIS_MOMENTS], self.now_ns(), M.axis_moments(values), check_finite=False)
-        self.messages += 1
+        self._write(M.AXIS_MOMENTS, M.COMMAND_TYPE, self.now_ns(), M.axis_moments(values))
+
+    def event(self, text: str) -> None:
+        self._write(M.EVENTS, M.STRING_TYPE, self.now_ns(), M.string(text))
 
     def reset(self) -> None:
         """Log a reset event, reset the simulator; log time goes on from here."""
         t = self.now_ns()
-        self.writer.event(t, "reset")
-        self.messages += 1
+        self.event("reset")
         self.sim.reset()
         self.offset_ns = t
-        self.reference = dict(self.sim.invariants())
+        self._next_diag_ns = t
+        self.sim.reference_invariants()
 
 
 @dataclass
@@ -129,6 +146,31 @@ class RunRecord:
     write_time: float = 0.0  # wall time spent building and writing messages
     interrupted: bool = False
     commands: list = field(default_factory=list)
+
+
+def read_schedule(path, axis_names: Sequence[str]) -> list[tuple[float, list[float]]]:
+    """A command schedule from a file: YAML (a list of ``[t, [values]]``) or a gyro_sim log
+    (``.mcap``: its /gyro_sim/axis_moments at their log times, resets not followed).
+    Raises ValueError naming the problem."""
+    from pathlib import Path
+
+    p = Path(path)
+    if p.suffix == ".mcap":
+        from .mcap_log import iter_messages
+
+        raw = [(t_ns * 1e-9, list(msg.data)) for _, _, t_ns, msg in iter_messages(p, [M.AXIS_MOMENTS])]
+        if not raw:
+            raise ValueError(f"no {M.AXIS_MOMENTS} in the log")
+    else:
+        import yaml
+
+        raw = yaml.safe_load(p.read_text())
+        if not isinstance(raw, list) or not all(isinstance(e, (list, tuple)) and len(e) == 2 for e in raw):
+            raise ValueError("expected a YAML list of [t, [one value per axis]]")
+    try:
+        return _schedule(raw, len(axis_names))
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{exc} (axes: {', '.join(axis_names)})") from None
 
 
 def _schedule(schedule, n_axes: int) -> list[tuple[float, list[float]]]:
@@ -179,7 +221,7 @@ def record_run(sim, path, *, duration: float, chunk: float = 0.01, publish_rate:
     rec = RunRecord(str(path))
     wall0 = _time.perf_counter()
     with LogWriter(path, scene=sim.scene, params=params, flush_period=flush_period) as w:
-        r = Recorder(w, sim)
+        r = LogRecorder(w, sim)
         next_pub = 0
         si = 0
         current = None
@@ -187,7 +229,12 @@ def record_run(sim, path, *, duration: float, chunk: float = 0.01, publish_rate:
             t_ns = r.now_ns()
             tw = _time.perf_counter()
             if t_ns + tol_ns >= next_pub:
-                r.publish()
+                elapsed = _time.perf_counter() - wall0
+                r.publish(M.Status(M.RUN_STATUS, {
+                    "state": "running", "backend": sim.backend, "wall_time_s": elapsed, "steps": rec.steps,
+                    "real_time_factor_target": 0.0,  # offline: as fast as possible
+                    **({"real_time_factor_achieved": sim.time / elapsed} if elapsed > 0 else {}),
+                    "commands_applied": len(rec.commands)}, hardware_id=sim.scene.name))
                 rec.publications += 1
                 while next_pub <= t_ns + tol_ns:
                     next_pub += period_ns

@@ -33,34 +33,23 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core.invariants import conserved
 from ..core.simulator import SimulationError
-from .pacing import Pacer, RateMeter, Samples, chunk_steps
+from ..io import messages as M
 from ..io.resim import COMMAND_TIMEOUT_EVENT
+from .outputs import OutputsClosed
+from .pacing import Pacer, RateMeter, Samples, chunk_steps
 
-
-def time_ns(t: float) -> int:
-    """Simulated time (s) as integer ns, rounded as gyro_sim.io.messages.time_ns (log times)."""
-    return int(round(t * 1e9))
-
-#: wall seconds between diagnostics
-DIAGNOSTICS_PERIOD = 1.0
+#: wall seconds between diagnostics while paused or stopped (running, they go with every
+#: publication at least gyro_sim.io.messages.DIAGNOSTICS_PERIOD simulated seconds apart)
+IDLE_DIAGNOSTICS_PERIOD = 1.0
 #: longest sleep while paused or stopped (s): how fast requests are served then
 IDLE_PERIOD = 0.05
-
-
-def backend_name(sim) -> str:
-    """"numba" or "numpy": which dynamics the Simulator runs."""
-    return "numba" if type(sim.system).__name__.startswith("Fast") else "numpy"
 
 
 def warm_up(sim, dt: float) -> None:
     """Run every path the loop uses once (first calls pay for imports, caches, compilation),
     then put the Simulator back in its initial state."""
-    sim.joint_states()
-    sim.wrenches()
-    sim.body_states()
-    sim.invariants()
+    sim.snapshot()
     sim.advance(dt)
     sim.reset()
 
@@ -100,8 +89,9 @@ class SimLoop:
     ----------
     sim : gyro_sim.core.simulator.Simulator
     config : gyro_sim.ros.params.NodeConfig
-    outputs : object with prepare_state(t_ns, sim) -> batch, send(t_ns, batch),
-        publish_diagnostics(t_ns, level, message, values), record_command(t_ns, raw), event(t_ns, text);
+    outputs : gyro_sim.ros.outputs.Outputs, or an object with the same methods:
+        prepare_state(t_ns, sim, diagnostics_run) -> batch, send(t_ns, batch),
+        publish_diagnostics(t_ns, sim, run_status), record_command(t_ns, raw), event(t_ns, text);
         t_ns: node time in integer nanoseconds
     clock, sleep : injectable for tests
     """
@@ -133,12 +123,13 @@ class SimLoop:
         self.finished = threading.Event()
         self._stop = threading.Event()
         self._last_cmd_step: int | None = None  # step at which the last good command took effect
-        self._commanded = False  # a non-zero moment was applied since the last reset
         self._last_pub_wall: float | None = None
-        self._next_diag = 0.0
+        # diagnostics go with every diag_every-th publication (simulated time, as offline logs);
+        # while paused or stopped, once per IDLE_DIAGNOSTICS_PERIOD of wall time
+        self.diag_every = max(1, round(M.DIAGNOSTICS_PERIOD * config.publish_rate))
+        self._publications = 0
+        self._next_idle_diag = 0.0
         warm_up(sim, self.dt)
-        self._inv0 = sim.invariants()
-        self._conserved = conserved(sim.model)
         self.thread = threading.Thread(target=self._run, name="gyro_sim-physics", daemon=True)
         self.wall_start = self.cpu_start = None
         self.wall_end = self.cpu_end = None
@@ -175,7 +166,7 @@ class SimLoop:
     @property
     def node_ns(self) -> int:
         """Node time in integer ns: the stamps and log times (offset of the last reset + Simulator time)."""
-        return self.offset_ns + time_ns(self.sim.time)
+        return self.offset_ns + M.time_ns(self.sim.time)
 
     @property
     def node_time(self) -> float:
@@ -192,9 +183,8 @@ class SimLoop:
                 self.sim.reset()
                 self.failure = None
                 self._last_cmd_step = None
-                self._commanded = False
+                self._publications = 0
                 self.counters.moments_since = self.node_time
-                self._inv0 = self.sim.invariants()
                 self.out.event(self.node_ns, "reset")
                 self.pacer.restart(self.node_time)
                 self.rate.mark(self.node_time)
@@ -214,13 +204,15 @@ class SimLoop:
         self.wall_start, self.cpu_start = self.clock(), time.process_time()
         self.pacer.restart(self.node_time)
         self.rate.mark(self.node_time)
-        self._next_diag = self.clock()
+        self._next_idle_diag = self.clock()
         try:
             self._send(self._prepare())
             while not self._stop.is_set():
                 self._serve_requests()
+                if self.failure is not None and self.config.duration > 0:
+                    break  # a bounded run that fails ends at once (exit status 1)
                 if self.paused or self.failure is not None:
-                    self._diagnostics_if_due()
+                    self._idle_diagnostics()
                     self._stop.wait(IDLE_PERIOD)
                     continue
                 if self._done():
@@ -229,7 +221,6 @@ class SimLoop:
                 batch = self._prepare() if self.steps % self.per_publish == 0 and self.failure is None else None
                 self.pacer.wait(self.node_time)
                 self._send(batch)
-                self._diagnostics_if_due()
         except OutputsClosed:
             pass
         except Exception:  # noqa: BLE001 - a bug: reported by the node's exit status
@@ -254,9 +245,7 @@ class SimLoop:
                 self.steps += 1
                 n += 1
         except SimulationError as exc:
-            self.failure = str(exc)
-            self.out.event(self.node_ns, f"simulation stopped: {exc}")
-            self._diagnostics()
+            self._fail(exc)
         if n:
             per_step = (time.perf_counter() - t0) / n
             for _ in range(n):
@@ -277,7 +266,6 @@ class SimLoop:
             self.sim.set_axis_moments(latest)
             self._last_cmd_step = self.steps
             self.counters.last_effective = t
-            self._commanded = self._commanded or any(v != 0.0 for v in latest)
         elif self._last_cmd_step is not None and (self.steps - self._last_cmd_step) > self._timeout_steps:
             self._last_cmd_step = None
             if np.any(self.sim.axis_moments != 0.0):
@@ -286,16 +274,22 @@ class SimLoop:
                 self.counters.moments_since = t
                 self.out.event(t_ns, f"{COMMAND_TIMEOUT_EVENT}: axis moments back to zero")
 
+    def _fail(self, exc: SimulationError) -> None:
+        self.failure = str(exc)
+        self.out.event(self.node_ns, f"simulation stopped: {exc}")
+        self._idle_diagnostics(force=True)
+
     def _prepare(self) -> list | None:
-        """The messages of the state just computed (None if it cannot be published)."""
+        """The messages of the state just computed (None if it cannot be published); the
+        diagnostics go with every diag_every-th publication since the start or the last reset."""
         t0 = time.perf_counter()
+        with_diag = self._publications % self.diag_every == 0
         try:
-            batch = self.out.prepare_state(self.node_ns, self.sim)
+            batch = self.out.prepare_state(self.node_ns, self.sim, self.report() if with_diag else False)
         except SimulationError as exc:
-            self.failure = str(exc)
-            self.out.event(self.node_ns, f"simulation stopped: {exc}")
-            self._diagnostics()
+            self._fail(exc)
             return None
+        self._publications += 1
         self.output_time.add(time.perf_counter() - t0)
         return batch
 
@@ -311,71 +305,62 @@ class SimLoop:
         self.counters.published += 1
 
     # --- diagnostics ---------------------------------------------------------------------------------
-    def _diagnostics_if_due(self) -> None:
-        if self.clock() >= self._next_diag:
-            self._diagnostics()
+    def _idle_diagnostics(self, force: bool = False) -> None:
+        """Diagnostics alone, once per IDLE_DIAGNOSTICS_PERIOD of wall time (paused, stopped)."""
+        if force or self.clock() >= self._next_idle_diag:
+            self._next_idle_diag = self.clock() + IDLE_DIAGNOSTICS_PERIOD
+            self.out.publish_diagnostics(self.node_ns, self.sim, self.report())
 
-    def _diagnostics(self) -> None:
-        self._next_diag = self.clock() + DIAGNOSTICS_PERIOD
-        level, message, values = self.report()
-        self.out.publish_diagnostics(self.node_ns, level, message, values)
-
-    def report(self) -> tuple[int, str, dict]:
-        """(level 0 OK / 1 WARN / 2 ERROR, message, key -> value) for /diagnostics."""
+    def report(self) -> M.Status:
+        """The ``gyro_sim: run`` status: level 0 OK / 1 WARN / 2 ERROR, a message, the figures
+        (numbers with their units in the key; a figure without data yet is left out)."""
         c, sim = self.counters, self.sim
         p50, p99 = self.step_time.window_percentiles(50, 99)
-        j50, j99 = (abs_dev_percentiles(self.pub_interval.window, self.nominal_publish_interval))
+        j50, j99 = abs_dev_percentiles(self.pub_interval.window, self.nominal_publish_interval)
         rtf = float("nan") if (self.paused or self.failure) else self.rate.window_rtf(self.node_time)
+        state = "stopped: simulation error" if self.failure else ("paused" if self.paused else "running")
         values = {
-            "state": "stopped: simulation error" if self.failure else ("paused" if self.paused else "running"),
-            "node_time_s": f"{self.node_time:.6f}",
-            "sim_time_since_reset_s": f"{sim.time:.6f}",
-            "physics_rate_hz": f"{self.config.physics_rate:g}",
-            "publish_rate_hz": f"{self.config.publish_rate:g}",
-            "real_time_factor_target": f"{self.rtf:g}",
-            "real_time_factor_achieved": fmt(rtf, ".4f"),
-            "step_time_p50_us": fmt(p50, ".1f", 1e6),
-            "step_time_p99_us": fmt(p99, ".1f", 1e6),
-            "publish_jitter_p50_us": fmt(j50, ".1f", 1e6),
-            "publish_jitter_p99_us": fmt(j99, ".1f", 1e6),
-            "sim_lag_max_ms": f"{max(self.lag.window, default=0.0) * 1e3:.3f}",
-            "deadline_misses": str(self.pacer.misses),
-            "slipped_s": f"{self.pacer.slipped:.6f}",
-            "commands_accepted": str(c.accepted),
-            "commands_rejected": str(c.rejected),
-            "last_reject_reason": c.last_reject_reason,
-            "command_timeouts": str(c.timeouts),
-            "last_command_effective_s": fmt(c.last_effective, ".9f"),
-            "moments_applied_since_s": f"{c.moments_since:.9f}",
-            "axis_names": ",".join(sim.axis_names),
-            "axis_moments": ",".join(f"{v:.6g}" for v in sim.axis_moments),
-            "integrator": sim.integrator_name,
-            "backend": backend_name(sim),
-            "error_estimate": "n/a (fixed step)" if sim.error_estimate is None else f"{sim.error_estimate:.3e}",
-            "steps_per_wakeup": str(self.per_chunk),
+            "state": state,
+            "node_time_s": self.node_time,
+            "physics_rate_Hz": self.config.physics_rate,
+            "publish_rate_Hz": self.config.publish_rate,
+            "real_time_factor_target": self.rtf,
+            "real_time_factor_achieved": rtf,
+            "step_time_p50_us": p50 * 1e6,
+            "step_time_p99_us": p99 * 1e6,
+            "publish_jitter_p50_us": j50 * 1e6,
+            "publish_jitter_p99_us": j99 * 1e6,
+            "sim_lag_max_ms": max(self.lag.window, default=0.0) * 1e3,
+            "deadline_misses": self.pacer.misses,
+            "slipped_s": self.pacer.slipped,
+            "steps_per_wakeup": self.per_chunk,
+            "commands_accepted": c.accepted,
+            "commands_rejected": c.rejected,
+            "command_timeouts": c.timeouts,
+            "last_command_effective_s": c.last_effective,
+            "moments_applied_since_s": c.moments_since,
+            "backend": sim.backend,
         }
-        if self.failure is None:
-            inv = sim.invariants()
-            for name, x in inv.items():  # energy, momenta (vectors as x,y,z), and what else applies
-                values[name] = ",".join(f"{float(c):.12g}" for c in np.ravel(x))
-            for name in self._conserved:
-                # commands are internal moments: they change the energy, not the momenta
-                if self._commanded and name in ("energy", "jacobi"):
-                    values[f"{name}_drift"] = "n/a (commanded since reset)"
-                else:
-                    values[f"{name}_drift"] = f"{relative_drift(self._inv0[name], inv[name]):.3e}"
+        if c.last_reject_reason:
+            values["last_reject_reason"] = c.last_reject_reason
+        if self.failure:
+            values["reason"] = self.failure
+        values = {k: v for k, v in values.items() if isinstance(v, str) or math.isfinite(v)}
         if self.failure is not None:
-            return 2, f"simulation stopped: {self.failure} (call ~/reset)", values
+            return self._status(M.ERROR, f"simulation stopped: {self.failure} (call ~/reset)", values)
         if self.paused:
-            return 0, "paused", values
+            return self._status(M.OK, "paused", values)
         warn = []
         if self.rtf > 0 and math.isfinite(rtf) and rtf < 0.95 * self.rtf:
             warn.append(f"real-time factor {rtf:.2f} below {self.rtf:g}")
         if c.rejected:
-            warn.append(f"{c.rejected} commands rejected")
+            warn.append(f"{c.rejected} command{'s' if c.rejected != 1 else ''} rejected")
         if warn:
-            return 1, "; ".join(warn), values
-        return 0, "running", values
+            return self._status(M.WARN, "; ".join(warn), values)
+        return self._status(M.OK, "running", values)
+
+    def _status(self, level: int, message: str, values: dict) -> M.Status:
+        return M.Status(M.RUN_STATUS, values, level=level, message=message, hardware_id=self.sim.scene.name)
 
     @property
     def nominal_publish_interval(self) -> float:
@@ -385,8 +370,11 @@ class SimLoop:
         """Whole-run timing statistics (for stats_file and the bench)."""
         p50, p99, pmax = self.step_time.run_percentiles(50, 99, 100)
         j50, j99 = abs_dev_percentiles(self.pub_interval.all, self.nominal_publish_interval)
-        wall = (self.wall_end or self.clock()) - self.wall_start
-        cpu = (self.cpu_end or time.process_time()) - self.cpu_start
+        if self.wall_start is None:  # never started (stopped during start-up)
+            wall = cpu = 0.0
+        else:
+            wall = (self.wall_end or self.clock()) - self.wall_start
+            cpu = (self.cpu_end or time.process_time()) - self.cpu_start
         intervals = np.asarray(self.pub_interval.all) if self.pub_interval.all else np.array([np.nan])
         return {
             "scene": self.config.scene.name,
@@ -395,7 +383,7 @@ class SimLoop:
             "publish_rate": self.config.publish_rate,
             "real_time_factor_target": self.rtf,
             "integrator": self.sim.integrator_name,
-            "backend": backend_name(self.sim),
+            "backend": self.sim.backend,
             "steps_per_wakeup": self.per_chunk,
             "steps": self.steps,
             "node_time_s": self.node_time,
@@ -419,15 +407,6 @@ class SimLoop:
         }
 
 
-class OutputsClosed(Exception):
-    """Raised by outputs when the ROS context is gone: the loop ends quietly."""
-
-
-def fmt(x: float, spec: str, scale: float = 1.0) -> str:
-    """`x * scale` formatted, or "n/a" when not finite (no NaN text on /diagnostics)."""
-    return format(x * scale, spec) if math.isfinite(x) else "n/a"
-
-
 def abs_dev_percentiles(intervals, nominal: float) -> tuple[float, float]:
     """p50 and p99 of |interval - nominal| (s); NaN without data or without a nominal."""
     if not len(intervals) or not math.isfinite(nominal):
@@ -435,9 +414,3 @@ def abs_dev_percentiles(intervals, nominal: float) -> tuple[float, float]:
     dev = np.abs(np.fromiter(intervals, float) - nominal)
     p50, p99 = np.percentile(dev, [50, 99])
     return float(p50), float(p99)
-
-
-def relative_drift(a, b) -> float:
-    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-    scale = max(float(np.max(np.abs(a))), 1e-300)
-    return float(np.max(np.abs(b - a))) / scale

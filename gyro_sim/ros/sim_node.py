@@ -12,7 +12,7 @@ from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
 from ..core.simulator import Simulator
-from .loop import SimLoop, backend_name
+from .loop import SimLoop
 from .outputs import Outputs
 from .params import PARAMETERS, ParameterError, validate
 
@@ -39,6 +39,11 @@ def log_params(sim, cfg) -> dict:
                       duration=cfg.duration or None, **own)
 
 
+def recorder_options(cfg) -> dict:
+    """LogWriter options from the parameters (overwrite:=true lets record replace a file)."""
+    return {"overwrite": True} if getattr(cfg, "overwrite", False) else {}
+
+
 class GyroSimNode(Node):
     """The simulation node. Raises ParameterError (nothing created) on invalid parameters."""
 
@@ -57,9 +62,10 @@ class GyroSimNode(Node):
                              backend=cfg.backend)
         self.recorder = None
         if cfg.record:
-            from .recorder import Recorder
+            from .recorder import LiveRecorder
 
-            self.recorder = Recorder(cfg.record, scene=cfg.scene, params=log_params(self.sim, cfg))
+            self.recorder = LiveRecorder(cfg.record, scene=cfg.scene, params=log_params(self.sim, cfg),
+                                         **recorder_options(cfg))
         try:
             self.outputs = Outputs(self, self.sim, cfg, self.recorder)
             self.loop = SimLoop(self.sim, cfg, self.outputs)
@@ -72,7 +78,7 @@ class GyroSimNode(Node):
         self.create_service(SetBool, "~/pause", self.on_pause)
         self.get_logger().info(
             f"scene '{cfg.scene.name}' ({cfg.scene_path}); axes {self.sim.axis_names}; "
-            f"physics {cfg.physics_rate:g} Hz ({self.sim.integrator_name}, {backend_name(self.sim)} dynamics), "
+            f"physics {cfg.physics_rate:g} Hz ({self.sim.integrator_name}, {self.sim.backend} dynamics), "
             f"publish {cfg.publish_rate:g} Hz, "
             f"real-time factor {cfg.real_time_factor:g}, {self.loop.per_chunk} steps per wake-up"
             + (f"; recording to {cfg.record}" if cfg.record else "")

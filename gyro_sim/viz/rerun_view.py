@@ -61,9 +61,10 @@ COLORS = {
     "body": (70, 130, 180),
     "rotor": (230, 160, 40),
     "marker": (40, 40, 40),
-    "force": (220, 50, 50),
-    "moment": (50, 160, 80),
-    "momentum": (150, 60, 200),
+    # arrows: hues apart from the body axes (x red, y green, z blue) and from each other
+    "force": (255, 140, 0),
+    "moment": (200, 0, 200),
+    "momentum": (0, 170, 170),
     "gravity": (120, 120, 120),
     "base": (30, 30, 30),
 }
@@ -197,7 +198,7 @@ def build_recording(path: str | os.PathLike, rec) -> dict:
     static("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP)
     static("world/legend", rr.TextDocument(
         f"# {scene.name}\n\nlog: `{Path(path).name}`\n\n"
-        "Arrows: red R^k (joint force), green L^k (joint moment), purple total angular momentum "
+        "Arrows: orange R^k (joint force), magenta L^k (joint moment), teal total angular momentum "
         "about O^1, grey gravity.", media_type="text/markdown"))
 
     # --- bodies: frames, shapes, rotors -------------------------------------------------------------
@@ -242,7 +243,7 @@ def build_recording(path: str | os.PathLike, rec) -> dict:
             send("world/base", s.pose_t, rr.Points3D.columns(positions=first))
             rec.log("world/base", rr.Points3D.from_fields(radii=[BASE_RADIUS_FRACTION * length], colors=[COLORS["base"]]), static=True)
             # total angular momentum about O^1
-            keys = [f"angular_momentum_O1_{a}" for a in "xyz"]
+            keys = [M.vector_key("angular_momentum_O1", a, "Nms") for a in "xyz"]
             if s.diag_t.size and all(k in s.diag for k in keys):
                 H = np.stack([s.diag[k] for k in keys], axis=1)
                 sH = _scale([H], length)
@@ -309,11 +310,16 @@ def build_recording(path: str | os.PathLike, rec) -> dict:
                 lines(f"plots/axis_moments/{axis}", [axis])
                 plotted.add("plots/axis_moments")
     for key, values in s.diag.items():
-        if key.endswith("_drift") and np.all(np.isfinite(values)):
-            name = key[: -len("_drift")]
+        if key.endswith(M.DRIFT_SUFFIX) and np.all(np.isfinite(values)):
+            name = key[: -len(M.DRIFT_SUFFIX)]
             send(f"plots/drift/{name}", s.diag_t, rr.Scalars.columns(scalars=values))
-            lines(f"plots/drift/{name}", [f"{name} (relative)"])
+            lines(f"plots/drift/{name}", [f"{name} drift"])
             plotted.add("plots/drift")
+    if M.BALANCE_REL_KEY in s.diag and np.all(np.isfinite(s.diag[M.BALANCE_REL_KEY])):
+        # E - E(0) - W: conserved with or without commands (gyro_sim.core.snapshot)
+        send("plots/drift/energy_balance", s.diag_t, rr.Scalars.columns(scalars=s.diag[M.BALANCE_REL_KEY]))
+        lines("plots/drift/energy_balance", ["energy balance E - E0 - W"])
+        plotted.add("plots/drift")
     for t, text in s.events:
         rec.set_time(TIMELINE, duration=t)
         rec.log("events", rr.TextLog(text, level="INFO"))
@@ -334,7 +340,7 @@ TITLES = {
     "plots/hinge": "hinge angles (rad)",
     "plots/rotor_rate": "rotor rates kappa' (rad/s)",
     "plots/axis_moments": "axis moments (N m)",
-    "plots/drift": "invariant drift (relative)",
+    "plots/drift": "drift of the invariants and energy balance (relative)",
 }
 
 

@@ -7,7 +7,7 @@ import pytest
 from gyro_sim import Simulator, load_scene
 from gyro_sim.io.mcap_log import LogWriter, iter_messages, read_info
 from gyro_sim.io import messages as M
-from gyro_sim.io.record import Recorder, record_run, run_params
+from gyro_sim.io.record import LogRecorder, record_run, run_params
 from gyro_sim.io.resim import resimulate
 
 from .conftest import DURATION, PUBLISH_RATE, SCENE, SCHEDULE, gyro_sim
@@ -70,7 +70,7 @@ def test_resets_and_commands_of_a_live_style_log_resimulate(tmp_path):
     dt = 0.004
     path = tmp_path / "live.mcap"
     with LogWriter(path, scene=scene, params=run_params(sim, advance_dt=dt, publish_rate=125, source="test")) as w:
-        r = Recorder(w, sim)
+        r = LogRecorder(w, sim)
         for i in range(60):
             if i % 2 == 0:
                 r.publish()

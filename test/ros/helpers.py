@@ -159,11 +159,8 @@ def stamp_ns(msg) -> int:
 
 
 def diag_values(msg) -> dict:
-    """key -> value of the gyro_sim status in a DiagnosticArray."""
-    for st in msg.status:
-        if st.name.startswith("gyro_sim"):
-            return {kv.key: kv.value for kv in st.values}
-    return {}
+    """key -> value of the gyro_sim statuses (dynamics and run) in a DiagnosticArray."""
+    return {kv.key: kv.value for st in msg.status if st.name.startswith("gyro_sim") for kv in st.values}
 
 
 def all_finite(msg) -> bool:

@@ -31,14 +31,16 @@ class Outputs:
     def __init__(self):
         self.states, self.events, self.commands, self.diags = [], [], [], []
 
-    def prepare_state(self, t, sim):
+    def prepare_state(self, t, sim, diagnostics_run=False):
+        if diagnostics_run is not False:
+            self.diags.append((t, diagnostics_run))
         return (t, np.array(sim.joint_states().position), list(sim.axis_moments))
 
     def send(self, t, batch):
         self.states.append(batch)
 
-    def publish_diagnostics(self, t, level, message, values):
-        self.diags.append((t, level, message, values))
+    def publish_diagnostics(self, t, sim, run):
+        self.diags.append((t, run))
 
     def record_command(self, t, raw):
         self.commands.append((t, raw))
@@ -149,3 +151,27 @@ def test_check_command_and_validate():
     assert "physics_rate: must be >= 1" in msg and "integrator: unknown 'x'" in msg and "scene: empty" in msg
     cfg = validate({"physics_rate": 1000, "duration": 5})  # integers accepted for numbers
     assert cfg.physics_rate == 1000.0 and cfg.steps_per_publish == 10
+
+
+def test_diagnostics_go_with_every_tenth_of_a_simulated_second():
+    clock = FakeClock()
+    loop, out = make_loop(clock)  # publish 50 Hz: every 5th publication
+    run_until(loop, lambda: loop.node_time > 0.45)
+    times = [t for t, _ in out.diags]
+    assert times[:5] == [0, 100_000_000, 200_000_000, 300_000_000, 400_000_000]
+    run = out.diags[-1][1]
+    assert run.name == "gyro_sim: run" and run.values["state"] == "running"
+    assert all(isinstance(v, (int, float)) for k, v in run.values.items() if k not in ("state", "backend"))
+
+
+def test_a_bounded_run_that_fails_ends_at_once():
+    """duration set, then a divergent command: the loop stops with the failure (node exit 1)."""
+    clock = FakeClock()
+    loop, out = make_loop(clock, duration=8.0)
+    loop.submit_command(b"x", [1e300, 1e300, 1e300])
+    loop.start()
+    assert loop.finished.wait(60.0), "the loop did not end"
+    loop.stop()
+    assert loop.failure is not None and loop.node_time < 8.0
+    assert any("simulation stopped" in e for _, e in out.events)
+    assert out.diags[-1][1].level == 2 and "reason" in out.diags[-1][1].values
