@@ -11,12 +11,10 @@ import sys
 import time
 
 #: measured cold compile of every kernel (s), NUMBA_CACHE_DIR pointing at an empty directory:
-#: 10.3 s on the project's 2-core machine while idle, 12.9 s while it was shared (README)
+#: 10.3-11.3 s on the project's 2-core machine while idle, 20.5-26.5 s while four jobs shared it (README)
 COMPILE_SECONDS = 12
 #: the scene compiled for: one signature serves every scene (fast.py), any small one will do
 WARM_UP_SCENE = "hinge_chain"
-#: the kernels the integrators call; the others are compiled inside them
-ENTRY_KERNELS = ("_rhs_kernel", "_normalize_quaternions")
 
 
 def kernels() -> dict:
@@ -31,13 +29,13 @@ def kernels() -> dict:
 
 
 def cache_is_cold() -> bool:
-    """True if an entry kernel has no valid entry in numba's disk cache (none written yet, or
-    fast.py changed since): the next Simulator with the numba backend compiles."""
-    ks = kernels()
+    """True if a kernel has no valid entry in numba's disk cache (none written yet, or fast.py
+    changed since): the next Simulator with the numba backend compiles. Every kernel of
+    fast.py is compiled by any scene (one signature), so after one start none is missing."""
     try:
         # numba's cache index of each kernel, checked against fast.py's timestamp and size
         # (an index written for another version of the file reads as empty)
-        return any(not ks[name]._cache._cache_file._load_index() for name in ENTRY_KERNELS if name in ks)
+        return any(not d._cache._cache_file._load_index() for d in kernels().values())
     except (AttributeError, OSError):  # another numba layout: cannot tell, say nothing
         return False
 
@@ -51,7 +49,7 @@ def precompile(stream=sys.stderr, prog: str = "gyro_sim") -> bool:
         return False
     from numba.core import event
 
-    stream.write(f"{prog}: compiling the dynamics once, about {COMPILE_SECONDS} s; "
+    stream.write(f"{prog}: compiling the dynamics once, about {COMPILE_SECONDS} s (more on a busy machine); "
                  f"later starts load it from the cache\n")
     stream.flush()
     done: set[str] = set()
