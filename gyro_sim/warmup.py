@@ -74,7 +74,7 @@ def precompile(stream=sys.stderr, prog: str = "gyro_sim") -> bool:
         try:  # building a Simulator on the numba backend compiles (or loads) every kernel
             Simulator(WARM_UP_SCENE, integrator="rk4", backend="numba")
         except Exception as exc:  # noqa: BLE001 - the real run reports (or falls back) itself
-            stream.write(f"{prog}: compiling failed ({type(exc).__name__}); the numpy backend will be used\n")
+            stream.write(f"{prog}: compiling failed ({type(exc).__name__}: {exc}); the run itself will say more\n")
             return True
     finally:
         event.unregister("numba:compile", listener)
