@@ -14,6 +14,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from .io.mcap_log import DEFAULT_FLUSH_PERIOD  # noqa: E402
 from .progress import Progress  # noqa: E402  (cmd_run, cmd_bench_scaling)
 
 
@@ -38,8 +39,6 @@ def cmd_run(args) -> int:
         except OutputError as exc:
             print(f"gyro-sim run: {exc}", file=sys.stderr)
             return 2
-        if args.force and os.path.lexists(args.record):
-            os.remove(args.record)  # the LogWriter creates its file ("xb"): --force replaces it
     sim = Simulator(scene, integrator=args.integrator, rtol=args.rtol, atol=args.atol, step=args.step)
     inv0 = sim.reference_invariants()
     schedule = []
@@ -69,6 +68,7 @@ def cmd_run(args) -> int:
             try:
                 record = record_run(sim, args.record, duration=args.duration, chunk=chunk, schedule=schedule,
                                     publish_rate=args.publish_rate, flush_period=args.flush_period,
+                                    overwrite=args.force,
                                     progress=lambda t, total: bar(t, total, f"t = {t:.3f} s"),
                                     stop=lambda: bool(stop))
             finally:
@@ -118,22 +118,22 @@ def cmd_run(args) -> int:
 
 
 def cmd_bench_scaling(args) -> int:
-    from .bench import scaling
+    import dataclasses
 
+    from .bench import scaling
+    from .bench.report import refused, write_report
+
+    if refused(args, "scaling"):
+        return 2
     sizes = scaling.QUICK_SIZES if args.quick else tuple(args.sizes or scaling.DEFAULT_SIZES)
     rows = scaling.measure(sizes, min_time=0.05 if args.quick else 0.3, progress=Progress("scaling"))
     text = "### Scaling: cost against chain length\n\n" + scaling.table(rows)
     feat = scaling.features(quick=args.quick)
     text += "\n\n### Leaving out what a scene does not have\n\n" + scaling.features_table(feat)
     print(text)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "scaling.md").write_text(text + "\n")
-    try:
-        scaling.plot(rows, str(out / "scaling.png"))
-        print(f"\nwrote {out / 'scaling.md'} and {out / 'scaling.png'}")
-    except ImportError:
-        print(f"\nwrote {out / 'scaling.md'} (no plot: pip install 'gyro_sim[bench]')")
+    data = {"rows": [dataclasses.asdict(r) if dataclasses.is_dataclass(r) else r for r in rows]}
+    write_report(args.out, "scaling", text + "\n", data, lambda png: scaling.plot(rows, png), force=args.force,
+                 json_default=str)
     return 0
 
 
@@ -190,7 +190,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "(.mcap) whose /gyro_sim/axis_moments are replayed at their log times")
     r.add_argument("--record", metavar="OUT.mcap", help="record an MCAP log (ROS 2 messages; view with gyro-sim view)")
     r.add_argument("--publish-rate", type=float, default=100.0, help="messages per simulated second in the log (Hz)")
-    r.add_argument("--flush-period", type=float, default=1.0,
+    r.add_argument("--flush-period", type=float, default=DEFAULT_FLUSH_PERIOD,
                    help="wall-clock seconds between flushes of the log (what a crash can lose)")
     r.add_argument("--force", action="store_true", help="replace an existing --record file (never the scene)")
     r.set_defaults(fn=cmd_run)
@@ -201,7 +201,8 @@ def build_parser() -> argparse.ArgumentParser:
     s = bsub.add_parser("scaling", help="cost per evaluation and per simulated second against chain length")
     s.add_argument("--sizes", type=int, nargs="+")
     s.add_argument("--quick", action="store_true", help="small sizes, short timings (CI)")
-    s.add_argument("--out", default="out/bench", help="directory for scaling.md and scaling.png")
+    s.add_argument("--out", default="out/bench", help="directory for scaling.md, .json and .png")
+    s.add_argument("--force", action="store_true", help="replace existing report files in --out")
     s.set_defaults(fn=cmd_bench_scaling)
     for name in PLUGINS:
         try:

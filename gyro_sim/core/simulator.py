@@ -13,6 +13,7 @@ from . import invariants as inv
 from .model import compile_model, initial_state
 from .rotations import matrices_to_euler, omegas_to_euler_rates
 from .scene import Scene
+from .snapshot import Snapshot
 
 
 class SimulationError(RuntimeError):
@@ -94,6 +95,13 @@ class Simulator:
             (np.flatnonzero(m.torque_body == k).tolist(), np.flatnonzero(m.speed_body == k).tolist())
             for k in range(m.n)
         ]
+        # index in the state vector of the angle each actuated axis drives (hinge phi or rotor
+        # kappa): the work of a held moment over an advance is moment * change of that angle
+        i_phi = np.arange(m.size)[m.i_phi]
+        i_kappa = np.arange(m.size)[m.i_kappa]
+        self._axis_angle = np.array([i_phi[h] if h >= 0 else i_kappa[r]
+                                     for h, r in zip(m.axis_hinge, m.axis_rotor)], dtype=int)
+        self._conserved = inv.conserved(m)
         self.reset()
 
     # --- state -----------------------------------------------------------------------------
@@ -107,6 +115,8 @@ class Simulator:
         self._cache = None
         self._kin_ok = False
         self.integrator.reset()
+        self._work = 0.0
+        self._reference = None  # invariants of the reset state (taken by the first advance or snapshot)
 
     @property
     def time(self) -> float:
@@ -159,6 +169,8 @@ class Simulator:
         """Integrate `dt` seconds of simulated time with the commands held (zero-order hold)."""
         if not (dt > 0 and math.isfinite(dt)):
             raise ValueError(f"dt must be a positive finite number, got {dt!r}")
+        if self._reference is None:  # the drifts' reference is the reset state: keep it before moving
+            self._reference = self.invariants()
         hinge_tau, L_rotor = self._inputs()
         self.system.hold(self._t, self._p, hinge_tau, L_rotor)
         try:
@@ -169,6 +181,9 @@ class Simulator:
         if not np.all(np.isfinite(y)):
             self.integrator.reset()
             raise SimulationError(f"t = {self._t:.6g} s: the state became non-finite; state kept at t = {self._t:.6g} s")
+        if len(self._axis_angle) and np.any(self._moments):
+            i = self._axis_angle
+            self._work += float(self._moments @ (y[i] - self._y[i]))
         self._p = self.system.spins(self._t + dt)
         self._t += dt
         self._y = y
@@ -285,3 +300,52 @@ class Simulator:
             out["lagrange_82"] = vertical_momentum_82(self._lagrange, euler, rates)  # = -vertical_momentum
             out["lagrange_85"] = energy_integral_85(self._lagrange, euler, rates)  # = 2 (T + V - const)
         return out
+
+    # --- the snapshot: everything the outside sees, once per publication ---------------------------
+    @property
+    def work(self) -> float:
+        """Work done by the commanded axis moments since the last reset (J): the sum over
+        `advance` calls of moment * change of the axis angle (exact under the zero-order hold)."""
+        return self._work
+
+    @property
+    def backend(self) -> str:
+        """"numba" or "numpy": which dynamics the Simulator runs."""
+        return "numba" if type(self.system).__name__.startswith("Fast") else "numpy"
+
+    def reference_invariants(self) -> dict:
+        """The invariants of the state at the last reset (what drifts are measured against)."""
+        if self._reference is None:
+            if self._t != 0.0:
+                raise RuntimeError("the reference is taken at the reset state")
+            self._reference = self.invariants()
+        return self._reference
+
+    def snapshot(self, *, bodies: bool = True, wrenches: bool = True, invariants: bool = True) -> Snapshot:
+        """The outputs at the current time (gyro_sim.core.snapshot.Snapshot); parts switched off
+        are None and not computed."""
+        m = self.model
+        js = self.joint_states()
+        kw = {}
+        if bodies:
+            states = self.body_states()
+            kw["body_position"] = np.array([b.position for b in states])
+            kw["body_quaternion"] = np.array([b.quaternion for b in states])
+        if wrenches:
+            ws = self.wrenches()
+            kw["wrench_force"] = np.array([w.force for w in ws])
+            kw["wrench_moment"] = np.array([w.moment for w in ws])
+        if invariants:
+            now = self.invariants()
+            ref = self.reference_invariants()
+            kw["invariants"] = now
+            kw["drift"] = {name: inv.relative_drift(name, ref, now[name]) for name in self._conserved}
+            kw["work"] = self._work
+            if "energy" in self._conserved:
+                kw["energy_balance"] = now["energy"] - ref["energy"] - self._work
+                kw["energy_scale"] = inv.drift_scale("energy", ref)
+        return Snapshot(
+            time=self._t, joint_names=tuple(js.name), position=np.array(js.position, dtype=float),
+            velocity=np.array(js.velocity, dtype=float), effort=np.array(js.effort, dtype=float),
+            axis_names=tuple(m.axis_names), axis_moments=self._moments.copy(), integrator=self.integrator_name,
+            error_estimate=self.error_estimate, body_names=tuple(m.names), **kw)

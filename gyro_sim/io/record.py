@@ -26,7 +26,7 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from . import messages as M
-from .mcap_log import LogWriter
+from .mcap_log import DEFAULT_FLUSH_PERIOD, LogWriter
 
 #: a boundary within this fraction of the step from a publish tick counts as on it
 TICK_TOLERANCE = 0.5
@@ -187,7 +187,8 @@ def _schedule(schedule, n_axes: int) -> list[tuple[float, list[float]]]:
 
 
 def record_run(sim, path, *, duration: float, chunk: float = 0.01, publish_rate: float = 100.0,
-               schedule: Sequence[tuple[float, Sequence[float]]] = (), flush_period: float = 1.0,
+               schedule: Sequence[tuple[float, Sequence[float]]] = (), flush_period: float = DEFAULT_FLUSH_PERIOD,
+               overwrite: bool = False,
                source: str = "gyro-sim run", progress: Callable[[float, float], None] | None = None,
                stop: Callable[[], bool] | None = None) -> RunRecord:
     """Simulate `duration` seconds offline and record everything to `path`.
@@ -220,7 +221,7 @@ def record_run(sim, path, *, duration: float, chunk: float = 0.01, publish_rate:
                         command_schedule=sched or [(0.0, [0.0] * n_axes)])
     rec = RunRecord(str(path))
     wall0 = _time.perf_counter()
-    with LogWriter(path, scene=sim.scene, params=params, flush_period=flush_period) as w:
+    with LogWriter(path, scene=sim.scene, params=params, flush_period=flush_period, overwrite=overwrite) as w:
         r = LogRecorder(w, sim)
         next_pub = 0
         si = 0

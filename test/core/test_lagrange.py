@@ -27,14 +27,7 @@ from gyro_sim.core import rotations as rot  # noqa: E402
 from gyro_sim.core.scene_load import load_scene  # noqa: E402
 from oracles.pin_chain import PinChain  # noqa: E402
 
-try:
-    from gyro_sim.core.simulator import Simulator
-    SIMULATOR_MISSING = None
-except Exception as exc:  # the dynamics core is being written
-    Simulator = None
-    SIMULATOR_MISSING = f"gyro_sim.core.simulator does not import yet ({type(exc).__name__}: {exc})"
-
-needs_sim = pytest.mark.skipif(Simulator is None, reason=SIMULATOR_MISSING or "")
+from gyro_sim.core.simulator import Simulator  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
 CONFIG = REPO / "config"
@@ -349,7 +342,6 @@ def test_general_n_printed_sign_fails():
     assert precession_deviation(E, R, kappa) > PERTURBED_MIN
 
 
-@needs_sim
 @pytest.mark.parametrize("case", PRECESSION_CASES)
 def test_regular_precession_simulator(case):
     scene_dict = PRECESSIONS[case]
@@ -359,7 +351,6 @@ def test_regular_precession_simulator(case):
     assert dev < PRECESSION_TOL_SIM
 
 
-@needs_sim
 @pytest.mark.parametrize("case", ["heavy_top.yaml", "double_gyro_plus.yaml",
                                   "double_gyro_minus.yaml"])
 def test_regular_precession_simulator_perturbed(case):
@@ -431,7 +422,6 @@ def test_integrals_independent_engine(n):
                      f"oracle n = {n}")
 
 
-@needs_sim
 @pytest.mark.parametrize("n", GENERIC_N)
 def test_integrals_simulator(n):
     scene_dict = generic_chain(n)

@@ -22,14 +22,7 @@ from gyro_sim.core import rotations as rot  # noqa: E402
 from gyro_sim.core.scene import Base, Body, Initial, Joint, Rotor, Scene  # noqa: E402
 from oracles.pin_chain import PinChain  # noqa: E402
 
-try:
-    from gyro_sim import Simulator
-except ImportError:  # the dynamics core is not there yet
-    Simulator = None
-try:
-    from gyro_sim import load_scene
-except ImportError:
-    load_scene = None
+from gyro_sim import Simulator, load_scene  # noqa: E402
 
 G = 9.81
 T_FINAL = 1.0
@@ -43,7 +36,6 @@ WRENCH_TRAJ_RTOL = 1e-6
 ENERGY_RTOL = 1e-10
 SIM_OPTIONS = dict(integrator="dop853", rtol=1e-11, atol=1e-12)
 
-needs_sim = pytest.mark.skipif(Simulator is None, reason="gyro_sim.Simulator not available yet")
 
 
 # ------------------------------------------------------------------ scenes
@@ -384,7 +376,6 @@ def _joint_closure(scene: Scene, wrenches, moments: dict[str, float]) -> None:
                 moments[body.name], abs=WRENCH_RTOL * scale)
 
 
-@needs_sim
 @pytest.mark.parametrize("seed,base", CASES)
 def test_random_chain_matches_oracle(seed, base):
     d = random_chain(seed, base)
@@ -425,7 +416,6 @@ def test_random_chain_matches_oracle(seed, base):
     print(f"{seed}-{base}: " + ", ".join(f"{k} {v:.1e}" for k, v in worst.items()))
 
 
-@pytest.mark.skipif(load_scene is None, reason="gyro_sim.load_scene not available yet")
 @pytest.mark.parametrize("seed,base", CASES)
 def test_loader_reads_random_chain_like_oracle(seed, base):
     """load_scene and this file's own reading of the scene dict agree (inertia_com -> A at O^k)."""

@@ -2,7 +2,7 @@
 
 Every node gets its own ROS_DOMAIN_ID (100..199, from the pid and a counter) with discovery
 limited to localhost, and ROS_LOG_DIR under the test's tmp directory. The whole environment
-is passed on (the ROS wheels need their LD_LIBRARY_PATH, ../shared/ROS_ON_PYPI.md). Waits are
+is passed on (the ROS wheels need their LD_LIBRARY_PATH). Waits are
 on conditions with generous timeouts: DDS discovery takes 0.1 s or 2-4 s.
 """
 from __future__ import annotations

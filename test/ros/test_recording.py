@@ -9,7 +9,6 @@ from pathlib import Path
 import pytest
 
 pytest.importorskip("rclpy", reason="the ROS 2 node needs rclpy (pip install '.[ros]')")
-pytest.importorskip("gyro_sim.io.mcap_log", reason="gyro_sim.io.mcap_log (the log writer) is not built yet")
 
 from rclpy.serialization import deserialize_message  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
@@ -83,7 +82,7 @@ def test_signal_during_recording_leaves_a_complete_log(tmp_path, sig):
 
     # the log keeps the re-simulation contract (gyro_sim.io.record): the core, fed the recorded
     # commands and the reset, reproduces every logged joint state bit for bit
-    resim = pytest.importorskip("gyro_sim.io.resim")
+    from gyro_sim.io import resim
     r = resim.resimulate(log)
     assert r.compared > 20 and r.resets == 1 and r.commands > 0
     assert r.max_deviation == 0.0, r.report()
