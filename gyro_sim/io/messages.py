@@ -223,6 +223,41 @@ def axis_moments(values: Sequence[float]) -> bytes:
     return bytes(w)
 
 
+def decode_axis_moments(data: bytes) -> np.ndarray:
+    """The values of a std_msgs/Float64MultiArray in CDR (the node's command input), without
+    rclpy; the layout is skipped. Raises ValueError on bytes that are not such a message."""
+    import struct
+
+    b = memoryview(data)
+    if len(b) < 16 or bytes(b[:2]) != b"\x00\x01":
+        raise ValueError("not little-endian CDR")
+    pos = 4
+
+    def u32() -> int:
+        nonlocal pos
+        pos += -(pos - 4) % 4
+        if pos + 4 > len(b):
+            raise ValueError("truncated")
+        (v,) = struct.unpack_from("<I", b, pos)
+        pos += 4
+        return v
+
+    for _ in range(u32()):  # layout.dim: label, size, stride
+        n = u32()
+        if n > len(b):
+            raise ValueError("bad string length")
+        pos += n
+        u32()
+        u32()
+    u32()  # layout.data_offset
+    n = u32()
+    if n:
+        pos += -(pos - 4) % 8
+    if not 0 <= len(b) - (pos + 8 * n) < 8:  # serializers may pad the end (to 4 or 8 bytes)
+        raise ValueError(f"{n} values do not fit the {len(b)} bytes")
+    return np.frombuffer(b, dtype="<f8", count=n, offset=pos).astype(float)
+
+
 def string(text: str) -> bytes:
     """std_msgs/String."""
     w = CdrWriter()

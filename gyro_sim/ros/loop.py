@@ -7,12 +7,13 @@ What runs where
   publication boundary the state's messages are prepared (computed and serialised) right
   after the chunk, before the deadline, and sent at the deadline by `outputs` (publish, and
   the same bytes to the recorder). Diagnostics are built here once a wall second.
-- The ROS executor thread only fills the command inbox (`submit_command`) and posts requests
-  (`request`: reset, pause); nothing there touches the Simulator.
+- The ROS executor thread only checks a command and keeps it as the latest (`submit_command`:
+  bounded work, one slot, nothing queued, so a flood of commands cannot pile work on this
+  thread) and posts requests (`request`: reset, pause); nothing there touches the Simulator.
 
-Commands take effect from the next physics step: before each step the inbox is drained, the
-last good command is set on the Simulator (zero-order hold for the step) and every command
-received is recorded with the log time of that step. When the last good command took effect
+Commands take effect from the next physics step: before each step the latest good command,
+if new, is set on the Simulator (zero-order hold for the step) and recorded with the log time
+of that step; commands it superseded within the step are counted, not applied. When the last good command took effect
 more than `command_timeout` *simulated* seconds ago, the moments are replaced by zeros
 (marked by an event). Simulated, not wall, time: the fallback then depends only on the
 command sequence and its log times, so a resimulation of the log reproduces it exactly,
@@ -66,6 +67,7 @@ def check_command(values, n_axes: int) -> str | None:
 @dataclass
 class Counters:
     accepted: int = 0
+    superseded: int = 0  # good commands replaced by a newer one before a step could take them
     rejected: int = 0
     timeouts: int = 0
     published: int = 0
@@ -109,10 +111,15 @@ class SimLoop:
         # the fallback comes at the first step starting more than command_timeout after the last good command
         self._timeout_steps = math.floor(config.command_timeout / self.dt * (1 + 1e-12))
         self.counters = Counters()
-        self.inbox: collections.deque = collections.deque()
+        # the latest good command: (sequence number, raw bytes, values); one slot, replaced whole
+        self._latest: tuple | None = None
+        self._taken_seq = 0
         self.requests: collections.deque = collections.deque()
         self.step_time = Samples(window=int(2 * config.physics_rate))
         self.pub_interval = Samples(window=int(2 * config.publish_rate) + 1)
+        # |interval - nominal| between publications (none when running as fast as possible)
+        self.pub_jitter = Samples(window=int(2 * config.publish_rate) + 1, offset=self.nominal_publish_interval) \
+            if self.rtf > 0 else None
         self.lag = Samples(window=int(2 * config.publish_rate) + 1)
         self.output_time = Samples(window=int(2 * config.publish_rate) + 1)
         self.steps = 0  # physics steps since start (all resets included)
@@ -136,14 +143,15 @@ class SimLoop:
 
     # --- from other threads ----------------------------------------------------------------------
     def submit_command(self, raw: bytes, values) -> str | None:
-        """A command received (raw CDR bytes and its values); returns why it is refused, if it is."""
+        """A command received (raw CDR bytes and its values); returns why it is refused, if it is.
+        A good one replaces the latest (taken by the next physics step)."""
         reason = check_command(values, self.n_axes)
         if reason is None:
             self.counters.accepted += 1
+            self._latest = (self.counters.accepted, raw, tuple(float(v) for v in values))
         else:
             self.counters.rejected += 1
             self.counters.last_reject_reason = reason
-        self.inbox.append((raw, None if reason else tuple(float(v) for v in values)))
         return reason
 
     def request(self, kind: str, value: bool = False, timeout: float = 2.0) -> tuple[bool, str]:
@@ -177,8 +185,9 @@ class SimLoop:
         while self.requests:
             req = self.requests.popleft()
             if req.kind == "reset":
-                while self.inbox:  # received before the reset: recorded, not applied
-                    self.out.record_command(self.node_ns, self.inbox.popleft()[0])
+                latest = self._latest  # received before the reset: not applied after it
+                if latest is not None:
+                    self._taken_seq = latest[0]
                 self.offset_ns = self.node_ns
                 self.sim.reset()
                 self.failure = None
@@ -254,12 +263,13 @@ class SimLoop:
     def _take_commands(self) -> None:
         t_ns = self.node_ns
         t = t_ns * 1e-9
+        new = self._latest
         latest = None
-        while self.inbox:
-            raw, values = self.inbox.popleft()
+        if new is not None and new[0] != self._taken_seq:
+            seq, raw, latest = new
+            self.counters.superseded += seq - self._taken_seq - 1
+            self._taken_seq = seq
             self.out.record_command(t_ns, raw)
-            if values is not None:
-                latest = values
         if latest is not None:
             if np.any(self.sim.axis_moments != latest):
                 self.counters.moments_since = t
@@ -299,6 +309,8 @@ class SimLoop:
         now = self.clock()
         if self._last_pub_wall is not None:
             self.pub_interval.add(now - self._last_pub_wall)
+            if self.pub_jitter is not None:
+                self.pub_jitter.add(now - self._last_pub_wall)
         self._last_pub_wall = now
         self.lag.add(self.pacer.lag(self.node_time, now))
         self.out.send(self.node_ns, batch)
@@ -316,7 +328,7 @@ class SimLoop:
         (numbers with their units in the key; a figure without data yet is left out)."""
         c, sim = self.counters, self.sim
         p50, p99 = self.step_time.window_percentiles(50, 99)
-        j50, j99 = abs_dev_percentiles(self.pub_interval.window, self.nominal_publish_interval)
+        j50, j99 = self.pub_jitter.window_percentiles(50, 99) if self.pub_jitter else (math.nan, math.nan)
         rtf = float("nan") if (self.paused or self.failure) else self.rate.window_rtf(self.node_time)
         state = "stopped: simulation error" if self.failure else ("paused" if self.paused else "running")
         values = {
@@ -336,6 +348,7 @@ class SimLoop:
             "steps_per_wakeup": self.per_chunk,
             "commands_accepted": c.accepted,
             "commands_rejected": c.rejected,
+            "commands_superseded": c.superseded,
             "command_timeouts": c.timeouts,
             "last_command_effective_s": c.last_effective,
             "moments_applied_since_s": c.moments_since,
@@ -369,13 +382,12 @@ class SimLoop:
     def summary(self) -> dict:
         """Whole-run timing statistics (for stats_file and the bench)."""
         p50, p99, pmax = self.step_time.run_percentiles(50, 99, 100)
-        j50, j99 = abs_dev_percentiles(self.pub_interval.all, self.nominal_publish_interval)
+        j50, j99 = self.pub_jitter.run_percentiles(50, 99) if self.pub_jitter else (math.nan, math.nan)
         if self.wall_start is None:  # never started (stopped during start-up)
             wall = cpu = 0.0
         else:
             wall = (self.wall_end or self.clock()) - self.wall_start
             cpu = (self.cpu_end or time.process_time()) - self.cpu_start
-        intervals = np.asarray(self.pub_interval.all) if self.pub_interval.all else np.array([np.nan])
         return {
             "scene": self.config.scene.name,
             "bodies": len(self.config.scene.bodies),
@@ -395,22 +407,13 @@ class SimLoop:
             "step_time_p99_us": p99 * 1e6,
             "step_time_max_us": pmax * 1e6,
             "publications": self.counters.published,
-            "publish_interval_mean_ms": float(np.mean(intervals)) * 1e3,
+            "publish_interval_mean_ms": self.pub_interval.run.mean * 1e3,
             "publish_jitter_p50_us": j50 * 1e6,
             "publish_jitter_p99_us": j99 * 1e6,
             "output_time_p50_us": self.output_time.run_percentiles(50)[0] * 1e6,
-            "sim_lag_max_ms": max(self.lag.all, default=0.0) * 1e3,
+            "sim_lag_max_ms": (self.lag.run.max if self.lag.run.n else 0.0) * 1e3,
             "deadline_misses": self.pacer.misses,
             "slipped_s": self.pacer.slipped,
             "commands_accepted": self.counters.accepted,
             "commands_rejected": self.counters.rejected,
         }
-
-
-def abs_dev_percentiles(intervals, nominal: float) -> tuple[float, float]:
-    """p50 and p99 of |interval - nominal| (s); NaN without data or without a nominal."""
-    if not len(intervals) or not math.isfinite(nominal):
-        return float("nan"), float("nan")
-    dev = np.abs(np.fromiter(intervals, float) - nominal)
-    p50, p99 = np.percentile(dev, [50, 99])
-    return float(p50), float(p99)

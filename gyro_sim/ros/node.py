@@ -18,12 +18,17 @@ import json  # noqa: E402
 import signal  # noqa: E402
 import sys  # noqa: E402
 import threading  # noqa: E402
+import time  # noqa: E402
 
 #: GIL switch interval (s) while the node runs: bounds how long the physics thread, woken at
 #: its deadline, waits for the executor thread (Python's default is 5 ms)
 SWITCH_INTERVAL = 5e-4
 #: longest wait of the executor (s): how soon a signal is acted on
 SPIN_PERIOD = 0.1
+#: the largest share of the interpreter the executor thread takes while callbacks keep coming:
+#: after each callback it sleeps (1 / share - 1) times the time it took, leaving the
+#: interpreter to the physics thread, so a flood of commands cannot starve the physics loop
+EXECUTOR_SHARE = 0.2
 
 
 class Interrupted(BaseException):
@@ -104,7 +109,11 @@ def _main(argv, shutdown: Shutdown) -> int:
             if not shutdown.requested.is_set():
                 node.loop.start()
             while not shutdown.requested.is_set() and not node.loop.finished.is_set():
+                t0 = time.monotonic()
                 executor.spin_once(timeout_sec=SPIN_PERIOD)
+                busy = time.monotonic() - t0
+                if busy < 0.5 * SPIN_PERIOD:  # it ran a callback
+                    time.sleep(busy * (1.0 / EXECUTOR_SHARE - 1.0))
         except Exception as exc:  # noqa: BLE001 - the log is closed below whatever happened
             spin_error = f"{type(exc).__name__}: {exc}"
         stats = node.finish()

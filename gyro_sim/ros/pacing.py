@@ -24,8 +24,10 @@ import numpy as np
 MAX_WAKE_PERIOD = 2e-3
 #: largest wall lateness (s) made up by running due steps back to back; beyond it the schedule slips
 MAX_CATCH_UP = 0.02
-#: cap on the samples kept for whole-run percentiles
-MAX_SAMPLES = 1_000_000
+#: whole-run statistics are kept in fixed histograms (constant memory over any run length):
+#: logarithmic bins from HIST_LOW to HIST_HIGH seconds, each HIST_RATIO wide; a quantile is
+#: the geometric centre of its bin (relative error below (HIST_RATIO - 1) / 2 = 0.5 %)
+HIST_LOW, HIST_HIGH, HIST_RATIO = 1e-8, 1e3, 1.01
 
 
 def chunk_steps(steps_per_publish: int, dt: float, rtf: float) -> int:
@@ -99,29 +101,71 @@ class Pacer:
         return False
 
 
-class Samples:
-    """Durations (s) kept for a sliding window and for the whole run."""
+class Histogram:
+    """Quantiles of non-negative durations (s) in constant memory: counts in logarithmic bins
+    (module constants), plus the exact count, sum and maximum. Values below HIST_LOW count in
+    the first bin, above HIST_HIGH in the last."""
 
-    def __init__(self, window: int):
-        self.window: deque[float] = deque(maxlen=window)
-        self.all: list[float] = []
+    _LOG_LOW = float(np.log(HIST_LOW))
+    _LOG_RATIO = float(np.log(HIST_RATIO))
+    BINS = int(np.ceil(np.log(HIST_HIGH / HIST_LOW) / np.log(HIST_RATIO))) + 1
+
+    def __init__(self) -> None:
+        self.counts = np.zeros(self.BINS, dtype=np.int64)
+        self.n = 0
+        self.total = 0.0
+        self.max = float("nan")
 
     def add(self, x: float) -> None:
-        self.window.append(x)
-        if len(self.all) < MAX_SAMPLES:
-            self.all.append(x)
+        i = 0 if x <= HIST_LOW else min(self.BINS - 1, int((np.log(x) - self._LOG_LOW) / self._LOG_RATIO))
+        self.counts[i] += 1
+        self.n += 1
+        self.total += x
+        if not x <= self.max:  # also replaces the initial NaN
+            self.max = x
 
-    @staticmethod
-    def _pct(xs, qs) -> list[float]:
-        if not len(xs):
+    @property
+    def mean(self) -> float:
+        return self.total / self.n if self.n else float("nan")
+
+    def quantiles(self, *qs: float) -> list[float]:
+        """Percentiles `qs` (0..100); 100 is the exact maximum; NaN without data."""
+        if not self.n:
             return [float("nan")] * len(qs)
-        return [float(v) for v in np.percentile(np.fromiter(xs, float), qs)]
+        cum = np.cumsum(self.counts)
+        out = []
+        for q in qs:
+            if q >= 100:
+                out.append(self.max)
+                continue
+            i = int(np.searchsorted(cum, q / 100.0 * self.n, side="left"))
+            i = min(i, self.BINS - 1)
+            out.append(min(float(np.exp(self._LOG_LOW + (i + 0.5) * self._LOG_RATIO)), self.max))
+        return out
+
+
+class Samples:
+    """Durations (s): the last `window` kept for live percentiles, the whole run in a Histogram
+    (constant memory). `offset`: what is recorded is |x - offset| (a nominal interval's jitter)."""
+
+    def __init__(self, window: int, offset: float | None = None):
+        self.window: deque[float] = deque(maxlen=window)
+        self.run = Histogram()
+        self.offset = offset
+
+    def add(self, x: float) -> None:
+        if self.offset is not None:
+            x = abs(x - self.offset)
+        self.window.append(x)
+        self.run.add(x)
 
     def window_percentiles(self, *qs) -> list[float]:
-        return self._pct(self.window, qs)
+        if not len(self.window):
+            return [float("nan")] * len(qs)
+        return [float(v) for v in np.percentile(np.fromiter(self.window, float), qs)]
 
     def run_percentiles(self, *qs) -> list[float]:
-        return self._pct(self.all, qs)
+        return self.run.quantiles(*qs)
 
 
 class RateMeter:

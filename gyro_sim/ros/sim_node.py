@@ -7,11 +7,11 @@ from __future__ import annotations
 
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.node import Node
-from rclpy.serialization import deserialize_message
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
 from ..core.simulator import Simulator
+from ..io.messages import decode_axis_moments
 from .loop import SimLoop
 from .outputs import Outputs
 from .params import PARAMETERS, ParameterError, validate
@@ -85,9 +85,10 @@ class GyroSimNode(Node):
         )
 
     def on_command(self, raw: bytes) -> None:
+        """Bounded work: decode (no rclpy message objects), check, keep as the latest."""
         try:
-            values = deserialize_message(raw, Float64MultiArray).data
-        except Exception:  # noqa: BLE001 - malformed bytes: refused like a NaN
+            values = decode_axis_moments(raw)
+        except ValueError:  # malformed bytes: refused like a NaN
             values = [float("nan")]
         reason = self.loop.submit_command(bytes(raw), values)
         if reason:

@@ -108,7 +108,8 @@ def test_loop_tracks_wall_time_and_applies_commands_at_the_next_step():
     t = np.array([s[0] for s in out.states])
     assert np.all(np.diff(t) == 20_000_000)  # ns
     assert loop.pacer.misses == 0 and abs(loop.pacer.lag(loop.node_time)) <= loop.dt
-    assert [c[0] for c in out.commands] == [0.0, 0.0, 0.0]  # recorded at the step they took effect
+    # the good command recorded at the step it took effect; the bad ones counted, not recorded
+    assert out.commands == [(0, b"x")]
     assert out.states[0][2] == [0.0, 0.0, 0.0] and out.states[1][2] == [0.0, 0.05, -0.03]
     assert loop.counters.accepted == 1 and loop.counters.rejected == 2
 
@@ -175,3 +176,34 @@ def test_a_bounded_run_that_fails_ends_at_once():
     assert loop.failure is not None and loop.node_time < 8.0
     assert any("simulation stopped" in e for _, e in out.events)
     assert out.diags[-1][1].level == 2 and "reason" in out.diags[-1][1].values
+
+
+def test_histogram_quantiles_in_constant_memory():
+    """Whole-run statistics do not grow with the run (issue: 2.1 MB/min of sample lists)."""
+    from gyro_sim.ros.pacing import HIST_RATIO, Histogram
+
+    rng = np.random.default_rng(1)
+    xs = rng.lognormal(mean=np.log(1e-4), sigma=0.8, size=200_000)
+    h = Histogram()
+    nbytes = h.counts.nbytes
+    for x in xs:
+        h.add(float(x))
+    assert h.counts.nbytes == nbytes and h.n == xs.size
+    for q, ref in zip((50, 90, 99), np.percentile(xs, [50, 90, 99])):
+        assert abs(h.quantiles(q)[0] / ref - 1) < HIST_RATIO - 1 + 1e-3, q
+    assert h.quantiles(100)[0] == xs.max() and h.mean == pytest.approx(xs.mean(), rel=1e-9)
+    assert all(np.isnan(Histogram().quantiles(50, 100)))
+
+
+def test_a_command_flood_keeps_only_the_latest_for_the_next_step():
+    """Bounded intake: 10,000 commands between two steps are one command applied, recorded
+    once, the rest counted as superseded; bad ones are counted, never applied."""
+    clock = FakeClock()
+    loop, out = make_loop(clock)
+    for i in range(10_000):
+        assert loop.submit_command(b"%d" % i, [0.0, 1e-6 * i, 0.0]) is None
+    assert loop.submit_command(b"bad", [0.0, float("nan"), 0.0]) is not None
+    run_until(loop, lambda: loop.steps >= 3)
+    assert out.commands == [(0, b"9999")]
+    assert loop.sim.axis_moments[1] == pytest.approx(1e-6 * 9999)
+    assert loop.counters.accepted == 10_000 and loop.counters.superseded == 9_999 and loop.counters.rejected == 1
