@@ -552,6 +552,65 @@ def test_last_step_not_shrunk_by_landing_on_t1():
     assert it._h_abs >= h
 
 
+# ------------------------------------------------------------------ the public single step
+@pytest.mark.parametrize("name", ADAPTIVE)
+def test_take_step_loop_is_advance(name):
+    """begin / take_step / dense / end driven from outside give what `advance` gives, bit for
+    bit (the "auto" method drives its inner methods this way), counters included."""
+    body = RigidBody([1.0, 1.4, 2.5])
+    y0, T = _body_state((0.6, -0.3, 2.0)), 3.0
+    t_eval = np.linspace(0.05, 2.95, 17)
+    ref = make_integrator(name, body, rtol=1e-9, atol=1e-11)
+    y_ref, Y_ref = ref.advance(0.0, y0, T, t_eval=t_eval)
+    it = make_integrator(name, body, rtol=1e-9, atol=1e-11)
+    y, t, rows = y0.copy(), 0.0, []
+    it.begin(0.0, y, T)
+    while t < T:
+        t_old = t
+        t = it.take_step(t, y, T)
+        assert t_old < t <= T and it.last_step == pytest.approx(t - t_old, rel=1e-12)
+        inside = t_eval[(t_eval > t_old) & (t_eval < t)]
+        if inside.size:
+            rows.append(it.dense(inside))
+    it.end(T, y)
+    assert len(rows) > 1  # several steps interpolated
+    np.testing.assert_array_equal(y, y_ref)
+    np.testing.assert_array_equal(np.concatenate(rows), Y_ref)
+    assert (it.nfev, it.nsteps, it.nrejected, it.njev, it.nlu) == \
+        (ref.nfev, ref.nsteps, ref.nrejected, ref.njev, ref.nlu)
+
+
+def test_dop853_hlamb_is_h_lambda_on_a_linear_problem():
+    """dop853.f's stiffness estimate: on y' = -lam (y - cos t), f(y1) - f(Y12) = -lam (y1 - Y12)
+    (Y12 is at t + h), so h |lambda| comes out as h lam; it is ready once f(y1) is known."""
+    lam, rel = 50.0, 1e-6  # rel: round-off of f over |y1 - Y12| ~ the local error
+    it = DOP853(StiffLinear(lam), stiffness_estimate=True, rtol=1e-6, atol=1e-9)
+    y = np.array([2.0])  # off the slow solution y ~ cos t: a fast transient
+    it.begin(0.0, y, 1.0)
+    assert it.hlamb is None
+    t = 0.0
+    for _ in range(5):
+        t = it.take_step(t, y, 1.0)
+        assert t < 1.0 and it.hlamb == pytest.approx(lam * it.last_step, rel=rel)
+    # the last step of a call: f(y1) is the next call's first rhs, if it continues from there
+    t1 = t + 0.9 * it.last_step
+    assert it.take_step(t, y, t1) == t1
+    h_last = it.last_step
+    assert it.hlamb is None
+    y_end = y.copy()
+    it.begin(t1, y, 1.0)
+    assert it.hlamb == pytest.approx(lam * h_last, rel=rel)
+    t2 = t1 + 0.9 * it.last_step
+    assert it.take_step(t1, y, t2) == t2  # again a last step, but the next call starts elsewhere
+    it.begin(t1, y_end, 1.0)
+    assert it.hlamb is None
+    plain = DOP853(StiffLinear(lam), rtol=1e-6, atol=1e-9)  # off unless asked for
+    y = np.array([2.0])
+    plain.begin(0.0, y, 1.0)
+    plain.take_step(0.0, y, 1.0)
+    assert plain.hlamb is None
+
+
 # ------------------------------------------------------------------ stiffness
 def test_radau_stiff_linear():
     stiff = StiffLinear(1e6)

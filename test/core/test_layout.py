@@ -1,0 +1,143 @@
+"""The core's layout (issue 8, "Layout review"): its imports form no cycle, the ODE system sits
+between the simulator and the compiled kernels, and no module drives another object's private
+members (the "auto" integrator steps its inner methods through their public single step).
+
+Read from the source with `ast`, imports inside functions included: a deferred import is still
+a dependency.
+"""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+import gyro_sim.core
+
+CORE = Path(gyro_sim.core.__file__).resolve().parent
+PACKAGE = "gyro_sim.core"
+
+
+def _modules() -> dict[str, Path]:
+    """Dotted name -> file of every module of gyro_sim.core (packages by their __init__)."""
+    out = {}
+    for path in sorted(CORE.rglob("*.py")):
+        parts = path.relative_to(CORE).with_suffix("").parts
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        out[".".join((PACKAGE, *parts))] = path
+    return out
+
+
+def import_graph() -> dict[str, set[str]]:
+    """Module -> the gyro_sim.core modules it imports (anywhere in its source)."""
+    modules = _modules()
+    graph = {}
+    for name, path in modules.items():
+        is_package = path.name == "__init__.py"
+        edges = set()
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                if node.level:
+                    base = name.split(".")
+                    base = base[:len(base) - node.level + (1 if is_package else 0)]
+                    base = ".".join(base + ([node.module] if node.module else []))
+                else:
+                    base = node.module
+                # `from pkg import mod` imports the module pkg.mod
+                targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in modules else base
+                           for a in node.names]
+            else:
+                continue
+            edges.update(t for t in targets if t in modules and t != name)
+        graph[name] = edges
+    return graph
+
+
+def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    """A cycle [a, b, ..., a] of the directed graph, or None."""
+    WHITE, GREY, BLACK = 0, 1, 2
+    color = dict.fromkeys(graph, WHITE)
+    stack: list[str] = []
+
+    def visit(u):
+        color[u] = GREY
+        stack.append(u)
+        for v in sorted(graph.get(u, ())):
+            if color.get(v, WHITE) == GREY:
+                return stack[stack.index(v):] + [v]
+            if color.get(v, WHITE) == WHITE:
+                found = visit(v)
+                if found:
+                    return found
+        stack.pop()
+        color[u] = BLACK
+        return None
+
+    for u in sorted(graph):
+        if color[u] == WHITE:
+            found = visit(u)
+            if found:
+                return found
+    return None
+
+
+def test_cycle_finder_finds_cycles():
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert find_cycle({"a": {"b", "c"}, "b": {"c"}, "c": set()}) is None
+
+
+def test_graph_sees_relative_and_deferred_imports():
+    g = import_graph()
+    assert "gyro_sim.core.integrators.dop853" in g["gyro_sim.core.integrators.auto"]  # from .dop853
+    assert "gyro_sim.core.rotations" in g["gyro_sim.core.integrators.lie4"]  # from ..rotations
+    assert "gyro_sim.core.dynamics" in g["gyro_sim.core.system"]  # from . import dynamics
+    assert "gyro_sim.core.scene_load" in g["gyro_sim.core.simulator"]  # inside Simulator.__init__
+
+
+def test_core_imports_have_no_cycle():
+    assert find_cycle(import_graph()) is None
+
+
+def test_simulator_system_kernels_in_one_direction():
+    """simulator -> system -> fast: the kernels know neither the system nor the simulator,
+    and the integrators know the system only by its protocol (no runtime import)."""
+    g = import_graph()
+    core = PACKAGE + "."
+    assert core + "system" in g[core + "simulator"]
+    assert core + "fast" in g[core + "system"]
+    assert not g[core + "fast"] & {core + "system", core + "simulator"}
+    assert core + "fast" not in g[core + "simulator"]  # the simulator asks the system module
+    integrators = [m for m in g if m.startswith(core + "integrators")]
+    assert len(integrators) == 7  # the package, base and one module per method
+    for m in integrators:
+        assert not g[m] & {core + "simulator", core + "fast", core + "dynamics"}, m
+
+
+def _private_reads(path: Path) -> list[str]:
+    """`x._name` where x is not self, cls or super(): another object's private member."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if not (isinstance(node, ast.Attribute) and node.attr.startswith("_")
+                and not node.attr.startswith("__")):
+            continue
+        v = node.value
+        if isinstance(v, ast.Name) and v.id in ("self", "cls"):
+            continue
+        if isinstance(v, ast.Call) and isinstance(v.func, ast.Name) and v.func.id == "super":
+            continue
+        found.append(f"{path.name}:{node.lineno}: {ast.unparse(node)}")
+    return found
+
+
+def test_private_read_detector_sees_them(tmp_path):
+    p = tmp_path / "m.py"
+    p.write_text("def f(inner):\n    return inner._K, self._K, super()._x, inner.__class__\n")
+    assert _private_reads(p) == ["m.py:2: inner._K"]
+
+
+@pytest.mark.parametrize("name", sorted(_modules()))
+def test_no_module_reads_another_objects_private_members(name):
+    assert _private_reads(_modules()[name]) == []
