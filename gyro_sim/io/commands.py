@@ -60,7 +60,7 @@ def cmd_view(args) -> int:
         save = str(Path(tmp.name) / "view.rrd")
     try:
         drawn = view(args.log, save=save, spawn=not save,
-                     play_state="following" if args.screenshot else ("paused" if args.paused else None))
+                     play_state="paused" if (args.screenshot or args.paused) else None)
     except (LogError, OSError) as exc:  # a damaged or crafted log is bad input
         _err("view", exc)
         return 2
@@ -73,19 +73,21 @@ def cmd_view(args) -> int:
 
 
 def _screenshot(rrd: str, png: str, size: str) -> int:
-    """A PNG of the viewer, headless (needs Vulkan: mesa-vulkan-drivers + libvulkan1 on Linux)."""
+    """A PNG of the viewer, headless (needs Vulkan: mesa-vulkan-drivers + libvulkan1 on Linux).
+
+    Taken once the viewer has loaded and drawn the whole recording (rerun_view.screenshot), not
+    a fixed number of frames after start as ``rerun --screenshot-to`` does.
+    """
     exe = rerun_binary()
     if exe is None:
         _err("view", "the rerun viewer binary was not found (pip install 'gyro_sim[viz]')")
         return 2
-    env = dict(os.environ)
-    env.setdefault("RUST_LOG", "error")  # keeps log notifications off the picture
-    env.setdefault("XDG_RUNTIME_DIR", tempfile.gettempdir())
-    r = subprocess.run([exe, rrd, "--headless", "--window-size", size, "--screenshot-to", png],
-                       env=env, capture_output=True, text=True, timeout=120)
-    if r.returncode != 0 or not Path(png).is_file():
-        _err("view", f"screenshot failed (exit {r.returncode}); a headless viewer needs Vulkan "
-                     f"(apt-get install mesa-vulkan-drivers libvulkan1)\n{r.stderr[-2000:]}")
+    from ..viz.rerun_view import ScreenshotError, screenshot
+
+    try:
+        screenshot(exe, rrd, png, size)
+    except (ScreenshotError, OSError) as exc:
+        _err("view", f"screenshot failed: {exc}")
         return 1
     print(f"wrote {png}")
     return 0

@@ -26,6 +26,10 @@ from __future__ import annotations
 
 import math
 import os
+import socket
+import subprocess
+import tempfile
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -51,6 +55,10 @@ GRAVITY_OFFSET_FRACTION = 0.4
 #: the 3D camera looks at the centre of the motion from this direction, this many spans away
 EYE_DIRECTION = np.array([1.0, -1.2, 0.6]) / np.linalg.norm([1.0, -1.2, 0.6])
 EYE_DISTANCE = 1.6
+
+#: room left after the last time of a plot (fraction of the log's span): keeps the last tick
+#: label (e.g. "+30s") inside the plot instead of cut at its right edge
+TIME_PAD_FRACTION = 0.04
 
 #: colours of the series of a plot, in turn (Okabe-Ito, distinguishable in colour-blind vision)
 PALETTE = [(0, 114, 178), (230, 159, 0), (0, 158, 115), (204, 121, 167), (86, 180, 233), (213, 94, 0),
@@ -332,7 +340,9 @@ def build_recording(path: str | os.PathLike, rec) -> dict:
         centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
         span = max(float(np.max(pts.max(axis=0) - pts.min(axis=0))), length)
         eye = (centre + EYE_DIRECTION * EYE_DISTANCE * span, centre)
-    return {"entities": entities, "views": views, "scene": scene.name, "eye": eye}
+    times = [a for a in (s.joint_t, s.pose_t, s.diag_t) if a.size]
+    t_range = (min(float(a[0]) for a in times), max(float(a[-1]) for a in times)) if times else None
+    return {"entities": entities, "views": views, "scene": scene.name, "eye": eye, "t_range": t_range}
 
 
 TITLES = {
@@ -344,14 +354,24 @@ TITLES = {
 }
 
 
-def blueprint(views: list[str], scene_name: str = "", *, eye=None, play_state: str | None = None):
+def blueprint(views: list[str], scene_name: str = "", *, eye=None, play_state: str | None = None,
+              t_range: tuple[float, float] | None = None):
     """The layout: the 3D chain on the left, the plots stacked on the right.
 
     `eye`: (position, look_target) of the 3D camera, world frame (None: rerun's default).
+    `t_range`: (first, last) time of the log (s): the plots' time axis, with room after the
+    last time for its tick label.
     """
+    import rerun as rr
     import rerun.blueprint as rrb
 
-    plots = [rrb.TimeSeriesView(origin=v, name=TITLES[v]) for v in views if v in TITLES]
+    axis_x = None
+    if t_range is not None and t_range[1] > t_range[0]:
+        pad = TIME_PAD_FRACTION * (t_range[1] - t_range[0])
+        axis_x = rrb.TimeAxis(view_range=rr.encodings.TimeRange(
+            start=rrb.TimeRangeBoundary.absolute(seconds=t_range[0]),
+            end=rrb.TimeRangeBoundary.absolute(seconds=t_range[1] + pad)))
+    plots = [rrb.TimeSeriesView(origin=v, name=TITLES[v], axis_x=axis_x) for v in views if v in TITLES]
     eye_controls = None
     if eye is not None:
         eye_controls = rrb.EyeControls3D(position=eye[0], look_target=eye[1], eye_up=[0, 0, 1])
@@ -375,7 +395,8 @@ def view(path: str | os.PathLike, save: str | os.PathLike | None = None, *, spaw
     rec = rr.RecordingStream(APP_ID, recording_id=f"gyro_sim:{Path(path).resolve()}")
     # the blueprint needs the views, which need the data: the stream buffers until a sink is set
     drawn = build_recording(path, rec)
-    bp = blueprint(drawn["views"], drawn["scene"], eye=drawn.get("eye"), play_state=play_state)
+    bp = blueprint(drawn["views"], drawn["scene"], eye=drawn.get("eye"), play_state=play_state,
+                   t_range=drawn.get("t_range"))
     if save is not None:
         rec.save(str(save), default_blueprint=bp)  # writes what is buffered, then streams the rest
         rec.flush()
@@ -384,3 +405,116 @@ def view(path: str | os.PathLike, save: str | os.PathLike | None = None, *, spaw
         rec.spawn(default_blueprint=bp)
         rec.flush()
     return drawn
+
+
+# =========================================================================================
+# Headless screenshot
+# =========================================================================================
+#: how long the headless viewer may take to start, load a recording and settle (s)
+SCREENSHOT_TIMEOUT = 120.0
+#: the viewer's start-up notification ("Listening for gRPC connections") stays on the picture
+#: for about a second of painting (measured < 1.1 s, rerun 0.41): pictures are compared only
+#: after this long
+SETTLE_SECONDS = 2.0
+
+
+class ScreenshotError(RuntimeError):
+    """The headless viewer did not start, load or paint."""
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def screenshot(exe: str, rrd: str | os.PathLike, png: str | os.PathLike, size: str = "1200x800", *,
+               timeout: float = SCREENSHOT_TIMEOUT) -> dict:
+    """A PNG of the viewer showing the recording `rrd`, once all of it is drawn.
+
+    ``rerun x.rrd --screenshot-to`` takes its picture a fixed 10 frames after start, whatever
+    has been loaded by then: with a software renderer (lavapipe) a long recording is often only
+    partly ingested, and the plots come out empty. Here a headless viewer (``exe``, the rerun
+    binary) is driven through its control API instead: the recording is opened, the viewer is
+    waited on until it reports nothing left to load, the time cursor is put at the end of the
+    log (paused, so nothing moves), and pictures are taken until two in a row are identical
+    (the data is all drawn), the first of them at least SETTLE_SECONDS after the first picture
+    (the start-up notification gone). The top panel (menu, renderer warnings) is hidden.
+    Returns {"seconds", "frames"}.
+    """
+    from rerun.experimental import ViewerClient
+
+    t0 = time.monotonic()
+    deadline = t0 + timeout
+    port = _free_port()
+    env = dict(os.environ)
+    env.setdefault("RUST_LOG", "error")  # keeps log notifications off the picture
+    env.setdefault("XDG_RUNTIME_DIR", tempfile.gettempdir())
+    with tempfile.TemporaryFile() as err:
+        proc = subprocess.Popen([exe, "--headless", "--window-size", size, "--port", str(port),
+                                 "--bind", "127.0.0.1", "--hide-welcome-screen"],
+                                env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=err)
+
+        def fail(what: str):
+            err.seek(0)
+            tail = err.read()[-2000:].decode(errors="replace")
+            raise ScreenshotError(f"{what} (a headless viewer needs Vulkan: apt-get install "
+                                  f"mesa-vulkan-drivers libvulkan1)\n{tail}")
+
+        def wait(cond, what: str, step: float = 0.05):
+            while True:
+                if proc.poll() is not None:
+                    fail(f"the viewer exited (code {proc.returncode}) {what}")
+                try:
+                    value = cond()
+                except (ConnectionError, OSError, RuntimeError, TimeoutError):
+                    value = None
+                if value:
+                    return value
+                if time.monotonic() > deadline:
+                    fail(f"timed out after {timeout:.0f} s {what}")
+                time.sleep(step)
+
+        try:
+            def connected():
+                socket.create_connection(("127.0.0.1", port), timeout=1.0).close()
+                return ViewerClient.connect(f"rerun+http://127.0.0.1:{port}/proxy")
+
+            client = wait(connected, "while starting")
+            wait(client.get_state, "while starting")
+            client.open(str(Path(rrd).resolve()))
+            client.run_command("ui.toggle_top_panel")
+
+            def loaded():
+                st = client.get_state()
+                if st.loading or st.active_recording is None:
+                    return None
+                for rec in st.recordings:
+                    if rec.store_id == st.active_recording:
+                        for tl in rec.timelines:
+                            if tl.name == TIMELINE and tl.end is not None:
+                                return (tl.end,)
+                return None
+
+            (end,) = wait(loaded, f"while loading {rrd}")
+            client.set_time(TIMELINE, duration=np.timedelta64(int(end), "ns"), play_state="paused")
+            frames, previous, first = 0, None, None
+            while True:
+                image = client.take_screenshot()
+                frames += 1
+                now = time.monotonic()
+                first = now if first is None else first
+                if image and image == previous and previous_at - first >= SETTLE_SECONDS:
+                    break
+                previous, previous_at = image, now
+                if proc.poll() is not None or time.monotonic() > deadline:
+                    fail(f"the picture did not settle in {timeout:.0f} s")
+            Path(png).write_bytes(image)
+        finally:
+            proc.terminate()
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+    return {"seconds": time.monotonic() - t0, "frames": frames}

@@ -1,0 +1,81 @@
+"""`gyro-sim view LOG --screenshot`: the picture of a long log shows all of it (issue 8, item 4).
+
+``rerun x.rrd --screenshot-to`` takes its picture 10 frames after start, whatever has been
+loaded: with the software renderer, 2 of 5 pictures of a 30 s log had every plot empty and the
+chain at its initial pose. The command now waits until the viewer has drawn the whole
+recording (gyro_sim.viz.rerun_view.screenshot); these tests look at the pixels.
+"""
+from __future__ import annotations
+
+import ctypes.util
+import glob
+import shutil
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from .conftest import gyro_sim
+
+pytest.importorskip("rerun")
+Image = pytest.importorskip("PIL.Image")  # a dependency of rerun-sdk
+
+RERUN = str(Path(sys.executable).with_name("rerun")) if Path(sys.executable).with_name("rerun").is_file() else shutil.which("rerun")
+VULKAN = ctypes.util.find_library("vulkan") is not None and bool(
+    glob.glob("/usr/share/vulkan/icd.d/*.json") + glob.glob("/etc/vulkan/icd.d/*.json"))
+pytestmark = [
+    pytest.mark.skipif(RERUN is None, reason="the rerun binary (rerun-sdk) is not installed"),
+    pytest.mark.skipif(sys.platform.startswith("linux") and not VULKAN,
+                       reason="no Vulkan driver (apt-get install mesa-vulkan-drivers libvulkan1)"),
+]
+
+#: the plots' series colours (rerun_view.PALETTE, the first six)
+PALETTE = [(0, 114, 178), (230, 159, 0), (0, 158, 115), (204, 121, 167), (86, 180, 233), (213, 94, 0)]
+BODY = (70, 130, 180)
+PLOTS = ["euler", "hinge", "rotor_rate", "axis_moments", "drift"]
+
+
+def _near(a, color, tol):
+    return np.abs(a - np.array(color)).sum(-1) < tol
+
+
+def inspect(png):
+    """Per plot (top to bottom): (palette pixels, rightmost one as a fraction of the plot's
+    width); and the vertical extent of the chain's bodies in the 3D view (fraction of the height)."""
+    a = np.asarray(Image.open(png).convert("RGB")).astype(int)
+    h, w, _ = a.shape
+    right = a[int(0.05 * h):int(0.96 * h), int(0.62 * w):]
+    lines = np.zeros(right.shape[:2], bool)
+    for c in PALETTE:
+        lines |= _near(right, c, 60)
+    plots = []
+    for band in np.array_split(lines, len(PLOTS), axis=0):
+        xs = np.nonzero(band)[1]
+        plots.append((int(band.sum()), float(xs.max()) / band.shape[1] if xs.size else 0.0))
+    ys = np.nonzero(_near(a[int(0.05 * h):int(0.96 * h), :int(0.58 * w)], BODY, 60))[0]
+    return plots, float(ys.max() - ys.min()) / h if ys.size else 0.0
+
+
+@pytest.mark.slow
+def test_screenshot_of_a_30_s_log_shows_every_plot_and_the_chain(tmp_path):
+    log = tmp_path / "v30.mcap"
+    r = gyro_sim("run", "--scene", "hinge_chain", "--duration", 30, "--record", log, timeout=300)
+    assert r.returncode == 0, r.stderr
+    pngs = []
+    for k in range(2):
+        png = tmp_path / f"shot{k}.png"
+        r = gyro_sim("view", log, "--screenshot", png, "--window-size", "1200x800", timeout=300)
+        assert r.returncode == 0, r.stderr
+        assert Image.open(png).size == (1200, 800)
+        plots, chain = inspect(png)
+        for name, (count, rightmost) in zip(PLOTS, plots):
+            # an empty plot has none (its legend neither); a flat line alone is about 450
+            assert count > 250, f"plot {name} is empty in {png}: {plots}"
+            # drawn to the end of the log (the time axis has 4 % room after it)
+            assert rightmost > 0.9, f"plot {name} stops at {rightmost:.2f} of its width: {plots}"
+        # the bodies stand up in view (empty pictures: a stub of 0.12 of the height, at the bottom)
+        assert chain > 0.2, f"the chain is not in view (extent {chain:.2f} of the height)"
+        pngs.append(png)
+    # the picture is taken once all is drawn, at the end of the log: the same picture each time
+    assert pngs[0].read_bytes() == pngs[1].read_bytes()
