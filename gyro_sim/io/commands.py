@@ -5,10 +5,8 @@ happen when a command runs, not when the parser is built.
 """
 from __future__ import annotations
 
-import os
 import shutil
 import signal
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
