@@ -1,11 +1,13 @@
-"""Console script `gyro_sim_node`: the rclpy node `gyro_sim` (SPEC.md, "ROS interface").
+"""Console script `gyro_sim_node`: the rclpy node `gyro_sim` and its main (SPEC.md, "ROS interface").
 
     gyro_sim_node --ros-args --params-file config/params.yaml -p duration:=20.0
 
-main() starts rclpy, the node (gyro_sim.ros.sim_node: parameters, publishers, the command
-subscription, the services) and its physics thread (gyro_sim.ros.loop: steps, paces,
-publishes), spins the executor in this thread (commands, ~/reset, ~/pause) until the bounded
-run ends or SIGINT/SIGTERM, then closes the log and prints a summary and where the log is.
+`GyroSimNode` is a thin class (the ROS 2 examples' style): parameters, publishers, the command
+subscription, the services; everything physical happens in the physics thread
+(gyro_sim.ros.loop) over the core's Simulator. main() checks the command line before rclpy
+starts (--help, misspelt parameters), starts rclpy, the node and its physics thread, spins the
+executor in this thread (commands, ~/reset, ~/pause) until the bounded run ends or
+SIGINT/SIGTERM (see `Shutdown`), then closes the log and prints a summary and where the log is.
 """
 from __future__ import annotations
 
@@ -20,6 +22,23 @@ import sys  # noqa: E402
 import threading  # noqa: E402
 import time  # noqa: E402
 
+try:  # rclpy from ROS 2 Jazzy (pip install 'gyro_sim[ros]'); --help works without it
+    from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+    from rclpy.node import Node
+    from std_msgs.msg import Float64MultiArray
+    from std_srvs.srv import SetBool, Trigger
+
+    ROS_IMPORT_ERROR = None
+except ImportError as _exc:  # the class below is then never instantiated
+    Node = object
+    ROS_IMPORT_ERROR = _exc
+
+from ..core.simulator import Simulator  # noqa: E402
+from ..io.messages import decode_axis_moments  # noqa: E402
+from .loop import SimLoop  # noqa: E402
+from .outputs import Outputs  # noqa: E402
+from .params import PARAMETERS, ParameterError, validate  # noqa: E402
+
 #: GIL switch interval (s) while the node runs: bounds how long the physics thread, woken at
 #: its deadline, waits for the executor thread (Python's default is 5 ms)
 SWITCH_INTERVAL = 5e-4
@@ -29,6 +48,105 @@ SPIN_PERIOD = 0.1
 #: after each callback it sleeps (1 / share - 1) times the time it took, leaving the
 #: interpreter to the physics thread, so a flood of commands cannot starve the physics loop
 EXECUTOR_SHARE = 0.2
+
+
+def descriptor(p) -> ParameterDescriptor:
+    """The descriptor of a parameter of gyro_sim.ros.params.PARAMETERS (read-only: set at start)."""
+    kinds = {float: ParameterType.PARAMETER_DOUBLE, str: ParameterType.PARAMETER_STRING,
+             bool: ParameterType.PARAMETER_BOOL}
+    d = ParameterDescriptor(name=p.name, type=kinds[p.kind], description=p.description, read_only=True)
+    if p.kind is float:
+        # integers are accepted too (-p duration:=10): the type and range are checked by validate()
+        d.dynamic_typing = True
+        d.additional_constraints = f"a number in [{p.low:g}, {p.high:g}]"
+    return d
+
+
+def log_params(sim, cfg) -> dict:
+    """The log's run parameters: the re-simulation contract of gyro_sim.io.record (one advance of
+    1/physics_rate per step), plus the node's own parameters."""
+    from ..io.record import run_params
+
+    own = {k: v for k, v in cfg.as_dict().items() if k not in ("publish_rate", "duration")}
+    return run_params(sim, advance_dt=cfg.dt, publish_rate=cfg.publish_rate, source="gyro_sim_node",
+                      duration=cfg.duration or None, **own)
+
+
+def recorder_options(cfg) -> dict:
+    """LogWriter options from the parameters (overwrite:=true lets record replace a file)."""
+    return {"overwrite": True} if getattr(cfg, "overwrite", False) else {}
+
+
+class GyroSimNode(Node):
+    """The simulation node. Raises ParameterError (nothing created) on invalid parameters."""
+
+    def __init__(self):
+        super().__init__("gyro_sim")
+        values, problems = {}, []
+        for p in PARAMETERS:
+            try:
+                values[p.name] = self.declare_parameter(p.name, p.default, descriptor(p)).value
+            except Exception as exc:  # noqa: BLE001 - rclpy's type and range exceptions
+                problems.append(f"{p.name}: {exc}")
+        if problems:
+            raise ParameterError("\n".join(problems))
+        self.config = cfg = validate(values)
+        self.sim = Simulator(cfg.scene, integrator=cfg.integrator, rtol=cfg.rtol, atol=cfg.atol, step=cfg.dt,
+                             backend=cfg.backend)
+        self.recorder = None
+        if cfg.record:
+            from .recorder import LiveRecorder
+
+            self.recorder = LiveRecorder(cfg.record, scene=cfg.scene, params=log_params(self.sim, cfg),
+                                         **recorder_options(cfg))
+        try:
+            self.outputs = Outputs(self, self.sim, cfg, self.recorder)
+            self.loop = SimLoop(self.sim, cfg, self.outputs)
+        except BaseException:
+            if self.recorder is not None:  # leave a readable (empty) log
+                self.recorder.close()
+            raise
+        self.create_subscription(Float64MultiArray, "~/axis_moments", self.on_command, 10, raw=True)
+        self.create_service(Trigger, "~/reset", self.on_reset)
+        self.create_service(SetBool, "~/pause", self.on_pause)
+        self.get_logger().info(
+            f"scene '{cfg.scene.name}' ({cfg.scene_path}); axes {self.sim.axis_names}; "
+            f"physics {cfg.physics_rate:g} Hz ({self.sim.integrator_name}, {self.sim.backend} dynamics), "
+            f"publish {cfg.publish_rate:g} Hz, "
+            f"real-time factor {cfg.real_time_factor:g}, {self.loop.per_chunk} steps per wake-up"
+            + (f"; recording to {cfg.record}" if cfg.record else "")
+        )
+
+    def on_command(self, raw: bytes) -> None:
+        """Bounded work: decode (no rclpy message objects), check, keep as the latest."""
+        try:
+            values = decode_axis_moments(raw)
+        except ValueError:  # malformed bytes: refused like a NaN
+            values = [float("nan")]
+        reason = self.loop.submit_command(bytes(raw), values)
+        if reason:
+            self.get_logger().warning(
+                f"command rejected ({reason}); axes: {self.sim.axis_names}; "
+                f"{self.loop.counters.rejected} rejected so far", throttle_duration_sec=2.0)
+
+    def on_reset(self, request, response):
+        response.success, response.message = self.loop.request("reset")
+        return response
+
+    def on_pause(self, request, response):
+        response.success, response.message = self.loop.request("pause", bool(request.data))
+        return response
+
+    def finish(self) -> dict:
+        """Stop the loop, close the log; the run's statistics."""
+        self.loop.stop()
+        stats = self.loop.summary()
+        if self.recorder is not None:
+            self.recorder.close()
+            stats.update(record=self.recorder.path, records_written=self.recorder.written,
+                         recorder_max_backlog=self.recorder.max_backlog,
+                         recorder_thread_cpu_s=self.recorder.thread_cpu, recorder_error=self.recorder.error)
+        return stats
 
 
 class Interrupted(BaseException):
@@ -76,16 +194,13 @@ def _main(argv, shutdown: Shutdown) -> int:
     code = preflight(sys.argv if argv is None else argv)
     if code is not None:
         return code
-    try:
-        import rclpy
-        from rclpy.executors import SingleThreadedExecutor
-        from rclpy.signals import SignalHandlerOptions
-
-        from .sim_node import GyroSimNode
-    except ImportError as exc:
-        print(f"gyro_sim_node needs ROS 2 Jazzy's rclpy (pip install 'gyro_sim[ros]'): {exc}", file=sys.stderr)
+    if ROS_IMPORT_ERROR is not None:
+        print(f"gyro_sim_node needs ROS 2 Jazzy's rclpy (pip install 'gyro_sim[ros]'): {ROS_IMPORT_ERROR}",
+              file=sys.stderr)
         return 2
-    from .params import ParameterError
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
 
     try:
         rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
@@ -134,16 +249,23 @@ def _main(argv, shutdown: Shutdown) -> int:
         rclpy.try_shutdown()
 
 
-def _report(node, stats: dict, signal_name: str = "") -> None:
-    cfg = node.config
-    if signal_name:
-        print(f"gyro_sim_node: {signal_name}: stopped at node time {stats['node_time_s']:.3f} s")
+def _summary_line(stats: dict, cfg) -> None:
     print(
         f"gyro_sim_node: simulated {stats['node_time_s']:.3f} s in {stats['wall_s']:.3f} s wall "
         f"(real-time factor {stats['real_time_factor_achieved']:.3f}, target {cfg.real_time_factor:g}), "
         f"step time p50 {stats['step_time_p50_us']:.0f} us / p99 {stats['step_time_p99_us']:.0f} us, "
         f"{stats['deadline_misses']} deadline misses, CPU {100 * stats['cpu_share']:.0f} %"
     )
+
+
+def _report(node, stats: dict, signal_name: str = "") -> None:
+    cfg = node.config
+    if signal_name:
+        print(f"gyro_sim_node: {signal_name}: stopped at node time {stats['node_time_s']:.3f} s")
+    if stats["wall_s"] == 0.0:
+        print("gyro_sim_node: stopped during start-up, nothing simulated")
+    else:
+        _summary_line(stats, cfg)
     if cfg.stats_file:
         try:
             with open(cfg.stats_file, "w") as f:

@@ -70,28 +70,30 @@ def logs(module_tmp):
     domain = new_domain_id()
     client = Client(domain)
     js = client.subscribe("/joint_states", JointState)
+    # no duration: discovery may take seconds, and the node must outlive it; stopped by SIGINT
     node = NodeProcess(module_tmp, domain, "scene:=hinge_chain", "integrator:=rk4", "physics_rate:=1000.0",
-                       "publish_rate:=100.0", f"duration:={DURATION + 1.0}", "command_timeout:=100.0",
-                       f"record:={node_log}")
+                       "publish_rate:=100.0", "command_timeout:=100.0", f"record:={node_log}")
     try:
         wait_for(lambda: js or not node.alive(), DISCOVERY_TIMEOUT, "first /joint_states")
         assert node.alive(), node.stderr
         pub = client.publisher("/gyro_sim/axis_moments", Float64MultiArray)
+        t_first = None
         while node.alive():
             msgs = client.messages("/joint_states")
             t = msgs[-1][1].header.stamp.sec + msgs[-1][1].header.stamp.nanosec * 1e-9
-            if t > DURATION:
+            t_first = t if t_first is None else t_first
+            if t > t_first + DURATION:  # DURATION s of commands, however long discovery took
                 break
             pub.publish(Float64MultiArray(data=command(t)))
             time.sleep(0.02)
-        node.proc.wait(30)
     finally:
         client.close()
         rc = node.stop()
     assert rc == 0, node.stderr
     env = ros_env(domain, module_tmp)
+    last = max(joint_states(node_log))  # the offline run covers the node's whole log
     run = subprocess.run([sys.executable, "-m", "gyro_sim.cli", "run", "--scene", "hinge_chain", "--integrator", "rk4",
-                          "--step", "0.001", "--chunk", "0.001", "--duration", f"{DURATION + 1.0}",
+                          "--step", "0.001", "--chunk", "0.001", "--duration", f"{last * 1e-9:.2f}",
                           "--commands", str(node_log), "--record", str(offline_log)],
                          env=env, capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr
