@@ -26,18 +26,9 @@ from __future__ import annotations
 import numpy as np
 
 from .model import Model
-from .rotations import quat_to_matrix
+from .rotations import cross, quat_to_matrix
 
 EYE3 = np.eye(3)
-
-
-_P = np.array([1, 2, 0])
-_Q = np.array([2, 0, 1])
-
-
-def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise cross product of (..., 3) arrays (np.cross is several times slower on small stacks)."""
-    return a.take(_P, axis=-1) * b.take(_Q, axis=-1) - a.take(_Q, axis=-1) * b.take(_P, axis=-1)
 
 
 def matvec(A: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -134,6 +125,16 @@ def velocities(model: Model, data: Data, t: float, u: np.ndarray) -> None:
     w_parent = np.zeros((n, 3))
     w_parent[1:] = w[:-1]
     data.w_parent = w_parent
+
+
+def torque_rotor_rates(model: Model, data: Data, p: np.ndarray) -> np.ndarray:
+    """kappa_i' = p_i - w^k . e_i (eqs 18-19): the angle rates (nt,) of the torque rotors
+    relative to their bodies, from their absolute spins p (nt,) and the velocities in `data`.
+
+    The numba kernel's scalar twin is `gyro_sim.core.fast._rotor_angle_rate`.
+    """
+    e_w = matvec(data.R[model.torque_body], model.torque_axis)
+    return p - np.einsum("ni,ni->n", data.w[model.torque_body], e_w)
 
 
 def lam(model: Model, data: Data, p: np.ndarray | None, L_rotor: np.ndarray | None):

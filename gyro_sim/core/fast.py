@@ -148,6 +148,23 @@ def _quat_to_matrix(q0, q1, q2, q3, R):
 
 
 @_njit
+def _quat_rate(q0, q1, q2, q3, w0, w1, w2, out):
+    """out (4,) = q' = 1/2 (0, w) (x) q of a quaternion (w, x, y, z), w in world components
+    (rotations.quat_rates in the same operations)."""
+    out[0] = -0.5 * (w0 * q1 + w1 * q2 + w2 * q3)
+    out[1] = 0.5 * (q0 * w0 + (w1 * q3 - w2 * q2))
+    out[2] = 0.5 * (q0 * w1 + (w2 * q1 - w0 * q3))
+    out[3] = 0.5 * (q0 * w2 + (w0 * q2 - w1 * q1))
+
+
+@_njit
+def _rotor_angle_rate(p, w, e):
+    """kappa' = p - w . e (eqs 18-19) of a rotor of spin p about the world axis e (3,) on a body
+    turning at w (3,) (dynamics.torque_rotor_rates in the same operations)."""
+    return p - (w[0] * e[0] + w[1] * e[1] + w[2] * e[2])
+
+
+@_njit
 def _inv3_sym(J, out):
     """out = J^-1 for a symmetric positive definite J (3, 3) (adjugate; exactly symmetric)."""
     c00 = J[1, 1] * J[2, 2] - J[1, 2] * J[1, 2]
@@ -590,19 +607,12 @@ def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis,
         if is_hinge[k]:
             ydot[i] = y[i_vel + own_col[k]]  # phi_k'
         else:
-            # q' = 1/2 (0, w) (x) q, w in world components
-            q0, q1, q2, q3 = y[i], y[i + 1], y[i + 2], y[i + 3]
-            w0, w1, w2 = w[k, 0], w[k, 1], w[k, 2]
-            ydot[i] = -0.5 * (w0 * q1 + w1 * q2 + w2 * q3)
-            ydot[i + 1] = 0.5 * (q0 * w0 + (w1 * q3 - w2 * q2))
-            ydot[i + 2] = 0.5 * (q0 * w1 + (w2 * q1 - w0 * q3))
-            ydot[i + 3] = 0.5 * (q0 * w2 + (w0 * q2 - w1 * q1))
+            _quat_rate(y[i], y[i + 1], y[i + 2], y[i + 3], w[k, 0], w[k, 1], w[k, 2], ydot[i:i + 4])
     e = np.empty(3)
     for i in range(nt):
-        # kappa_i' = p_i - w . e_i (eqs 18-19)
         k = torque_body[i]
         _matvec(R[k], torque_axis[i], e)
-        ydot[i_kap + i] = p[i] - (w[k, 0] * e[0] + w[k, 1] * e[1] + w[k, 2] * e[2])
+        ydot[i_kap + i] = _rotor_angle_rate(p[i], w[k], e)
 
 
 @_njit

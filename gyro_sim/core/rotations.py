@@ -19,6 +19,14 @@ DEFAULT_DOWN = np.array([0.0, 0.0, -1.0])
 #: below this sin(theta) the Euler angles psi and phi are not separable
 EULER_SINGULAR_SIN = 1e-9
 
+_P = np.array([1, 2, 0])
+_Q = np.array([2, 0, 1])
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross product of (..., 3) arrays (np.cross is several times slower on small stacks)."""
+    return a.take(_P, axis=-1) * b.take(_Q, axis=-1) - a.take(_Q, axis=-1) * b.take(_P, axis=-1)
+
 
 def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product a (x) b of quaternions of shape (..., 4)."""
@@ -33,6 +41,18 @@ def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         ],
         axis=-1,
     )
+
+
+def quat_rates(q: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """q' = 1/2 (0, w) (x) q (n, 4) of quaternions q (n, 4), world from body, turning with the
+    angular velocities w (n, 3) in world components.
+
+    The numba kernel's scalar twin is `gyro_sim.core.fast._quat_rate`, in the same operations.
+    """
+    qd = np.empty_like(q)
+    qd[:, 0] = -0.5 * np.einsum("ni,ni->n", w, q[:, 1:])
+    qd[:, 1:] = 0.5 * (q[:, :1] * w + cross(w, q[:, 1:]))
+    return qd
 
 
 def quat_conj(q: np.ndarray) -> np.ndarray:
@@ -68,6 +88,7 @@ def quat_to_matrix(q: np.ndarray) -> np.ndarray:
 
     The homogeneous form (|q|^2 R is quadratic in q) divided by |q|^2, so the result is a
     rotation even for the slightly non-unit quaternions of intermediate integrator stages.
+    The numba kernel's scalar twin is `gyro_sim.core.fast._quat_to_matrix`.
     """
     q = np.asarray(q, dtype=float)
     qq = q[..., :, None] * q[..., None, :]

@@ -243,9 +243,8 @@ class Simulator:
         y, u = self._y, self._y[m.i_vel]
         phi, phid = y[m.i_phi], u[m.col_hinge]
         kappa = y[m.i_kappa]
-        if len(m.torque_body):  # kappa_i' = p_i - w . e_i (eq 19)
-            e_t = dyn.matvec(d.R[m.torque_body], m.torque_axis)
-            kdot_t = self._p - np.einsum("ni,ni->n", d.w[m.torque_body], e_t)
+        if len(m.torque_body):
+            kdot_t = dyn.torque_rotor_rates(m, d, self._p)  # kappa_i' (eqs 18-19)
         if len(m.speed_body):  # the motor keeps kappa_i' constant: L_i = A_i (w' . e_i)
             e_v = dyn.matvec(d.R[m.speed_body], m.speed_axis)
             L_v = m.speed_A * np.einsum("ni,ni->n", ev.acc_w[m.speed_body], e_v)

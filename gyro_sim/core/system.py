@@ -28,6 +28,7 @@ import numpy as np
 from . import dynamics as dyn
 from . import fast
 from .model import Model, initial_state
+from .rotations import quat_rates
 
 
 class OdeSystem(Protocol):
@@ -96,19 +97,11 @@ class ChainODE:
         if m.free:
             ydot[m.i_r0] = u[m.col_base]
         if len(m.sph_bodies):
-            # q' = 1/2 (0, w) (x) q, w in world components
-            w = d.w[m.sph_bodies]
-            q = y[m.i_quat]
-            qd = np.empty_like(q)
-            qd[:, 0] = -0.5 * np.einsum("ni,ni->n", w, q[:, 1:])
-            qd[:, 1:] = 0.5 * (q[:, :1] * w + dyn.cross(w, q[:, 1:]))
-            ydot[m.i_quat] = qd
+            ydot[m.i_quat] = quat_rates(y[m.i_quat], d.w[m.sph_bodies])  # q' = 1/2 (0, w) (x) q
         ydot[m.i_phi] = u[m.col_hinge]
         ydot[m.i_vel] = udot
         if p is not None:
-            # kappa_i' = p_i - w . e_i (eq 18-19)
-            e_w = dyn.matvec(d.R[m.torque_body], m.torque_axis)
-            ydot[m.i_kappa] = p - np.einsum("ni,ni->n", d.w[m.torque_body], e_w)
+            ydot[m.i_kappa] = dyn.torque_rotor_rates(m, d, p)  # kappa_i' = p_i - w . e_i (eqs 18-19)
         return ydot
 
     def project(self, y: np.ndarray) -> None:

@@ -15,6 +15,8 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+from ..core.rotations import quat_to_matrix
+
 #: radius of a body without a visual radius, as a fraction of the chain's length
 DEFAULT_RADIUS_FRACTION = 0.03
 #: rotor disc thickness when the inertia does not give one, as a fraction of its radius
@@ -80,8 +82,8 @@ def rpy_z_to(v) -> tuple[float, float, float]:
     """URDF roll, pitch, yaw (fixed axes x, y, z) of the rotation turning +z onto v."""
     x, y, z, w = quat_z_to(v)
     # R = Rz(yaw) Ry(pitch) Rx(roll), read from the matrix entries of the quaternion
-    r00, r10, r20 = 1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)
-    r21, r22 = 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
+    R = quat_to_matrix(np.array([w, x, y, z]))
+    r00, r10, r20, r21, r22 = R[0, 0], R[1, 0], R[2, 0], R[2, 1], R[2, 2]
     return math.atan2(r21, r22), math.atan2(-r20, math.hypot(r00, r10)), math.atan2(r10, r00)
 
 

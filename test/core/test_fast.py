@@ -131,6 +131,36 @@ def test_long_spherical_chain(n):
     assert_rhs_equal(model, ref.rhs(0.0, y), fst.rhs(0.0, y), rtol=1e-10)
 
 
+# --- the kernel's scalar twins of formulas whose home is numpy -----------------------------
+def test_twins_equal_their_numpy_homes():
+    """_quat_to_matrix, _quat_rate, _rotor_angle_rate against rotations.quat_to_matrix,
+    rotations.quat_rates, dynamics.torque_rotor_rates, on non-unit quaternions as integrator
+    stages pass them."""
+    from gyro_sim.core.rotations import quat_rates, quat_to_matrix
+
+    rng = np.random.default_rng(7)
+    q = rng.normal(size=(50, 4))
+    w = rng.normal(size=(50, 3)) * 10.0
+    R = np.empty((3, 3))
+    qd = np.empty(4)
+    for qk, wk, ref_R, ref_qd in zip(q, w, quat_to_matrix(q), quat_rates(q, w)):
+        fast._quat_to_matrix(*qk, R)
+        np.testing.assert_allclose(R, ref_R, rtol=0, atol=4 * np.finfo(float).eps)
+        fast._quat_rate(*qk, *wk, qd)
+        np.testing.assert_allclose(qd, ref_qd, rtol=1e-15, atol=1e-14)
+    model = compile_model(load_scene(chain_scene(0, "fixed")))
+    assert len(model.torque_body)
+    data = dyn.Data(model)
+    y = random_state(rng, model)
+    dyn.positions(model, data, 0.0, y)
+    dyn.velocities(model, data, 0.0, y[model.i_vel])
+    p = rng.uniform(-50.0, 50.0, len(model.torque_body))
+    ref = dyn.torque_rotor_rates(model, data, p)
+    for i, k in enumerate(model.torque_body):
+        e = data.R[k] @ model.torque_axis[i]
+        assert fast._rotor_angle_rate(p[i], data.w[k], e) == pytest.approx(ref[i], rel=1e-14, abs=1e-12)
+
+
 # --- the rest of the ChainODE interface ------------------------------------------------------
 def test_interface_matches_chain_ode():
     model, ref, fst = systems(chain_scene(3, "free"))
