@@ -1,7 +1,8 @@
 """Rotations: unit quaternions (w, x, y, z), rotation matrices and the paper's Euler angles.
 
 Quaternions are world-from-body and stored w first. Functions accept stacks: a quaternion
-array of shape (..., 4) gives matrices of shape (..., 3, 3).
+array of shape (..., 4) gives matrices of shape (..., 3, 3). Also the home of the quaternion
+rates q' = 1/2 (0, w) (x) q (`quat_rates`) and of the row-wise cross product (`cross`).
 
 Euler angles are the paper's z-x-z angles (psi, theta, phi) relative to the "down" frame,
 whose z-axis is nu, the unit gravity direction (SPEC.md, THEORY.md section 6):
