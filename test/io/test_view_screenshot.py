@@ -33,7 +33,7 @@ pytestmark = [
 #: the plots' series colours (rerun_view.PALETTE, the first six)
 PALETTE = [(0, 114, 178), (230, 159, 0), (0, 158, 115), (204, 121, 167), (86, 180, 233), (213, 94, 0)]
 BODY = (70, 130, 180)
-PLOTS = ["euler", "hinge", "rotor_rate", "axis_moments", "drift"]
+PLOTS = ["euler", "hinge", "rotor_rate", "axis_moments", "drift", "balance"]
 
 
 def _near(a, color, tol):
@@ -42,7 +42,7 @@ def _near(a, color, tol):
 
 def inspect(png):
     """Per plot (top to bottom): (palette pixels, rightmost one as a fraction of the plot's
-    width); and the vertical extent of the chain's bodies in the 3D view (fraction of the height)."""
+    width); and the chain's bodies in the 3D view: (pixels, mean height as a fraction of the view)."""
     a = np.asarray(Image.open(png).convert("RGB")).astype(int)
     h, w, _ = a.shape
     right = a[int(0.05 * h):int(0.96 * h), int(0.62 * w):]
@@ -53,14 +53,18 @@ def inspect(png):
     for band in np.array_split(lines, len(PLOTS), axis=0):
         xs = np.nonzero(band)[1]
         plots.append((int(band.sum()), float(xs.max()) / band.shape[1] if xs.size else 0.0))
-    ys = np.nonzero(_near(a[int(0.05 * h):int(0.96 * h), :int(0.58 * w)], BODY, 60))[0]
-    return plots, float(ys.max() - ys.min()) / h if ys.size else 0.0
+    view = a[int(0.05 * h):int(0.96 * h), :int(0.58 * w)]
+    ys = np.nonzero(_near(view, BODY, 60))[0]
+    return plots, (ys.size, float(ys.mean()) / view.shape[0] if ys.size else 1.0)
 
 
 @pytest.mark.slow
 def test_screenshot_of_a_30_s_log_shows_every_plot_and_the_chain(tmp_path):
     log = tmp_path / "v30.mcap"
-    r = gyro_sim("run", "--scene", "hinge_chain", "--duration", 30, "--record", log, timeout=300)
+    commands = tmp_path / "commands.yaml"  # steps on every axis: no plot is a flat line
+    commands.write_text("- [0.0, [0.002, 0.05, -0.03]]\n- [10.0, [-0.002, -0.05, 0.03]]\n- [20.0, [0.0, 0.02, 0.0]]\n")
+    r = gyro_sim("run", "--scene", "hinge_chain", "--duration", 30, "--commands", commands, "--record", log,
+                 timeout=300)
     assert r.returncode == 0, r.stderr
     pngs = []
     for k in range(2):
@@ -70,12 +74,14 @@ def test_screenshot_of_a_30_s_log_shows_every_plot_and_the_chain(tmp_path):
         assert Image.open(png).size == (1200, 800)
         plots, chain = inspect(png)
         for name, (count, rightmost) in zip(PLOTS, plots):
-            # an empty plot has none (its legend neither); a flat line alone is about 450
+            # an empty plot has none (its legend neither)
             assert count > 250, f"plot {name} is empty in {png}: {plots}"
             # drawn to the end of the log (the time axis has 4 % room after it)
             assert rightmost > 0.9, f"plot {name} stops at {rightmost:.2f} of its width: {plots}"
-        # the bodies stand up in view (empty pictures: a stub of 0.12 of the height, at the bottom)
-        assert chain > 0.2, f"the chain is not in view (extent {chain:.2f} of the height)"
+        # the bodies are drawn, around the middle of the view where the camera looks (a picture
+        # taken before the data: a stub of the initial pose at the bottom edge)
+        count, centre = chain
+        assert count > 500 and 0.15 < centre < 0.75, f"the chain is not in view ({count} pixels, centre {centre:.2f})"
         pngs.append(png)
     # the picture is taken once all is drawn, at the end of the log: the same picture each time
     assert pngs[0].read_bytes() == pngs[1].read_bytes()

@@ -150,6 +150,6 @@ def test_same_rerun_entities(logs, module_tmp):
         assert r.returncode == 0, r.stderr
         got[name] = rerun_entities(rrd)
     assert got["node"] == got["offline"]
-    for entity in ("/world/angular_momentum", "/plots/rotor_rate/wheel2", "/plots/drift/energy_balance",
+    for entity in ("/world/angular_momentum", "/plots/rotor_rate/wheel2", "/plots/balance/energy_balance",
                    "/world/arm1/wrench/force", "/plots/axis_moments/arm3"):
         assert entity in got["node"], (entity, sorted(got["node"]))
