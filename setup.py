@@ -12,7 +12,10 @@ VIZ = ["rerun-sdk>=0.41"]
 BENCH = ["matplotlib>=3.6", "mujoco>=3", "pin>=3"]
 # pin (Pinocchio): the independent engine of the cross-check tests; rosbags: an independent
 # MCAP reader for the log tests
-TEST = ["pytest>=7", "rosbags>=0.9"] + ROS + VIZ + BENCH
+# gyro-sim sweep: dask[distributed] runs the points on a local or remote cluster; pyarrow writes
+# the Parquet table (without pandas); matplotlib draws the map
+SWEEP = ["dask[distributed]>=2024.1", "pyarrow>=14", "matplotlib>=3.6"]
+TEST = ["pytest>=7", "rosbags>=0.9"] + ROS + VIZ + BENCH + SWEEP
 
 setup(
     name=package_name,
@@ -23,6 +26,7 @@ setup(
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", glob("config/*.yaml")),
+        ("share/" + package_name + "/config/sweeps", glob("config/sweeps/*.yaml")),
     ],
     # mcap + mcap-ros2-support: logs are written and read without ROS installed;
     # numba: the compiled dynamics (35x faster than numpy at n = 10: real time at 1 kHz)
@@ -34,7 +38,7 @@ setup(
         "mcap>=1.6",
         "mcap-ros2-support>=0.5",
     ],
-    extras_require={"ros": ROS, "viz": VIZ, "bench": BENCH, "test": TEST},
+    extras_require={"ros": ROS, "viz": VIZ, "bench": BENCH, "sweep": SWEEP, "test": TEST},
     python_requires=">=3.10",
     zip_safe=True,
     maintainer="gyro_sim developers",

@@ -1,0 +1,145 @@
+"""Running a sweep's points: in batches on a Dask cluster (or serially, in this process).
+
+- ``workers=N``: a ``distributed.LocalCluster`` of N worker processes with one thread each
+  (the dynamics is single-threaded numba; threads would fight over the GIL between steps);
+- ``scheduler="tcp://host:8786"``: an existing cluster (``dask scheduler`` and ``dask worker``
+  on other machines, each with gyro_sim installed);
+- ``workers=0``: serially, here, without Dask (the reference the parallel table must equal).
+
+The points not yet in DIR/parts are cut into batches (contiguous point indices) that go out as
+tasks; every finished batch is written as its own Parquet part at once, in whatever order the
+batches finish. A worker that dies takes its running batch with it and Dask runs that batch
+again elsewhere (a LocalCluster's nanny also restarts the worker); nothing already written is
+lost. Ctrl-C cancels what is pending and keeps what is written.
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import os
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+from .point import run_batch
+from .results import read_parts, write_part
+
+#: tasks per worker when the sweep does not fix `batch`: enough for balance, few enough to keep
+#: the per-task overhead (a few ms on a LocalCluster) out of the way
+TASKS_PER_WORKER = 4
+MAX_AUTO_BATCH = 64
+
+
+class ClusterError(RuntimeError):
+    """The cluster could not run the sweep (no scheduler there, batches that kept failing)."""
+
+
+def batch_size(sweep, n_todo: int, workers: int) -> int:
+    if sweep.batch:
+        return sweep.batch
+    return max(1, min(MAX_AUTO_BATCH, math.ceil(n_todo / max(1, workers * TASKS_PER_WORKER))))
+
+
+def batches(points: list, size: int) -> list[list]:
+    return [points[i:i + size] for i in range(0, len(points), size)]
+
+
+def payload(sweep) -> dict[str, Any]:
+    """What every task needs: the sweep without its (possibly long) list of points."""
+    return {"sweep": dataclasses.replace(sweep, points=[])}
+
+
+def default_workers() -> int:
+    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
+
+
+def run(sweep, out: Path, *, workers: int | None = None, scheduler: str | None = None,
+        progress: Callable[[int, int, str], None] | None = None,
+        on_batch: Callable[[Any, list[dict]], None] | None = None) -> dict[str, Any]:
+    """Run the points of `sweep` that DIR/parts does not hold yet.
+
+    Returns {"ran", "skipped", "wall", "where", "interrupted"}. Raises ClusterError.
+    `on_batch(client, rows)` is called after each part is written (client None when serial).
+    """
+    done = {int(r["point"]) for r in read_parts(out)}
+    todo = [p for p in sweep.points if p.index not in done]
+    total = len(sweep.points)
+    stats = {"ran": 0, "skipped": len(done), "wall": 0.0, "interrupted": False}
+    if workers is None and scheduler is None:
+        workers = default_workers()
+    if progress:
+        progress(len(done), total, f"{len(done)}/{total} points")
+    if not todo:
+        stats["where"] = "nothing to run"
+        return stats
+    t0 = time.perf_counter()
+
+    def finished(rows: list[dict], client=None) -> None:
+        write_part(out, rows)
+        stats["ran"] += len(rows)
+        if on_batch:
+            on_batch(client, rows)
+        if progress:
+            n = len(done) + stats["ran"]
+            rate = stats["ran"] / max(time.perf_counter() - t0, 1e-9)
+            progress(n, total, f"{n}/{total} points, {rate:.2f}/s")
+
+    try:
+        if scheduler is None and workers == 0:
+            stats["where"] = "serial, in-process"
+            pay = payload(sweep)
+            for b in batches(todo, batch_size(sweep, len(todo), 1)):
+                finished(run_batch(pay, b))
+        else:
+            _run_dask(sweep, todo, workers, scheduler, finished, stats)
+    except KeyboardInterrupt:
+        stats["interrupted"] = True
+    stats["wall"] = time.perf_counter() - t0
+    return stats
+
+
+def _run_dask(sweep, todo, workers, scheduler, finished, stats) -> None:
+    from distributed import Client, LocalCluster, as_completed
+
+    cluster = None
+    try:
+        if scheduler is not None:
+            try:
+                client = Client(scheduler, timeout="10s")
+            except (OSError, TimeoutError) as exc:
+                raise ClusterError(f"no Dask scheduler at {scheduler}: {exc}".splitlines()[0]) from None
+            n_workers = max(1, len(client.scheduler_info().get("workers", {})))
+            stats["where"] = f"Dask scheduler {scheduler}, {n_workers} workers"
+        else:
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=logging.ERROR)
+            client = Client(cluster)
+            n_workers = workers
+            stats["where"] = f"LocalCluster, {workers} worker{'s' if workers != 1 else ''} x 1 thread"
+    except ClusterError:
+        raise
+    except Exception as exc:  # noqa: BLE001  (a cluster that does not start: one line, exit 1)
+        raise ClusterError(f"could not start the Dask cluster: {type(exc).__name__}: {exc}".splitlines()[0]) from None
+    futures = []
+    try:
+        pay = client.scatter(payload(sweep), broadcast=True)
+        size = batch_size(sweep, len(todo), n_workers)
+        token = sweep.digest()
+        futures = [client.submit(run_batch, pay, b, key=f"gyro-sweep-{token}-{b[0].index}-{len(b)}", pure=False)
+                   for b in batches(todo, size)]
+        for fut in as_completed(futures):
+            try:
+                rows = fut.result()
+            except Exception as exc:  # noqa: BLE001  (KilledWorker, a worker without gyro_sim, a bug)
+                raise ClusterError(f"a batch failed: {type(exc).__name__}: {exc}".splitlines()[0]) from None
+            finished(rows, client)
+            fut.release()
+    finally:
+        try:
+            if futures:
+                client.cancel(futures)
+            client.close()
+        finally:
+            if cluster is not None:
+                cluster.close()
