@@ -77,7 +77,8 @@ def _env(domain: int, workdir: Path) -> dict:
 
 
 def _domain(i: int) -> int:
-    return 100 + (os.getpid() * 17 + i) % 100
+    """200..229: apart from the tests' domains (50..199), so a bench and the tests can share a machine."""
+    return 200 + (os.getpid() * 17 + i) % 30
 
 
 def _start_node(workdir: Path, domain: int, name: str, *params: str, node_command=NODE_COMMAND):

@@ -128,6 +128,64 @@ def _check_finite(obj: Any, path: str = "") -> None:
             _check_finite(getattr(obj, k, None), f"{path}.{k}" if path else k)
 
 
+class _PackedChunkIndexes:
+    """The summary's chunk indexes, held as packed integers between flushes.
+
+    mcap's Writer keeps one ChunkIndex object per chunk until `finish` writes the summary:
+    about 1.3 kB each, so at the default flush period (a chunk every 0.25 s) a recording would
+    grow by about 19 MB per hour. Packed here after every flush (8 int64 per chunk, and per
+    channel in it the id and the offset from the chunk's start as uint32: about 150 B for a
+    dozen channels) and turned back into ChunkIndex objects just before `finish`.
+    """
+
+    HEAD = 8  # start, end, chunk offset, chunk length, index length, compressed, uncompressed, n
+
+    def __init__(self) -> None:
+        self.heads = array.array("q")
+        self.items = array.array("I")
+        self.compression = ""
+
+    @staticmethod
+    def _list(writer) -> list | None:
+        return getattr(writer, "_Writer__chunk_indices", None)  # mcap internals; None: left alone
+
+    def pack(self, writer) -> None:
+        lst = self._list(writer)
+        if not lst:
+            return
+        for ci in lst:
+            base = ci.chunk_start_offset
+            if any(not 0 <= off - base < 2**32 or not 0 <= cid < 2**32 for cid, off in ci.message_index_offsets.items()):
+                return  # not representable (never for gyro_sim's chunks): keep the objects
+        for ci in lst:
+            base = ci.chunk_start_offset
+            self.heads.extend((ci.message_start_time, ci.message_end_time, base, ci.chunk_length,
+                               ci.message_index_length, ci.compressed_size, ci.uncompressed_size,
+                               len(ci.message_index_offsets)))
+            for cid, off in ci.message_index_offsets.items():
+                self.items.extend((cid, off - base))
+            self.compression = ci.compression
+        lst.clear()
+
+    def unpack(self, writer) -> None:
+        lst = self._list(writer)
+        if lst is None or not self.heads:
+            return
+        from mcap.records import ChunkIndex
+
+        restored, j = [], 0
+        for i in range(0, len(self.heads), self.HEAD):
+            start, end, base, length, index_length, compressed, uncompressed, n = self.heads[i:i + self.HEAD]
+            offsets = {self.items[j + 2 * k]: base + self.items[j + 2 * k + 1] for k in range(n)}
+            j += 2 * n
+            restored.append(ChunkIndex(chunk_length=length, chunk_start_offset=base, compression=self.compression,
+                                       compressed_size=compressed, message_end_time=end,
+                                       message_index_length=index_length, message_index_offsets=offsets,
+                                       message_start_time=start, uncompressed_size=uncompressed))
+        lst[:0] = restored
+        self.heads, self.items = array.array("q"), array.array("I")
+
+
 class LogWriter:
     """Write a gyro_sim log (module docstring). A context manager; `close` is idempotent.
 
@@ -162,6 +220,7 @@ class LogWriter:
             from .safe_paths import OutputError
 
             raise OutputError(f"log {self.path}: exists; refused to overwrite it (overwrite=True to replace)") from None
+        self._chunk_indexes = _PackedChunkIndexes()
         self._writer = Writer(self._file, chunk_size=CHUNK_SIZE, compression=_compression())
         self._writer.start(profile="ros2", library=f"gyro_sim/{__version__}")
         self._writer.add_metadata(
@@ -323,6 +382,7 @@ class LogWriter:
                 self._writer._Writer__finalize_chunk()  # noqa: SLF001
                 self._file.flush()
             self._dirty = False
+            self._chunk_indexes.pack(self._writer)
         self._last_flush = time.monotonic()
 
     def _flush_loop(self) -> None:
@@ -347,6 +407,7 @@ class LogWriter:
             self._closed = True
             self._stop.set()
             try:
+                self._chunk_indexes.unpack(self._writer)
                 self._writer.finish()
             finally:
                 self._file.close()
