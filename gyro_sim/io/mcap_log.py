@@ -21,7 +21,7 @@ What a file holds (SPEC.md, "Logs"):
   message indexes, chunk indexes, statistics and summary written on close.
 
 Crash safety: the chunk in progress is finished and handed to the operating system at least
-every `flush_period` seconds of wall time (``DEFAULT_FLUSH_PERIOD``, 0.25 s; checked on every
+every `flush_period` seconds of wall time (``DEFAULT_FLUSH_PERIOD``, 0.2 s; checked on every
 write and by a background timer), so after SIGKILL everything written before the last flush is in the file and
 :func:`gyro_sim.io.recover.recover` gets it back. The file is not fsync'ed: a crash of the
 process loses nothing flushed, a crash of the machine may.
@@ -68,7 +68,9 @@ CHUNK_SIZE = 1 << 20
 #: shortest sleep of the background flush timer (s)
 MIN_TIMER_WAIT = 0.005
 #: default wall-clock seconds between flushes: what SIGKILL can lose (measured cost: README)
-DEFAULT_FLUSH_PERIOD = 0.25
+#: 0.2 s: a SIGKILL loses at most the promised 0.25 s of simulated time at real time (the last
+#: flush, plus up to a publication period and the recorder's queue: `gyro-sim bench soak`)
+DEFAULT_FLUSH_PERIOD = 0.2
 
 
 class LogError(RuntimeError):
@@ -132,8 +134,8 @@ class _PackedChunkIndexes:
     """The summary's chunk indexes, held as packed integers between flushes.
 
     mcap's Writer keeps one ChunkIndex object per chunk until `finish` writes the summary:
-    about 1.3 kB each, so at the default flush period (a chunk every 0.25 s) a recording would
-    grow by about 19 MB per hour. Packed here after every flush (8 int64 per chunk, and per
+    about 1.3 kB each, so at the default flush period (a chunk every 0.2 s) a recording would
+    grow by about 23 MB per hour. Packed here after every flush (8 int64 per chunk, and per
     channel in it the id and the offset from the chunk's start as uint32: about 150 B for a
     dozen channels) and turned back into ChunkIndex objects just before `finish`.
     """

@@ -1,5 +1,5 @@
 """A long recording does not grow the writer's memory by the summary's chunk indexes: with a
-chunk every 0.25 s, mcap's own ChunkIndex objects (about 1.3 kB each) would cost about 19 MB
+chunk every 0.2 s, mcap's own ChunkIndex objects (about 1.3 kB each) would cost about 23 MB
 per hour; gyro_sim's writer packs them (gyro_sim.io.mcap_log._PackedChunkIndexes)."""
 from __future__ import annotations
 
@@ -29,7 +29,7 @@ def test_chunk_indexes_cost_little_memory_and_the_summary_is_whole(tmp_path):
     for k in range(CHUNKS):
         for c in chs:
             w.write_raw(c, 1000 * k, data)
-        w.flush()  # one chunk each, as the 0.25 s flush period makes them
+        w.flush()  # one chunk each, as the 0.2 s flush period makes them
     grown = sum(d.size_diff for d in tracemalloc.take_snapshot().compare_to(before, "filename"))
     tracemalloc.stop()
     w.close()

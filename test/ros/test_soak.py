@@ -1,4 +1,6 @@
-"""The physics thread first: a flood of 20,000 commands per second on ~/axis_moments, from two
+"""What the node keeps under abuse (the measurements behind `gyro-sim bench soak`).
+
+The physics thread first: a flood of 20,000 commands per second on ~/axis_moments, from two
 other processes over real DDS, leaves /joint_states at >= 95 Hz (the measurement behind
 `gyro-sim bench soak`, whose flood part this runs)."""
 from __future__ import annotations
@@ -19,5 +21,15 @@ def test_joint_states_hold_their_rate_under_a_command_flood(tmp_path):
     assert fl.sent >= 0.9 * 20_000 * 4.0, fl
     assert fl.hz_before >= 95.0, fl
     assert fl.hz_during >= 95.0, fl
-    assert fl.rtf_during >= 0.99, fl
+    assert fl.rtf_during >= 0.95, fl  # the node warns below 0.95 of its target
     assert fl.accepted > 0, "the node took commands in during the flood"
+
+
+@pytest.mark.slow
+def test_sigkill_loses_at_most_a_quarter_second(tmp_path):
+    """Nodes killed with SIGKILL at random moments: after `gyro-sim recover` the log ends at
+    most 0.25 s of simulated time before the last /clock the node published."""
+    (tmp_path / "ros_log").mkdir()
+    ki = soak.kills(tmp_path, n=4, domain=new_domain_id())
+    assert len(ki.lost_s) == 4 and all(m > 0 for m in ki.kept_messages), ki
+    assert max(ki.lost_s) <= 0.25, ki.lost_s
