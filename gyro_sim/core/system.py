@@ -186,11 +186,6 @@ class FastChainODE:
 #: what `make_system` accepts: "auto" (numba if it works, else numpy), "numba", "numpy"
 BACKENDS = ("auto", "numba", "numpy")
 
-#: "auto" keeps the numpy reference above this ratio of a subtree's mass to the body carrying
-#: it: the articulated-body projection loses digits as the ratio squared (measured against the
-#: numpy reference, |accelerations| ~ 77: 3e-9 at 1e2, 3e-7 at 1e3, 5e-6 at 1e4, 0.13 at 1e6)
-NUMBA_MASS_RATIO_LIMIT = 1e3
-
 
 def heavy_subtree_ratio(model: Model) -> float:
     """The largest ratio of the mass of bodies k+1..n to the mass of body k."""
@@ -205,15 +200,14 @@ def make_system(model: Model, backend: str = "auto") -> ChainODE | FastChainODE:
     backend: "numpy" -> ChainODE; "numba" -> FastChainODE, compiled (or loaded from the disk
     cache) now, so the first integration step does not pay for it; ImportError without numba.
     "auto" -> as "numba" if numba imports and the kernels compile, else ChainODE with a
-    warning when numba is there but failed; also ChainODE when a subtree is more than
-    NUMBA_MASS_RATIO_LIMIT times heavier than the body carrying it.
+    warning when numba is there but failed. Heavy tips stay compiled: the kernel's
+    elimination is exact to ~1e-14 relative at any mass ratio up to 1e7 either way
+    (`gyro_sim.core.fast.STABLE_ABA_RATIO`, test/core/test_heavy_tip.py).
     """
     if backend not in BACKENDS:
         raise ValueError(f"unknown backend {backend!r}; valid: {', '.join(BACKENDS)}")
     if backend == "numpy" or (backend == "auto" and not fast.available()):
         return ChainODE(model)
-    if backend == "auto" and heavy_subtree_ratio(model) > NUMBA_MASS_RATIO_LIMIT:
-        return ChainODE(model)  # a heavy tip on light links: keep the accurate reference
     if not fast.available():
         raise ImportError("the numba backend needs numba; use backend 'numpy' or 'auto'")
     try:
