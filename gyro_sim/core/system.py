@@ -26,7 +26,7 @@ from typing import Protocol
 import numpy as np
 
 from . import dynamics as dyn
-from . import fast
+from . import fast, fast_loop
 from .model import Model, initial_state
 from .rotations import quat_rates
 
@@ -135,6 +135,8 @@ class FastChainODE:
         self._work = fast.workspace(model)
         self._i_q0 = int(model.i_quat[0, 0]) if len(model.sph_bodies) else 0
         self._nq = len(model.sph_bodies)
+        self._stage_rows: dict[int, np.ndarray] = {}  # march_explicit_rk: stages (s, size)
+        self._ys = np.empty(model.size)
         self._set_inputs(self._ref.t0, self._ref.p0, None, None)
 
     # --- inputs ------------------------------------------------------------------------------
@@ -166,13 +168,34 @@ class FastChainODE:
         fast.rhs_kernel(float(t), y, ydot, *self._args)
         return ydot
 
+    def march_explicit_rk(self, A: np.ndarray, B: np.ndarray, C: np.ndarray, t0: float,
+                          y: np.ndarray, h: float, nsteps: int) -> int:
+        """`nsteps` steps of size h of the explicit Runge-Kutta tableau (A (s, s), B (s,),
+        C (s,)) from (t0, y) in one compiled call (:func:`gyro_sim.core.fast_loop.erk_march`),
+        with the inputs held: y (size,), float64 and contiguous, updated in place and
+        projected after every step. Returns the number of steps that left a finite state
+        (nsteps, or the index of the step that did not; y then holds its result). Counts the
+        rhs evaluations in nfev."""
+        if y.shape != (self.size,) or y.dtype != np.float64 or not y.flags.c_contiguous:
+            raise ValueError(f"y must be a contiguous float64 array of shape ({self.size},)")
+        stages = B.shape[0]
+        K = self._stage_rows.get(stages)
+        if K is None:
+            K = self._stage_rows[stages] = np.empty((stages, self.size))
+        done = fast_loop.erk_march(float(t0), float(h), int(nsteps), y, A, B, C, K,
+                                   self._ys, self._i_q0, self._nq, *self._args)
+        self.nfev += stages * min(done + 1, nsteps)
+        return done
+
     def warm_up(self) -> None:
         """Compile the kernels (or load them from the disk cache) by one evaluation at the
-        model's initial state; not counted in nfev."""
+        model's initial state and a march of no step; not counted in nfev."""
         y = initial_state(self.model)
         self.rhs(self._ref.t0, y)
         self.project(y)
         self.nfev -= 1
+        one = np.zeros((1, 1))  # any tableau: zero steps compile the loop for every tableau
+        self.march_explicit_rk(one, one[0], one[0], self._ref.t0, y, 1.0, 0)
 
     def project(self, y: np.ndarray) -> None:
         """Renormalise the quaternions of y (size,) in place."""

@@ -238,15 +238,29 @@ class FixedStepIntegrator(Integrator):
         span = t1 - t0
         n = max(1, math.ceil(span / self.step - STEP_COUNT_SLACK))
         h = span / n
-        for k in range(n):
-            t = t0 + k * h
-            self._step(t, y, h)
-            self._project(y)
-            if not np.isfinite(y).all():
-                raise IntegrationError(self.name, "state is not finite after the step", t, h,
-                                       describe_nonfinite(y))
-            self.nsteps += 1
+        done = self._march_compiled(t0, y, h, n)
+        if done is not None:  # all n steps in one compiled call
+            self.nsteps += done
+            if done < n:
+                raise IntegrationError(self.name, "state is not finite after the step", t0 + done * h,
+                                       h, describe_nonfinite(y))
+        else:
+            for k in range(n):
+                t = t0 + k * h
+                self._step(t, y, h)
+                self._project(y)
+                if not np.isfinite(y).all():
+                    raise IntegrationError(self.name, "state is not finite after the step", t, h,
+                                           describe_nonfinite(y))
+                self.nsteps += 1
         self.last_step = h
+
+    def _march_compiled(self, t0: float, y: np.ndarray, h: float, n: int) -> int | None:
+        """n steps of size h from (t0, y) in one compiled call, when the method and its system
+        have one: y (size,) updated in place (projected after each step); returns the number
+        of steps that left a finite state (n, or the index of the failing step, y then its
+        non-finite result). None: no compiled loop, `_march` steps in Python with `_step`."""
+        return None
 
     def _step(self, t: float, y: np.ndarray, h: float) -> None:
         """One step of size h from (t, y); y (size,) is updated in place."""

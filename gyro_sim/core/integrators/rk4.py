@@ -5,6 +5,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..rk_kernels import erk_stage_state, erk_update
 from .base import ExplicitRungeKutta, FixedStepIntegrator
 
 if TYPE_CHECKING:
@@ -16,6 +17,12 @@ class RK4(ExplicitRungeKutta, FixedStepIntegrator):
 
     Four rhs evaluations per step; no error estimate, no dense output (`t_eval` times are
     stepped to exactly).
+
+    One implementation, two drivers: the tableau's arithmetic is
+    :mod:`gyro_sim.core.rk_kernels`. On a system that offers `march_explicit_rk` (the
+    compiled :class:`gyro_sim.core.system.FastChainODE`) the n substeps of an `advance` run in
+    one compiled call with this class's tableau; on any other system this class steps in
+    Python (`_step`), calling the same arithmetic between its rhs evaluations.
 
     References
     ----------
@@ -39,15 +46,21 @@ class RK4(ExplicitRungeKutta, FixedStepIntegrator):
         super().__init__(system, **options)
         self._K = np.empty((self.n_stages, self.n))
         self._ys = np.empty(self.n)
-        self._dy = np.empty(self.n)
         self._hA = np.empty_like(self.A)
-        self._C_all = self.C
+        self._march_system = getattr(system, "march_explicit_rk", None)
+
+    def _march_compiled(self, t0: float, y: np.ndarray, h: float, n: int) -> int | None:
+        if self._march_system is None:
+            return None
+        done = self._march_system(self.A, self.B, self.C, t0, y, h, n)
+        self.nfev += self.n_stages * min(done + 1, n)
+        return done
 
     def _step(self, t: float, y: np.ndarray, h: float) -> None:
-        K = self._K
+        K, ys = self._K, self._ys
         K[0] = self._fun(t, y)
         np.multiply(self.A, h, out=self._hA)
-        self._stages(t, y, self._hA, h, 1, self.n_stages)
-        # y1 = y + h sum_i B_i K_i
-        np.dot(h * self.B, K, out=self._dy)
-        y += self._dy
+        for s in range(1, self.n_stages):
+            erk_stage_state(y, K, self._hA, s, ys)  # ys = y + h sum_j A[s, j] K[j]
+            K[s] = self._fun(t + self.C[s] * h, ys)
+        erk_update(y, K, h * self.B)  # y1 = y + h sum_i B_i K_i

@@ -1,0 +1,103 @@
+"""Whole integration loops compiled with numba: many steps in one call of compiled code.
+
+:func:`erk_march` takes `nsteps` equal steps of an explicit Runge-Kutta tableau (the method's
+own class attributes, e.g. :class:`gyro_sim.core.integrators.rk4.RK4`) from (t0, y), calling
+the articulated-body kernel :func:`gyro_sim.core.fast.rhs_kernel` directly and the tableau's
+arithmetic of :mod:`gyro_sim.core.rk_kernels` (the very functions the Python driver of the
+method calls for other systems): no Python between two evaluations. After every step the
+quaternions are renormalised (`project`) and the state checked finite, as
+:class:`gyro_sim.core.integrators.base.FixedStepIntegrator` does.
+
+:class:`gyro_sim.core.system.FastChainODE` offers it as `march_explicit_rk`; the fixed-step
+integrators dispatch to it when their system has it.
+
+Caching: numba's disk cache keys a kernel on its own file only (numba docs, "Cache
+limitations"), and these loops inline the kernels of fast.py and rk_kernels.py: cached the
+usual way, a loop would survive an edit of those files and run the old dynamics. So their
+cache lives in a directory named after a digest of all three files (:func:`cache_directory`):
+an edit of any of them starts an empty one. Compiling costs ~2.5 s once per version.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+from . import fast, rk_kernels
+from .rk_kernels import erk_stage_state, erk_update
+
+try:
+    import numba
+except ImportError:  # pragma: no cover - exercised only where numba is missing
+    numba = None
+
+#: the files whose kernels the loops compile in (the key of their cache directory)
+DEPENDENCIES = (Path(fast.__file__), Path(rk_kernels.__file__), Path(__file__))
+
+
+def cache_directory() -> Path:
+    """Where the loops' compiled code is cached: `fast_loop-<digest of DEPENDENCIES>` under
+    NUMBA_CACHE_DIR when set, else under this package's __pycache__ (if writable), else under
+    ~/.cache/gyro_sim."""
+    digest = hashlib.sha256(b"".join(p.read_bytes() for p in DEPENDENCIES)).hexdigest()[:16]
+    if numba is not None and numba.config.CACHE_DIR:
+        base = Path(numba.config.CACHE_DIR)
+    else:
+        base = Path(__file__).parent / "__pycache__"
+        if not os.access(base if base.exists() else base.parent, os.W_OK):
+            base = Path.home() / ".cache" / "gyro_sim"
+    return base / f"fast_loop-{digest}"
+
+
+def _njit(fn):
+    """Compiled in nopython mode, cached on disk in :func:`cache_directory` (see the module
+    docstring); IEEE arithmetic, numpy's error model, as gyro_sim.core.fast."""
+    if numba is None:
+        return fn
+    saved = numba.config.CACHE_DIR
+    numba.config.CACHE_DIR = str(cache_directory())  # read once, when the dispatcher is made
+    try:
+        return numba.njit(cache=True, error_model="numpy")(fn)
+    finally:
+        numba.config.CACHE_DIR = saved
+
+
+@_njit
+def _finite(y):
+    for i in range(y.shape[0]):
+        if not (abs(y[i]) < float("inf")):
+            return False
+    return True
+
+
+@_njit
+def erk_march(t0, h, nsteps, y, A, B, C, K, ys, i_q0, nq,
+              work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
+              inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base,
+              ht0, p0, pdot, L_rotor, tau):
+    """`nsteps` steps of size h of the explicit tableau (A, B, C) from (t0, y), y (size,) in
+    place; step k starts at t0 + k h. K (stages, size), ys (size,): scratch.
+
+    After each step: quaternions y[i_q0 + 4 j : +4], j < nq, renormalised; the state checked.
+    Returns the number of steps completed with a finite state: nsteps, or k < nsteps when step
+    k left a non-finite state (y is then that state). The arguments from `work` on are those of
+    fast.rhs_kernel (`ht0` its `t0`, the start of the hold).
+    """
+    stages = B.shape[0]
+    hA = A * h
+    hB = B * h
+    for k in range(nsteps):
+        t = t0 + k * h
+        fast.rhs_kernel(t, y, K[0], work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                        first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
+                        flags, base, ht0, p0, pdot, L_rotor, tau)
+        for st in range(1, stages):
+            erk_stage_state(y, K, hA, st, ys)
+            fast.rhs_kernel(t + C[st] * h, ys, K[st], work, is_hinge, qrow, own_col, col_start,
+                            hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
+                            torque_axis, torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
+        erk_update(y, K, hB)
+        fast.normalize_quaternions(y, i_q0, nq)
+        if not _finite(y):
+            return k
+    return nsteps
