@@ -25,8 +25,8 @@ from gyro_sim.core.integrators import (
 )
 from gyro_sim.core.rotations import quat_exp, quat_mul, quat_to_matrix
 
-NAMES = ("rk4", "dop853", "radau", "lie4")
-FIXED = ("rk4", "lie4")
+NAMES = ("rk4", "dop853", "radau", "lie4", "gauss4")
+FIXED = ("rk4", "lie4", "gauss4")
 ADAPTIVE = ("dop853", "radau")
 NO_QUAT = np.zeros((0, 4), dtype=int)
 

@@ -111,7 +111,7 @@ def test_simulator_system_kernels_in_one_direction():
     assert not g[core + "fast"] & {core + "system", core + "simulator"}
     assert core + "fast" not in g[core + "simulator"]  # the simulator asks the system module
     integrators = [m for m in g if m.startswith(core + "integrators")]
-    assert len(integrators) == 7  # the package, base and one module per method
+    assert len(integrators) == 9  # the package, base, one module per method and choose
     for m in integrators:
         assert not g[m] & {core + "simulator", core + "fast", core + "dynamics"}, m
 
