@@ -77,6 +77,20 @@ def recorder_options(cfg) -> dict:
     return {"overwrite": True} if getattr(cfg, "overwrite", False) else {}
 
 
+def stiffness_note(sim, cfg) -> str:
+    """A warning when the explicit fixed-step method runs a scene too stiff for its step
+    (gyro_sim.core.integrators.choose: h |lambda| at the initial state against RK4's limit)."""
+    if cfg.integrator not in ("rk4", "lie4"):
+        return ""
+    from ..core.integrators.choose import fixed_step_method
+
+    name, reason = fixed_step_method(sim, cfg.dt)
+    if name == "rk4":
+        return ""
+    return (f"the scene is stiff for {cfg.integrator} at physics_rate {cfg.physics_rate:g} Hz ({reason}); "
+            f"it may stop with a simulation error: raise physics_rate or try -p integrator:={name}")
+
+
 class GyroSimNode(Node):
     """The simulation node. Raises ParameterError (nothing created) on invalid parameters."""
 
@@ -116,6 +130,9 @@ class GyroSimNode(Node):
             f"real-time factor {cfg.real_time_factor:g}, {self.loop.per_chunk} steps per wake-up"
             + (f"; recording to {cfg.record}" if cfg.record else "")
         )
+        self.stiffness_note = stiffness_note(self.sim, cfg)
+        if self.stiffness_note:
+            self.get_logger().warning(self.stiffness_note)
 
     def on_command(self, raw: bytes) -> None:
         """Bounded work: decode (no rclpy message objects), check, keep as the latest."""

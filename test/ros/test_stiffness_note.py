@@ -1,0 +1,28 @@
+"""The node warns at start when its explicit fixed-step method meets a scene too stiff for
+the physics step (and says nothing otherwise)."""
+from __future__ import annotations
+
+import yaml
+
+from gyro_sim import Simulator
+from gyro_sim.paths import find_scene
+from gyro_sim.ros.node import stiffness_note
+from gyro_sim.ros.params import validate
+
+
+def note(scene: str) -> str:
+    cfg = validate({"scene": scene, "integrator": "rk4", "physics_rate": 1000.0})
+    return stiffness_note(Simulator(cfg.scene, integrator=cfg.integrator, step=cfg.dt), cfg)
+
+
+def test_no_note_on_the_shipped_hinge_chain():
+    assert note("hinge_chain") == ""
+
+
+def test_a_fast_heavy_top_is_stiff_for_rk4_at_1_khz(tmp_path):
+    top = yaml.safe_load(find_scene("heavy_top").read_text())
+    top["bodies"][0]["initial"]["euler_rates"][2] = 1e4  # spin, rad/s
+    path = tmp_path / "fast_top.yaml"
+    path.write_text(yaml.safe_dump(top))
+    text = note(str(path))
+    assert "stiff for rk4 at physics_rate 1000 Hz" in text and "integrator:=gauss4" in text, text
