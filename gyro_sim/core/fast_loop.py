@@ -31,15 +31,11 @@ try:
 except ImportError:  # pragma: no cover - exercised only where numba is missing
     numba = None
 
-#: the files whose kernels the loops compile in (the key of their cache directory)
-DEPENDENCIES = (Path(fast.__file__), Path(rk_kernels.__file__), Path(__file__))
-
-
-def cache_directory() -> Path:
-    """Where the loops' compiled code is cached: `fast_loop-<digest of DEPENDENCIES>` under
-    NUMBA_CACHE_DIR when set, else under this package's __pycache__ (if writable), else under
-    ~/.cache/gyro_sim."""
-    digest = hashlib.sha256(b"".join(p.read_bytes() for p in DEPENDENCIES)).hexdigest()[:16]
+def cache_directory(files) -> Path:
+    """Where kernels compiled from `files` (paths) are cached: `fast_loop-<digest of the files>`
+    under NUMBA_CACHE_DIR when set, else under this package's __pycache__ (if writable), else
+    under ~/.cache/gyro_sim."""
+    digest = hashlib.sha256(b"".join(Path(p).read_bytes() for p in files)).hexdigest()[:16]
     if numba is not None and numba.config.CACHE_DIR:
         base = Path(numba.config.CACHE_DIR)
     else:
@@ -49,17 +45,52 @@ def cache_directory() -> Path:
     return base / f"fast_loop-{digest}"
 
 
-def _njit(fn):
-    """Compiled in nopython mode, cached on disk in :func:`cache_directory` (see the module
-    docstring); IEEE arithmetic, numpy's error model, as gyro_sim.core.fast."""
-    if numba is None:
-        return fn
-    saved = numba.config.CACHE_DIR
-    numba.config.CACHE_DIR = str(cache_directory())  # read once, when the dispatcher is made
-    try:
-        return numba.njit(cache=True, error_model="numpy")(fn)
-    finally:
-        numba.config.CACHE_DIR = saved
+def njit_with_dependencies(*files):
+    """A decorator: compiled in nopython mode (IEEE arithmetic, numpy's error model, as
+    gyro_sim.core.fast), cached on disk in :func:`cache_directory` of `files`, the files of
+    every kernel the function compiles in (its own included): an edit of any starts afresh."""
+
+    def decorate(fn):
+        if numba is None:
+            return fn
+        saved = numba.config.CACHE_DIR
+        numba.config.CACHE_DIR = str(cache_directory(files))  # read when the dispatcher is made
+        try:
+            return numba.njit(cache=True, error_model="numpy")(fn)
+        finally:
+            numba.config.CACHE_DIR = saved
+
+    return decorate
+
+
+class Direct:
+    """A compiled kernel called without numba's per-call type dispatch: the first call goes
+    through the dispatcher (compiling or loading), later calls straight to the compiled
+    entry point of that first call's signature (numba resolves the types of every argument on
+    every call otherwise: ~0.3 us an argument, 5-10 us for the kernels here).
+
+    The caller guarantees that every later call passes arguments of the first call's types
+    (dtype, dimensions, C-contiguous arrays; float and int scalars): the entry point converts,
+    it does not check. Without numba, the plain function is called.
+    """
+
+    def __init__(self, kernel):
+        self.kernel = kernel
+        self.entry = None
+
+    def __call__(self, *args):
+        if self.entry is not None:
+            return self.entry(*args)
+        out = self.kernel(*args)
+        if numba is not None:
+            signature = tuple(numba.typeof(a) for a in args)
+            self.entry = self.kernel.overloads[signature].entry_point
+        return out
+
+
+#: the files whose kernels the loops compile in (the key of their cache directory)
+DEPENDENCIES = (Path(fast.__file__), Path(rk_kernels.__file__), Path(__file__))
+_njit = njit_with_dependencies(*DEPENDENCIES)
 
 
 @_njit

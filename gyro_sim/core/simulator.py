@@ -102,7 +102,49 @@ class Simulator:
         self._axis_angle = np.array([i_phi[h] if h >= 0 else i_kappa[r]
                                      for h, r in zip(m.axis_hinge, m.axis_rotor)], dtype=int)
         self._conserved = inv.conserved(m)
+        self._joint_layout()
+        # snapshots from compiled code when the system has it (the numba backend)
+        self._compiled_outputs = getattr(self.system, "outputs", None)
         self.reset()
+
+    def _joint_layout(self) -> None:
+        """The joint-state entries in order (SPEC.md): their names, and where each entry's
+        position, velocity and effort come from in the sources of `_joint_arrays`: the Euler
+        angles of every body (3 n, zero effort), the hinges, the torque rotors, the speed rotors."""
+        m = self.model
+        n, nh, nt = m.n, len(m.hinge_bodies), len(m.torque_body)
+        names, idx = [], []
+        ih = 0
+        for k, body in enumerate(m.names):
+            if m.is_hinge[k]:
+                names.append(body)
+                idx.append(3 * n + ih)
+                ih += 1
+            else:
+                names += [f"{body}_psi", f"{body}_theta", f"{body}_phi"]
+                idx += [3 * k, 3 * k + 1, 3 * k + 2]
+            for i in self._rotors_of[k][0]:
+                names.append(m.torque_names[i])
+                idx.append(3 * n + nh + i)
+            for i in self._rotors_of[k][1]:
+                names.append(m.speed_names[i])
+                idx.append(3 * n + nh + nt + i)
+        self._joint_names = names
+        self._joint_index = np.array(idx, dtype=np.intp)
+
+    def _joint_arrays(self, euler, rates, kdot_t, L_v, hinge_tau, L_rotor):
+        """position, velocity, effort (J,) of the joint states from their sources (see
+        `_joint_layout`): euler, rates (n, 3); kdot_t (nt,) torque-rotor angle rates; L_v (nv,)
+        speed-rotor motor torques; the held commands (None: zero)."""
+        m = self.model
+        nh, nt = len(m.hinge_bodies), len(m.torque_body)
+        u = self._y[m.i_vel]
+        pos = np.concatenate((euler.ravel(), self._y[m.i_phi], self._y[m.i_kappa], m.speed_rate * self._t))
+        vel = np.concatenate((rates.ravel(), u[m.col_hinge], kdot_t, m.speed_rate))
+        eff = np.concatenate((np.zeros(3 * m.n), np.zeros(nh) if hinge_tau is None else hinge_tau,
+                              np.zeros(nt) if L_rotor is None else L_rotor, L_v))
+        i = self._joint_index
+        return pos[i], vel[i], eff[i]
 
     # --- state -----------------------------------------------------------------------------
     def reset(self) -> None:
@@ -212,7 +254,18 @@ class Simulator:
             self._kin_ok = True
         return d
 
+    # On the numba backend every output comes from one compiled call (FastChainODE.outputs),
+    # the snapshot's and these alike (a log re-simulates bit for bit against any of them); the
+    # numpy reference (`_..._numpy`) is what the compiled outputs are tested against.
     def body_states(self) -> list[BodyState]:
+        """Pose and velocity of every body."""
+        if self._compiled_outputs is None:
+            return self._body_states_numpy()
+        o = self._outputs_compiled()
+        return [BodyState(name, o["O"][k], o["R"][k], o["quat"][k], o["w"][k], o["vO"][k])
+                for k, name in enumerate(self.model.names)]
+
+    def _body_states_numpy(self) -> list[BodyState]:
         from .rotations import matrix_to_quat
 
         m = self.model
@@ -234,48 +287,37 @@ class Simulator:
         return euler, omegas_to_euler_rates(euler, d.w, self.model.down)
 
     def joint_states(self) -> JointStates:
-        """Euler angles of spherical joints, hinge angles, rotor angles (SPEC.md)."""
+        """Euler angles of spherical joints, hinge angles, rotor angles (SPEC.md); the same
+        numbers as `snapshot()` (compiled on the numba backend), which logs re-simulate against."""
+        if self._compiled_outputs is not None:
+            pos, vel, eff = self._joint_arrays_compiled(self._outputs_compiled())
+        else:
+            pos, vel, eff = self._joint_arrays_numpy()
+        return JointStates(list(self._joint_names), pos.tolist(), vel.tolist(), eff.tolist())
+
+    def _joint_arrays_numpy(self):
+        """The joint states' arrays from the numpy reference."""
         m = self.model
         ev = self._evaluate() if len(m.speed_body) else None
         d = self._kinematics()
         hinge_tau, L_rotor = self._inputs()
         euler, rates = self._euler(d)
-        y, u = self._y, self._y[m.i_vel]
-        phi, phid = y[m.i_phi], u[m.col_hinge]
-        kappa = y[m.i_kappa]
-        if len(m.torque_body):
-            kdot_t = dyn.torque_rotor_rates(m, d, self._p)  # kappa_i' (eqs 18-19)
+        kdot_t = dyn.torque_rotor_rates(m, d, self._p) if len(m.torque_body) else np.zeros(0)  # (18-19)
+        L_v = np.zeros(0)
         if len(m.speed_body):  # the motor keeps kappa_i' constant: L_i = A_i (w' . e_i)
             e_v = dyn.matvec(d.R[m.speed_body], m.speed_axis)
             L_v = m.speed_A * np.einsum("ni,ni->n", ev.acc_w[m.speed_body], e_v)
-        names, pos, vel, eff = [], [], [], []
-        ih = 0
-        for k, body in enumerate(m.names):
-            if m.is_hinge[k]:
-                names.append(body)
-                pos.append(float(phi[ih]))
-                vel.append(float(phid[ih]))
-                eff.append(0.0 if hinge_tau is None else float(hinge_tau[ih]))
-                ih += 1
-            else:
-                names += [f"{body}_psi", f"{body}_theta", f"{body}_phi"]
-                pos += euler[k].tolist()
-                vel += rates[k].tolist()
-                eff += [0.0, 0.0, 0.0]
-            for i in self._rotors_of[k][0]:
-                names.append(m.torque_names[i])
-                pos.append(float(kappa[i]))
-                vel.append(float(kdot_t[i]))
-                eff.append(0.0 if L_rotor is None else float(L_rotor[i]))
-            for i in self._rotors_of[k][1]:
-                names.append(m.speed_names[i])
-                pos.append(float(m.speed_rate[i] * self._t))
-                vel.append(float(m.speed_rate[i]))
-                eff.append(float(L_v[i]))
-        return JointStates(names, pos, vel, eff)
+        return self._joint_arrays(euler, rates, kdot_t, L_v, hinge_tau, L_rotor)
 
     def wrenches(self) -> list[Wrench]:
         """R^k (eq 40) and L^k (eq 48) at every joint, in the body's own frame."""
+        if self._compiled_outputs is None:
+            return self._wrenches_numpy()
+        o = self._outputs_compiled()
+        return [Wrench(name, name, o["wrench_force"][k], o["wrench_moment"][k])
+                for k, name in enumerate(self.model.names)]
+
+    def _wrenches_numpy(self) -> list[Wrench]:
         ev = self._evaluate()
         d = self.system.data
         R, L = dyn.reactions(self.model, d, ev.f_ang, ev.f_lin)
@@ -290,6 +332,11 @@ class Simulator:
         "lagrange_82" (eq 82, = -vertical_momentum) and "lagrange_85" (eq 85, = 2 (energy - const),
         see :func:`gyro_sim.core.lagrange.physical_invariants`).
         """
+        if self._compiled_outputs is None:
+            return self._invariants_numpy()
+        return self._invariants_compiled(self._outputs_compiled())
+
+    def _invariants_numpy(self) -> dict[str, float]:
         d = self._kinematics()
         out = inv.invariants(self.model, d, self._p, self._t)
         if self._lagrange is not None:
@@ -322,29 +369,81 @@ class Simulator:
 
     def snapshot(self, *, bodies: bool = True, wrenches: bool = True, invariants: bool = True) -> Snapshot:
         """The outputs at the current time (gyro_sim.core.snapshot.Snapshot); parts switched off
-        are None and not computed."""
-        m = self.model
-        js = self.joint_states()
+        are None and not computed. On the numba backend every part comes from one compiled call
+        (`FastChainODE.outputs`), else from the numpy reference; both agree to round-off."""
+        if self._compiled_outputs is not None:
+            return self._snapshot_compiled(bodies, wrenches, invariants)
+        return self._snapshot_numpy(bodies, wrenches, invariants)
+
+    def _snapshot_numpy(self, bodies: bool = True, wrenches: bool = True, invariants: bool = True) -> Snapshot:
+        pos, vel, eff = self._joint_arrays_numpy()
         kw = {}
         if bodies:
-            states = self.body_states()
+            states = self._body_states_numpy()
             kw["body_position"] = np.array([b.position for b in states])
             kw["body_quaternion"] = np.array([b.quaternion for b in states])
         if wrenches:
-            ws = self.wrenches()
+            ws = self._wrenches_numpy()
             kw["wrench_force"] = np.array([w.force for w in ws])
             kw["wrench_moment"] = np.array([w.moment for w in ws])
         if invariants:
-            now = self.invariants()
-            ref = self.reference_invariants()
-            kw["invariants"] = now
-            kw["drift"] = {name: inv.relative_drift(name, ref, now[name]) for name in self._conserved}
-            kw["work"] = self._work
-            if "energy" in self._conserved:
-                kw["energy_balance"] = now["energy"] - ref["energy"] - self._work
-                kw["energy_scale"] = inv.drift_scale("energy", ref)
+            kw.update(self._invariant_parts(self._invariants_numpy()))
+        return self._snapshot(pos, vel, eff, kw)
+
+    def _outputs_compiled(self) -> dict:
+        """Every output of the current state from one compiled call (FastChainODE.outputs)."""
+        self.system.hold(self._t, self._p, *self._inputs())
+        return self._compiled_outputs(self._t, self._y)
+
+    def _joint_arrays_compiled(self, o: dict):
+        return self._joint_arrays(o["euler"], o["euler_rate"], o["ydot"][self.model.i_kappa], o["L_speed"],
+                                  *self._inputs())
+
+    def _snapshot_compiled(self, bodies: bool, wrenches: bool, invariants: bool) -> Snapshot:
+        m = self.model
+        o = self._outputs_compiled()
+        pos, vel, eff = self._joint_arrays_compiled(o)
+        kw = {}
+        if bodies:
+            kw["body_position"], kw["body_quaternion"] = o["O"], o["quat"]
+        if wrenches:
+            kw["wrench_force"], kw["wrench_moment"] = o["wrench_force"], o["wrench_moment"]
+        if invariants:
+            kw.update(self._invariant_parts(self._invariants_compiled(o)))
+        return self._snapshot(pos, vel, eff, kw)
+
+    def _invariants_compiled(self, o: dict) -> dict:
+        """The invariants (as gyro_sim.core.invariants.invariants) from the compiled outputs."""
+        m, v = self.model, o["inv"]
+        now = {"energy": float(v[0]), "kinetic": float(v[1]), "potential": float(v[2])}
+        if m.lam_speed is not None:
+            now["jacobi"] = float(v[3])
+        now["angular_momentum_O1"] = v[5:8].copy()
+        now["vertical_momentum"] = float(v[4])
+        if m.free:
+            now["linear_momentum"] = v[8:11].copy()
+            now["angular_momentum"] = v[11:14].copy()
+        if self._lagrange is not None:
+            from .lagrange import energy_integral_85, vertical_momentum_82
+
+            now["lagrange_82"] = vertical_momentum_82(self._lagrange, o["euler"], o["euler_rate"])
+            now["lagrange_85"] = energy_integral_85(self._lagrange, o["euler"], o["euler_rate"])
+        return now
+
+    def _invariant_parts(self, now: dict) -> dict:
+        """The snapshot's invariants, drifts since the reset, work and energy balance."""
+        ref = self.reference_invariants()
+        kw = {"invariants": now,
+              "drift": {name: inv.relative_drift(name, ref, now[name]) for name in self._conserved},
+              "work": self._work}
+        if "energy" in self._conserved:
+            kw["energy_balance"] = now["energy"] - ref["energy"] - self._work
+            kw["energy_scale"] = inv.drift_scale("energy", ref)
+        return kw
+
+    def _snapshot(self, pos, vel, eff, kw: dict) -> Snapshot:
+        m = self.model
         return Snapshot(
-            time=self._t, joint_names=tuple(js.name), position=np.array(js.position, dtype=float),
-            velocity=np.array(js.velocity, dtype=float), effort=np.array(js.effort, dtype=float),
+            time=self._t, joint_names=tuple(self._joint_names), position=pos, velocity=vel, effort=eff,
             axis_names=tuple(m.axis_names), axis_moments=self._moments.copy(), integrator=self.integrator_name,
             error_estimate=self.error_estimate, body_names=tuple(m.names), **kw)

@@ -26,9 +26,9 @@ from typing import Protocol
 import numpy as np
 
 from . import dynamics as dyn
-from . import fast, fast_loop
+from . import fast, fast_loop, fast_outputs
 from .model import Model, initial_state
-from .rotations import quat_rates
+from .rotations import EULER_SINGULAR_SIN, quat_rates
 
 
 class OdeSystem(Protocol):
@@ -135,7 +135,17 @@ class FastChainODE:
         self._work = fast.workspace(model)
         self._i_q0 = int(model.i_quat[0, 0]) if len(model.sph_bodies) else 0
         self._nq = len(model.sph_bodies)
-        self._stage_rows: dict[int, np.ndarray] = {}  # march_explicit_rk: stages (s, size)
+        # march_explicit_rk: per tableau (by its A) the kernel's copies of A, B, C and the stages K
+        self._tableaus: dict[int, tuple] = {}
+        self._march = fast_loop.Direct(fast_loop.erk_march)  # bound once: the types stay the same
+        self._outputs = fast_loop.Direct(fast_outputs.outputs_kernel)
+        self._speed_args = (  # outputs: the model beyond the kernel's arguments
+            np.ascontiguousarray(model.base_position, dtype=np.float64),
+            np.ascontiguousarray(model.down, dtype=np.float64), EULER_SINGULAR_SIN,
+            np.ascontiguousarray(model.speed_body, dtype=np.int64),
+            np.ascontiguousarray(np.reshape(model.speed_axis, (-1, 3)), dtype=np.float64),
+            np.ascontiguousarray(model.speed_A, dtype=np.float64),
+            np.ascontiguousarray(model.speed_rate, dtype=np.float64))
         self._ys = np.empty(model.size)
         self._set_inputs(self._ref.t0, self._ref.p0, None, None)
 
@@ -178,14 +188,44 @@ class FastChainODE:
         rhs evaluations in nfev."""
         if y.shape != (self.size,) or y.dtype != np.float64 or not y.flags.c_contiguous:
             raise ValueError(f"y must be a contiguous float64 array of shape ({self.size},)")
-        stages = B.shape[0]
-        K = self._stage_rows.get(stages)
-        if K is None:
-            K = self._stage_rows[stages] = np.empty((stages, self.size))
-        done = fast_loop.erk_march(float(t0), float(h), int(nsteps), y, A, B, C, K,
-                                   self._ys, self._i_q0, self._nq, *self._args)
-        self.nfev += stages * min(done + 1, nsteps)
+        tableau = self._tableaus.get(id(A))
+        if tableau is None or tableau[0] is not A:  # the kernel's types, checked once per tableau
+            stages = len(B)
+            if np.shape(A) != (stages, stages) or np.shape(C) != (stages,):
+                raise ValueError("A must be (s, s), B and C (s,)")
+            tableau = self._tableaus[id(A)] = (A, *(np.array(x, dtype=np.float64) for x in (A, B, C)),
+                                               np.empty((stages, self.size)))
+        _, A_, B_, C_, K = tableau
+        done = self._march(float(t0), float(h), int(nsteps), y, A_, B_, C_, K,
+                           self._ys, self._i_q0, self._nq, *self._args)
+        self.nfev += len(B_) * min(done + 1, nsteps)
         return done
+
+    def outputs(self, t: float, y: np.ndarray) -> dict[str, np.ndarray]:
+        """Every output at (t, y) with the inputs held, in one compiled call
+        (:func:`gyro_sim.core.fast_outputs.outputs_kernel`); new arrays, by name:
+
+        ydot (size,) y' (u' and the torque-rotor angle rates in it), R (n, 3, 3) world_R_body,
+        w (n, 3) angular velocities, vO (n, 3) velocities of the joint points, O (n, 3) joint points,
+        quat (n, 4) world from body, euler and euler_rate (n, 3), L_speed (nv,) speed-rotor
+        motor torques, wrench_force and wrench_moment (n, 3) R^k (eq 40) and L^k (eq 48) in
+        body k's frame, inv (fast_outputs.INV_SIZE,) energy, kinetic, potential, jacobi,
+        vertical momentum, H_O1 (3), P (3), L about the centre of mass (3). Not counted in nfev.
+        """
+        m, n = self.model, self.model.n
+        out = {"ydot": np.empty(self.size), "R": np.empty((n, 3, 3)), "w": np.empty((n, 3)),
+               "vO": np.empty((n, 3)), "O": np.empty((n, 3)), "quat": np.empty((n, 4)),
+               "euler": np.empty((n, 3)), "euler_rate": np.empty((n, 3)),
+               "L_speed": np.empty(len(m.speed_body)), "wrench_force": np.empty((n, 3)),
+               "wrench_moment": np.empty((n, 3)), "inv": np.empty(fast_outputs.INV_SIZE)}
+        y = np.ascontiguousarray(y, dtype=np.float64)
+        if y.shape != (self.size,):
+            raise ValueError(f"y must have shape ({self.size},), got {y.shape}")
+        self._outputs(float(t), y, out["ydot"], *self._args, *self._speed_args,
+                                    out["R"], out["w"], out["vO"], out["O"], out["quat"], out["euler"], out["euler_rate"],
+                                    out["L_speed"], out["wrench_force"], out["wrench_moment"],
+                                    out["inv"])
+        return out
 
     def warm_up(self) -> None:
         """Compile the kernels (or load them from the disk cache) by one evaluation at the
@@ -196,6 +236,7 @@ class FastChainODE:
         self.nfev -= 1
         one = np.zeros((1, 1))  # any tableau: zero steps compile the loop for every tableau
         self.march_explicit_rk(one, one[0], one[0], self._ref.t0, y, 1.0, 0)
+        self.outputs(self._ref.t0, y)
 
     def project(self, y: np.ndarray) -> None:
         """Renormalise the quaternions of y (size,) in place."""

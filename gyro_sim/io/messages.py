@@ -43,7 +43,7 @@ from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
-from .cdr import NS_PER_S, CdrWriter
+from .cdr import NS_PER_S, CdrWriter, Refill
 
 # --- names ---------------------------------------------------------------------------------------
 WORLD_FRAME = "world"
@@ -160,21 +160,30 @@ def _finite(a, what: str) -> np.ndarray:
 # --- one message each ------------------------------------------------------------------------------
 def joint_state(snap, t_ns: int) -> bytes:
     """sensor_msgs/JointState: header, name[], position[], velocity[], effort[]."""
-    w = CdrWriter()
+    return bytes(_joint_state(CdrWriter(), snap.joint_names, _finite(snap.position, "joint_states.position"),
+                              _finite(snap.velocity, "joint_states.velocity"),
+                              _finite(snap.effort, "joint_states.effort"), t_ns))
+
+
+def _joint_state(w: CdrWriter, names, position, velocity, effort, t_ns: int) -> CdrWriter:
     w.header(t_ns, "")
-    w.strings(snap.joint_names)
-    w.f64_seq(_finite(snap.position, "joint_states.position"))
-    w.f64_seq(_finite(snap.velocity, "joint_states.velocity"))
-    w.f64_seq(_finite(snap.effort, "joint_states.effort"))
-    return bytes(w)
+    w.strings(names)
+    w.f64_seq(position)
+    w.f64_seq(velocity)
+    w.f64_seq(effort)
+    return w
 
 
 def wrench_stamped(t_ns: int, frame: str, force, moment) -> bytes:
     """geometry_msgs/WrenchStamped: header, wrench (force, torque)."""
-    w = CdrWriter()
+    return bytes(_wrench_stamped(CdrWriter(), t_ns, frame, np.concatenate(
+        [_finite(force, f"wrench {frame}.force"), _finite(moment, f"wrench {frame}.torque")])))
+
+
+def _wrench_stamped(w: CdrWriter, t_ns: int, frame: str, wrench) -> CdrWriter:
     w.header(t_ns, frame)
-    w.f64_block(np.concatenate([_finite(force, f"wrench {frame}.force"), _finite(moment, f"wrench {frame}.torque")]))
-    return bytes(w)
+    w.f64_block(wrench)
+    return w
 
 
 def _poses_xyzw(snap, what: str) -> np.ndarray:
@@ -186,24 +195,28 @@ def _poses_xyzw(snap, what: str) -> np.ndarray:
 
 def pose_array(snap, t_ns: int) -> bytes:
     """geometry_msgs/PoseArray of every body, frame "world"."""
-    poses = _poses_xyzw(snap, "poses")
-    w = CdrWriter()
+    return bytes(_pose_array(CdrWriter(), _poses_xyzw(snap, "poses"), t_ns))
+
+
+def _pose_array(w: CdrWriter, poses, t_ns: int) -> CdrWriter:
     w.header(t_ns, WORLD_FRAME)
     w.u32(len(poses))
     w.f64_block(poses)  # Pose = 7 float64, no padding between poses
-    return bytes(w)
+    return w
 
 
 def tf_message(snap, t_ns: int) -> bytes:
     """tf2_msgs/TFMessage: world -> each body frame, named after the body."""
-    poses = _poses_xyzw(snap, "tf")
-    w = CdrWriter()
+    return bytes(_tf_message(CdrWriter(), snap.body_names, _poses_xyzw(snap, "tf"), t_ns))
+
+
+def _tf_message(w: CdrWriter, body_names, poses, t_ns: int) -> CdrWriter:
     w.u32(len(poses))
-    for name, pose in zip(snap.body_names, poses):
+    for name, pose in zip(body_names, poses):
         w.header(t_ns, WORLD_FRAME)
         w.string(name)  # child_frame_id
         w.f64_block(pose)  # Transform: translation, rotation
-    return bytes(w)
+    return w
 
 
 def clock(t_ns: int) -> bytes:
@@ -361,21 +374,42 @@ class Publication:
         self.wrench_topics = tuple(wrench_topic(b, namespace) for b in self.body_names)
         self.poses_topic = f"{namespace}/poses"
         self.hardware_id = hardware_id
+        # the messages of fixed layout, written once and refilled (same bytes as the builders)
+        n = len(self.body_names)
+        zeros = np.zeros((n, 7))
+        self._wrenches = Refill([_wrench_stamped(CdrWriter(record=True), 0, b, zeros[0, :6]) for b in self.body_names])
+        self._poses = Refill([_pose_array(CdrWriter(record=True), zeros, 0)])
+        self._tf = Refill([_tf_message(CdrWriter(record=True), self.body_names, zeros, 0)])
+        self._joints: tuple[tuple[str, ...], Refill] | None = None
+
+    def _joint_refill(self, names: tuple[str, ...]) -> Refill:
+        if self._joints is None or (self._joints[0] is not names and self._joints[0] != names):
+            z = np.zeros(len(names))
+            self._joints = (names, Refill([_joint_state(CdrWriter(record=True), names, z, z, z, 0)]))
+        return self._joints[1]
 
     def messages(self, snap, t_ns: int, *, poses: bool = True, tf: bool = True,
                  diagnostics_run: Status | None | bool = False) -> list[tuple[str, str, bytes]]:
         """The snapshot's messages. Wrenches when the snapshot has them; poses and /tf when asked
         and the snapshot has bodies; diagnostics when `diagnostics_run` is not False (None: the
-        dynamics status only; a Status: that too)."""
-        out = [(JOINT_STATES, JOINT_STATE_TYPE, joint_state(snap, t_ns)), (CLOCK, CLOCK_TYPE, clock(t_ns))]
+        dynamics status only; a Status: that too). The same bytes as the builders above."""
+        js = np.concatenate((snap.position, snap.velocity, snap.effort))
+        if not np.all(np.isfinite(js)):
+            joint_state(snap, t_ns)  # raises, naming the field
+        (data,) = self._joint_refill(tuple(snap.joint_names)).fill(t_ns, js)
+        out = [(JOINT_STATES, JOINT_STATE_TYPE, data), (CLOCK, CLOCK_TYPE, clock(t_ns))]
         if snap.wrench_force is not None:
-            for topic, frame, f, m in zip(self.wrench_topics, self.body_names, snap.wrench_force, snap.wrench_moment):
-                out.append((topic, WRENCH_TYPE, wrench_stamped(t_ns, frame, f, m)))
-        if snap.body_position is not None:
+            wr = np.concatenate((snap.wrench_force, snap.wrench_moment), axis=1)
+            if not np.all(np.isfinite(wr)):
+                for frame, f, m in zip(self.body_names, snap.wrench_force, snap.wrench_moment):
+                    wrench_stamped(t_ns, frame, f, m)  # raises, naming the body and field
+            out += zip(self.wrench_topics, (WRENCH_TYPE,) * len(self.wrench_topics), self._wrenches.fill(t_ns, wr))
+        if snap.body_position is not None and (poses or tf):
+            xyzw = _poses_xyzw(snap, "poses" if poses else "tf")
             if poses:
-                out.append((self.poses_topic, POSE_ARRAY_TYPE, pose_array(snap, t_ns)))
+                out.append((self.poses_topic, POSE_ARRAY_TYPE, self._poses.fill(t_ns, xyzw)[0]))
             if tf:
-                out.append((TF, TF_TYPE, tf_message(snap, t_ns)))
+                out.append((TF, TF_TYPE, self._tf.fill(t_ns, xyzw)[0]))
         if diagnostics_run is not False:
             out.append((DIAGNOSTICS, DIAGNOSTICS_TYPE, diagnostics(snap, t_ns, self.hardware_id, diagnostics_run or None)))
         return out

@@ -46,16 +46,16 @@ def test_a_one_ulp_change_in_the_log_is_found(tmp_path):
     """The comparison is exact: a joint state off by one ulp at one time is reported there."""
     scene = load_scene(SCENE)
     sim = Simulator(scene)
-    real = sim.joint_states
+    real = sim.snapshot
     bad_time = 0.06
 
-    def joint_states():
-        js = real()
+    def snapshot(**kw):  # what the recorder logs: the snapshot's joint states
+        snap = real(**kw)
         if abs(sim.time - bad_time) < 1e-9:
-            js.position[4] = float(np.nextafter(js.position[4], np.inf))
-        return js
+            snap.position[4] = float(np.nextafter(snap.position[4], np.inf))
+        return snap
 
-    sim.joint_states = joint_states
+    sim.snapshot = snapshot
     path = tmp_path / "ulp.mcap"
     record_run(sim, path, duration=0.1, chunk=0.01, publish_rate=100, schedule=SCHEDULE[:2])
     res = resimulate(path)

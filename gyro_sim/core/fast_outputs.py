@@ -1,0 +1,246 @@
+"""What one publication shows, compiled with numba: joint states, poses, wrenches, invariants.
+
+:func:`outputs_kernel` computes at one (t, y), in one compiled call over the kernels of
+:mod:`gyro_sim.core.fast` (its stages and :func:`gyro_sim.core.fast.rhs_kernel`), what
+:class:`gyro_sim.core.simulator.Simulator` otherwise builds from the numpy reference
+(`joint_states`, `body_states`, `wrenches`, `invariants`); :class:`gyro_sim.core.system.
+FastChainODE` offers it as `outputs`. Same equations, about each joint point O^k instead of
+the world origin; the results agree to round-off (test/core/test_fast_outputs.py).
+
+Pipeline (all world components, about O^k unless said):
+    rhs_kernel      t, y          -> u', torque-rotor angle rates kappa'          (eqs 18-19, 48)
+    stages of fast  t, y          -> R^k, s^k, w^k, v(O^k), c^k, I^k, p^k         (eqs 29-39, 50)
+    accelerations   u', c         -> body accelerations (alpha, a(O^k))           (eq 34 differentiated)
+    wrenches        I a + p       -> subtree sums: R^k (eq 40), L^k about O^k (eq 48), body frame
+    poses           R, s          -> O^k, quaternions (w >= 0 for hinge bodies)
+    joint angles    R, w          -> Euler angles and rates (rotations.matrices_to_euler)
+    invariants      R, w, v       -> energy (eq 33 + potential), momenta (eq 79)
+
+Its cache is keyed as the loops' of :mod:`gyro_sim.core.fast_loop` (a digest of every file
+whose kernels it compiles in).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from pathlib import Path
+
+from . import fast
+from .fast import _bias_forces, _cross, _cross_add, _dot6, _joint_columns, _matvec, _positions, _velocities
+from .fast_loop import njit_with_dependencies
+
+_njit = njit_with_dependencies(Path(fast.__file__), Path(__file__))
+
+#: entries of `inv`, the invariants' output vector
+INV_ENERGY, INV_KINETIC, INV_POTENTIAL, INV_JACOBI, INV_VERTICAL = 0, 1, 2, 3, 4
+INV_H_O1, INV_P, INV_L_COM = slice(5, 8), slice(8, 11), slice(11, 14)
+INV_SIZE = 14
+
+
+@_njit
+def _matrix_to_quat(R, q):
+    """q (4,) of R (3, 3): Shepperd's method, unit, w >= 0 (rotations.matrix_to_quat)."""
+    tr = R[0, 0] + R[1, 1] + R[2, 2]
+    i, best = 0, tr
+    for a in range(3):
+        if R[a, a] > best:
+            i, best = a + 1, R[a, a]
+    if i == 0:
+        r = 0.5 * math.sqrt(1.0 + tr)
+        q[0], q[1], q[2], q[3] = r, (R[2, 1] - R[1, 2]) / (4 * r), (R[0, 2] - R[2, 0]) / (4 * r), \
+            (R[1, 0] - R[0, 1]) / (4 * r)
+    elif i == 1:
+        r = 0.5 * math.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
+        q[0], q[1], q[2], q[3] = (R[2, 1] - R[1, 2]) / (4 * r), r, (R[0, 1] + R[1, 0]) / (4 * r), \
+            (R[0, 2] + R[2, 0]) / (4 * r)
+    elif i == 2:
+        r = 0.5 * math.sqrt(1.0 - R[0, 0] + R[1, 1] - R[2, 2])
+        q[0], q[1], q[2], q[3] = (R[0, 2] - R[2, 0]) / (4 * r), (R[0, 1] + R[1, 0]) / (4 * r), r, \
+            (R[1, 2] + R[2, 1]) / (4 * r)
+    else:
+        r = 0.5 * math.sqrt(1.0 - R[0, 0] - R[1, 1] + R[2, 2])
+        q[0], q[1], q[2], q[3] = (R[1, 0] - R[0, 1]) / (4 * r), (R[0, 2] + R[2, 0]) / (4 * r), \
+            (R[1, 2] + R[2, 1]) / (4 * r), r
+    nrm = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    sgn = 1.0 if q[0] >= 0.0 else -1.0
+    for a in range(4):
+        q[a] = sgn * q[a] / nrm
+
+
+@_njit
+def _euler(R, w, down, singular, ang, rate):
+    """Euler angles (psi, theta, phi) and their rates of world_R_body R (3, 3) turning at w (3,)
+    (rotations.matrices_to_euler, omegas_to_euler_rates)."""
+    D = np.empty((3, 3))
+    for a in range(3):
+        for b in range(3):
+            D[a, b] = down[0, a] * R[0, b] + down[1, a] * R[1, b] + down[2, a] * R[2, b]
+    theta = math.acos(min(1.0, max(-1.0, D[2, 2])))
+    if math.hypot(D[0, 2], D[1, 2]) >= singular:
+        psi, phi = math.atan2(D[0, 2], -D[1, 2]), math.atan2(D[2, 0], D[2, 1])
+    else:
+        psi, phi = math.atan2(D[1, 0], D[0, 0]), 0.0
+    ang[0], ang[1], ang[2] = psi, theta, phi
+    wd = np.empty(3)
+    for a in range(3):
+        wd[a] = w[0] * down[0, a] + w[1] * down[1, a] + w[2] * down[2, a]
+    c, s = math.cos(psi), math.sin(psi)
+    st = math.sin(theta)
+    dphi = (wd[0] * s - wd[1] * c) / st if abs(st) > singular else 0.0
+    rate[0] = wd[2] - dphi * math.cos(theta)
+    rate[1] = wd[0] * c + wd[1] * s
+    rate[2] = dphi
+
+
+@_njit
+def outputs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                   first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
+                   base, t0, p0, pdot, L_rotor, tau,
+                   base_position, down, singular, speed_body, speed_axis, speed_A, speed_rate,
+                   R, w, vO, O, quat, euler, euler_rate, L_speed, wrench_force, wrench_moment, inv):
+    """Every output at (t, y) (the arguments up to `tau` are those of fast.rhs_kernel, whose y'
+    is left in ydot: u' and the torque-rotor angle rates kappa').
+
+    base_position (3,), down (3, 3) world_R_down of the Euler angles, singular: the Euler
+    singularity threshold (rotations.EULER_SINGULAR_SIN); speed rotors: body (nv,), axis
+    (nv, 3), A (nv,), rate (nv,). Out: R (n, 3, 3) world_R_body, w (n, 3) angular velocities,
+    vO (n, 3) velocities of O^k, O (n, 3), quat (n, 4) world from body, euler and
+    euler_rate (n, 3), L_speed (nv,) motor torques A_i (w' . e_i), wrench_force and
+    wrench_moment (n, 3) R^k (eq 40), L^k (eq 48) in body k's frame, inv (INV_SIZE,).
+    """
+    fast.rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                    first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
+                    base, t0, p0, pdot, L_rotor, tau)
+    base_type, has_gravity, has_lam = flags[0], flags[1] != 0, flags[2] != 0
+    i_r0, i_vel, N = flags[3], flags[4], flags[6]
+    amp, W, gravity = base[0:3], base[3], base[4:7]
+    n, nt = mass.shape[0], torque_body.shape[0]
+    s_w = np.empty((n, 3))
+    hk = np.empty((n, 3))
+    Aw = np.empty((n, 3, 3))
+    e_w = np.empty((n, 3))
+    c = np.empty((n, 6))
+    I6 = np.empty((n, 6, 6))
+    pb = np.empty((n, 6))
+    lam_b = np.empty((n, 3))
+    dlam_b = np.empty((n, 3))
+    S = np.empty((N, 6))
+    p = np.empty(nt)
+    for i in range(nt):
+        p[i] = p0[i] + pdot[i] * (t - t0)  # (29)
+    # positions, velocities, body inertias and forces at zero acceleration (as rhs_kernel)
+    _positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, hk, Aw, e_w)
+    _velocities(t, y, is_hinge, own_col, base_type, amp, W, i_vel, s_w, e_w, w, vO, c)
+    _bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
+                 torque_A, p, L_rotor, has_gravity, gravity, lam_b, dlam_b, I6, pb)
+    _joint_columns(is_hinge, own_col, base_type, e_w, S)
+    udot = ydot[i_vel:i_vel + N]
+    # body accelerations about O^k: A^k = A^{k-1} moved to O^k + c^k + S_k u'_k
+    acc = np.empty((n, 6))
+    A = np.zeros(6)
+    if base_type == fast.BASE_MOVING:
+        sw = -W * W * math.sin(W * t)
+        for a in range(3):
+            A[3 + a] = amp[a] * sw
+    for k in range(n):
+        if k > 0:
+            _cross_add(A[:3], s_w[k - 1], A[3:])  # a kernel helper
+        for r in range(6):
+            A[r] += c[k, r]
+        for j in range(col_start[k], col_start[k + 1]):
+            for r in range(6):
+                A[r] += S[j, r] * udot[j]
+        acc[k] = A
+    # wrenches: F^k = sum_{p >= k} (I a + p)^p about O^k; R^k its force (40), L^k its moment (48)
+    Fa = np.zeros(3)
+    Fl = np.zeros(3)
+    tmp = np.empty(3)
+    for k in range(n - 1, -1, -1):
+        if k < n - 1:
+            _cross(s_w[k], Fl, tmp)  # moment of F^{k+1} moved to O^k
+            for a in range(3):
+                Fa[a] += tmp[a]
+        for r in range(3):
+            Fa[r] += _dot6(I6[k, r], acc[k]) + pb[k, r]
+            Fl[r] += _dot6(I6[k, 3 + r], acc[k]) + pb[k, 3 + r]
+        for a in range(3):
+            wrench_force[k, a] = R[k, 0, a] * Fl[0] + R[k, 1, a] * Fl[1] + R[k, 2, a] * Fl[2]
+            wrench_moment[k, a] = R[k, 0, a] * Fa[0] + R[k, 1, a] * Fa[1] + R[k, 2, a] * Fa[2]
+    # poses
+    for a in range(3):
+        if base_type == fast.BASE_FREE:
+            O[0, a] = y[i_r0 + a]
+        elif base_type == fast.BASE_MOVING:
+            O[0, a] = base_position[a] + amp[a] * math.sin(W * t)
+        else:
+            O[0, a] = base_position[a]
+    for k in range(1, n):
+        for a in range(3):
+            O[k, a] = O[k - 1, a] + s_w[k - 1, a]
+    for k in range(n):
+        if is_hinge[k]:
+            _matrix_to_quat(R[k], quat[k])
+        else:
+            i = qrow[k]
+            nrm = math.sqrt(y[i] * y[i] + y[i + 1] * y[i + 1] + y[i + 2] * y[i + 2] + y[i + 3] * y[i + 3])
+            for a in range(4):
+                quat[k, a] = y[i + a] / nrm
+        _euler(R[k], w[k], down, singular, euler[k], euler_rate[k])
+    # speed rotors: the motor keeps kappa' constant, L_i = A_i (w' . e_i)
+    e = np.empty(3)
+    for i in range(speed_body.shape[0]):
+        k = speed_body[i]
+        _matvec(R[k], speed_axis[i], e)
+        L_speed[i] = speed_A[i] * (acc[k, 0] * e[0] + acc[k, 1] * e[1] + acc[k, 2] * e[2])
+    # invariants: momenta about O^k, then about the origin; (33) and the potential
+    T = 0.0
+    V = 0.0
+    lam_dot = 0.0
+    L = np.zeros(3)
+    P = np.zeros(3)
+    hsum = np.zeros(3)
+    ang = np.empty(3)
+    lin = np.empty(3)
+    for k in range(n):
+        _matvec(Aw[k], w[k], ang)  # A w + h x v(O)
+        _cross_add(hk[k], vO[k], ang)
+        _cross(w[k], hk[k], lin)  # m v(O) + w x h
+        for a in range(3):
+            lin[a] += mass[k] * vO[k, a]
+        T += 0.5 * (w[k, 0] * ang[0] + w[k, 1] * ang[1] + w[k, 2] * ang[2]
+                    + vO[k, 0] * lin[0] + vO[k, 1] * lin[1] + vO[k, 2] * lin[2])
+        _cross_add(O[k], lin, ang)  # about the origin
+        if has_lam:
+            _matvec(R[k], lam_b[k], tmp)  # lambda^k, speed and torque rotors
+            for a in range(3):
+                ang[a] += tmp[a]
+            _matvec(R[k], lam_speed[k], tmp)
+            lam_dot += w[k, 0] * tmp[0] + w[k, 1] * tmp[1] + w[k, 2] * tmp[2]
+        for a in range(3):
+            L[a] += ang[a]
+            P[a] += lin[a]
+            hsum[a] += mass[k] * O[k, a] + hk[k, a]
+    spin2 = 0.0
+    for i in range(speed_body.shape[0]):
+        spin2 += speed_A[i] * speed_rate[i] * speed_rate[i]
+    T += lam_dot + 0.5 * spin2
+    for i in range(nt):
+        T += 0.5 * torque_A[i] * p[i] * p[i]
+    if has_gravity:
+        V = -(gravity[0] * hsum[0] + gravity[1] * hsum[1] + gravity[2] * hsum[2])
+    inv[INV_ENERGY], inv[INV_KINETIC], inv[INV_POTENTIAL] = T + V, T, V
+    inv[INV_JACOBI] = T + V - lam_dot - spin2
+    _cross(O[0], P, tmp)  # H_O1 = L - O^1 x P
+    mtot = 0.0
+    for k in range(n):
+        mtot += mass[k]
+    for a in range(3):
+        inv[5 + a] = L[a] - tmp[a]
+        inv[8 + a] = P[a]
+        hsum[a] /= mtot  # the centre of mass
+    inv[INV_VERTICAL] = -(down[0, 2] * inv[5] + down[1, 2] * inv[6] + down[2, 2] * inv[7])  # (79)
+    _cross(hsum, P, tmp)
+    for a in range(3):
+        inv[11 + a] = L[a] - tmp[a]
