@@ -6,6 +6,12 @@ articulated-body recursion), the cost of one simulated second with RK4 at 1 kHz 
 real-time configuration, default backend), and, in the same run, Pinocchio's `aba` on the
 same chain when the `pin` package is installed (C++ O(n) articulated-body algorithm, called
 from Python).
+
+A second table (:func:`fixed_step`) puts the fixed-step loop beside MuJoCo: one simulated
+second of RK4 at 1 kHz on a spherical chain with a rotor on every body, CPU seconds of
+gyro_sim (one `advance(1 s)`, i.e. one compiled loop; and 1000 `advance(1 ms)` calls, the
+node's pattern) against MuJoCo's `mj_step` with its RK4 at the same step on the same chain
+(rotors as hinge bodies, gyro_sim.bench.peers), medians of `FIXED_STEP_REPEATS` runs.
 """
 from __future__ import annotations
 
@@ -23,6 +29,11 @@ from .scenes import spherical_chain
 DEFAULT_SIZES = (1, 2, 5, 10, 20, 50, 100)
 QUICK_SIZES = (1, 2, 5)
 RK4_STEP = 1e-3  # s: 1 kHz
+#: chain lengths of the fixed-step comparison with MuJoCo (rotors on every body)
+FIXED_STEP_SIZES = (10, 20, 50, 100)
+QUICK_FIXED_STEP_SIZES = (10,)
+#: runs per entry of that comparison (the median is reported)
+FIXED_STEP_REPEATS = 5
 
 
 @dataclass
@@ -106,6 +117,94 @@ def measure(sizes=DEFAULT_SIZES, min_time: float = 0.3, progress=None) -> list[R
         if progress:
             progress(i + 1, len(sizes))
     return rows
+
+
+@dataclass
+class FixedStepRow:
+    n: int
+    one_call_s: float  # CPU s per simulated second: one advance(1 s)
+    per_step_s: float  # CPU s per simulated second: advance(1 ms) x 1000
+    mujoco_s: float | None  # mj_step RK4, same step, same chain
+    mujoco_note: str = ""  # "unstable" when MuJoCo warned (bad accelerations) during the runs
+
+    def ratio(self, value: float) -> float | None:
+        return None if self.mujoco_s is None else value / self.mujoco_s
+
+
+def _median_cpu(fn, repeats: int) -> float:
+    out = []
+    for _ in range(repeats):
+        t0 = time.process_time()
+        fn()
+        out.append(time.process_time() - t0)
+    return float(np.median(out))
+
+
+def fixed_step(sizes=FIXED_STEP_SIZES, seconds: float = 1.0, repeats: int = FIXED_STEP_REPEATS,
+               progress=None) -> list[FixedStepRow]:
+    """CPU seconds per simulated second of RK4 at 1 kHz, gyro_sim (numba) and MuJoCo mj_step."""
+    rows = []
+    for i, n in enumerate(sizes):
+        scene = load_scene(spherical_chain(n, rotors=True))
+        sim = Simulator(scene, integrator="rk4", step=RK4_STEP, backend="numba")
+        steps = int(round(seconds / RK4_STEP))
+
+        def one_call():
+            sim.reset()
+            sim.advance(seconds)
+
+        def per_step():
+            sim.reset()
+            for _ in range(steps):
+                sim.advance(RK4_STEP)
+
+        one = _median_cpu(one_call, repeats) / seconds
+        per = _median_cpu(per_step, repeats) / seconds
+        mj, note = None, ""
+        try:
+            import mujoco
+
+            from .peers import MujocoChain
+        except ImportError:
+            pass
+        else:
+            warned: list[str] = []
+            chains = []
+
+            def mujoco_run():
+                chain = MujocoChain(scene, RK4_STEP, "RK4")  # from the same initial state each run
+                chains.append(chain)
+                t0 = time.process_time()
+                chain.step(steps)
+                return time.process_time() - t0
+
+            previous = mujoco.get_mju_user_warning()
+            mujoco.set_mju_user_warning(warned.append)  # MuJoCo resets an unstable run and goes on
+            try:
+                mj = float(np.median([mujoco_run() for _ in range(repeats)])) / seconds
+            finally:
+                mujoco.set_mju_user_warning(previous)
+            bad = int(mujoco.mjtWarning.mjWARN_BADQACC)
+            if warned or any(c.d.warning[bad].number for c in chains):
+                note = "unstable"
+        rows.append(FixedStepRow(n, one, per, mj, note))
+        if progress:
+            progress(i + 1, len(sizes))
+    return rows
+
+
+def fixed_step_table(rows: list[FixedStepRow]) -> str:
+    lines = [
+        "| n (rotors on every body) | gyro_sim rk4, one advance (ms) | gyro_sim rk4, advance per step (ms) "
+        "| MuJoCo mj_step RK4 (ms) | one advance / MuJoCo | per step / MuJoCo |",
+        "|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in rows:
+        mj = "n/a" if r.mujoco_s is None else f"{r.mujoco_s * 1e3:.1f}" + (f" ({r.mujoco_note})" if r.mujoco_note else "")
+        a, b = r.ratio(r.one_call_s), r.ratio(r.per_step_s)
+        lines.append(f"| {r.n} | {r.one_call_s * 1e3:.1f} | {r.per_step_s * 1e3:.1f} | {mj} | "
+                     f"{'n/a' if a is None else f'{a:.2f}x'} | {'n/a' if b is None else f'{b:.2f}x'} |")
+    return "\n".join(lines)
 
 
 def table(rows: list[Row]) -> str:
