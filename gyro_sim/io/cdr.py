@@ -124,6 +124,7 @@ class Refill:
             ends.append(at)
         self.template = np.frombuffer(b"".join(bytes(w) for w in writers), dtype=np.uint8).copy()
         self.stamp_index = (np.array(stamps, dtype=np.intp)[:, None] + np.arange(8)).ravel()
+        self.stamp_pattern = np.tile(np.arange(8), len(stamps))  # byte j of the stamp, per stamp
         self.float_index = np.concatenate(floats) if floats else np.zeros(0, dtype=np.intp)
         self.bounds = list(zip([0] + ends[:-1], ends))
         self.n_stamps = len(stamps)
@@ -135,7 +136,7 @@ class Refill:
         buf = self.template.copy()
         if self.n_stamps:
             stamp = np.frombuffer(_TIME.pack(*divmod(int(t_ns), NS_PER_S)), dtype=np.uint8)
-            buf[self.stamp_index] = np.tile(stamp, self.n_stamps)
+            buf[self.stamp_index] = stamp[self.stamp_pattern]
         buf[self.float_index] = np.ascontiguousarray(values, dtype="<f8").reshape(-1).view(np.uint8)
         data = buf.tobytes()
         if len(self.bounds) == 1:
