@@ -12,7 +12,6 @@ import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-import numpy as np  # noqa: E402
 
 from .io.mcap_log import DEFAULT_FLUSH_PERIOD  # noqa: E402
 from .progress import Progress  # noqa: E402  (cmd_run, cmd_bench_scaling)

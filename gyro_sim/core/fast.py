@@ -201,6 +201,23 @@ def _spd_inverse(D, nk):
 
 
 @_njit
+def _joint_projection(S, U, D, W, j0, nk):
+    """The joint's articulated projection from U = I^A S (rows j0 .. j0+nk): D = S^T U, its
+    inverse in place, and W = U D^-1 (what both forms of the elimination need)."""
+    for a in range(nk):
+        for b in range(a, nk):
+            D[a, b] = _dot6(S[j0 + a], U[j0 + b])
+            D[b, a] = D[a, b]
+    _spd_inverse(D, nk)
+    for a in range(nk):
+        for r in range(6):
+            acc = 0.0
+            for b in range(nk):
+                acc += U[j0 + b, r] * D[b, a]
+            W[j0 + a, r] = acc
+
+
+@_njit
 def _shift_inertia(I, d, out, Dx, T, G):
     """out += I moved from point P to Q = P - d (world axes): X^T I X, X = [[1, 0], [-d x, 1]].
 
@@ -545,17 +562,7 @@ def _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, D
                 for r in range(6):
                     U[j, r] = _dot6(IAk[r], S[j])
                 u[j] = tau[j] - _dot6(S[j], pAk)
-            for a in range(nk):
-                for b in range(a, nk):
-                    D[a, b] = _dot6(S[j0 + a], U[j0 + b])
-                    D[b, a] = D[a, b]
-            _spd_inverse(D, nk)
-            for a in range(nk):
-                for r in range(6):
-                    acc = 0.0
-                    for b in range(nk):
-                        acc += U[j0 + b, r] * D[b, a]
-                    W[j0 + a, r] = acc
+            _joint_projection(S, U, D, W, j0, nk)
             if k == 0:
                 continue
             for r in range(6):
@@ -697,17 +704,7 @@ def _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Di
             for j in range(j0, j1):
                 for r in range(6):
                     U[j, r] = _dot6(Ia[r], S[j])
-            for a in range(nk):
-                for b in range(a, nk):
-                    D[a, b] = _dot6(S[j0 + a], U[j0 + b])
-                    D[b, a] = D[a, b]
-            _spd_inverse(D, nk)
-            for a in range(nk):
-                for r in range(6):
-                    acc = 0.0
-                    for b in range(nk):
-                        acc += U[j0 + b, r] * D[b, a]
-                    W[j0 + a, r] = acc
+            _joint_projection(S, U, D, W, j0, nk)
             continue
         # the stacked factor [F_own; F_child] in joint axes Q (columns 0..2 times H for a hinge)
         sigma = 1.0

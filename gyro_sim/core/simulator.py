@@ -340,12 +340,15 @@ class Simulator:
         d = self._kinematics()
         out = inv.invariants(self.model, d, self._p, self._t)
         if self._lagrange is not None:
-            from .lagrange import energy_integral_85, vertical_momentum_82
-
-            euler, rates = self._euler(d)
-            out["lagrange_82"] = vertical_momentum_82(self._lagrange, euler, rates)  # = -vertical_momentum
-            out["lagrange_85"] = energy_integral_85(self._lagrange, euler, rates)  # = 2 (T + V - const)
+            self._add_lagrange(out, *self._euler(d))
         return out
+
+    def _add_lagrange(self, out: dict, euler, rates) -> None:
+        """The paper's own integrals of a Lagrange chain, from the Euler angles and rates."""
+        from .lagrange import energy_integral_85, vertical_momentum_82
+
+        out["lagrange_82"] = vertical_momentum_82(self._lagrange, euler, rates)  # = -vertical_momentum
+        out["lagrange_85"] = energy_integral_85(self._lagrange, euler, rates)  # = 2 (T + V - const)
 
     # --- the snapshot: everything the outside sees, once per publication ---------------------------
     @property
@@ -400,7 +403,6 @@ class Simulator:
                                   *self._inputs())
 
     def _snapshot_compiled(self, bodies: bool, wrenches: bool, invariants: bool) -> Snapshot:
-        m = self.model
         o = self._outputs_compiled()
         pos, vel, eff = self._joint_arrays_compiled(o)
         kw = {}
@@ -424,10 +426,7 @@ class Simulator:
             now["linear_momentum"] = v[8:11].copy()
             now["angular_momentum"] = v[11:14].copy()
         if self._lagrange is not None:
-            from .lagrange import energy_integral_85, vertical_momentum_82
-
-            now["lagrange_82"] = vertical_momentum_82(self._lagrange, o["euler"], o["euler_rate"])
-            now["lagrange_85"] = energy_integral_85(self._lagrange, o["euler"], o["euler_rate"])
+            self._add_lagrange(now, o["euler"], o["euler_rate"])
         return now
 
     def _invariant_parts(self, now: dict) -> dict:

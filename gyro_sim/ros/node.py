@@ -72,11 +72,6 @@ def log_params(sim, cfg) -> dict:
                       duration=cfg.duration or None, **own)
 
 
-def recorder_options(cfg) -> dict:
-    """LogWriter options from the parameters (overwrite:=true lets record replace a file)."""
-    return {"overwrite": True} if getattr(cfg, "overwrite", False) else {}
-
-
 def stiffness_note(sim, cfg) -> str:
     """A warning when the explicit fixed-step method runs a scene too stiff for its step
     (gyro_sim.core.integrators.choose: h |lambda| at the initial state against RK4's limit)."""
@@ -112,7 +107,7 @@ class GyroSimNode(Node):
             from .recorder import LiveRecorder
 
             self.recorder = LiveRecorder(cfg.record, scene=cfg.scene, params=log_params(self.sim, cfg),
-                                         **recorder_options(cfg))
+                                         overwrite=cfg.overwrite)
         try:
             self.outputs = Outputs(self, self.sim, cfg, self.recorder)
             self.loop = SimLoop(self.sim, cfg, self.outputs)

@@ -34,3 +34,16 @@ def recorded(tmp_path_factory):
     sim = Simulator(load_scene(SCENE))
     rec = record_run(sim, path, duration=DURATION, chunk=CHUNK, publish_rate=PUBLISH_RATE, schedule=SCHEDULE)
     return path, rec
+
+
+def rosbags_messages(path) -> list[tuple[str, int]]:
+    """(topic, log time) of every message in file order, each deserialised by rosbags (an
+    independent reader)."""
+    from rosbags.highlevel import AnyReader
+
+    out = []
+    with AnyReader([Path(path)]) as reader:
+        for con, t, raw in reader.messages():
+            reader.deserialize(raw, con.msgtype)
+            out.append((con.topic, t))
+    return out

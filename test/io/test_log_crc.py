@@ -2,30 +2,17 @@
 with the chunk's offset, and `recover` keeping every intact chunk after a damaged one."""
 from __future__ import annotations
 
-from pathlib import Path
 
 import pytest
 
 from gyro_sim.io.mcap_log import LogError, iter_messages, read_info
 from gyro_sim.io.recover import recover
 
-from .conftest import CHUNK, DURATION, PUBLISH_RATE, SCENE, SCHEDULE, gyro_sim
+from .conftest import CHUNK, DURATION, PUBLISH_RATE, SCENE, SCHEDULE, gyro_sim, rosbags_messages
 from .crafted import chunk_offsets, flip, truncate
 
 #: the chunk header's fixed fields before its CRC: start time, end time, uncompressed size
 CRC_FIELD = 9 + 8 + 8 + 8
-
-
-def rosbags_messages(path) -> list[tuple[str, int]]:
-    """(topic, log time) of every message, read and deserialised by rosbags (an independent reader)."""
-    from rosbags.highlevel import AnyReader
-
-    out = []
-    with AnyReader([Path(path)]) as reader:
-        for con, t, raw in reader.messages():
-            reader.deserialize(raw, con.msgtype)
-            out.append((con.topic, t))
-    return out
 
 
 @pytest.fixture(scope="module")

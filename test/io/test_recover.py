@@ -7,7 +7,6 @@ import subprocess
 import sys
 import threading
 import time
-from pathlib import Path
 
 import pytest
 
@@ -16,7 +15,7 @@ from gyro_sim.io.mcap_log import LogError, read_info
 from gyro_sim.io.recover import recover
 from gyro_sim.io.safe_paths import OutputError
 
-from .conftest import ROOT, gyro_sim
+from .conftest import ROOT, gyro_sim, rosbags_messages
 
 FLUSH_PERIOD = 0.25
 KILL_AFTER = 2.0
@@ -32,18 +31,6 @@ def progress(t, total):
 record_run(sim, sys.argv[1], duration=1000.0, chunk=0.01, publish_rate=100.0,
            flush_period={FLUSH_PERIOD}, progress=progress)
 """
-
-
-def read_rosbags(path):
-    """Every message of a file, deserialised by rosbags: (topic, log time) in order."""
-    from rosbags.highlevel import AnyReader
-
-    out = []
-    with AnyReader([Path(path)]) as reader:
-        for con, t, raw in reader.messages():
-            reader.deserialize(raw, con.msgtype)
-            out.append((con.topic, t))
-    return out
 
 
 def test_sigkill_during_recording_loses_at_most_the_last_flush_period(tmp_path):
@@ -75,7 +62,7 @@ def test_sigkill_during_recording_loses_at_most_the_last_flush_period(tmp_path):
     rec = recover(log, fixed)
     assert not rec.complete and rec.messages > 0 and rec.attachments == 1 and rec.metadata == 1
 
-    msgs = read_rosbags(fixed)  # reads cleanly
+    msgs = rosbags_messages(fixed)  # reads cleanly
     assert len(msgs) == rec.messages
     info = read_info(fixed)
     assert info.message_count == rec.messages and info.params["advance_dt"] == 0.01
