@@ -112,15 +112,29 @@ class _Watcher:
         rclpy.init(context=self.ctx, domain_id=domain)
         self.node = rclpy.create_node("gyro_sim_soak_watch", context=self.ctx)
         self.js: list[float] = []
+        self.stamps: list[int] = []  # header stamps (ns) of the /joint_states received, in order
         self.clock = float("nan")
         self.run: dict = {}
-        self.node.create_subscription(JointState, "/joint_states", lambda m: self.js.append(time.monotonic()), 1000)
+        self.node.create_subscription(JointState, "/joint_states", self._js, 1000)
         self.node.create_subscription(Clock, "/clock", self._clock, 100)
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._diag, 100)
         self.ex = SingleThreadedExecutor(context=self.ctx)
         self.ex.add_node(self.node)
         self.thread = threading.Thread(target=self._spin, daemon=True)
         self.thread.start()
+
+    def _js(self, m) -> None:
+        self.js.append(time.monotonic())
+        self.stamps.append(m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec)
+
+    def missing(self, t0: float, t1: float, period_ns: int) -> tuple[int, float]:
+        """Publications absent between the first and last /joint_states received in [t0, t1)
+        (wall): stamp steps beyond one publish period, counted in periods; and the simulated
+        time (s) those stamps span."""
+        st = [s for t, s in zip(self.js, self.stamps) if t0 <= t < t1]
+        if len(st) < 2:
+            return 0, 0.0
+        return sum(max(0, round((b - a) / period_ns) - 1) for a, b in zip(st, st[1:])), (st[-1] - st[0]) * 1e-9
 
     def _clock(self, m) -> None:
         self.clock = m.clock.sec + 1e-9 * m.clock.nanosec
@@ -171,6 +185,11 @@ class Flood:
     sent: int = 0
     hz_before: float = float("nan")
     hz_during: float = float("nan")
+    #: publications (stamp steps of one publish period) absent from /joint_states during the flood
+    missing_during: int = -1
+    #: simulated time (s) spanned by the stamps of the /joint_states received during the flood
+    stamps_span_during: float = 0.0
+    misses_before: int = 0
     misses_during: int = 0
     rtf_during: float = float("nan")
     accepted: int = 0
@@ -210,6 +229,8 @@ def flood(workdir: Path, rate: float = FLOOD_RATE, seconds: float = FLOOD_SECOND
         time.sleep(0.5)  # the diagnostics of the flood's end
         after = dict(w.run)
         out.hz_during = w.rate(t0 + 0.1, t1)
+        out.missing_during, out.stamps_span_during = w.missing(t0, t1, round(1e9 / PUBLISH_RATE))
+        out.misses_before = int(before.get("deadline_misses", 0))
         out.misses_during = int(after.get("deadline_misses", 0)) - int(before.get("deadline_misses", 0))
         out.rtf_during = float(after.get("real_time_factor_achieved", "nan"))
         out.accepted = int(after.get("commands_accepted", 0))
@@ -311,7 +332,8 @@ def report(fl: Flood | None, so: Soak | None, ki: Kills | None) -> str:
     if fl is not None:
         lines += [f"Flood: {fl.sent} commands in {fl.seconds:g} s ({fl.sent / fl.seconds:.0f} msg/s from "
                   f"{FLOOD_PUBLISHERS} processes) on ~/axis_moments; /joint_states received at "
-                  f"{fl.hz_before:.1f} Hz before and **{fl.hz_during:.1f} Hz during** the flood; "
+                  f"{fl.hz_before:.1f} Hz before and **{fl.hz_during:.1f} Hz during** the flood "
+                  f"({fl.missing_during} publications missing during it); "
                   f"{fl.misses_during} deadline misses during it, real-time factor {fl.rtf_during:.3f}; "
                   f"{fl.accepted} commands taken in by the node, {fl.superseded} superseded before a step "
                   "could apply them.", ""]

@@ -1,8 +1,15 @@
 """What the node keeps under abuse (the measurements behind `gyro-sim bench soak`).
 
 The physics thread first: a flood of 20,000 commands per second on ~/axis_moments, from two
-other processes over real DDS, leaves /joint_states at >= 95 Hz (the measurement behind
-`gyro-sim bench soak`, whose flood part this runs)."""
+other processes over real DDS, leaves /joint_states at >= 95 Hz with no publication missing
+(the measurement behind `gyro-sim bench soak`, whose flood part this runs).
+
+The rate before the flood is reported by the bench but not asserted here: it measures the
+machine, not the flood. A stall of the whole machine (CI saw 290 ms in the 2 s before a flood:
+85.5 Hz, while the node then held 100.1 Hz through the flood) makes the node slip its schedule by
+design (pacing.MAX_CATCH_UP), which no intake can prevent. What the flood could break, and what
+is asserted, is the node's own path: every publication of the flood window arrives (header
+stamps in steps of exactly one publish period), the rate and the real-time factor hold."""
 from __future__ import annotations
 
 import pytest
@@ -19,7 +26,7 @@ def test_joint_states_hold_their_rate_under_a_command_flood(tmp_path):
     (tmp_path / "ros_log").mkdir()
     fl = soak.flood(tmp_path, rate=20_000.0, seconds=4.0, publishers=2, domain=new_domain_id())
     assert fl.sent >= 0.9 * 20_000 * 4.0, fl
-    assert fl.hz_before >= 95.0, fl
+    assert fl.stamps_span_during >= 0.9 * 4.0 and fl.missing_during == 0, fl
     assert fl.hz_during >= 95.0, fl
     assert fl.rtf_during >= 0.95, fl  # the node warns below 0.95 of its target
     assert fl.accepted > 0, "the node took commands in during the flood"
