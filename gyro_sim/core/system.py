@@ -160,6 +160,17 @@ class FastChainODE:
         self._ref.hold(t0, p0, hinge_tau, L_rotor)
         self._set_inputs(t0, p0, hinge_tau, L_rotor)
 
+    def kernel_arguments(self) -> tuple:
+        """The arguments of :func:`gyro_sim.core.fast.rhs_kernel` after (t, y, out), with the
+        inputs held now (`work`, the model's arrays, the held inputs): for compiled loops of
+        other modules that call the kernel directly. Valid until the next `hold`."""
+        return self._args
+
+    def quaternion_block(self) -> tuple[int, int]:
+        """(i_q0, nq): the quaternions are y[i_q0 + 4 j : i_q0 + 4 j + 4], j < nq (for
+        fast.normalize_quaternions in compiled loops)."""
+        return self._i_q0, self._nq
+
     def spins(self, t: float) -> np.ndarray | None:
         """Absolute torque-rotor spins p_i(t) (eq 29 integrated over the hold)."""
         return self._ref.spins(t)
