@@ -6,12 +6,26 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..dop853_kernels import (
+    CONTROL_SIZE,
+    dop_clip,
+    dop_control,
+    dop_dense_coefficients,
+    dop_dense_eval,
+    dop_error_norm,
+    dop_finite,
+    dop_stage_state,
+    dop_update,
+)
 from .base import (
+    LAST_STEP_STRETCH,
     MAX_FACTOR,
     MIN_FACTOR,
+    MIN_STEP_RELATIVE,
     SAFETY,
     AdaptiveIntegrator,
     ExplicitRungeKutta,
+    IntegrationError,
     describe_nonfinite,
 )
 
@@ -217,23 +231,37 @@ _DOP_D[3, 15] = -0.14972683625798562581422125276e+3
 class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
     """Explicit Runge-Kutta method of order 8 with error control and dense output.
 
-    The Dormand-Prince 8(5,3) pair as in Hairer's dop853.f: 12 stages (the 13th, FSAL, is
-    the next step's first), an error estimate combining the 5th- and 3rd-order embedded
-    formulas (err = h |e5|^2 / sqrt(|e5|^2 + 0.01 |e3|^2), RMS-weighted, as scipy's DOP853),
-    and a dense output of order 7 that costs 3 more rhs evaluations in the steps where it
-    is asked for. Step control: h_new = h min(MAX_FACTOR, SAFETY err^(-1/8)).
+    The Dormand-Prince 8(5,3) pair as in Hairer's dop853.f (HNW I, sec. II.10): 12 stages (the
+    13th, FSAL, is the next step's first), an error estimate combining the 5th- and 3rd-order
+    embedded formulas (err = h |e5|^2 / sqrt(|e5|^2 + 0.01 |e3|^2), RMS-weighted, as scipy's
+    DOP853), and a dense output of order 7 (sec. II.6) that costs 3 more rhs evaluations in the
+    steps where it is asked for. Step control (sec. II.4): h_new = h min(MAX_FACTOR, SAFETY
+    err^(-1/8)), at most h after a rejection, h max(MIN_FACTOR, SAFETY err^(-1/8)) for a rejected
+    step, h MIN_FACTOR after a non-finite trial. The first step: `AdaptiveIntegrator._initial_step`.
+
+    One implementation, two drivers: the arithmetic (stage states, the step, the error norm,
+    the controller, the dense output) is :mod:`gyro_sim.core.dop853_kernels`. On a system that
+    offers `kernel_arguments` and `quaternion_block` (the compiled
+    :class:`gyro_sim.core.system.FastChainODE`) a whole `advance` runs in one compiled call,
+    :func:`gyro_sim.core.fast_dop853.dop853_advance`, with this class's tableau (unless
+    `stiffness_estimate`); on any other system, and for the public single step
+    (`begin` / `take_step` / `dense`, which the "auto" method drives), this class steps in
+    Python, calling the same arithmetic between its rhs evaluations. Both give the same bits
+    (test/core/test_fast_dop853.py), and so do they as scipy's DOP853 to round-off.
 
     With `stiffness_estimate=True`, each accepted step also gets dop853.f's estimate of
     h |lambda| (HLAMB), h ||f(y1) - f(Y12)|| / ||y1 - Y12|| (Y12 the last stage, at t + h): the
     step times the dominant eigenvalue along it. It needs f(y1), so it is ready after the
     `take_step` or `dense` that evaluates f(y1), or, for the last step of a call, after the
     next call's `begin` if that call continues from the step's end. `hlamb` holds it until
-    the next `begin` or `take_step` (None: not ready, or y1 = Y12).
+    the next `begin` or `take_step` (None: not ready, or y1 = Y12). Such an integrator steps
+    in Python.
 
     References
     ----------
     .. [1] E. Hairer, S. P. Norsett, G. Wanner, "Solving Ordinary Differential Equations I:
-           Nonstiff Problems", 2nd ed., Springer 1993, sec. II.5 and II.6.
+           Nonstiff Problems", 2nd ed., Springer 1993, sec. II.4 (step control), II.5, II.6
+           (dense output) and II.10 (DOP853).
     .. [2] E. Hairer, dop853.f, http://www.unige.ch/~hairer/software.html
     .. [3] scipy.integrate.DOP853 (scipy/integrate/_ivp/rk.py): the error norm and the
            dense-output evaluation are ported from there.
@@ -255,36 +283,48 @@ class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
     A_EXTRA = _DOP_A[_DOP_N_STAGES + 1:]
     C_EXTRA = _DOP_C[_DOP_N_STAGES + 1:]
     D = _DOP_D
+    #: the extended tableau the kernels read: rows 0..11 the stages, 12 the weights B (the
+    #: FSAL stage), 13..15 the extra stages of the dense output
+    A_ALL = _DOP_A
+    C_ALL = _DOP_C
+    #: the controller's constants (dop853_kernels.dop_control): SAFETY, MIN_FACTOR, MAX_FACTOR,
+    #: the exponent -1/(q + 1) of the order-q = 7 estimator, MIN_STEP_RELATIVE, LAST_STEP_STRETCH
+    CONTROL = np.array([SAFETY, MIN_FACTOR, MAX_FACTOR, -1.0 / (7 + 1), MIN_STEP_RELATIVE,
+                        LAST_STEP_STRETCH])
+    assert CONTROL.size == CONTROL_SIZE
 
     def __init__(self, system: OdeSystem, *, stiffness_estimate: bool = False, **options):
         super().__init__(system, **options)
+        n = self.n
         self.stiffness_estimate = stiffness_estimate
         #: h |lambda| of an accepted step (see the class docstring), or None
         self.hlamb: float | None = None
         self._pending = None  # (t1, y1, h, Y12, f(Y12)) of a step whose f(y1) is not known yet
-        self._K = np.empty((_DOP_N_EXTENDED, self.n))
-        self._ys = np.empty(self.n)
-        self._e5 = np.empty(self.n)
-        self._e3 = np.empty(self.n)
-        self._hA = np.empty((_DOP_N_EXTENDED, _DOP_N_EXTENDED))
+        self._K = np.zeros((_DOP_N_EXTENDED, n))
+        self._ys = np.zeros(n)
+        self._F = np.zeros((_DOP_N_DENSE, n))
+        self._atol_v = np.ascontiguousarray(np.broadcast_to(np.asarray(self.atol, dtype=float), (n,)))
         self._C_all = _DOP_C
         self._A_all = _DOP_A
         self._h = 0.0  # the accepted step (for the dense output)
-        self._exponent = -1.0 / (self.error_estimator_order + 1)
+        # the compiled loop (fast_dop853), when the system offers the kernel
+        self._loop = None
+        if callable(getattr(system, "kernel_arguments", None)) and callable(
+                getattr(system, "quaternion_block", None)):
+            from .. import fast_dop853, fast_loop
 
-    def _error_norm(self, h: float, scale: np.ndarray) -> float:
-        K, e5, e3 = self._K[:_DOP_N_STAGES], self._e5, self._e3
-        np.dot(self.E5, K, out=e5)
-        e5 /= scale
-        np.dot(self.E3, K, out=e3)
-        e3 /= scale
-        n5, n3 = float(np.dot(e5, e5)), float(np.dot(e3, e3))
-        if n5 == 0.0 and n3 == 0.0:
-            return 0.0
-        return abs(h) * n5 / math.sqrt((n5 + 0.01 * n3) * self.n)
+            self._loop = fast_loop.Direct(fast_dop853.dop853_advance)
+            self._i_q0, self._nq = (int(v) for v in system.quaternion_block())
+            self._real = np.zeros(fast_dop853.REAL_SIZE)
+            self._status = np.zeros(fast_dop853.STATUS_SIZE, dtype=np.int64)
+            self._bad = np.zeros(_DOP_N_STAGES, dtype=np.int64)
+            self._no_te, self._no_Y = np.zeros(0), np.zeros((0, n))
+            #: the ends of the first len(_trace) accepted steps of the last compiled call (tests)
+            self._trace = np.zeros(0)
 
+    # --- the Python driver ---------------------------------------------------------------------
     def _step_impl(self, t: float, y: np.ndarray, t1: float) -> float:
-        K, hA, y_new = self._K, self._hA, self._y_new
+        K, ys, y_new, A, C = self._K, self._ys, self._y_new, self._A_all, self._C_all
         h_abs = min(self._h_abs, self.max_step)
         min_step = self._min_step(t, t1)
         rejected = False
@@ -292,30 +332,21 @@ class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
         while True:
             if h_abs < min_step:
                 raise self._collapse(t, h_abs, nonfinite)
-            h, t_new = self._clip(t, h_abs, t1)
+            h, t_new = dop_clip(t, h_abs, t1, LAST_STEP_STRETCH)
             K[0] = self._f
-            np.multiply(self._A_all, h, out=hA)
-            self._stages(t, y, hA, h, 1, _DOP_N_STAGES)
-            # y1 = y + h sum_i B_i K_i  (B is row 12 of A)
-            np.dot(hA[_DOP_N_STAGES, :_DOP_N_STAGES], K[:_DOP_N_STAGES], out=y_new)
-            y_new += y
-            error_norm = self._error_norm(h, self._scale(y, y_new))
-            if not (math.isfinite(error_norm) and np.isfinite(y_new).all()):
-                nonfinite = describe_nonfinite(K[:_DOP_N_STAGES])
-                h_abs = abs(h) * MIN_FACTOR
-                rejected = True
-                self.nrejected += 1
-                continue
-            if error_norm < 1.0:
-                if error_norm == 0.0:
-                    factor = MAX_FACTOR
-                else:
-                    factor = min(MAX_FACTOR, SAFETY * error_norm ** self._exponent)
-                if rejected:
-                    factor = min(1.0, factor)
-                self._h_abs = self._next_h(h, h_abs, factor)
+            for s in range(1, _DOP_N_STAGES):
+                dop_stage_state(y, K, A, s, h, ys)  # ys = y + (sum_j A[s, j] K[j]) h
+                K[s] = self._fun(t + C[s] * h, ys)
+            dop_update(y, K, self.B, h, y_new)  # y1 = y + h sum_i B_i K_i
+            error_norm = dop_error_norm(K, self.E5, self.E3, h, y, y_new, self.rtol, self._atol_v)
+            finite = dop_finite(y_new)
+            accepted, h_next = dop_control(error_norm, finite, h, h_abs, rejected, self.CONTROL)
+            if accepted:
+                self._h_abs = h_next
                 break
-            h_abs = abs(h) * max(MIN_FACTOR, SAFETY * error_norm ** self._exponent)
+            if not (finite and math.isfinite(error_norm)):
+                nonfinite = describe_nonfinite(K[:_DOP_N_STAGES])
+            h_abs = h_next
             rejected = True
             self.nrejected += 1
         self.error_estimate = error_norm
@@ -362,20 +393,62 @@ class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
         return abs(h) * math.sqrt(float(np.dot(df, df)) / den)
 
     def _dense(self, t, y, t_new, y_new, tq: np.ndarray) -> np.ndarray:
-        K, h = self._K, self._h
-        # the three extra stages (hA still holds h A of this step)
-        self._stages(t, y, self._hA, h, _DOP_N_STAGES + 1, _DOP_N_EXTENDED)
-        F = np.empty((_DOP_N_DENSE, self.n))
-        dy = y_new - y
-        F[0] = dy
-        F[1] = h * K[0] - dy
-        F[2] = 2.0 * dy - h * (K[_DOP_N_STAGES] + K[0])
-        np.dot(h * self.D, K, out=F[3:])
-        # Horner in x and (1 - x), alternating (scipy's Dop853DenseOutput)
-        x = ((tq - t) / h)[:, None]
-        out = np.zeros((tq.size, self.n))
-        for i, Fi in enumerate(F[::-1]):
-            out += Fi
-            out *= x if i % 2 == 0 else 1.0 - x
-        out += y
+        K, ys, h, A, C = self._K, self._ys, self._h, self._A_all, self._C_all
+        for s in range(_DOP_N_STAGES + 1, _DOP_N_EXTENDED):  # the three extra stages
+            dop_stage_state(y, K, A, s, h, ys)
+            K[s] = self._fun(t + C[s] * h, ys)
+        dop_dense_coefficients(y, y_new, K, self.D, h, self._F)
+        tq = np.ascontiguousarray(tq, dtype=float)
+        out = np.empty((tq.size, self.n))
+        dop_dense_eval(self._F, y, t, h, tq, out)
         return out
+
+    # --- the compiled loop -------------------------------------------------------------------
+    def _integrate(self, t0, y, t1, te, Y) -> None:
+        if self._loop is None or self.stiffness_estimate or t1 == t0:
+            super()._integrate(t0, y, t1, te, Y)
+        else:
+            self._integrate_compiled(t0, y, t1, te, Y)
+
+    def _integrate_compiled(self, t0: float, y: np.ndarray, t1: float, te, Y) -> None:
+        """`_integrate` (the loop of `begin`, `take_step`, `dense`) in one compiled call."""
+        from ..fast_dop853 import (ACCEPTED_RHS_NONFINITE, COLLAPSED, INITIAL_RHS_NONFINITE,
+                                   R_ERROR, R_H, R_H_ABS, R_LAST_STEP, R_T, R_T_OLD, S_ACCEPTED,
+                                   S_F_NEW, S_NFEV, S_NONFINITE, S_REJECTED, S_STATUS)
+        fresh = self._h_abs is not None
+        if not fresh:  # the first call after a reset: the fresh rhs and the initial step here
+            self.begin(t0, y, t1)
+        if te is None:
+            te, Y = self._no_te, self._no_Y
+        elif not (te.flags.c_contiguous and te.flags.writeable):
+            te = te.copy()
+        real, status = self._real, self._status
+        real[R_ERROR] = math.nan if self.error_estimate is None else self.error_estimate
+        real[R_LAST_STEP] = math.nan if self.last_step is None else self.last_step
+        self._loop(t0, t1, y, fresh, te, Y, self._h_abs, self.max_step, self.rtol, self._atol_v,
+                   self.A_ALL, self.C_ALL, self.E5, self.E3, self.D, self.CONTROL, self._i_q0, self._nq,
+                   self._f, self._K, self._ys, self._y_new, self._y_old, self._F, self._bad,
+                   self._trace, real, status, *self.system.kernel_arguments())
+        nfev = int(status[S_NFEV])
+        self.nfev += nfev
+        self.system.nfev += nfev
+        self.nsteps += int(status[S_ACCEPTED])
+        self.nrejected += int(status[S_REJECTED])
+        self._h_abs = float(real[R_H_ABS])
+        if not math.isnan(real[R_ERROR]):
+            self.error_estimate = float(real[R_ERROR])
+            self.last_step = self._h = float(real[R_LAST_STEP])
+        self._f_new = bool(status[S_F_NEW])
+        code = int(status[S_STATUS])
+        if code == INITIAL_RHS_NONFINITE:
+            raise IntegrationError(self.name, "rhs is not finite at the initial state", t0, None,
+                                   describe_nonfinite(self._f))
+        if code == COLLAPSED:
+            nonfinite = ""
+            if status[S_NONFINITE]:  # the stages of the last non-finite trial, as named in Python
+                nonfinite = describe_nonfinite(np.where(self._bad[:, None] != 0, np.nan, 0.0))
+            raise self._collapse(float(real[R_T]), float(real[R_H]), nonfinite)
+        if code == ACCEPTED_RHS_NONFINITE:
+            raise IntegrationError(self.name, "rhs is not finite at the accepted state",
+                                   float(real[R_T]), float(real[R_H]), describe_nonfinite(self._f))
+        self._t_old, self._t_new = float(real[R_T_OLD]), t1

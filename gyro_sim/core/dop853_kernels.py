@@ -1,0 +1,206 @@
+"""The arithmetic of DOP853 (Dormand-Prince 8(5,3)), compiled with numba.
+
+One implementation, two drivers: :class:`gyro_sim.core.integrators.dop853.DOP853` calls these
+between its rhs evaluations on any system (the numpy reference among them), and the compiled
+loop :func:`gyro_sim.core.fast_dop853.dop853_advance` calls the same functions between calls
+of the articulated-body kernel. The tableau is data (the class attributes of DOP853: the
+extended A (16, 16) and C (16,), B, E5, E3 (12,), D (4, 16)), and so are the controller's
+constants (`control`, :data:`CONTROL_SIZE` values, see :func:`dop_control`).
+
+What each function computes, as scipy's `scipy.integrate.DOP853` does (rk.py: rk_step,
+_estimate_error_norm, _dense_output_impl, Dop853DenseOutput) and in the same order of
+operations wherever scipy's order is defined (its sums are BLAS dot products, whose order
+and fused multiply-adds are the library's: there the results agree to round-off):
+
+    ys  = y + (sum_{j<s} A[s, j] K[j]) h                   stage state       (dop_stage_state)
+    y1  = y + h sum_{j<12} B[j] K[j]                        the 8th-order step (dop_update)
+    err = |h| |e5|^2 / sqrt(n (|e5|^2 + 0.01 |e3|^2)),      error norm        (dop_error_norm)
+          e5, e3 = sum_j E5[j] K[j], sum_j E3[j] K[j] divided by atol + rtol max(|y|, |y1|)
+    h_new from err: HNW I, sec. II.4 (eq. 4.13)              step control      (dop_control)
+    F (7, n): the dense output of order 7, HNW I, sec. II.6  coefficients      (dop_dense_coefficients)
+    y(t_old + x h) = y_old + F0 x + F1 x(1-x) + F2 x^2(1-x) + ...   evaluation (dop_dense_eval)
+
+The sums run over j in increasing order, one product added at a time. No fastmath: IEEE
+arithmetic, no contraction into fused multiply-adds. Without numba these stay plain Python
+(correct, slow).
+
+References
+----------
+.. [1] E. Hairer, S. P. Norsett, G. Wanner, "Solving Ordinary Differential Equations I:
+       Nonstiff Problems", 2nd ed., Springer 1993: sec. II.4 (automatic step size control,
+       eq. 4.13), sec. II.6 (dense output), sec. II.10 (DOP853: the 8(5,3) pair, its error
+       estimator and its dense output of order 7).
+.. [2] E. Hairer, dop853.f, http://www.unige.ch/~hairer/software.html
+.. [3] scipy.integrate.DOP853 (scipy/integrate/_ivp/rk.py, scipy 1.17).
+"""
+from __future__ import annotations
+
+import math
+
+try:
+    import numba
+except ImportError:  # pragma: no cover - exercised only where numba is missing
+    numba = None
+
+#: stages of a step (the 13th, FSAL, is f at the new state, row N_STAGES of K)
+N_STAGES = 12
+#: rows of K with the three extra stages of the dense output
+N_EXTENDED = 16
+#: rows of the dense-output coefficients F
+N_DENSE = 7
+#: the controller's constants in `control`: SAFETY, MIN_FACTOR, MAX_FACTOR, the exponent
+#: -1/(q+1) (q = 7, the order of the error estimator), MIN_STEP_RELATIVE, LAST_STEP_STRETCH
+CONTROL_SIZE = 6
+
+
+def _njit(fn):
+    """Compiled in nopython mode and cached on disk (as gyro_sim.core.rk_kernels)."""
+    if numba is None:
+        return fn
+    return numba.njit(cache=True, error_model="numpy")(fn)
+
+
+@_njit
+def dop_stage_state(y, K, A, s, h, ys):
+    """ys (n,) = y + (sum_{j<s} A[s, j] K[j]) h: the state of stage s (scipy's rk_step and
+    _dense_output_impl: `y + np.dot(K[:s].T, a[:s]) * h`). y (n,), K (>= s, n), A (>s, >=s)."""
+    n = y.shape[0]
+    for i in range(n):
+        acc = 0.0
+        for j in range(s):
+            acc += A[s, j] * K[j, i]
+        ys[i] = y[i] + acc * h
+
+
+@_njit
+def dop_update(y, K, B, h, y_new):
+    """y_new (n,) = y + h sum_j B[j] K[j], j < len(B): the step of order 8."""
+    n = y.shape[0]
+    for i in range(n):
+        acc = 0.0
+        for j in range(B.shape[0]):
+            acc += B[j] * K[j, i]
+        y_new[i] = y[i] + h * acc
+
+
+@_njit
+def dop_error_norm(K, E5, E3, h, y, y_new, rtol, atol):
+    """DOP853's error norm of the step y -> y_new (HNW I, sec. II.10; scipy's
+    DOP853._estimate_error_norm): the 5th-order estimate e5 damped by the 3rd-order one e3,
+
+        err = |h| |e5|^2 / sqrt(n (|e5|^2 + 0.01 |e3|^2)),
+
+    e5_i = sum_j E5[j] K[j, i] / sc_i (likewise e3), sc_i = atol_i + max(|y_i|, |y_new_i|) rtol.
+    1 is the tolerance; 0 when both estimates vanish. atol (n,)."""
+    n = y.shape[0]
+    stages = E5.shape[0]
+    n5 = 0.0
+    n3 = 0.0
+    for i in range(n):
+        a5 = 0.0
+        a3 = 0.0
+        for j in range(stages):
+            a5 += E5[j] * K[j, i]
+            a3 += E3[j] * K[j, i]
+        ay, an = abs(y[i]), abs(y_new[i])
+        sc = atol[i] + (ay if ay >= an else an) * rtol
+        e5 = a5 / sc
+        e3 = a3 / sc
+        n5 += e5 * e5
+        n3 += e3 * e3
+    if n5 == 0.0 and n3 == 0.0:
+        return 0.0
+    return abs(h) * n5 / math.sqrt((n5 + 0.01 * n3) * n)
+
+
+@_njit
+def dop_finite(y):
+    """True if every component of y (n,) is finite."""
+    for i in range(y.shape[0]):
+        if not (abs(y[i]) < math.inf):
+            return False
+    return True
+
+
+@_njit
+def dop_clip(t, h_abs, t1, stretch):
+    """(h, t_new) of a trial step of h_abs from t: to exactly t1 when t + h_abs (1 + stretch)
+    reaches it (dop853.f stretches the step before t1 rather than leave a sliver), else
+    t_new = t + h_abs and h = t_new - t (the step as represented)."""
+    if t + h_abs * (1.0 + stretch) >= t1:
+        return t1 - t, t1
+    t_new = t + h_abs
+    return t_new - t, t_new
+
+
+@_njit
+def dop_control(err, finite, h, h_abs, rejected, control):
+    """The step-size controller (HNW I, sec. II.4, eq. 4.13, with scipy's constants): given the
+    error norm `err` of a trial step h (`finite`: its new state is finite), whose trial size
+    was h_abs (h may be shorter: clipped to t1), after `rejected` earlier failures of this step:
+
+    - accepted (err < 1): factor = min(MAX_FACTOR, SAFETY err^(-1/8)) (MAX_FACTOR if err = 0),
+      at most 1 after a rejection; the next step h factor, but a step shortened only to land
+      on t1 that went well (h < h_abs, factor >= 1) does not shrink the memory: at least h_abs;
+    - rejected (err >= 1): |h| max(MIN_FACTOR, SAFETY err^(-1/8));
+    - not finite (err or the state): |h| MIN_FACTOR.
+
+    control: SAFETY, MIN_FACTOR, MAX_FACTOR, exponent (-1/8), ... (CONTROL_SIZE values).
+    Returns (accepted, the step size to try or remember)."""
+    safety, min_factor, max_factor, exponent = control[0], control[1], control[2], control[3]
+    if not (finite and math.isfinite(err)):
+        return False, abs(h) * min_factor
+    if err < 1.0:
+        if err == 0.0:
+            factor = max_factor
+        else:
+            factor = min(max_factor, safety * err ** exponent)
+        if rejected:
+            factor = min(1.0, factor)
+        h_next = h * factor
+        if h < h_abs and factor >= 1.0:
+            h_next = max(h_next, h_abs)
+        return True, h_next
+    return False, abs(h) * max(min_factor, safety * err ** exponent)
+
+
+@_njit
+def dop_dense_coefficients(y_old, y_new, K, D, h, F):
+    """The coefficients F (7, n) of DOP853's dense output of order 7 over the step
+    y_old -> y_new of size h (HNW I, sec. II.6 and II.10; scipy's _dense_output_impl):
+
+        F0 = y_new - y_old,  F1 = h K0 - F0,  F2 = 2 F0 - h (K12 + K0),  F3..6 = h (D K)
+
+    K (16, n): the step's stages, K12 = f(y_new) (the FSAL stage) and the three extra stages."""
+    n = y_old.shape[0]
+    rows, cols = D.shape[0], D.shape[1]
+    for i in range(n):
+        dy = y_new[i] - y_old[i]
+        F[0, i] = dy
+        F[1, i] = h * K[0, i] - dy
+        F[2, i] = 2.0 * dy - h * (K[N_STAGES, i] + K[0, i])
+        for r in range(rows):
+            acc = 0.0
+            for j in range(cols):
+                acc += D[r, j] * K[j, i]
+            F[3 + r, i] = h * acc
+
+
+@_njit
+def dop_dense_eval(F, y_old, t_old, h, tq, Y):
+    """Y (k, n): the dense output at times tq (k,) of the step from (t_old, y_old) of size h,
+    x = (t - t_old) / h, by Horner's scheme in x and (1 - x) alternately from the last
+    coefficient (scipy's Dop853DenseOutput, the same operations)."""
+    n = y_old.shape[0]
+    p = F.shape[0]
+    for r in range(tq.shape[0]):
+        x = (tq[r] - t_old) / h
+        for i in range(n):
+            acc = 0.0
+            for q in range(p):
+                acc += F[p - 1 - q, i]
+                if q % 2 == 0:
+                    acc *= x
+                else:
+                    acc *= 1.0 - x
+            Y[r, i] = acc + y_old[i]

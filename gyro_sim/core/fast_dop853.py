@@ -1,0 +1,217 @@
+"""DOP853's whole `advance` compiled with numba: every step of a call in one compiled call.
+
+:func:`dop853_advance` is what :meth:`gyro_sim.core.integrators.dop853.DOP853.advance` does
+in Python (`AdaptiveIntegrator._integrate`: `begin`, then `take_step` and `dense` until t1):
+the steps with error control, accepted and rejected, the fresh rhs at the start, the FSAL
+stage, the dense output at the requested times, the renormalisation of the quaternions of
+every accepted state and output, the finite checks. It calls the articulated-body kernel
+:func:`gyro_sim.core.fast.rhs_kernel` directly and the arithmetic of
+:mod:`gyro_sim.core.dop853_kernels`, the very functions the Python driver calls between its
+rhs evaluations on other systems: the two drivers give the same bits.
+
+DOP853 dispatches to it when its system offers `kernel_arguments` and `quaternion_block`
+(the compiled :class:`gyro_sim.core.system.FastChainODE`). The initial step (once, after a
+reset) is selected in Python before the call.
+
+Caching: the loop inlines fast.py and dop853_kernels.py, so it is cached in a directory keyed
+on all three files (:func:`gyro_sim.core.fast_loop.njit_with_dependencies`).
+
+References
+----------
+.. [1] E. Hairer, S. P. Norsett, G. Wanner, "Solving Ordinary Differential Equations I:
+       Nonstiff Problems", 2nd ed., Springer 1993: sec. II.4 (step control), II.6 (dense
+       output), II.10 (DOP853).
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from . import dop853_kernels, fast, fast_loop
+from .dop853_kernels import (
+    N_EXTENDED,
+    N_STAGES,
+    dop_clip,
+    dop_control,
+    dop_dense_coefficients,
+    dop_dense_eval,
+    dop_error_norm,
+    dop_finite,
+    dop_stage_state,
+    dop_update,
+)
+
+#: the files the loop compiles in (the key of its cache directory)
+DEPENDENCIES = (Path(fast.__file__), Path(dop853_kernels.__file__), Path(__file__))
+_njit = fast_loop.njit_with_dependencies(*DEPENDENCIES)
+
+# --- what the loop returns in status[0] ----------------------------------------------------
+#: t1 reached
+DONE = 0
+#: the step size fell below MIN_STEP_RELATIVE max(|t|, |t1|) (HNW's "step size too small")
+COLLAPSED = 1
+#: the fresh rhs at (t0, y0) is not finite
+INITIAL_RHS_NONFINITE = 2
+#: the rhs at an accepted state (FSAL, or for the dense output) is not finite
+ACCEPTED_RHS_NONFINITE = 3
+
+#: layout of the loop's outputs: floats (`real`) and integers (`status`)
+REAL_SIZE = 6
+R_T, R_H, R_H_ABS, R_ERROR, R_LAST_STEP, R_T_OLD = range(REAL_SIZE)
+STATUS_SIZE = 8
+S_STATUS, S_NFEV, S_ACCEPTED, S_REJECTED, S_OUTPUTS, S_F_NEW, S_NONFINITE, S_TRACED = range(STATUS_SIZE)
+
+
+@_njit
+def dop853_advance(t0, t1, y, fresh, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, D, control,
+                   i_q0, nq, f, K, ys, y_new, y_old, F, bad, trace, real, status,
+                   work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
+                   inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base,
+                   ht0, p0, pdot, L_rotor, tau):
+    """DOP853 from (t0, y) to exactly t1 > t0, y (size,) in place; Y (m, size) the states at
+    te (m,), sorted within [t0, t1].
+
+    fresh: evaluate f = rhs(t0, y) first (else f (size,) holds it). h_mem: the step-size memory
+    (> 0, selected before the first call). A (16, 16), C (16,): the extended tableau (row 12
+    the weights B, rows 13..15 the extra stages of the dense output); E5, E3 (12,); D (4, 16);
+    control: dop853_kernels.CONTROL_SIZE constants. Quaternions y[i_q0 + 4 j : +4], j < nq.
+    Scratch, left as the Python driver leaves its own: K (16, size) the stages of the last
+    step, ys (size,) its last stage state, y_new the accepted state, y_old the one before, F
+    (7, size), bad (12,) the non-finite stages of the last non-finite trial. trace (k,): the
+    ends of the first k accepted steps (k may be 0).
+
+    Outputs: real (REAL_SIZE,) t reached (or of the failure), h of the failure, the step-size
+    memory, the error norm and size of the last accepted step, its start; status
+    (STATUS_SIZE,) the status (DONE, COLLAPSED, ...), rhs evaluations, accepted and rejected
+    steps, outputs filled, whether f = rhs(y_new) is known, whether the last failing step had
+    a non-finite trial, the steps traced. The arguments from `work` on are those of
+    fast.rhs_kernel (`ht0` its `t0`, the start of the hold).
+    """
+    m = te.shape[0]
+    nfev = 0
+    naccepted = 0
+    nrejected = 0
+    j = 0
+    while j < m and te[j] <= t0:
+        Y[j, :] = y
+        j += 1
+    status[S_F_NEW] = 0
+    status[S_NONFINITE] = 0
+    status[S_STATUS] = DONE
+    if fresh:
+        fast.rhs_kernel(t0, y, f, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                        first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
+                        flags, base, ht0, p0, pdot, L_rotor, tau)
+        nfev += 1
+        if not dop_finite(f):
+            status[S_STATUS] = INITIAL_RHS_NONFINITE
+            real[R_T] = t0
+    t = t0
+    t_old = t0
+    error = real[R_ERROR]
+    last_step = real[R_LAST_STEP]
+    min_step_relative, stretch = control[4], control[5]
+    while status[S_STATUS] == DONE and t < t1:
+        # --- one accepted step (DOP853._step_impl)
+        h_abs = min(h_mem, max_step)
+        min_step = min_step_relative * max(abs(t), abs(t1))
+        rejected = False
+        status[S_NONFINITE] = 0
+        t_new = t
+        while True:
+            if h_abs < min_step:
+                status[S_STATUS] = COLLAPSED
+                real[R_T] = t
+                real[R_H] = h_abs
+                break
+            h, t_new = dop_clip(t, h_abs, t1, stretch)
+            K[0, :] = f
+            for st in range(1, N_STAGES):
+                dop_stage_state(y, K, A, st, h, ys)
+                fast.rhs_kernel(t + C[st] * h, ys, K[st], work, is_hinge, qrow, own_col, col_start,
+                                hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
+                                torque_axis, torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
+                nfev += 1
+            dop_update(y, K, A[N_STAGES, :N_STAGES], h, y_new)
+            err = dop_error_norm(K, E5, E3, h, y, y_new, rtol, atol)
+            finite = dop_finite(y_new)
+            accepted, h_next = dop_control(err, finite, h, h_abs, rejected, control)
+            if accepted:
+                h_mem = h_next
+                error = err
+                last_step = h
+                break
+            if not (finite and math.isfinite(err)):
+                status[S_NONFINITE] = 1
+                for st in range(N_STAGES):
+                    bad[st] = 0 if dop_finite(K[st]) else 1
+            h_abs = h_next
+            rejected = True
+            nrejected += 1
+        if status[S_STATUS] != DONE:
+            break
+        # --- accept it (AdaptiveIntegrator.take_step)
+        fast.normalize_quaternions(y_new, i_q0, nq)
+        status[S_F_NEW] = 0
+        if t_new < t1:
+            fast.rhs_kernel(t_new, y_new, f, work, is_hinge, qrow, own_col, col_start, hinge_axis,
+                            s, mass, first_moment, inertia, lam_speed, torque_body, torque_axis,
+                            torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
+            nfev += 1
+            if not dop_finite(f):
+                status[S_STATUS] = ACCEPTED_RHS_NONFINITE
+                real[R_T] = t_new
+                real[R_H] = last_step
+                break
+            status[S_F_NEW] = 1
+            K[N_STAGES, :] = f
+        t_old = t
+        y_old[:] = y
+        y[:] = y_new
+        t = t_new
+        if naccepted < trace.shape[0]:
+            trace[naccepted] = t
+        naccepted += 1
+        # --- the dense output at the times inside the step (AdaptiveIntegrator.dense)
+        k = j
+        while k < m and te[k] < t:
+            k += 1
+        if k > j:
+            if status[S_F_NEW] == 0:
+                fast.rhs_kernel(t, y_new, f, work, is_hinge, qrow, own_col, col_start, hinge_axis,
+                                s, mass, first_moment, inertia, lam_speed, torque_body,
+                                torque_axis, torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
+                nfev += 1
+                if not dop_finite(f):
+                    status[S_STATUS] = ACCEPTED_RHS_NONFINITE
+                    real[R_T] = t
+                    real[R_H] = last_step
+                    break
+                status[S_F_NEW] = 1
+                K[N_STAGES, :] = f
+            for st in range(N_STAGES + 1, N_EXTENDED):
+                dop_stage_state(y_old, K, A, st, last_step, ys)
+                fast.rhs_kernel(t_old + C[st] * last_step, ys, K[st], work, is_hinge, qrow, own_col,
+                                col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed,
+                                torque_body, torque_axis, torque_A, flags, base, ht0, p0, pdot,
+                                L_rotor, tau)
+                nfev += 1
+            dop_dense_coefficients(y_old, y_new, K, D, last_step, F)
+            dop_dense_eval(F, y_old, t_old, last_step, te[j:k], Y[j:k])
+            for r in range(j, k):
+                fast.normalize_quaternions(Y[r], i_q0, nq)
+            j = k
+        while j < m and te[j] <= t:
+            Y[j, :] = y
+            j += 1
+    if status[S_STATUS] == DONE:
+        real[R_T] = t
+    real[R_H_ABS] = h_mem
+    real[R_ERROR] = error
+    real[R_LAST_STEP] = last_step
+    real[R_T_OLD] = t_old
+    status[S_NFEV] = nfev
+    status[S_ACCEPTED] = naccepted
+    status[S_REJECTED] = nrejected
+    status[S_OUTPUTS] = j
+    status[S_TRACED] = min(naccepted, trace.shape[0])
