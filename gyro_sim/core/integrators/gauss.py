@@ -1,22 +1,41 @@
-"""Gauss-Legendre collocation, 2 stages (gauss4): order 4, fixed step, implicit.
+"""Gauss-Legendre collocation, 2 stages (gauss4): order 4, fixed step, implicit, solved by a
+Jacobian-free Newton-Krylov iteration in O(n) memory with a bounded cost per step.
 
 A-stable, symplectic and conserving every quadratic invariant of the flow exactly (Hairer,
-Lubich, Wanner, "Geometric Numerical Integration", 2nd ed., Springer 2006, sec. IV.2): the
-norms |q|^2 of the quaternion blocks (q' = 1/2 (0, w) (x) q keeps them for any w), so
-rotations stay on SO(3) without projection (`project` is still called, a no-op to round-off),
-and the angular momentum of a free chain. For stiff (gyroscopic) scenes at the node's fixed
-step, where rk4 goes unstable.
+Lubich, Wanner, "Geometric Numerical Integration", 2nd ed., Springer 2006, sec. IV.2, Thm.
+2.1): the norms |q|^2 of the quaternion blocks (q' = 1/2 (0, w) (x) q keeps them for any w),
+so rotations stay on SO(3) without projection (`project` is still called, a no-op to
+round-off) -- provided the collocation equations are solved to round-off, which the stop test
+below asks for. For stiff (gyroscopic) scenes at the node's fixed step, where rk4 goes unstable.
 
-Nonlinear solve: simplified Newton on the stage increments Z (2, size), with the iteration
-matrix I - h A (x) J from a finite-difference Jacobian J of the rhs, reused across steps and
-refreshed only when the iteration slows (contraction rate above NEWTON_SLOW_RATE) or fails.
-At most NEWTON_CAP iterations per attempt and one refresh per step, so a step costs at most
-2 (NEWTON_CAP + 1) rhs evaluations plus one Jacobian (size evaluations): a known worst case.
-A step that does not converge raises IntegrationError with the reason (never silent).
+Nonlinear solve (Hairer, Wanner, "Solving Ordinary Differential Equations II", 2nd ed.,
+Springer 1996, sec. IV.8; Kelley, "Solving Nonlinear Equations with Newton's Method", SIAM
+2003, ch. 3): Newton on the stage increments Z (2, size) of G(Z) = Z - h (A (x) I) F(Z) = 0,
+with the Jacobian at the current iterate (full Newton: on a fast top the Jacobian turns with
+the body within a step, and a frozen one converges too slowly). Each Newton system
+(I - h (A (x) I) diag(J_s)) dZ = -G is solved by GMRES without forming any matrix: J_s v is a
+forward difference of the rhs in the direction v (2 rhs evaluations per Krylov vector, both
+stages). All in per-component scaled variables dZ_i / w_i, w_i = NEWTON_TOL (1 + |y_i|)
+(atol = rtol = NEWTON_TOL); the stop test is Hairer-Wanner's (IV.8, eq. (8.13)): with the
+contraction rate theta of successive updates, converged when theta / (1 - theta) |dZ| <=
+NEWTON_KAPPA (the first update: when |dZ| <= NEWTON_FIRST_TOL); theta >= NEWTON_SLOW_RATE is
+divergence. GMRES stops at GMRES_RTOL of its initial residual or at GMRES_ATOL (rms, in units
+of the tolerance), else after GMRES_CAP vectors (no restart: the partial solution is the
+update). The starting guess extrapolates the previous step's collocation polynomial (HW IV.8,
+"starting values"), when the step continues the previous one (the same call, or a call that
+starts where the last one ended), else Z = 0.
 
-This first version keeps J dense, (size, size), and factors the (2 size)^2 iteration matrix
-by LU: O(n^2) memory and O(n^3) per refresh. The chain's Jacobian is block-tridiagonal in
-bodies; the structured solve is left to do.
+Cost per step, worst case (known): NEWTON_CAP iterations of 2 rhs evaluations (the stages) +
+GMRES_CAP Krylov vectors of 2 evaluations: NEWTON_CAP (2 + 2 GMRES_CAP) = 336 evaluations and
+O(GMRES_CAP^2 size) flops, memory (GMRES_CAP + 10) x 2 size floats. A step that does not
+converge within NEWTON_CAP raises IntegrationError ("Newton iteration failed: ..." with the
+reason); never silent.
+
+One implementation, two drivers: the arithmetic is :mod:`gyro_sim.core.gauss_kernels`. On a
+system that offers `kernel_arguments()` and `quaternion_block()` (the compiled
+:class:`gyro_sim.core.system.FastChainODE`) the substeps of an `advance` run in one compiled
+call (:func:`gyro_sim.core.fast_gauss.gauss_march`); on any other system this class steps in
+Python, calling the same kernels between its rhs evaluations: the same steps, bit for bit.
 """
 from __future__ import annotations
 
@@ -24,32 +43,76 @@ import math
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.linalg import lu_factor, lu_solve
 
+from .. import gauss_kernels as gk
+from ..gauss_kernels import (
+    COUNT_KRYLOV,
+    COUNT_MAX_KRYLOV,
+    COUNT_MAX_NEWTON,
+    COUNT_NEWTON,
+    COUNT_RHS,
+    STEP_DIVERGED,
+    STEP_LINEAR,
+    STEP_NONFINITE,
+    STEP_NOT_CONVERGED,
+    STEP_OK,
+    STEP_RHS_NONFINITE,
+)
 from .base import EPS, FixedStepIntegrator, IntegrationError, describe_nonfinite
-from .radau import FD_MIN_SCALE, FD_REL_STEP
 
 if TYPE_CHECKING:
     from ..system import OdeSystem
 
 _S3 = math.sqrt(3.0)
-#: most simplified-Newton iterations per attempt (an attempt with a fresh Jacobian follows once)
+#: most Newton iterations per step (each: 2 rhs evaluations + a GMRES solve)
 NEWTON_CAP = 8
-#: contraction rate above which the iteration counts as slow: the Jacobian is refreshed
-NEWTON_SLOW_RATE = 0.5
-#: converged when the scaled Newton update is below this
-NEWTON_TOL = 1e-12
+#: most Krylov vectors per GMRES solve (each: 2 rhs evaluations); no restart
+GMRES_CAP = 20
+#: scale of the Newton iteration: w_i = NEWTON_TOL (1 + |y_i|) is the unit of its stop test
+NEWTON_TOL = 1e-13
+#: converged when the estimated error theta / (1 - theta) |dZ| is below this (HW IV.8: 0.01-0.1)
+NEWTON_KAPPA = 0.1
+#: the first update (no rate yet) converges alone when below this
+NEWTON_FIRST_TOL = 0.01
+#: a contraction rate theta at or above this: the iteration diverges (the step fails)
+NEWTON_SLOW_RATE = 1.0
+#: GMRES stops at this fraction of its initial residual (the inexact Newton forcing term) ...
+GMRES_RTOL = 1e-4
+#: ... or below this rms residual (units of the tolerance): more accuracy is not needed
+GMRES_ATOL = 0.01
+#: forward differences J v: a perturbation of rms FD_REL_STEP (1 + |y_i|) per component
+FD_REL_STEP = math.sqrt(EPS)
+
+#: the parameters of both drivers, indexed by gauss_kernels.PAR_* (the eps of the differences
+#: depends on the size and is set per integrator)
+_PARAMS = (NEWTON_TOL, NEWTON_KAPPA, NEWTON_FIRST_TOL, NEWTON_SLOW_RATE, GMRES_RTOL, GMRES_ATOL,
+           math.nan, NEWTON_CAP)
+
+
+def _lagrange(theta: float, ci: float, cj: float) -> float:
+    """L_i(theta) of the nodes {0, c_i, c_j}: 1 at c_i, 0 at 0 and c_j."""
+    return theta * (theta - cj) / (ci * (ci - cj))
 
 
 class Gauss4(FixedStepIntegrator):
     """Two-stage Gauss-Legendre collocation, order 4, fixed step (see the module docstring).
 
+    Attributes (besides the base's counters)
+    ----------------------------------------
+    counts : int64 (5,), cumulative: Newton iterations, Krylov vectors (each 2 rhs
+        evaluations), the most Newton iterations of one step, the most Krylov vectors of one
+        GMRES solve, rhs evaluations of the steps.
+
     References
     ----------
     .. [1] E. Hairer, G. Wanner, "Solving Ordinary Differential Equations II", 2nd ed.,
-           Springer 1996, sec. IV.5 (tableau, Table 5.1) and IV.8 (simplified Newton).
+           Springer 1996, sec. IV.5 (tableau, Table 5.1) and IV.8 (Newton, stop test,
+           starting values).
     .. [2] E. Hairer, C. Lubich, G. Wanner, "Geometric Numerical Integration", 2nd ed.,
            Springer 2006, sec. IV.2 (quadratic invariants).
+    .. [3] C. T. Kelley, "Solving Nonlinear Equations with Newton's Method", SIAM 2003, ch. 3
+           (Newton-Krylov, finite-difference directional derivatives); "Iterative Methods
+           for Linear and Nonlinear Equations", SIAM 1995, sec. 3.4-3.5 (GMRES, Givens).
     """
 
     name = "gauss4"
@@ -60,80 +123,184 @@ class Gauss4(FixedStepIntegrator):
     B = np.array([0.5, 0.5])
     #: y1 = y + D . Z: B^T A^-1 (no rhs evaluation at the stages' end)
     D = np.array([-_S3, _S3])
+    #: extrapolate the previous step's collocation polynomial for the starting guess
+    predict = True
 
     def __init__(self, system: OdeSystem, **options):
         super().__init__(system, **options)
-        self._J: np.ndarray | None = None
-        self._lu = None
-        self._lu_h: float | None = None
-        self._Z = np.zeros((2, self.n))
-        self.nrefresh = 0
+        n, m = self.n, GMRES_CAP
+        self._Z = np.zeros((2, n))
+        self._Zp = np.zeros((2, n))  # the previous step's stage increments (the predictor)
+        self._Ys = np.empty((2, n))
+        self._F = np.empty((2, n))
+        self._Fp = np.empty((2, n))
+        self._Yp = np.empty(n)
+        self._w = np.empty(n)
+        self._V = np.zeros((m + 1, 2, n))
+        self._H = np.zeros((m + 1, m))
+        self._cs = np.zeros(m)
+        self._sn = np.zeros(m)
+        self._g = np.zeros(m + 1)
+        self._coef = np.zeros(m)
+        self._info = np.zeros(3)  # a failing step: iteration, rate, update norm
+        self.counts = np.zeros(5, dtype=np.int64)
+        self._h_prev: float | None = None  # step of _Zp; None: no predictor
+        self._t_end: float | None = None
+        self._y_end = np.empty(n)
+        self._fd_eps = FD_REL_STEP * math.sqrt(2.0 * n) / NEWTON_TOL if n else 1.0
+        self._params = np.array(_PARAMS, dtype=np.float64)
+        self._params[gk.PAR_FD_EPS] = self._fd_eps
+        has_kernel = callable(getattr(system, "kernel_arguments", None)) and \
+            callable(getattr(system, "quaternion_block", None))
+        #: march in compiled code when the system allows it; False: step in Python (the same steps)
+        self.use_compiled = True
+        self._compiled = None
+        if has_kernel:
+            from .. import fast_gauss  # the compiled march (imports the kernel's module)
+
+            self._compiled = fast_gauss.GaussMarch(system)
+            self._A = np.array(self.A, dtype=np.float64)
+            self._C = np.array(self.C, dtype=np.float64)
+            self._D = np.array(self.D, dtype=np.float64)
 
     def reset(self) -> None:
         super().reset()
-        self._J = None
-        self._lu = None
-        self._Z[:] = 0.0
+        self._h_prev = None
+        self._t_end = None
 
-    def _jacobian(self, t: float, y: np.ndarray) -> None:
-        """J = d rhs / dy at (t, y) by forward differences (size evaluations)."""
-        f0 = self._fun(t, y).copy()  # the rhs may return its workspace
-        J = np.empty((self.n, self.n))
-        yp = y.copy()
-        for i in range(self.n):
-            d = FD_REL_STEP * max(abs(y[i]), FD_MIN_SCALE)
-            yp[i] = y[i] + d
-            J[:, i] = (self._fun(t, yp) - f0) / d
-            yp[i] = y[i]
-        self._J = J
-        self._lu = None
-        self.njev += 1
+    @property
+    def workspace_bytes(self) -> int:
+        """Bytes of the arrays the steps use (O(size): GMRES_CAP + 10 rows of 2 size)."""
+        return sum(a.nbytes for a in (self._Z, self._Zp, self._Ys, self._F, self._Fp, self._Yp,
+                                      self._w, self._V, self._H, self._cs, self._sn, self._g,
+                                      self._coef, self._y_end))
 
-    def _factor(self, h: float) -> None:
-        n, J = self.n, self._J
-        M = np.eye(2 * n)
-        for i in range(2):
-            for j in range(2):
-                M[i * n:(i + 1) * n, j * n:(j + 1) * n] -= h * self.A[i, j] * J
-        self._lu = lu_factor(M, overwrite_a=True, check_finite=False)
-        self._lu_h = h
-        self.nlu += 1
+    # --- the starting guess ---------------------------------------------------------------
+    def predictor(self, ratio: float) -> np.ndarray:
+        """P (2, 2): Z_new = P Z_old extrapolates the collocation polynomial u of the last step
+        (u(t0 + x h) = y0 + sum_i L_i(x) Z_i, nodes {0, c_1, c_2}) to the next step of
+        `ratio` times its size: Z_new[s] = u(1 + ratio c_s) - u(1) (HW IV.8)."""
+        c1, c2 = self.C
+        P = np.empty((2, 2))
+        for s in range(2):
+            x = 1.0 + ratio * self.C[s]
+            P[s, 0] = _lagrange(x, c1, c2) - _lagrange(1.0, c1, c2)
+            P[s, 1] = _lagrange(x, c2, c1) - _lagrange(1.0, c2, c1)
+        return P
 
-    def _solve(self, t: float, y: np.ndarray, h: float) -> tuple[bool, str]:
-        """Simplified Newton on Z; True when converged (Z holds the stage increments)."""
-        n, Z = self.n, self._Z
-        scale = np.maximum(np.abs(y), 1.0)
-        F = np.empty((2, n))
-        prev = None
-        Z[:] = 0.0
-        for it in range(NEWTON_CAP):
-            for s in range(2):
-                F[s] = self._fun(t + self.C[s] * h, y + Z[s])
-            if not np.isfinite(F).all():
-                return False, f"rhs not finite at the stages ({describe_nonfinite(F)})"
-            G = -(Z - h * (self.A @ F))
-            dZ = lu_solve(self._lu, G.ravel(), check_finite=False).reshape(2, n)
-            Z += dZ
-            norm = math.sqrt(float(np.mean((dZ / scale) ** 2)))
-            if norm <= NEWTON_TOL or norm <= 4 * EPS:
-                return True, ""
-            if prev is not None and prev > 0 and norm / prev > NEWTON_SLOW_RATE:
-                return False, f"Newton iteration slow (rate {norm / prev:.2g} at iteration {it})"
-            prev = norm
-        return False, f"Newton iteration did not converge in {NEWTON_CAP} iterations (update {norm:.2g})"
+    def _start(self, h: float) -> np.ndarray | None:
+        """The predictor matrix of the first step of size h of a march, or None (Z = 0)."""
+        if not self.predict or self._h_prev is None:
+            return None
+        return self.predictor(h / self._h_prev)
+
+    # --- the march -----------------------------------------------------------------------------
+    def _march(self, t0: float, y: np.ndarray, t1: float) -> None:
+        if self._t_end != t0 or not np.array_equal(y, self._y_end):
+            self._h_prev = None  # not where the last march ended: no predictor
+        self._t_end = None
+        super()._march(t0, y, t1)
+        self._t_end = t1
+        self._y_end[:] = y
+
+    def _march_compiled(self, t0: float, y: np.ndarray, h: float, n: int) -> int | None:
+        if self._compiled is None or not self.use_compiled:
+            return None
+        P1 = self.predictor(1.0) if self.predict else None
+        done, status, rhs_calls = self._compiled(
+            t0, y, h, n, self._A, self._C, self._D, self._start(h), P1, self._params, self._Zp,
+            self._Z, self._Ys, self._F, self._Fp, self._Yp, self._w, self._V, self._H, self._cs,
+            self._sn, self._g, self._coef, self._info, self.counts)
+        self.nfev += rhs_calls
+        if status not in (STEP_OK, STEP_NONFINITE):
+            self.nsteps += done
+            self._h_prev = None
+            raise self._failure(status, t0 + done * h, h)
+        self._h_prev = h if done == n else None
+        return done
+
+    def _failure(self, status: int, t: float, h: float) -> IntegrationError:
+        it, theta, norm = self._info
+        if status == STEP_RHS_NONFINITE:
+            why = f"rhs not finite at the stages ({describe_nonfinite(self._F)})"
+        elif status == STEP_DIVERGED:
+            why = f"diverging (rate {theta:.2g} at iteration {int(it)}, update {norm:.2g} x tolerance)"
+        elif status == STEP_LINEAR:
+            why = f"GMRES gave a non-finite update at iteration {int(it)}"
+        else:
+            why = (f"not converged in {int(self._params[gk.PAR_NEWTON_CAP])} iterations (rate {theta:.2g}, update "
+                   f"{norm:.2g} x tolerance)")
+        return IntegrationError(self.name, "Newton iteration failed", t, h, why)
 
     def _step(self, t: float, y: np.ndarray, h: float) -> None:
-        if self._J is None:
-            self._jacobian(t, y)
-        if self._lu is None or self._lu_h != h:
-            self._factor(h)
-        ok, why = self._solve(t, y, h)
-        if not ok:
-            self._jacobian(t, y)  # the Jacobian is stale: refresh once
-            self._factor(h)
-            self.nrefresh += 1
-            ok, why2 = self._solve(t, y, h)
-            if not ok:
-                raise IntegrationError(self.name, "Newton iteration failed", t, h,
-                                       f"{why}; with a fresh Jacobian: {why2}")
-        y += self.D @ self._Z
+        P = self._start(h)
+        status = self._newton(t, y, h, P)
+        if status != STEP_OK:
+            self._h_prev = None
+            raise self._failure(status, t, h)
+        gk.gauss_update(y, self._Z, self.D)
+        self._Zp[:] = self._Z
+        self._h_prev = h
+
+    def _rhs_into(self, t: float, ys: np.ndarray, out: np.ndarray) -> None:
+        out[:] = self._fun(t, ys)
+        self.counts[COUNT_RHS] += 1
+
+    def _newton(self, t: float, y: np.ndarray, h: float, P: np.ndarray | None) -> int:
+        """The Newton iteration of one step (the compiled march's, statement for statement):
+        Z (2, size) the stage increments on success; returns a STEP_ status."""
+        n, m = self.n, GMRES_CAP
+        Z, Ys, F, Fp, Yp, w = self._Z, self._Ys, self._F, self._Fp, self._Yp, self._w
+        V, H, cs, sn, g, coef, counts = self._V, self._H, self._cs, self._sn, self._g, \
+            self._coef, self.counts
+        par = self._params
+        tol, kappa, first_tol, diverge = par[gk.PAR_TOL], par[gk.PAR_KAPPA], par[gk.PAR_FIRST_TOL], \
+            par[gk.PAR_DIVERGE]
+        grtol, gatol, eps = par[gk.PAR_GMRES_RTOL], par[gk.PAR_GMRES_ATOL], par[gk.PAR_FD_EPS]
+        newton_cap = int(par[gk.PAR_NEWTON_CAP])
+        hA = self.A * h
+        tc0, tc1 = t + self.C[0] * h, t + self.C[1] * h
+        inv_eps = 1.0 / eps
+        gk.gauss_weights(y, tol, w)
+        if P is None:
+            Z[:] = 0.0
+        else:
+            gk.gauss_predict(self._Zp, P, Z)
+        norm_prev = 0.0
+        for it in range(newton_cap):
+            counts[COUNT_NEWTON] += 1
+            counts[COUNT_MAX_NEWTON] = max(counts[COUNT_MAX_NEWTON], it + 1)
+            gk.gauss_stage_state(y, Z, 0, Ys[0])
+            self._rhs_into(tc0, Ys[0], F[0])
+            gk.gauss_stage_state(y, Z, 1, Ys[1])
+            self._rhs_into(tc1, Ys[1], F[1])
+            if not gk.all_finite(F):
+                return STEP_RHS_NONFINITE
+            beta = gk.gmres_start(Z, F, hA, w, V, g)
+            if beta == 0.0:
+                return STEP_OK
+            goal = gk.gmres_goal(beta, grtol, gatol, n)
+            k = 0
+            while k < m:
+                gk.gauss_perturbed(Ys[0], w, V[k], 0, eps, Yp)
+                self._rhs_into(tc0, Yp, Fp[0])
+                gk.gauss_perturbed(Ys[1], w, V[k], 1, eps, Yp)
+                self._rhs_into(tc1, Yp, Fp[1])
+                gk.gauss_operator(V[k], Fp, F, hA, w, inv_eps, V[k + 1])
+                res = gk.gmres_arnoldi(V, H, cs, sn, g, k)
+                k += 1
+                if res <= goal:
+                    break
+            counts[COUNT_KRYLOV] += k
+            counts[COUNT_MAX_KRYLOV] = max(counts[COUNT_MAX_KRYLOV], k)
+            norm = gk.gmres_update(V, H, g, k, w, Z, coef)
+            code, theta = gk.newton_test(norm, norm_prev, it, kappa, first_tol, diverge)
+            self._info[:] = (it, theta, norm)
+            if code == gk.NEWTON_CONVERGED:
+                return STEP_OK
+            if code == gk.NEWTON_DIVERGING:
+                return STEP_DIVERGED
+            if code == gk.NEWTON_NOT_FINITE:
+                return STEP_LINEAR
+            norm_prev = norm
+        return STEP_NOT_CONVERGED

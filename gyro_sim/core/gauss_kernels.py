@@ -1,0 +1,247 @@
+"""The arithmetic of the gauss4 step (Jacobian-free Newton-Krylov), compiled with numba.
+
+One implementation, two drivers, as :mod:`gyro_sim.core.rk_kernels`:
+:class:`gyro_sim.core.integrators.gauss.Gauss4` calls these between its rhs evaluations on any
+system (the numpy reference among them), and the compiled loop
+:func:`gyro_sim.core.fast_gauss.gauss_march` calls the same functions between calls of the
+articulated-body kernel. Every number either driver looks at (norms, rates, the decisions of
+the stop tests) comes out of these functions, so both take the same steps bit for bit
+(test/core/test_gauss.py).
+
+The collocation equations of the 2-stage Gauss method for the stage increments Z (2, n)
+(Hairer, Wanner II, sec. IV.8, eq. (8.2)):
+
+    G(Z) = Z - (h A (x) I) F(Z) = 0,   F_s(Z) = f(t + c_s h, y + Z_s),   y1 = y + sum_s d_s Z_s
+
+Newton: (I - h (A (x) I) diag(J_s)) dZ = -G(Z), J_s = f'(y + Z_s) at the current iterate (a
+full Newton iteration: the stage Jacobians are where the iterate is, not frozen at y). Each
+linear system is solved by GMRES (Saad-Schultz; Kelley, "Iterative Methods for Linear and
+Nonlinear Equations", SIAM 1995, sec. 3.4-3.5: Arnoldi by modified Gram-Schmidt, the
+least-squares problem by Givens rotations) on the operator applied without forming it: the
+products J_s v_s are forward differences of f in the direction v_s (Kelley, "Solving Nonlinear
+Equations with Newton's Method", SIAM 2003, sec. 3.2: Jacobian-free Newton-GMRES), two rhs
+evaluations per Krylov vector. Everything is in scaled variables, u = dZ / w with
+w_i = tol (1 + |y_i|) per component (atol = rtol = tol): the Euclidean norm of GMRES is the
+weighted norm of the stop test, whose unit is the tolerance.
+
+Memory: O(n) -- the Krylov basis V (m + 1, 2, n) and a few (2, n) arrays; nothing (n, n).
+No fastmath (IEEE arithmetic, no fused multiply-adds). Without numba these stay plain Python.
+"""
+from __future__ import annotations
+
+import math
+
+try:
+    import numba
+except ImportError:  # pragma: no cover - exercised only where numba is missing
+    numba = None
+
+#: newton_test results
+NEWTON_CONTINUE, NEWTON_CONVERGED, NEWTON_DIVERGING, NEWTON_NOT_FINITE = 0, 1, 2, 3
+#: status of a step (both drivers): done; the state not finite after it; the rhs not finite at
+#: the stages; Newton diverging; Newton not converged within its cap; GMRES update not finite
+STEP_OK, STEP_NONFINITE, STEP_RHS_NONFINITE, STEP_DIVERGED, STEP_NOT_CONVERGED, STEP_LINEAR = range(6)
+#: the counters array (int64, 5): Newton iterations, Krylov vectors, the most Newton iterations
+#: of a step, the most Krylov vectors of a solve, rhs evaluations
+COUNT_NEWTON, COUNT_KRYLOV, COUNT_MAX_NEWTON, COUNT_MAX_KRYLOV, COUNT_RHS = range(5)
+#: the parameters array (float64, 8): NEWTON_TOL, NEWTON_KAPPA, NEWTON_FIRST_TOL,
+#: NEWTON_SLOW_RATE, GMRES_RTOL, GMRES_ATOL, the finite-difference eps, NEWTON_CAP
+(PAR_TOL, PAR_KAPPA, PAR_FIRST_TOL, PAR_DIVERGE, PAR_GMRES_RTOL, PAR_GMRES_ATOL, PAR_FD_EPS,
+ PAR_NEWTON_CAP) = range(8)
+
+
+def _njit(fn):
+    """Compiled in nopython mode and cached on disk (as gyro_sim.core.fast)."""
+    if numba is None:
+        return fn
+    return numba.njit(cache=True, error_model="numpy")(fn)
+
+
+@_njit
+def gauss_weights(y, tol, w):
+    """w (n,) = tol (1 + |y|): the per-component scale of the Newton iteration."""
+    for i in range(y.shape[0]):
+        w[i] = tol * (1.0 + abs(y[i]))
+
+
+@_njit
+def gauss_predict(Zp, P, Z):
+    """Z (2, n) = P Zp: the starting stage increments, the previous step's collocation
+    polynomial extrapolated (P from the class's `predictor`); Zp (2, n) its stage increments."""
+    n = Z.shape[1]
+    for s in range(2):
+        for i in range(n):
+            Z[s, i] = P[s, 0] * Zp[0, i] + P[s, 1] * Zp[1, i]
+
+
+@_njit
+def gauss_stage_state(y, Z, s, Ys):
+    """Ys (n,) = y + Z[s]: the state of stage s."""
+    for i in range(y.shape[0]):
+        Ys[i] = y[i] + Z[s, i]
+
+
+@_njit
+def all_finite(X):
+    """True when every entry of X (k, n) is finite."""
+    for s in range(X.shape[0]):
+        for i in range(X.shape[1]):
+            if not (abs(X[s, i]) < math.inf):
+                return False
+    return True
+
+
+@_njit
+def gmres_start(Z, F, hA, w, V, g):
+    """The right-hand side of the Newton system, scaled, as GMRES's first basis vector.
+
+    b = -G(Z) / w = (-Z_s + sum_j hA[s, j] F_j) / w; V[0] = b / beta, g = (beta, 0, ...).
+    Returns beta = |b| (the 2-norm of the 2 n entries). beta == 0: Z solves the equations,
+    V[0] is left unnormalised.
+    """
+    n = Z.shape[1]
+    acc = 0.0
+    for s in range(2):
+        for i in range(n):
+            b = (-Z[s, i] + (hA[s, 0] * F[0, i] + hA[s, 1] * F[1, i])) / w[i]
+            V[0, s, i] = b
+            acc += b * b
+    beta = math.sqrt(acc)
+    if beta > 0.0:
+        inv = 1.0 / beta
+        for s in range(2):
+            for i in range(n):
+                V[0, s, i] *= inv
+    for j in range(g.shape[0]):
+        g[j] = 0.0
+    g[0] = beta
+    return beta
+
+
+@_njit
+def gmres_goal(beta, rtol, atol, n):
+    """The residual (2-norm, scaled) at which GMRES stops: max(rtol beta, atol sqrt(2 n)) --
+    relative (the inexact Newton forcing term) or absolute (atol in rms units of the
+    tolerance: no accuracy beyond the Newton tolerance is asked)."""
+    return max(rtol * beta, atol * math.sqrt(2.0 * n))
+
+
+@_njit
+def gauss_perturbed(Ys, w, v, s, eps, out):
+    """out (n,) = Ys + eps w v[s]: the state at which f is differenced for J_s (w v_s).
+    Ys (n,) the stage state, v (2, n) a scaled Krylov vector."""
+    for i in range(Ys.shape[0]):
+        out[i] = Ys[i] + eps * (w[i] * v[s, i])
+
+
+@_njit
+def gauss_operator(v, Fp, F, hA, w, inv_eps, out):
+    """out (2, n) = v - (h A (x) I) [J_s (w v_s)] / w: the scaled Newton matrix applied to v,
+    J_s (w v_s) = (Fp[s] - F[s]) / eps by forward differences (Fp[s] = f at `gauss_perturbed`)."""
+    n = v.shape[1]
+    for i in range(n):
+        j0 = (Fp[0, i] - F[0, i]) * inv_eps
+        j1 = (Fp[1, i] - F[1, i]) * inv_eps
+        for s in range(2):
+            out[s, i] = v[s, i] - (hA[s, 0] * j0 + hA[s, 1] * j1) / w[i]
+
+
+@_njit
+def gmres_arnoldi(V, H, cs, sn, g, k):
+    """Arnoldi step k of GMRES with its Givens rotation. On entry V[k + 1] (2, n) holds the
+    operator applied to V[k]; it is orthogonalised against V[0..k] (modified Gram-Schmidt),
+    normalised, column k of H (m + 1, m) filled and rotated, g (m + 1) updated. Returns the
+    norm of the residual of the least-squares solution with k + 1 vectors, |g[k + 1]|.
+    A breakdown (the new vector is 0: the Krylov space is invariant) leaves V[k + 1] at 0 and
+    the residual exactly 0."""
+    n = V.shape[2]
+    for j in range(k + 1):
+        acc = 0.0
+        for s in range(2):
+            for i in range(n):
+                acc += V[j, s, i] * V[k + 1, s, i]
+        H[j, k] = acc
+        for s in range(2):
+            for i in range(n):
+                V[k + 1, s, i] -= acc * V[j, s, i]
+    acc = 0.0
+    for s in range(2):
+        for i in range(n):
+            acc += V[k + 1, s, i] * V[k + 1, s, i]
+    hn = math.sqrt(acc)
+    H[k + 1, k] = hn
+    if hn > 0.0:
+        inv = 1.0 / hn
+        for s in range(2):
+            for i in range(n):
+                V[k + 1, s, i] *= inv
+    for j in range(k):  # the previous rotations on the new column
+        a, b = H[j, k], H[j + 1, k]
+        H[j, k] = cs[j] * a + sn[j] * b
+        H[j + 1, k] = -sn[j] * a + cs[j] * b
+    a, b = H[k, k], H[k + 1, k]
+    r = math.sqrt(a * a + b * b)
+    if r == 0.0:
+        cs[k], sn[k] = 1.0, 0.0
+    else:
+        cs[k], sn[k] = a / r, b / r
+    H[k, k] = r
+    H[k + 1, k] = 0.0
+    g[k + 1] = -sn[k] * g[k]
+    g[k] = cs[k] * g[k]
+    return abs(g[k + 1])
+
+
+@_njit
+def gmres_update(V, H, g, k, w, Z, coef):
+    """The GMRES solution with k vectors added to Z: coef (k,) solves the triangle
+    H[:k, :k] coef = g[:k]; Z += w (sum_j coef_j V[j]). Returns the rms norm of the scaled
+    update sum_j coef_j V[j] (= |coef| / sqrt(2 n): V is orthonormal), the Newton step's size
+    in units of the tolerance; inf or nan if the solve failed."""
+    n = Z.shape[1]
+    for j in range(k - 1, -1, -1):
+        acc = g[j]
+        for l in range(j + 1, k):
+            acc -= H[j, l] * coef[l]
+        coef[j] = acc / H[j, j] if H[j, j] != 0.0 else 0.0
+    acc = 0.0
+    for j in range(k):
+        acc += coef[j] * coef[j]
+    for s in range(2):
+        for i in range(n):
+            u = 0.0
+            for j in range(k):
+                u += coef[j] * V[j, s, i]
+            Z[s, i] += w[i] * u
+    return math.sqrt(acc / (2.0 * n))
+
+
+@_njit
+def newton_test(norm, norm_prev, it, kappa, first_tol, diverge):
+    """The stop test of the Newton iteration after its update number `it` (0-based) of scaled
+    rms size `norm` (Hairer, Wanner II, sec. IV.8, eqs. (8.10)-(8.13)): with the contraction
+    rate theta = norm / norm_prev, the error left in Z is estimated by theta / (1 - theta) norm,
+    converged when that is below kappa (the unit is the tolerance). The first update has no
+    rate: converged when norm <= first_tol. Returns (code, theta): NEWTON_CONVERGED,
+    NEWTON_DIVERGING (theta >= diverge, 1 in HW), NEWTON_NOT_FINITE (the update is not finite) or
+    NEWTON_CONTINUE; theta is -1 at it = 0."""
+    if not (norm < math.inf):
+        return NEWTON_NOT_FINITE, -1.0
+    if it == 0 or norm_prev == 0.0:
+        if norm <= first_tol:
+            return NEWTON_CONVERGED, -1.0
+        return NEWTON_CONTINUE, -1.0
+    theta = norm / norm_prev
+    if theta >= diverge:
+        return NEWTON_DIVERGING, theta
+    if theta / (1.0 - theta) * norm <= kappa:
+        return NEWTON_CONVERGED, theta
+    return NEWTON_CONTINUE, theta
+
+
+@_njit
+def gauss_update(y, Z, D):
+    """y (n,) += D[0] Z[0] + D[1] Z[1]: the step's result (y1 = u(t + h) of the collocation
+    polynomial, no rhs evaluation)."""
+    for i in range(y.shape[0]):
+        y[i] += D[0] * Z[0, i] + D[1] * Z[1, i]
