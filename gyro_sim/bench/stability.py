@@ -51,6 +51,8 @@ CHUNK = 0.01
 SETTINGS: dict[str, dict[str, float]] = {
     "rk4": {"step": 1e-3},
     "lie4": {"step": 1e-3},
+    "gauss4": {"step": 1e-3},
+    "fixed": {"step": 1e-3},
     "dop853": {"rtol": 1e-8},
     "radau": {"rtol": 1e-8},
     "auto": {"rtol": 1e-8},

@@ -445,4 +445,13 @@ class Simulator:
         return Snapshot(
             time=self._t, joint_names=tuple(self._joint_names), position=pos, velocity=vel, effort=eff,
             axis_names=tuple(m.axis_names), axis_moments=self._moments.copy(), integrator=self.integrator_name,
-            error_estimate=self.error_estimate, body_names=tuple(m.names), **kw)
+            error_estimate=self.error_estimate, body_names=tuple(m.names), **self._method_fields(), **kw)
+
+    def _method_fields(self) -> dict:
+        """The chooser's state ("fixed" integrator), for the snapshot."""
+        integ = self.integrator
+        if not getattr(integ, "current", ""):
+            return {}
+        hl = getattr(integ, "h_lambda", None)
+        return {"method": integ.current, "method_reason": integ.reason,
+                "h_lambda": hl if hl is not None and math.isfinite(hl) else None}

@@ -52,6 +52,9 @@ class Snapshot:
     work: float | None = None  # work of the commanded moments since reset (J)
     energy_balance: float | None = None  # E - E(0) - W (J); None where E is not conserved
     energy_scale: float | None = None  # what energy_balance is relative to (J)
+    method: str | None = None  # the method stepping now, when the integrator chooses ("fixed")
+    method_reason: str | None = None  # why that one (one line)
+    h_lambda: float | None = None  # the chooser's last estimate of h |lambda| (step x largest |eigenvalue|)
 
     def nonfinite(self) -> str | None:
         """The name of the first field holding NaN or infinity (None when all are finite)."""
@@ -60,7 +63,7 @@ class Snapshot:
             v = getattr(self, name)
             if v is not None and not np.all(np.isfinite(v)):
                 return name
-        for name in ("time", "error_estimate", "work", "energy_balance"):
+        for name in ("time", "error_estimate", "work", "energy_balance", "h_lambda"):
             v = getattr(self, name)
             if v is not None and not np.isfinite(v):
                 return name

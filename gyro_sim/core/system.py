@@ -57,6 +57,13 @@ class OdeSystem(Protocol):
     def project(self, y: np.ndarray) -> None: ...
 
 
+def _same(a, b) -> bool:
+    """Two held inputs (None or arrays) with the same values."""
+    if a is None or b is None:
+        return a is b
+    return np.array_equal(a, b)
+
+
 class ChainODE:
     """The chain as an ODE system for the integrators: y' = f(t, y) with inputs held.
 
@@ -75,8 +82,12 @@ class ChainODE:
         self.t0 = 0.0
         self.p0 = model.torque_p0.copy() if len(model.torque_body) else None
         self.nfev = 0
+        #: counts the holds whose commanded values (hinge_tau, L_rotor) differ from the last
+        self.inputs_version = 0
 
     def hold(self, t0: float, p0: np.ndarray | None, hinge_tau, L_rotor) -> None:
+        if not (_same(hinge_tau, self.hinge_tau) and _same(L_rotor, self.L_rotor)):
+            self.inputs_version += 1
         self.t0, self.p0, self.hinge_tau, self.L_rotor = t0, p0, hinge_tau, L_rotor
 
     def spins(self, t: float) -> np.ndarray | None:
@@ -159,6 +170,11 @@ class FastChainODE:
         """Hold the inputs from t0 on (the zero-order hold of `Simulator.advance`)."""
         self._ref.hold(t0, p0, hinge_tau, L_rotor)
         self._set_inputs(t0, p0, hinge_tau, L_rotor)
+
+    @property
+    def inputs_version(self) -> int:
+        """Counts the holds whose commanded values differ from the last (ChainODE's)."""
+        return self._ref.inputs_version
 
     def kernel_arguments(self) -> tuple:
         """The arguments of :func:`gyro_sim.core.fast.rhs_kernel` after (t, y, out), with the

@@ -73,7 +73,8 @@ RUN_STATUS = "gyro_sim: run"
 #: diagnostic_msgs/DiagnosticStatus levels
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
 #: keys whose values are text (states and reasons); every other value is a number
-STRING_KEYS = frozenset({"integrator", "state", "reason", "backend", "last_reject_reason"})
+STRING_KEYS = frozenset({"integrator", "integrator_now", "integrator_reason", "state", "reason", "backend",
+                         "last_reject_reason"})
 #: the invariants (gyro_sim.core.invariants) as diagnostics: key stem and unit
 INVARIANT_KEYS = {
     "energy": ("energy", "J"),
@@ -282,6 +283,11 @@ def string(text: str) -> bytes:
 def dynamics_values(snap) -> dict[str, float | str]:
     """The key-values of the ``gyro_sim: dynamics`` status of a snapshot."""
     out: dict[str, float | str] = {SIM_TIME_KEY: snap.time, "integrator": snap.integrator}
+    if snap.method:  # an integrator that chooses ("fixed"): which method steps now, and why
+        out["integrator_now"] = snap.method
+        out["integrator_reason"] = snap.method_reason or ""
+        if snap.h_lambda is not None:
+            out["stiffness_h_lambda"] = snap.h_lambda
     for name, value in (snap.invariants or {}).items():
         stem, unit = INVARIANT_KEYS[name]
         v = np.asarray(value, dtype=float)

@@ -72,6 +72,15 @@ def log_params(sim, cfg) -> dict:
                       duration=cfg.duration or None, **own)
 
 
+def method_choice(sim, cfg) -> str:
+    """What "fixed" steps with at the start and why, for the start line ("" for other methods)."""
+    if cfg.integrator != "fixed":
+        return ""
+    from ..core.integrators.choose import fixed_step_method
+
+    return fixed_step_method(sim, cfg.dt)[1]
+
+
 def stiffness_note(sim, cfg) -> str:
     """A warning when the explicit fixed-step method runs a scene too stiff for its step
     (gyro_sim.core.integrators.choose: h |lambda| at the initial state against RK4's limit)."""
@@ -120,7 +129,9 @@ class GyroSimNode(Node):
         self.create_service(SetBool, "~/pause", self.on_pause)
         self.get_logger().info(
             f"scene '{cfg.scene.name}' ({cfg.scene_path}); axes {self.sim.axis_names}; "
-            f"physics {cfg.physics_rate:g} Hz ({self.sim.integrator_name}, {self.sim.backend} dynamics), "
+            f"physics {cfg.physics_rate:g} Hz ({self.sim.integrator_name}"
+            + (f" = {choice}" if (choice := method_choice(self.sim, cfg)) else "")
+            + f", {self.sim.backend} dynamics), "
             f"publish {cfg.publish_rate:g} Hz, "
             f"real-time factor {cfg.real_time_factor:g}, {self.loop.per_chunk} steps per wake-up"
             + (f"; recording to {cfg.record}" if cfg.record else "")

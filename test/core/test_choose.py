@@ -47,3 +47,64 @@ def test_gauss4_on_the_fast_heavy_top_where_rk4_fails():
     name, why = fixed_step_method(Simulator(scene, integrator="rk4", step=STEP), STEP)
     assert name == "gauss4" and "stiff for rk4" in why, why
     assert not survives(scene, "rk4")  # the choice matters: rk4 goes non-finite
+
+
+# --- "fixed": the choice made at the start and again as the motion changes -------------------
+
+class Rotation:
+    """y' = w J y in the plane (eigenvalues +-i w): rk4 is unstable for h w > 2 sqrt 2, Gauss
+    collocation keeps |y| exactly (a quadratic invariant)."""
+
+    def __init__(self, w):
+        self.w, self.size, self.quat_index, self.nfev = w, 2, np.zeros((0, 4), dtype=int), 0
+
+    def rhs(self, t, y):
+        self.nfev += 1
+        with np.errstate(over="ignore", invalid="ignore"):  # rk4 past its limit overflows, by design here
+            return self.w * np.array([-y[1], y[0]])
+
+    def project(self, y):
+        pass
+
+
+def test_fixed_is_rk4_bit_for_bit_on_a_soft_scene():
+    a = Simulator("hinge_chain", integrator="fixed", step=STEP)
+    b = Simulator("hinge_chain", integrator="rk4", step=STEP)
+    for _ in range(30):
+        a.advance(CALL)
+        b.advance(CALL)
+    assert a.integrator.current == "rk4" and a.integrator.switches == []
+    assert np.array_equal(a.state, b.state)
+
+
+def test_fixed_switches_when_a_command_stiffens_the_scene_and_back():
+    """A rotation whose rate is the command: soft, then past rk4's limit, then soft again."""
+    from gyro_sim.core.integrators.choose import SceneFixedStep
+
+    sys_ = Rotation(100.0)
+    sys_.inputs_version = 0
+    integ = SceneFixedStep(sys_, step=STEP)
+    y = np.array([1.0, 0.0])
+    t = 0.0
+    for w, expect in ((100.0, "rk4"), (5000.0, "gauss4"), (100.0, "rk4")):
+        sys_.w = w
+        sys_.inputs_version += 1  # as ChainODE.hold does when the commanded values change
+        for _ in range(50):
+            y = integ.advance(t, y, t + CALL)
+            t += CALL
+        assert integ.current == expect, (w, integ.reason)
+    assert [s[1:3] for s in integ.switches] == [("rk4", "gauss4"), ("gauss4", "rk4")]
+    assert np.hypot(*y) == pytest.approx(1.0, abs=1e-5)  # neither let it grow (rk4 damps ~7e-9 a step)
+
+
+def test_fixed_takes_a_call_again_with_gauss4_when_rk4_blows_up(monkeypatch):
+    """The estimate said rk4 (forced here), rk4 overflowed within the call: the call is taken
+    again from its start with gauss4, which keeps |y| = 1 to round-off (h w = 5)."""
+    from gyro_sim.core.integrators import choose
+
+    monkeypatch.setattr(choose, "_choice", lambda rhs, t, y, h, now: ("rk4", "forced", 0.0))
+    integ = choose.SceneFixedStep(Rotation(5000.0), step=STEP)
+    y = integ.advance(0.0, np.array([1.0, 0.0]), 1.0)  # 1000 steps: rk4 grows ~21x a step
+    assert integ.current == "gauss4" and "non-finite" in integ.reason
+    assert len(integ.switches) == 1 and integ.switches[0][0] == 0.0
+    assert np.hypot(*y) == pytest.approx(1.0, abs=1e-12)

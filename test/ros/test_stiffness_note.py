@@ -26,3 +26,13 @@ def test_a_fast_heavy_top_is_stiff_for_rk4_at_1_khz(tmp_path):
     path.write_text(yaml.safe_dump(top))
     text = note(str(path))
     assert "stiff for rk4 at physics_rate 1000 Hz" in text and "integrator:=gauss4" in text, text
+
+
+def test_the_default_is_fixed_and_the_start_line_says_what_it_chose(tmp_path):
+    from gyro_sim.ros.node import method_choice
+
+    cfg = validate({"scene": "hinge_chain"})
+    assert cfg.integrator == "fixed"
+    sim = Simulator(cfg.scene, integrator=cfg.integrator, step=cfg.dt)
+    assert method_choice(sim, cfg).startswith("rk4: h |lambda| = ")
+    assert stiffness_note(sim, cfg) == ""  # "fixed" needs no warning: it takes gauss4 where rk4 fails
