@@ -53,6 +53,19 @@ import numpy as np
 
 from gyro_sim.core.scene import Body, Scene
 
+try:
+    import numba
+except ImportError:  # pragma: no cover - exercised only where numba is missing
+    numba = None
+
+
+def _njit(fn):
+    """Compiled in nopython mode and cached on disk (as gyro_sim.core.fast); plain Python
+    without numba."""
+    if numba is None:
+        return fn
+    return numba.njit(cache=True, error_model="numpy")(fn)
+
 __all__ = [
     "LagrangeChain",
     "vertical_momentum_82",
@@ -268,15 +281,33 @@ def vertical_momentum_82(chain: LagrangeChain, euler: np.ndarray, rates: np.ndar
     psi, th, dpsi, dth, dphi = _angles(euler, rates, chain.n)
     sin, cos = np.sin(th), np.cos(th)
     Bn = chain.A * _spin_p(th, dpsi, dphi) + chain.lam  # (70)
-    # C[i, j] = sin th_i [th_j' cos th_j sin(psi_j - psi_i) + psi_j' sin th_j cos(psi_j - psi_i)]
-    d = psi[None, :] - psi[:, None]
-    C = sin[:, None] * (dth * cos * np.sin(d) + dpsi * sin * np.cos(d))
-    m, c, s = chain.m, chain.c, chain.s
     k = float(np.sum(Bn * cos + chain.B * dpsi * sin**2))  # (82), first sum
-    for p in range(1, chain.n):
-        sl = s[:p]
-        k += m[p] * (c[p] * (sl @ C[p, :p]) + sl @ C[:p, :p] @ sl + c[p] * (sl @ C[:p, p]))
-    return k
+    return k + _sums_82(chain.m, chain.c, chain.s, psi, th, dpsi, dth)
+
+
+@_njit
+def _sums_82(m, c, s, psi, th, dpsi, dth):
+    """The double sums of (82), O(n^2): the running sum S_p = sum_{q<p} sum_{l<p} s^q s^l C_ql
+    grows by s^p (sum_{l<p} s^l (C_pl + C_lp)) + (s^p)^2 C_pp from p to p + 1; C_ij from the
+    sines and cosines of the angles (sin(psi_j - psi_i) expanded), no (n, n) array."""
+    n = psi.shape[0]
+    st, ct, sp, cp = np.sin(th), np.cos(th), np.sin(psi), np.cos(psi)
+    a = dth * ct  # C_ij = st_i [a_j sin(psi_j - psi_i) + b_j cos(psi_j - psi_i)]
+    b = dpsi * st
+    total = 0.0
+    S = 0.0  # sum_{q<p} sum_{l<p} s^q s^l C_ql
+    for p in range(n):
+        row = 0.0  # sum_{l<p} s^l C_pl
+        col = 0.0  # sum_{l<p} s^l C_lp
+        for l in range(p):
+            sin_lp = sp[p] * cp[l] - cp[p] * sp[l]  # sin(psi_p - psi_l)
+            cos_lp = cp[p] * cp[l] + sp[p] * sp[l]
+            row += s[l] * st[p] * (-a[l] * sin_lp + b[l] * cos_lp)  # C_pl: psi_l - psi_p
+            col += s[l] * st[l] * (a[p] * sin_lp + b[p] * cos_lp)  # C_lp: psi_p - psi_l
+        if p >= 1:
+            total += m[p] * (c[p] * row + S + c[p] * col)
+        S += s[p] * (row + col) + s[p] * s[p] * st[p] * b[p]  # C_pp = st_p b_p
+    return total
 
 
 def energy_integral_85(chain: LagrangeChain, euler: np.ndarray, rates: np.ndarray) -> float:
@@ -297,16 +328,33 @@ def energy_integral_85(chain: LagrangeChain, euler: np.ndarray, rates: np.ndarra
     """
     psi, th, dpsi, dth, _ = _angles(euler, rates, chain.n)
     sin, cos = np.sin(th), np.cos(th)
-    d = psi[:, None] - psi[None, :]  # psi_l - psi_q
-    G = (np.outer(dth * sin, dth * sin)
-         + (np.outer(dth * cos, dth * cos) + np.outer(dpsi * sin, dpsi * sin)) * np.cos(d)
-         + (np.outer(dth * cos, dpsi * sin) - np.outer(dpsi * sin, dth * cos)) * np.sin(d))
-    m, c, s = chain.m, chain.c, chain.s
     h = float(np.sum((dth**2 + dpsi**2 * sin**2 - 2.0 * chain.mu * cos) * chain.B))  # (85)
-    for k in range(1, chain.n):
-        sl = s[:k]
-        h += m[k] * (2.0 * c[k] * (sl @ G[:k, k]) + sl @ G[:k, :k] @ sl)
-    return h
+    return h + _sums_85(chain.m, chain.c, chain.s, psi, th, dpsi, dth)
+
+
+@_njit
+def _sums_85(m, c, s, psi, th, dpsi, dth):
+    """The double sums of (85), O(n^2): G is symmetric, so the running sum
+    T_k = sum_{l<k} sum_{q<k} s^l s^q G_lq grows by 2 s^k sum_{l<k} s^l G_lk + (s^k)^2 G_kk;
+    G_lq from the sines and cosines of the angles, no (n, n) array."""
+    n = psi.shape[0]
+    st, ct, sp, cp = np.sin(th), np.cos(th), np.sin(psi), np.cos(psi)
+    total = 0.0
+    T = 0.0
+    for k in range(n):
+        col = 0.0  # sum_{l<k} s^l G_lk
+        for l in range(k):
+            cos_lk = cp[l] * cp[k] + sp[l] * sp[k]  # cos(psi_l - psi_k)
+            sin_lk = sp[l] * cp[k] - cp[l] * sp[k]  # sin(psi_l - psi_k)
+            G = (dth[l] * dth[k] * st[l] * st[k]
+                 + (dth[l] * dth[k] * ct[l] * ct[k] + dpsi[l] * dpsi[k] * st[l] * st[k]) * cos_lk
+                 + (dth[l] * ct[l] * dpsi[k] * st[k] - dth[k] * ct[k] * dpsi[l] * st[l]) * sin_lk)
+            col += s[l] * G
+        if k >= 1:
+            total += m[k] * (2.0 * c[k] * col + T)
+        Gkk = dth[k] * dth[k] * st[k] * st[k] + dth[k] * dth[k] * ct[k] * ct[k] + dpsi[k] * dpsi[k] * st[k] * st[k]
+        T += 2.0 * s[k] * col + s[k] * s[k] * Gkk
+    return total
 
 
 def axial_energy(chain: LagrangeChain, euler: np.ndarray, rates: np.ndarray) -> float:
