@@ -27,9 +27,11 @@ from .gauss_kernels import (
     COUNT_MAX_NEWTON,
     COUNT_NEWTON,
     COUNT_RHS,
+    COUNT_STALLED,
     NEWTON_CONVERGED,
     NEWTON_DIVERGING,
     NEWTON_NOT_FINITE,
+    NEWTON_STALLED,
     PAR_DIVERGE,
     PAR_FD_EPS,
     PAR_FIRST_TOL,
@@ -37,6 +39,8 @@ from .gauss_kernels import (
     PAR_GMRES_RTOL,
     PAR_KAPPA,
     PAR_NEWTON_CAP,
+    PAR_STALL,
+    PAR_STALL_RATE,
     PAR_TOL,
     STEP_DIVERGED,
     STEP_LINEAR,
@@ -64,6 +68,7 @@ def _newton(t, h, y, hA, C, P, use_p, params, Zp, Z, Ys, F, Fp, Yp, w, V, H, cs,
         params[PAR_DIVERGE]
     grtol, gatol, eps = params[PAR_GMRES_RTOL], params[PAR_GMRES_ATOL], params[PAR_FD_EPS]
     newton_cap = int(params[PAR_NEWTON_CAP])
+    stall, stall_rate = params[PAR_STALL], params[PAR_STALL_RATE]
     tc0 = t + C[0] * h
     tc1 = t + C[1] * h
     inv_eps = 1.0 / eps
@@ -112,9 +117,13 @@ def _newton(t, h, y, hA, C, P, use_p, params, Zp, Z, Ys, F, Fp, Yp, w, V, H, cs,
         counts[COUNT_KRYLOV] += k
         counts[COUNT_MAX_KRYLOV] = max(counts[COUNT_MAX_KRYLOV], k)
         norm = gk.gmres_update(V, H, g, k, w, Z, coef)
-        code, theta = gk.newton_test(norm, norm_prev, it, kappa, first_tol, diverge)
+        code, theta = gk.newton_test(norm, norm_prev, it, kappa, first_tol, diverge, stall,
+                                     stall_rate)
         info[0], info[1], info[2] = it, theta, norm
         if code == NEWTON_CONVERGED:
+            return STEP_OK
+        if code == NEWTON_STALLED:
+            counts[COUNT_STALLED] += 1
             return STEP_OK
         if code == NEWTON_DIVERGING:
             return STEP_DIVERGED

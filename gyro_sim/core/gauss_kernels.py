@@ -37,17 +37,19 @@ except ImportError:  # pragma: no cover - exercised only where numba is missing
     numba = None
 
 #: newton_test results
-NEWTON_CONTINUE, NEWTON_CONVERGED, NEWTON_DIVERGING, NEWTON_NOT_FINITE = 0, 1, 2, 3
+NEWTON_CONTINUE, NEWTON_CONVERGED, NEWTON_DIVERGING, NEWTON_NOT_FINITE, NEWTON_STALLED = 0, 1, 2, 3, 4
 #: status of a step (both drivers): done; the state not finite after it; the rhs not finite at
 #: the stages; Newton diverging; Newton not converged within its cap; GMRES update not finite
 STEP_OK, STEP_NONFINITE, STEP_RHS_NONFINITE, STEP_DIVERGED, STEP_NOT_CONVERGED, STEP_LINEAR = range(6)
-#: the counters array (int64, 5): Newton iterations, Krylov vectors, the most Newton iterations
-#: of a step, the most Krylov vectors of a solve, rhs evaluations
-COUNT_NEWTON, COUNT_KRYLOV, COUNT_MAX_NEWTON, COUNT_MAX_KRYLOV, COUNT_RHS = range(5)
-#: the parameters array (float64, 8): NEWTON_TOL, NEWTON_KAPPA, NEWTON_FIRST_TOL,
-#: NEWTON_SLOW_RATE, GMRES_RTOL, GMRES_ATOL, the finite-difference eps, NEWTON_CAP
+#: the counters array (int64, 6): Newton iterations, Krylov vectors, the most Newton iterations
+#: of a step, the most Krylov vectors of a solve, rhs evaluations, steps accepted at the
+#: round-off floor (NEWTON_STALLED)
+COUNT_NEWTON, COUNT_KRYLOV, COUNT_MAX_NEWTON, COUNT_MAX_KRYLOV, COUNT_RHS, COUNT_STALLED = range(6)
+#: the parameters array (float64, 10): NEWTON_TOL, NEWTON_KAPPA, NEWTON_FIRST_TOL,
+#: NEWTON_SLOW_RATE, GMRES_RTOL, GMRES_ATOL, the finite-difference eps, NEWTON_CAP,
+#: NEWTON_STALL, NEWTON_STALL_RATE
 (PAR_TOL, PAR_KAPPA, PAR_FIRST_TOL, PAR_DIVERGE, PAR_GMRES_RTOL, PAR_GMRES_ATOL, PAR_FD_EPS,
- PAR_NEWTON_CAP) = range(8)
+ PAR_NEWTON_CAP, PAR_STALL, PAR_STALL_RATE) = range(10)
 
 
 def _njit(fn):
@@ -217,14 +219,22 @@ def gmres_update(V, H, g, k, w, Z, coef):
 
 
 @_njit
-def newton_test(norm, norm_prev, it, kappa, first_tol, diverge):
+def newton_test(norm, norm_prev, it, kappa, first_tol, diverge, stall, stall_rate):
     """The stop test of the Newton iteration after its update number `it` (0-based) of scaled
     rms size `norm` (Hairer, Wanner II, sec. IV.8, eqs. (8.10)-(8.13)): with the contraction
     rate theta = norm / norm_prev, the error left in Z is estimated by theta / (1 - theta) norm,
     converged when that is below kappa (the unit is the tolerance). The first update has no
-    rate: converged when norm <= first_tol. Returns (code, theta): NEWTON_CONVERGED,
-    NEWTON_DIVERGING (theta >= diverge, 1 in HW), NEWTON_NOT_FINITE (the update is not finite) or
-    NEWTON_CONTINUE; theta is -1 at it = 0."""
+    rate: converged when norm <= first_tol.
+
+    The round-off floor: an update that no longer contracts (theta >= stall_rate) while it is
+    already below `stall` tolerance units has reached the noise of the rhs (a component near 0
+    of a large vector, e.g. a world angular-velocity component of a top spinning at 1e4 rad/s,
+    carries the round-off of the |w|^2 terms): NEWTON_STALLED, accepted. Otherwise theta >=
+    diverge is divergence (1 in HW).
+
+    Returns (code, theta): NEWTON_CONVERGED, NEWTON_STALLED, NEWTON_DIVERGING,
+    NEWTON_NOT_FINITE (the update is not finite) or NEWTON_CONTINUE; theta is -1 at it = 0.
+    """
     if not (norm < math.inf):
         return NEWTON_NOT_FINITE, -1.0
     if it == 0 or norm_prev == 0.0:
@@ -232,6 +242,8 @@ def newton_test(norm, norm_prev, it, kappa, first_tol, diverge):
             return NEWTON_CONVERGED, -1.0
         return NEWTON_CONTINUE, -1.0
     theta = norm / norm_prev
+    if theta >= stall_rate and norm <= stall:
+        return NEWTON_STALLED, theta
     if theta >= diverge:
         return NEWTON_DIVERGING, theta
     if theta / (1.0 - theta) * norm <= kappa:

@@ -197,6 +197,46 @@ def test_angular_momentum_of_a_free_chain():
     assert g[75:].max() <= 2 * g[:25].max() + 1e-15, (g[:25].max(), g[75:].max())
 
 
+class EulerBody:
+    """Euler's equations of a free rigid body, I w' = (I w) x w (body-frame w, principal I)."""
+
+    size = 3
+    quat_index = np.zeros((0, 4), dtype=int)
+    I = np.array([1.0, 2.0, 3.0])
+
+    def rhs(self, t, w):
+        Iw = self.I * w
+        return np.array([Iw[1] * w[2] - Iw[2] * w[1], Iw[2] * w[0] - Iw[0] * w[2],
+                         Iw[0] * w[1] - Iw[1] * w[0]]) / self.I
+
+    def project(self, y):
+        pass
+
+
+def test_quadratic_invariants_of_a_free_rigid_body_to_round_off():
+    """Euler's equations keep 2T = w . I w and |L|^2 = |I w|^2, both quadratic: gauss4 keeps
+    them to round-off, 1e4 steps of h = 10 ms (measured: relative drift <= 4.4e-15 at every
+    1000th step, no growth), where rk4 loses ~1e-11. Python driver."""
+    body = EulerBody()
+    y0 = np.array([0.4, -1.1, 0.7])
+
+    def invariants(y):
+        Iw = body.I * y
+        return np.array([y @ Iw, Iw @ Iw])
+
+    drift = {}
+    for name in ("gauss4", "rk4"):
+        g = make_integrator(name, body, step=1e-2)
+        y, k0, d = y0, invariants(y0), []
+        for k in range(10):
+            y = g.advance(k * 10.0, y, (k + 1) * 10.0)
+            d.append(np.abs(invariants(y) / k0 - 1.0).max())
+        assert g.nsteps == 10000
+        drift[name] = np.array(d)
+    assert drift["gauss4"].max() < 2e-14, drift["gauss4"]
+    assert drift["rk4"].max() > 100 * drift["gauss4"].max(), drift
+
+
 def test_energy_bounded_on_a_nutating_top():
     """5000 steps of 1 ms on the nutating top: gauss4's energy error stays bounded (log-log
     slope of its running maximum ~0.1), rk4's grows linearly (slope ~1.2)."""
@@ -206,10 +246,10 @@ def test_energy_bounded_on_a_nutating_top():
     assert runs["rk4"].growth == "linear (~ t)", runs["rk4"].slope
 
 
-@pytest.mark.parametrize("spin", [1e2, 1e3])
+@pytest.mark.parametrize("spin", [1e2, 1e3, 1e4])
 def test_fast_heavy_top_converges(spin):
-    """The heavy top spun at 1e2 and 1e3 rad/s (1 rad a step) at h = 1 ms: 0.1 s, within the
-    Newton cap, and |q| kept."""
+    """The heavy top spun at 1e2, 1e3 and 1e4 rad/s (0.1, 1, 10 rad a step) at h = 1 ms: 0.1 s
+    within the Newton cap, and |q| kept."""
     sim = Simulator(fast_heavy_top(spin), integrator="gauss4", step=1e-3)
     for _ in range(10):
         sim.advance(0.01)

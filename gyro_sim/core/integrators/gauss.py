@@ -51,6 +51,7 @@ from ..gauss_kernels import (
     COUNT_MAX_NEWTON,
     COUNT_NEWTON,
     COUNT_RHS,
+    COUNT_STALLED,
     STEP_DIVERGED,
     STEP_LINEAR,
     STEP_NONFINITE,
@@ -76,8 +77,12 @@ NEWTON_KAPPA = 0.1
 NEWTON_FIRST_TOL = 0.01
 #: a contraction rate theta at or above this: the iteration diverges (the step fails)
 NEWTON_SLOW_RATE = 1.0
+#: the round-off floor: an update below NEWTON_STALL tolerance units (1e-10 relative) that no
+#: longer contracts (theta >= NEWTON_STALL_RATE) is the noise of the rhs: accepted (counted)
+NEWTON_STALL = 1e3
+NEWTON_STALL_RATE = 0.5
 #: GMRES stops at this fraction of its initial residual (the inexact Newton forcing term) ...
-GMRES_RTOL = 1e-4
+GMRES_RTOL = 1e-6
 #: ... or below this rms residual (units of the tolerance): more accuracy is not needed
 GMRES_ATOL = 0.01
 #: forward differences J v: a perturbation of rms FD_REL_STEP (1 + |y_i|) per component
@@ -86,7 +91,7 @@ FD_REL_STEP = math.sqrt(EPS)
 #: the parameters of both drivers, indexed by gauss_kernels.PAR_* (the eps of the differences
 #: depends on the size and is set per integrator)
 _PARAMS = (NEWTON_TOL, NEWTON_KAPPA, NEWTON_FIRST_TOL, NEWTON_SLOW_RATE, GMRES_RTOL, GMRES_ATOL,
-           math.nan, NEWTON_CAP)
+           math.nan, NEWTON_CAP, NEWTON_STALL, NEWTON_STALL_RATE)
 
 
 def _lagrange(theta: float, ci: float, cj: float) -> float:
@@ -143,7 +148,7 @@ class Gauss4(FixedStepIntegrator):
         self._g = np.zeros(m + 1)
         self._coef = np.zeros(m)
         self._info = np.zeros(3)  # a failing step: iteration, rate, update norm
-        self.counts = np.zeros(5, dtype=np.int64)
+        self.counts = np.zeros(6, dtype=np.int64)
         self._h_prev: float | None = None  # step of _Zp; None: no predictor
         self._t_end: float | None = None
         self._y_end = np.empty(n)
@@ -258,6 +263,7 @@ class Gauss4(FixedStepIntegrator):
             par[gk.PAR_DIVERGE]
         grtol, gatol, eps = par[gk.PAR_GMRES_RTOL], par[gk.PAR_GMRES_ATOL], par[gk.PAR_FD_EPS]
         newton_cap = int(par[gk.PAR_NEWTON_CAP])
+        stall, stall_rate = par[gk.PAR_STALL], par[gk.PAR_STALL_RATE]
         hA = self.A * h
         tc0, tc1 = t + self.C[0] * h, t + self.C[1] * h
         inv_eps = 1.0 / eps
@@ -294,9 +300,13 @@ class Gauss4(FixedStepIntegrator):
             counts[COUNT_KRYLOV] += k
             counts[COUNT_MAX_KRYLOV] = max(counts[COUNT_MAX_KRYLOV], k)
             norm = gk.gmres_update(V, H, g, k, w, Z, coef)
-            code, theta = gk.newton_test(norm, norm_prev, it, kappa, first_tol, diverge)
+            code, theta = gk.newton_test(norm, norm_prev, it, kappa, first_tol, diverge, stall,
+                                         stall_rate)
             self._info[:] = (it, theta, norm)
             if code == gk.NEWTON_CONVERGED:
+                return STEP_OK
+            if code == gk.NEWTON_STALLED:
+                counts[COUNT_STALLED] += 1
                 return STEP_OK
             if code == gk.NEWTON_DIVERGING:
                 return STEP_DIVERGED
