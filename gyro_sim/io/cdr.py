@@ -108,7 +108,13 @@ class CdrWriter:
 class Refill:
     """Messages of fixed layout (names and sizes known), refilled per publication: the bytes of
     all of them, written once by recording writers, with new stamps and float64 values put in
-    place by byte index. Same bytes as writing them afresh, in one vectorised pass.
+    place. Same bytes as writing them afresh, in one vectorised pass.
+
+    Every float64 sits 8-aligned after the 4-byte encapsulation header of its message, and every
+    stamp 4-aligned: when each message's length keeps the next message's header on the same
+    alignment (a multiple of 8; else the messages are laid out apart, each padded), the values
+    go in through a float64 view of the bytes from offset 4 and the stamps through a uint32
+    view, one index per value (not per byte).
 
     Parameters
     ----------
@@ -116,29 +122,41 @@ class Refill:
     """
 
     def __init__(self, writers: list[CdrWriter]) -> None:
-        stamps, floats, ends, at = [], [], [], 0
+        stamps, floats, bounds, at = [], [], [], 0
         for w in writers:
             stamps += [at + o for o in w.stamps]
-            floats += [at + o + np.arange(8 * c) for o, c in w.floats]
-            at += len(w.buf)
-            ends.append(at)
-        self.template = np.frombuffer(b"".join(bytes(w) for w in writers), dtype=np.uint8).copy()
-        self.stamp_index = (np.array(stamps, dtype=np.intp)[:, None] + np.arange(8)).ravel()
-        self.stamp_pattern = np.tile(np.arange(8), len(stamps))  # byte j of the stamp, per stamp
-        self.float_index = np.concatenate(floats) if floats else np.zeros(0, dtype=np.intp)
-        self.bounds = list(zip([0] + ends[:-1], ends))
+            floats += [at + o + 8 * np.arange(c) for o, c in w.floats]
+            bounds.append((at, at + len(w.buf)))
+            at += -(-len(w.buf) // 8) * 8  # the next message starts 8-aligned
+        size = at + 8
+        template = np.zeros(size, dtype=np.uint8)
+        for w, (a, b) in zip(writers, bounds):
+            template[a:b] = np.frombuffer(bytes(w), dtype=np.uint8)
+        self.template = template
+        float_at = np.concatenate(floats) if floats else np.zeros(0, dtype=np.intp)
+        stamp_at = np.array(stamps, dtype=np.intp)
+        assert not (float_at - 4).size or np.all((float_at - 4) % 8 == 0), "float64 not 8-aligned after the header"
+        assert np.all(stamp_at % 4 == 0), "stamp not 4-aligned"
+        self.float_index = (float_at - 4) // 8  # into the float64 view from byte 4
+        self.sec_index = stamp_at // 4  # into the uint32 view: seconds, then nanoseconds
+        self.bounds = bounds
+        self.contiguous = all(b == a2 for (_, b), (a2, _) in zip(bounds, bounds[1:]))
         self.n_stamps = len(stamps)
-        self.n_floats = self.float_index.size // 8
+        self.n_floats = self.float_index.size
+        self._f64_count = (size - 4) // 8
+        self._u32_count = size // 4
 
     def fill(self, t_ns: int, values: np.ndarray) -> list[bytes]:
         """The messages with every stamp t_ns and the float64 values (n_floats,) in the order
         the writers wrote them."""
         buf = self.template.copy()
         if self.n_stamps:
-            stamp = np.frombuffer(_TIME.pack(*divmod(int(t_ns), NS_PER_S)), dtype=np.uint8)
-            buf[self.stamp_index] = stamp[self.stamp_pattern]
-        buf[self.float_index] = np.ascontiguousarray(values, dtype="<f8").reshape(-1).view(np.uint8)
+            sec, nsec = divmod(int(t_ns), NS_PER_S)
+            u32 = buf[: 4 * self._u32_count].view("<u4")
+            u32[self.sec_index] = sec & 0xFFFFFFFF  # int32 seconds, two's complement
+            u32[self.sec_index + 1] = nsec
+        buf[4: 4 + 8 * self._f64_count].view("<f8")[self.float_index] = np.asarray(values, dtype=np.float64).reshape(-1)
         data = buf.tobytes()
         if len(self.bounds) == 1:
-            return [data]
+            return [data[: self.bounds[0][1]]]
         return [data[a:b] for a, b in self.bounds]
