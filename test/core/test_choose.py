@@ -108,3 +108,20 @@ def test_fixed_takes_a_call_again_with_gauss4_when_rk4_blows_up(monkeypatch):
     assert integ.current == "gauss4" and "non-finite" in integ.reason
     assert len(integ.switches) == 1 and integ.switches[0][0] == 0.0
     assert np.hypot(*y) == pytest.approx(1.0, abs=1e-12)
+def test_fixed_takes_gauss4_on_the_fast_heavy_top():
+    sim = Simulator(fast_heavy_top(1e3 * 3), integrator="fixed", step=STEP)  # h w ~ 3: past rk4's limit
+    sim.advance(CALL)
+    assert sim.integrator.current == "gauss4" and "stiff for rk4" in sim.integrator.reason
+
+
+def test_fixed_re_simulates_bit_for_bit_with_its_switches():
+    """Two runs with the same commands: the same switches and the same states."""
+    def run():
+        sim = Simulator(fast_heavy_top(3e3), integrator="fixed", step=STEP)
+        out = []
+        for _ in range(20):
+            sim.advance(CALL)
+            out.append(sim.state.copy())
+        return out, list(sim.integrator.switches), sim.integrator.current
+    a, b = run(), run()
+    assert a[1:] == b[1:] and all(np.array_equal(x, y) for x, y in zip(a[0], b[0]))
