@@ -17,6 +17,7 @@ and fused multiply-adds are the library's: there the results agree to round-off)
     err = |h| |e5|^2 / sqrt(n (|e5|^2 + 0.01 |e3|^2)),      error norm        (dop_error_norm)
           e5, e3 = sum_j E5[j] K[j], sum_j E3[j] K[j] divided by atol + rtol max(|y|, |y1|)
     h_new from err: HNW I, sec. II.4 (eq. 4.13)              step control      (dop_control)
+    h0 from ||y0||, ||f0||, ||f1 - f0||: HNW I, sec. II.4    starting step     (dop_initial_*)
     F (7, n): the dense output of order 7, HNW I, sec. II.6  coefficients      (dop_dense_coefficients)
     y(t_old + x h) = y_old + F0 x + F1 x(1-x) + F2 x^2(1-x) + ...   evaluation (dop_dense_eval)
 
@@ -51,6 +52,9 @@ N_DENSE = 7
 #: the controller's constants in `control`: SAFETY, MIN_FACTOR, MAX_FACTOR, the exponent
 #: -1/(q+1) (q = 7, the order of the error estimator), MIN_STEP_RELATIVE, LAST_STEP_STRETCH
 CONTROL_SIZE = 6
+#: the starting step's constants in `initial` (base.py's _H0_*): NEGLIGIBLE, DEFAULT, FRACTION,
+#: GROWTH, TINY_DERIVATIVES, TINY_STEP, TINY_FRACTION
+INITIAL_SIZE = 7
 
 
 def _njit(fn):
@@ -162,6 +166,60 @@ def dop_control(err, finite, h, h_abs, rejected, control):
             h_next = max(h_next, h_abs)
         return True, h_next
     return False, abs(h) * max(min_factor, safety * err ** exponent)
+
+
+@_njit
+def _rms_scaled(x, sc):
+    """sqrt(sum_i (x_i / sc_i)^2 / n), 0 for n = 0 (scipy's `norm`: RMS)."""
+    n = x.shape[0]
+    acc = 0.0
+    for i in range(n):
+        v = x[i] / sc[i]
+        acc += v * v
+    return math.sqrt(acc / n) if n else 0.0
+
+
+@_njit
+def dop_initial_probe(y0, f0, rtol, atol, span, initial, sc, y1):
+    """The starting step size, first half (HNW I, sec. II.4, "starting step size"; scipy's
+    select_initial_step): sc = atol + |y0| rtol, d0 = ||y0||, d1 = ||f0|| (RMS norms in sc),
+    h0 = FRACTION d0 / d1 (DEFAULT if either is below NEGLIGIBLE), at most span; y1 = y0 + h0
+    f0, where f1 = f(t0 + h0, y1) is to be evaluated for :func:`dop_initial_step`.
+    initial: the INITIAL_SIZE constants. Returns (h0, d1)."""
+    negligible, default, fraction = initial[0], initial[1], initial[2]
+    n = y0.shape[0]
+    for i in range(n):
+        sc[i] = atol[i] + abs(y0[i]) * rtol
+    d0 = _rms_scaled(y0, sc)
+    d1 = _rms_scaled(f0, sc)
+    h0 = default if d0 < negligible or d1 < negligible else fraction * d0 / d1
+    h0 = min(h0, span)
+    for i in range(n):
+        y1[i] = y0[i] + h0 * f0[i]
+    return h0, d1
+
+
+@_njit
+def dop_initial_step(f0, f1, sc, h0, d1, span, max_step, order, initial):
+    """The starting step size, second half: d2 = ||f1 - f0|| / h0 (an estimate of ||y''||, 0 if
+    not finite), h1 = (FRACTION / max(d1, d2))^(1 / (order + 1)) (max(TINY_STEP, TINY_FRACTION
+    h0) if both are below TINY_DERIVATIVES); h = min(GROWTH h0, h1, span, max_step). order: the
+    error estimator's (7)."""
+    fraction, growth = initial[2], initial[3]
+    tiny_derivatives, tiny_step, tiny_fraction = initial[4], initial[5], initial[6]
+    n = f0.shape[0]
+    acc = 0.0
+    for i in range(n):
+        v = (f1[i] - f0[i]) / sc[i]
+        acc += v * v
+    d2 = (math.sqrt(acc / n) if n else 0.0) / h0
+    if not math.isfinite(d2):
+        d2 = 0.0
+    if d1 <= tiny_derivatives and d2 <= tiny_derivatives:
+        h1 = max(tiny_step, h0 * tiny_fraction)
+    else:
+        h1 = (fraction / max(d1, d2)) ** (1.0 / (order + 1))
+    return min(growth * h0, h1, span, max_step)
 
 
 @_njit

@@ -10,8 +10,9 @@ every accepted state and output, the finite checks. It calls the articulated-bod
 rhs evaluations on other systems: the two drivers give the same bits.
 
 DOP853 dispatches to it when its system offers `kernel_arguments` and `quaternion_block`
-(the compiled :class:`gyro_sim.core.system.FastChainODE`). The initial step (once, after a
-reset) is selected in Python before the call.
+(the compiled :class:`gyro_sim.core.system.FastChainODE`), through :func:`loop_for`: one
+:class:`gyro_sim.core.fast_loop.Direct` per process and types of the kernel's arguments, so a
+new integrator (a new Simulator) pays numba's type dispatch only once per process.
 
 Caching: the loop inlines fast.py and dop853_kernels.py, so it is cached in a directory keyed
 on all three files (:func:`gyro_sim.core.fast_loop.njit_with_dependencies`).
@@ -27,6 +28,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
+
 from . import dop853_kernels, fast, fast_loop
 from .dop853_kernels import (
     N_EXTENDED,
@@ -37,6 +40,8 @@ from .dop853_kernels import (
     dop_dense_eval,
     dop_error_norm,
     dop_finite,
+    dop_initial_probe,
+    dop_initial_step,
     dop_stage_state,
     dop_update,
 )
@@ -55,6 +60,9 @@ INITIAL_RHS_NONFINITE = 2
 #: the rhs at an accepted state (FSAL, or for the dense output) is not finite
 ACCEPTED_RHS_NONFINITE = 3
 
+#: the order of DOP853's error estimator (the starting step's exponent)
+ORDER_OF_ESTIMATOR = 7
+
 #: layout of the loop's outputs: floats (`real`) and integers (`status`)
 REAL_SIZE = 6
 R_T, R_H, R_H_ABS, R_ERROR, R_LAST_STEP, R_T_OLD = range(REAL_SIZE)
@@ -63,18 +71,20 @@ S_STATUS, S_NFEV, S_ACCEPTED, S_REJECTED, S_OUTPUTS, S_F_NEW, S_NONFINITE, S_TRA
 
 
 @_njit
-def dop853_advance(t0, t1, y, fresh, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, D, control,
-                   i_q0, nq, f, K, ys, y_new, y_old, F, bad, trace, real, status,
+def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, D, control,
+                   initial, i_q0, nq, f, K, ys, y_new, y_old, F, bad, trace, real, status,
                    work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
                    inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base,
                    ht0, p0, pdot, L_rotor, tau):
     """DOP853 from (t0, y) to exactly t1 > t0, y (size,) in place; Y (m, size) the states at
     te (m,), sorted within [t0, t1].
 
-    fresh: evaluate f = rhs(t0, y) first (else f (size,) holds it). h_mem: the step-size memory
-    (> 0, selected before the first call). A (16, 16), C (16,): the extended tableau (row 12
-    the weights B, rows 13..15 the extra stages of the dense output); E5, E3 (12,); D (4, 16);
-    control: dop853_kernels.CONTROL_SIZE constants. Quaternions y[i_q0 + 4 j : +4], j < nq.
+    The call starts with a fresh f = rhs(t0, y) (inputs may have changed since the last call).
+    h_mem: the step-size memory of the last call; 0 on the first call after a reset: the
+    starting step is selected here (dop853_kernels.dop_initial_*, one more rhs evaluation).
+    A (16, 16), C (16,): the extended tableau (row 12 the weights B, rows 13..15 the extra
+    stages of the dense output); E5, E3 (12,); D (4, 16); control, initial: the constants of
+    dop853_kernels (CONTROL_SIZE, INITIAL_SIZE). Quaternions y[i_q0 + 4 j : +4], j < nq.
     Scratch, left as the Python driver leaves its own: K (16, size) the stages of the last
     step, ys (size,) its last stage state, y_new the accepted state, y_old the one before, F
     (7, size), bad (12,) the non-finite stages of the last non-finite trial. trace (k,): the
@@ -98,14 +108,21 @@ def dop853_advance(t0, t1, y, fresh, te, Y, h_mem, max_step, rtol, atol, A, C, E
     status[S_F_NEW] = 0
     status[S_NONFINITE] = 0
     status[S_STATUS] = DONE
-    if fresh:
-        fast.rhs_kernel(t0, y, f, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                        first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
+    fast.rhs_kernel(t0, y, f, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                    first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
+                    flags, base, ht0, p0, pdot, L_rotor, tau)
+    nfev += 1
+    if not dop_finite(f):
+        status[S_STATUS] = INITIAL_RHS_NONFINITE
+        real[R_T] = t0
+    elif h_mem <= 0.0:  # the starting step (AdaptiveIntegrator.begin), F[0] and F[1] as scratch
+        sc, f1 = F[0], F[1]
+        h0, d1 = dop_initial_probe(y, f, rtol, atol, t1 - t0, initial, sc, ys)
+        fast.rhs_kernel(t0 + h0, ys, f1, work, is_hinge, qrow, own_col, col_start, hinge_axis, s,
+                        mass, first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
                         flags, base, ht0, p0, pdot, L_rotor, tau)
         nfev += 1
-        if not dop_finite(f):
-            status[S_STATUS] = INITIAL_RHS_NONFINITE
-            real[R_T] = t0
+        h_mem = dop_initial_step(f, f1, sc, h0, d1, t1 - t0, max_step, ORDER_OF_ESTIMATOR, initial)
     t = t0
     t_old = t0
     error = real[R_ERROR]
@@ -215,3 +232,27 @@ def dop853_advance(t0, t1, y, fresh, te, Y, h_mem, max_step, rtol, atol, A, C, E
     status[S_REJECTED] = nrejected
     status[S_OUTPUTS] = j
     status[S_TRACED] = min(naccepted, trace.shape[0])
+
+
+_LOOPS: dict[tuple, fast_loop.Direct] = {}
+
+
+def _type_key(a) -> tuple:
+    """What numba's type of an argument depends on: dtype, dimensions, layout, writeability of
+    an array; the Python type of a scalar."""
+    if isinstance(a, np.ndarray):
+        return (a.dtype.str, a.ndim, a.flags.c_contiguous, a.flags.f_contiguous, a.flags.writeable)
+    return (type(a),)
+
+
+def loop_for(kernel_arguments: tuple) -> fast_loop.Direct:
+    """:func:`dop853_advance` called through its compiled entry point, for a system whose
+    kernel arguments (`FastChainODE.kernel_arguments()`) have the types of these: one per
+    process and combination of types (the first call dispatches, the later ones go straight
+    to the entry point). The caller passes the other arguments with fixed types: float64
+    C-contiguous arrays of fixed dimensions, Python floats and ints."""
+    key = tuple(_type_key(a) for a in kernel_arguments)
+    loop = _LOOPS.get(key)
+    if loop is None:
+        loop = _LOOPS[key] = fast_loop.Direct(dop853_advance)
+    return loop

@@ -8,16 +8,26 @@ import numpy as np
 
 from ..dop853_kernels import (
     CONTROL_SIZE,
+    INITIAL_SIZE,
     dop_clip,
     dop_control,
     dop_dense_coefficients,
     dop_dense_eval,
     dop_error_norm,
     dop_finite,
+    dop_initial_probe,
+    dop_initial_step,
     dop_stage_state,
     dop_update,
 )
 from .base import (
+    _H0_DEFAULT,
+    _H0_FRACTION,
+    _H0_GROWTH,
+    _H0_NEGLIGIBLE,
+    _H0_TINY_DERIVATIVES,
+    _H0_TINY_FRACTION,
+    _H0_TINY_STEP,
     LAST_STEP_STRETCH,
     MAX_FACTOR,
     MIN_FACTOR,
@@ -291,7 +301,10 @@ class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
     #: the exponent -1/(q + 1) of the order-q = 7 estimator, MIN_STEP_RELATIVE, LAST_STEP_STRETCH
     CONTROL = np.array([SAFETY, MIN_FACTOR, MAX_FACTOR, -1.0 / (7 + 1), MIN_STEP_RELATIVE,
                         LAST_STEP_STRETCH])
-    assert CONTROL.size == CONTROL_SIZE
+    #: the starting step's constants (dop853_kernels.dop_initial_probe, dop_initial_step), base's
+    INITIAL = np.array([_H0_NEGLIGIBLE, _H0_DEFAULT, _H0_FRACTION, _H0_GROWTH, _H0_TINY_DERIVATIVES,
+                        _H0_TINY_STEP, _H0_TINY_FRACTION])
+    assert CONTROL.size == CONTROL_SIZE and INITIAL.size == INITIAL_SIZE
 
     def __init__(self, system: OdeSystem, *, stiffness_estimate: bool = False, **options):
         super().__init__(system, **options)
@@ -309,11 +322,11 @@ class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
         self._h = 0.0  # the accepted step (for the dense output)
         # the compiled loop (fast_dop853), when the system offers the kernel
         self._loop = None
-        if callable(getattr(system, "kernel_arguments", None)) and callable(
+        if n and callable(getattr(system, "kernel_arguments", None)) and callable(
                 getattr(system, "quaternion_block", None)):
-            from .. import fast_dop853, fast_loop
+            from .. import fast_dop853
 
-            self._loop = fast_loop.Direct(fast_dop853.dop853_advance)
+            self._loop = fast_dop853.loop_for(system.kernel_arguments())
             self._i_q0, self._nq = (int(v) for v in system.quaternion_block())
             self._real = np.zeros(fast_dop853.REAL_SIZE)
             self._status = np.zeros(fast_dop853.STATUS_SIZE, dtype=np.int64)
@@ -323,6 +336,17 @@ class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
             self._trace = np.zeros(0)
 
     # --- the Python driver ---------------------------------------------------------------------
+    def _initial_step(self, t0, y0, f0, t1, order) -> float:
+        """The starting step (HNW I, sec. II.4; scipy's select_initial_step) by the kernels the
+        compiled loop calls: `AdaptiveIntegrator._initial_step` in the same arithmetic."""
+        if self.n == 0:
+            return super()._initial_step(t0, y0, f0, t1, order)
+        span = t1 - t0
+        sc, y1 = np.empty(self.n), np.empty(self.n)
+        h0, d1 = dop_initial_probe(y0, f0, self.rtol, self._atol_v, span, self.INITIAL, sc, y1)
+        f1 = self._fun(t0 + h0, y1)
+        return dop_initial_step(f0, f1, sc, h0, d1, span, self.max_step, order, self.INITIAL)
+
     def _step_impl(self, t: float, y: np.ndarray, t1: float) -> float:
         K, ys, y_new, A, C = self._K, self._ys, self._y_new, self._A_all, self._C_all
         h_abs = min(self._h_abs, self.max_step)
@@ -415,9 +439,6 @@ class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
         from ..fast_dop853 import (ACCEPTED_RHS_NONFINITE, COLLAPSED, INITIAL_RHS_NONFINITE,
                                    R_ERROR, R_H, R_H_ABS, R_LAST_STEP, R_T, R_T_OLD, S_ACCEPTED,
                                    S_F_NEW, S_NFEV, S_NONFINITE, S_REJECTED, S_STATUS)
-        fresh = self._h_abs is not None
-        if not fresh:  # the first call after a reset: the fresh rhs and the initial step here
-            self.begin(t0, y, t1)
         if te is None:
             te, Y = self._no_te, self._no_Y
         elif not (te.flags.c_contiguous and te.flags.writeable):
@@ -425,8 +446,10 @@ class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
         real, status = self._real, self._status
         real[R_ERROR] = math.nan if self.error_estimate is None else self.error_estimate
         real[R_LAST_STEP] = math.nan if self.last_step is None else self.last_step
-        self._loop(t0, t1, y, fresh, te, Y, self._h_abs, self.max_step, self.rtol, self._atol_v,
-                   self.A_ALL, self.C_ALL, self.E5, self.E3, self.D, self.CONTROL, self._i_q0, self._nq,
+        h_mem = 0.0 if self._h_abs is None else float(self._h_abs)  # 0: select the starting step
+        self._loop(t0, t1, y, te, Y, h_mem, self.max_step, self.rtol, self._atol_v,
+                   self.A_ALL, self.C_ALL, self.E5, self.E3, self.D, self.CONTROL, self.INITIAL,
+                   self._i_q0, self._nq,
                    self._f, self._K, self._ys, self._y_new, self._y_old, self._F, self._bad,
                    self._trace, real, status, *self.system.kernel_arguments())
         nfev = int(status[S_NFEV])
@@ -434,7 +457,7 @@ class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
         self.system.nfev += nfev
         self.nsteps += int(status[S_ACCEPTED])
         self.nrejected += int(status[S_REJECTED])
-        self._h_abs = float(real[R_H_ABS])
+        self._h_abs = float(real[R_H_ABS]) if real[R_H_ABS] > 0.0 else None
         if not math.isnan(real[R_ERROR]):
             self.error_estimate = float(real[R_ERROR])
             self.last_step = self._h = float(real[R_LAST_STEP])
