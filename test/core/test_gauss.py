@@ -107,21 +107,34 @@ def test_compiled_march_equals_the_python_driver_bit_for_bit(seed, base):
     from Python, with held inputs and over two calls (the predictor carried across): identical
     bits, rhs evaluations and Newton/GMRES counts."""
     model = compile_model(load_scene(random_chain(seed, base=base)))
+    nt, nh = len(model.torque_body), len(model.hinge_bodies)
     runs = []
     for compiled in (True, False):
         system = FastChainODE(model)
         rng = np.random.default_rng(seed)
-        nt, nh = len(model.torque_body), len(model.hinge_bodies)
-        system.hold(0.1, rng.uniform(-50, 50, nt) if nt else None,
-                    rng.normal(size=nh) if nh else None, rng.normal(size=nt) * 1e-2 if nt else None)
         g = make_integrator("gauss4", system, step=1e-3)
         g.use_compiled = compiled
-        y = g.advance(0.1, initial_state(model), 0.115)
-        y = g.advance(0.115, y, 0.13)
-        runs.append((y, g.nfev, g.counts.copy(), g.nsteps))
-    (yc, nc, cc, sc), (yp, npy, cp, sp) = runs
+        y = initial_state(model)
+        for t0, t1 in ((0.1, 0.115), (0.115, 0.13)):  # new inputs held at each call
+            system.hold(t0, rng.uniform(-50, 50, nt) if nt else None,
+                        rng.normal(size=nh) if nh else None, rng.normal(size=nt) * 1e-2 if nt else None)
+            y = g.advance(t0, y, t1)
+        runs.append((y, g.nfev, system.nfev, g.counts.copy(), g.nsteps))
+    (yc, nc, sc, cc, kc), (yp, npy, sp, cp, kp) = runs
     assert np.array_equal(yc, yp)
-    assert nc == npy == cc[gk.COUNT_RHS] and np.array_equal(cc, cp) and sc == sp == 30
+    assert nc == npy == sc == sp == cc[gk.COUNT_RHS] and np.array_equal(cc, cp) and kc == kp == 30
+
+
+@needs_numba
+def test_non_finite_state_stops_the_compiled_march():
+    """A state that overflows: the march stops at the failing step with the reason (a
+    non-finite rhs at the stages, or a non-finite state after the step), never silently."""
+    model, system = _system()
+    g = make_integrator("gauss4", system, step=1e-3)
+    y0 = initial_state(model)
+    y0[model.i_vel.start] = 1e200
+    with pytest.raises(IntegrationError, match="not finite"):
+        g.advance(0.0, y0, 0.01)
 
 
 # ------------------------------------------------------------------ failures
