@@ -238,10 +238,12 @@ _LOOPS: dict[tuple, fast_loop.Direct] = {}
 
 
 def _type_key(a) -> tuple:
-    """What numba's type of an argument depends on: dtype, dimensions, layout, writeability of
-    an array; the Python type of a scalar."""
+    """What numba's type of an argument depends on: dtype, dimensions, layout (as numba.typeof
+    reads it: C if C-contiguous, else F if Fortran-contiguous, else A), writeability of an
+    array; the Python type of a scalar."""
     if isinstance(a, np.ndarray):
-        return (a.dtype.str, a.ndim, a.flags.c_contiguous, a.flags.f_contiguous, a.flags.writeable)
+        layout = "C" if a.flags.c_contiguous else ("F" if a.flags.f_contiguous else "A")
+        return (a.dtype.str, a.ndim, layout, a.flags.writeable)
     return (type(a),)
 
 
