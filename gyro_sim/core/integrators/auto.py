@@ -251,6 +251,12 @@ class Auto(Integrator):
         if imp.njev != self._rho_njev and imp.jacobian is not None:
             self._rho = _spectral_radius(imp.jacobian)
             self._rho_njev = imp.njev
+        elif imp.njev != self._rho_njev and imp.jacobian_point is not None:  # matrix-free radau
+            from .choose import spectral_radius_estimate
+
+            t_j, y_j = imp.jacobian_point
+            self._rho = spectral_radius_estimate(self._fun, t_j, y_j)
+            self._rho_njev = imp.njev
         if self._rho is None or abs(h) * self._rho >= NONSTIFF_HRHO:
             self._n_easy = 0
             return None

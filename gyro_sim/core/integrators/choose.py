@@ -113,7 +113,8 @@ def _choice(rhs, t: float, y: np.ndarray, h: float, now: str) -> tuple[str, str,
 
 class SceneFixedStep(FixedStepIntegrator):
     """"fixed": rk4 where the scene is soft at the step, gauss4 where it is stiff, re-chosen
-    every CHECK_PERIOD of simulated time (see the module docstring).
+    as the motion and the commands change (see the module docstring). Order 4 (both methods
+    are), fixed step, one step per physics step.
 
     Attributes
     ----------
@@ -121,6 +122,13 @@ class SceneFixedStep(FixedStepIntegrator):
     reason : one line: why (h |lambda| against rk4's limit).
     h_lambda : the last estimate of h |lambda|.
     switches : the changes after the first choice, (t, from, to, reason) each (as "auto").
+
+    References
+    ----------
+    .. [1] E. Hairer, G. Wanner, "Solving Ordinary Differential Equations II", 2nd ed.,
+           Springer 1996, sec. IV.2 (stability regions: RK4's along the imaginary axis).
+    .. [2] Y. Saad, "Numerical Methods for Large Eigenvalue Problems", 2nd ed., SIAM 2011,
+           ch. 6 (Arnoldi's method: the Ritz values of the estimate).
     """
 
     name = "fixed"

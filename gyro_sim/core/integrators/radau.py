@@ -37,6 +37,14 @@ LU_REUSE_RTOL = 1e-6
 #: forward-difference Jacobian: step sqrt(eps) * max(|y_j|, FD_MIN_SCALE)
 FD_REL_STEP = math.sqrt(EPS)
 FD_MIN_SCALE = 1.0
+#: above this size the Jacobian is never formed: the linear systems are solved by GMRES on
+#: Jacobian-vector products (forward differences of the rhs at the Jacobian's point), O(n)
+#: memory; at or below it, the dense Jacobian and LU (faster for small systems)
+DENSE_MAX = 2000
+#: GMRES (matrix-free mode): relative residual, restart length, restarts
+KRYLOV_RTOL = 1e-8
+KRYLOV_RESTART = 30
+KRYLOV_RESTARTS = 4
 
 
 # --- Radau IIA coefficients (scipy radau.py; Hairer, Wanner II, sec. IV.8) -----------------
@@ -82,6 +90,13 @@ class Radau(AdaptiveIntegrator):
     has one, else forward differences (n rhs evaluations, counted in nfev); it is reused
     across steps and recomputed only when Newton converged slowly (more than
     RADAU_SLOW_ITER iterations at a rate above RADAU_SLOW_RATE) or failed with an old one.
+
+    Above DENSE_MAX states (a chain of some 300 bodies) nothing of size n^2 is formed: the
+    "Jacobian" is its point (t, y, rhs(t, y)), kept and renewed by the same rules, and the two
+    linear systems are solved by restarted GMRES (scipy.sparse.linalg.gmres) on products
+    J v = (rhs(t, y + e v) - rhs(t, y)) / e, one rhs evaluation a product (two for the complex
+    system), to KRYLOV_RTOL: an inexact simplified Newton (Kelley, "Iterative Methods for
+    Linear and Nonlinear Equations", SIAM 1995, ch. 6), O(n) memory.
     Dense output: the collocation polynomial (order 3 between the nodes), which also predicts
     the next step's Newton start when the state continues from the previous call.
 
@@ -113,7 +128,9 @@ class Radau(AdaptiveIntegrator):
         jac = getattr(system, "jacobian", None)
         self._jac_fn = jac if callable(jac) else None
         self._newton_tol = max(10 * EPS / self.rtol, min(0.03, self.rtol ** 0.5))
-        self._I = np.identity(n)
+        #: solve without forming the Jacobian (large systems, see DENSE_MAX)
+        self.matrix_free = n > DENSE_MAX and self._jac_fn is None
+        self._I = None if self.matrix_free else np.identity(n)
         self._F = np.empty((3, n))
         self._ys = np.empty(n)
         self._TI_complex = self.TI[1] + 1j * self.TI[2]
@@ -144,13 +161,48 @@ class Radau(AdaptiveIntegrator):
     @property
     def jacobian(self) -> np.ndarray | None:
         """The Jacobian (n, n) the steps are using (refreshed when `njev` counts up), or None
-        before the first step."""
-        return self._J
+        before the first step and in matrix-free mode (see `jacobian_point`)."""
+        return None if self.matrix_free else self._J
+
+    @property
+    def jacobian_point(self) -> tuple[float, np.ndarray] | None:
+        """(t, y) where the Jacobian in use is taken (matrix-free mode), else None."""
+        return (self._J[0], self._J[1]) if self.matrix_free and self._J is not None else None
+
+    def _jvp(self, v: np.ndarray) -> np.ndarray:
+        """J v by a forward difference at the Jacobian's point (matrix-free mode)."""
+        t, y, f = self._J
+        norm = float(np.linalg.norm(v))
+        if norm == 0.0:
+            return np.zeros(self.n)
+        e = FD_REL_STEP * max(FD_MIN_SCALE, float(np.linalg.norm(y))) / norm
+        return (self._fun(t, y + e * v) - f) / e
+
+    def _krylov(self, mu: complex, b: np.ndarray) -> np.ndarray:
+        """(mu I - J) x = b by restarted GMRES on Jacobian-vector products."""
+        from scipy.sparse.linalg import LinearOperator, gmres
+
+        if isinstance(mu, complex):
+            def mv(v):
+                v = np.asarray(v).ravel()
+                return mu * v - (self._jvp(v.real) + 1j * self._jvp(v.imag))
+            dtype = np.complex128
+        else:
+            def mv(v):
+                v = np.asarray(v).ravel()
+                return mu * v - self._jvp(v)
+            dtype = np.float64
+        op = LinearOperator((self.n, self.n), matvec=mv, dtype=dtype)
+        x, _ = gmres(op, b, rtol=KRYLOV_RTOL, atol=0.0, restart=KRYLOV_RESTART, maxiter=KRYLOV_RESTARTS)
+        return x  # not converged: an inexact solve; Newton's rate test judges the result
 
     # --- linear algebra ---------------------------------------------------------------------
     def _jacobian(self, t: float, y: np.ndarray, f: np.ndarray) -> np.ndarray:
-        """d rhs / dy (n, n): the system's, or forward differences around f = rhs(t, y)."""
+        """d rhs / dy (n, n): the system's, or forward differences around f = rhs(t, y); in
+        matrix-free mode only its point (t, y, f), copied."""
         self.njev += 1
+        if self.matrix_free:
+            return (t, y.copy(), f.copy())
         if self._jac_fn is not None:
             J = np.asarray(self._jac_fn(t, y), dtype=float)
             if J.shape != (self.n, self.n):
@@ -169,7 +221,11 @@ class Radau(AdaptiveIntegrator):
         return J
 
     def _factor(self, h: float) -> None:
-        """LU of MU_REAL/h I - J and MU_COMPLEX/h I - J (LAPACK getrf)."""
+        """LU of MU_REAL/h I - J and MU_COMPLEX/h I - J (LAPACK getrf); matrix-free: only h."""
+        if self.matrix_free:
+            self._LU_real = self._LU_complex = ("krylov", h)
+            self._lu_h = h
+            return
         self._LU_real = self._lu(self._getrf_real, self.MU_REAL / h * self._I - self._J)
         self._LU_complex = self._lu(self._getrf_complex, self.MU_COMPLEX / h * self._I - self._J)
         self._lu_h = h
@@ -184,6 +240,9 @@ class Radau(AdaptiveIntegrator):
         return lu, piv
 
     def _solve(self, getrs, LU: tuple, b: np.ndarray) -> np.ndarray:
+        if self.matrix_free:
+            h = LU[1]
+            return self._krylov(self.MU_REAL / h if getrs is self._getrs_real else self.MU_COMPLEX / h, b)
         x, info = getrs(LU[0], LU[1], b)
         return x
 
