@@ -42,13 +42,13 @@ from .chains import random_chain
 pytestmark = pytest.mark.skipif(not fast.available(), reason="numba is not installed")
 
 #: a step of the same size as scipy's, after up to ~100 steps of a chaotic pendulum
-SAME_STEP_RTOL = 1e-12
+SAME_STEP_RTOL = 1e-13
 #: accepted step times against scipy's (the error norm's cancellation, see the docstring)
 STEP_TIME_RTOL = 1e-8
 #: states against scipy's at the same step, corrected for the time offset, relative to max |y|
 STATE_RTOL = 1e-11
 #: dense output against scipy's on the same steps, relative to max |y|
-DENSE_RTOL = 1e-12
+DENSE_RTOL = 1e-13
 SCENES = sorted(os.path.basename(p)[:-5] for p in glob.glob(
     os.path.join(os.path.dirname(__file__), "..", "..", "config", "*.yaml")) if not p.endswith("params.yaml"))
 
