@@ -51,6 +51,9 @@ def warm_up(sim, dt: float) -> None:
     """Run every path the loop uses once (first calls pay for imports, caches, compilation),
     then put the Simulator back in its initial state."""
     sim.snapshot()
+    integ_warm_up = getattr(sim.integrator, "warm_up", None)
+    if integ_warm_up is not None:  # "fixed": the method it may switch to later, compiled now
+        integ_warm_up(sim.time, sim.state)
     sim.advance(dt)
     sim.reset()
 

@@ -125,3 +125,18 @@ def test_fixed_re_simulates_bit_for_bit_with_its_switches():
         return out, list(sim.integrator.switches), sim.integrator.current
     a, b = run(), run()
     assert a[1:] == b[1:] and all(np.array_equal(x, y) for x, y in zip(a[0], b[0]))
+
+
+def test_warm_up_runs_both_methods_and_leaves_no_trace():
+    """The node calls it before real time starts: gauss4's path is compiled (or loaded) then,
+    not at the first switch; state, counters and the choice are as before."""
+    sim = Simulator("hinge_chain", integrator="fixed", step=STEP)
+    integ, y0 = sim.integrator, sim.state
+    calls = []
+    for name, m in integ.methods.items():
+        march = m._march
+        m._march = lambda t0, y, t1, march=march, name=name: (calls.append(name), march(t0, y, t1))
+    integ.warm_up(sim.time, y0)
+    assert sorted(calls) == ["gauss4", "rk4"]
+    assert all(m.nsteps == 0 and m.nfev == 0 for m in integ.methods.values())
+    assert np.array_equal(sim.state, y0) and integ.current == "" and integ.switches == []

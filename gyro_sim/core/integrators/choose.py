@@ -161,6 +161,21 @@ class SceneFixedStep(FixedStepIntegrator):
             m.reset()
         self._next_check = -math.inf
 
+    def warm_up(self, t0: float, y: np.ndarray) -> None:
+        """One step of each method on a copy of y (then forgotten): every compiled path this
+        integrator may switch to is compiled (or loaded from the cache) now, not at the first
+        switch in the middle of a real-time run. Counters are kept as they were."""
+        counts = {name: (m.nfev, m.nsteps, m.njev, m.nlu) for name, m in self.methods.items()}
+        try:
+            for m in self.methods.values():
+                m._march(t0, y.copy(), t0 + self.step)
+        except IntegrationError:
+            pass  # a scene a method cannot step from here: it is compiled all the same
+        finally:
+            for name, m in self.methods.items():
+                m.nfev, m.nsteps, m.njev, m.nlu = counts[name]
+                m.reset()
+
     def _speed(self, y: np.ndarray) -> float:
         return float(np.abs(y[self._speeds]).max()) if len(self._speeds) else 0.0
 
