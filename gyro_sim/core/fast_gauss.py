@@ -69,8 +69,7 @@ def _newton(t, h, y, hA, C, P, use_p, params, Zp, Z, Ys, F, Fp, Yp, w, V, H, cs,
     grtol, gatol, eps = params[PAR_GMRES_RTOL], params[PAR_GMRES_ATOL], params[PAR_FD_EPS]
     newton_cap = int(params[PAR_NEWTON_CAP])
     stall, stall_rate = params[PAR_STALL], params[PAR_STALL_RATE]
-    tc0 = t + C[0] * h
-    tc1 = t + C[1] * h
+    tc = (t + C[0] * h, t + C[1] * h)
     inv_eps = 1.0 / eps
     gk.gauss_weights(y, tol, w)
     if use_p:
@@ -81,16 +80,12 @@ def _newton(t, h, y, hA, C, P, use_p, params, Zp, Z, Ys, F, Fp, Yp, w, V, H, cs,
     for it in range(newton_cap):
         counts[COUNT_NEWTON] += 1
         counts[COUNT_MAX_NEWTON] = max(counts[COUNT_MAX_NEWTON], it + 1)
-        gk.gauss_stage_state(y, Z, 0, Ys[0])
-        fast.rhs_kernel(tc0, Ys[0], F[0], work, is_hinge, qrow, own_col, col_start, hinge_axis, s,
-                        mass, first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
-                        flags, base, ht0, p0, pdot, L_rotor, tau)
-        counts[COUNT_RHS] += 1
-        gk.gauss_stage_state(y, Z, 1, Ys[1])
-        fast.rhs_kernel(tc1, Ys[1], F[1], work, is_hinge, qrow, own_col, col_start, hinge_axis, s,
-                        mass, first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
-                        flags, base, ht0, p0, pdot, L_rotor, tau)
-        counts[COUNT_RHS] += 1
+        for st in range(2):
+            gk.gauss_stage_state(y, Z, st, Ys[st])
+            fast.rhs_kernel(tc[st], Ys[st], F[st], work, is_hinge, qrow, own_col, col_start,
+                            hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
+                            torque_axis, torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
+            counts[COUNT_RHS] += 1
         if not gk.all_finite(F):
             return STEP_RHS_NONFINITE
         beta = gk.gmres_start(Z, F, hA, w, V, g)
@@ -99,16 +94,12 @@ def _newton(t, h, y, hA, C, P, use_p, params, Zp, Z, Ys, F, Fp, Yp, w, V, H, cs,
         goal = gk.gmres_goal(beta, grtol, gatol, n)
         k = 0
         while k < m:
-            gk.gauss_perturbed(Ys[0], w, V[k], 0, eps, Yp)
-            fast.rhs_kernel(tc0, Yp, Fp[0], work, is_hinge, qrow, own_col, col_start, hinge_axis,
-                            s, mass, first_moment, inertia, lam_speed, torque_body, torque_axis,
-                            torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
-            counts[COUNT_RHS] += 1
-            gk.gauss_perturbed(Ys[1], w, V[k], 1, eps, Yp)
-            fast.rhs_kernel(tc1, Yp, Fp[1], work, is_hinge, qrow, own_col, col_start, hinge_axis,
-                            s, mass, first_moment, inertia, lam_speed, torque_body, torque_axis,
-                            torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
-            counts[COUNT_RHS] += 1
+            for st in range(2):
+                gk.gauss_perturbed(Ys[st], w, V[k], st, eps, Yp)
+                fast.rhs_kernel(tc[st], Yp, Fp[st], work, is_hinge, qrow, own_col, col_start,
+                                hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
+                                torque_axis, torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
+                counts[COUNT_RHS] += 1
             gk.gauss_operator(V[k], Fp, F, hA, w, inv_eps, V[k + 1])
             res = gk.gmres_arnoldi(V, H, cs, sn, g, k)
             k += 1
@@ -153,18 +144,13 @@ def gauss_march(t0, h, nsteps, y, A, C, D, P0, use_p0, P1, use_p1, params, Zp, Z
     hA = A * h
     for k in range(nsteps):
         t = t0 + k * h
+        P, use_p = P1, use_p1
         if k == 0:
-            status = _newton(t, h, y, hA, C, P0, use_p0, params, Zp, Z, Ys, F, Fp, Yp, w, V, H,
-                             cs, sn, g, coef, info, counts, work, is_hinge, qrow, own_col,
-                             col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed,
-                             torque_body, torque_axis, torque_A, flags, base, ht0, p0, pdot,
-                             L_rotor, tau)
-        else:
-            status = _newton(t, h, y, hA, C, P1, use_p1, params, Zp, Z, Ys, F, Fp, Yp, w, V, H,
-                             cs, sn, g, coef, info, counts, work, is_hinge, qrow, own_col,
-                             col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed,
-                             torque_body, torque_axis, torque_A, flags, base, ht0, p0, pdot,
-                             L_rotor, tau)
+            P, use_p = P0, use_p0
+        status = _newton(t, h, y, hA, C, P, use_p, params, Zp, Z, Ys, F, Fp, Yp, w, V, H, cs, sn, g, coef, info, counts,
+                         work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                         first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
+                         flags, base, ht0, p0, pdot, L_rotor, tau)
         if status != STEP_OK:
             return k, status
         gk.gauss_update(y, Z, D)
