@@ -133,9 +133,16 @@ def cmd_bench_scaling(args) -> int:
                                seconds=0.2 if args.quick else 1.0, repeats=1 if args.quick else scaling.FIXED_STEP_REPEATS)
     text += ("\n\n### One simulated second, RK4 at 1 kHz, beside MuJoCo (CPU, median of runs)\n\n"
              + scaling.fixed_step_table(fixed))
+    mem = []
+    if args.memory:
+        mem = scaling.memory(scaling.QUICK_MEMORY_SIZES if args.quick else scaling.MEMORY_SIZES,
+                             scaling.QUICK_MEMORY_INTEGRATORS if args.quick else scaling.MEMORY_INTEGRATORS,
+                             progress=Progress("memory"))
+        text += (f"\n\n### Memory: {scaling.MEMORY_SECONDS:g} s of a long chain, every integrator "
+                 "(peak resident memory of a process of its own)\n\n" + scaling.memory_table(mem))
     print(text)
     data = {"rows": [dataclasses.asdict(r) if dataclasses.is_dataclass(r) else r for r in rows],
-            "fixed_step": [dataclasses.asdict(r) for r in fixed]}
+            "fixed_step": [dataclasses.asdict(r) for r in fixed], "memory": [dataclasses.asdict(r) for r in mem]}
     write_report(args.out, "scaling", text + "\n", data, lambda png: scaling.plot(rows, png), force=args.force,
                  json_default=str)
     return 0
@@ -207,6 +214,8 @@ def build_parser() -> argparse.ArgumentParser:
     s = bsub.add_parser("scaling", help="cost per evaluation and per simulated second against chain length")
     s.add_argument("--sizes", type=int, nargs="+")
     s.add_argument("--quick", action="store_true", help="small sizes, short timings (CI)")
+    s.add_argument("--memory", action="store_true",
+                   help="also the peak memory of 0.1 s at n = 1000 and 5000 with every integrator (minutes; quick: n = 300)")
     s.add_argument("--out", default="out/bench", help="directory for scaling.md, .json and .png")
     s.add_argument("--force", action="store_true", help="replace existing report files in --out")
     s.set_defaults(fn=cmd_bench_scaling)

@@ -289,3 +289,78 @@ def features_table(rows) -> str:
     for name, t0, t1 in rows:
         lines.append(f"| {name} | {t0:.1f} | {t1:.1f} | {100 * (1 - t0 / t1):.0f} % |")
     return "\n".join(lines)
+
+
+# --- memory: long chains, every integrator --------------------------------------------------------
+MEMORY_SIZES = (1000, 5000)
+QUICK_MEMORY_SIZES = (300,)
+MEMORY_INTEGRATORS = ("rk4", "lie4", "gauss4", "fixed", "dop853", "radau", "auto")
+QUICK_MEMORY_INTEGRATORS = ("rk4", "radau")
+MEMORY_SECONDS = 0.1
+#: wall seconds a run may take before it counts as too slow
+MEMORY_TIMEOUT = 900.0
+_MEMORY_RUN = r"""
+import json, resource, sys, time
+from gyro_sim.bench.scenes import spherical_chain
+from gyro_sim.core.simulator import Simulator
+n, name, seconds = int(sys.argv[1]), sys.argv[2], float(sys.argv[3])
+before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+sim = Simulator(spherical_chain(n), integrator=name, step=1e-3, rtol=1e-8, atol=1e-10)
+built = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+t = time.process_time()
+sim.advance(seconds)
+i = sim.integrator
+print(json.dumps({"size": i.n, "built_mb": built / 1024, "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+                  "cpu_s": time.process_time() - t, "steps": i.nsteps, "nfev": i.nfev}))
+"""
+
+
+@dataclass
+class MemoryRow:
+    n: int
+    integrator: str
+    size: int = 0
+    built_mb: float = float("nan")  # peak RSS after building the Simulator (MB)
+    peak_mb: float = float("nan")  # peak RSS after the run (MB)
+    cpu_s: float = float("nan")
+    steps: int = 0
+    failed: str = ""
+
+
+def memory(sizes=MEMORY_SIZES, integrators=MEMORY_INTEGRATORS, seconds: float = MEMORY_SECONDS,
+           progress=None) -> list[MemoryRow]:
+    """Peak resident memory (ru_maxrss) of a `seconds` run of a spherical chain of n bodies with
+    gravity, each integrator in a process of its own (fixed steps 1 ms, adaptive rtol 1e-8)."""
+    import json
+    import subprocess
+    import sys
+
+    rows, total = [], len(sizes) * len(integrators)
+    for n in sizes:
+        for name in integrators:
+            row = MemoryRow(n, name)
+            try:
+                out = subprocess.run([sys.executable, "-c", _MEMORY_RUN, str(n), name, repr(seconds)],
+                                     capture_output=True, text=True, timeout=MEMORY_TIMEOUT)
+                if out.returncode == 0:
+                    for k, v in json.loads(out.stdout.strip().splitlines()[-1]).items():
+                        setattr(row, k, v)
+                else:
+                    row.failed = (out.stderr.strip().splitlines() or ["exit %d" % out.returncode])[-1][:120]
+            except subprocess.TimeoutExpired:
+                row.failed = f"over {MEMORY_TIMEOUT:g} s"
+            rows.append(row)
+            if progress:
+                progress(len(rows), total, f"n = {n} {name}: {row.peak_mb:.0f} MB")
+    return rows
+
+
+def memory_table(rows: list[MemoryRow]) -> str:
+    lines = [f"| n (states) | integrator | peak RSS (MB) | of which the model and kernels (MB) | CPU (s) | steps |",
+             "|---:|---|---:|---:|---:|---:|"]
+    for r in rows:
+        if r.failed:
+            lines.append(f"| {r.n} | {r.integrator} | failed: {r.failed} | | | |")
+        else:
+            lines.append(f"| {r.n} ({r.size}) | {r.integrator} | {r.peak_mb:.0f} | {r.built_mb:.0f} | {r.cpu_s:.1f} | {r.steps} |")
+    return "\n".join(lines)
