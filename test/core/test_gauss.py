@@ -13,6 +13,7 @@ from gyro_sim.bench.stability import long_horizon
 from gyro_sim.core import fast
 from gyro_sim.core import gauss_kernels as gk
 from gyro_sim.core.integrators import INTEGRATORS, IntegrationError, make_integrator
+from gyro_sim.core.integrators import gauss
 from gyro_sim.core.integrators.gauss import GMRES_CAP, NEWTON_CAP, Gauss4
 from gyro_sim.core.model import compile_model, initial_state
 from gyro_sim.core.scene_load import load_scene
@@ -270,6 +271,30 @@ def test_fast_heavy_top_converges(spin):
     assert g.nsteps == 100 and g.counts[gk.COUNT_MAX_NEWTON] <= NEWTON_CAP
     q = sim.state[sim.model.i_quat]
     assert abs(np.linalg.norm(q) - 1.0) < 1e-14
+
+
+@needs_numba
+def test_round_off_floor_is_accepted_counted_and_the_same_on_both_drivers():
+    """The top at 1e4 rad/s with GMRES at 1e-8: some steps' updates stop contracting at ~10
+    tolerance units (a world angular-velocity component near 0 carries the round-off of the
+    |w|^2 terms). Accepted as the round-off floor (counted), bit for bit on both drivers;
+    without the floor (NEWTON_STALL = 0) the first step reports divergence."""
+    results = []
+    for stall, compiled in ((gauss.NEWTON_STALL, True), (gauss.NEWTON_STALL, False), (0.0, True)):
+        sim = Simulator(fast_heavy_top(1e4), integrator="gauss4", step=1e-3)
+        g = sim.integrator
+        g.use_compiled = compiled
+        g._params[gk.PAR_GMRES_RTOL] = 1e-8
+        g._params[gk.PAR_STALL] = stall
+        try:
+            for _ in range(30):
+                sim.advance(0.01)
+            results.append((sim.state.copy(), g.counts.copy()))
+        except SimulationError as e:
+            results.append(str(e))
+    (yc, cc), (yp, cp), failed = results
+    assert cc[gk.COUNT_STALLED] > 0 and np.array_equal(cc, cp) and np.array_equal(yc, yp)
+    assert "Newton iteration failed" in failed and "diverging" in failed, failed
 
 
 # ------------------------------------------------------------------ memory
