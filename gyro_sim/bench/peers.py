@@ -21,6 +21,7 @@ reason, by :func:`mujoco_unsupported`.
 """
 from __future__ import annotations
 
+import contextlib
 import time
 from dataclasses import dataclass
 
@@ -250,9 +251,18 @@ class MujocoChain:
                 i_rot += 1
             R_par, w_par = R, w
         if moments is not None:
-            for name, value in zip(model.axis_names, moments):
-                self.d.qfrc_applied[self._jnt(name)[1]] = float(value)
+            self.set_moments(moments)
         self.mj.mj_forward(self.m, self.d)
+
+    def set_moments(self, moments) -> None:
+        """Commanded axis moments (`model.axis_names` order) as generalised forces on the hinge
+        and rotor joints (`qfrc_applied`), held until set again."""
+        for name, value in zip(self.model.axis_names, moments):
+            self.d.qfrc_applied[self._jnt(name)[1]] = float(value)
+
+    @property
+    def time(self) -> float:
+        return float(self.d.time)
 
     def step(self, nstep: int) -> None:
         self.mj.mj_step(self.m, self.d, nstep=nstep)
@@ -286,24 +296,41 @@ class MujocoChain:
 
 def run_mujoco(scene: Scene, integrator: str, step: float, horizon: float, moments=None) -> PeerRun:
     """MuJoCo from gyro_sim's initial state to `horizon` in n = ceil(horizon / step) steps."""
-    import mujoco
-
     n = max(1, int(np.ceil(horizon / step - 1e-9)))
     chain = MujocoChain(scene, horizon / n, MUJOCO_INTEGRATORS[integrator], moments)
     inv0 = chain.invariants()
-    messages: list[str] = []
-    previous = mujoco.get_mju_user_warning()
-    mujoco.set_mju_user_warning(messages.append)  # MuJoCo prints them otherwise
-    try:
+    with mujoco_warnings() as messages:
         t0 = time.process_time()
         chain.step(n)
         cpu = time.process_time() - t0
-    finally:
-        mujoco.set_mju_user_warning(previous)
-    bad = [mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQVEL, mujoco.mjtWarning.mjWARN_BADQPOS]
-    # MuJoCo resets an unstable simulation to the model's rest state and goes on: detect it
-    if messages or any(chain.d.warning[int(w)].number for w in bad) or not (
-            np.all(np.isfinite(chain.d.qpos)) and np.all(np.isfinite(chain.d.qvel))):
-        what = messages[0].strip() if messages else "non-finite state"
+    what = mujoco_failure(chain, messages)
+    if what:
         return PeerRun(None, None, inv0, cpu, 0, n, f"MuJoCo {integrator}: {what}")
     return PeerRun(chain.frames(), chain.invariants(), inv0, cpu, 0, n)
+
+
+@contextlib.contextmanager
+def mujoco_warnings():
+    """Collect MuJoCo's warning messages (it prints them otherwise) into the list yielded."""
+    import mujoco
+
+    messages: list[str] = []
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(messages.append)
+    try:
+        yield messages
+    finally:
+        mujoco.set_mju_user_warning(previous)
+
+
+def mujoco_failure(chain: MujocoChain, messages: list[str]) -> str | None:
+    """Why the MuJoCo run of `chain` is not to be trusted, or None: a warning was raised, an
+    instability flag is set (MuJoCo resets an unstable simulation to the model's rest state
+    and goes on: detect it) or the state is not finite."""
+    import mujoco
+
+    bad = [mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQVEL, mujoco.mjtWarning.mjWARN_BADQPOS]
+    if messages or any(chain.d.warning[int(w)].number for w in bad) or not (
+            np.all(np.isfinite(chain.d.qpos)) and np.all(np.isfinite(chain.d.qvel))):
+        return messages[0].strip() if messages else "non-finite state"
+    return None

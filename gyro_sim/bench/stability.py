@@ -41,7 +41,7 @@ from ..core.simulator import SimulationError, Simulator
 from . import extreme as ex
 from .accuracy import (ATOL_FACTOR, chain_length, invariant_error, invariant_scales, precession_exact,
                        state_error)
-from .peers import frames_of_state
+from .peers import frames_of_state, mujoco_unsupported
 from .scenes import spherical_chain
 from .report import add_force_option, refused, write_report
 
@@ -57,6 +57,11 @@ SETTINGS: dict[str, dict[str, float]] = {
     "radau": {"rtol": 1e-8},
     "auto": {"rtol": 1e-8},
 }
+#: MuJoCo's rows (peers.MujocoChain), at the node's step, in the same chunks: row -> integrator
+MUJOCO_ROWS = {"mujoco implicitfast": "implicitfast", "mujoco RK4": "RK4"}
+MUJOCO_STEP = 1e-3
+#: every row of the verdict tables, in order
+ROWS = (*SETTINGS, *MUJOCO_ROWS)
 #: verdict thresholds: relative drift of a conserved invariant, final-state error
 DRIFT_TOL = 1e-5
 ERROR_TOL = 1e-3
@@ -263,9 +268,60 @@ class ItemResult:
     runs: list[Run]
     reference: str  # what the errors are against
     predicted: str | None = None  # Kapitza: "stays up" / "falls"
+    mujoco_skipped: str | None = None  # why there are no MuJoCo rows
 
 
-def run_item(item: Item, integrators=None, progress=None, backend: str = "auto") -> ItemResult:
+def mujoco_skip(scene) -> str | None:
+    """Why MuJoCo gets no row on `scene` (package missing, scene not expressible), or None."""
+    try:
+        import mujoco  # noqa: F401
+    except ImportError:
+        return "the mujoco package is not installed"
+    return mujoco_unsupported(scene)
+
+
+def simulate_mujoco(item: Item, scene, row: str, budget: float) -> tuple[Run, Any]:
+    """`item` in MuJoCo (peers.MujocoChain, integrator MUJOCO_ROWS[row]) at MUJOCO_STEP, as
+    :func:`simulate` does it: CHUNK-second calls, the step moments set between calls from
+    `item.moments_at` on (generalised forces on the hinge and rotor joints, as the accuracy
+    report's peers); the run and the chain."""
+    from .peers import MujocoChain, mujoco_failure, mujoco_warnings
+
+    run = Run(item.key, row)
+    n = max(1, round(item.horizon / CHUNK))
+    per = max(1, round(item.horizon / n / MUJOCO_STEP))
+    chain = MujocoChain(scene, item.horizon / n / per, MUJOCO_ROWS[row])
+    chain.invariants0 = chain.invariants()
+    applied = False
+    cpu0 = time.process_time()
+    with np.errstate(all="ignore"), mujoco_warnings() as messages:
+        try:
+            with cpu_limit(budget):
+                for i in range(n):
+                    if item.moments is not None and not applied and i * item.horizon / n >= item.moments_at - 1e-12:
+                        chain.set_moments(item.moments)
+                        applied = True
+                    chain.step(per)
+                    run.nsteps += per
+                    what = mujoco_failure(chain, messages)
+                    if what:  # MuJoCo has reset its state and time to the model's rest
+                        run.verdict = "fails"
+                        run.t_reached = i * item.horizon / n
+                        run.note = f"MuJoCo {MUJOCO_ROWS[row]}: {what} (in the call from t = {run.t_reached:.3g} s)"
+                        break
+        except _OverBudget:
+            pass
+    run.cpu = time.process_time() - cpu0
+    if run.verdict != "fails":
+        run.t_reached = chain.time
+    if run.verdict == "" and chain.time < item.horizon * (1 - 1e-9):
+        run.verdict = "too slow"
+        run.note = f"budget {budget:g} s CPU spent at t = {chain.time:.3g} s of {item.horizon:g} s"
+    return run, chain
+
+
+def run_item(item: Item, integrators=None, progress=None, backend: str = "auto",
+             mujoco: bool = True) -> ItemResult:
     scene = load_scene(item.build())
     model = compile_model(scene)
     names = _names(model, item.moments)
@@ -299,17 +355,34 @@ def run_item(item: Item, integrators=None, progress=None, backend: str = "auto")
     for name in integrators or item.integrators:
         run, sim = simulate(item, scene, name, SETTINGS[name], item.budget, backend)
         if run.verdict == "":
-            inv1 = sim.invariants()
-            run.drift = invariant_error(inv0, inv1, names, scales)
-            if "energy" in names:
-                run.energy_drift = invariant_error(inv0, inv1, ("energy",), scales)
-            if ref_frames is not None:
-                run.error = state_error(frames_of_state(model, sim.time, sim.state), ref_frames, length, free)
-            run.verdict, run.note = _verdict(run, result.predicted)
+            _judge(run, inv0, sim.invariants(), frames_of_state(model, sim.time, sim.state), names, scales,
+                   ref_frames, length, free, result.predicted)
         if progress:
             progress(run)
         result.runs.append(run)
+    if mujoco:
+        result.mujoco_skipped = mujoco_skip(scene)
+        for row in (() if result.mujoco_skipped else MUJOCO_ROWS):
+            run, chain = simulate_mujoco(item, scene, row, item.budget)
+            if run.verdict == "":
+                # MuJoCo's own energy and momenta, against its own at t = 0 (as the accuracy report)
+                _judge(run, chain.invariants0, chain.invariants(), chain.frames(), names, scales, ref_frames,
+                       length, free, result.predicted)
+            if progress:
+                progress(run)
+            result.runs.append(run)
     return result
+
+
+def _judge(run: Run, inv0: dict, inv1: dict, frames, names, scales, ref_frames, length, free,
+           predicted) -> None:
+    """The verdict of a finished run from its invariants and final frames."""
+    run.drift = invariant_error(inv0, inv1, names, scales)
+    if "energy" in names:
+        run.energy_drift = invariant_error(inv0, inv1, ("energy",), scales)
+    if ref_frames is not None:
+        run.error = state_error(frames, ref_frames, length, free)
+    run.verdict, run.note = _verdict(run, predicted)
 
 
 def _verdict(run: Run, predicted: str | None) -> tuple[str, str]:
@@ -321,7 +394,7 @@ def _verdict(run: Run, predicted: str | None) -> tuple[str, str]:
         bad.append(f"invariant drift {run.drift:.1e}")
     if run.error is not None and not run.error <= ERROR_TOL:
         bad.append(f"error {run.error:.1e}")
-    if predicted is not None:
+    if predicted is not None and run.max_tilt is not None:
         outcome = kapitza_outcome(run.max_tilt)
         notes.append(f"{outcome} (max tilt {run.max_tilt:.3f} rad)")
         if outcome != predicted:
@@ -417,7 +490,7 @@ def verdict_table(results: list[ItemResult]) -> str:
 
 
 def overview_table(results: list[ItemResult]) -> str:
-    names = list(SETTINGS)
+    names = list(ROWS)
     lines = ["| case | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
     for res in results:
         v = {r.integrator: r.verdict for r in res.runs}
@@ -426,10 +499,20 @@ def overview_table(results: list[ItemResult]) -> str:
 
 
 def cases_table(results: list[ItemResult]) -> str:
-    lines = ["| case | horizon (s) | reference | what makes it hard |", "|---|---:|---|---|"]
+    lines = ["| case | horizon (s) | reference | what makes it hard | MuJoCo |", "|---|---:|---|---|---|"]
     for res in results:
-        lines.append(f"| {res.item.key} | {res.item.horizon:g} | {res.reference} | {res.item.why or res.item.title} |")
+        mj = "yes" if any(r.integrator in MUJOCO_ROWS for r in res.runs) else \
+            ("skipped: " + res.mujoco_skipped if res.mujoco_skipped else "not run")
+        lines.append(f"| {res.item.key} | {res.item.horizon:g} | {res.reference} | {res.item.why or res.item.title} "
+                     f"| {mj} |")
     return "\n".join(lines)
+
+
+def mujoco_skipped_text(results: list[ItemResult]) -> str:
+    """One sentence: the cases MuJoCo cannot express, each with the reason."""
+    skipped = [f"{r.item.key} ({r.mujoco_skipped})" for r in results if r.mujoco_skipped]
+    return ("No MuJoCo rows for " + "; ".join(skipped) + ".") if skipped else ""
+
 
 
 def kapitza_table(results: list[ItemResult]) -> str:
@@ -467,14 +550,21 @@ def long_table(runs: list[LongRun]) -> str:
 
 
 # --------------------------------------------------------------------------------- plot
-def plot(results: list[ItemResult], long_runs: list[LongRun], path: str) -> None:
+def plot(results: list[ItemResult], long_runs: list[LongRun], path: str, spin_runs=()) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(14, 5), gridspec_kw={"width_ratios": [1.6, 1]})
-    names = list(SETTINGS)
+    if spin_runs:
+        from . import spin_sweep as ss
+
+        fig, axes = plt.subplots(2, 2, figsize=(14, 10), gridspec_kw={"width_ratios": [1.6, 1]})
+        (ax0, ax1), bottom = axes
+        ss.plot(bottom, spin_runs)
+    else:
+        fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(14, 5), gridspec_kw={"width_ratios": [1.6, 1]})
+    names = list(ROWS)
     colors = {"stable": "#4caf50", "drifts": "#ffb300", "fails": "#e53935", "too slow": "#8e8e8e"}
     keys = [r.item.key for r in results]
     for i, res in enumerate(results):
@@ -484,7 +574,7 @@ def plot(results: list[ItemResult], long_runs: list[LongRun], path: str) -> None
             ax0.text(j + 0.5, i + 0.5, f"{r.verdict}\n{r.cpu:.2g} s", ha="center", va="center", fontsize=6)
     ax0.set_xlim(0, len(names))
     ax0.set_ylim(len(keys), 0)
-    ax0.set_xticks(np.arange(len(names)) + 0.5, names)
+    ax0.set_xticks(np.arange(len(names)) + 0.5, [n.replace("mujoco ", "MuJoCo\n") for n in names], fontsize=7)
     ax0.set_yticks(np.arange(len(keys)) + 0.5, keys, fontsize=7)
     ax0.set_title("verdict and CPU time per case and integrator")
     for r in long_runs:
@@ -509,6 +599,10 @@ class Report:
     cpu_total: float
     quick: bool
     backend: str = "numpy"
+    spin_runs: list = field(default_factory=list)  # spin_sweep.SpinRun
+    sweep_steps: int = 0
+    tips: list = field(default_factory=list)  # heavy_tips.TipRow
+    wall: float = 0.0  # s
 
     def markdown(self) -> str:
         mode = "quick mode (short horizons, small budgets)" if self.quick else "full run"
@@ -538,6 +632,8 @@ class Report:
             "",
             long_table(self.long_runs),
             "",
+            *self._spin_section(),
+            *self._tips_section(),
             "The numbers behind the verdicts:",
             "",
             verdict_table(self.results),
@@ -546,12 +642,67 @@ class Report:
             "",
             cases_table(self.results),
             "",
+            mujoco_skipped_text(self.results),
+            "",
         ])
+
+    def _spin_section(self) -> list[str]:
+        from . import spin_sweep as ss
+
+        if not self.spin_runs:
+            return []
+        return [
+            f"### Spin sweep: fast tops at h = {ss.STEP * 1e3:g} ms",
+            "",
+            "The heavy top (config/heavy_top.yaml) and the double gyroscope (config/double_gyro_plus.yaml), "
+            "top 1 spun at 1e2, 1e3, 1e4 rad/s and started in its slow regular precession (the paper's "
+            "eq 88, `lagrange.regular_precession_state`; slow root kappa of phi_1'(kappa) = spin), so "
+            "the exact motion is known (theta_k, psi_k' = kappa, phi_k' constant: "
+            "`accuracy.precession_exact`). "
+            f"{self.sweep_steps:.0e} steps each"
+            f"{' (quick mode)' if self.quick else ''}, gyro_sim in {ss.CHUNK * 1e3:g} ms `advance` calls, MuJoCo "
+            f"in its own steps; {ss.SAMPLES} samples. Axis error: the largest angle between a "
+            "carrier's axis and the exact one over the run; precession angle error: the largest error "
+            "of an axis's azimuth about the vertical; energy drift (E - E0) / (T0 + |V0|) and vertical "
+            "angular momentum drift (K - K0) / |K0| (MuJoCo: its own), final and [largest], growth "
+            "classified as in the long-horizon item (log-log slope of the running max over the last two "
+            "decades). A run that fails shows its message and how far it got, nothing else.",
+            "",
+            ss.summary_table(self.spin_runs),
+            "",
+            ss.table(self.spin_runs),
+            "",
+        ]
+
+    def _tips_section(self) -> list[str]:
+        from . import heavy_tips as ht
+
+        if not self.tips:
+            return []
+        return [
+            "### Heavy and light tips: accelerations against 80 digits",
+            "",
+            "`extreme.mass_ratio_chain(ratio)` at its initial state: the largest difference of the "
+            "accelerations u', relative to the largest 80-digit acceleration, between the compiled "
+            "(numba) kernel, the numpy reference (dense solve of the composite-inertia matrix) and the "
+            "same equations in 80-digit arithmetic (the kernel run as Python on decimal numbers: "
+            "`gyro_sim.bench.heavy_tips`, as test/core/extended_precision.py).",
+            "",
+            ht.table(self.tips),
+            "",
+        ]
+
+
+#: the report's parts (--parts)
+PARTS = ("verdicts", "long", "sweep", "tips")
+#: CPU budget (s) of one spin-sweep run: quick, full
+SWEEP_BUDGET = (20.0, 600.0)
 
 
 def build(quick: bool = False, keys=None, integrators=None, long_steps: int | None = None,
-          progress=None, backend: str = "auto") -> Report:
-    cpu0 = time.process_time()
+          progress=None, backend: str = "auto", mujoco: bool = True, sweep_steps: int | None = None,
+          parts=PARTS) -> Report:
+    cpu0, wall0 = time.process_time(), time.time()
     chosen = [it for it in items(quick) if keys is None or it.key in keys]
     total = sum(len(integrators or it.integrators) for it in chosen)
     done = [0]
@@ -561,11 +712,26 @@ def build(quick: bool = False, keys=None, integrators=None, long_steps: int | No
         if progress:
             progress(done[0], total, f"{run.item} {run.integrator}: {run.verdict}")
 
-    results = [run_item(it, integrators, tick, backend) for it in chosen]
+    results = [run_item(it, integrators, tick, backend, mujoco) for it in chosen] if "verdicts" in parts else []
     steps = long_steps if long_steps is not None else (10_000 if quick else 1_000_000)
-    long_runs = long_horizon(steps, backend=backend) if steps > 0 else []
+    long_runs = long_horizon(steps, backend=backend) if steps > 0 and "long" in parts else []
+    spin_runs = []
+    s_steps = sweep_steps if sweep_steps is not None else (10_000 if quick else 1_000_000)
+    if "sweep" in parts and s_steps > 0:
+        from . import spin_sweep as ss
+
+        methods = ss.METHODS if mujoco else ss.GYRO_METHODS
+        spin_runs = ss.sweep(s_steps, SWEEP_BUDGET[0 if quick else 1], methods=methods, backend=backend,
+                             progress=(lambda i, n, r: progress(i, n, f"spin sweep: {r.scene} {r.spin:g} {r.method}"))
+                             if progress else None)
+    tips = []
+    if "tips" in parts:
+        from . import heavy_tips as ht
+
+        tips = ht.rows()
     resolved = _default_backend() if backend == "auto" else backend
-    return Report(results, long_runs, time.process_time() - cpu0, quick, resolved)
+    return Report(results, long_runs, time.process_time() - cpu0, quick, resolved, spin_runs, s_steps, tips,
+                  time.time() - wall0)
 
 
 def to_json(report: Report) -> dict[str, Any]:
@@ -576,6 +742,10 @@ def to_json(report: Report) -> dict[str, Any]:
                    "kapitza_margin": r.item.kapitza_margin, "predicted": r.predicted,
                    "runs": [asdict(x) for x in r.runs]} for r in report.results],
         "long_horizon": [asdict(r) for r in report.long_runs],
+        "mujoco_skipped": {r.item.key: r.mujoco_skipped for r in report.results if r.mujoco_skipped},
+        "spin_sweep": {"steps": report.sweep_steps, "runs": [asdict(r) for r in report.spin_runs]},
+        "heavy_tips": [asdict(r) for r in report.tips],
+        "wall": report.wall,
     }
 
 
@@ -586,11 +756,12 @@ def main(args) -> int:
         return 2
     bar = Progress("stability")
     report = build(quick=args.quick, keys=args.cases, long_steps=args.long_steps, progress=bar,
-                   backend=args.backend)
+                   backend=args.backend, mujoco=not args.no_mujoco, sweep_steps=args.sweep_steps,
+                   parts=tuple(args.parts))
     text = report.markdown()
     print(text)
     write_report(args.out, "stability", text + "\n", to_json(report),
-                 lambda png: plot(report.results, report.long_runs, png), force=args.force)
+                 lambda png: plot(report.results, report.long_runs, png, report.spin_runs), force=args.force)
     return 0
 
 
@@ -605,4 +776,10 @@ def register(sub, bench) -> None:
                    help="steps of the long-horizon runs (default 1e6, quick 1e4; 0: skip)")
     p.add_argument("--backend", default="auto", choices=("auto", "numba", "numpy"),
                    help="the Simulator's dynamics backend (default auto: numba when it imports)")
+    p.add_argument("--sweep-steps", type=int, default=None,
+                   help="steps of each spin-sweep run (default 1e6, quick 1e4; 0: skip)")
+    p.add_argument("--parts", nargs="+", choices=PARTS, default=list(PARTS),
+                   help="the parts of the report to run (default all): verdicts, long (the long-horizon item), "
+                        "sweep (spin sweep), tips (heavy-tip table)")
+    p.add_argument("--no-mujoco", action="store_true", help="no MuJoCo rows (verdicts and spin sweep)")
     p.set_defaults(fn=main)
