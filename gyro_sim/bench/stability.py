@@ -704,7 +704,7 @@ def build(quick: bool = False, keys=None, integrators=None, long_steps: int | No
           parts=PARTS) -> Report:
     cpu0, wall0 = time.process_time(), time.time()
     chosen = [it for it in items(quick) if keys is None or it.key in keys]
-    total = sum(len(integrators or it.integrators) for it in chosen)
+    total = sum(len(integrators or it.integrators) + (len(MUJOCO_ROWS) if mujoco else 0) for it in chosen)
     done = [0]
 
     def tick(run: Run) -> None:
