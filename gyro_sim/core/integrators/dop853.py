@@ -6,6 +6,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .. import fast_dop853
 from ..dop853_kernels import (
     CONTROL_SIZE,
     INITIAL_SIZE,
@@ -327,8 +328,6 @@ class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
         self._loop = None
         if n and callable(getattr(system, "kernel_arguments", None)) and callable(
                 getattr(system, "quaternion_block", None)):
-            from .. import fast_dop853
-
             self._loop = fast_dop853.loop_for(system.kernel_arguments())
             self._i_q0, self._nq = (int(v) for v in system.quaternion_block())
             self._real = np.zeros(fast_dop853.REAL_SIZE)
@@ -439,42 +438,42 @@ class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
 
     def _integrate_compiled(self, t0: float, y: np.ndarray, t1: float, te, Y) -> None:
         """`_integrate` (the loop of `begin`, `take_step`, `dense`) in one compiled call."""
-        from ..fast_dop853 import (ACCEPTED_RHS_NONFINITE, COLLAPSED, INITIAL_RHS_NONFINITE,
-                                   R_ERROR, R_H, R_H_ABS, R_LAST_STEP, R_T, R_T_OLD, S_ACCEPTED,
-                                   S_F_NEW, S_NFEV, S_NONFINITE, S_REJECTED, S_STATUS)
+        fd = fast_dop853
         if te is None:
             te, Y = self._no_te, self._no_Y
         elif not (te.flags.c_contiguous and te.flags.writeable):
             te = te.copy()
         real, status = self._real, self._status
-        real[R_ERROR] = math.nan if self.error_estimate is None else self.error_estimate
-        real[R_LAST_STEP] = math.nan if self.last_step is None else self.last_step
+        real[fd.R_ERROR] = math.nan if self.error_estimate is None else self.error_estimate
+        real[fd.R_LAST_STEP] = math.nan if self.last_step is None else self.last_step
         h_mem = 0.0 if self._h_abs is None else float(self._h_abs)  # 0: select the starting step
         self._loop(t0, t1, y, te, Y, h_mem, self.max_step, self.rtol, self._atol_v,
                    self.A_ALL, self.C_ALL, self.E5, self.E3, self.D, self.CONTROL, self.INITIAL,
                    self._i_q0, self._nq,
                    self._f, self._K, self._ys, self._y_new, self._y_old, self._F, self._bad,
                    self._trace, real, status, *self.system.kernel_arguments())
-        nfev = int(status[S_NFEV])
+        r, st = real.tolist(), status.tolist()
+        nfev = st[fd.S_NFEV]
         self.nfev += nfev
         self.system.nfev += nfev
-        self.nsteps += int(status[S_ACCEPTED])
-        self.nrejected += int(status[S_REJECTED])
-        self._h_abs = float(real[R_H_ABS]) if real[R_H_ABS] > 0.0 else None
-        if not math.isnan(real[R_ERROR]):
-            self.error_estimate = float(real[R_ERROR])
-            self.last_step = self._h = float(real[R_LAST_STEP])
-        self._f_new = bool(status[S_F_NEW])
-        code = int(status[S_STATUS])
-        if code == INITIAL_RHS_NONFINITE:
+        self.nsteps += st[fd.S_ACCEPTED]
+        self.nrejected += st[fd.S_REJECTED]
+        self._h_abs = r[fd.R_H_ABS] if r[fd.R_H_ABS] > 0.0 else None
+        if not math.isnan(r[fd.R_ERROR]):
+            self.error_estimate = r[fd.R_ERROR]
+            self.last_step = self._h = r[fd.R_LAST_STEP]
+        self._f_new = st[fd.S_F_NEW] != 0
+        code = st[fd.S_STATUS]
+        if code == fd.DONE:
+            self._t_old, self._t_new = r[fd.R_T_OLD], t1
+        elif code == fd.INITIAL_RHS_NONFINITE:
             raise IntegrationError(self.name, "rhs is not finite at the initial state", t0, None,
                                    describe_nonfinite(self._f))
-        if code == COLLAPSED:
+        elif code == fd.COLLAPSED:
             nonfinite = ""
-            if status[S_NONFINITE]:  # the stages of the last non-finite trial, as named in Python
+            if st[fd.S_NONFINITE]:  # the stages of the last non-finite trial, as named in Python
                 nonfinite = describe_nonfinite(np.where(self._bad[:, None] != 0, np.nan, 0.0))
-            raise self._collapse(float(real[R_T]), float(real[R_H]), nonfinite)
-        if code == ACCEPTED_RHS_NONFINITE:
-            raise IntegrationError(self.name, "rhs is not finite at the accepted state",
-                                   float(real[R_T]), float(real[R_H]), describe_nonfinite(self._f))
-        self._t_old, self._t_new = float(real[R_T_OLD]), t1
+            raise self._collapse(r[fd.R_T], r[fd.R_H], nonfinite)
+        else:  # ACCEPTED_RHS_NONFINITE
+            raise IntegrationError(self.name, "rhs is not finite at the accepted state", r[fd.R_T],
+                                   r[fd.R_H], describe_nonfinite(self._f))
