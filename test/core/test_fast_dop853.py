@@ -18,6 +18,11 @@ How close to scipy, and why:
   (y(t + dt) = y(t) + f dt + O(dt^2), dt ~ 1e-11). With the step size pinned by max_step
   the times are scipy's bit for bit and the states agree to round-off directly.
 
+Reached here (scipy 1.17, OpenBLAS): 145 steps (40 rejected) at rtol 1e-9 of a chaotic
+pendulum, step times within 7e-10 relative, states within 2e-12 of max |y| once shifted; 41
+pinned steps: the final state within 8 ulps of max |y|, the dense output within 1.3e-15.
+The bounds below leave ~10-100x for other BLAS builds.
+
 The compiled loop and the Python driver run the same kernels between the same rhs
 evaluations: identical bits, counters included (and so are two runs of either).
 """
