@@ -5,26 +5,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..rotations import quat_conj, quat_exp, quat_mul
+from ..lie_kernels import lie_field, lie_stage, lie_start, lie_update
 from .base import FixedStepIntegrator
 
 if TYPE_CHECKING:
     from ..system import OdeSystem
-
-# Quaternion products as matrices, for stacks (nq, 4) at a few microseconds (rotations.quat_mul
-# is the reference; these tensors are built from it). L(a) b = a (x) b with
-# L(a) = (a @ _HAMILTON_LEFT).reshape(4, 4); and 2 vec(p (x) conj(q)) = G(q) p with
-# G(q) = (q @ _OMEGA_OF_QDOT).reshape(3, 4).
-_E4 = np.identity(4)
-_HAMILTON_LEFT = (np.array([[quat_mul(ej, ek) for ek in _E4] for ej in _E4])
-                  .transpose(0, 2, 1).reshape(4, 16))
-_OMEGA_OF_QDOT = (2.0 * np.array([[quat_mul(ek, quat_conj(ej)) for ek in _E4] for ej in _E4])
-                  .transpose(0, 2, 1)[:, 1:, :].reshape(4, 12))
-
-
-def _quat_left(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a (x) b for stacks (nq, 4) (= rotations.quat_mul, as a batched matrix product)."""
-    return np.matmul((a @ _HAMILTON_LEFT).reshape(-1, 4, 4), b[:, :, None])[:, :, 0]
 
 
 class Lie4(FixedStepIntegrator):
@@ -45,6 +30,15 @@ class Lie4(FixedStepIntegrator):
     On the translation part it is the classical RK4. Quaternions stay unit to round-off by
     construction (no projection needed; `project` is called anyway), rotations stay on
     SO(3). Four rhs evaluations per step; no error estimate.
+
+    One implementation, two drivers: the arithmetic of a step (omega from q', the stage
+    exponents, the action exp(theta) (x) q with the translation, the output's two
+    exponentials) is :mod:`gyro_sim.core.lie_kernels`. On a system that offers
+    `kernel_arguments()` and `quaternion_block()` (the compiled
+    :class:`gyro_sim.core.system.FastChainODE`) the n substeps of an `advance` run in one
+    compiled call (:func:`gyro_sim.core.fast_lie.lie_march`); on any other system (or with
+    `use_compiled` False) this class steps in Python (`_step`), calling the same kernels between
+    its rhs evaluations: the same steps, bit for bit.
 
     References
     ----------
@@ -76,36 +70,40 @@ class Lie4(FixedStepIntegrator):
         self._Y = np.empty((self.n_stages, self.n))  # stage states
         self._W = np.empty((self.n_stages, nq, 3))  # omega of each stage (world)
         self._V = np.empty((self.n_stages, nl))  # y' of each stage, translation part
-        self._qi, self._li = self.quat_index, self.lin_index
-        self._BETA = np.array([self.BETA1, self.BETA2])  # (2, 4): both output exponents
+        self._qi = np.ascontiguousarray(self.quat_index, dtype=np.int64)
+        self._li = np.ascontiguousarray(self.lin_index, dtype=np.int64)
+        self._hALPHA = np.empty_like(self.ALPHA)
+        #: the output's exponents, one row each: B (translation), BETA1, BETA2 (quaternions)
+        self._BETA = np.array([self.B, self.BETA1, self.BETA2], dtype=np.float64)
+        self._hBETA = np.empty_like(self._BETA)
+        #: march in compiled code when the system allows it; False: step in Python (the same steps)
+        self.use_compiled = True
+        self._compiled = None
+        if callable(getattr(system, "kernel_arguments", None)) and \
+                callable(getattr(system, "quaternion_block", None)):
+            from .. import fast_lie  # the compiled march (imports the kernel's module)
 
-    def _field(self, s: int, t: float, Y: np.ndarray) -> None:
-        """F_s = F(t, Y): omega of every quaternion block into W[s], the rest into V[s]."""
-        f = self._fun(t, Y)
-        self._V[s] = f[self._li]
-        if len(self._qi):
-            # omega = 2 vec(q' (x) conj(q))
-            G = (Y[self._qi] @ _OMEGA_OF_QDOT).reshape(-1, 3, 4)
-            np.matmul(G, f[self._qi][:, :, None], out=self._W[s][:, :, None])
+            self._compiled = fast_lie.LieMarch(system, self._qi, self._li, self.ALPHA, self.BASE,
+                                               self._BETA, self.C)
+            self._march_compiled(0.0, np.zeros(self.n), self.step, 0)  # compile or load it now,
+            # not in the first advance (a node's first steps)
 
-    def _act(self, theta: np.ndarray, d: np.ndarray, y: np.ndarray, out: np.ndarray) -> None:
-        """out = exp(theta, d) y: quaternions q <- quat_exp(theta) (x) q, the rest y + d."""
-        out[self._li] = y[self._li] + d
-        if len(self._qi):
-            out[self._qi] = _quat_left(quat_exp(theta), y[self._qi])
+    def _march_compiled(self, t0: float, y: np.ndarray, h: float, n: int) -> int | None:
+        if self._compiled is None or not self.use_compiled:
+            return None
+        done = self._compiled(t0, y, h, n, self._Y, self._W, self._V)
+        self.nfev += self.n_stages * min(done + 1, n)
+        return done
 
     def _step(self, t: float, y: np.ndarray, h: float) -> None:
-        Y, W, V = self._Y, self._W, self._V
-        W2 = W.reshape(self.n_stages, -1)
-        Y[0] = y
-        self._field(0, t, y)
+        """One step (the compiled march's, statement for statement)."""
+        Y, W, V, qi, li = self._Y, self._W, self._V, self._qi, self._li
+        hALPHA, hBETA = self._hALPHA, self._hBETA
+        np.multiply(self.ALPHA, h, out=hALPHA)
+        np.multiply(self._BETA, h, out=hBETA)
+        lie_start(y, Y)
+        lie_field(Y, self._fun(t, Y[0]), 0, qi, li, W, V)
         for s in range(1, self.n_stages):
-            a = h * self.ALPHA[s, :s]
-            theta = (a @ W2[:s]).reshape(-1, 3)
-            self._act(theta, a @ V[:s], Y[self.BASE[s]], Y[s])
-            self._field(s, t + self.C[s] * h, Y[s])
-        # translation part: y + h sum_i B_i V_i (the two exponentials commute there)
-        y[self._li] += (h * self.B) @ V
-        if len(self._qi):
-            e1, e2 = quat_exp(((h * self._BETA) @ W2).reshape(2, -1, 3))
-            y[self._qi] = _quat_left(e2, _quat_left(e1, y[self._qi]))
+            lie_stage(Y, W, V, hALPHA, s, self.BASE[s], qi, li)
+            lie_field(Y, self._fun(t + self.C[s] * h, Y[s]), s, qi, li, W, V)
+        lie_update(y, W, V, hBETA, qi, li)
