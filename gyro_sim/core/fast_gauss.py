@@ -56,75 +56,6 @@ _njit = fast_loop.njit_with_dependencies(*DEPENDENCIES)
 
 
 @_njit
-def _newton(t, h, y, hA, C, P, use_p, params, Zp, Z, Ys, F, Fp, Yp, w, V, H, cs, sn, g, coef,
-            info, counts, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-            first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base,
-            ht0, p0, pdot, L_rotor, tau):
-    """The Newton iteration of one step from (t, y): Z (2, size) on success; a STEP_ status.
-    Gauss4._newton statement for statement."""
-    n = y.shape[0]
-    m = H.shape[1]
-    tol, kappa, first_tol, diverge = params[PAR_TOL], params[PAR_KAPPA], params[PAR_FIRST_TOL], \
-        params[PAR_DIVERGE]
-    grtol, gatol, eps = params[PAR_GMRES_RTOL], params[PAR_GMRES_ATOL], params[PAR_FD_EPS]
-    newton_cap = int(params[PAR_NEWTON_CAP])
-    stall, stall_rate = params[PAR_STALL], params[PAR_STALL_RATE]
-    tc = (t + C[0] * h, t + C[1] * h)
-    inv_eps = 1.0 / eps
-    gk.gauss_weights(y, tol, w)
-    if use_p:
-        gk.gauss_predict(Zp, P, Z)
-    else:
-        Z[:, :] = 0.0
-    norm_prev = 0.0
-    for it in range(newton_cap):
-        counts[COUNT_NEWTON] += 1
-        counts[COUNT_MAX_NEWTON] = max(counts[COUNT_MAX_NEWTON], it + 1)
-        for st in range(2):
-            gk.gauss_stage_state(y, Z, st, Ys[st])
-            fast.rhs_kernel(tc[st], Ys[st], F[st], work, is_hinge, qrow, own_col, col_start,
-                            hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-                            torque_axis, torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
-            counts[COUNT_RHS] += 1
-        if not gk.all_finite(F):
-            return STEP_RHS_NONFINITE
-        beta = gk.gmres_start(Z, F, hA, w, V, g)
-        if beta == 0.0:
-            return STEP_OK
-        goal = gk.gmres_goal(beta, grtol, gatol, n)
-        k = 0
-        while k < m:
-            for st in range(2):
-                gk.gauss_perturbed(Ys[st], w, V[k], st, eps, Yp)
-                fast.rhs_kernel(tc[st], Yp, Fp[st], work, is_hinge, qrow, own_col, col_start,
-                                hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-                                torque_axis, torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
-                counts[COUNT_RHS] += 1
-            gk.gauss_operator(V[k], Fp, F, hA, w, inv_eps, V[k + 1])
-            res = gk.gmres_arnoldi(V, H, cs, sn, g, k)
-            k += 1
-            if res <= goal:
-                break
-        counts[COUNT_KRYLOV] += k
-        counts[COUNT_MAX_KRYLOV] = max(counts[COUNT_MAX_KRYLOV], k)
-        norm = gk.gmres_update(V, H, g, k, w, Z, coef)
-        code, theta = gk.newton_test(norm, norm_prev, it, kappa, first_tol, diverge, stall,
-                                     stall_rate)
-        info[0], info[1], info[2] = it, theta, norm
-        if code == NEWTON_CONVERGED:
-            return STEP_OK
-        if code == NEWTON_STALLED:
-            counts[COUNT_STALLED] += 1
-            return STEP_OK
-        if code == NEWTON_DIVERGING:
-            return STEP_DIVERGED
-        if code == NEWTON_NOT_FINITE:
-            return STEP_LINEAR
-        norm_prev = norm
-    return STEP_NOT_CONVERGED
-
-
-@_njit
 def gauss_march(t0, h, nsteps, y, A, C, D, P0, use_p0, P1, use_p1, params, Zp, Z, Ys, F, Fp, Yp,
                 w, V, H, cs, sn, g, coef, info, counts, i_q0, nq,
                 work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
@@ -134,35 +65,99 @@ def gauss_march(t0, h, nsteps, y, A, C, D, P0, use_p0, P1, use_p1, params, Zp, Z
     t0 + k h. The first step starts Newton from P0 Zp (use_p0) or 0, the others from P1 Zp
     (use_p1) or 0; Zp (2, size) ends as the last step's stage increments. After each step the
     quaternions y[i_q0 + 4 j : +4], j < nq, are renormalised and the state checked finite.
+    The Newton iteration of a step is Gauss4._newton statement for statement (written out
+    here, not called: one function less for numba and LLVM to compile).
 
     Returns (steps done, status): (nsteps, STEP_OK), or (k, status) when step k failed: y is
     then its start (Newton failure) or its non-finite result (STEP_NONFINITE). info (3,) holds
-    the last Newton iteration, rate, update norm; counts (5,) is incremented. The arguments
+    the last Newton iteration, rate, update norm; counts (6,) is incremented. The arguments
     from `work` on are those of fast.rhs_kernel (`ht0` its `t0`, the start of the hold);
     params as gauss_kernels.PAR_*; the rest scratch of Gauss4's shapes.
     """
+    n = y.shape[0]
+    m = H.shape[1]
+    tol, kappa, first_tol, diverge = params[PAR_TOL], params[PAR_KAPPA], params[PAR_FIRST_TOL], \
+        params[PAR_DIVERGE]
+    grtol, gatol, eps = params[PAR_GMRES_RTOL], params[PAR_GMRES_ATOL], params[PAR_FD_EPS]
+    newton_cap = int(params[PAR_NEWTON_CAP])
+    stall, stall_rate = params[PAR_STALL], params[PAR_STALL_RATE]
+    inv_eps = 1.0 / eps
     hA = A * h
     for k in range(nsteps):
         t = t0 + k * h
-        P, use_p = P1, use_p1
-        if k == 0:
-            P, use_p = P0, use_p0
-        status = _newton(t, h, y, hA, C, P, use_p, params, Zp, Z, Ys, F, Fp, Yp, w, V, H, cs, sn, g, coef, info, counts,
-                         work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                         first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
-                         flags, base, ht0, p0, pdot, L_rotor, tau)
+        tc = (t + C[0] * h, t + C[1] * h)
+        gk.gauss_weights(y, tol, w)
+        if k == 0 and use_p0:
+            gk.gauss_predict(Zp, P0, Z)
+        elif k > 0 and use_p1:
+            gk.gauss_predict(Zp, P1, Z)
+        else:
+            Z[:, :] = 0.0
+        status = STEP_NOT_CONVERGED
+        norm_prev = 0.0
+        for it in range(newton_cap):
+            counts[COUNT_NEWTON] += 1
+            counts[COUNT_MAX_NEWTON] = max(counts[COUNT_MAX_NEWTON], it + 1)
+            for st in range(2):
+                gk.gauss_stage_state(y, Z, st, Ys[st])
+                fast.rhs_kernel(tc[st], Ys[st], F[st], work, is_hinge, qrow, own_col, col_start,
+                                hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
+                                torque_axis, torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
+                counts[COUNT_RHS] += 1
+            if not gk.all_finite(F):
+                status = STEP_RHS_NONFINITE
+                break
+            beta = gk.gmres_start(Z, F, hA, w, V, g)
+            if beta == 0.0:
+                status = STEP_OK
+                break
+            goal = gk.gmres_goal(beta, grtol, gatol, n)
+            j = 0
+            while j < m:
+                for st in range(2):
+                    gk.gauss_perturbed(Ys[st], w, V[j], st, eps, Yp)
+                    fast.rhs_kernel(tc[st], Yp, Fp[st], work, is_hinge, qrow, own_col, col_start,
+                                    hinge_axis, s, mass, first_moment, inertia, lam_speed,
+                                    torque_body, torque_axis, torque_A, flags, base, ht0, p0, pdot,
+                                    L_rotor, tau)
+                    counts[COUNT_RHS] += 1
+                gk.gauss_operator(V[j], Fp, F, hA, w, inv_eps, V[j + 1])
+                res = gk.gmres_arnoldi(V, H, cs, sn, g, j)
+                j += 1
+                if res <= goal:
+                    break
+            counts[COUNT_KRYLOV] += j
+            counts[COUNT_MAX_KRYLOV] = max(counts[COUNT_MAX_KRYLOV], j)
+            norm = gk.gmres_update(V, H, g, j, w, Z, coef)
+            code, theta = gk.newton_test(norm, norm_prev, it, kappa, first_tol, diverge, stall,
+                                         stall_rate)
+            info[0], info[1], info[2] = it, theta, norm
+            if code == NEWTON_CONVERGED:
+                status = STEP_OK
+                break
+            if code == NEWTON_STALLED:
+                counts[COUNT_STALLED] += 1
+                status = STEP_OK
+                break
+            if code == NEWTON_DIVERGING:
+                status = STEP_DIVERGED
+                break
+            if code == NEWTON_NOT_FINITE:
+                status = STEP_LINEAR
+                break
+            norm_prev = norm
         if status != STEP_OK:
             return k, status
         gk.gauss_update(y, Z, D)
         Zp[:, :] = Z
         fast.normalize_quaternions(y, i_q0, nq)
-        if not fast_loop_finite(y):
+        if not _all_finite_1d(y):
             return k, STEP_NONFINITE
     return nsteps, STEP_OK
 
 
 @_njit
-def fast_loop_finite(y):
+def _all_finite_1d(y):
     """True when every entry of y (size,) is finite."""
     for i in range(y.shape[0]):
         if not (abs(y[i]) < np.inf):
