@@ -120,9 +120,13 @@ class Gauss4(FixedStepIntegrator):
 
     Attributes (besides the base's counters)
     ----------------------------------------
-    counts : int64 (5,), cumulative: Newton iterations, Krylov vectors (each 2 rhs
-        evaluations), the most Newton iterations of one step, the most Krylov vectors of one
-        GMRES solve, rhs evaluations of the steps.
+    counts : int64 (6,), cumulative, indexed by gauss_kernels.COUNT_*: Newton iterations,
+        Krylov vectors (each 2 rhs evaluations), the most Newton iterations of one step, the
+        most Krylov vectors of one GMRES solve, rhs evaluations of the steps, steps accepted
+        at the round-off floor.
+    use_compiled : True (default): march in compiled code when the system offers it; False:
+        step in Python on any system (the same steps, bit for bit).
+    workspace_bytes : bytes of the arrays the steps use, O(size).
 
     References
     ----------
