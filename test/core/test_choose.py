@@ -134,8 +134,8 @@ def test_warm_up_runs_both_methods_and_leaves_no_trace():
     integ, y0 = sim.integrator, sim.state
     calls = []
     for name, m in integ.methods.items():
-        march = m._march
-        m._march = lambda t0, y, t1, march=march, name=name: (calls.append(name), march(t0, y, t1))
+        march = m.march
+        m.march = lambda t0, y, t1, march=march, name=name: (calls.append(name), march(t0, y, t1))
     integ.warm_up(sim.time, y0)
     assert sorted(calls) == ["gauss4", "rk4"]
     assert all(m.nsteps == 0 and m.nfev == 0 for m in integ.methods.values())

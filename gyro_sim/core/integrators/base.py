@@ -234,6 +234,12 @@ class FixedStepIntegrator(Integrator):
         if t1 > t:
             self._march(t, y, t1)
 
+    def march(self, t0: float, y: np.ndarray, t1: float) -> None:
+        """Advance y (size,) in place from t0 to t1 in equal steps of at most `step`, with no
+        copy and no check of the start (for drivers of other methods, e.g. "fixed"); raises
+        IntegrationError when a step leaves a non-finite state (y then holds it)."""
+        self._march(t0, y, t1)
+
     def _march(self, t0: float, y: np.ndarray, t1: float) -> None:
         span = t1 - t0
         n = max(1, math.ceil(span / self.step - STEP_COUNT_SLACK))

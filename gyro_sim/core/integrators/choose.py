@@ -168,7 +168,7 @@ class SceneFixedStep(FixedStepIntegrator):
         counts = {name: (m.nfev, m.nsteps, m.njev, m.nlu) for name, m in self.methods.items()}
         try:
             for m in self.methods.values():
-                m._march(t0, y.copy(), t0 + self.step)
+                m.march(t0, y.copy(), t0 + self.step)
         except IntegrationError:
             pass  # a scene a method cannot step from here: it is compiled all the same
         finally:
@@ -207,16 +207,16 @@ class SceneFixedStep(FixedStepIntegrator):
             if self.current == "rk4":
                 self._y0[:] = y
                 try:
-                    m._march(t0, y, t1)
+                    m.march(t0, y, t1)
                 except IntegrationError as e:  # past rk4's limit within the call: again with gauss4
                     y[:] = self._y0
                     self.reason = f"gauss4: rk4 left a non-finite state at t = {e.t:.6g} s"
                     self._switch(t0, "gauss4")
                     self._next_check = t0 + CHECK_PERIOD
                     m = self.methods["gauss4"]
-                    m._march(t0, y, t1)
+                    m.march(t0, y, t1)
             else:
-                m._march(t0, y, t1)
+                m.march(t0, y, t1)
         finally:
             ms = self.methods.values()
             self.nfev = self._check_fev + sum(x.nfev for x in ms)
