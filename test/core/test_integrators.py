@@ -704,3 +704,18 @@ def test_min_step_constant_is_about_ulps():
     """The collapse threshold is tens of ulps of t (the brief's ~1e-14 |t|)."""
     t = 1234.5
     assert 10 * np.spacing(t) < integ.MIN_STEP_RELATIVE * t < 100 * np.spacing(t)
+
+
+def test_no_starting_step_is_an_integration_error_not_a_division_by_zero():
+    class Huge:
+        size, quat_index = 2, NO_QUAT
+
+        def rhs(self, t, y):
+            return np.array([1e300, 1e300])  # finite, but |f| / tolerance overflows: h0 = 0
+
+        def project(self, y):
+            pass
+
+    with np.errstate(over="ignore"):
+        with pytest.raises(IntegrationError, match="no starting step"):
+            integ.make_integrator("radau", Huge()).advance(0.0, np.array([1.0, 1.0]), 1.0)

@@ -437,6 +437,9 @@ class AdaptiveIntegrator(Integrator):
         d0, d1 = rms(y0 / scale), rms(f0 / scale)
         h0 = _H0_DEFAULT if d0 < _H0_NEGLIGIBLE or d1 < _H0_NEGLIGIBLE else _H0_FRACTION * d0 / d1
         h0 = min(h0, span)
+        if not h0 > 0.0:  # |f0| so large against |y0| that no step is representable
+            raise IntegrationError(self.name, f"no starting step: the rhs is too large (weighted norm {d1:.3g})",
+                                   t0, None)
         f1 = self._fun(t0 + h0, y0 + h0 * f0)
         d2 = rms((f1 - f0) / scale) / h0
         if not math.isfinite(d2):
