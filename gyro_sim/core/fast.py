@@ -78,9 +78,11 @@ SPHERICAL_DOF = 3
 WORK_PER_BODY = 123
 #: per velocity column: S 6, U 6, U D^-1 6, u 1
 WORK_PER_COLUMN = 19
-#: `_aba` takes the square-root form (`_aba_stable`) when a subtree is more than this many
-#: times heavier than the body carrying it; below, the formed projection (`_aba_classic`)
-#: loses ~10 eps ratio^2 relative (9e-12 at 1e2: test/core/test_heavy_tip.py)
+#: `_aba` takes the square-root form (`_aba_stable`) when the classic elimination passes on to
+#: a body more than this many times its own mass (the subtree's apparent, articulated mass at
+#: the joint); below, the formed projection (`_aba_classic`) loses ~10 eps ratio^2 relative
+#: (9e-12 at 1e2: test/core/test_heavy_tip.py). Chains whose subtrees all weigh less than this
+#: many times their carriers cannot pass on more and skip the check.
 STABLE_ABA_RATIO = 100.0
 
 
@@ -525,6 +527,7 @@ def _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, D
     D = J, and only the apparent mass M - H^T J^-1 H passes to the parent.
     """
     n = IA.shape[0]
+    worst = 0.0  # largest apparent mass passed on / the carrier's own mass
     Ia = np.empty((6, 6))
     pa = np.empty(6)
     Ma = np.empty((3, 3))
@@ -556,6 +559,9 @@ def _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, D
                 pa[a] = tau[j0 + a]
                 pa[3 + a] = pAk[3 + a] + (Ma[a, 0] * c[k, 3] + Ma[a, 1] * c[k, 4] + Ma[a, 2] * c[k, 5]) \
                     + (JiH[0, a] * u[j0] + JiH[1, a] * u[j0 + 1] + JiH[2, a] * u[j0 + 2])
+            ratio = (Ma[0, 0] + Ma[1, 1] + Ma[2, 2]) / (3.0 * IA[k - 1, 3, 3])
+            if ratio > worst:
+                worst = ratio
             _shift_mass(Ma, s_w[k - 1], IA[k - 1], Dx, T)
         else:
             for j in range(j0, j1):
@@ -577,6 +583,9 @@ def _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, D
                 for a in range(nk):
                     acc += W[j0 + a, r] * u[j0 + a]
                 pa[r] = acc
+            ratio = (Ia[3, 3] + Ia[4, 4] + Ia[5, 5]) / (3.0 * IA[k - 1, 3, 3])
+            if ratio > worst:
+                worst = ratio
             _shift_inertia(Ia, s_w[k - 1], IA[k - 1], Dx, T, G)
         # forces to O^{k-1} = O^k - s^{k-1}: (n + s x f, f)
         _cross_add(s_w[k - 1], pa[3:], pA[k - 1, :3])
@@ -614,6 +623,7 @@ def _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, D
             for a in range(nk):
                 for r in range(6):
                     A[r] += S[j0 + a, r] * udot[j0 + a]
+    return worst
 
 
 @_njit
@@ -624,10 +634,11 @@ def _aba(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udo
     IA (n, 6, 6) and pA (n, 6) enter as the bodies' own inertias and bias forces (both are
     overwritten); c (n, 6): joint bias accelerations; a_base (6,): acceleration of the base at
     O^1; tau (N,): generalized forces of the columns. U, W (N, 6), u (N,), Dinv (n, 6, 6):
-    scratch. The elimination is `_aba_classic` unless some subtree is more than
-    STABLE_ABA_RATIO times heavier than the body carrying it, then `_aba_stable` (square-root
-    factors and one step of iterative refinement; exact to ~1e-14 relative at mass ratios up to
-    1e7, about 2.5 x the cost).
+    scratch. The elimination is `_aba_classic` unless it passes on to some body more than
+    STABLE_ABA_RATIO times that body's own mass (checked only where a subtree is that much
+    heavier than its carrier), then `_aba_stable` from the bodies' own inertias again
+    (square-root factors and one step of iterative refinement; exact to ~1e-14 relative at
+    mass ratios up to 1e7, about 2.5 x the cost).
     """
     n = IA.shape[0]
     after = 0.0
@@ -636,10 +647,18 @@ def _aba(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udo
         after += IA[k, 3, 3]  # the mass of bodies k..n
         if after > worst * IA[k - 1, 3, 3]:
             worst = after / IA[k - 1, 3, 3]
-    if worst > STABLE_ABA_RATIO:
-        _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot)
-    else:
+    if worst <= STABLE_ABA_RATIO:  # no subtree can pass on more mass than it has
         _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot)
+        return
+    # a heavy subtree: what decides is the mass its elimination passes on (an articulated, not a
+    # rigid, inertia: a uniform chain of 1000 links passes on about a link's mass at each joint),
+    # known only once the classic elimination has run
+    IA0 = IA.copy()
+    pA0 = pA.copy()
+    if _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot) > STABLE_ABA_RATIO:
+        IA[:] = IA0
+        pA[:] = pA0
+        _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot)
 
 
 @_njit
