@@ -193,7 +193,7 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("run", help="simulate a scene offline, as fast as possible")
     r.add_argument("--scene", required=True, help="scene file, or the name of a shipped scene (config/)")
     r.add_argument("--duration", type=float, required=True, help="simulated seconds")
-    r.add_argument("--integrator", default="auto", help="auto (dop853, switching to radau when stiff) | dop853 | radau | rk4 | lie4")
+    r.add_argument("--integrator", default="auto", help="auto (dop853, switching to radau when stiff) | dop853 | radau | rk4 | lie4 | gauss4 | fixed")
     r.add_argument("--rtol", type=float, default=1e-10)
     r.add_argument("--atol", type=float, default=1e-12)
     r.add_argument("--step", type=float, default=1e-3, help="step of fixed-step methods (s)")
@@ -259,7 +259,7 @@ def _compile_first(args) -> None:
         return
     from .warmup import precompile
 
-    precompile(sys.stderr, prog=f"gyro-sim {args.cmd}")
+    precompile(sys.stderr, prog=f"gyro-sim {args.cmd}", integrator=getattr(args, "integrator", None) or "auto")
 
 
 def main(argv=None) -> int:

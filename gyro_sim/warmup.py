@@ -1,7 +1,8 @@
-"""The first start: compiling the numba kernels of :mod:`gyro_sim.core.fast`, said out loud.
+"""The first start: compiling the numba kernels of :mod:`gyro_sim.core`, said out loud.
 
-The kernels are compiled once per installation (and after any edit of fast.py) and then
-loaded from numba's disk cache. Compiling takes about ``COMPILE_SECONDS`` on the project's
+The kernels (the dynamics of fast.py, the outputs, and each integrator's compiled loop) are
+compiled once per installation (and after any edit of their files) and then loaded from
+numba's disk cache; a start compiles only what its integrator runs. Compiling takes about ``COMPILE_SECONDS`` on the project's
 2-core machine, during which nothing else is printed; :func:`precompile` says so first and
 prints a line per kernel compiled, then later starts find the cache warm and print nothing.
 """
@@ -10,46 +11,104 @@ from __future__ import annotations
 import sys
 import time
 
-#: measured cold compile of every kernel (s), NUMBA_CACHE_DIR pointing at an empty directory:
-#: 10.3-11.3 s on the project's 2-core machine while idle, 20.5-26.5 s while four jobs shared it (README)
-COMPILE_SECONDS = 12
+#: measured cold compile (CPU s) of what a run with each integrator needs, NUMBA_CACHE_DIR pointing
+#: at an empty directory, on the project's 2-core machine (README; wall time is longer on a busy
+#: machine): every loop compiles the dynamics kernel into itself again, which is most of it
+COMPILE_SECONDS = {"fixed": 75, "gauss4": 80, "lie4": 70, "dop853": 75, "rk4": 65, "auto": 65, "radau": 60}
 #: the scene compiled for: one signature serves every scene (fast.py), any small one will do
 WARM_UP_SCENE = "hinge_chain"
 
 
-def kernels() -> dict:
-    """The numba dispatchers of gyro_sim.core.fast by name ({} without numba)."""
-    try:
-        from numba.core.dispatcher import Dispatcher
+#: the modules holding numba kernels (dispatchers)
+KERNEL_MODULES = ("fast", "rk_kernels", "fast_loop", "fast_outputs", "lagrange", "gauss_kernels", "fast_gauss",
+                  "dop853_kernels", "fast_dop853", "lie_kernels", "fast_lie")
+#: the compiled loops each integrator runs on the numba backend, (module, name), besides the
+#: kernels every run needs (fast.py's, the outputs, a Lagrange chain's integrals); the cache
+#: counts as cold for an integrator when any of its kernels has no entry
+COMMON_KERNELS = (("fast_outputs", "outputs_kernel"), ("lagrange", "_sums_82"), ("lagrange", "_sums_85"))
+LOOPS = {
+    "rk4": (("fast_loop", "erk_march"),),
+    "lie4": (("fast_lie", "lie_march"),),
+    "gauss4": (("fast_gauss", "gauss_march"),),
+    "fixed": (("fast_loop", "erk_march"), ("fast_gauss", "gauss_march")),
+    "dop853": (("fast_dop853", "dop853_advance"),),
+    "auto": (("dop853_kernels", "dop_update"),),  # auto's dop853 steps through the Python driver
+    "radau": (),
+}
+#: the node's default
+DEFAULT_INTEGRATOR = "fixed"
 
-        from .core import fast
+
+def _dispatchers(module_names) -> dict:
+    try:
+        import importlib
+
+        from numba.core.dispatcher import Dispatcher
     except ImportError:
         return {}
-    return {name: d for name, d in vars(fast).items() if isinstance(d, Dispatcher)}
+    out = {}
+    for mod in module_names:
+        try:
+            m = importlib.import_module(f"gyro_sim.core.{mod}")
+        except ImportError:
+            continue
+        out.update({f"{mod}.{name}": d for name, d in vars(m).items() if isinstance(d, Dispatcher)})
+    return out
 
 
-def cache_is_cold() -> bool:
-    """True if a kernel has no valid entry in numba's disk cache (none written yet, or fast.py
-    changed since): the next Simulator with the numba backend compiles. Every kernel of
-    fast.py is compiled by any scene (one signature), so after one start none is missing."""
+def kernels() -> dict:
+    """The numba dispatchers of gyro_sim.core's compiled modules by "module.name" ({} without numba)."""
+    return _dispatchers(KERNEL_MODULES)
+
+
+def _needed(integrator: str) -> list:
+    ks = kernels()
+    names = [name for name in ks if name.startswith("fast.")]
+    names += [f"{m}.{n}" for m, n in COMMON_KERNELS + LOOPS.get(integrator, ())]
+    return [ks[n] for n in names if n in ks]
+
+
+def cache_is_cold(integrator: str = DEFAULT_INTEGRATOR) -> bool:
+    """True if a kernel a run with `integrator` needs has no valid entry in numba's disk cache
+    (none written yet, or its file changed since): the next start compiles. Checked: every
+    kernel of fast.py (any scene compiles all of them: one signature), the outputs, the
+    Lagrange integrals and the integrator's compiled loop (LOOPS: their cache index is keyed on
+    every file they inline)."""
     try:
-        # numba's cache index of each kernel, checked against fast.py's timestamp and size
+        # numba's cache index of each kernel, checked against its file's timestamp and size
         # (an index written for another version of the file reads as empty)
-        return any(not d._cache._cache_file._load_index() for d in kernels().values())
+        return any(not d._cache._cache_file._load_index() for d in _needed(integrator))
     except (AttributeError, OSError):  # another numba layout: cannot tell, say nothing
         return False
 
 
-def precompile(stream=sys.stderr, prog: str = "gyro_sim") -> bool:
-    """If the cache is cold, say so, compile every kernel with a line per kernel, and return
-    True; otherwise (or without numba) return False at once. Compile errors are left to the
-    backend selection of the Simulator, which falls back to numpy when it may."""
+def warm_everything(integrator: str = DEFAULT_INTEGRATOR) -> None:
+    """Compile (or load) every kernel a run with `integrator` may call on the numba backend:
+    the dynamics, the outputs, a Lagrange chain's integrals, and the integrator's loop ("fixed":
+    both of its methods)."""
+    from .core.simulator import Simulator
+
+    for scene in (WARM_UP_SCENE, "heavy_top"):  # heavy_top: a Lagrange chain (eqs 82, 85)
+        sim = Simulator(scene, integrator=integrator if integrator in LOOPS else "rk4", backend="numba")
+        sim.snapshot()
+        warm = getattr(sim.integrator, "warm_up", None)
+        if warm is not None:
+            warm(sim.time, sim.state)
+        sim.advance(0.002)
+
+
+def precompile(stream=sys.stderr, prog: str = "gyro_sim", integrator: str = DEFAULT_INTEGRATOR) -> bool:
+    """If the cache is cold for a run with `integrator`, say so, compile its kernels with a
+    line per kernel, and return True; otherwise (or without numba) return False at once.
+    Compile errors are left to the backend selection of the Simulator, which falls back to
+    numpy when it may."""
     ks = kernels()
-    if not ks or not cache_is_cold():
+    if not ks or not cache_is_cold(integrator):
         return False
     from numba.core import event
 
-    stream.write(f"{prog}: compiling the dynamics once, about {COMPILE_SECONDS} s (more on a busy machine); "
+    seconds = COMPILE_SECONDS.get(integrator, max(COMPILE_SECONDS.values()))
+    stream.write(f"{prog}: compiling the dynamics once, about {seconds} s (more on a busy machine); "
                  f"later starts load it from the cache\n")
     stream.flush()
     done: set[str] = set()
@@ -60,19 +119,18 @@ def precompile(stream=sys.stderr, prog: str = "gyro_sim") -> bool:
             pass
 
         def on_end(self, ev):
-            name = ev.data["dispatcher"].py_func.__name__
+            d = ev.data["dispatcher"]
+            name = f"{d.py_func.__module__.rsplit('.', 1)[-1]}.{d.py_func.__name__}"
             if name in ks and name not in done:
                 done.add(name)
-                stream.write(f"  compiled {name} ({len(done)}/{len(ks)}, {time.perf_counter() - t0:.1f} s)\n")
+                stream.write(f"  compiled {name} ({len(done)} kernels, {time.perf_counter() - t0:.1f} s)\n")
                 stream.flush()
 
     listener = _Listener()
     event.register("numba:compile", listener)
     try:
-        from .core.simulator import Simulator
-
-        try:  # building a Simulator on the numba backend compiles (or loads) every kernel
-            Simulator(WARM_UP_SCENE, integrator="rk4", backend="numba")
+        try:  # compiles (or loads) every kernel a run may call
+            warm_everything(integrator)
         except Exception as exc:  # noqa: BLE001 - the real run reports (or falls back) itself
             stream.write(f"{prog}: compiling failed ({type(exc).__name__}: {exc}); the run itself will say more\n")
             return True

@@ -180,20 +180,21 @@ def test_argv_is_read_as_rcl_reads_it(tmp_path):
 
 # --- 4. the first start says it compiles ------------------------------------------------------------
 def test_readme_states_the_measured_compile_time():
-    from gyro_sim.warmup import COMPILE_SECONDS
+    from gyro_sim.warmup import COMPILE_SECONDS, DEFAULT_INTEGRATOR
 
+    seconds = COMPILE_SECONDS[DEFAULT_INTEGRATOR]  # the node's first start
     assert "about 10 s" not in README
-    assert f"about {COMPILE_SECONDS} s" in README, "README and gyro_sim.warmup.COMPILE_SECONDS disagree"
-    assert "measured" in README[README.index(f"about {COMPILE_SECONDS} s") - 300:][:600].lower()
+    assert f"about {seconds} s" in README, "README and gyro_sim.warmup.COMPILE_SECONDS disagree"
+    assert "measured" in README[README.index(f"about {seconds} s") - 300:][:600].lower()
 
 
 def test_warm_cache_is_detected():
-    from gyro_sim import Simulator, load_scene
-    from gyro_sim.warmup import cache_is_cold, precompile
+    from gyro_sim.warmup import cache_is_cold, precompile, warm_everything
 
-    Simulator(load_scene("hinge_chain"), backend="numba")  # compiles or loads: the cache is warm after
-    assert not cache_is_cold()
-    assert precompile() is False
+    for integrator in ("fixed", "dop853"):
+        warm_everything(integrator)  # compiles or loads: the cache is warm after
+        assert not cache_is_cold(integrator)
+        assert precompile(integrator=integrator) is False
 
 
 def test_empty_cache_is_detected(tmp_path):
@@ -206,7 +207,7 @@ def test_empty_cache_is_detected(tmp_path):
 def test_cold_cache_is_announced_with_progress_then_silent(tmp_path):
     """An empty NUMBA_CACHE_DIR is a first start: compiles (about COMPILE_SECONDS of CPU)."""
     code = ("import sys\nfrom gyro_sim.warmup import cache_is_cold, precompile\n"
-            "cold = cache_is_cold()\nprint('cold' if cold else 'warm')\nprecompile()\n")
+            "cold = cache_is_cold('rk4')\nprint('cold' if cold else 'warm')\nprecompile(integrator='rk4')\n")
     cache = tmp_path / "numba_cache"
     cache.mkdir()
     first = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env(NUMBA_CACHE_DIR=str(cache)),

@@ -364,5 +364,5 @@ def preflight(argv, stream_out=None, stream_err=None) -> int | None:
     if values.get("backend", "auto") != "numpy":
         from ..warmup import precompile
 
-        precompile(err, prog="gyro_sim_node")
+        precompile(err, prog="gyro_sim_node", integrator=str(values.get("integrator", "fixed")))
     return None
