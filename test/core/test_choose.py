@@ -102,7 +102,7 @@ def test_fixed_takes_a_call_again_with_gauss4_when_rk4_blows_up(monkeypatch):
     again from its start with gauss4, which keeps |y| = 1 to round-off (h w = 5)."""
     from gyro_sim.core.integrators import choose
 
-    monkeypatch.setattr(choose, "_choice", lambda rhs, t, y, h, now: ("rk4", "forced", 0.0))
+    monkeypatch.setattr(choose, "_choice", lambda rhs, t, y, h, now, dim=0: ("rk4", "forced", 0.0))
     integ = choose.SceneFixedStep(Rotation(5000.0), step=STEP)
     y = integ.advance(0.0, np.array([1.0, 0.0]), 1.0)  # 1000 steps: rk4 grows ~21x a step
     assert integ.current == "gauss4" and "non-finite" in integ.reason
