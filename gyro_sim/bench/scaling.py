@@ -16,7 +16,7 @@ node's pattern) against MuJoCo's `mj_step` with its RK4 at the same step on the 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -30,7 +30,12 @@ DEFAULT_SIZES = (1, 2, 5, 10, 20, 50, 100)
 QUICK_SIZES = (1, 2, 5)
 RK4_STEP = 1e-3  # s: 1 kHz
 #: chain lengths of the fixed-step comparison with MuJoCo (rotors on every body)
-FIXED_STEP_SIZES = (10, 20, 50, 100)
+FIXED_STEP_SIZES = (10, 20, 50, 100, 200, 500, 1000)
+#: MuJoCo beside it up to this n (its cost grows faster than O(n) on these chains: 8 s of CPU per
+#: simulated second at n = 100 already)
+MUJOCO_MAX_N = 100
+#: the other fixed-step methods, in the node's 10 ms advances
+OTHER_FIXED = ("lie4", "gauss4", "fixed")
 QUICK_FIXED_STEP_SIZES = (10,)
 #: runs per entry of that comparison (the median is reported)
 FIXED_STEP_REPEATS = 5
@@ -126,6 +131,7 @@ class FixedStepRow:
     per_step_s: float  # CPU s per simulated second: advance(1 ms) x 1000
     mujoco_s: float | None  # mj_step RK4, same step, same chain
     mujoco_note: str = ""  # "unstable" when MuJoCo warned (bad accelerations) during the runs
+    others: dict = field(default_factory=dict)  # CPU s per simulated second, 10 ms advances, by method
 
     def ratio(self, value: float) -> float | None:
         return None if self.mujoco_s is None else value / self.mujoco_s
@@ -142,24 +148,37 @@ def _median_cpu(fn, repeats: int) -> float:
 
 def fixed_step(sizes=FIXED_STEP_SIZES, seconds: float = 1.0, repeats: int = FIXED_STEP_REPEATS,
                progress=None) -> list[FixedStepRow]:
-    """CPU seconds per simulated second of RK4 at 1 kHz, gyro_sim (numba) and MuJoCo mj_step."""
+    """CPU seconds per simulated second of RK4 at 1 kHz, gyro_sim (numba) and MuJoCo mj_step
+    (up to MUJOCO_MAX_N), and of the other fixed-step methods (OTHER_FIXED) in 10 ms advances.
+    Above n = 100 one run of at most 0.2 simulated s each."""
     rows = []
     for i, n in enumerate(sizes):
         scene = load_scene(spherical_chain(n, rotors=True))
         sim = Simulator(scene, integrator="rk4", step=RK4_STEP, backend="numba")
-        steps = int(round(seconds / RK4_STEP))
+        big = n > MUJOCO_MAX_N
+        seconds_n, repeats_n = (min(seconds, 0.2), 1) if big else (seconds, repeats)
+        steps = int(round(seconds_n / RK4_STEP))
 
         def one_call():
             sim.reset()
-            sim.advance(seconds)
+            sim.advance(seconds_n)
 
         def per_step():
             sim.reset()
             for _ in range(steps):
                 sim.advance(RK4_STEP)
 
-        one = _median_cpu(one_call, repeats) / seconds
-        per = _median_cpu(per_step, repeats) / seconds
+        one = _median_cpu(one_call, repeats_n) / seconds_n
+        per = _median_cpu(per_step, repeats_n) / seconds_n
+        others = {}
+        for name in OTHER_FIXED:
+            other = Simulator(scene, integrator=name, step=RK4_STEP, backend="numba")
+
+            def chunks(other=other):
+                other.reset()
+                for _ in range(max(1, steps // 10)):
+                    other.advance(10 * RK4_STEP)
+            others[name] = _median_cpu(chunks, repeats_n) / (max(1, steps // 10) * 10 * RK4_STEP)
         mj, note = None, ""
         try:
             import mujoco
@@ -168,42 +187,50 @@ def fixed_step(sizes=FIXED_STEP_SIZES, seconds: float = 1.0, repeats: int = FIXE
         except ImportError:
             pass
         else:
-            warned: list[str] = []
-            chains = []
+            if not big:
+                warned: list[str] = []
+                chains = []
 
-            def mujoco_run():
-                chain = MujocoChain(scene, RK4_STEP, "RK4")  # from the same initial state each run
-                chains.append(chain)
-                t0 = time.process_time()
-                chain.step(steps)
-                return time.process_time() - t0
+                def mujoco_run():
+                    chain = MujocoChain(scene, RK4_STEP, "RK4")  # from the same initial state each run
+                    chains.append(chain)
+                    t0 = time.process_time()
+                    chain.step(steps)
+                    return time.process_time() - t0
 
-            previous = mujoco.get_mju_user_warning()
-            mujoco.set_mju_user_warning(warned.append)  # MuJoCo resets an unstable run and goes on
-            try:
-                mj = float(np.median([mujoco_run() for _ in range(repeats)])) / seconds
-            finally:
-                mujoco.set_mju_user_warning(previous)
-            bad = int(mujoco.mjtWarning.mjWARN_BADQACC)
-            if warned or any(c.d.warning[bad].number for c in chains):
-                note = "unstable"
-        rows.append(FixedStepRow(n, one, per, mj, note))
+                previous = mujoco.get_mju_user_warning()
+                mujoco.set_mju_user_warning(warned.append)  # MuJoCo resets an unstable run and goes on
+                try:
+                    mj = float(np.median([mujoco_run() for _ in range(repeats)])) / seconds
+                finally:
+                    mujoco.set_mju_user_warning(previous)
+                bad = int(mujoco.mjtWarning.mjWARN_BADQACC)
+                if warned or any(c.d.warning[bad].number for c in chains):
+                    note = "unstable"
+        rows.append(FixedStepRow(n, one, per, mj, note, others))
         if progress:
             progress(i + 1, len(sizes))
     return rows
 
 
 def fixed_step_table(rows: list[FixedStepRow]) -> str:
+    names = [k for k in OTHER_FIXED if any(k in r.others for r in rows)]
     lines = [
         "| n (rotors on every body) | gyro_sim rk4, one advance (ms) | gyro_sim rk4, advance per step (ms) "
-        "| MuJoCo mj_step RK4 (ms) | one advance / MuJoCo | per step / MuJoCo |",
-        "|---:|---:|---:|---:|---:|---:|",
+        "| MuJoCo mj_step RK4 (ms) | one advance / MuJoCo | per step / MuJoCo | rk4 per step and body (us) | "
+        + " | ".join(f"{k}, 10 ms advances (ms)" for k in names) + " |",
+        "|---:|---:|---:|---:|---:|---:|---:|" + "---:|" * len(names),
     ]
     for r in rows:
-        mj = "n/a" if r.mujoco_s is None else f"{r.mujoco_s * 1e3:.1f}" + (f" ({r.mujoco_note})" if r.mujoco_note else "")
+        if r.mujoco_s is None:
+            mj = f"not run above n = {MUJOCO_MAX_N}" if r.n > MUJOCO_MAX_N else "n/a"
+        else:
+            mj = f"{r.mujoco_s * 1e3:.1f}" + (f" ({r.mujoco_note})" if r.mujoco_note else "")
         a, b = r.ratio(r.one_call_s), r.ratio(r.per_step_s)
         lines.append(f"| {r.n} | {r.one_call_s * 1e3:.1f} | {r.per_step_s * 1e3:.1f} | {mj} | "
-                     f"{'n/a' if a is None else f'{a:.2f}x'} | {'n/a' if b is None else f'{b:.2f}x'} |")
+                     f"{'n/a' if a is None else f'{a:.2f}x'} | {'n/a' if b is None else f'{b:.2f}x'} | "
+                     f"{r.one_call_s * 1e3 / r.n:.2f} | "
+                     + " | ".join(f"{r.others[k] * 1e3:.1f}" if k in r.others else "" for k in names) + " |")
     return "\n".join(lines)
 
 
