@@ -311,10 +311,17 @@ def _e(x: float) -> str:
     return "" if x is None or not math.isfinite(x) else f"{x:.1e}"
 
 
-def _growth(label: str, slope: float) -> str:
+#: a drift whose largest value stays below this is round-off (its growth is still shown)
+ROUND_OFF = 1e-12
+
+
+def _growth(label: str, slope: float, series=None) -> str:
     if not label or label == "n/a":
         return label
-    return f"{label.split(' ')[0]} ({slope:.2f})" if math.isfinite(slope) else label
+    out = f"{label.split(' ')[0]} ({slope:.2f})" if math.isfinite(slope) else label
+    if series is not None and len(series) and float(np.max(np.abs(series))) < ROUND_OFF:
+        out += f", round-off (< {ROUND_OFF:g})"
+    return out
 
 
 def table(runs: list[SpinRun]) -> str:
@@ -345,13 +352,14 @@ def table(runs: list[SpinRun]) -> str:
             e = k = ""
         lines.append(f"| {r.scene} | {r.spin:.0e} | {r.kappa:.4g} | {r.method} | {outcome} | {t_end:.4g} | "
                      f"{_e(r.max_axis_error)} | {_e(r.max_precession_error)} | {e} | "
-                     f"{_growth(r.energy_growth, r.energy_slope)} | {k} | "
-                     f"{_growth(r.momentum_growth, r.momentum_slope)} | {r.cpu:.1f} |")
+                     f"{_growth(r.energy_growth, r.energy_slope, r.energy)} | {k} | "
+                     f"{_growth(r.momentum_growth, r.momentum_slope, r.momentum)} | {r.cpu:.1f} |")
     return "\n".join(lines)
 
 
 def summary_table(runs: list[SpinRun]) -> str:
-    """scene x spin rows, a cell per method: the axis error and the energy growth, or the outcome."""
+    """scene x spin rows, a cell per method: the largest axis error, the energy drift's growth
+    (round-off: below ROUND_OFF throughout) and the CPU time, or the outcome."""
     methods = [m for m in METHODS if any(r.method == m for r in runs)]
     lines = ["| scene | spin (rad/s) | " + " | ".join(methods) + " |", "|---|---:|" + "---|" * len(methods)]
     keys = []
@@ -369,7 +377,9 @@ def summary_table(runs: list[SpinRun]) -> str:
             elif r.too_slow:
                 cells.append(f"too slow (t = {r.t[-1] if r.t else 0:.3g} s)")
             else:
-                cells.append(f"axis {r.max_axis_error:.0e}, E {r.energy_growth.split(' ')[0]}, {r.cpu:.0f} s")
+                e = "round-off" if r.energy and float(np.max(np.abs(r.energy))) < ROUND_OFF else \
+                    r.energy_growth.split(' ')[0]
+                cells.append(f"axis {r.max_axis_error:.0e}, E {e}, {r.cpu:.0f} s")
         lines.append(f"| {scene} | {spin:.0e} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -403,3 +413,8 @@ def plot(axes, runs: list[SpinRun]) -> None:
 
 def to_json(runs: list[SpinRun]) -> list[dict[str, Any]]:
     return [asdict(r) for r in runs]
+
+
+def from_json(rows: list[dict[str, Any]]) -> list[SpinRun]:
+    """SpinRuns from :func:`to_json` (stability.json's "spin_sweep" runs): to redraw the tables."""
+    return [SpinRun(**r) for r in rows]

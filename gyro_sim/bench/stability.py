@@ -19,8 +19,14 @@ commands set between calls. A run gets one verdict:
 
 The long-horizon item is separate: RK4 and Lie4 for 1e6 steps (1e4 in quick mode) on a
 small scene, the energy recorded on the way; the growth of |E(t) - E(0)| is classified as
-bounded, random-walk (t^1/2) or linear (t^1) by its log-log slope over the last two decades
-of time, and its rate fitted.
+bounded, random-walk (t^1/2), linear (t^1) or superlinear (slope 1.5 and more: an
+instability) by its log-log slope over the last two decades of time, and its rate fitted.
+
+Beside them (:mod:`gyro_sim.bench.spin_sweep`, :mod:`gyro_sim.bench.heavy_tips`): MuJoCo's
+implicitfast and RK4 at the same 1 ms step as rows of the verdict tables wherever MuJoCo can
+express the case (:func:`peers.mujoco_unsupported` says why not), a spin sweep of fast tops
+against the exact regular precession (eq 88), and the heavy/light-tip accelerations against
+80 digits.
 """
 from __future__ import annotations
 
@@ -465,8 +471,10 @@ def _classify(run: LongRun) -> None:
         run.growth = "bounded"
     elif run.slope < 0.75:
         run.growth = "random walk (~ t^1/2)"
-    else:
+    elif run.slope < 1.5:
         run.growth = "linear (~ t)"
+    else:
+        run.growth = "superlinear (faster than t^1.5: an instability)"
 
 
 # ------------------------------------------------------------------------------- tables

@@ -130,6 +130,7 @@ def test_cpu_limit_stops_a_call_that_never_returns():
     (lambda t: 1e-10 * np.sqrt(t), "random walk (~ t^1/2)"),
     (lambda t: 3e-11 * t, "linear (~ t)"),
     (lambda t: -3e-11 * t + 1e-12 * np.sin(50.0 * t), "linear (~ t)"),
+    (lambda t: 1e-12 * np.exp(t / 50.0), "superlinear (faster than t^1.5: an instability)"),
 ])
 def test_growth_classifier_on_known_shapes(shape, label):
     t = np.linspace(0.0, 1000.0, st.LONG_SAMPLES + 1)
