@@ -5,6 +5,7 @@ happen when a command runs, not when the parser is built.
 """
 from __future__ import annotations
 
+import os
 import shutil
 import signal
 import sys
@@ -25,7 +26,18 @@ def _exists(cmd: str, path) -> bool:
 
 # --- view ------------------------------------------------------------------------------------------
 def rerun_binary() -> str | None:
-    """The `rerun` viewer of rerun-sdk: next to this Python, else on PATH."""
+    """The `rerun` viewer of rerun-sdk: the binary itself (rerun_cli/rerun), else the `rerun`
+    next to this Python, else on PATH. The binary first: the `rerun` script of a venv is a
+    Python wrapper that runs the binary as its child, and stopping the wrapper (the headless
+    screenshot's viewer) would leave the viewer running."""
+    try:
+        import rerun_cli
+
+        binary = Path(rerun_cli.__file__).with_name("rerun")
+        if binary.is_file() and os.access(binary, os.X_OK):
+            return str(binary)
+    except ImportError:
+        pass
     here = Path(sys.executable).with_name("rerun")
     return str(here) if here.is_file() else shutil.which("rerun")
 

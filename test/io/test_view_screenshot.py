@@ -58,6 +58,28 @@ def inspect(png):
     return plots, (ys.size, float(ys.mean()) / view.shape[0] if ys.size else 1.0)
 
 
+def _headless_viewers() -> set[int]:
+    """pids of running rerun viewers started headless (as the screenshot does)."""
+    out = set()
+    for d in Path("/proc").glob("[0-9]*"):
+        try:
+            argv = (d / "cmdline").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        if b"--headless" in argv and any(a.endswith(b"rerun") for a in argv[:1]):
+            out.add(int(d.name))
+    return out
+
+
+def test_the_viewer_started_is_the_binary_not_the_python_wrapper():
+    """A venv's `rerun` is a Python script that runs the binary as its child: stopping the script
+    left the headless viewer running after every screenshot (found after a test run)."""
+    from gyro_sim.io.commands import rerun_binary
+
+    exe = Path(rerun_binary())
+    assert not exe.read_bytes()[:2] == b"#!", f"{exe} is a script"
+
+
 @pytest.mark.slow
 def test_screenshot_of_a_30_s_log_shows_every_plot_and_the_chain(tmp_path):
     log = tmp_path / "v30.mcap"
@@ -67,6 +89,7 @@ def test_screenshot_of_a_30_s_log_shows_every_plot_and_the_chain(tmp_path):
                  timeout=300)
     assert r.returncode == 0, r.stderr
     pngs = []
+    before = _headless_viewers()
     for k in range(2):
         png = tmp_path / f"shot{k}.png"
         r = gyro_sim("view", log, "--screenshot", png, "--window-size", "1200x800", timeout=300)
@@ -85,3 +108,4 @@ def test_screenshot_of_a_30_s_log_shows_every_plot_and_the_chain(tmp_path):
         pngs.append(png)
     # the picture is taken once all is drawn, at the end of the log: the same picture each time
     assert pngs[0].read_bytes() == pngs[1].read_bytes()
+    assert _headless_viewers() <= before, "a headless viewer was left running"
