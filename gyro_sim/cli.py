@@ -179,6 +179,7 @@ PLUGINS = (
     "gyro_sim.bench.accuracy",
     "gyro_sim.bench.stability",
     "gyro_sim.bench.realtime",
+    "gyro_sim.bench.publication",
     "gyro_sim.sweep.commands",  # sweep (many runs on Dask)
     "gyro_sim.bench.soak",
 )

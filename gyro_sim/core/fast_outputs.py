@@ -72,128 +72,231 @@ def _matrix_to_quat(R, q):
 @_njit
 def _euler(R, w, down, singular, ang, rate):
     """Euler angles (psi, theta, phi) and their rates of world_R_body R (3, 3) turning at w (3,)
-    (rotations.matrices_to_euler, omegas_to_euler_rates)."""
-    D = np.empty((3, 3))
-    for a in range(3):
-        for b in range(3):
-            D[a, b] = down[0, a] * R[0, b] + down[1, a] * R[1, b] + down[2, a] * R[2, b]
-    theta = math.acos(min(1.0, max(-1.0, D[2, 2])))
-    if math.hypot(D[0, 2], D[1, 2]) >= singular:
-        psi, phi = math.atan2(D[0, 2], -D[1, 2]), math.atan2(D[2, 0], D[2, 1])
+    (rotations.matrices_to_euler, omegas_to_euler_rates), in scalars: cos and sin of psi from
+    the entries atan2 takes them from, of theta from its cosine (the same numbers to round-off)."""
+    D00 = down[0, 0] * R[0, 0] + down[1, 0] * R[1, 0] + down[2, 0] * R[2, 0]
+    D10 = down[0, 1] * R[0, 0] + down[1, 1] * R[1, 0] + down[2, 1] * R[2, 0]
+    D20 = down[0, 2] * R[0, 0] + down[1, 2] * R[1, 0] + down[2, 2] * R[2, 0]
+    D21 = down[0, 2] * R[0, 1] + down[1, 2] * R[1, 1] + down[2, 2] * R[2, 1]
+    D02 = down[0, 0] * R[0, 2] + down[1, 0] * R[1, 2] + down[2, 0] * R[2, 2]
+    D12 = down[0, 1] * R[0, 2] + down[1, 1] * R[1, 2] + down[2, 1] * R[2, 2]
+    D22 = down[0, 2] * R[0, 2] + down[1, 2] * R[1, 2] + down[2, 2] * R[2, 2]
+    ct = min(1.0, max(-1.0, D22))
+    theta = math.acos(ct)
+    h = math.hypot(D02, D12)
+    if h >= singular:
+        psi, phi = math.atan2(D02, -D12), math.atan2(D20, D21)
+        c, s = -D12 / h, D02 / h
     else:
-        psi, phi = math.atan2(D[1, 0], D[0, 0]), 0.0
+        psi, phi = math.atan2(D10, D00), 0.0
+        h0 = math.hypot(D00, D10)
+        c, s = (D00 / h0, D10 / h0) if h0 > 0.0 else (1.0, 0.0)
     ang[0], ang[1], ang[2] = psi, theta, phi
-    wd = np.empty(3)
-    for a in range(3):
-        wd[a] = w[0] * down[0, a] + w[1] * down[1, a] + w[2] * down[2, a]
-    c, s = math.cos(psi), math.sin(psi)
-    st = math.sin(theta)
-    dphi = (wd[0] * s - wd[1] * c) / st if abs(st) > singular else 0.0
-    rate[0] = wd[2] - dphi * math.cos(theta)
-    rate[1] = wd[0] * c + wd[1] * s
+    wd0 = w[0] * down[0, 0] + w[1] * down[1, 0] + w[2] * down[2, 0]
+    wd1 = w[0] * down[0, 1] + w[1] * down[1, 1] + w[2] * down[2, 1]
+    wd2 = w[0] * down[0, 2] + w[1] * down[1, 2] + w[2] * down[2, 2]
+    st = math.sqrt((1.0 - ct) * (1.0 + ct))  # sin(theta) >= 0, theta in [0, pi]
+    dphi = (wd0 * s - wd1 * c) / st if st > singular else 0.0
+    rate[0] = wd2 - dphi * ct
+    rate[1] = wd0 * c + wd1 * s
     rate[2] = dphi
 
 
-@_njit
-def outputs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                   first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
-                   base, t0, p0, pdot, L_rotor, tau,
-                   base_position, down, singular, speed_body, speed_axis, speed_A, speed_rate,
-                   R, w, vO, O, quat, euler, euler_rate, L_speed, wrench_force, wrench_moment, inv):
-    """Every output at (t, y) (the arguments up to `tau` are those of fast.rhs_kernel, whose y'
-    is left in ydot: u' and the torque-rotor angle rates kappa').
+#: bits of `want` (publication_kernel): the parts computed beyond the joint states
+WANT_WRENCHES, WANT_BODIES, WANT_INVARIANTS, WANT_EULER_ALL = 1, 2, 4, 8
+WANT_ALL = WANT_WRENCHES | WANT_BODIES | WANT_INVARIANTS | WANT_EULER_ALL
+#: joint-state entries (joint_kind): an Euler angle of a body (joint_ref = 3 k + axis), a hinge
+#: (ref: its body), a torque rotor, a speed rotor (ref: the rotor's index)
+JOINT_EULER, JOINT_HINGE, JOINT_TORQUE_ROTOR, JOINT_SPEED_ROTOR = 0, 1, 2, 3
+#: what publication_kernel returns: 0, or the first field found non-finite (Snapshot's names)
+NONFINITE_FIELDS = (None, "position", "velocity", "effort", "body_position", "body_quaternion",
+                    "wrench_force", "wrench_moment")
 
-    base_position (3,), down (3, 3) world_R_down of the Euler angles, singular: the Euler
-    singularity threshold (rotations.EULER_SINGULAR_SIN); speed rotors: body (nv,), axis
-    (nv, 3), A (nv,), rate (nv,). Out: R (n, 3, 3) world_R_body, w (n, 3) angular velocities,
-    vO (n, 3) velocities of O^k, O (n, 3), quat (n, 4) world from body, euler and
-    euler_rate (n, 3), L_speed (nv,) motor torques A_i (w' . e_i), wrench_force and
-    wrench_moment (n, 3) R^k (eq 40), L^k (eq 48) in body k's frame, inv (INV_SIZE,).
+
+@_njit
+def _put(dst, at, i, v):
+    """v into dst at the slots at[c, i] of every copy c; False if v is not finite."""
+    for c in range(at.shape[0]):
+        dst[at[c, i]] = v
+    return abs(v) < math.inf
+
+
+@_njit
+def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                       first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
+                       base, t0, p0, pdot, L_rotor, tau,
+                       base_position, down, singular, speed_body, speed_axis, speed_A, speed_rate,
+                       want, joint_kind, joint_ref,
+                       R, w, vO, O, quat, euler, euler_rate, L_speed, wrench_force, wrench_moment, inv,
+                       position, velocity, effort, dst, at_joint, at_position, at_quat, at_wrench):
+    """What one publication asks for at (t, y), in one pass: the joint states always, wrenches,
+    poses and invariants when `want` says so; written into the output arrays and, for each
+    copy c, into dst at the slots at_...[c] (any flat float64 buffer: the messages' bytes).
+
+    The arguments up to `tau` are those of fast.rhs_kernel (its y' in ydot when it runs: only
+    for wrenches or speed rotors, which need the accelerations). base_position (3,), down
+    (3, 3) world_R_down of the Euler angles, singular: the Euler singularity threshold
+    (rotations.EULER_SINGULAR_SIN); speed rotors: body (nv,), axis (nv, 3), A (nv,), rate
+    (nv,). want: WANT_* bits. joint_kind, joint_ref (J,): what each joint-state entry is
+    (JOINT_*). Out: R (n, 3, 3) world_R_body, w (n, 3) angular velocities, vO (n, 3) velocities
+    of O^k, O (n, 3), quat (n, 4) world from body (WANT_BODIES), euler and euler_rate (n, 3)
+    (spherical bodies; every body with WANT_EULER_ALL), L_speed (nv,) motor torques
+    A_i (w' . e_i), wrench_force and wrench_moment (n, 3) R^k (eq 40), L^k (eq 48) in body k's
+    frame (WANT_WRENCHES), inv (INV_SIZE,) (WANT_INVARIANTS), position, velocity, effort (J,)
+    the joint states. Scatter: dst (m,) float64; at_joint (c, 3, J) slots of position, velocity,
+    effort; at_position (c, n, 3), at_quat (c, n, 4) (w, x, y, z), at_wrench (c, n, 6) (force,
+    moment); c = 0 writes none.
+
+    Returns 0, or the index in NONFINITE_FIELDS of the first output found not finite (the
+    joint states, and the poses and wrenches asked for, are all checked as they are written).
     """
-    fast.rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                    first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
-                    base, t0, p0, pdot, L_rotor, tau)
     base_type, has_gravity, has_lam = flags[0], flags[1] != 0, flags[2] != 0
-    i_r0, i_vel, N = flags[3], flags[4], flags[6]
+    i_r0, i_vel, i_kap, N = flags[3], flags[4], flags[5], flags[6]
     amp, W, gravity = base[0:3], base[3], base[4:7]
-    n, nt = mass.shape[0], torque_body.shape[0]
+    n, nt, nv = mass.shape[0], torque_body.shape[0], speed_body.shape[0]
+    do_wrench = (want & WANT_WRENCHES) != 0
+    do_bodies = (want & WANT_BODIES) != 0
+    do_inv = (want & WANT_INVARIANTS) != 0
+    if do_wrench or nv > 0:  # the accelerations: u' into ydot
+        fast.rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                        first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
+                        base, t0, p0, pdot, L_rotor, tau)
     s_w = np.empty((n, 3))
     hk = np.empty((n, 3))
     Aw = np.empty((n, 3, 3))
     e_w = np.empty((n, 3))
     c = np.empty((n, 6))
-    I6 = np.empty((n, 6, 6))
-    pb = np.empty((n, 6))
     lam_b = np.empty((n, 3))
-    dlam_b = np.empty((n, 3))
-    S = np.empty((N, 6))
     p = np.empty(nt)
+    tmp = np.empty(3)
     for i in range(nt):
         p[i] = p0[i] + pdot[i] * (t - t0)  # (29)
-    # positions, velocities, body inertias and forces at zero acceleration (as rhs_kernel)
     _positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, hk, Aw, e_w)
     _velocities(t, y, is_hinge, own_col, base_type, amp, W, i_vel, s_w, e_w, w, vO, c)
-    _bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
-                 torque_A, p, L_rotor, has_gravity, gravity, lam_b, dlam_b, I6, pb)
-    _joint_columns(is_hinge, own_col, base_type, e_w, S)
-    udot = ydot[i_vel:i_vel + N]
-    # body accelerations about O^k: A^k = A^{k-1} moved to O^k + c^k + S_k u'_k
-    acc = np.empty((n, 6))
-    A = np.zeros(6)
-    if base_type == fast.BASE_MOVING:
-        sw = -W * W * math.sin(W * t)
-        for a in range(3):
-            A[3 + a] = amp[a] * sw
-    for k in range(n):
-        if k > 0:
-            _cross_add(A[:3], s_w[k - 1], A[3:])  # a kernel helper
-        for r in range(6):
-            A[r] += c[k, r]
-        for j in range(col_start[k], col_start[k + 1]):
-            for r in range(6):
-                A[r] += S[j, r] * udot[j]
-        acc[k] = A
-    # wrenches: F^k = sum_{p >= k} (I a + p)^p about O^k; R^k its force (40), L^k its moment (48)
-    Fa = np.zeros(3)
-    Fl = np.zeros(3)
-    tmp = np.empty(3)
-    for k in range(n - 1, -1, -1):
-        if k < n - 1:
-            _cross(s_w[k], Fl, tmp)  # moment of F^{k+1} moved to O^k
+    bad = 0
+    acc = np.empty((0, 6))
+    if do_wrench or nv > 0:
+        # body inertias and forces at zero acceleration (as rhs_kernel, which overwrote its own)
+        I6 = np.empty((n, 6, 6))
+        pb = np.empty((n, 6))
+        dlam_b = np.empty((n, 3))
+        S = np.empty((N, 6))
+        _bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
+                     torque_A, p, L_rotor, has_gravity, gravity, lam_b, dlam_b, I6, pb)
+        _joint_columns(is_hinge, own_col, base_type, e_w, S)
+        udot = ydot[i_vel:i_vel + N]
+        # body accelerations about O^k: A^k = A^{k-1} moved to O^k + c^k + S_k u'_k
+        acc = np.empty((n, 6))
+        A = np.zeros(6)
+        if base_type == fast.BASE_MOVING:
+            sw = -W * W * math.sin(W * t)
             for a in range(3):
-                Fa[a] += tmp[a]
-        for r in range(3):
-            Fa[r] += _dot6(I6[k, r], acc[k]) + pb[k, r]
-            Fl[r] += _dot6(I6[k, 3 + r], acc[k]) + pb[k, 3 + r]
+                A[3 + a] = amp[a] * sw
+        for k in range(n):
+            if k > 0:
+                _cross_add(A[:3], s_w[k - 1], A[3:])  # a kernel helper
+            for r in range(6):
+                A[r] += c[k, r]
+            for j in range(col_start[k], col_start[k + 1]):
+                for r in range(6):
+                    A[r] += S[j, r] * udot[j]
+            for r in range(6):
+                acc[k, r] = A[r]
+        if do_wrench:
+            # F^k = sum_{p >= k} (I a + p)^p about O^k; R^k its force (40), L^k its moment (48)
+            Fa0 = Fa1 = Fa2 = 0.0
+            Fl0 = Fl1 = Fl2 = 0.0
+            for k in range(n - 1, -1, -1):
+                if k < n - 1:  # the moment of F^{k+1} moved to O^k
+                    d0, d1, d2 = s_w[k, 0], s_w[k, 1], s_w[k, 2]
+                    Fa0 += d1 * Fl2 - d2 * Fl1
+                    Fa1 += d2 * Fl0 - d0 * Fl2
+                    Fa2 += d0 * Fl1 - d1 * Fl0
+                Fa0 += _dot6(I6[k, 0], acc[k]) + pb[k, 0]
+                Fa1 += _dot6(I6[k, 1], acc[k]) + pb[k, 1]
+                Fa2 += _dot6(I6[k, 2], acc[k]) + pb[k, 2]
+                Fl0 += _dot6(I6[k, 3], acc[k]) + pb[k, 3]
+                Fl1 += _dot6(I6[k, 4], acc[k]) + pb[k, 4]
+                Fl2 += _dot6(I6[k, 5], acc[k]) + pb[k, 5]
+                for a in range(3):
+                    f = R[k, 0, a] * Fl0 + R[k, 1, a] * Fl1 + R[k, 2, a] * Fl2
+                    m = R[k, 0, a] * Fa0 + R[k, 1, a] * Fa1 + R[k, 2, a] * Fa2
+                    wrench_force[k, a] = f
+                    wrench_moment[k, a] = m
+                    if not _put(dst, at_wrench[:, k], a, f) and bad == 0:
+                        bad = 6
+                    if not _put(dst, at_wrench[:, k], 3 + a, m) and bad == 0:
+                        bad = 7
+        # speed rotors: the motor keeps kappa' constant, L_i = A_i (w' . e_i)
+        for i in range(nv):
+            k = speed_body[i]
+            _matvec(R[k], speed_axis[i], tmp)
+            L_speed[i] = speed_A[i] * (acc[k, 0] * tmp[0] + acc[k, 1] * tmp[1] + acc[k, 2] * tmp[2])
+    elif do_inv and has_lam:
+        I6 = np.empty((n, 6, 6))
+        pb = np.empty((n, 6))
+        dlam_b = np.empty((n, 3))
+        _bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
+                     torque_A, p, L_rotor, has_gravity, gravity, lam_b, dlam_b, I6, pb)
+    # joint points
+    if do_bodies or do_inv:
         for a in range(3):
-            wrench_force[k, a] = R[k, 0, a] * Fl[0] + R[k, 1, a] * Fl[1] + R[k, 2, a] * Fl[2]
-            wrench_moment[k, a] = R[k, 0, a] * Fa[0] + R[k, 1, a] * Fa[1] + R[k, 2, a] * Fa[2]
-    # poses
-    for a in range(3):
-        if base_type == fast.BASE_FREE:
-            O[0, a] = y[i_r0 + a]
-        elif base_type == fast.BASE_MOVING:
-            O[0, a] = base_position[a] + amp[a] * math.sin(W * t)
-        else:
-            O[0, a] = base_position[a]
-    for k in range(1, n):
-        for a in range(3):
-            O[k, a] = O[k - 1, a] + s_w[k - 1, a]
+            if base_type == fast.BASE_FREE:
+                O[0, a] = y[i_r0 + a]
+            elif base_type == fast.BASE_MOVING:
+                O[0, a] = base_position[a] + amp[a] * math.sin(W * t)
+            else:
+                O[0, a] = base_position[a]
+        for k in range(1, n):
+            for a in range(3):
+                O[k, a] = O[k - 1, a] + s_w[k - 1, a]
+    # Euler angles (joint states of spherical joints; every body for the Lagrange integrals)
+    all_euler = (want & WANT_EULER_ALL) != 0
     for k in range(n):
-        if is_hinge[k]:
-            _matrix_to_quat(R[k], quat[k])
-        else:
-            i = qrow[k]
-            nrm = math.sqrt(y[i] * y[i] + y[i + 1] * y[i + 1] + y[i + 2] * y[i + 2] + y[i + 3] * y[i + 3])
+        if all_euler or not is_hinge[k]:
+            _euler(R[k], w[k], down, singular, euler[k], euler_rate[k])
+    # poses
+    if do_bodies:
+        for k in range(n):
+            if is_hinge[k]:
+                _matrix_to_quat(R[k], quat[k])
+            else:
+                i = qrow[k]
+                nrm = math.sqrt(y[i] * y[i] + y[i + 1] * y[i + 1] + y[i + 2] * y[i + 2] + y[i + 3] * y[i + 3])
+                for a in range(4):
+                    quat[k, a] = y[i + a] / nrm
+            for a in range(3):
+                if not _put(dst, at_position[:, k], a, O[k, a]) and bad == 0:
+                    bad = 4
             for a in range(4):
-                quat[k, a] = y[i + a] / nrm
-        _euler(R[k], w[k], down, singular, euler[k], euler_rate[k])
-    # speed rotors: the motor keeps kappa' constant, L_i = A_i (w' . e_i)
-    e = np.empty(3)
-    for i in range(speed_body.shape[0]):
-        k = speed_body[i]
-        _matvec(R[k], speed_axis[i], e)
-        L_speed[i] = speed_A[i] * (acc[k, 0] * e[0] + acc[k, 1] * e[1] + acc[k, 2] * e[2])
+                if not _put(dst, at_quat[:, k], a, quat[k, a]) and bad == 0:
+                    bad = 5
+    # joint states
+    for j in range(joint_kind.shape[0]):
+        kind, ref = joint_kind[j], joint_ref[j]
+        if kind == JOINT_EULER:
+            k, a = ref // 3, ref % 3
+            pos, vel, eff = euler[k, a], euler_rate[k, a], 0.0
+        elif kind == JOINT_HINGE:
+            col = own_col[ref]
+            pos, vel, eff = y[qrow[ref]], y[i_vel + col], tau[col]
+        elif kind == JOINT_TORQUE_ROTOR:
+            k = torque_body[ref]
+            _matvec(R[k], torque_axis[ref], tmp)
+            pos = y[i_kap + ref]
+            vel = p[ref] - (w[k, 0] * tmp[0] + w[k, 1] * tmp[1] + w[k, 2] * tmp[2])  # (18-19)
+            eff = L_rotor[ref]
+        else:
+            pos, vel, eff = speed_rate[ref] * t, speed_rate[ref], L_speed[ref]
+        position[j], velocity[j], effort[j] = pos, vel, eff
+        if not _put(dst, at_joint[:, 0], j, pos) and bad == 0:
+            bad = 1
+        if not _put(dst, at_joint[:, 1], j, vel) and bad == 0:
+            bad = 2
+        if not _put(dst, at_joint[:, 2], j, eff) and bad == 0:
+            bad = 3
+    if not do_inv:
+        return bad
     # invariants: momenta about O^k, then about the origin; (33) and the potential
     T = 0.0
     V = 0.0
@@ -223,7 +326,7 @@ def outputs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_a
             P[a] += lin[a]
             hsum[a] += mass[k] * O[k, a] + hk[k, a]
     spin2 = 0.0
-    for i in range(speed_body.shape[0]):
+    for i in range(nv):
         spin2 += speed_A[i] * speed_rate[i] * speed_rate[i]
     T += lam_dot + 0.5 * spin2
     for i in range(nt):
@@ -244,3 +347,26 @@ def outputs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_a
     _cross(hsum, P, tmp)
     for a in range(3):
         inv[11 + a] = L[a] - tmp[a]
+    return bad
+
+
+@_njit
+def outputs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                   first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
+                   base, t0, p0, pdot, L_rotor, tau,
+                   base_position, down, singular, speed_body, speed_axis, speed_A, speed_rate,
+                   R, w, vO, O, quat, euler, euler_rate, L_speed, wrench_force, wrench_moment, inv):
+    """Every output at (t, y): :func:`publication_kernel` with everything wanted and no joint
+    states or scatter (FastChainODE.outputs); ydot holds y' (u' and the torque-rotor angle rates
+    kappa' as fast.rhs_kernel leaves them)."""
+    none = np.empty(0, dtype=np.int64)
+    nothing = np.empty(0)
+    publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                       first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
+                       base, t0, p0, pdot, L_rotor, tau,
+                       base_position, down, singular, speed_body, speed_axis, speed_A, speed_rate,
+                       WANT_ALL, none, none,
+                       R, w, vO, O, quat, euler, euler_rate, L_speed, wrench_force, wrench_moment, inv,
+                       nothing, nothing, nothing, nothing, np.empty((0, 3, 0), dtype=np.int64),
+                       np.empty((0, R.shape[0], 3), dtype=np.int64), np.empty((0, R.shape[0], 4), dtype=np.int64),
+                       np.empty((0, R.shape[0], 6), dtype=np.int64))

@@ -13,7 +13,7 @@ from . import invariants as inv
 from .model import compile_model, initial_state
 from .rotations import matrices_to_euler, omegas_to_euler_rates
 from .scene import Scene
-from .snapshot import Snapshot
+from .snapshot import Scatter, Snapshot
 
 
 class SimulationError(RuntimeError):
@@ -105,7 +105,37 @@ class Simulator:
         self._joint_layout()
         # snapshots from compiled code when the system has it (the numba backend)
         self._compiled_outputs = getattr(self.system, "outputs", None)
+        self._watched = self._watched_energy()
+        if self._watched is not None and getattr(self.integrator, "monitor", False) is None:
+            self.integrator.monitor = self._energy_error  # "fixed": its energy watchdog
         self.reset()
+
+    def _watched_energy(self) -> int | None:
+        """The index in the compiled invariants of the energy the exact motion keeps ("energy",
+        or "jacobi" with speed rotors, gyro_sim.core.invariants.conserved), None when none is
+        kept (a moving base) or on the numpy backend."""
+        from . import fast_outputs
+
+        if self._compiled_outputs is None:
+            return None
+        if "energy" in self._conserved:
+            return fast_outputs.INV_ENERGY
+        return fast_outputs.INV_JACOBI if "jacobi" in self._conserved else None
+
+    def _energy_error(self, t0: float, y0: np.ndarray, t1: float, y1: np.ndarray) -> float:
+        """How far an integrator's call from (t0, y0) to (t1, y1) breaks the energy balance,
+        relative to T + |V| at the reference state: (E1 - E0 - W) / (T + |V|), W the work of the
+        held moments (exact under the zero-order hold); 0 where no balance holds (Jacobi
+        integral with moments commanded). Called by the "fixed" integrator after each call."""
+        moving = len(self._axis_angle) and np.any(self._moments)
+        if self._watched is None or (moving and "energy" not in self._conserved):
+            return 0.0
+        i = self._axis_angle
+        work = float(self._moments @ (y1[i] - y0[i])) if moving else 0.0
+        e0 = self._compiled_outputs(t0, y0)["inv"][self._watched]
+        e1 = self._compiled_outputs(t1, y1)["inv"][self._watched]
+        ref = self._reference if self._reference is not None else self.invariants()
+        return float((e1 - e0 - work) / inv.drift_scale("energy", ref))
 
     def _joint_layout(self) -> None:
         """The joint-state entries in order (SPEC.md): their names, and where each entry's
@@ -370,13 +400,19 @@ class Simulator:
             self._reference = self.invariants()
         return self._reference
 
-    def snapshot(self, *, bodies: bool = True, wrenches: bool = True, invariants: bool = True) -> Snapshot:
+    def snapshot(self, *, bodies: bool = True, wrenches: bool = True, invariants: bool = True,
+                 into: Scatter | None = None) -> Snapshot:
         """The outputs at the current time (gyro_sim.core.snapshot.Snapshot); parts switched off
         are None and not computed. On the numba backend every part comes from one compiled call
-        (`FastChainODE.outputs`), else from the numpy reference; both agree to round-off."""
+        (`gyro_sim.core.fast_outputs.publication_kernel`), else from the numpy reference; both
+        agree to round-off. `into`: also write the joint states, poses and wrenches into the
+        slots of a Scatter (the parts it has slots for must be asked)."""
         if self._compiled_outputs is not None:
-            return self._snapshot_compiled(bodies, wrenches, invariants)
-        return self._snapshot_numpy(bodies, wrenches, invariants)
+            return self._snapshot_compiled(bodies, wrenches, invariants, into)
+        snap = self._snapshot_numpy(bodies, wrenches, invariants)
+        if into is not None:
+            into.write(snap)
+        return snap
 
     def _snapshot_numpy(self, bodies: bool = True, wrenches: bool = True, invariants: bool = True) -> Snapshot:
         pos, vel, eff = self._joint_arrays_numpy()
@@ -393,26 +429,96 @@ class Simulator:
             kw.update(self._invariant_parts(self._invariants_numpy()))
         return self._snapshot(pos, vel, eff, kw)
 
-    def _outputs_compiled(self) -> dict:
-        """Every output of the current state from one compiled call (FastChainODE.outputs)."""
+    def _snapshot_setup(self) -> None:
+        """What the compiled outputs take beyond the dynamics kernel's arguments, and their
+        scratch arrays: made once, on the first compiled snapshot."""
+        from . import fast_loop, fast_outputs
+        from .rotations import EULER_SINGULAR_SIN
+
+        m = self.model
+        n, nv = m.n, len(m.speed_body)
+        f64 = np.ascontiguousarray
+        self._snapshot_kernel = fast_loop.Direct(fast_outputs.publication_kernel)
+        self._snapshot_model = (
+            f64(m.base_position, dtype=np.float64), f64(m.down, dtype=np.float64), EULER_SINGULAR_SIN,
+            f64(m.speed_body, dtype=np.int64), f64(np.reshape(m.speed_axis, (-1, 3)), dtype=np.float64),
+            f64(m.speed_A, dtype=np.float64), f64(m.speed_rate, dtype=np.float64), 0, *self._joint_arrays_sources())
+        self._snapshot_scratch = {
+            "ydot": np.zeros(m.size), "R": np.zeros((n, 3, 3)), "w": np.zeros((n, 3)), "vO": np.zeros((n, 3)),
+            "O": np.zeros((n, 3)), "quat": np.zeros((n, 4)), "euler": np.zeros((n, 3)), "euler_rate": np.zeros((n, 3)),
+            "L_speed": np.zeros(nv), "wrench_force": np.zeros((n, 3)), "wrench_moment": np.zeros((n, 3)),
+            "inv": np.zeros(fast_outputs.INV_SIZE)}
+        J = len(self._joint_names)
+        self._snapshot_nowhere = Scatter(np.zeros(0), *(np.zeros((0, *shape), dtype=np.int64)
+                                                      for shape in ((3, J), (n, 3), (n, 4), (n, 6))))
+        self._snapshot_names = (tuple(self._joint_names), tuple(m.axis_names), tuple(m.names))
+
+    def _joint_arrays_sources(self) -> tuple[np.ndarray, np.ndarray]:
+        """The joint-state entries for the compiled outputs: (kind, ref) (J,) int64, kind one of
+        fast_outputs.JOINT_* (the sources of `_joint_layout`, decoded)."""
+        from . import fast_outputs as fo
+
+        m = self.model
+        n, nh, nt = m.n, len(m.hinge_bodies), len(m.torque_body)
+        kind, ref = [], []
+        for i in self._joint_index.tolist():
+            if i < 3 * n:
+                kind.append(fo.JOINT_EULER), ref.append(i)
+            elif i < 3 * n + nh:
+                kind.append(fo.JOINT_HINGE), ref.append(int(m.hinge_bodies[i - 3 * n]))
+            elif i < 3 * n + nh + nt:
+                kind.append(fo.JOINT_TORQUE_ROTOR), ref.append(i - 3 * n - nh)
+            else:
+                kind.append(fo.JOINT_SPEED_ROTOR), ref.append(i - 3 * n - nh - nt)
+        return np.array(kind, dtype=np.int64), np.array(ref, dtype=np.int64)
+
+    def _outputs_compiled(self, want: int | None = None, into: Scatter | None = None, fresh: bool = True) -> dict:
+        """The outputs of the current state from one compiled call
+        (fast_outputs.publication_kernel): the arrays of FastChainODE.outputs by name, and the
+        joint states "position", "velocity", "effort" (new arrays), "nonfinite" (0, or the index in
+        fast_outputs.NONFINITE_FIELDS of the first output found not finite). want: WANT_* bits
+        (None: every part); into: a Scatter to write into as well. fresh=False: the other arrays
+        are the Simulator's scratch, valid until the next call."""
+        from . import fast_outputs as fo
+
+        if getattr(self, "_snapshot_kernel", None) is None:
+            self._snapshot_setup()
         self.system.hold(self._t, self._p, *self._inputs())
-        return self._compiled_outputs(self._t, self._y)
+        o = self._snapshot_scratch
+        into = self._snapshot_nowhere if into is None else into
+        J = len(self._joint_names)
+        pos, vel, eff = np.empty(J), np.empty(J), np.empty(J)
+        y = self._y
+        if y.dtype != np.float64 or not y.flags.c_contiguous:  # the compiled entry does not convert
+            y = self._y = np.ascontiguousarray(y, dtype=np.float64)
+        model = self._snapshot_model
+        bad = self._snapshot_kernel(
+            float(self._t), y, o["ydot"], *self.system.kernel_arguments(), *model[:7], int(fo.WANT_ALL if want is None else want),
+            *model[8:], o["R"], o["w"], o["vO"], o["O"], o["quat"], o["euler"], o["euler_rate"], o["L_speed"],
+            o["wrench_force"], o["wrench_moment"], o["inv"], pos, vel, eff,
+            into.dst, into.joint, into.position, into.quaternion, into.wrench)
+        out = {k: v.copy() for k, v in o.items()} if fresh else dict(o)
+        out.update(position=pos, velocity=vel, effort=eff, nonfinite=bad)
+        return out
 
     def _joint_arrays_compiled(self, o: dict):
-        return self._joint_arrays(o["euler"], o["euler_rate"], o["ydot"][self.model.i_kappa], o["L_speed"],
-                                  *self._inputs())
+        return o["position"], o["velocity"], o["effort"]
 
-    def _snapshot_compiled(self, bodies: bool, wrenches: bool, invariants: bool) -> Snapshot:
-        o = self._outputs_compiled()
-        pos, vel, eff = self._joint_arrays_compiled(o)
+    def _snapshot_compiled(self, bodies: bool, wrenches: bool, invariants: bool, into: Scatter | None = None) -> Snapshot:
+        from . import fast_outputs as fo
+
+        want = (fo.WANT_BODIES if bodies else 0) | (fo.WANT_WRENCHES if wrenches else 0)
+        if invariants:
+            want |= fo.WANT_INVARIANTS | (fo.WANT_EULER_ALL if self._lagrange is not None else 0)
+        o = self._outputs_compiled(want, into, fresh=False)
         kw = {}
         if bodies:
-            kw["body_position"], kw["body_quaternion"] = o["O"], o["quat"]
+            kw["body_position"], kw["body_quaternion"] = o["O"].copy(), o["quat"].copy()
         if wrenches:
-            kw["wrench_force"], kw["wrench_moment"] = o["wrench_force"], o["wrench_moment"]
+            kw["wrench_force"], kw["wrench_moment"] = o["wrench_force"].copy(), o["wrench_moment"].copy()
         if invariants:
             kw.update(self._invariant_parts(self._invariants_compiled(o)))
-        return self._snapshot(pos, vel, eff, kw)
+        return self._snapshot(o["position"], o["velocity"], o["effort"], kw, arrays_checked=o["nonfinite"] == 0)
 
     def _invariants_compiled(self, o: dict) -> dict:
         """The invariants (as gyro_sim.core.invariants.invariants) from the compiled outputs."""
@@ -440,12 +546,14 @@ class Simulator:
             kw["energy_scale"] = inv.drift_scale("energy", ref)
         return kw
 
-    def _snapshot(self, pos, vel, eff, kw: dict) -> Snapshot:
-        m = self.model
+    def _snapshot(self, pos, vel, eff, kw: dict, arrays_checked: bool = False) -> Snapshot:
+        names = getattr(self, "_snapshot_names", None)
+        if names is None:
+            names = (tuple(self._joint_names), tuple(self.model.axis_names), tuple(self.model.names))
         return Snapshot(
-            time=self._t, joint_names=tuple(self._joint_names), position=pos, velocity=vel, effort=eff,
-            axis_names=tuple(m.axis_names), axis_moments=self._moments.copy(), integrator=self.integrator_name,
-            error_estimate=self.error_estimate, body_names=tuple(m.names), **self._method_fields(), **kw)
+            time=self._t, joint_names=names[0], position=pos, velocity=vel, effort=eff, axis_names=names[1],
+            axis_moments=self._moments.copy(), integrator=self.integrator_name, error_estimate=self.error_estimate,
+            body_names=names[2], arrays_checked=arrays_checked, **self._method_fields(), **kw)
 
     def _method_fields(self) -> dict:
         """The chooser's state ("fixed" integrator), for the snapshot."""

@@ -20,7 +20,7 @@ is conserved with or without commands wherever the energy is conserved without t
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Mapping
 
 import numpy as np
@@ -55,11 +55,16 @@ class Snapshot:
     method: str | None = None  # the method stepping now, when the integrator chooses ("fixed")
     method_reason: str | None = None  # why that one (one line)
     h_lambda: float | None = None  # the chooser's last estimate of h |lambda| (step x largest |eigenvalue|)
+    #: the compiled outputs found every number of the arrays they computed (joint states, poses,
+    #: wrenches) finite as they wrote them: `nonfinite` need not look at those again
+    arrays_checked: bool = field(default=False, repr=False, compare=False)
 
     def nonfinite(self) -> str | None:
         """The name of the first field holding NaN or infinity (None when all are finite)."""
-        for name in ("position", "velocity", "effort", "axis_moments", "body_position", "body_quaternion",
-                     "wrench_force", "wrench_moment"):
+        names = ("axis_moments",) if self.arrays_checked else (
+            "position", "velocity", "effort", "axis_moments", "body_position", "body_quaternion", "wrench_force",
+            "wrench_moment")
+        for name in names:
             v = getattr(self, name)
             if v is not None and not np.all(np.isfinite(v)):
                 return name
@@ -72,3 +77,49 @@ class Snapshot:
                 if not np.all(np.isfinite(v)):
                     return f"{group}.{key}"
         return None
+
+
+@dataclass(frozen=True)
+class Scatter:
+    """Where `Simulator.snapshot(into=...)` also writes the numbers it computes: float64 slots of
+    one flat buffer (e.g. the bytes of every message of a publication, gyro_sim.io.messages), so
+    that nothing is copied between the outputs and what leaves. Each index array holds c copies
+    (c = 0: not written); the parts with slots must be asked of the snapshot.
+
+    dst : (m,) float64, contiguous and 8-byte aligned
+    joint : (c, 3, J) int64, slots of the joint states' position, velocity, effort
+    position : (c, n, 3) int64, slots of body_position
+    quaternion : (c, n, 4) int64, slots of body_quaternion (w, x, y, z)
+    wrench : (c, n, 6) int64, slots of wrench_force, then wrench_moment
+    """
+
+    dst: np.ndarray
+    joint: np.ndarray
+    position: np.ndarray
+    quaternion: np.ndarray
+    wrench: np.ndarray
+
+    def __post_init__(self) -> None:
+        d = self.dst
+        if d.dtype != np.float64 or d.ndim != 1 or not d.flags.c_contiguous or not d.flags.aligned:
+            raise ValueError("dst must be a contiguous, aligned float64 vector")
+        for name, ndim, last in (("joint", 3, None), ("position", 3, 3), ("quaternion", 3, 4), ("wrench", 3, 6)):
+            a = getattr(self, name)
+            if a.dtype != np.int64 or a.ndim != ndim or not a.flags.c_contiguous or (last and a.shape[-1] != last):
+                raise ValueError(f"{name}: expected a contiguous int64 array (c, ..., {last or 'J'})")
+            if a.size and (a.min() < 0 or a.max() >= d.size):
+                raise ValueError(f"{name}: slots outside dst")
+
+    def write(self, snap: Snapshot) -> None:
+        """The snapshot's numbers into their slots (what the compiled outputs do as they compute)."""
+        d = self.dst
+        for c in range(self.joint.shape[0]):
+            for i, v in enumerate((snap.position, snap.velocity, snap.effort)):
+                d[self.joint[c, i]] = v
+        for c in range(self.position.shape[0]):
+            d[self.position[c]] = snap.body_position
+        for c in range(self.quaternion.shape[0]):
+            d[self.quaternion[c]] = snap.body_quaternion
+        for c in range(self.wrench.shape[0]):
+            d[self.wrench[c, :, :3]] = snap.wrench_force
+            d[self.wrench[c, :, 3:]] = snap.wrench_moment

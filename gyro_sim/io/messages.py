@@ -388,6 +388,11 @@ class Publication:
         self._tf = Refill([_tf_message(CdrWriter(record=True), self.body_names, zeros, 0)])
         self._joints: tuple[tuple[str, ...], Refill] | None = None
 
+    def frame(self, joint_names: Sequence[str], *, wrenches: bool, poses: bool, tf: bool) -> "Frame":
+        """The messages of fixed layout of a publication (joint states, /clock, and the wrenches,
+        poses and /tf asked for) in one buffer that `Simulator.snapshot(into=frame.scatter)` fills."""
+        return Frame(self, tuple(joint_names), wrenches=wrenches, poses=poses, tf=tf)
+
     def _joint_refill(self, names: tuple[str, ...]) -> Refill:
         if self._joints is None or (self._joints[0] is not names and self._joints[0] != names):
             z = np.zeros(len(names))
@@ -419,3 +424,83 @@ class Publication:
         if diagnostics_run is not False:
             out.append((DIAGNOSTICS, DIAGNOSTICS_TYPE, diagnostics(snap, t_ns, self.hardware_id, diagnostics_run or None)))
         return out
+
+
+class Frame:
+    """Every message of fixed layout of one publication, written once into one buffer: the
+    compiled outputs put their numbers straight into its float64 slots (`scatter`, a
+    gyro_sim.core.snapshot.Scatter), `messages` puts the stamps in and cuts the bytes. The same
+    bytes as the builders above (test/io/test_publication_frame.py).
+
+    Each message starts 8-aligned in the buffer, whose start is 4 bytes past an 8-byte
+    boundary: every float64 of every message (8-aligned after its 4-byte CDR header) is then an
+    aligned slot of one float64 view, and every stamp an aligned pair of a uint32 view.
+    """
+
+    def __init__(self, publication: Publication, joint_names: tuple[str, ...], *, wrenches: bool, poses: bool,
+                 tf: bool) -> None:
+        from ..core.snapshot import Scatter
+
+        self.joint_names = joint_names
+        body_names = publication.body_names
+        n, J = len(body_names), len(joint_names)
+        z, z7 = np.zeros(J), np.zeros((n, 7))
+        msgs = [(JOINT_STATES, JOINT_STATE_TYPE, _joint_state(CdrWriter(record=True), joint_names, z, z, z, 0))]
+        w = CdrWriter(record=True)
+        w.time(0)
+        msgs.append((CLOCK, CLOCK_TYPE, w))
+        if wrenches:
+            msgs += [(topic, WRENCH_TYPE, _wrench_stamped(CdrWriter(record=True), 0, b, z7[0, :6]))
+                     for topic, b in zip(publication.wrench_topics, body_names)]
+        if poses:
+            msgs.append((publication.poses_topic, POSE_ARRAY_TYPE, _pose_array(CdrWriter(record=True), z7, 0)))
+        if tf:
+            msgs.append((TF, TF_TYPE, _tf_message(CdrWriter(record=True), body_names, z7, 0)))
+        starts, at = [], 0
+        for _, _, m in msgs:
+            starts.append(at)
+            at += -(-len(m.buf) // 8) * 8
+        size = at + 8
+        raw = np.zeros(size + 8, dtype=np.uint8)
+        off = (4 - raw.ctypes.data) % 8  # the buffer starts 4 past an 8-byte boundary
+        self._raw = raw
+        self.buffer = raw[off:off + size]
+        for (_, _, m), a in zip(msgs, starts):
+            self.buffer[a:a + len(m.buf)] = np.frombuffer(bytes(m.buf), dtype=np.uint8)
+        self._f64 = raw[off + 4:off + 4 + 8 * ((size - 4) // 8)].view("<f8")
+        self._u32 = raw[off:off + 4 * (size // 4)].view("<u4")
+        stamps = [a + o for (_, _, m), a in zip(msgs, starts) for o in m.stamps]
+        self._sec = np.array(stamps, dtype=np.intp) // 4
+        self._nsec = self._sec + 1
+
+        def slots(i: int) -> np.ndarray:  # the float64 slots of message i, in writing order
+            m, a = msgs[i][2], starts[i]
+            return np.concatenate([(a + o - 4) // 8 + np.arange(c) for o, c in m.floats]).astype(np.int64)
+
+        joint = slots(0).reshape(1, 3, J) if J else np.zeros((1, 3, 0), dtype=np.int64)
+        i = 2
+        wrench = np.zeros((0, n, 6), dtype=np.int64)
+        if wrenches:
+            wrench = np.stack([slots(i + k) for k in range(n)])[None]
+            i += n
+        pose_slots = []
+        for on in (poses, tf):
+            if on:
+                pose_slots.append(slots(i).reshape(n, 7))
+                i += 1
+        ps = np.array(pose_slots, dtype=np.int64).reshape(len(pose_slots), n, 7)
+        self.scatter = Scatter(self._f64, joint, np.ascontiguousarray(ps[:, :, :3]),
+                               np.ascontiguousarray(ps[:, :, [6, 3, 4, 5]]),  # w, x, y, z <- x, y, z, w
+                               np.ascontiguousarray(wrench))
+        self.topics = tuple(t for t, _, _ in msgs)
+        self.types = tuple(ty for _, ty, _ in msgs)
+        self._slices = tuple(slice(a, a + len(m.buf)) for (_, _, m), a in zip(msgs, starts))
+
+    def messages(self, t_ns: int) -> list[tuple[str, str, bytes]]:
+        """[(topic, type, bytes)] with the numbers the last `snapshot(into=self.scatter)` wrote
+        and every stamp t_ns."""
+        sec, nsec = divmod(int(t_ns), NS_PER_S)
+        self._u32[self._sec] = sec & 0xFFFFFFFF  # int32 seconds, two's complement
+        self._u32[self._nsec] = nsec
+        data = self.buffer.tobytes()
+        return list(zip(self.topics, self.types, map(data.__getitem__, self._slices)))

@@ -69,6 +69,10 @@ class Outputs:
         if self.publish_poses:
             publisher(self.publication.poses_topic, M.POSE_ARRAY_TYPE)
         self._want: dict[str, tuple[float, bool]] = {}
+        #: the publication's buffers by the parts asked (wrenches, poses, tf), once the joint
+        #: names are known (from the first snapshot)
+        self._frames: dict[tuple[bool, bool, bool], M.Frame] = {}
+        self._joint_names: tuple[str, ...] | None = None
 
     def _wanted(self, topic: str) -> bool:
         """Recording, or someone subscribes (the count is asked at most every WANT_PERIOD s)."""
@@ -91,11 +95,26 @@ class Outputs:
         wrenches = any(self._wanted(t) for t in self.wrench_topics)
         poses = self.publish_poses and self._wanted(self.publication.poses_topic)
         tf = self.recorder is not None or self._wanted(M.TF)
-        snap = sim.snapshot(bodies=poses or tf, wrenches=wrenches, invariants=diagnostics_run is not False)
-        bad = snap.nonfinite()
+        frame = None
+        if self._joint_names is not None:  # the numbers go straight into the messages' bytes
+            key = (wrenches, poses, tf)
+            frame = self._frames.get(key)
+            if frame is None:
+                frame = self._frames[key] = self.publication.frame(self._joint_names, wrenches=wrenches, poses=poses,
+                                                                   tf=tf)
+        snap = sim.snapshot(bodies=poses or tf, wrenches=wrenches, invariants=diagnostics_run is not False,
+                            into=None if frame is None else frame.scatter)
+        bad = snap.nonfinite()  # the arrays were checked as they were computed: then only the scalars
         if bad is not None:
             raise SimulationError(f"t = {sim.time:.6g} s: non-finite {bad} (not published)")
-        return self.publication.messages(snap, t_ns, poses=poses, tf=tf, diagnostics_run=diagnostics_run)
+        if frame is None or (snap.joint_names is not frame.joint_names and snap.joint_names != frame.joint_names):
+            self._joint_names, self._frames = snap.joint_names, {}
+            return self.publication.messages(snap, t_ns, poses=poses, tf=tf, diagnostics_run=diagnostics_run)
+        out = frame.messages(t_ns)
+        if diagnostics_run is not False:
+            out.append((M.DIAGNOSTICS, M.DIAGNOSTICS_TYPE,
+                        M.diagnostics(snap, t_ns, self.publication.hardware_id, diagnostics_run or None)))
+        return out
 
     def send(self, t_ns: int, batch: list) -> None:
         """Publish a prepared state (and hand the same bytes to the recorder)."""

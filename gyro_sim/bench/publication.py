@@ -1,0 +1,381 @@
+"""`gyro-sim bench publication`: the physics thread's cost of one publication, part by part.
+
+The node (gyro_sim.ros.loop) prepares one publication every 10 ms of simulated time (publish
+100 Hz, physics 1 kHz): `Outputs.prepare_state` (the compiled outputs, the snapshot, the
+message bytes) and, at its deadline, `Outputs.send` (one `Publisher.publish(bytes)` per message,
+one publisher per joint wrench topic as SPEC.md fixes, and the same bytes handed to the
+recorder). This bench runs exactly that code on the physics thread of this process, with a real
+rclpy node, real publishers and a real recorder (gyro_sim.ros.recorder.LiveRecorder writing an
+MCAP file from its child process), on spherical chains of gyro_sim.bench.scenes with a rotor on
+every body (in space: no gravity, as bench realtime), RK4 at 1 ms, with wrenches, poses and /tf on (what a recording node publishes), and
+/diagnostics every 10th publication as the node sends them.
+
+Parts (wall time on the calling thread, medians and p99 over the publications):
+
+- kernel: the compiled outputs call alone (`Simulator._outputs_compiled`);
+- snapshot: `Simulator.snapshot` as the node asks for it, minus the kernel;
+- bytes: `Publication.messages` from that snapshot, with the finite check;
+- prepare: `Outputs.prepare_state` as a whole (what the node times as output_time);
+- publish: the rclpy `publish(bytes)` calls of the batch, without a subscriber and with one
+  (a separate process subscribing to every topic, raw);
+- record: the recorder hand-off, `LiveRecorder.raw` of every message of the batch;
+- total: prepare + publish + record, what the physics thread pays per publication.
+
+It also measures one `publish(bytes)` alone, the binding's own `publish_raw` under it, and
+whether the rcl publish releases the interpreter lock (:func:`gil_released_by_publish`).
+
+The machine may be shared: the report says the load.
+"""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+DEFAULT_SIZES = (10, 50, 100)
+QUICK_SIZES = (10,)
+DEFAULT_PUBLICATIONS = 400
+QUICK_PUBLICATIONS = 60
+PHYSICS_STEP = 1e-3
+PUBLISH_PERIOD = 0.01
+#: the node sends /diagnostics with every DIAG_EVERY-th publication (10 Hz at 100 Hz)
+DIAG_EVERY = 10
+#: ROS domain of the bench: Fast DDS accepts 0..232; the tests use 50..199, bench realtime and
+#: soak 200..229, test_newcomer 230..232 briefly: the bench takes 231 with localhost discovery
+DOMAIN = 231
+PARTS = ("kernel", "snapshot", "bytes", "prepare", "publish", "record", "total")
+
+_SUBSCRIBER = r"""
+import sys, rclpy, importlib
+from rclpy.node import Node
+rclpy.init()
+node = Node("gyro_sim_bench_sub")
+subs = []
+for line in sys.stdin:
+    line = line.strip()
+    if not line:
+        break
+    topic, msgtype = line.split()
+    pkg, _, name = msgtype.split("/")
+    cls = getattr(importlib.import_module(pkg + ".msg"), name)
+    subs.append(node.create_subscription(cls, topic, lambda m: None, 10, raw=True))
+print("ready", flush=True)
+import threading
+from rclpy.executors import SingleThreadedExecutor
+ex = SingleThreadedExecutor()
+ex.add_node(node)
+threading.Thread(target=ex.spin, daemon=True).start()
+sys.stdin.read()  # until the bench closes our input: then leave the graph cleanly
+ex.shutdown()
+node.destroy_node()
+rclpy.shutdown()
+"""
+
+
+@dataclass
+class Row:
+    """One chain length: per part, the samples (seconds) of every publication."""
+
+    n: int
+    subscriber: bool
+    samples: dict[str, list[float]] = field(default_factory=dict)
+    diag: list[bool] = field(default_factory=list)
+    sender_cpu: float = float("nan")  # CPU seconds of the recorder's sender thread per publication
+
+    def stat(self, part: str, q: float = 50.0, diag: bool | None = None) -> float:
+        """Percentile q of `part` in microseconds (diag: only publications with/without diagnostics)."""
+        s = np.asarray(self.samples.get(part, []))
+        if diag is not None and s.size:
+            s = s[np.asarray(self.diag) == diag]
+        return float(np.percentile(s, q) * 1e6) if s.size else float("nan")
+
+
+def _env(workdir: Path) -> dict:
+    env = dict(os.environ, ROS_DOMAIN_ID=str(DOMAIN), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               ROS_LOG_DIR=str(workdir / "ros_log"))
+    root = str(Path(__file__).resolve().parents[2])
+    env["PYTHONPATH"] = os.pathsep.join([root, env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    return env
+
+
+def _simulator(n: int):
+    from ..core.simulator import Simulator
+    from .scenes import spherical_chain
+
+    sim = Simulator(spherical_chain(n, gravity=False, rotors=True), integrator="rk4", step=PHYSICS_STEP, backend="numba")
+    sim.advance(PUBLISH_PERIOD)  # compiles, and leaves the reset state
+    return sim
+
+
+def _frame(out):
+    """The node's publication buffer (gyro_sim.io.messages.Frame) once prepare_state made it."""
+    frames = getattr(out, "_frames", None)
+    return next(iter(frames.values()), None) if frames else None
+
+
+def _kernel(sim, out, diag: bool) -> None:
+    """The compiled outputs call of a publication alone, as prepare_state asks for it."""
+    from ..core import fast_outputs as fo
+
+    want = getattr(fo, "WANT_BODIES", 0) | getattr(fo, "WANT_WRENCHES", 0) | (getattr(fo, "WANT_INVARIANTS", 0) if diag else 0)
+    frame = _frame(out)
+    try:
+        sim._outputs_compiled(want, None if frame is None else frame.scatter, fresh=False)  # noqa: SLF001
+    except TypeError:  # before the publication kernel: one call computed everything
+        sim._outputs_compiled()  # noqa: SLF001
+
+
+def _bytes(sim, out, snap, t_ns: int, run) -> None:
+    """The messages' bytes of a snapshot, as prepare_state makes them."""
+    from ..io import messages as M
+
+    frame = _frame(out)
+    if frame is None:
+        out.publication.messages(snap, t_ns, poses=True, tf=True, diagnostics_run=run)
+        return
+    frame.messages(t_ns)
+    if run is not False:
+        M.diagnostics(snap, t_ns, out.publication.hardware_id, run)
+
+
+def measure_size(n: int, publications: int, node, workdir: Path, *, subscriber_env: dict | None,
+                 progress=None) -> list[Row]:
+    """Rows without and (subscriber_env given) with a subscriber process for chain length n."""
+    from ..ros.outputs import Outputs
+    from ..ros.recorder import LiveRecorder
+
+    sim = _simulator(n)
+    log = workdir / f"pub_{n}.mcap"
+    recorder = LiveRecorder(str(log), scene=sim.scene, params={"bench": "publication"}, overwrite=True)
+    config = SimpleNamespace(publish_wrenches=True, publish_poses=True)
+    out = Outputs(node, sim, config, recorder=recorder)
+    rows = []
+    sub = None
+    try:
+        for with_sub in (False, True) if subscriber_env is not None else (False,):
+            if with_sub:
+                sub = _start_subscriber(out, subscriber_env, workdir)
+            rows.append(_run(sim, out, recorder, n, publications, with_sub, progress))
+    finally:
+        if sub is not None:  # a clean exit: a killed reader stays matched (and slows writers) until its lease ends
+            sub.stdin.close()
+            try:
+                sub.wait(10)
+            except subprocess.TimeoutExpired:
+                sub.kill()
+                sub.wait()
+        recorder.close()
+        for r in rows:
+            r.sender_cpu = recorder.sender_cpu / max(1, sum(len(x.diag) for x in rows))
+        for pub in out.pubs.values():
+            node.destroy_publisher(pub)
+        log.unlink(missing_ok=True)
+    return rows
+
+
+def _start_subscriber(out, env: dict, workdir: Path, timeout: float = 20.0):
+    from ..io import messages as M
+
+    proc = subprocess.Popen([sys.executable, "-c", _SUBSCRIBER], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=open(workdir / "subscriber.err", "w"), env=env, text=True)
+    types = {M.JOINT_STATES: M.JOINT_STATE_TYPE, M.CLOCK: M.CLOCK_TYPE, M.DIAGNOSTICS: M.DIAGNOSTICS_TYPE,
+             out.publication.poses_topic: M.POSE_ARRAY_TYPE}
+    types.update({t: M.WRENCH_TYPE for t in out.wrench_topics})
+    proc.stdin.write("".join(f"{t} {types[t]}\n" for t in out.pubs) + "\n")
+    proc.stdin.flush()
+    proc.stdout.readline()
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout:
+        if all(p.get_subscription_count() > 0 for p in out.pubs.values()):
+            time.sleep(0.5)  # let the matching settle
+            return proc
+        time.sleep(0.05)
+    proc.kill()
+    raise RuntimeError(f"the subscriber process did not match every publisher in {timeout:g} s")
+
+
+def _run(sim, out, recorder, n: int, publications: int, with_sub: bool, progress) -> Row:
+    from ..io import messages as M
+
+    row = Row(n, with_sub, {p: [] for p in PARTS})
+    clock = time.perf_counter
+    run = M.Status("gyro_sim: run", {"real_time_factor": 1.0})
+    for i in range(publications):
+        sim.advance(PUBLISH_PERIOD)
+        diag = i % DIAG_EVERY == 0
+        t_ns = M.time_ns(sim.time)
+        # the parts, each on its own (the same calls prepare_state makes)
+        t0 = clock()
+        _kernel(sim, out, diag)
+        t1 = clock()
+        frame = _frame(out)
+        if frame is None:
+            snap = sim.snapshot(bodies=True, wrenches=True, invariants=diag)
+        else:
+            snap = sim.snapshot(bodies=True, wrenches=True, invariants=diag, into=frame.scatter)
+        t2 = clock()
+        _bytes(sim, out, snap, t_ns, run if diag else False)
+        t3 = clock()
+        # what the physics thread runs: prepare, then send (split into its two halves)
+        batch = out.prepare_state(t_ns, sim, run if diag else False)
+        t4 = clock()
+        for topic, _, data in batch:
+            pub = out.pubs.get(topic)
+            if pub is not None:
+                pub.publish(data)
+        t5 = clock()
+        for topic, msgtype, data in batch:
+            recorder.raw(topic, msgtype, t_ns, data)
+        t6 = clock()
+        s = row.samples
+        s["kernel"].append(t1 - t0)
+        s["snapshot"].append(t2 - t1 - (t1 - t0))
+        s["bytes"].append(t3 - t2)
+        s["prepare"].append(t4 - t3)
+        s["publish"].append(t5 - t4)
+        s["record"].append(t6 - t5)
+        s["total"].append(t6 - t3)
+        row.diag.append(diag)
+        if progress is not None and i % 50 == 0:
+            progress(i, publications, f"n = {n}{' (subscriber)' if with_sub else ''}")
+    return row
+
+
+def publish_costs(node, repeats: int = 3000) -> dict[str, float]:
+    """Microseconds (median) of one `publish(bytes)` of a WrenchStamped without a subscriber, and
+    of the binding's `publish_raw` under it (rclpy's Python layer is the difference)."""
+    from geometry_msgs.msg import WrenchStamped
+
+    from ..io import messages as M
+
+    pub = node.create_publisher(WrenchStamped, "/gyro_sim_bench/wrench_probe", 10)
+    data = M.wrench_stamped(1, "probe", np.ones(3), np.ones(3))
+    raw = getattr(pub, "_Publisher__publisher").publish_raw
+    out = {}
+    for name, fn in (("publish", pub.publish), ("publish_raw", raw)):
+        ts = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            fn(data)
+            ts.append(time.perf_counter() - t0)
+        out[name] = float(np.median(ts) * 1e6)
+    node.destroy_publisher(pub)
+    return out
+
+
+def gil_released_by_publish(node, seconds: float = 0.5) -> dict[str, float]:
+    """Whether rcl's publish releases the interpreter lock: publish calls per second on one thread
+    while another thread runs Python, against the same with a call that does release it
+    (time.sleep(0)). A call that releases the lock must win it back on return, which waits for the
+    other thread's switch interval: such a loop manages only ~1/switch-interval calls per second."""
+    from geometry_msgs.msg import WrenchStamped
+
+    from ..io import messages as M
+
+    pub = node.create_publisher(WrenchStamped, "/gyro_sim_bench/gil_probe", 10)
+    data = M.wrench_stamped(1, "probe", np.ones(3), np.ones(3))
+
+    def rate(fn) -> float:
+        stop = False
+
+        def spin():
+            while not stop:
+                pass
+
+        th = threading.Thread(target=spin, daemon=True)
+        th.start()
+        t0, calls = time.perf_counter(), 0
+        while time.perf_counter() - t0 < seconds:
+            fn()
+            calls += 1
+        stop = True
+        th.join()
+        return calls / seconds
+
+    out = {"publish_calls_per_s": rate(lambda: pub.publish(data)), "sleep0_calls_per_s": rate(lambda: time.sleep(0)),
+           "switch_interval_s": sys.getswitchinterval()}
+    out["released"] = float(out["publish_calls_per_s"] < 10 * out["sleep0_calls_per_s"])
+    node.destroy_publisher(pub)
+    return out
+
+
+def measure(sizes=DEFAULT_SIZES, publications: int = DEFAULT_PUBLICATIONS, *, subscriber: bool = True,
+            progress=None) -> dict:
+    """Every size's rows, the cost of one publish and the lock test; needs rclpy."""
+    import rclpy
+    from rclpy.node import Node
+
+    with tempfile.TemporaryDirectory(prefix="gyro_sim_pub_") as tmp:
+        workdir = Path(tmp)
+        env = _env(workdir)
+        os.environ.update({k: env[k] for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_LOG_DIR")})
+        rclpy.init()
+        try:
+            node = Node("gyro_sim", namespace="/gyro_sim_bench")
+            rows = []
+            for n in sizes:
+                rows += measure_size(n, publications, node, workdir, subscriber_env=env if subscriber else None,
+                                     progress=progress)
+            one = publish_costs(node)
+            gil = gil_released_by_publish(node)
+            node.destroy_node()
+        finally:
+            rclpy.shutdown()
+    return {"rows": rows, "publish": one, "gil": gil, "load": os.getloadavg()[0], "cores": os.cpu_count()}
+
+
+def table(result: dict) -> str:
+    """Markdown: one line per size and subscriber case, median / p99 of each part (us)."""
+    rows = result["rows"]
+    head = "| n | subscriber | " + " | ".join(PARTS) + " | total, with diagnostics | recorder's sender thread |\n"
+    head += "|---:|:---:|" + "---:|" * (len(PARTS) + 2) + "\n"
+    lines = []
+    for r in rows:
+        cells = [f"{r.stat(p):.0f} / {r.stat(p, 99):.0f}" for p in PARTS]
+        lines.append(f"| {r.n} | {'yes' if r.subscriber else 'no'} | " + " | ".join(cells)
+                     + f" | {r.stat('total', 50, diag=True):.0f} | {r.sender_cpu * 1e6:.0f} |")
+    one, gil = result["publish"], result["gil"]
+    text = head + "\n".join(lines) + "\n\n"
+    text += ("Microseconds, median / p99 over the publications (every 10th with /diagnostics; the median of those in "
+             "its column; the recorder's sender thread: its CPU per publication, which holds the interpreter lock "
+             "the physics thread needs). prepare = kernel + snapshot + bytes as `Outputs.prepare_state` runs them; "
+             "total = prepare + publish + record, the physics thread's cost.\n\n")
+    text += (f"One `publish(bytes)` without a subscriber: {one['publish']:.2f} us, of which the binding's "
+             f"`publish_raw`: {one['publish_raw']:.2f} us. With another thread running Python, publish "
+             f"manages {gil['publish_calls_per_s']:.0f} calls/s against {gil['sleep0_calls_per_s']:.0f} for "
+             f"a call that releases the lock (time.sleep(0)): rcl publish "
+             f"{'releases' if gil['released'] else 'does not release'} the interpreter lock.\n\n")
+    text += f"Machine load (1-minute average, {result['cores']} cores, shared): {result['load']:.2f}.\n"
+    return text
+
+
+def cmd_bench_publication(args) -> int:
+    from ..progress import Progress
+
+    sizes = QUICK_SIZES if args.quick else tuple(args.sizes or DEFAULT_SIZES)
+    pubs = QUICK_PUBLICATIONS if args.quick else args.publications
+    try:
+        result = measure(sizes, pubs, subscriber=not args.no_subscriber, progress=Progress("publication"))
+    except (ImportError, RuntimeError) as exc:
+        print(f"gyro-sim bench publication: {exc}", file=sys.stderr)
+        return 1
+    print(table(result))
+    return 0
+
+
+def register(sub, bench) -> None:
+    """Add `gyro-sim bench publication`."""
+    p = bench.add_parser("publication", help="the physics thread's cost of one publication, part by part (needs rclpy)")
+    p.add_argument("--sizes", type=int, nargs="+", help=f"chain lengths (default {' '.join(map(str, DEFAULT_SIZES))})")
+    p.add_argument("--publications", type=int, default=DEFAULT_PUBLICATIONS, help="publications per size")
+    p.add_argument("--no-subscriber", action="store_true", help="skip the runs with a subscriber process")
+    p.add_argument("--quick", action="store_true", help=f"n = {QUICK_SIZES[0]}, {QUICK_PUBLICATIONS} publications")
+    p.set_defaults(fn=cmd_bench_publication)

@@ -1,0 +1,105 @@
+"""The node's publication path: Simulator.snapshot(into=frame.scatter) writes the numbers
+straight into the messages' bytes (io.messages.Frame). Those bytes must be the builders' bytes
+of the same snapshot (the builders are checked against mcap's encoder, rosbags and rclpy in
+test_cdr), on both backends, for every choice of parts; a non-finite number is never let out."""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from gyro_sim.core import fast
+from gyro_sim.core.simulator import SimulationError, Simulator
+from gyro_sim.io import messages as M
+
+BACKENDS = ["numpy"] + (["numba"] if fast.available() else [])
+#: spherical joints, hinges and an actuated torque rotor; a speed rotor; a free base with rotors;
+#: a moving base
+SCENES = ("hinge_chain", "speed_rotor_top", "free_chain_rotors", "vibrating_base")
+
+
+def driven(scene: str, backend: str) -> Simulator:
+    sim = Simulator(scene, integrator="rk4", backend=backend)
+    rng = np.random.default_rng(3)
+    if sim.axis_names:
+        sim.set_axis_moments(rng.normal(size=len(sim.axis_names)) * 0.05)
+    sim.advance(0.02)
+    return sim
+
+
+def builders(snap, pub: M.Publication, t: int, wrenches: bool, poses: bool, tf: bool) -> list[bytes]:
+    want = [M.joint_state(snap, t), M.clock(t)]
+    if wrenches:
+        want += [M.wrench_stamped(t, b, f, m) for b, f, m in zip(pub.body_names, snap.wrench_force, snap.wrench_moment)]
+    if poses:
+        want.append(M.pose_array(snap, t))
+    if tf:
+        want.append(M.tf_message(snap, t))
+    return want
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("scene", SCENES)
+def test_frame_bytes_are_the_builders_bytes(scene, backend):
+    sim = driven(scene, backend)
+    pub = M.Publication(sim.model.names)
+    names = sim.snapshot(bodies=False, wrenches=False, invariants=False).joint_names
+    for wrenches, poses, tf in ((True, True, True), (False, False, False), (True, False, True), (False, True, False)):
+        frame = pub.frame(names, wrenches=wrenches, poses=poses, tf=tf)
+        for step in range(2):  # filled again: nothing left over from the last time
+            sim.advance(0.01)
+            t = M.time_ns(sim.time) + 2**33 * step  # past 2^32 ns: seconds and nanoseconds both change
+            snap = sim.snapshot(bodies=poses or tf, wrenches=wrenches, invariants=False, into=frame.scatter)
+            assert snap.nonfinite() is None
+            got = frame.messages(t)
+            assert [g[2] for g in got] == builders(snap, pub, t, wrenches, poses, tf)
+            topics = [M.JOINT_STATES, M.CLOCK] + (list(pub.wrench_topics) if wrenches else [])
+            topics += ([pub.poses_topic] if poses else []) + ([M.TF] if tf else [])
+            assert [g[0] for g in got] == topics
+            assert [g[1] for g in got] == [M.topic_types(pub.body_names)[x] for x in topics]
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_snapshot_into_gives_the_same_numbers_as_without(backend):
+    sim = driven("hinge_chain", backend)
+    frame = M.Publication(sim.model.names).frame(sim.snapshot().joint_names, wrenches=True, poses=True, tf=True)
+    a = sim.snapshot(into=frame.scatter)
+    b = sim.snapshot()
+    for name in ("position", "velocity", "effort", "body_position", "body_quaternion", "wrench_force", "wrench_moment"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+    assert a.invariants.keys() == b.invariants.keys()
+
+
+class _Node:
+    """What ros.outputs.Outputs asks of an rclpy node, without ROS: publishers nobody reads."""
+
+    def get_fully_qualified_name(self):
+        return M.NAMESPACE
+
+    def create_publisher(self, cls, topic, qos):
+        return SimpleNamespace(topic=topic, get_subscription_count=lambda: 1, publish=lambda data: None)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_node_outputs_are_the_builders_bytes_and_refuse_non_finite_numbers(backend):
+    pytest.importorskip("sensor_msgs.msg")
+    from gyro_sim.ros.outputs import Outputs
+
+    sim = driven("hinge_chain", backend)
+    out = Outputs(_Node(), sim, SimpleNamespace(publish_wrenches=True, publish_poses=True))
+    for i in range(3):  # the first from the snapshot's arrays, then from the frame
+        sim.advance(0.01)
+        t = M.time_ns(sim.time)
+        batch = out.prepare_state(t, sim, None if i == 2 else False)
+        snap = sim.snapshot()
+        tf = M.TF in out.pubs
+        want = builders(snap, out.publication, t, True, True, tf)
+        if i == 2:
+            want.append(M.diagnostics(snap, t, out.publication.hardware_id))
+        assert [b[2] for b in batch] == want
+    bad = sim.state
+    bad[sim.model.i_vel.start + 1] = np.nan  # a joint rate: every output of the bodies past it
+    sim._y, sim._cache, sim._kin_ok = bad, None, False  # noqa: SLF001 - a state the integrator would refuse
+    with pytest.raises(SimulationError, match="non-finite (position|velocity)"):
+        out.prepare_state(M.time_ns(sim.time), sim)
