@@ -227,10 +227,16 @@ def _run(sim, out, recorder, n: int, publications: int, with_sub: bool, progress
         # what the physics thread runs: prepare, then send (split into its two halves)
         batch = out.prepare_state(t_ns, sim, run if diag else False)
         t4 = clock()
+        publisher = getattr(out, "_publisher", None)  # the call Outputs.send makes
         for topic, _, data in batch:
-            pub = out.pubs.get(topic)
-            if pub is not None:
-                pub.publish(data)
+            if publisher is not None:
+                fn = publisher(topic)
+                if fn is not None:
+                    fn(data)
+            else:
+                pub = out.pubs.get(topic)
+                if pub is not None:
+                    pub.publish(data)
         t5 = clock()
         for topic, msgtype, data in batch:
             recorder.raw(topic, msgtype, t_ns, data)
@@ -247,6 +253,56 @@ def _run(sim, out, recorder, n: int, publications: int, with_sub: bool, progress
         if progress is not None and i % 50 == 0:
             progress(i, publications, f"n = {n}{' (subscriber)' if with_sub else ''}")
     return row
+
+
+def isolated(n: int, repeats: int = 300) -> dict[str, float]:
+    """Microseconds (median of `repeats` back-to-back calls on one state, no rclpy, no recorder,
+    no other thread): the kernel (joint states only, and with wrenches and poses), a snapshot
+    as the recording node asks for it, the bytes, and prepare_state with and without the
+    diagnostics, through Outputs with stand-in publishers."""
+    from ..core import fast_outputs as fo
+    from ..io import messages as M
+    from ..ros.outputs import Outputs
+
+    class _Node:
+        def get_fully_qualified_name(self):
+            return M.NAMESPACE
+
+        def create_publisher(self, cls, topic, qos):
+            return SimpleNamespace(get_subscription_count=lambda: 1, publish=lambda data: None)
+
+    sim = _simulator(n)
+    out = Outputs(_Node(), sim, SimpleNamespace(publish_wrenches=True, publish_poses=True))
+    out.prepare_state(0, sim)
+    out.prepare_state(0, sim)
+    frame = _frame(out)
+    run = M.Status("gyro_sim: run", {"real_time_factor": 1.0})
+
+    def med(fn) -> float:
+        ts = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            fn()
+            ts.append(time.perf_counter() - t0)
+        return float(np.median(ts) * 1e6)
+
+    res = {}
+    scatter = None if frame is None else frame.scatter
+    if hasattr(fo, "WANT_BODIES"):
+        res["kernel, joint states"] = med(lambda: sim._outputs_compiled(0, None, fresh=False))  # noqa: SLF001
+        res["kernel, + wrenches, poses"] = med(lambda: sim._outputs_compiled(  # noqa: SLF001
+            fo.WANT_BODIES | fo.WANT_WRENCHES, scatter, fresh=False))
+        res["snapshot"] = med(lambda: sim.snapshot(invariants=False, into=scatter))
+        snap = sim.snapshot(invariants=False, into=scatter)
+        res["bytes"] = med(lambda: frame.messages(1))
+    else:
+        res["kernel, + wrenches, poses"] = med(lambda: sim._outputs_compiled())  # noqa: SLF001
+        res["snapshot"] = med(lambda: sim.snapshot(invariants=False))
+        snap = sim.snapshot(invariants=False)
+        res["bytes"] = med(lambda: out.publication.messages(snap, 1))
+    res["prepare"] = med(lambda: out.prepare_state(1, sim))
+    res["prepare, with diagnostics"] = med(lambda: out.prepare_state(1, sim, run))
+    return res
 
 
 def publish_costs(node, repeats: int = 3000) -> dict[str, float]:
@@ -321,6 +377,7 @@ def measure(sizes=DEFAULT_SIZES, publications: int = DEFAULT_PUBLICATIONS, *, su
         try:
             node = Node("gyro_sim", namespace="/gyro_sim_bench")
             rows = []
+            alone = {n: isolated(n) for n in sizes}
             for n in sizes:
                 rows += measure_size(n, publications, node, workdir, subscriber_env=env if subscriber else None,
                                      progress=progress)
@@ -329,7 +386,7 @@ def measure(sizes=DEFAULT_SIZES, publications: int = DEFAULT_PUBLICATIONS, *, su
             node.destroy_node()
         finally:
             rclpy.shutdown()
-    return {"rows": rows, "publish": one, "gil": gil, "load": os.getloadavg()[0], "cores": os.cpu_count()}
+    return {"rows": rows, "isolated": alone, "publish": one, "gil": gil, "load": os.getloadavg()[0], "cores": os.cpu_count()}
 
 
 def table(result: dict) -> str:
@@ -353,6 +410,13 @@ def table(result: dict) -> str:
              f"manages {gil['publish_calls_per_s']:.0f} calls/s against {gil['sleep0_calls_per_s']:.0f} for "
              f"a call that releases the lock (time.sleep(0)): rcl publish "
              f"{'releases' if gil['released'] else 'does not release'} the interpreter lock.\n\n")
+    alone = result.get("isolated") or {}
+    if alone:
+        keys = list(next(iter(alone.values())))
+        text += ("Each part alone (median of back-to-back calls on one state, stand-in publishers, no recorder, "
+                 "no other thread), us:\n\n| n | " + " | ".join(keys) + " |\n|---:|" + "---:|" * len(keys) + "\n")
+        text += "".join(f"| {n} | " + " | ".join(f"{v[k]:.1f}" for k in keys) + " |\n" for n, v in alone.items())
+        text += "\n"
     text += f"Machine load (1-minute average, {result['cores']} cores, shared): {result['load']:.2f}.\n"
     return text
 

@@ -20,6 +20,7 @@ is conserved with or without commands wherever the energy is conserved without t
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Mapping
 
@@ -66,11 +67,11 @@ class Snapshot:
             "wrench_moment")
         for name in names:
             v = getattr(self, name)
-            if v is not None and not np.all(np.isfinite(v)):
+            if v is not None and v.size and not np.all(np.isfinite(v)):
                 return name
         for name in ("time", "error_estimate", "work", "energy_balance", "h_lambda"):
             v = getattr(self, name)
-            if v is not None and not np.isfinite(v):
+            if v is not None and not math.isfinite(v):
                 return name
         for group in ("invariants", "drift"):
             for key, v in (getattr(self, group) or {}).items():
