@@ -25,12 +25,14 @@ KERNEL_MODULES = ("fast", "rk_kernels", "fast_loop", "fast_outputs", "lagrange",
 #: the compiled loops each integrator runs on the numba backend, (module, name), besides the
 #: kernels every run needs (fast.py's, the outputs, a Lagrange chain's integrals); the cache
 #: counts as cold for an integrator when any of its kernels has no entry
-COMMON_KERNELS = (("fast_outputs", "outputs_kernel"), ("lagrange", "_sums_82"), ("lagrange", "_sums_85"))
+COMMON_KERNELS = (("fast_outputs", "outputs_kernel"), ("fast_outputs", "publication_kernel"), ("lagrange", "_sums_82"),
+                  ("lagrange", "_sums_85"))
 LOOPS = {
     "rk4": (("fast_loop", "erk_march"),),
     "lie4": (("fast_lie", "lie_march"),),
     "gauss4": (("fast_gauss", "gauss_march"),),
-    "fixed": (("fast_loop", "erk_march"), ("fast_gauss", "gauss_march")),
+    # fixed: its rescue (dop853) steps through the Python driver on the kernels
+    "fixed": (("fast_loop", "erk_march"), ("fast_gauss", "gauss_march"), ("dop853_kernels", "dop_update")),
     "dop853": (("fast_dop853", "dop853_advance"),),
     "auto": (("dop853_kernels", "dop_update"),),  # auto's dop853 steps through the Python driver
     "radau": (),

@@ -86,13 +86,13 @@ def stiffness_note(sim, cfg) -> str:
     (gyro_sim.core.integrators.choose: h |lambda| at the initial state against RK4's limit)."""
     if cfg.integrator not in ("rk4", "lie4"):
         return ""
-    from ..core.integrators.choose import fixed_step_method
+    from ..core.integrators.choose import fixed_step_choice
 
-    name, reason = fixed_step_method(sim, cfg.dt)
-    if name == "rk4":
+    c = fixed_step_choice(sim, cfg.dt)
+    if c.method == "rk4" and c.substeps == 1:
         return ""
-    return (f"the scene is stiff for {cfg.integrator} at physics_rate {cfg.physics_rate:g} Hz ({reason}); "
-            f"it may stop with a simulation error: raise physics_rate or try -p integrator:={name}")
+    return (f"the scene is stiff for {cfg.integrator} at physics_rate {cfg.physics_rate:g} Hz ({c.reason}); "
+            f"it may stop with a simulation error or drift: raise physics_rate or try -p integrator:=fixed")
 
 
 class GyroSimNode(Node):

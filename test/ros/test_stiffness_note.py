@@ -25,7 +25,8 @@ def test_a_fast_heavy_top_is_stiff_for_rk4_at_1_khz(tmp_path):
     path = tmp_path / "fast_top.yaml"
     path.write_text(yaml.safe_dump(top))
     text = note(str(path))
-    assert "stiff for rk4 at physics_rate 1000 Hz" in text and "integrator:=gauss4" in text, text
+    assert "stiff for rk4 at physics_rate 1000 Hz" in text and "integrator:=fixed" in text, text
+    assert "x40 substeps" in text, text  # what "fixed" would do: 10 rad a step, 0.25 rad a substep
 
 
 def test_the_default_is_fixed_and_the_start_line_says_what_it_chose(tmp_path):
@@ -35,4 +36,4 @@ def test_the_default_is_fixed_and_the_start_line_says_what_it_chose(tmp_path):
     assert cfg.integrator == "fixed"
     sim = Simulator(cfg.scene, integrator=cfg.integrator, step=cfg.dt)
     assert method_choice(sim, cfg).startswith("rk4: h |lambda| = ")
-    assert stiffness_note(sim, cfg) == ""  # "fixed" needs no warning: it takes gauss4 where rk4 fails
+    assert stiffness_note(sim, cfg) == ""  # "fixed" needs no warning: it substeps, or takes gauss4, where rk4 fails

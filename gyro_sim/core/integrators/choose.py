@@ -12,7 +12,19 @@ the differences) when size <= KRYLOV_DIM. rk4 is chosen when h |lambda| stays be
 RK4_SAFETY x RK4_IMAG_LIMIT (the margin covers the estimate and the motion moving the
 eigenvalues); otherwise gauss4, A-stable, whose Newton iteration is the remaining limit.
 
+A body that turns fast must be resolved whatever the method: on the heavy top at 1e3 rad/s
+(1 rad a 1 ms step, h |lambda| = 0.61, inside rk4's region) rk4's energy grew x2.8 over 1e6
+steps without leaving a finite state, and gauss4 at 1e4 rad/s (10 rad a step) kept the energy
+but precessed the wrong way. So each physics step is cut into `substeps` so that no body turns
+more than SPIN_RESOLVE rad in one (`body_rate_bound`: the sum of the joints' relative rates;
+rotors excluded, their angles never enter the dynamics), at most MAX_SUBSTEPS, and the method
+is chosen for the substep. Measured over 5 s against the exact regular precession (eq 88,
+`gyro_sim.bench.spin_sweep`): the heavy top at 1e3 rad/s rk4 x4 (axis error 1.9e-5 rad, where
+rk4 at 1 ms gets 5.5e-3), at 1e4 rad/s rk4 x40 (1.9e-6; CPU 0.34 s per simulated s, n = 1);
+the double gyroscope at 1e3 rk4 x7 (2.8e-5), at 1e4 rk4 x64 (4.1e-6; 0.54 s per s).
+
     name, reason = fixed_step_method(sim, 1e-3)   # ("rk4", "rk4: h |lambda| = 0.12 ...")
+    c = fixed_step_choice(sim, 1e-3)              # Choice("rk4", 40, "rk4 x40 substeps ...", 0.16)
 
 A scene that starts soft may stiffen: a commanded moment spins a body up, and the gyroscopic
 eigenvalues grow with the spin (and the commanded moments enter the Jacobian themselves,
@@ -23,14 +35,28 @@ has moved by more than a factor SPEED_CHANGE (with RECHECK_DIM Krylov vectors: a
 evaluations, against the 80 that 20 ms of rk4 at 1 kHz take); and switches: to gauss4 above the rk4 limit, back to rk4 below
 RK4_RETURN of it (hysteresis: no flapping at the boundary). A speed that grows within one call
 (a huge step moment spins a link up in milliseconds: the estimate at the command saw a chain at
-rest) can still take rk4 past its limit: when rk4 leaves a non-finite state, the call is taken
-again from its start with gauss4. Every decision depends only on the simulated states and
-commands, and the estimate is deterministic (a seeded start vector), so a re-simulation makes
-the same switches bit for bit.
+rest) can still take rk4 past its limit. So a call that fails is taken again from its start one
+rung down: rk4 -> gauss4 -> RESCUE (dop853, adaptive at the integrator's rtol and atol, its
+Python driver on the compiled kernels, no step longer than the physics step), which then
+stays until the next scheduled check (CHECK_PERIOD); only a call dop853 cannot take either
+(its step size collapses: a singular scene) is a simulation error. A call fails when its
+method raises (a non-finite state, Newton not converging) or when the energy watchdog, the
+`monitor` the Simulator sets where the exact motion keeps an energy (energy, or the Jacobi
+integral without commands; compiled backend), finds the call's energy error (E1 - E0 - work
+of the held moments) above ENERGY_WATCH x its length x the kinetic energy: a step that does
+not resolve the motion no longer passes silently. The heavy tip of mass ratio 1e6 is the case
+that needs every rung: when the chain straightens its light links whip (~1e8 rad/s^2 for
+~0.1 ms), rk4 fails at any step down to 16 us, gauss4's Newton iteration diverges, dop853
+takes ~150 steps through it; over 0.3 s "fixed" keeps the energy to 1.4 J where rk4 with the
+non-finite retake alone ran away to 3.6e12 J. Every decision depends only on the simulated
+states and commands, and the estimate is deterministic (a seeded start vector), so a
+re-simulation makes the same switches bit for bit.
 """
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+
 import numpy as np
 
 from .base import EPS, FixedStepIntegrator, IntegrationError
@@ -55,6 +81,16 @@ SPEED_CHANGE = 1.5
 MIN_RECHECK = 0.02
 #: "fixed": Krylov vectors of the estimates after the first (the first takes KRYLOV_DIM)
 RECHECK_DIM = 10
+#: most rotation of a body in one (sub)step, rad: a faster body is stepped in substeps
+SPIN_RESOLVE = 0.25
+#: most substeps of one physics step
+MAX_SUBSTEPS = 64
+#: "fixed": the last resort of a call that rk4 and gauss4 both fail (adaptive, error-controlled)
+RESCUE = "dop853"
+#: "fixed": the energy watchdog's limit on a call's energy error, relative to the kinetic
+#: energy, per simulated second of the call (1e-5 for the node's 10 ms calls; rk4 at 1 ms on the
+#: shipped scenes stays below 4.2e-7 a call, config/chain_4.yaml the highest)
+ENERGY_WATCH = 1e-3
 
 
 def spectral_radius_estimate(rhs, t: float, y: np.ndarray, dim: int = KRYLOV_DIM) -> float:
@@ -86,35 +122,89 @@ def spectral_radius_estimate(rhs, t: float, y: np.ndarray, dim: int = KRYLOV_DIM
     return float(np.abs(np.linalg.eigvals(H[:k, :k])).max())
 
 
-def fixed_step_method(sim, dt: float) -> tuple[str, str]:
-    """The fixed-step integrator for the scene of `sim` (a gyro_sim.core.simulator.Simulator;
-    not imported: the integrators know the simulator by its attributes only) at step `dt` (s), and a one-line reason.
+@dataclass(frozen=True)
+class Choice:
+    """A fixed-step method for a physics step h: `method` ("rk4" or "gauss4") in `substeps`
+    equal substeps of h, why (one line), and the estimated h |lambda| of one substep."""
 
-    Returns ("rk4", "rk4: h |lambda| = 0.12 (stable below 1.4)") when dt times the estimated
-    largest |eigenvalue| of the rhs's Jacobian at the current state (commands held) is below
-    RK4_SAFETY x RK4_IMAG_LIMIT, else ("gauss4", "gauss4: h |lambda| = 35: stiff for rk4 ...").
-    Call it on a Simulator just built or reset (the node chooses at start): the rhs is held
-    with the scene's own rotor spins and no commanded moments. `sim` is not advanced.
+    method: str
+    substeps: int
+    reason: str
+    h_lambda: float
+
+    @property
+    def label(self) -> str:
+        """"rk4", or "rk4 x4" for 4 substeps."""
+        return self.method if self.substeps == 1 else f"{self.method} x{self.substeps}"
+
+
+def body_rate_bound(model, y: np.ndarray) -> float:
+    """An upper bound of the largest body angular speed |w^k| (rad/s) in state y: the sum over
+    the chain of its joints' relative rates (a spherical joint's |u| over its 3 columns, a
+    hinge's |phi'|; eqs 34, 50: w^k is the sum of the relative rates up to body k). Rotors do
+    not count: an axisymmetric rotor's angle never enters the dynamics (eqs 18-19), only its
+    momentum does, so its spin needs no resolving; nor does a base's translation."""
+    u = y[model.i_vel]
+    total = 0.0
+    if len(model.col_sph):
+        total += float(np.sqrt((u[model.col_sph] ** 2).sum(axis=1)).sum())
+    if len(model.col_hinge):
+        total += float(np.abs(u[model.col_hinge]).sum())
+    return total
+
+
+def substeps_for(h: float, omega: float, now: int = 1) -> int:
+    """Substeps of a step h so that no body turns more than SPIN_RESOLVE rad in one of them
+    (at most MAX_SUBSTEPS), at body angular speeds up to `omega`; the count used `now` is kept
+    while it is enough and at most twice what is needed (no flapping)."""
+    if not omega > 0:
+        need = 1
+    elif not math.isfinite(omega):
+        need = MAX_SUBSTEPS
+    else:
+        need = min(MAX_SUBSTEPS, max(1, math.ceil(h * omega / SPIN_RESOLVE - 1e-9)))
+    return now if need <= now <= 2 * need else need
+
+
+def fixed_step_choice(sim, dt: float) -> Choice:
+    """The fixed-step method for the scene of `sim` (a gyro_sim.core.simulator.Simulator; not
+    imported: the integrators know the simulator by its attributes only) at step `dt` (s).
+
+    The substeps resolve the fastest body's rotation (`substeps_for`); the method is rk4 when
+    the substep times the estimated largest |eigenvalue| of the rhs's Jacobian at the current
+    state (commands held) is below RK4_SAFETY x RK4_IMAG_LIMIT, else gauss4. Call it on a
+    Simulator just built or reset (the node chooses at start): the rhs is held with the scene's
+    own rotor spins and no commanded moments. `sim` is not advanced.
     """
     if not (dt > 0 and math.isfinite(dt)):
         raise ValueError(f"dt must be a positive finite number, got {dt!r}")
     m = sim.model
     p0 = m.torque_p0.copy() if len(m.torque_body) else None
     sim.system.hold(sim.time, p0, None, None)  # the reset state's inputs, as advance holds them
-    name, reason, _ = _choice(sim.system.rhs, sim.time, sim.state, dt, "rk4")
-    return name, reason
+    return _choice(sim.system.rhs, sim.time, sim.state, dt, "rk4", omega=body_rate_bound(m, sim.state))
 
 
-def _choice(rhs, t: float, y: np.ndarray, h: float, now: str, dim: int = KRYLOV_DIM) -> tuple[str, str, float]:
-    """(method, reason, h |lambda|) at (t, y) for step h, given the method used `now` (the
-    hysteresis of RK4_RETURN applies when leaving gauss4), from `dim` Krylov vectors."""
-    hl = h * spectral_radius_estimate(rhs, t, y, dim)
+def fixed_step_method(sim, dt: float) -> tuple[str, str]:
+    """(method, one-line reason) of :func:`fixed_step_choice`, e.g. ("rk4", "rk4: h |lambda| =
+    0.12 (stable below 1.4)") or ("rk4", "rk4 x40 substeps (a body turns 10 rad a step): ...")."""
+    c = fixed_step_choice(sim, dt)
+    return c.method, c.reason
+
+
+def _choice(rhs, t: float, y: np.ndarray, h: float, now: str, dim: int = KRYLOV_DIM, omega: float = 0.0,
+            k_now: int = 1) -> Choice:
+    """The Choice at (t, y) for step h, given the method used `now` (the hysteresis of
+    RK4_RETURN applies when leaving gauss4) and its substeps `k_now`, from `dim` Krylov
+    vectors, with body angular speeds up to `omega`."""
+    k = substeps_for(h, omega, k_now)
+    hl = h / k * spectral_radius_estimate(rhs, t, y, dim)
     limit = RK4_SAFETY * RK4_IMAG_LIMIT
     back = limit if now == "rk4" else RK4_RETURN * limit
+    sub = f" x{k} substeps (a body turns up to {h * omega:.2g} rad a step)" if k > 1 else ""
     if hl < back:
-        return "rk4", f"rk4: h |lambda| = {hl:.2g} (stable below {limit:.2g})", hl
-    return "gauss4", (f"gauss4: h |lambda| = {hl:.2g}: stiff for rk4 "
-                      f"(rk4 needs below {back:.2g} at h = {h:g} s)"), hl
+        return Choice("rk4", k, f"rk4{sub}: h |lambda| = {hl:.2g} (stable below {limit:.2g})", hl)
+    return Choice("gauss4", k, f"gauss4{sub}: h |lambda| = {hl:.2g}: stiff for rk4 "
+                               f"(rk4 needs below {back:.2g} at h = {h / k:.3g} s)", hl)
 
 
 class SceneFixedStep(FixedStepIntegrator):
@@ -125,9 +215,12 @@ class SceneFixedStep(FixedStepIntegrator):
     Attributes
     ----------
     current : the method stepping now ("rk4" or "gauss4").
-    reason : one line: why (h |lambda| against rk4's limit).
-    h_lambda : the last estimate of h |lambda|.
-    switches : the changes after the first choice, (t, from, to, reason) each (as "auto").
+    substeps : substeps of one step now (1: none): the fastest body turns at most
+        SPIN_RESOLVE rad in one.
+    reason : one line: why (the substeps, h |lambda| of a substep against rk4's limit).
+    h_lambda : the last estimate of h |lambda| (h: a substep).
+    switches : the changes after the first choice, (t, from, to, reason) each (as "auto";
+        from and to are Choice labels: "rk4", "gauss4 x4").
 
     References
     ----------
@@ -145,10 +238,17 @@ class SceneFixedStep(FixedStepIntegrator):
         from .gauss import Gauss4  # here: gauss imports this package's base, not the reverse
         from .rk4 import RK4
 
-        self.methods = {"rk4": RK4(system, **options), "gauss4": Gauss4(system, **options)}
+        from .dop853 import DOP853
+
+        self.methods = {"rk4": RK4(system, **options), "gauss4": Gauss4(system, **options),
+                        RESCUE: DOP853(_Plain(system), **{**options, "max_step": self.step})}
         self.current = ""
+        self.substeps = 1
         self.reason = ""
         self.h_lambda = math.nan
+        #: the energy watchdog: (t0, y0, t1, y1) -> relative energy error of a call, or None
+        self.monitor = None
+        self._hold_until = -math.inf
         self.switches: list[tuple[float, str, str, str]] = []
         self._next_check = -math.inf
         self._last_check = -math.inf
@@ -160,6 +260,7 @@ class SceneFixedStep(FixedStepIntegrator):
         if self._speeds is None:
             self._speeds = self.lin_index
         self._speeds = np.arange(self.n)[self._speeds]  # a slice or indices: indices
+        self._model = model if hasattr(model, "col_sph") else None
         self._y0 = np.empty(self.n)
 
     def reset(self) -> None:
@@ -168,21 +269,26 @@ class SceneFixedStep(FixedStepIntegrator):
             m.reset()
         self._next_check = -math.inf
         self._last_check = -math.inf
+        self._hold_until = -math.inf
         self.current = ""
+        self.substeps = 1
 
     def warm_up(self, t0: float, y: np.ndarray) -> None:
         """One step of each method on a copy of y (then forgotten): every compiled path this
         integrator may switch to is compiled (or loaded from the cache) now, not at the first
         switch in the middle of a real-time run. Counters are kept as they were."""
-        counts = {name: (m.nfev, m.nsteps, m.njev, m.nlu) for name, m in self.methods.items()}
+        counts = {name: (m.nfev, m.nsteps, m.njev, m.nlu, m.nrejected) for name, m in self.methods.items()}
         try:
             for m in self.methods.values():
-                m.march(t0, y.copy(), t0 + self.step)
+                if m.adaptive:
+                    m.advance(t0, y, t0 + self.step)
+                else:
+                    m.march(t0, y.copy(), t0 + self.step)
         except IntegrationError:
             pass  # a scene a method cannot step from here: it is compiled all the same
         finally:
             for name, m in self.methods.items():
-                m.nfev, m.nsteps, m.njev, m.nlu = counts[name]
+                m.nfev, m.nsteps, m.njev, m.nlu, m.nrejected = counts[name]
                 m.reset()
 
     def _speed(self, y: np.ndarray) -> float:
@@ -191,6 +297,8 @@ class SceneFixedStep(FixedStepIntegrator):
     def _due(self, t0: float, y: np.ndarray) -> bool:
         if t0 >= self._next_check:
             return True
+        if t0 < self._hold_until:  # a rung down after a failure: kept until the next check
+            return False
         if t0 < self._last_check + MIN_RECHECK:
             return False
         if getattr(self.system, "inputs_version", 0) != self._inputs_seen:
@@ -198,11 +306,22 @@ class SceneFixedStep(FixedStepIntegrator):
         v, seen = self._speed(y), self._speed_seen
         return v > SPEED_CHANGE * seen or v * SPEED_CHANGE < seen
 
-    def _switch(self, t: float, name: str) -> None:
-        if self.current and name != self.current:
-            self.switches.append((t, self.current, name, self.reason))
+    def _body_rate(self, y: np.ndarray) -> float:
+        return body_rate_bound(self._model, y) if self._model is not None else 0.0
+
+    def _label(self) -> str:
+        return Choice(self.current, self.substeps, "", 0.0).label
+
+    def _switch(self, t: float, name: str, substeps: int) -> None:
+        if (name, substeps) == (self.current, self.substeps):
+            return
+        before = self._label() if self.current else ""
+        for m in self.methods.values():
+            m.step = self.step / substeps
+        self.current, self.substeps = name, substeps
+        if before:
+            self.switches.append((t, before, self._label(), self.reason))
             self.methods[name].reset()
-        self.current = name
 
     def _counted_rhs(self, t: float, y: np.ndarray) -> np.ndarray:
         self._check_fev += 1
@@ -211,27 +330,40 @@ class SceneFixedStep(FixedStepIntegrator):
     def _march(self, t0: float, y: np.ndarray, t1: float) -> None:
         if self._due(t0, y):
             dim = RECHECK_DIM if self.current else KRYLOV_DIM
-            name, self.reason, self.h_lambda = _choice(self._counted_rhs, t0, y, self.step, self.current or "rk4", dim)
-            self._switch(t0, name)
+            c = _choice(self._counted_rhs, t0, y, self.step, self.current or "rk4", dim, self._body_rate(y),
+                        self.substeps)
+            self.reason, self.h_lambda = c.reason, c.h_lambda
+            self._switch(t0, c.method, c.substeps)
             self._last_check = t0
             self._next_check = t0 + CHECK_PERIOD
             self._inputs_seen = getattr(self.system, "inputs_version", 0)
             self._speed_seen = self._speed(y)
         m = self.methods[self.current]
+        self._y0[:] = y
         try:
-            if self.current == "rk4":
-                self._y0[:] = y
+            while True:
                 try:
-                    m.march(t0, y, t1)
-                except IntegrationError as e:  # past rk4's limit within the call: again with gauss4
+                    if m.adaptive:
+                        y[:] = m.advance(t0, y, t1)
+                    else:
+                        m.march(t0, y, t1)
+                    if self.monitor is not None and self.current != RESCUE:
+                        err = self.monitor(t0, self._y0, t1, y)
+                        if not abs(err) <= ENERGY_WATCH * (t1 - t0):
+                            raise IntegrationError(self.current, f"energy watchdog: {err:.2g} of the kinetic energy "
+                                                   f"in {t1 - t0:.3g} s", t0, self.step / self.substeps)
+                    break
+                except IntegrationError as e:  # the call again from its start, one rung down
                     y[:] = self._y0
-                    self.reason = f"gauss4: rk4 left a non-finite state at t = {e.t:.6g} s"
-                    self._switch(t0, "gauss4")
-                    self._next_check = t0 + CHECK_PERIOD
-                    m = self.methods["gauss4"]
-                    m.march(t0, y, t1)
-            else:
-                m.march(t0, y, t1)
+                    if self.current == RESCUE:
+                        raise
+                    after = "gauss4" if self.current == "rk4" else RESCUE
+                    what = (f"failed ({e.reason})" if self.current != "rk4" or "watchdog" in e.reason
+                            else "left a non-finite state")
+                    self.reason = f"{after}: {self._label()} {what} at t = {e.t:.6g} s"
+                    self._switch(t0, after, 1 if after == RESCUE else self.substeps)
+                    self._next_check = self._hold_until = t0 + CHECK_PERIOD
+                    m = self.methods[after]
         finally:
             ms = self.methods.values()
             self.nfev = self._check_fev + sum(x.nfev for x in ms)
@@ -239,3 +371,14 @@ class SceneFixedStep(FixedStepIntegrator):
             self.njev = sum(x.njev for x in ms)
             self.nlu = sum(x.nlu for x in ms)
             self.last_step = m.last_step
+
+
+class _Plain:
+    """A system seen through its rhs only (no compiled march): the rescue's dop853 steps with
+    its Python driver on the compiled dop853 kernels, so that "fixed" compiles no third loop
+    for a rung most runs never take."""
+
+    def __init__(self, system):
+        self.system = system
+        self.size, self.quat_index = system.size, system.quat_index
+        self.rhs, self.project = system.rhs, system.project
