@@ -570,5 +570,5 @@ class Simulator:
         if not getattr(integ, "current", ""):
             return {}
         hl = getattr(integ, "h_lambda", None)
-        return {"method": integ.current, "method_reason": integ.reason,
+        return {"method": integ.current, "method_reason": integ.reason, "substeps": getattr(integ, "substeps", None),
                 "h_lambda": hl if hl is not None and math.isfinite(hl) else None}

@@ -55,6 +55,7 @@ class Snapshot:
     energy_scale: float | None = None  # what energy_balance is relative to (J)
     method: str | None = None  # the method stepping now, when the integrator chooses ("fixed")
     method_reason: str | None = None  # why that one (one line)
+    substeps: int | None = None  # its substeps of one physics step (a fast-turning body is resolved)
     h_lambda: float | None = None  # the chooser's last estimate of h |lambda| (step x largest |eigenvalue|)
     #: the compiled outputs found every number of the arrays they computed (joint states, poses,
     #: wrenches) finite as they wrote them: `nonfinite` need not look at those again

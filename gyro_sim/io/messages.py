@@ -286,6 +286,8 @@ def dynamics_values(snap) -> dict[str, float | str]:
     if snap.method:  # an integrator that chooses ("fixed"): which method steps now, and why
         out["integrator_now"] = snap.method
         out["integrator_reason"] = snap.method_reason or ""
+        if snap.substeps is not None:
+            out["integrator_substeps"] = float(snap.substeps)
         if snap.h_lambda is not None:
             out["stiffness_h_lambda"] = snap.h_lambda
     for name, value in (snap.invariants or {}).items():

@@ -260,3 +260,14 @@ def test_warm_up_runs_both_methods_and_leaves_no_trace():
     assert sorted(calls) == ["dop853", "gauss4", "rk4"]
     assert all(m.nsteps == m.nfev == m.nrejected == 0 for m in integ.methods.values())
     assert np.array_equal(sim.state, y0) and integ.current == "" and integ.switches == []
+
+
+def test_diagnostics_say_the_method_and_its_substeps():
+    from gyro_sim.bench.spin_sweep import heavy_top
+    from gyro_sim.io.messages import dynamics_values
+
+    sim = Simulator(heavy_top(1e3), integrator="fixed", step=STEP)
+    sim.advance(CALL)
+    values = dynamics_values(sim.snapshot(bodies=False, wrenches=False, invariants=False))
+    assert values["integrator_now"] == "rk4" and values["integrator_substeps"] == 4.0
+    assert values["integrator_reason"].startswith("rk4 x4 substeps"), values["integrator_reason"]
