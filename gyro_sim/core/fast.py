@@ -78,6 +78,10 @@ SPHERICAL_DOF = 3
 WORK_PER_BODY = 123
 #: per velocity column: S 6, U 6, U D^-1 6, u 1
 WORK_PER_COLUMN = 19
+#: per torque rotor: its spin p_i(t) (eq 29)
+WORK_PER_ROTOR = 1
+#: fixed scratch of the elimination: a 6 x 6, two 6-vectors, three 3 x 3, the base acceleration 6
+WORK_FIXED = 81
 #: `_aba` takes the square-root form (`_aba_stable`) when the classic elimination passes on to
 #: a body more than this many times its own mass (the subtree's apparent, articulated mass at
 #: the joint); below, the formed projection (`_aba_classic`) loses ~10 eps ratio^2 relative
@@ -138,51 +142,48 @@ def _skew(d, D):
 
 
 @_njit
-def _quat_to_matrix(q0, q1, q2, q3, R):
-    """R (3, 3) of a quaternion (w, x, y, z), divided by |q|^2 as rotations.quat_to_matrix does
-    (a rotation even for the non-unit quaternions of integrator stages)."""
+def _quat_to_matrix(q0, q1, q2, q3):
+    """R (3, 3) of a quaternion (w, x, y, z) as a tuple of its 9 entries, row by row, divided by
+    |q|^2 as rotations.quat_to_matrix does (a rotation even for the non-unit quaternions of
+    integrator stages)."""
     nn = q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3
-    R[0, 0] = (q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3) / nn
-    R[0, 1] = 2.0 * (q1 * q2 - q0 * q3) / nn
-    R[0, 2] = 2.0 * (q1 * q3 + q0 * q2) / nn
-    R[1, 0] = 2.0 * (q1 * q2 + q0 * q3) / nn
-    R[1, 1] = (q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3) / nn
-    R[1, 2] = 2.0 * (q2 * q3 - q0 * q1) / nn
-    R[2, 0] = 2.0 * (q1 * q3 - q0 * q2) / nn
-    R[2, 1] = 2.0 * (q2 * q3 + q0 * q1) / nn
-    R[2, 2] = (q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3) / nn
+    return ((q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3) / nn, 2.0 * (q1 * q2 - q0 * q3) / nn,
+            2.0 * (q1 * q3 + q0 * q2) / nn,
+            2.0 * (q1 * q2 + q0 * q3) / nn, (q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3) / nn,
+            2.0 * (q2 * q3 - q0 * q1) / nn,
+            2.0 * (q1 * q3 - q0 * q2) / nn, 2.0 * (q2 * q3 + q0 * q1) / nn,
+            (q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3) / nn)
 
 
 @_njit
-def _quat_rate(q0, q1, q2, q3, w0, w1, w2, out):
-    """out (4,) = q' = 1/2 (0, w) (x) q of a quaternion (w, x, y, z), w in world components
+def _quat_rate(q0, q1, q2, q3, w0, w1, w2):
+    """q' (4-tuple) = 1/2 (0, w) (x) q of a quaternion (w, x, y, z), w in world components
     (rotations.quat_rates in the same operations)."""
-    out[0] = -0.5 * (w0 * q1 + w1 * q2 + w2 * q3)
-    out[1] = 0.5 * (q0 * w0 + (w1 * q3 - w2 * q2))
-    out[2] = 0.5 * (q0 * w1 + (w2 * q1 - w0 * q3))
-    out[3] = 0.5 * (q0 * w2 + (w0 * q2 - w1 * q1))
+    return (-0.5 * (w0 * q1 + w1 * q2 + w2 * q3),
+            0.5 * (q0 * w0 + (w1 * q3 - w2 * q2)),
+            0.5 * (q0 * w1 + (w2 * q1 - w0 * q3)),
+            0.5 * (q0 * w2 + (w0 * q2 - w1 * q1)))
 
 
 @_njit
-def _rotor_angle_rate(p, w, e):
-    """kappa' = p - w . e (eqs 18-19) of a rotor of spin p about the world axis e (3,) on a body
-    turning at w (3,) (dynamics.torque_rotor_rates in the same operations)."""
-    return p - (w[0] * e[0] + w[1] * e[1] + w[2] * e[2])
+def _rotor_angle_rate(p, w0, w1, w2, e0, e1, e2):
+    """kappa' = p - w . e (eqs 18-19) of a rotor of spin p about the world axis e on a body
+    turning at w (dynamics.torque_rotor_rates in the same operations)."""
+    return p - (w0 * e0 + w1 * e1 + w2 * e2)
 
 
 @_njit
-def _inv3_sym(J, out):
-    """out = J^-1 for a symmetric positive definite J (3, 3) (adjugate; exactly symmetric)."""
-    c00 = J[1, 1] * J[2, 2] - J[1, 2] * J[1, 2]
-    c01 = J[0, 2] * J[1, 2] - J[0, 1] * J[2, 2]
-    c02 = J[0, 1] * J[1, 2] - J[0, 2] * J[1, 1]
-    c11 = J[0, 0] * J[2, 2] - J[0, 2] * J[0, 2]
-    c12 = J[0, 1] * J[0, 2] - J[0, 0] * J[1, 2]
-    c22 = J[0, 0] * J[1, 1] - J[0, 1] * J[0, 1]
-    inv_det = 1.0 / (J[0, 0] * c00 + J[0, 1] * c01 + J[0, 2] * c02)
-    out[0, 0], out[0, 1], out[0, 2] = c00 * inv_det, c01 * inv_det, c02 * inv_det
-    out[1, 0], out[1, 1], out[1, 2] = out[0, 1], c11 * inv_det, c12 * inv_det
-    out[2, 0], out[2, 1], out[2, 2] = out[0, 2], out[1, 2], c22 * inv_det
+def _inv3_sym(J00, J01, J02, J11, J12, J22):
+    """J^-1 of a symmetric positive definite J (3, 3) from its upper triangle (adjugate): its
+    upper triangle (d00, d01, d02, d11, d12, d22), the inverse exactly symmetric."""
+    c00 = J11 * J22 - J12 * J12
+    c01 = J02 * J12 - J01 * J22
+    c02 = J01 * J12 - J02 * J11
+    c11 = J00 * J22 - J02 * J02
+    c12 = J01 * J02 - J00 * J12
+    c22 = J00 * J11 - J01 * J01
+    inv_det = 1.0 / (J00 * c00 + J01 * c01 + J02 * c02)
+    return c00 * inv_det, c01 * inv_det, c02 * inv_det, c11 * inv_det, c12 * inv_det, c22 * inv_det
 
 
 @_njit
@@ -246,25 +247,67 @@ def _shift_inertia(I, d, out, Dx, T, G):
                 out[3 + b, 3 + a] += I[3 + a, 3 + b]
 
 
+
 @_njit
-def _shift_mass(Ma, d, out, Dx, T):
-    """out += [[0, 0], [0, Ma]] moved from P to Q = P - d: the apparent mass Ma (3, 3) passed
-    through a spherical joint at P. H_Q = d x Ma, J_Q = -(d x Ma) d x, M_Q = Ma (symmetric)."""
-    _skew(d, Dx)
-    for a in range(3):
-        for b in range(3):
-            T[a, b] = Dx[a, 0] * Ma[0, b] + Dx[a, 1] * Ma[1, b] + Dx[a, 2] * Ma[2, b]
-    for a in range(3):
-        for b in range(3):
-            out[a, 3 + b] += T[a, b]
-            out[3 + b, a] += T[a, b]
-        for b in range(a, 3):
-            JQ = -(T[a, 0] * Dx[0, b] + T[a, 1] * Dx[1, b] + T[a, 2] * Dx[2, b])
-            out[a, b] += JQ
-            out[3 + a, 3 + b] += Ma[a, b]
-            if b != a:
-                out[b, a] += JQ
-                out[3 + b, 3 + a] += Ma[a, b]
+def _shift_mass(m00, m01, m02, m11, m12, m22, d0, d1, d2, IA, kp):
+    """IA[kp] += [[0, 0], [0, Ma]] moved from P to Q = P - d: the apparent mass Ma (symmetric,
+    its upper triangle) passed through a spherical joint at P. With T = d x Ma:
+    H_Q = T, J_Q = -T d x, M_Q = Ma (the products with the zeros of d x left out)."""
+    # T = d x Ma, d x = [[0, -d2, d1], [d2, 0, -d0], [-d1, d0, 0]]
+    t00 = -d2 * m01 + d1 * m02
+    t01 = -d2 * m11 + d1 * m12
+    t02 = -d2 * m12 + d1 * m22
+    t10 = d2 * m00 + -d0 * m02
+    t11 = d2 * m01 + -d0 * m12
+    t12 = d2 * m02 + -d0 * m22
+    t20 = -d1 * m00 + d0 * m01
+    t21 = -d1 * m01 + d0 * m11
+    t22 = -d1 * m02 + d0 * m12
+    # H_Q (upper right) and H_Q^T (lower left)
+    IA[kp, 0, 3] += t00
+    IA[kp, 0, 4] += t01
+    IA[kp, 0, 5] += t02
+    IA[kp, 1, 3] += t10
+    IA[kp, 1, 4] += t11
+    IA[kp, 1, 5] += t12
+    IA[kp, 2, 3] += t20
+    IA[kp, 2, 4] += t21
+    IA[kp, 2, 5] += t22
+    IA[kp, 3, 0] += t00
+    IA[kp, 4, 0] += t01
+    IA[kp, 5, 0] += t02
+    IA[kp, 3, 1] += t10
+    IA[kp, 4, 1] += t11
+    IA[kp, 5, 1] += t12
+    IA[kp, 3, 2] += t20
+    IA[kp, 4, 2] += t21
+    IA[kp, 5, 2] += t22
+    # J_Q = -T d x: column b of d x is (0, d2, -d1), (-d2, 0, d0), (d1, -d0, 0)
+    j00 = -(t01 * d2 + t02 * -d1)
+    j01 = -(t00 * -d2 + t02 * d0)
+    j02 = -(t00 * d1 + t01 * -d0)
+    j11 = -(t10 * -d2 + t12 * d0)
+    j12 = -(t10 * d1 + t11 * -d0)
+    j22 = -(t20 * d1 + t21 * -d0)
+    IA[kp, 0, 0] += j00
+    IA[kp, 0, 1] += j01
+    IA[kp, 0, 2] += j02
+    IA[kp, 1, 1] += j11
+    IA[kp, 1, 2] += j12
+    IA[kp, 2, 2] += j22
+    IA[kp, 1, 0] += j01
+    IA[kp, 2, 0] += j02
+    IA[kp, 2, 1] += j12
+    # M_Q = Ma
+    IA[kp, 3, 3] += m00
+    IA[kp, 3, 4] += m01
+    IA[kp, 3, 5] += m02
+    IA[kp, 4, 4] += m11
+    IA[kp, 4, 5] += m12
+    IA[kp, 5, 5] += m22
+    IA[kp, 4, 3] += m01
+    IA[kp, 5, 3] += m02
+    IA[kp, 5, 4] += m12
 
 
 # --- stages -----------------------------------------------------------------------------------
@@ -273,41 +316,50 @@ def _positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, 
     """World components of each body's constants: R^k (quaternion, or eq 50 for a hinge),
     s^k, h^k = m^k c^k, the inertia A^k about O^k (eq 30) and the hinge axis e^k."""
     n = s.shape[0]
-    Rrel = np.empty((3, 3))
-    K = np.empty((3, 3))
     for k in range(n):
         i = qrow[k]
         if is_hinge[k]:
-            # (50): body k is its parent turned by phi_k about e^k: Rrel = 1 + sin K + (1 - cos) K^2
+            # (50): body k is its parent turned by phi_k about e^k: Rrel = 1 + sin K + (1 - cos) K^2,
+            # K = e x = [[0, -e2, e1], [e2, 0, -e0], [-e1, e0, 0]]; Rrel is held in R[k]
             phi = y[i]
             sp, cp = math.sin(phi), 1.0 - math.cos(phi)
-            e = hinge_axis[k]
-            _skew(e, K)
-            for a in range(3):
+            e0, e1, e2 = hinge_axis[k, 0], hinge_axis[k, 1], hinge_axis[k, 2]
+            R[k, 0, 0] = 1.0 + sp * 0.0 + cp * (-e2 * e2 + e1 * -e1)
+            R[k, 0, 1] = 0.0 + sp * -e2 + cp * (e1 * e0)
+            R[k, 0, 2] = 0.0 + sp * e1 + cp * (-e2 * -e0)
+            R[k, 1, 0] = 0.0 + sp * e2 + cp * (-e0 * -e1)
+            R[k, 1, 1] = 1.0 + sp * 0.0 + cp * (e2 * -e2 + -e0 * e0)
+            R[k, 1, 2] = 0.0 + sp * -e0 + cp * (e2 * e1)
+            R[k, 2, 0] = 0.0 + sp * -e1 + cp * (e0 * e2)
+            R[k, 2, 1] = 0.0 + sp * e0 + cp * (-e1 * -e2)
+            R[k, 2, 2] = 1.0 + sp * 0.0 + cp * (-e1 * e1 + e0 * -e0)
+            if k > 0:
+                # R^k = R^{k-1} Rrel, a column at a time (Rrel's column read before it is replaced)
                 for b in range(3):
-                    K2 = K[a, 0] * K[0, b] + K[a, 1] * K[1, b] + K[a, 2] * K[2, b]
-                    Rrel[a, b] = (1.0 if a == b else 0.0) + sp * K[a, b] + cp * K2
+                    x0, x1, x2 = R[k, 0, b], R[k, 1, b], R[k, 2, b]
+                    for a in range(3):
+                        R[k, a, b] = R[k - 1, a, 0] * x0 + R[k - 1, a, 1] * x1 + R[k - 1, a, 2] * x2
             for a in range(3):
-                for b in range(3):
-                    if k == 0:
-                        R[0, a, b] = Rrel[a, b]
-                    else:
-                        R[k, a, b] = (R[k - 1, a, 0] * Rrel[0, b] + R[k - 1, a, 1] * Rrel[1, b]
-                                      + R[k - 1, a, 2] * Rrel[2, b])
-            _matvec(R[k], e, e_w[k])
+                e_w[k, a] = R[k, a, 0] * e0 + R[k, a, 1] * e1 + R[k, a, 2] * e2
         else:
-            _quat_to_matrix(y[i], y[i + 1], y[i + 2], y[i + 3], R[k])
-            e_w[k, :] = 0.0
-        _matvec(R[k], s[k], s_w[k])
-        _matvec(R[k], first_moment[k], hk[k])
-        # R A R^T, exactly symmetric (see the module docstring)
-        Rk, Ak = R[k], inertia[k]
+            (R[k, 0, 0], R[k, 0, 1], R[k, 0, 2], R[k, 1, 0], R[k, 1, 1], R[k, 1, 2],
+             R[k, 2, 0], R[k, 2, 1], R[k, 2, 2]) = _quat_to_matrix(y[i], y[i + 1], y[i + 2], y[i + 3])
+            e_w[k, 0] = 0.0
+            e_w[k, 1] = 0.0
+            e_w[k, 2] = 0.0
         for a in range(3):
-            for b in range(3):
-                K[a, b] = Rk[a, 0] * Ak[0, b] + Rk[a, 1] * Ak[1, b] + Rk[a, 2] * Ak[2, b]
+            r0, r1, r2 = R[k, a, 0], R[k, a, 1], R[k, a, 2]
+            s_w[k, a] = r0 * s[k, 0] + r1 * s[k, 1] + r2 * s[k, 2]
+            hk[k, a] = r0 * first_moment[k, 0] + r1 * first_moment[k, 1] + r2 * first_moment[k, 2]
+        # R A R^T, exactly symmetric (see the module docstring): row a of R A, then row a of the
+        # upper triangle
         for a in range(3):
+            r0, r1, r2 = R[k, a, 0], R[k, a, 1], R[k, a, 2]
+            k0 = r0 * inertia[k, 0, 0] + r1 * inertia[k, 1, 0] + r2 * inertia[k, 2, 0]
+            k1 = r0 * inertia[k, 0, 1] + r1 * inertia[k, 1, 1] + r2 * inertia[k, 2, 1]
+            k2 = r0 * inertia[k, 0, 2] + r1 * inertia[k, 1, 2] + r2 * inertia[k, 2, 2]
             for b in range(a, 3):
-                Aw[k, a, b] = K[a, 0] * Rk[b, 0] + K[a, 1] * Rk[b, 1] + K[a, 2] * Rk[b, 2]
+                Aw[k, a, b] = k0 * R[k, b, 0] + k1 * R[k, b, 1] + k2 * R[k, b, 2]
                 Aw[k, b, a] = Aw[k, a, b]
 
 
@@ -322,9 +374,7 @@ def _velocities(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, 
         hinge, (e^k)' = w^{k-1} x e^k: c = (w^{k-1} x e^k phi', v(O^k) x e^k phi')
     """
     n = s_w.shape[0]
-    wp = np.zeros(3)  # w^{k-1}
-    da = np.empty(3)
-    wrel = np.empty(3)
+    wp0, wp1, wp2 = 0.0, 0.0, 0.0  # w^{k-1}
     for k in range(n):
         if k == 0:
             # v(O^1): free base (a state), moving base (a W cos(W t)) or fixed
@@ -336,28 +386,33 @@ def _velocities(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, 
                 for a in range(3):
                     vO[0, a] = base_amplitude[a] * cw
             else:
-                vO[0, :] = 0.0
+                for a in range(3):
+                    vO[0, a] = 0.0
         else:
             # (34): v0^k = v0^{k-1} + w^{k-1} x s^{k-1}
-            _cross(w[k - 1], s_w[k - 1], vO[k])
-            for a in range(3):
-                vO[k, a] += vO[k - 1, a]
+            s0, s1, s2 = s_w[k - 1, 0], s_w[k - 1, 1], s_w[k - 1, 2]
+            vO[k, 0] = (wp1 * s2 - wp2 * s1) + vO[k - 1, 0]
+            vO[k, 1] = (wp2 * s0 - wp0 * s2) + vO[k - 1, 1]
+            vO[k, 2] = (wp0 * s1 - wp1 * s0) + vO[k - 1, 2]
         j = i_vel + own_col[k]
         if is_hinge[k]:
             ph = y[j]
-            for a in range(3):
-                wrel[a] = e_w[k, a] * ph  # (50): e^k phi_k'
-            _cross(wp, wrel, da)
+            # (50): e^k phi_k'
+            wr0, wr1, wr2 = e_w[k, 0] * ph, e_w[k, 1] * ph, e_w[k, 2] * ph
+            c[k, 0] = wp1 * wr2 - wp2 * wr1
+            c[k, 1] = wp2 * wr0 - wp0 * wr2
+            c[k, 2] = wp0 * wr1 - wp1 * wr0
         else:
-            for a in range(3):
-                wrel[a] = y[j + a]
-            da[:] = 0.0
-        for a in range(3):
-            w[k, a] = wp[a] + wrel[a]
-            c[k, a] = da[a]
-        _cross(vO[k], wrel, c[k, 3:])
-        for a in range(3):
-            wp[a] = w[k, a]
+            wr0, wr1, wr2 = y[j], y[j + 1], y[j + 2]
+            c[k, 0] = 0.0
+            c[k, 1] = 0.0
+            c[k, 2] = 0.0
+        wp0, wp1, wp2 = wp0 + wr0, wp1 + wr1, wp2 + wr2
+        w[k, 0], w[k, 1], w[k, 2] = wp0, wp1, wp2
+        v0, v1, v2 = vO[k, 0], vO[k, 1], vO[k, 2]
+        c[k, 3] = v1 * wr2 - v2 * wr1
+        c[k, 4] = v2 * wr0 - v0 * wr2
+        c[k, 5] = v0 * wr1 - v1 * wr0
 
 
 @_njit
@@ -382,42 +437,55 @@ def _bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque
             for a in range(3):
                 lam_b[k, a] += torque_A[i] * p[i] * torque_axis[i, a]
                 dlam_b[k, a] += L_rotor[i] * torque_axis[i, a]
-    mom_a = np.empty(3)
-    mom_l = np.empty(3)
-    tmp = np.empty(3)
+    g0, g1, g2 = gravity[0], gravity[1], gravity[2]
     for k in range(n):
         m = mass[k]
-        hh, wk, vk = hk[k], w[k], vO[k]
-        I6[k, :, :] = 0.0
-        _skew(hh, I6[k, :3, 3:])
+        h0, h1, h2 = hk[k, 0], hk[k, 1], hk[k, 2]
+        w0, w1, w2 = w[k, 0], w[k, 1], w[k, 2]
+        v0, v1, v2 = vO[k, 0], vO[k, 1], vO[k, 2]
+        # I = [[A, h x], [(h x)^T, m 1]]
         for a in range(3):
-            I6[k, 3 + a, 3 + a] = m
             for b in range(3):
                 I6[k, a, b] = Aw[k, a, b]
+                I6[k, 3 + a, 3 + b] = m if a == b else 0.0
+        I6[k, 0, 3], I6[k, 0, 4], I6[k, 0, 5] = 0.0, -h2, h1
+        I6[k, 1, 3], I6[k, 1, 4], I6[k, 1, 5] = h2, 0.0, -h0
+        I6[k, 2, 3], I6[k, 2, 4], I6[k, 2, 5] = -h1, h0, 0.0
+        for a in range(3):
+            for b in range(3):
                 I6[k, 3 + a, b] = I6[k, b, 3 + a]
         # momentum about O^k: (A w + h x v + lambda, m v + w x h)
-        _matvec(Aw[k], wk, mom_a)
-        _cross_add(hh, vk, mom_a)
+        ma0 = (Aw[k, 0, 0] * w0 + Aw[k, 0, 1] * w1 + Aw[k, 0, 2] * w2) + (h1 * v2 - h2 * v1)
+        ma1 = (Aw[k, 1, 0] * w0 + Aw[k, 1, 1] * w1 + Aw[k, 1, 2] * w2) + (h2 * v0 - h0 * v2)
+        ma2 = (Aw[k, 2, 0] * w0 + Aw[k, 2, 1] * w1 + Aw[k, 2, 2] * w2) + (h0 * v1 - h1 * v0)
         if has_lam:
-            _matvec(R[k], lam_b[k], tmp)
-            for a in range(3):
-                mom_a[a] += tmp[a]
-        _cross(wk, hh, mom_l)
-        for a in range(3):
-            mom_l[a] += m * vk[a]
+            l0, l1, l2 = lam_b[k, 0], lam_b[k, 1], lam_b[k, 2]
+            ma0 += R[k, 0, 0] * l0 + R[k, 0, 1] * l1 + R[k, 0, 2] * l2
+            ma1 += R[k, 1, 0] * l0 + R[k, 1, 1] * l1 + R[k, 1, 2] * l2
+            ma2 += R[k, 2, 0] * l0 + R[k, 2, 1] * l1 + R[k, 2, 2] * l2
+        ml0 = (w1 * h2 - w2 * h1) + m * v0
+        ml1 = (w2 * h0 - w0 * h2) + m * v1
+        ml2 = (w0 * h1 - w1 * h0) + m * v2
         # V x* momentum = (w x ang + v x lin, w x lin)
-        _cross(wk, mom_a, pb[k, :3])
-        _cross_add(vk, mom_l, pb[k, :3])
-        _cross(wk, mom_l, pb[k, 3:])
+        f0 = (w1 * ma2 - w2 * ma1) + (v1 * ml2 - v2 * ml1)
+        f1 = (w2 * ma0 - w0 * ma2) + (v2 * ml0 - v0 * ml2)
+        f2 = (w0 * ma1 - w1 * ma0) + (v0 * ml1 - v1 * ml0)
+        f3 = w1 * ml2 - w2 * ml1
+        f4 = w2 * ml0 - w0 * ml2
+        f5 = w0 * ml1 - w1 * ml0
         if has_lam:
-            _matvec(R[k], dlam_b[k], tmp)
-            for a in range(3):
-                pb[k, a] += tmp[a]
+            l0, l1, l2 = dlam_b[k, 0], dlam_b[k, 1], dlam_b[k, 2]
+            f0 += R[k, 0, 0] * l0 + R[k, 0, 1] * l1 + R[k, 0, 2] * l2
+            f1 += R[k, 1, 0] * l0 + R[k, 1, 1] * l1 + R[k, 1, 2] * l2
+            f2 += R[k, 2, 0] * l0 + R[k, 2, 1] * l1 + R[k, 2, 2] * l2
         if has_gravity:
-            _cross(hh, gravity, tmp)
-            for a in range(3):
-                pb[k, a] -= tmp[a]
-                pb[k, 3 + a] -= m * gravity[a]
+            f0 -= h1 * g2 - h2 * g1
+            f1 -= h2 * g0 - h0 * g2
+            f2 -= h0 * g1 - h1 * g0
+            f3 -= m * g0
+            f4 -= m * g1
+            f5 -= m * g2
+        pb[k, 0], pb[k, 1], pb[k, 2], pb[k, 3], pb[k, 4], pb[k, 5] = f0, f1, f2, f3, f4, f5
 
 
 @_njit
@@ -512,10 +580,12 @@ def _hinge_reflector(e, H):
 
 
 @_njit
-def _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot):
+def _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
+                 Ia, pa, Dx, T, G, x):
     """`_aba` as Featherstone writes it, the articulated inertias formed: I^a = I^A - U D^-1 U^T.
     Fast, and exact to round-off while no subtree is much heavier than its carrier (see
-    STABLE_ABA_RATIO); IA leaves as the articulated inertias.
+    STABLE_ABA_RATIO); IA leaves as the articulated inertias. Returns the largest apparent mass
+    passed on to a body over that body's own mass.
 
     Articulated-body algorithm: u' (N,) of the closure rows S_j . F_subtree(k(j)) = tau_j
     (eqs 44, 51, 54; Featherstone 2008, Table 7.1), about each body's O^k in world axes.
@@ -523,63 +593,87 @@ def _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, D
     IA (n, 6, 6) and pA (n, 6) enter as the bodies' own inertias and bias forces and leave as
     the articulated ones. c (n, 6): joint bias accelerations; a_base (6,): acceleration of the
     base at O^1; tau (N,): generalized forces of the columns. U, W (N, 6), u (N,),
-    Dinv (n, 6, 6): scratch. A spherical joint (S = (1, 0)) is eliminated in closed form:
-    D = J, and only the apparent mass M - H^T J^-1 H passes to the parent.
+    Dinv (n, 6, 6), Ia (6, 6), pa (6,), Dx, T, G (3, 3), x (6,): scratch. A spherical joint
+    (S = (1, 0)) is eliminated in closed form, in scalars: D = J, and only the apparent mass
+    M - H^T J^-1 H passes to the parent.
     """
     n = IA.shape[0]
     worst = 0.0  # largest apparent mass passed on / the carrier's own mass
-    Ia = np.empty((6, 6))
-    pa = np.empty(6)
-    Ma = np.empty((3, 3))
-    JiH = np.empty((3, 3))
-    Dx = np.empty((3, 3))
-    T = np.empty((3, 3))
-    G = np.empty((3, 3))
     # backward: I^a = I^A - U D^-1 U^T, p^a = p^A + I^a c + U D^-1 u, to the parent's O^{k-1}
     for k in range(n - 1, -1, -1):
         j0, j1 = col_start[k], col_start[k + 1]
         nk = j1 - j0
-        IAk, pAk, D = IA[k], pA[k], Dinv[k]
         if nk == SPHERICAL_DOF and not is_hinge[k]:
-            _inv3_sym(IAk[:3, :3], D)  # D = J
-            for a in range(3):
-                u[j0 + a] = tau[j0 + a] - pAk[a]
+            # D^-1 = J^-1, I^A = [[J, H], [H^T, M]]
+            d00, d01, d02, d11, d12, d22 = _inv3_sym(IA[k, 0, 0], IA[k, 0, 1], IA[k, 0, 2],
+                                                     IA[k, 1, 1], IA[k, 1, 2], IA[k, 2, 2])
+            Dinv[k, 0, 0], Dinv[k, 0, 1], Dinv[k, 0, 2] = d00, d01, d02
+            Dinv[k, 1, 0], Dinv[k, 1, 1], Dinv[k, 1, 2] = d01, d11, d12
+            Dinv[k, 2, 0], Dinv[k, 2, 1], Dinv[k, 2, 2] = d02, d12, d22
+            u0 = tau[j0] - pA[k, 0]
+            u1 = tau[j0 + 1] - pA[k, 1]
+            u2 = tau[j0 + 2] - pA[k, 2]
+            u[j0], u[j0 + 1], u[j0 + 2] = u0, u1, u2
             if k == 0:
                 continue
-            # Ma = M - H^T J^-1 H;  p^a = (tau, p^A_lin + Ma c_lin + (J^-1 H)^T u)
-            for a in range(3):
-                for b in range(3):
-                    JiH[a, b] = D[a, 0] * IAk[0, 3 + b] + D[a, 1] * IAk[1, 3 + b] + D[a, 2] * IAk[2, 3 + b]
-            for a in range(3):
-                for b in range(a, 3):
-                    Ma[a, b] = IAk[3 + a, 3 + b] - (IAk[0, 3 + a] * JiH[0, b] + IAk[1, 3 + a] * JiH[1, b]
-                                                    + IAk[2, 3 + a] * JiH[2, b])
-                    Ma[b, a] = Ma[a, b]
-            for a in range(3):
-                pa[a] = tau[j0 + a]
-                pa[3 + a] = pAk[3 + a] + (Ma[a, 0] * c[k, 3] + Ma[a, 1] * c[k, 4] + Ma[a, 2] * c[k, 5]) \
-                    + (JiH[0, a] * u[j0] + JiH[1, a] * u[j0 + 1] + JiH[2, a] * u[j0 + 2])
-            ratio = (Ma[0, 0] + Ma[1, 1] + Ma[2, 2]) / (3.0 * IA[k - 1, 3, 3])
+            h00, h01, h02 = IA[k, 0, 3], IA[k, 0, 4], IA[k, 0, 5]
+            h10, h11, h12 = IA[k, 1, 3], IA[k, 1, 4], IA[k, 1, 5]
+            h20, h21, h22 = IA[k, 2, 3], IA[k, 2, 4], IA[k, 2, 5]
+            # G = J^-1 H
+            g00 = d00 * h00 + d01 * h10 + d02 * h20
+            g01 = d00 * h01 + d01 * h11 + d02 * h21
+            g02 = d00 * h02 + d01 * h12 + d02 * h22
+            g10 = d01 * h00 + d11 * h10 + d12 * h20
+            g11 = d01 * h01 + d11 * h11 + d12 * h21
+            g12 = d01 * h02 + d11 * h12 + d12 * h22
+            g20 = d02 * h00 + d12 * h10 + d22 * h20
+            g21 = d02 * h01 + d12 * h11 + d22 * h21
+            g22 = d02 * h02 + d12 * h12 + d22 * h22
+            # Ma = M - H^T J^-1 H (upper triangle)
+            m00 = IA[k, 3, 3] - (h00 * g00 + h10 * g10 + h20 * g20)
+            m01 = IA[k, 3, 4] - (h00 * g01 + h10 * g11 + h20 * g21)
+            m02 = IA[k, 3, 5] - (h00 * g02 + h10 * g12 + h20 * g22)
+            m11 = IA[k, 4, 4] - (h01 * g01 + h11 * g11 + h21 * g21)
+            m12 = IA[k, 4, 5] - (h01 * g02 + h11 * g12 + h21 * g22)
+            m22 = IA[k, 5, 5] - (h02 * g02 + h12 * g12 + h22 * g22)
+            # p^a = (tau, p^A_lin + Ma c_lin + (J^-1 H)^T u)
+            c3, c4, c5 = c[k, 3], c[k, 4], c[k, 5]
+            pl0 = pA[k, 3] + (m00 * c3 + m01 * c4 + m02 * c5) + (g00 * u0 + g10 * u1 + g20 * u2)
+            pl1 = pA[k, 4] + (m01 * c3 + m11 * c4 + m12 * c5) + (g01 * u0 + g11 * u1 + g21 * u2)
+            pl2 = pA[k, 5] + (m02 * c3 + m12 * c4 + m22 * c5) + (g02 * u0 + g12 * u1 + g22 * u2)
+            ratio = (m00 + m11 + m22) / (3.0 * IA[k - 1, 3, 3])
             if ratio > worst:
                 worst = ratio
-            _shift_mass(Ma, s_w[k - 1], IA[k - 1], Dx, T)
+            s0, s1, s2 = s_w[k - 1, 0], s_w[k - 1, 1], s_w[k - 1, 2]
+            _shift_mass(m00, m01, m02, m11, m12, m22, s0, s1, s2, IA, k - 1)
+            # forces to O^{k-1} = O^k - s^{k-1}: (n + s x f, f)
+            pA[k - 1, 0] = (pA[k - 1, 0] + (s1 * pl2 - s2 * pl1)) + tau[j0]
+            pA[k - 1, 1] = (pA[k - 1, 1] + (s2 * pl0 - s0 * pl2)) + tau[j0 + 1]
+            pA[k - 1, 2] = (pA[k - 1, 2] + (s0 * pl1 - s1 * pl0)) + tau[j0 + 2]
+            pA[k - 1, 3] += pl0
+            pA[k - 1, 4] += pl1
+            pA[k - 1, 5] += pl2
         else:
+            # U = I^A S, u = tau - S^T p^A
             for j in range(j0, j1):
                 for r in range(6):
-                    U[j, r] = _dot6(IAk[r], S[j])
-                u[j] = tau[j] - _dot6(S[j], pAk)
-            _joint_projection(S, U, D, W, j0, nk)
+                    U[j, r] = (IA[k, r, 0] * S[j, 0] + IA[k, r, 1] * S[j, 1] + IA[k, r, 2] * S[j, 2]
+                               + IA[k, r, 3] * S[j, 3] + IA[k, r, 4] * S[j, 4] + IA[k, r, 5] * S[j, 5])
+                u[j] = tau[j] - (S[j, 0] * pA[k, 0] + S[j, 1] * pA[k, 1] + S[j, 2] * pA[k, 2]
+                                 + S[j, 3] * pA[k, 3] + S[j, 4] * pA[k, 4] + S[j, 5] * pA[k, 5])
+            _joint_projection(S, U, Dinv[k], W, j0, nk)
             if k == 0:
                 continue
             for r in range(6):
                 for q in range(r, 6):
-                    acc = IAk[r, q]
+                    acc = IA[k, r, q]
                     for a in range(nk):
                         acc -= W[j0 + a, r] * U[j0 + a, q]
                     Ia[r, q] = acc
                     Ia[q, r] = acc
             for r in range(6):
-                acc = pAk[r] + _dot6(Ia[r], c[k])
+                acc = pA[k, r] + (Ia[r, 0] * c[k, 0] + Ia[r, 1] * c[k, 1] + Ia[r, 2] * c[k, 2]
+                                  + Ia[r, 3] * c[k, 3] + Ia[r, 4] * c[k, 4] + Ia[r, 5] * c[k, 5])
                 for a in range(nk):
                     acc += W[j0 + a, r] * u[j0 + a]
                 pa[r] = acc
@@ -587,58 +681,81 @@ def _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, D
             if ratio > worst:
                 worst = ratio
             _shift_inertia(Ia, s_w[k - 1], IA[k - 1], Dx, T, G)
-        # forces to O^{k-1} = O^k - s^{k-1}: (n + s x f, f)
-        _cross_add(s_w[k - 1], pa[3:], pA[k - 1, :3])
-        for r in range(6):
-            pA[k - 1, r] += pa[r]
+            # forces to O^{k-1} = O^k - s^{k-1}: (n + s x f, f)
+            s0, s1, s2 = s_w[k - 1, 0], s_w[k - 1, 1], s_w[k - 1, 2]
+            pA[k - 1, 0] = (pA[k - 1, 0] + (s1 * pa[5] - s2 * pa[4])) + pa[0]
+            pA[k - 1, 1] = (pA[k - 1, 1] + (s2 * pa[3] - s0 * pa[5])) + pa[1]
+            pA[k - 1, 2] = (pA[k - 1, 2] + (s0 * pa[4] - s1 * pa[3])) + pa[2]
+            pA[k - 1, 3] += pa[3]
+            pA[k - 1, 4] += pa[4]
+            pA[k - 1, 5] += pa[5]
     # forward: a = A^{k-1} + c^k, u'_k = D^-1 (u - U^T a), A^k = a + S u'_k
-    A = np.empty(6)
-    for r in range(6):
-        A[r] = a_base[r]
-    x = np.empty(MAX_JOINT_DOF)
+    A0, A1, A2, A3, A4, A5 = a_base[0], a_base[1], a_base[2], a_base[3], a_base[4], a_base[5]
     for k in range(n):
         j0, j1 = col_start[k], col_start[k + 1]
         nk = j1 - j0
-        IAk, D = IA[k], Dinv[k]
         if k > 0:
             # motions from O^{k-1} to O^k: (alpha, a + alpha x s^{k-1})
-            _cross_add(A[:3], s_w[k - 1], A[3:])
-        for r in range(6):
-            A[r] += c[k, r]
+            s0, s1, s2 = s_w[k - 1, 0], s_w[k - 1, 1], s_w[k - 1, 2]
+            A3 += A1 * s2 - A2 * s1
+            A4 += A2 * s0 - A0 * s2
+            A5 += A0 * s1 - A1 * s0
+        A0 += c[k, 0]
+        A1 += c[k, 1]
+        A2 += c[k, 2]
+        A3 += c[k, 3]
+        A4 += c[k, 4]
+        A5 += c[k, 5]
         if nk == SPHERICAL_DOF and not is_hinge[k]:
             # U^T a = J alpha + H a_lin
-            for a in range(3):
-                x[a] = u[j0 + a] - _dot6(IAk[a], A)
-            for a in range(3):
-                udot[j0 + a] = D[a, 0] * x[0] + D[a, 1] * x[1] + D[a, 2] * x[2]
-                A[a] += udot[j0 + a]
+            x0 = u[j0] - (IA[k, 0, 0] * A0 + IA[k, 0, 1] * A1 + IA[k, 0, 2] * A2
+                          + IA[k, 0, 3] * A3 + IA[k, 0, 4] * A4 + IA[k, 0, 5] * A5)
+            x1 = u[j0 + 1] - (IA[k, 1, 0] * A0 + IA[k, 1, 1] * A1 + IA[k, 1, 2] * A2
+                              + IA[k, 1, 3] * A3 + IA[k, 1, 4] * A4 + IA[k, 1, 5] * A5)
+            x2 = u[j0 + 2] - (IA[k, 2, 0] * A0 + IA[k, 2, 1] * A1 + IA[k, 2, 2] * A2
+                              + IA[k, 2, 3] * A3 + IA[k, 2, 4] * A4 + IA[k, 2, 5] * A5)
+            ud0 = Dinv[k, 0, 0] * x0 + Dinv[k, 0, 1] * x1 + Dinv[k, 0, 2] * x2
+            ud1 = Dinv[k, 1, 0] * x0 + Dinv[k, 1, 1] * x1 + Dinv[k, 1, 2] * x2
+            ud2 = Dinv[k, 2, 0] * x0 + Dinv[k, 2, 1] * x1 + Dinv[k, 2, 2] * x2
+            udot[j0], udot[j0 + 1], udot[j0 + 2] = ud0, ud1, ud2
+            A0 += ud0
+            A1 += ud1
+            A2 += ud2
         else:
             for a in range(nk):
-                x[a] = u[j0 + a] - _dot6(U[j0 + a], A)
+                j = j0 + a
+                x[a] = u[j] - (U[j, 0] * A0 + U[j, 1] * A1 + U[j, 2] * A2
+                               + U[j, 3] * A3 + U[j, 4] * A4 + U[j, 5] * A5)
             for a in range(nk):
                 acc = 0.0
                 for b in range(nk):
-                    acc += D[a, b] * x[b]
+                    acc += Dinv[k, a, b] * x[b]
                 udot[j0 + a] = acc
             for a in range(nk):
-                for r in range(6):
-                    A[r] += S[j0 + a, r] * udot[j0 + a]
+                j = j0 + a
+                ud = udot[j]
+                A0 += S[j, 0] * ud
+                A1 += S[j, 1] * ud
+                A2 += S[j, 2] * ud
+                A3 += S[j, 3] * ud
+                A4 += S[j, 4] * ud
+                A5 += S[j, 5] * ud
     return worst
 
 
 @_njit
-def _aba(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot):
+def _aba(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot, Ia, pa, Dx, T, G, x):
     """Articulated-body algorithm: u' (N,) of the closure rows S_j . F_subtree(k(j)) = tau_j
     (eqs 44, 51, 54; Featherstone 2008, Table 7.1), about each body's O^k in world axes.
 
     IA (n, 6, 6) and pA (n, 6) enter as the bodies' own inertias and bias forces (both are
     overwritten); c (n, 6): joint bias accelerations; a_base (6,): acceleration of the base at
-    O^1; tau (N,): generalized forces of the columns. U, W (N, 6), u (N,), Dinv (n, 6, 6):
-    scratch. The elimination is `_aba_classic` unless it passes on to some body more than
-    STABLE_ABA_RATIO times that body's own mass (checked only where a subtree is that much
-    heavier than its carrier), then `_aba_stable` from the bodies' own inertias again
-    (square-root factors and one step of iterative refinement; exact to ~1e-14 relative at
-    mass ratios up to 1e7, about 2.5 x the cost).
+    O^1; tau (N,): generalized forces of the columns. U, W (N, 6), u (N,), Dinv (n, 6, 6),
+    Ia (6, 6), pa (6,), Dx, T, G (3, 3), x (6,): scratch. The elimination is `_aba_classic`
+    unless it passes on to some body more than STABLE_ABA_RATIO times that body's own mass
+    (checked only where a subtree is that much heavier than its carrier), then `_aba_stable`
+    from the bodies' own inertias again (square-root factors and one step of iterative
+    refinement; exact to ~1e-14 relative at mass ratios up to 1e7, about 2.5 x the cost).
     """
     n = IA.shape[0]
     after = 0.0
@@ -648,14 +765,16 @@ def _aba(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udo
         if after > worst * IA[k - 1, 3, 3]:
             worst = after / IA[k - 1, 3, 3]
     if worst <= STABLE_ABA_RATIO:  # no subtree can pass on more mass than it has
-        _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot)
+        _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
+                     Ia, pa, Dx, T, G, x)
         return
     # a heavy subtree: what decides is the mass its elimination passes on (an articulated, not a
     # rigid, inertia: a uniform chain of 1000 links passes on about a link's mass at each joint),
     # known only once the classic elimination has run
     IA0 = IA.copy()
     pA0 = pA.copy()
-    if _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot) > STABLE_ABA_RATIO:
+    if _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
+                    Ia, pa, Dx, T, G, x) > STABLE_ABA_RATIO:
         IA[:] = IA0
         pA[:] = pA0
         _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot)
@@ -896,12 +1015,28 @@ def _aba_resolve(col_start, S, s_w, W, Dinv, rhs, u, P, udot):
 
 
 @_njit
+def _block2(work, o, n, m):
+    """work[o : o + n m] as an (n, m) C-ordered view. as_strided, not reshape: numba's reshape
+    calls a C helper (~40 ns, twenty times per evaluation)."""
+    it = work.itemsize
+    return np.lib.stride_tricks.as_strided(work[o:], shape=(n, m), strides=(m * it, it))
+
+
+@_njit
+def _block3(work, o, n, m, q):
+    """work[o : o + n m q] as an (n, m, q) C-ordered view (as `_block2`)."""
+    it = work.itemsize
+    return np.lib.stride_tricks.as_strided(work[o:], shape=(n, m, q), strides=(m * q * it, q * it, it))
+
+
+@_njit
 def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
                 first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
                 flags, base, t0, p0, pdot, L_rotor, tau):
     """y' (size,) at (t, y) into ydot: what system.ChainODE.rhs computes.
 
-    work: float workspace of n WORK_PER_BODY + N WORK_PER_COLUMN.
+    work: float workspace of n WORK_PER_BODY + N WORK_PER_COLUMN + nt + WORK_FIXED (`workspace`);
+    nothing is allocated per call.
     flags (int, 7): base type, has gravity, has lambda (rotors), i_r0, i_vel, i_kappa, N.
     base (float, 7): moving-base amplitude (3), W = 2 pi f, gravity (3).
     Held inputs: torque-rotor spins p_i = p0_i + pdot_i (t - t0) (eq 29), their torques
@@ -914,57 +1049,69 @@ def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis,
     nt = torque_body.shape[0]
     # workspace views
     o = 0
-    R = work[o:o + 9 * n].reshape((n, 3, 3))
+    R = _block3(work, o, n, 3, 3)
     o += 9 * n
-    s_w = work[o:o + 3 * n].reshape((n, 3))
+    s_w = _block2(work, o, n, 3)
     o += 3 * n
-    hk = work[o:o + 3 * n].reshape((n, 3))
+    hk = _block2(work, o, n, 3)
     o += 3 * n
-    Aw = work[o:o + 9 * n].reshape((n, 3, 3))
+    Aw = _block3(work, o, n, 3, 3)
     o += 9 * n
-    e_w = work[o:o + 3 * n].reshape((n, 3))
+    e_w = _block2(work, o, n, 3)
     o += 3 * n
-    w = work[o:o + 3 * n].reshape((n, 3))
+    w = _block2(work, o, n, 3)
     o += 3 * n
-    vO = work[o:o + 3 * n].reshape((n, 3))
+    vO = _block2(work, o, n, 3)
     o += 3 * n
-    c = work[o:o + 6 * n].reshape((n, 6))
+    c = _block2(work, o, n, 6)
     o += 6 * n
-    I6 = work[o:o + 36 * n].reshape((n, 6, 6))
+    I6 = _block3(work, o, n, 6, 6)
     o += 36 * n
-    pb = work[o:o + 6 * n].reshape((n, 6))
+    pb = _block2(work, o, n, 6)
     o += 6 * n
-    Dinv = work[o:o + 36 * n].reshape((n, 6, 6))
+    Dinv = _block3(work, o, n, 6, 6)
     o += 36 * n
-    lam_b = work[o:o + 3 * n].reshape((n, 3))
+    lam_b = _block2(work, o, n, 3)
     o += 3 * n
-    dlam_b = work[o:o + 3 * n].reshape((n, 3))
+    dlam_b = _block2(work, o, n, 3)
     o += 3 * n
-    S = work[o:o + 6 * N].reshape((N, 6))
+    S = _block2(work, o, N, 6)
     o += 6 * N
-    U = work[o:o + 6 * N].reshape((N, 6))
+    U = _block2(work, o, N, 6)
     o += 6 * N
-    W = work[o:o + 6 * N].reshape((N, 6))
+    W = _block2(work, o, N, 6)
     o += 6 * N
     u = work[o:o + N]
+    o += N
+    p = work[o:o + nt]
+    o += nt
+    # fixed scratch (WORK_FIXED): Ia 36, pa 6, Dx 9, T 9, G 9, x 6, a_base 6
+    Ia = _block2(work, o, 6, 6)
+    pa = work[o + 36:o + 42]
+    Dx = _block2(work, o + 42, 3, 3)
+    T = _block2(work, o + 51, 3, 3)
+    G = _block2(work, o + 60, 3, 3)
+    x = work[o + 69:o + 75]
+    a_base = work[o + 75:o + 81]
 
     # positions, velocities
     _positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, hk, Aw, e_w)
     _velocities(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, i_vel, s_w, e_w, w, vO, c)
     # bias forces: p_i(t) = p_i(t0) + (L_i / A_i)(t - t0) (eq 29)
-    p = np.empty(nt)
     for i in range(nt):
         p[i] = p0[i] + pdot[i] * (t - t0)
     _bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
                  torque_A, p, L_rotor, has_gravity, gravity, lam_b, dlam_b, I6, pb)
     # ABA
     _joint_columns(is_hinge, own_col, base_type, e_w, S)
-    a_base = np.zeros(6)
+    for a in range(6):
+        a_base[a] = 0.0
     if base_type == BASE_MOVING:
         sw = -base_omega * base_omega * math.sin(base_omega * t)
         for a in range(3):
             a_base[3 + a] = base_amplitude[a] * sw
-    _aba(is_hinge, col_start, S, I6, pb, c, tau, a_base, s_w, U, W, u, Dinv, ydot[i_vel:i_vel + N])
+    _aba(is_hinge, col_start, S, I6, pb, c, tau, a_base, s_w, U, W, u, Dinv, ydot[i_vel:i_vel + N],
+         Ia, pa, Dx, T, G, x)
     # y'
     if base_type == BASE_FREE:
         for a in range(3):
@@ -974,12 +1121,15 @@ def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis,
         if is_hinge[k]:
             ydot[i] = y[i_vel + own_col[k]]  # phi_k'
         else:
-            _quat_rate(y[i], y[i + 1], y[i + 2], y[i + 3], w[k, 0], w[k, 1], w[k, 2], ydot[i:i + 4])
-    e = np.empty(3)
+            ydot[i], ydot[i + 1], ydot[i + 2], ydot[i + 3] = _quat_rate(
+                y[i], y[i + 1], y[i + 2], y[i + 3], w[k, 0], w[k, 1], w[k, 2])
     for i in range(nt):
         k = torque_body[i]
-        _matvec(R[k], torque_axis[i], e)
-        ydot[i_kap + i] = _rotor_angle_rate(p[i], w[k], e)
+        ax0, ax1, ax2 = torque_axis[i, 0], torque_axis[i, 1], torque_axis[i, 2]
+        e0 = R[k, 0, 0] * ax0 + R[k, 0, 1] * ax1 + R[k, 0, 2] * ax2
+        e1 = R[k, 1, 0] * ax0 + R[k, 1, 1] * ax1 + R[k, 1, 2] * ax2
+        e2 = R[k, 2, 0] * ax0 + R[k, 2, 1] * ax1 + R[k, 2, 2] * ax2
+        ydot[i_kap + i] = _rotor_angle_rate(p[i], w[k, 0], w[k, 1], w[k, 2], e0, e1, e2)
 
 
 @_njit
@@ -1059,5 +1209,7 @@ def input_arguments(model: Model, t0: float, p0, hinge_tau, L_rotor) -> tuple:
 
 
 def workspace(model: Model) -> np.ndarray:
-    """The float workspace of `rhs_kernel`: n WORK_PER_BODY + N WORK_PER_COLUMN."""
-    return np.zeros(model.n * WORK_PER_BODY + model.N * WORK_PER_COLUMN)
+    """The float workspace of `rhs_kernel`: n WORK_PER_BODY + N WORK_PER_COLUMN
+    + nt WORK_PER_ROTOR + WORK_FIXED (nt torque rotors)."""
+    return np.zeros(model.n * WORK_PER_BODY + model.N * WORK_PER_COLUMN
+                    + len(model.torque_body) * WORK_PER_ROTOR + WORK_FIXED)

@@ -140,12 +140,10 @@ def test_twins_equal_their_numpy_homes():
     rng = np.random.default_rng(7)
     q = rng.normal(size=(50, 4))
     w = rng.normal(size=(50, 3)) * 10.0
-    R = np.empty((3, 3))
-    qd = np.empty(4)
     for qk, wk, ref_R, ref_qd in zip(q, w, quat_to_matrix(q), quat_rates(q, w)):
-        fast._quat_to_matrix(*qk, R)
+        R = np.array(fast._quat_to_matrix(*qk)).reshape(3, 3)
         np.testing.assert_allclose(R, ref_R, rtol=0, atol=4 * np.finfo(float).eps)
-        fast._quat_rate(*qk, *wk, qd)
+        qd = np.array(fast._quat_rate(*qk, *wk))
         np.testing.assert_allclose(qd, ref_qd, rtol=1e-15, atol=1e-14)
     model = compile_model(load_scene(chain_scene(0, "fixed")))
     assert len(model.torque_body)
@@ -157,7 +155,7 @@ def test_twins_equal_their_numpy_homes():
     ref = dyn.torque_rotor_rates(model, data, p)
     for i, k in enumerate(model.torque_body):
         e = data.R[k] @ model.torque_axis[i]
-        assert fast._rotor_angle_rate(p[i], data.w[k], e) == pytest.approx(ref[i], rel=1e-14, abs=1e-12)
+        assert fast._rotor_angle_rate(p[i], *data.w[k], *e) == pytest.approx(ref[i], rel=1e-14, abs=1e-12)
 
 
 # --- the rest of the ChainODE interface ------------------------------------------------------
