@@ -107,6 +107,7 @@ class Simulator:
         self._compiled_outputs = getattr(self.system, "outputs", None)
         self._watched = self._watched_energy()
         self._watch_last = None
+        self._watch_joints = None
         if self._watched is not None and getattr(self.integrator, "monitor", False) is None:
             self.integrator.monitor = self._energy_error  # "fixed": its energy watchdog
         self.reset()
@@ -139,11 +140,31 @@ class Simulator:
 
         last = self._watch_last  # the previous call's end is usually this one's start
         v0 = last[2] if last is not None and last[0] == t0 and np.array_equal(last[1], y0) \
-            else self._compiled_outputs(t0, y0)["inv"]
-        v1 = self._compiled_outputs(t1, y1)["inv"]
+            else self._invariants_at(t0, y0)
+        v1 = self._invariants_at(t1, y1)
         self._watch_last = (t1, y1.copy(), v1)
         scale = max(v0[INV_KINETIC], v1[INV_KINETIC], 1e-300)
         return float((v1[self._watched] - v0[self._watched] - work) / scale)
+
+    def _invariants_at(self, t: float, y: np.ndarray) -> np.ndarray:
+        """The compiled invariants (fast_outputs.INV_*) at (t, y) with the inputs the system
+        holds (those of the call under way: no new hold), computing nothing else but the joint
+        states (fast_outputs.publication_kernel with WANT_INVARIANTS); a new array."""
+        from . import fast_outputs as fo
+
+        if getattr(self, "_snapshot_kernel", None) is None:
+            self._snapshot_setup()
+        o, model, into = self._snapshot_scratch, self._snapshot_model, self._snapshot_nowhere
+        J = len(self._joint_names)
+        js = self._watch_joints
+        if js is None or js.shape[1] != J:
+            js = self._watch_joints = np.empty((3, J))
+        self._snapshot_kernel(
+            float(t), np.ascontiguousarray(y, dtype=np.float64), o["ydot"], *self.system.kernel_arguments(),
+            *model[:7], int(fo.WANT_INVARIANTS), *model[8:], o["R"], o["w"], o["vO"], o["O"], o["quat"], o["euler"],
+            o["euler_rate"], o["L_speed"], o["wrench_force"], o["wrench_moment"], o["inv"], js[0], js[1], js[2],
+            into.dst, into.joint, into.position, into.quaternion, into.wrench)
+        return o["inv"].copy()
 
     def _joint_layout(self) -> None:
         """The joint-state entries in order (SPEC.md): their names, and where each entry's
