@@ -18,11 +18,15 @@ Parts (wall time on the calling thread, medians and p99 over the publications):
 - prepare: `Outputs.prepare_state` as a whole (what the node times as output_time);
 - publish: the rclpy `publish(bytes)` calls of the batch, without a subscriber and with one
   (a separate process subscribing to every topic, raw);
-- record: the recorder hand-off, `LiveRecorder.raw` of every message of the batch;
+- record: the recorder hand-off, as `Outputs.send` makes it;
 - total: prepare + publish + record, what the physics thread pays per publication.
 
 It also measures one `publish(bytes)` alone, the binding's own `publish_raw` under it, and
 whether the rcl publish releases the interpreter lock (:func:`gil_released_by_publish`).
+
+`--recorder` (:func:`recorder_costs`, no rclpy) measures the recorder's share alone, paced as
+the node: the hand-off, the CPU of the sender thread (which holds the interpreter lock the
+physics thread needs) and of the writer process, per publication.
 
 The machine may be shared: the report says the load.
 """
@@ -238,8 +242,7 @@ def _run(sim, out, recorder, n: int, publications: int, with_sub: bool, progress
                 if pub is not None:
                     pub.publish(data)
         t5 = clock()
-        for topic, msgtype, data in batch:
-            recorder.raw(topic, msgtype, t_ns, data)
+        _hand_off(recorder, t_ns, batch)
         t6 = clock()
         s = row.samples
         s["kernel"].append(t1 - t0)
@@ -303,6 +306,127 @@ def isolated(n: int, repeats: int = 300) -> dict[str, float]:
     res["prepare"] = med(lambda: out.prepare_state(1, sim))
     res["prepare, with diagnostics"] = med(lambda: out.prepare_state(1, sim, run))
     return res
+
+
+def _hand_off(recorder, t_ns: int, batch: list) -> None:
+    """What `Outputs.send` hands the recorder for one publication (one call where the recorder
+    takes a publication at once, else one call per record)."""
+    raw_batch = getattr(recorder, "raw_batch", None)
+    if raw_batch is not None:
+        raw_batch(t_ns, batch)
+        return
+    raw = recorder.raw
+    for topic, msgtype, data in batch:
+        raw(topic, msgtype, t_ns, data)
+
+
+def recorder_costs(n: int, publications: int = 300, workdir: str | None = None) -> dict[str, float]:
+    """The recorder's share of a publication at chain length n (no rclpy): the node's physics loop
+    paced at 100 Hz of wall time (advance 10 ms of simulated time, `Outputs.prepare_state` with
+    wrenches, poses, /tf and every 10th time /diagnostics, then the hand-off), recording to an
+    MCAP file through gyro_sim.ros.recorder.LiveRecorder.
+
+    Returns microseconds per publication: `hand_off` (median and p99: the physics thread's time
+    in the recorder calls), `sender_cpu` (CPU of the recorder's sender thread in this process,
+    `time.thread_time` there, its wake-ups and pipe writes included: ~50 us a wake-up on this
+    virtual machine, without the interpreter lock), `pack` (the sender's Python work for one
+    publication timed alone, :func:`_sender_python`: what it holds the interpreter lock for),
+    `writer_cpu` (CPU of the writer process, without its start where the recorder tells it),
+    `advance` (median wall time of the 10 physics
+    steps between two publications, the physics thread's own work with the recorder beside it),
+    and `records`, `written` (records handed over and written)."""
+    from ..io import messages as M
+    from ..ros.outputs import Outputs
+    from ..ros.recorder import LiveRecorder
+
+    class _Node:
+        def get_fully_qualified_name(self):
+            return M.NAMESPACE
+
+        def create_publisher(self, cls, topic, qos):
+            return SimpleNamespace(get_subscription_count=lambda: 1, publish=lambda data: None)
+
+    sim = _simulator(n)
+    run = M.Status("gyro_sim: run", {"real_time_factor": 1.0})
+    with tempfile.TemporaryDirectory(prefix="gyro_sim_rec_", dir=workdir) as tmp:
+        recorder = LiveRecorder(str(Path(tmp) / "rec.mcap"), scene=sim.scene, params={"bench": "recorder"})
+        out = Outputs(_Node(), sim, SimpleNamespace(publish_wrenches=True, publish_poses=True), recorder=recorder)
+        hand, adv, records = [], [], 0
+        try:
+            out.prepare_state(0, sim)  # the first call learns the joint names, the second makes the frame
+            clock = time.perf_counter
+            deadline = clock()
+            for i in range(publications):
+                t0 = clock()
+                sim.advance(PUBLISH_PERIOD)
+                t1 = clock()
+                t_ns = M.time_ns(sim.time)
+                batch = out.prepare_state(t_ns, sim, run if i % DIAG_EVERY == 0 else False)
+                t2 = clock()
+                _hand_off(recorder, t_ns, batch)
+                t3 = clock()
+                adv.append(t1 - t0)
+                hand.append(t3 - t2)
+                records += len(batch)
+                deadline += PUBLISH_PERIOD
+                pause = deadline - clock()
+                if pause > 0:
+                    time.sleep(pause)
+                else:  # behind: start again from now (as the node's pacer after a miss)
+                    deadline = clock()
+        finally:
+            recorder.close()
+    us = 1e6
+    return {"hand_off": float(np.median(hand) * us), "hand_off_p99": float(np.percentile(hand, 99) * us),
+            "sender_cpu": recorder.sender_cpu / publications * us,
+            "pack": _sender_python(batch, t_ns) * us, "writer_cpu": (recorder.thread_cpu - getattr(recorder, "open_cpu", 0.0)) / publications * us,
+            "advance": float(np.median(adv) * us), "records": records, "written": recorder.written,
+            "publications": publications,
+            "error": recorder.error}
+
+
+def _sender_python(batch: list, t_ns: int, repeats: int = 200) -> float:
+    """Seconds (median, back-to-back, no other thread) of the sender thread's Python work for one
+    publication: the recorder's `_Packer.pack` where it has one, else (the recorder before it)
+    pickling the records into one frame as its sender did."""
+    import pickle
+
+    from ..ros import recorder as R
+
+    packer = getattr(R, "_Packer", None)
+    if packer is not None:
+        p = packer()
+        p.pack([(t_ns, batch)])  # the layout goes once
+
+        def work():
+            p.pack([(t_ns, batch)])
+    else:
+        def work():
+            data = pickle.dumps([(topic, msgtype, t_ns, b) for topic, msgtype, b in batch],
+                                protocol=pickle.HIGHEST_PROTOCOL)
+            return len(data).to_bytes(4, "little") + data
+
+    ts = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        work()
+        ts.append(time.perf_counter() - t0)
+    return float(np.median(ts))
+
+
+def recorder_table(costs: dict[int, dict]) -> str:
+    """Markdown: one line per chain length of :func:`recorder_costs`."""
+    text = ("| n | records / publication | hand-off p50 / p99 (us) | sender thread CPU (us) | sender's Python work (us) "
+            "| writer process CPU (us) | 10 physics steps (us) |\n|---:|---:|---:|---:|---:|---:|---:|\n")
+    for n, c in costs.items():
+        text += (f"| {n} | {c['records'] / c['publications']:.1f} | {c['hand_off']:.1f} / {c['hand_off_p99']:.1f} "
+                 f"| {c['sender_cpu']:.1f} | {c['pack']:.1f} | {c['writer_cpu']:.0f} | {c['advance']:.0f} |\n")
+    text += ("\nPer publication (physics 1 kHz, publish 100 Hz paced on the wall clock, wrenches, poses, /tf, "
+             "/diagnostics every 10th): the physics thread's hand-off to the recorder, the CPU of the recorder's "
+             "sender thread (wake-ups and pipe writes included), its Python work for one publication timed alone "
+             "(what it holds the interpreter lock the physics thread needs for), of the writer process, and "
+             f"the physics thread's own 10 steps. Machine load {os.getloadavg()[0]:.2f} ({os.cpu_count()} cores, shared).\n")
+    return text
 
 
 def publish_costs(node, repeats: int = 3000) -> dict[str, float]:
@@ -426,6 +550,9 @@ def cmd_bench_publication(args) -> int:
 
     sizes = QUICK_SIZES if args.quick else tuple(args.sizes or DEFAULT_SIZES)
     pubs = QUICK_PUBLICATIONS if args.quick else args.publications
+    if args.recorder:  # no rclpy: the recorder's share alone
+        print(recorder_table({n: recorder_costs(n, pubs) for n in sizes}))
+        return 0
     try:
         result = measure(sizes, pubs, subscriber=not args.no_subscriber, progress=Progress("publication"))
     except (ImportError, RuntimeError) as exc:
@@ -442,4 +569,6 @@ def register(sub, bench) -> None:
     p.add_argument("--publications", type=int, default=DEFAULT_PUBLICATIONS, help="publications per size")
     p.add_argument("--no-subscriber", action="store_true", help="skip the runs with a subscriber process")
     p.add_argument("--quick", action="store_true", help=f"n = {QUICK_SIZES[0]}, {QUICK_PUBLICATIONS} publications")
+    p.add_argument("--recorder", action="store_true",
+                   help="only the recorder's share (hand-off, sender thread and writer CPU per publication; no rclpy)")
     p.set_defaults(fn=cmd_bench_publication)
