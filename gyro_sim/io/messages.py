@@ -497,12 +497,25 @@ class Frame:
         self.topics = tuple(t for t, _, _ in msgs)
         self.types = tuple(ty for _, ty, _ in msgs)
         self._slices = tuple(slice(a, a + len(m.buf)) for (_, _, m), a in zip(msgs, starts))
+        #: ((topic, type, start, stop), ...): where each message lies in the block (one object
+        #: per frame: a recorder sends it once and then only blocks)
+        self.layout = tuple((t, ty, s.start, s.stop) for t, ty, s in zip(self.topics, self.types, self._slices))
 
-    def messages(self, t_ns: int) -> list[tuple[str, str, bytes]]:
+    def messages(self, t_ns: int) -> FrameBatch:
         """[(topic, type, bytes)] with the numbers the last `snapshot(into=self.scatter)` wrote
-        and every stamp t_ns."""
+        and every stamp t_ns, cut from one block (`block`, with the `layout`)."""
         sec, nsec = divmod(int(t_ns), NS_PER_S)
         self._u32[self._sec] = sec & 0xFFFFFFFF  # int32 seconds, two's complement
         self._u32[self._nsec] = nsec
         data = self.buffer.tobytes()
-        return list(zip(self.topics, self.types, map(data.__getitem__, self._slices)))
+        out = FrameBatch(zip(self.topics, self.types, map(data.__getitem__, self._slices)))
+        out.block, out.layout = data, self.layout
+        return out
+
+
+class FrameBatch(list):
+    """A publication's [(topic, type, bytes)] from a :class:`Frame`: its first len(layout) items
+    are `block[start:stop]` for each (topic, type, start, stop) of `layout`; items appended after
+    them (the diagnostics) are not in the block."""
+
+    __slots__ = ("block", "layout")

@@ -135,7 +135,8 @@ class Outputs:
         return fn
 
     def send(self, t_ns: int, batch: list) -> None:
-        """Publish a prepared state (and hand the same bytes to the recorder)."""
+        """Publish a prepared state (and hand the same bytes to the recorder, the batch itself:
+        it is not changed after)."""
         get = self._publish_fn.get
         for topic, _, data in batch:
             fn = get(topic, False)
@@ -146,10 +147,8 @@ class Outputs:
                     fn(data)
                 except Exception as exc:  # the context went away (shutdown under way)
                     raise OutputsClosed(str(exc)) from exc
-        if self.recorder is not None:
-            raw = self.recorder.raw
-            for topic, msgtype, data in batch:
-                raw(topic, msgtype, t_ns, data)
+        if self.recorder is not None:  # one call: the recorder's sender thread takes it from there
+            self.recorder.raw_batch(t_ns, batch)
 
     def publish_diagnostics(self, t_ns: int, sim, run: M.Status) -> None:
         """Diagnostics alone (paused, stopped): the dynamics of the state kept, and the run."""

@@ -58,6 +58,9 @@ def test_frame_bytes_are_the_builders_bytes(scene, backend):
             topics += ([pub.poses_topic] if poses else []) + ([M.TF] if tf else [])
             assert [g[0] for g in got] == topics
             assert [g[1] for g in got] == [M.topic_types(pub.body_names)[x] for x in topics]
+            # the block and its layout (what the recorder sends instead of the records) give the same records
+            assert got.layout is frame.layout
+            assert [(t, ty, got.block[a:b]) for t, ty, a, b in got.layout] == list(got)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
