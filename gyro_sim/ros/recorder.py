@@ -244,7 +244,11 @@ class LiveRecorder:
             if None in items:  # close(): what came before it is the last to send
                 stop = True
                 items = items[:items.index(None)]
-            bufs, count = packer.pack(items)
+            try:
+                bufs, count = packer.pack(items)
+            except Exception as exc:  # noqa: BLE001 - a bad item must not stop the recording
+                bufs, count = [], len(items)
+                self.error = self.error or f"recorder: {type(exc).__name__}: {exc}"
             self.error = self.error or packer.error
             if count > self.max_backlog:
                 self.max_backlog = count

@@ -1,5 +1,6 @@
 """The node's recorder (no rclpy): the exact bytes handed to it, in a log flushed every 0.2 s
-by default (what SIGKILL can lose: at most 0.25 s), refusing an existing file unless told."""
+by default (what SIGKILL can lose: at most that and the sender's period, 0.02 s), refusing an
+existing file unless told."""
 from __future__ import annotations
 
 import pytest
@@ -8,14 +9,14 @@ from gyro_sim import Simulator, load_scene
 from gyro_sim.io import messages as M
 from gyro_sim.io.mcap_log import DEFAULT_FLUSH_PERIOD, iter_messages
 from gyro_sim.io.safe_paths import OutputError
-from gyro_sim.ros.recorder import LiveRecorder
+from gyro_sim.ros.recorder import SEND_PERIOD, LiveRecorder
 
 
 def test_live_recorder_writes_the_bytes_it_gets(tmp_path):
     sim = Simulator(load_scene("hinge_chain"))
     pub = M.Publication(sim.model.names)
     rec = LiveRecorder(str(tmp_path / "live.mcap"), scene=sim.scene, params={})
-    assert rec.writer.flush_period == DEFAULT_FLUSH_PERIOD <= 0.2
+    assert rec.writer.flush_period == DEFAULT_FLUSH_PERIOD <= 0.2 and SEND_PERIOD <= 0.05
     sent = []
     for i in range(5):
         t = M.time_ns(sim.time)
