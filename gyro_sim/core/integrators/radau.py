@@ -5,16 +5,53 @@ import math
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.linalg.lapack import get_lapack_funcs
 
+from .. import fast_radau
+from ..dop853_kernels import dop_initial_probe, dop_initial_step
+from ..radau_kernels import (
+    CONTROL_SIZE,
+    NEWTON_CONVERGED,
+    NEWTON_DIVERGING,
+    rad_add,
+    rad_clip,
+    rad_control_accepted,
+    rad_control_rejected,
+    rad_dense_coefficients,
+    rad_dense_eval,
+    rad_dw_norm,
+    rad_error,
+    rad_error_rhs,
+    rad_factor,
+    rad_fd_column,
+    rad_fd_delta,
+    rad_finite,
+    rad_finite_rows,
+    rad_newton_advance,
+    rad_newton_increment,
+    rad_newton_residual,
+    rad_predict,
+    rad_rms_scaled,
+    rad_scale,
+    rad_stage_state,
+    rad_transform,
+)
 from .base import (
+    _H0_DEFAULT,
+    _H0_FRACTION,
+    _H0_GROWTH,
+    _H0_NEGLIGIBLE,
+    _H0_TINY_DERIVATIVES,
+    _H0_TINY_FRACTION,
+    _H0_TINY_STEP,
     EPS,
+    LAST_STEP_STRETCH,
     MAX_FACTOR,
     MIN_FACTOR,
+    MIN_STEP_RELATIVE,
     SAFETY,
     AdaptiveIntegrator,
+    IntegrationError,
     describe_nonfinite,
-    rms,
 )
 
 if TYPE_CHECKING:
@@ -78,6 +115,10 @@ _RADAU_P = np.array([
 ])
 
 
+#: what a non-finite trial left for the collapse message (the compiled loop's codes too)
+NONFINITE_NONE, NONFINITE_STAGES, NONFINITE_STATE, NONFINITE_ERROR = range(4)
+
+
 class Radau(AdaptiveIntegrator):
     """Implicit Runge-Kutta method Radau IIA, 3 stages, order 5, for stiff systems.
 
@@ -91,12 +132,27 @@ class Radau(AdaptiveIntegrator):
     across steps and recomputed only when Newton converged slowly (more than
     RADAU_SLOW_ITER iterations at a rate above RADAU_SLOW_RATE) or failed with an old one.
 
+    One implementation, two drivers: the arithmetic (the forward-difference Jacobian, the two
+    LU factorisations and their solves, the Newton residual and increment and its rate tests,
+    the error estimate, the controller, the dense output) is :mod:`gyro_sim.core.radau_kernels`.
+    On a system that offers `kernel_arguments` and `quaternion_block` (the compiled
+    :class:`gyro_sim.core.system.FastChainODE`) and no `jacobian`, in the dense mode, a whole
+    `advance` runs in one compiled call, :func:`gyro_sim.core.fast_radau.radau_advance`
+    (compiled, or loaded from numba's cache, when the integrator is built); on any other
+    system, in the matrix-free mode, and for the public single step (`begin` / `take_step` /
+    `dense`, which the "auto" method drives) this class steps in Python, calling the same
+    arithmetic between its rhs evaluations. The two give the same bits, counters included;
+    against scipy's Radau on the same rhs, Jacobian and tolerances they take the same steps
+    (test/core/test_fast_radau.py). The LU is the kernels' own (partial pivoting, as
+    LAPACK's getrf): the same bits in and out of compiled code.
+
     Above DENSE_MAX states (a chain of some 300 bodies) nothing of size n^2 is formed: the
     "Jacobian" is its point (t, y, rhs(t, y)), kept and renewed by the same rules, and the two
     linear systems are solved by restarted GMRES (scipy.sparse.linalg.gmres) on products
     J v = (rhs(t, y + e v) - rhs(t, y)) / e, one rhs evaluation a product (two for the complex
     system), to KRYLOV_RTOL: an inexact simplified Newton (Kelley, "Iterative Methods for
-    Linear and Nonlinear Equations", SIAM 1995, ch. 6), O(n) memory.
+    Linear and Nonlinear Equations", SIAM 1995, ch. 6), O(n) memory. This mode steps in
+    Python (the Newton iteration around GMRES, on the same kernels otherwise).
     Dense output: the collocation polynomial (order 3 between the nodes), which also predicts
     the next step's Newton start when the state continues from the previous call.
 
@@ -121,6 +177,14 @@ class Radau(AdaptiveIntegrator):
     T = _RADAU_T
     TI = _RADAU_TI
     P = _RADAU_P
+    #: the controller's constants (radau_kernels.CONTROL_SIZE, in the order of its C_* indices)
+    CONTROL = np.array([SAFETY, MIN_FACTOR, MAX_FACTOR, NEWTON_MAXITER, RADAU_SLOW_ITER,
+                        RADAU_SLOW_RATE, RADAU_KEEP_STEP, RADAU_NEWTON_FAIL_FACTOR, LU_REUSE_RTOL,
+                        MIN_STEP_RELATIVE, LAST_STEP_STRETCH])
+    #: the starting step's constants (dop853_kernels.dop_initial_probe, dop_initial_step), base's
+    INITIAL = np.array([_H0_NEGLIGIBLE, _H0_DEFAULT, _H0_FRACTION, _H0_GROWTH, _H0_TINY_DERIVATIVES,
+                        _H0_TINY_STEP, _H0_TINY_FRACTION])
+    assert CONTROL.size == CONTROL_SIZE
 
     def __init__(self, system: OdeSystem, **options):
         super().__init__(system, **options)
@@ -130,29 +194,58 @@ class Radau(AdaptiveIntegrator):
         self._newton_tol = max(10 * EPS / self.rtol, min(0.03, self.rtol ** 0.5))
         #: solve without forming the Jacobian (large systems, see DENSE_MAX)
         self.matrix_free = n > DENSE_MAX and self._jac_fn is None
-        self._I = None if self.matrix_free else np.identity(n)
-        self._F = np.empty((3, n))
-        self._ys = np.empty(n)
-        self._TI_complex = self.TI[1] + 1j * self.TI[2]
-        self._y_end = np.empty(n)
-        self._sol_y = np.empty(n)  # y_old of the collocation polynomial
-        # LAPACK directly: scipy.linalg.lu_solve's checks cost more than the solve at n ~ 60
-        self._getrf_real, self._getrs_real = get_lapack_funcs(("getrf", "getrs"), dtype=np.float64)
-        self._getrf_complex, self._getrs_complex = get_lapack_funcs(("getrf", "getrs"),
-                                                                    dtype=np.complex128)
+        dense = not self.matrix_free
+        self._atol_v = np.ascontiguousarray(np.broadcast_to(np.asarray(self.atol, dtype=float), (n,)))
+        # the Jacobian and the LU factors of MU_REAL/h I - J and MU_COMPLEX/h I - J (dense mode)
+        self._J = np.zeros((n, n) if dense else (0, 0))
+        self._LU_real = np.zeros((n, n) if dense else (0, 0))
+        self._LU_complex = np.zeros((n, n) if dense else (0, 0), dtype=complex)
+        self._piv_real = np.zeros(n, dtype=np.int64)
+        self._piv_complex = np.zeros(n, dtype=np.int64)
+        # the stages: Z (3, n) in y, W in the eigenbasis of A^-1, F the rhs there
+        self._Z0, self._Z, self._W, self._dW, self._F = (np.zeros((3, n)) for _ in range(5))
+        self._ys, self._scale_v, self._delta, self._ZE, self._err, self._fe, self._y_bad = (
+            np.zeros(n) for _ in range(7))
+        self._f_real = np.zeros(n)
+        self._f_complex = np.zeros(n, dtype=complex)
+        self._bad = np.zeros(3, dtype=np.int64)
+        self._y_end = np.zeros(n)
+        self._Qt = np.zeros((3, n))  # the collocation polynomial of the last step
+        self._sol_y = np.zeros(n)  # its y_old
         self._reset_memory()
+        # the compiled loop (fast_radau), when the system offers the kernel
+        self._loop = None
+        if n and dense and self._jac_fn is None and callable(getattr(system, "kernel_arguments", None)) \
+                and callable(getattr(system, "quaternion_block", None)):
+            self._loop = fast_radau.loop_for(system.kernel_arguments())
+            self._i_q0, self._nq = (int(v) for v in system.quaternion_block())
+            self._mem = np.zeros(fast_radau.MEM_SIZE)
+            self._flags = np.zeros(fast_radau.FLAGS_SIZE, dtype=np.int64)
+            self._no_te, self._no_Y = np.zeros(0), np.zeros((0, n))
+            #: the ends of the first len(_trace) accepted steps of the last compiled call (tests)
+            self._trace = np.zeros(0)
+            # compile (or load) the loop now, not in the first advance: a call of no step from
+            # a valid state (unit quaternions), its memory thrown away
+            y = np.zeros(n)
+            y[self._i_q0:self._i_q0 + 4 * self._nq:4] = 1.0
+            self._pack()
+            self._mem[fast_radau.M_H_ABS] = 1.0
+            self._call_loop(0.0, y, 0.0, self._no_te, self._no_Y)
+            self._reset_memory()
 
     def _reset_memory(self) -> None:
-        self._h_abs_old: float | None = None
-        self._error_norm_old: float | None = None
-        self._J: np.ndarray | None = None
-        self._current_jac = False
-        self._recompute_jac = False
-        self._LU_real = self._LU_complex = None
-        self._lu_h = None
-        self._sol_Q: np.ndarray | None = None  # (n, 3); None: no predictor
+        self._h_abs_old = math.nan  # the last accepted step (NaN: none)
+        self._error_norm_old = math.nan  # its error norm
+        self._has_J = False  # a Jacobian (or its point, matrix-free) is there
+        self._J_point = None  # matrix-free: (t, y, rhs(t, y)) of the Jacobian
+        self._current_jac = False  # ... and taken at the current state
+        self._recompute_jac = False  # renew it at the next step
+        self._has_lu = False
+        self._lu_h = math.nan  # the step the LU factors are for
+        self._has_sol = False  # a collocation polynomial to predict the Newton start from
         self._sol_t = self._sol_h = 0.0
-        self._t_end: float | None = None
+        self._t_end = math.nan  # where the last call ended (with _y_end)
+        self._nonfinite = NONFINITE_NONE
 
     def reset(self) -> None:
         super().reset()
@@ -160,25 +253,26 @@ class Radau(AdaptiveIntegrator):
 
     @property
     def jacobian(self) -> np.ndarray | None:
-        """The Jacobian (n, n) the steps are using (refreshed when `njev` counts up), or None
-        before the first step and in matrix-free mode (see `jacobian_point`)."""
-        return None if self.matrix_free else self._J
+        """The Jacobian (n, n) the steps are using (refreshed in place when `njev` counts up),
+        or None before the first step and in matrix-free mode (see `jacobian_point`)."""
+        return self._J if self._has_J and not self.matrix_free else None
 
     @property
     def jacobian_point(self) -> tuple[float, np.ndarray] | None:
         """(t, y) where the Jacobian in use is taken (matrix-free mode), else None."""
-        return (self._J[0], self._J[1]) if self.matrix_free and self._J is not None else None
+        return (self._J_point[0], self._J_point[1]) if self.matrix_free and self._J_point is not None else None
 
+    # --- matrix-free linear algebra ------------------------------------------------------------
     def _jvp(self, v: np.ndarray) -> np.ndarray:
         """J v by a forward difference at the Jacobian's point (matrix-free mode)."""
-        t, y, f = self._J
+        t, y, f = self._J_point
         norm = float(np.linalg.norm(v))
         if norm == 0.0:
             return np.zeros(self.n)
         e = FD_REL_STEP * max(FD_MIN_SCALE, float(np.linalg.norm(y))) / norm
         return (self._fun(t, y + e * v) - f) / e
 
-    def _krylov(self, mu: complex, b: np.ndarray) -> np.ndarray:
+    def _krylov(self, mu: complex | float, b: np.ndarray) -> np.ndarray:
         """(mu I - J) x = b by restarted GMRES on Jacobian-vector products."""
         from scipy.sparse.linalg import LinearOperator, gmres
 
@@ -196,116 +290,98 @@ class Radau(AdaptiveIntegrator):
         x, _ = gmres(op, b, rtol=KRYLOV_RTOL, atol=0.0, restart=KRYLOV_RESTART, maxiter=KRYLOV_RESTARTS)
         return x  # not converged: an inexact solve; Newton's rate test judges the result
 
-    # --- linear algebra ---------------------------------------------------------------------
-    def _jacobian(self, t: float, y: np.ndarray, f: np.ndarray) -> np.ndarray:
-        """d rhs / dy (n, n): the system's, or forward differences around f = rhs(t, y); in
-        matrix-free mode only its point (t, y, f), copied."""
+    # --- the Python driver ---------------------------------------------------------------------
+    def _initial_step(self, t0, y0, f0, t1, order) -> float:
+        """The starting step (HNW I, sec. II.4; scipy's select_initial_step) by the kernels the
+        compiled loop calls (dop853_kernels): `AdaptiveIntegrator._initial_step` in the same
+        arithmetic."""
+        if self.n == 0:
+            return super()._initial_step(t0, y0, f0, t1, order)
+        span = t1 - t0
+        sc, y1 = np.empty(self.n), np.empty(self.n)
+        h0, d1 = dop_initial_probe(y0, f0, self.rtol, self._atol_v, span, self.INITIAL, sc, y1)
+        f1 = self._fun(t0 + h0, y1)
+        return dop_initial_step(f0, f1, sc, h0, d1, span, self.max_step, order, self.INITIAL)
+
+    def _jacobian(self, t: float, y: np.ndarray, f: np.ndarray) -> None:
+        """The Jacobian d rhs / dy at (t, y), f = rhs(t, y), into _J: the system's, or forward
+        differences (rad_fd_delta, rad_fd_column); in matrix-free mode only its point (t, y, f),
+        copied. Counts njev; the LU factors are stale after it."""
         self.njev += 1
+        self._has_J = True
+        self._has_lu = False
         if self.matrix_free:
-            return (t, y.copy(), f.copy())
+            self._J_point = (t, y.copy(), f.copy())
+            return
         if self._jac_fn is not None:
             J = np.asarray(self._jac_fn(t, y), dtype=float)
             if J.shape != (self.n, self.n):
                 raise ValueError(f"jacobian must have shape {(self.n, self.n)}, got {J.shape}")
-            return J
-        delta = (y + FD_REL_STEP * np.maximum(np.abs(y), FD_MIN_SCALE)) - y
-        J = np.empty((self.n, self.n))
-        yj = self._ys
+            self._J[:] = J
+            return
+        delta, yj = self._delta, self._ys
+        rad_fd_delta(y, FD_REL_STEP, FD_MIN_SCALE, delta)
         yj[:] = y
         for j in range(self.n):
             yj[j] = y[j] + delta[j]
-            J[:, j] = self._fun(t, yj)
+            rad_fd_column(self._J, j, self._fun(t, yj), f, delta[j])
             yj[j] = y[j]
-        J -= f[:, None]
-        J /= delta
-        return J
 
     def _factor(self, h: float) -> None:
-        """LU of MU_REAL/h I - J and MU_COMPLEX/h I - J (LAPACK getrf); matrix-free: only h."""
-        if self.matrix_free:
-            self._LU_real = self._LU_complex = ("krylov", h)
-            self._lu_h = h
-            return
-        self._LU_real = self._lu(self._getrf_real, self.MU_REAL / h * self._I - self._J)
-        self._LU_complex = self._lu(self._getrf_complex, self.MU_COMPLEX / h * self._I - self._J)
+        """LU of MU_REAL/h I - J and MU_COMPLEX/h I - J (rad_factor); matrix-free: only h."""
+        if not self.matrix_free:
+            rad_factor(self._J, h, self.MU_REAL, self.MU_COMPLEX, self._LU_real, self._piv_real,
+                       self._LU_complex, self._piv_complex)
+            self.nlu += 2
         self._lu_h = h
-        self.nlu += 2
+        self._has_lu = True
 
-    @staticmethod
-    def _lu(getrf, M: np.ndarray) -> tuple:
-        lu, piv, info = getrf(M, overwrite_a=True)
-        if info < 0:
-            raise ValueError(f"getrf: illegal argument {-info}")
-        # info > 0: exactly singular; the solves give inf/nan and the step is rejected
-        return lu, piv
-
-    def _solve(self, getrs, LU: tuple, b: np.ndarray) -> np.ndarray:
-        if self.matrix_free:
-            h = LU[1]
-            return self._krylov(self.MU_REAL / h if getrs is self._getrs_real else self.MU_COMPLEX / h, b)
-        x, info = getrs(LU[0], LU[1], b)
-        return x
-
-    def _solve_real(self, b: np.ndarray) -> np.ndarray:
-        return self._solve(self._getrs_real, self._LU_real, b)
-
-    # --- the step -------------------------------------------------------------------------------
-    def _newton(self, t, y, h, Z0, scale):
-        """Simplified Newton iteration for the collocation system (scipy's
-        solve_collocation_system). Returns (converged, n_iter, Z (3, n), rate)."""
-        F, ys = self._F, self._ys
-        M_real, M_complex = self.MU_REAL / h, self.MU_COMPLEX / h
-        W = self.TI @ Z0
-        Z = Z0
-        dW = np.empty_like(W)
-        ch = h * self.C
-        dW_norm_old = rate = None
-        converged = False
-        tol = self._newton_tol
+    def _newton(self, t: float, y: np.ndarray, h: float, scale: np.ndarray) -> tuple[bool, int, float]:
+        """The simplified Newton iteration for the collocation system from Z0 (scipy's
+        solve_collocation_system) into _Z. Returns (converged, n_iter, rate)."""
+        F, ys, W, dW, Z = self._F, self._ys, self._W, self._dW, self._Z
+        f_real, f_complex = self._f_real, self._f_complex
+        rad_transform(self.TI, self._Z0, W)
+        Z[:] = self._Z0
+        dW_norm_old = rate = math.nan
         k = 0
         for k in range(NEWTON_MAXITER):
             for i in range(3):
-                np.add(y, Z[i], out=ys)
-                F[i] = self._fun(t + ch[i], ys)
-            if not np.isfinite(F).all():
-                self._nonfinite = describe_nonfinite(F)
-                break
-            f_real = self.TI[0] @ F - M_real * W[0]
-            f_complex = self._TI_complex @ F - M_complex * (W[1] + 1j * W[2])
-            dW[0] = self._solve(self._getrs_real, self._LU_real, f_real)
-            dW_complex = self._solve(self._getrs_complex, self._LU_complex, f_complex)
-            dW[1] = dW_complex.real
-            dW[2] = dW_complex.imag
-            dW_norm = rms((dW / scale).ravel())
-            if dW_norm_old is not None:
-                rate = dW_norm / dW_norm_old
-            if rate is not None and (
-                rate >= 1 or rate ** (NEWTON_MAXITER - k) / (1 - rate) * dW_norm > tol
-            ):
-                break  # diverges, or will not converge within NEWTON_MAXITER
-            W += dW
-            Z = self.T @ W
-            if dW_norm == 0 or (rate is not None and rate / (1 - rate) * dW_norm < tol):
-                converged = True
-                break
+                rad_stage_state(y, Z, i, ys)
+                F[i] = self._fun(t + h * self.C[i], ys)
+            if not rad_finite_rows(F, self._bad):
+                self._nonfinite = NONFINITE_STAGES
+                return False, k + 1, rate
+            rad_newton_residual(F, W, self.TI, h, self.MU_REAL, self.MU_COMPLEX, f_real, f_complex)
+            if self.matrix_free:
+                dW[0] = self._krylov(self.MU_REAL / h, f_real)
+                x = self._krylov(self.MU_COMPLEX / h, f_complex)
+                dW[1], dW[2] = x.real, x.imag
+                dW_norm = rad_dw_norm(dW, scale)
+            else:
+                dW_norm = rad_newton_increment(self._LU_real, self._piv_real, self._LU_complex,
+                                               self._piv_complex, f_real, f_complex, scale, dW)
+            code, rate = rad_newton_advance(dW_norm, dW_norm_old, k, self._newton_tol,
+                                            NEWTON_MAXITER, W, dW, self.T, Z)
+            if code == NEWTON_DIVERGING:
+                return False, k + 1, rate
+            if code == NEWTON_CONVERGED:
+                return True, k + 1, rate
             dW_norm_old = dW_norm
-        return converged, k + 1, Z, rate
+        return False, k + 1, rate
 
-    @staticmethod
-    def _predict_factor(h_abs, h_abs_old, error_norm, error_norm_old) -> float:
-        """Gustafsson's predictive step-size factor (Hairer, Wanner II, sec. IV.8)."""
-        if error_norm_old is None or h_abs_old is None or error_norm == 0:
-            multiplier = 1.0
-        else:
-            multiplier = h_abs / h_abs_old * (error_norm_old / error_norm) ** 0.25
-        with np.errstate(divide="ignore"):
-            return min(1.0, multiplier) * np.float64(error_norm) ** -0.25
+    def _error_solve(self, b: np.ndarray, scale: np.ndarray) -> float:
+        """b (n,) becomes (MU_REAL/h I - J)^-1 b; returns its norm in scale."""
+        if self.matrix_free:
+            b[:] = self._krylov(self.MU_REAL / self._lu_h, b)
+            return rad_rms_scaled(b, scale)
+        return rad_error(self._LU_real, self._piv_real, b, scale)
 
     def begin(self, t0: float, y: np.ndarray, t1: float) -> None:
         super().begin(t0, y, t1)
-        if self._t_end != t0 or not np.array_equal(y, self._y_end):
+        if not (self._t_end == t0 and np.array_equal(y, self._y_end)):
             # not a continuation of the previous call: no predictor, the Jacobian is old
-            self._sol_Q = None
+            self._has_sol = False
             self._current_jac = False
 
     def end(self, t1: float, y: np.ndarray) -> None:
@@ -314,89 +390,184 @@ class Radau(AdaptiveIntegrator):
         self._y_end[:] = y
 
     def _step_impl(self, t: float, y: np.ndarray, t1: float) -> float:
-        f = self._f
+        f, scale, Z, err = self._f, self._scale_v, self._Z, self._err
         min_step = self._min_step(t, t1)
         if self._h_abs > self.max_step:
-            h_abs, h_abs_old, error_norm_old = self.max_step, None, None
+            h_abs, h_abs_old, error_norm_old = self.max_step, math.nan, math.nan
         else:
             h_abs, h_abs_old, error_norm_old = self._h_abs, self._h_abs_old, self._error_norm_old
-        if self._J is None or self._recompute_jac:
-            self._J = self._jacobian(t, y, f)
+        if not self._has_J or self._recompute_jac:
+            self._jacobian(t, y, f)
             self._current_jac, self._recompute_jac = True, False
-            self._LU_real = None
-        self._nonfinite = ""
+        self._nonfinite = NONFINITE_NONE
         rejected = False
         while True:
             if h_abs < min_step:
-                raise self._collapse(t, h_abs, self._nonfinite)
-            h, t_new = self._clip(t, h_abs, t1)
-            if self._sol_Q is None:
-                Z0 = np.zeros((3, self.n))
+                raise self._collapse(t, h_abs, self._describe_nonfinite())
+            h, t_new = rad_clip(t, h_abs, t1, LAST_STEP_STRETCH)
+            if self._has_sol:
+                rad_predict(self._Qt, self._sol_t, self._sol_h, self._sol_y, t, h, self.C, y, self._Z0)
             else:
-                x = (t + h * self.C - self._sol_t) / self._sol_h
-                Z0 = (self._sol_Q @ np.array([x, x * x, x * x * x])).T + (self._sol_y - y)
-            scale = self._scale(y)
+                self._Z0[:] = 0.0
+            rad_scale(y, y, self.rtol, self._atol_v, scale)
             converged = False
             while not converged:
-                if self._LU_real is None or abs(h - self._lu_h) > LU_REUSE_RTOL * h:
+                if not self._has_lu or abs(h - self._lu_h) > LU_REUSE_RTOL * h:
                     self._factor(h)
-                converged, n_iter, Z, rate = self._newton(t, y, h, Z0, scale)
+                converged, n_iter, rate = self._newton(t, y, h, scale)
                 if not converged:
                     if self._current_jac:
                         break
-                    self._J = self._jacobian(t, y, f)
+                    self._jacobian(t, y, f)
                     self._current_jac = True
-                    self._LU_real = None
             if not converged:
                 h_abs = abs(h) * RADAU_NEWTON_FAIL_FACTOR
-                self._LU_real = None
+                self._has_lu = False
                 self.nrejected += 1
                 continue
             y_new = self._y_new
-            np.add(y, Z[-1], out=y_new)
-            ZE = (self.E @ Z) / h
-            error = self._solve_real(f + ZE)
-            scale = self._scale(y, y_new)
-            error_norm = rms(error / scale)
-            safety = SAFETY * (2 * NEWTON_MAXITER + 1) / (2 * NEWTON_MAXITER + n_iter)
+            rad_add(y, Z[2], y_new)
+            rad_scale(y, y_new, self.rtol, self._atol_v, scale)
+            rad_error_rhs(self.E, Z, h, f, self._ZE, err)
+            error_norm = self._error_solve(err, scale)
             if rejected and error_norm > 1:
-                error = self._solve_real(self._fun(t, y + error) + ZE)
-                error_norm = rms(error / scale)
-            if not (math.isfinite(error_norm) and np.isfinite(y_new).all()):
-                self._nonfinite = describe_nonfinite(y_new) if not np.isfinite(y_new).all() else \
-                    "a non-finite error estimate"
+                rad_add(y, err, self._ys)
+                rad_add(self._fun(t, self._ys), self._ZE, err)
+                error_norm = self._error_solve(err, scale)
+            if not (math.isfinite(error_norm) and rad_finite(y_new)):
+                if rad_finite(y_new):
+                    self._nonfinite = NONFINITE_ERROR
+                else:
+                    self._nonfinite = NONFINITE_STATE
+                    self._y_bad[:] = y_new
                 h_abs = abs(h) * MIN_FACTOR
                 rejected = True
                 self.nrejected += 1
                 continue
             if error_norm > 1:
-                factor = self._predict_factor(abs(h), h_abs_old, error_norm, error_norm_old)
-                h_abs = abs(h) * max(MIN_FACTOR, safety * factor)
+                h_abs = rad_control_rejected(h, h_abs_old, error_norm, error_norm_old, n_iter, self.CONTROL)
                 rejected = True
                 self.nrejected += 1
                 continue
             break
-        self._recompute_jac = n_iter > RADAU_SLOW_ITER and rate > RADAU_SLOW_RATE
-        factor = self._predict_factor(abs(h), h_abs_old, error_norm, error_norm_old)
-        factor = min(MAX_FACTOR, safety * factor)
-        if not self._recompute_jac and factor < RADAU_KEEP_STEP:
-            factor = 1.0
+        self._recompute_jac, self._h_abs = rad_control_accepted(
+            h, h_abs, h_abs_old, error_norm, error_norm_old, n_iter, rate, self.CONTROL)
         # from now on J belongs to an older state (a slow Newton renews it next step)
         self._current_jac = False
         self._h_abs_old = abs(h)
         self._error_norm_old = error_norm
-        self._h_abs = self._next_h(abs(h), h_abs, factor)
-        self._Z = Z
         self.error_estimate = error_norm
         self.last_step = h
         return t_new
 
+    def _describe_nonfinite(self) -> str:
+        """What the last non-finite trial of the step had (for the collapse message)."""
+        if self._nonfinite == NONFINITE_STAGES:
+            return describe_nonfinite(np.where(self._bad[:, None] != 0, np.nan, 0.0))
+        if self._nonfinite == NONFINITE_STATE:
+            return describe_nonfinite(self._y_bad)
+        if self._nonfinite == NONFINITE_ERROR:
+            return "a non-finite error estimate"
+        return ""
+
     def _accept(self, t, y, t_new, y_new) -> None:
         # the collocation polynomial of this step: dense output and next Newton start
-        self._sol_Q = self._Z.T @ self.P
+        rad_dense_coefficients(self._Z, self.P, self._Qt)
         self._sol_t, self._sol_h = t, t_new - t
         self._sol_y[:] = y
+        self._has_sol = True
 
-    def _dense(self, t, y, t_new, y_new, tq: np.ndarray) -> np.ndarray:
-        x = (tq - t) / (t_new - t)
-        return y + np.column_stack([x, x * x, x * x * x]) @ self._sol_Q.T
+    def dense(self, tq: np.ndarray) -> np.ndarray:
+        """States (k, size), projected, at times tq (k,) inside the step `take_step` just took:
+        the collocation polynomial (it needs no rhs at the step's end)."""
+        tq = np.ascontiguousarray(tq, dtype=float)
+        Y = np.empty((tq.size, self.n))
+        rad_dense_eval(self._Qt, self._sol_y, self._sol_t, self._sol_h, tq, Y)
+        for row in Y:
+            self._project(row)
+        return Y
+
+    # --- the compiled loop -------------------------------------------------------------------
+    def _integrate(self, t0, y, t1, te, Y) -> None:
+        if self._loop is None or t1 == t0:
+            super()._integrate(t0, y, t1, te, Y)
+        else:
+            self._integrate_compiled(t0, y, t1, te, Y)
+
+    def _pack(self) -> None:
+        """The step-size and Jacobian memory into the loop's `mem` and `flags`."""
+        fr = fast_radau
+        mem, flags = self._mem, self._flags
+        mem[fr.M_H_ABS] = 0.0 if self._h_abs is None else self._h_abs  # 0: select the first step
+        mem[fr.M_H_ABS_OLD] = self._h_abs_old
+        mem[fr.M_ERROR_OLD] = self._error_norm_old
+        mem[fr.M_LU_H] = self._lu_h
+        mem[fr.M_SOL_T] = self._sol_t
+        mem[fr.M_SOL_H] = self._sol_h
+        mem[fr.M_T_END] = self._t_end
+        mem[fr.M_ERROR] = math.nan if self.error_estimate is None else self.error_estimate
+        mem[fr.M_LAST_STEP] = math.nan if self.last_step is None else self.last_step
+        flags[:] = 0
+        flags[fr.F_HAS_J] = self._has_J
+        flags[fr.F_CURRENT_JAC] = self._current_jac
+        flags[fr.F_RECOMPUTE_JAC] = self._recompute_jac
+        flags[fr.F_HAS_LU] = self._has_lu
+        flags[fr.F_HAS_SOL] = self._has_sol
+
+    def _unpack(self) -> None:
+        """The loop's memory and counts back into this integrator."""
+        fr = fast_radau
+        m, st = self._mem.tolist(), self._flags.tolist()
+        self._h_abs = m[fr.M_H_ABS] if m[fr.M_H_ABS] > 0.0 else None
+        self._h_abs_old, self._error_norm_old = m[fr.M_H_ABS_OLD], m[fr.M_ERROR_OLD]
+        self._lu_h, self._sol_t, self._sol_h, self._t_end = (m[fr.M_LU_H], m[fr.M_SOL_T], m[fr.M_SOL_H],
+                                                             m[fr.M_T_END])
+        if not math.isnan(m[fr.M_ERROR]):
+            self.error_estimate, self.last_step = m[fr.M_ERROR], m[fr.M_LAST_STEP]
+        self._has_J, self._current_jac, self._recompute_jac, self._has_lu, self._has_sol = (
+            bool(st[i]) for i in (fr.F_HAS_J, fr.F_CURRENT_JAC, fr.F_RECOMPUTE_JAC, fr.F_HAS_LU,
+                                  fr.F_HAS_SOL))
+        self._nonfinite = st[fr.F_NONFINITE]
+        nfev = st[fr.F_NFEV]
+        self.nfev += nfev
+        self.system.nfev += nfev
+        self.njev += st[fr.F_NJEV]
+        self.nlu += st[fr.F_NLU]
+        self.nsteps += st[fr.F_ACCEPTED]
+        self.nrejected += st[fr.F_REJECTED]
+        self._f_new = st[fr.F_F_NEW] != 0
+
+    def _integrate_compiled(self, t0: float, y: np.ndarray, t1: float, te, Y) -> None:
+        """`_integrate` (the loop of `begin`, `take_step`, `dense`, `end`) in one compiled call."""
+        fr = fast_radau
+        if te is None:
+            te, Y = self._no_te, self._no_Y
+        elif not (te.flags.c_contiguous and te.flags.writeable):
+            te = te.copy()
+        self._pack()
+        self._call_loop(t0, y, t1, te, Y)
+        self._unpack()
+        m, st = self._mem.tolist(), self._flags.tolist()
+        code = st[fr.F_STATUS]
+        if code == fr.DONE:
+            self._t_old, self._t_new = m[fr.M_T_OLD], t1
+        elif code == fr.INITIAL_RHS_NONFINITE:
+            raise IntegrationError(self.name, "rhs is not finite at the initial state", t0, None,
+                                   describe_nonfinite(self._f))
+        elif code == fr.COLLAPSED:
+            raise self._collapse(m[fr.M_T], m[fr.M_H], self._describe_nonfinite())
+        else:  # ACCEPTED_RHS_NONFINITE
+            raise IntegrationError(self.name, "rhs is not finite at the accepted state", m[fr.M_T],
+                                   m[fr.M_H], describe_nonfinite(self._f))
+
+    def _call_loop(self, t0: float, y: np.ndarray, t1: float, te, Y) -> None:
+        """fast_radau.radau_advance with this integrator's method, options, memory, scratch."""
+        self._loop(t0, t1, y, te, Y, self.max_step, self.rtol, self._atol_v, self._newton_tol,
+                   self.C, self.E, self.T, self.TI, self.P, self.MU_REAL, self.MU_COMPLEX,
+                   self.CONTROL, self.INITIAL, FD_REL_STEP, FD_MIN_SCALE, self._i_q0, self._nq,
+                   self._f, self._J, self._LU_real, self._piv_real, self._LU_complex,
+                   self._piv_complex, self._Z0, self._Z, self._W, self._dW, self._F, self._ys,
+                   self._f_real, self._f_complex, self._scale_v, self._delta, self._ZE, self._err,
+                   self._fe, self._y_new, self._y_old, self._y_bad, self._bad, self._Qt,
+                   self._sol_y, self._y_end, self._trace, self._mem, self._flags,
+                   *self.system.kernel_arguments())

@@ -1,0 +1,437 @@
+"""The arithmetic of Radau IIA (3 stages, order 5), compiled with numba.
+
+One implementation, two drivers: :class:`gyro_sim.core.integrators.radau.Radau` calls these
+between its rhs evaluations on any system (the numpy reference among them), and the compiled
+loop :func:`gyro_sim.core.fast_radau.radau_advance` calls the same functions between calls of
+the articulated-body kernel. The method is data (the class attributes of Radau: C, E, T, TI,
+P, the eigenvalues MU_REAL and MU_COMPLEX of A^-1), and so are the controller's constants
+(`control`, :data:`CONTROL_SIZE` values).
+
+What each function computes, as scipy's `scipy.integrate.Radau` does (radau.py:
+solve_collocation_system, predict_factor, Radau._step_impl, RadauDenseOutput), in the same
+order of operations wherever scipy's order is defined (its sums are BLAS products, whose
+order and fused multiply-adds are the library's: there the results agree to round-off):
+
+    delta_j = (y_j + FD_REL max(|y_j|, FD_MIN)) - y_j      FD Jacobian steps  (rad_fd_delta)
+    J[:, j] = (f(y + delta_j e_j) - f) / delta_j            its columns        (rad_fd_column)
+    LU of MU_REAL/h I - J and MU_COMPLEX/h I - J             partial pivoting   (rad_factor)
+    W = TI Z, Z = T W                                        eigenbasis of A^-1 (rad_transform)
+    f_real = sum_j TI[0, j] F_j - MU_REAL/h W_0             Newton residual    (rad_newton_residual)
+    f_cplx = sum_j (TI[1, j] + i TI[2, j]) F_j - MU_COMPLEX/h (W_1 + i W_2)
+    dW from the two LUs, ||dW / scale||_rms                 Newton increment   (rad_newton_increment)
+    rate tests of the simplified Newton (HW II, sec. IV.8)   iteration control  (rad_newton_advance)
+    err = (MU_REAL/h I - J)^-1 (f + (E Z) / h)              error estimate     (rad_error)
+    Gustafsson's predictive controller                       step control       (rad_control_*)
+    Q = Z^T P; y(t_old + x h) = y_old + Q (x, x^2, x^3)      dense output       (rad_dense_*)
+
+The LU is this module's own (rad_lu, rad_lu_solve: Doolittle with partial pivoting, rows
+swapped as LAPACK's getrf does, the pivot of largest |Re| + |Im| as LAPACK's izamax), so
+that both drivers factor with the same bits, inside compiled code and out; scipy factors
+with LAPACK getrf (blocked, BLAS-3): the factors agree to round-off, not bit for bit.
+The sums run over j in increasing order, one product added at a time. No fastmath: IEEE
+arithmetic, no contraction into fused multiply-adds. Without numba these stay plain Python
+(correct, slow).
+
+References
+----------
+.. [1] E. Hairer, G. Wanner, "Solving Ordinary Differential Equations II: Stiff and
+       Differential-Algebraic Problems", 2nd ed., Springer 1996, sec. IV.8 (Radau IIA: the
+       simplified Newton iteration in the eigenbasis of A^-1, its stopping criterion, the
+       error estimate, the predictive step-size controller).
+.. [2] E. Hairer, radau5.f, http://www.unige.ch/~hairer/software.html
+.. [3] scipy.integrate.Radau (scipy/integrate/_ivp/radau.py, scipy 1.17).
+.. [4] G. H. Golub, C. F. Van Loan, "Matrix Computations", 4th ed., Johns Hopkins 2013,
+       sec. 3.4 (Gaussian elimination with partial pivoting).
+"""
+from __future__ import annotations
+
+import math
+
+try:
+    import numba
+except ImportError:  # pragma: no cover - exercised only where numba is missing
+    numba = None
+
+#: stages of Radau IIA (rows of Z, W, F)
+N_STAGES = 3
+#: the controller's constants in `control` (Radau.CONTROL): SAFETY, MIN_FACTOR, MAX_FACTOR,
+#: NEWTON_MAXITER, RADAU_SLOW_ITER, RADAU_SLOW_RATE, RADAU_KEEP_STEP, RADAU_NEWTON_FAIL_FACTOR,
+#: LU_REUSE_RTOL, MIN_STEP_RELATIVE, LAST_STEP_STRETCH
+CONTROL_SIZE = 11
+(C_SAFETY, C_MIN_FACTOR, C_MAX_FACTOR, C_NEWTON_MAXITER, C_SLOW_ITER, C_SLOW_RATE, C_KEEP_STEP,
+ C_NEWTON_FAIL_FACTOR, C_LU_REUSE_RTOL, C_MIN_STEP_RELATIVE, C_LAST_STEP_STRETCH) = range(CONTROL_SIZE)
+#: what rad_newton_advance returns: iterate again, converged, diverging (or too slow)
+NEWTON_CONTINUE = 0
+NEWTON_CONVERGED = 1
+NEWTON_DIVERGING = 2
+
+
+def _njit(fn):
+    """Compiled in nopython mode and cached on disk (as gyro_sim.core.rk_kernels)."""
+    if numba is None:
+        return fn
+    return numba.njit(cache=True, error_model="numpy")(fn)
+
+
+# --- vectors ---------------------------------------------------------------------------------
+@_njit
+def rad_finite(x):
+    """True if every component of x (n,) is finite."""
+    for i in range(x.shape[0]):
+        if not (abs(x[i]) < math.inf):
+            return False
+    return True
+
+
+@_njit
+def rad_finite_rows(F, bad):
+    """bad (k,) = 1 where the row of F (k, n) has a non-finite component, else 0; returns
+    True if none has."""
+    ok = True
+    for s in range(F.shape[0]):
+        bad[s] = 0
+        for i in range(F.shape[1]):
+            if not (abs(F[s, i]) < math.inf):
+                bad[s] = 1
+                ok = False
+                break
+    return ok
+
+
+@_njit
+def rad_add(a, b, out):
+    """out (n,) = a + b."""
+    for i in range(a.shape[0]):
+        out[i] = a[i] + b[i]
+
+
+@_njit
+def rad_scale(y, y_new, rtol, atol, sc):
+    """sc (n,) = atol + max(|y|, |y_new|) rtol (np.maximum: NaN propagates); y_new = y gives
+    atol + |y| rtol. atol (n,)."""
+    for i in range(y.shape[0]):
+        a, b = abs(y[i]), abs(y_new[i])
+        m = b if (b > a or b != b) else a
+        sc[i] = m * rtol + atol[i]
+
+
+@_njit
+def rad_rms_scaled(x, sc):
+    """sqrt(sum_i (x_i / sc_i)^2 / n), 0 for n = 0 (scipy's `norm` of x / scale)."""
+    n = x.shape[0]
+    acc = 0.0
+    for i in range(n):
+        v = x[i] / sc[i]
+        acc += v * v
+    return math.sqrt(acc / n) if n else 0.0
+
+
+@_njit
+def rad_dw_norm(dW, sc):
+    """||dW / sc||_rms over all 3 n components, row after row (scipy: norm(dW / scale))."""
+    k, n = dW.shape[0], dW.shape[1]
+    acc = 0.0
+    for s in range(k):
+        for i in range(n):
+            v = dW[s, i] / sc[i]
+            acc += v * v
+    return math.sqrt(acc / (k * n)) if n else 0.0
+
+
+@_njit
+def rad_clip(t, h_abs, t1, stretch):
+    """(h, t_new) of a trial step of h_abs from t: to exactly t1 when t + h_abs (1 + stretch)
+    reaches it, else t_new = t + h_abs and h = t_new - t (AdaptiveIntegrator._clip)."""
+    if t + h_abs * (1.0 + stretch) >= t1:
+        return t1 - t, t1
+    t_new = t + h_abs
+    return t_new - t, t_new
+
+
+# --- the Jacobian by forward differences --------------------------------------------------
+@_njit
+def rad_fd_delta(y, rel_step, min_scale, delta):
+    """delta (n,): the forward-difference steps delta_j = (y_j + rel_step max(|y_j|,
+    min_scale)) - y_j, as represented (the difference of two floats: exact in the quotient)."""
+    for j in range(y.shape[0]):
+        a = abs(y[j])
+        delta[j] = (y[j] + rel_step * (a if a > min_scale else min_scale)) - y[j]
+
+
+@_njit
+def rad_fd_column(J, j, fj, f, dj):
+    """Column j of the forward-difference Jacobian: J[:, j] = (fj - f) / dj."""
+    for i in range(f.shape[0]):
+        J[i, j] = (fj[i] - f[i]) / dj
+
+
+# --- LU with partial pivoting ----------------------------------------------------------------
+@_njit
+def rad_lu(A, piv):
+    """LU of A (n, n) in place, with partial pivoting (Golub, Van Loan, sec. 3.4): P A = L U,
+    L unit lower (below the diagonal), U upper; at elimination step k rows k and piv[k] are
+    swapped, whole rows, as LAPACK's getrf records it. The pivot is the entry of largest
+    |Re| + |Im| (LAPACK's i?amax), the first of equals. Real or complex A. Returns 0, or
+    k + 1 if U[k, k] is exactly 0 (that column is left uneliminated: solves give inf/nan)."""
+    n = A.shape[0]
+    info = 0
+    for k in range(n):
+        p = k
+        big = abs(A[k, k].real) + abs(A[k, k].imag)
+        for i in range(k + 1, n):
+            v = abs(A[i, k].real) + abs(A[i, k].imag)
+            if v > big:
+                big = v
+                p = i
+        piv[k] = p
+        if p != k:
+            for j in range(n):
+                tmp = A[k, j]
+                A[k, j] = A[p, j]
+                A[p, j] = tmp
+        pivot = A[k, k]
+        if pivot == 0:
+            if info == 0:
+                info = k + 1
+            continue
+        for i in range(k + 1, n):
+            l = A[i, k] / pivot
+            A[i, k] = l
+            if l != 0:
+                for j in range(k + 1, n):
+                    A[i, j] -= l * A[k, j]
+    return info
+
+
+@_njit
+def rad_lu_solve(LU, piv, b):
+    """Solves A x = b in place (b (n,) becomes x) from rad_lu's factors of A: the row swaps,
+    then L (unit lower) forward and U backward, sums in increasing column order."""
+    n = LU.shape[0]
+    for k in range(n):
+        p = piv[k]
+        if p != k:
+            tmp = b[k]
+            b[k] = b[p]
+            b[p] = tmp
+    for i in range(n):
+        acc = b[i]
+        for j in range(i):
+            acc -= LU[i, j] * b[j]
+        b[i] = acc
+    for i in range(n - 1, -1, -1):
+        acc = b[i]
+        for j in range(i + 1, n):
+            acc -= LU[i, j] * b[j]
+        b[i] = acc / LU[i, i]
+
+
+@_njit
+def rad_factor(J, h, mu_real, mu_complex, LU_real, piv_real, LU_complex, piv_complex):
+    """The two matrices of the simplified Newton iteration and their LU (HW II, sec. IV.8):
+    LU_real = MU_REAL/h I - J, LU_complex = MU_COMPLEX/h I - J (complex), factored in place
+    (rad_lu). Off the diagonal -J, on it MU/h - J. Returns the info of the two (0: regular)."""
+    n = J.shape[0]
+    c_real = mu_real / h
+    c_complex = complex(mu_complex.real / h, mu_complex.imag / h)
+    for i in range(n):
+        for j in range(n):
+            LU_real[i, j] = -J[i, j]
+            LU_complex[i, j] = -J[i, j]
+        LU_real[i, i] = c_real - J[i, i]
+        LU_complex[i, i] = complex(c_complex.real - J[i, i], c_complex.imag)
+    info_real = rad_lu(LU_real, piv_real)
+    info_complex = rad_lu(LU_complex, piv_complex)
+    return max(info_real, info_complex)
+
+
+# --- the collocation system -----------------------------------------------------------------
+@_njit
+def rad_transform(M, X, out):
+    """out (3, n) = M X, M (3, 3), X (3, n): W = TI Z or Z = T W."""
+    n = X.shape[1]
+    for r in range(M.shape[0]):
+        for i in range(n):
+            acc = 0.0
+            for j in range(X.shape[0]):
+                acc += M[r, j] * X[j, i]
+            out[r, i] = acc
+
+
+@_njit
+def rad_predict(Qt, t_old, h_old, y_old, t, h, C, y, Z0):
+    """The Newton start Z0 (3, n) of a step (t, h) from the collocation polynomial of the
+    previous step (Qt (3, n), from (t_old, y_old) of size h_old): Z0[s] = y_poly(t + C[s] h)
+    - y (scipy: `self.sol(t + h * C).T - y`)."""
+    for s in range(C.shape[0]):
+        x = (t + h * C[s] - t_old) / h_old
+        x2 = x * x
+        x3 = x2 * x
+        for i in range(y.shape[0]):
+            Z0[s, i] = ((Qt[0, i] * x + Qt[1, i] * x2 + Qt[2, i] * x3) + y_old[i]) - y[i]
+
+
+@_njit
+def rad_stage_state(y, Z, s, ys):
+    """ys (n,) = y + Z[s]: the state of stage s."""
+    for i in range(y.shape[0]):
+        ys[i] = y[i] + Z[s, i]
+
+
+@_njit
+def rad_newton_residual(F, W, TI, h, mu_real, mu_complex, f_real, f_complex):
+    """The right-hand sides of the two linear systems of a simplified Newton iteration in the
+    eigenbasis of A^-1 (scipy's solve_collocation_system):
+
+        f_real    = sum_j TI[0, j] F_j - MU_REAL/h W_0                    (n,)
+        f_complex = sum_j (TI[1, j] + i TI[2, j]) F_j - MU_COMPLEX/h (W_1 + i W_2)
+
+    F (3, n) the rhs at the stage states, W (3, n) the stages in the eigenbasis."""
+    c_real = mu_real / h
+    cr, ci = mu_complex.real / h, mu_complex.imag / h
+    for i in range(F.shape[1]):
+        a = 0.0
+        b = 0.0
+        c = 0.0
+        for j in range(3):
+            a += TI[0, j] * F[j, i]
+            b += TI[1, j] * F[j, i]
+            c += TI[2, j] * F[j, i]
+        f_real[i] = a - c_real * W[0, i]
+        w1, w2 = W[1, i], W[2, i]
+        f_complex[i] = complex(b - (cr * w1 - ci * w2), c - (cr * w2 + ci * w1))
+
+
+@_njit
+def rad_newton_increment(LU_real, piv_real, LU_complex, piv_complex, f_real, f_complex, scale, dW):
+    """dW (3, n): the Newton increment from the residuals (solved in place) through the two
+    LUs (dW_0 real, dW_1 + i dW_2 complex); returns ||dW / scale||_rms."""
+    rad_lu_solve(LU_real, piv_real, f_real)
+    rad_lu_solve(LU_complex, piv_complex, f_complex)
+    for i in range(f_real.shape[0]):
+        dW[0, i] = f_real[i]
+        dW[1, i] = f_complex[i].real
+        dW[2, i] = f_complex[i].imag
+    return rad_dw_norm(dW, scale)
+
+
+@_njit
+def rad_newton_advance(dW_norm, dW_norm_old, k, tol, maxiter, W, dW, T, Z):
+    """Iteration k (from 0) of the simplified Newton iteration after its increment dW, of norm
+    dW_norm (the previous one dW_norm_old; HW II, sec. IV.8, eq. 8.10 ff.; scipy):
+    rate = dW_norm / dW_norm_old (from k = 1; NaN before). Diverging (rate >= 1) or too slow
+    to converge within maxiter iterations (rate^(maxiter - k) / (1 - rate) dW_norm > tol):
+    NEWTON_DIVERGING, nothing updated. Else W += dW, Z = T W, and NEWTON_CONVERGED when
+    dW_norm = 0 or rate / (1 - rate) dW_norm < tol, else NEWTON_CONTINUE. Returns (code, rate)."""
+    rate = math.nan
+    if k > 0:
+        rate = dW_norm / dW_norm_old
+        if rate >= 1.0 or rate ** float(maxiter - k) / (1.0 - rate) * dW_norm > tol:
+            return NEWTON_DIVERGING, rate
+    for s in range(W.shape[0]):
+        for i in range(W.shape[1]):
+            W[s, i] += dW[s, i]
+    rad_transform(T, W, Z)
+    if dW_norm == 0.0 or (k > 0 and rate / (1.0 - rate) * dW_norm < tol):
+        return NEWTON_CONVERGED, rate
+    return NEWTON_CONTINUE, rate
+
+
+# --- error estimate and step control ----------------------------------------------------------
+@_njit
+def rad_error_rhs(E, Z, h, f, ZE, b):
+    """ZE (n,) = (sum_j E[j] Z[j]) / h and b = f + ZE: the right-hand side of the error
+    estimate (HW II, sec. IV.8, eq. 8.19 ff.; scipy: `f + Z.T.dot(E) / h`)."""
+    for i in range(f.shape[0]):
+        acc = 0.0
+        for j in range(3):
+            acc += E[j] * Z[j, i]
+        ZE[i] = acc / h
+        b[i] = f[i] + ZE[i]
+
+
+@_njit
+def rad_error(LU_real, piv_real, b, scale):
+    """The error estimate err = (MU_REAL/h I - J)^-1 b in place of b (n,); returns
+    ||err / scale||_rms."""
+    rad_lu_solve(LU_real, piv_real, b)
+    return rad_rms_scaled(b, scale)
+
+
+@_njit
+def rad_predict_factor(h_abs, h_abs_old, error_norm, error_norm_old):
+    """Gustafsson's predictive step-size factor (HW II, sec. IV.8, eq. 8.25; scipy's
+    predict_factor): min(1, h/h_old (err_old/err)^(1/4)) err^(-1/4), the first factor 1 when
+    there is no previous step (h_old or err_old NaN) or err = 0 (then the factor is inf)."""
+    if error_norm_old != error_norm_old or h_abs_old != h_abs_old or error_norm == 0.0:
+        multiplier = 1.0
+    else:
+        multiplier = h_abs / h_abs_old * (error_norm_old / error_norm) ** 0.25
+    return min(1.0, multiplier) * error_norm ** -0.25
+
+
+@_njit
+def rad_safety(n_iter, control):
+    """SAFETY (2 NEWTON_MAXITER + 1) / (2 NEWTON_MAXITER + n_iter): a step whose Newton
+    iteration needed more iterations grows less (radau5.f, scipy)."""
+    maxiter = control[C_NEWTON_MAXITER]
+    return control[C_SAFETY] * (2.0 * maxiter + 1.0) / (2.0 * maxiter + n_iter)
+
+
+@_njit
+def rad_control_rejected(h, h_abs_old, error_norm, error_norm_old, n_iter, control):
+    """The trial size after a rejected step h (error_norm > 1): |h| max(MIN_FACTOR, safety
+    factor), factor from rad_predict_factor with the last accepted step's memory."""
+    factor = rad_predict_factor(abs(h), h_abs_old, error_norm, error_norm_old)
+    return abs(h) * max(control[C_MIN_FACTOR], rad_safety(n_iter, control) * factor)
+
+
+@_njit
+def rad_control_accepted(h, h_try, h_abs_old, error_norm, error_norm_old, n_iter, rate, control):
+    """After an accepted step h (tried as h_try: h may be shorter, clipped to t1), whose Newton
+    iteration took n_iter iterations at the last rate:
+
+    - the Jacobian is renewed for the next step if Newton was slow (n_iter > RADAU_SLOW_ITER
+      and rate > RADAU_SLOW_RATE);
+    - factor = min(MAX_FACTOR, safety rad_predict_factor), 1 below RADAU_KEEP_STEP when the
+      Jacobian is kept (the step and its LU factors are kept, as scipy and radau5.f);
+    - the step-size memory |h| factor, but a step shortened only to land on t1 that went well
+      does not shrink it (at least h_try; AdaptiveIntegrator._next_h).
+
+    Returns (recompute_jac, the step-size memory)."""
+    recompute = n_iter > control[C_SLOW_ITER] and rate > control[C_SLOW_RATE]
+    factor = rad_predict_factor(abs(h), h_abs_old, error_norm, error_norm_old)
+    factor = min(control[C_MAX_FACTOR], rad_safety(n_iter, control) * factor)
+    if not recompute and factor < control[C_KEEP_STEP]:
+        factor = 1.0
+    h_abs = abs(h)
+    h_next = h_abs * factor
+    if h_abs < h_try and factor >= 1.0:
+        h_next = max(h_next, h_try)
+    return recompute, h_next
+
+
+# --- dense output -------------------------------------------------------------------------------
+@_njit
+def rad_dense_coefficients(Z, P, Qt):
+    """Qt (3, n): the collocation polynomial of a step, Qt[c, i] = sum_j Z[j, i] P[j, c]
+    (scipy: Q = Z.T.dot(P)); y(t_old + x h) = y_old + sum_c Qt[c] x^(c + 1)."""
+    for c in range(P.shape[1]):
+        for i in range(Z.shape[1]):
+            acc = 0.0
+            for j in range(Z.shape[0]):
+                acc += Z[j, i] * P[j, c]
+            Qt[c, i] = acc
+
+
+@_njit
+def rad_dense_eval(Qt, y_old, t_old, h, tq, Y):
+    """Y (k, n): the dense output at times tq (k,) of the step from (t_old, y_old) of size h,
+    x = (t - t_old) / h, (Q0 x + Q1 x^2 + Q2 x^3) + y_old (scipy's RadauDenseOutput, the
+    powers as its cumprod)."""
+    for r in range(tq.shape[0]):
+        x = (tq[r] - t_old) / h
+        x2 = x * x
+        x3 = x2 * x
+        for i in range(y_old.shape[0]):
+            Y[r, i] = (Qt[0, i] * x + Qt[1, i] * x2 + Qt[2, i] * x3) + y_old[i]
