@@ -85,6 +85,8 @@ COLLAPSED = 1
 INITIAL_RHS_NONFINITE = 2
 #: the rhs at an accepted state is not finite
 ACCEPTED_RHS_NONFINITE = 3
+#: no starting step is representable (|f0| too large against |y0|; mem[M_H]: ||f0|| weighted)
+NO_STARTING_STEP = 4
 
 #: the order of Radau's error estimator (the starting step's exponent)
 ORDER_OF_ESTIMATOR = 3
@@ -197,11 +199,18 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
         if h_mem <= 0.0:  # F[0] and F[1] as scratch
             sc, f1 = F[0], F[1]
             h0, d1 = dop_initial_probe(y, f, rtol, atol, t1 - t0, initial, sc, ys)
-            fast.rhs_kernel(t0 + h0, ys, f1, work, is_hinge, qrow, own_col, col_start, hinge_axis,
-                            s, mass, first_moment, inertia, lam_speed, torque_body, torque_axis,
-                            torque_A, flags_k, base, ht0, p0, pdot, L_rotor, tau)
-            nfev += 1
-            h_mem = dop_initial_step(f, f1, sc, h0, d1, t1 - t0, max_step, ORDER_OF_ESTIMATOR, initial)
+            if h0 > 0.0:
+                fast.rhs_kernel(t0 + h0, ys, f1, work, is_hinge, qrow, own_col, col_start,
+                                hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
+                                torque_axis, torque_A, flags_k, base, ht0, p0, pdot, L_rotor, tau)
+                nfev += 1
+                h_mem = dop_initial_step(f, f1, sc, h0, d1, t1 - t0, max_step, ORDER_OF_ESTIMATOR,
+                                         initial)
+            else:
+                status = NO_STARTING_STEP
+                t_fail = t0
+                h_fail = d1
+    if status == DONE:
         continuation = mem[M_T_END] == t0
         if continuation:
             for i in range(y.shape[0]):

@@ -300,8 +300,14 @@ class Radau(AdaptiveIntegrator):
         span = t1 - t0
         sc, y1 = np.empty(self.n), np.empty(self.n)
         h0, d1 = dop_initial_probe(y0, f0, self.rtol, self._atol_v, span, self.INITIAL, sc, y1)
+        if not h0 > 0.0:  # |f0| so large against |y0| that no step is representable
+            raise self._no_starting_step(t0, d1)
         f1 = self._fun(t0 + h0, y1)
         return dop_initial_step(f0, f1, sc, h0, d1, span, self.max_step, order, self.INITIAL)
+
+    def _no_starting_step(self, t0: float, d1: float) -> IntegrationError:
+        return IntegrationError(self.name, f"no starting step: the rhs is too large (weighted norm {d1:.3g})",
+                                t0, None)
 
     def _jacobian(self, t: float, y: np.ndarray, f: np.ndarray) -> None:
         """The Jacobian d rhs / dy at (t, y), f = rhs(t, y), into _J: the system's, or forward
@@ -554,6 +560,8 @@ class Radau(AdaptiveIntegrator):
         elif code == fr.INITIAL_RHS_NONFINITE:
             raise IntegrationError(self.name, "rhs is not finite at the initial state", t0, None,
                                    describe_nonfinite(self._f))
+        elif code == fr.NO_STARTING_STEP:
+            raise self._no_starting_step(t0, m[fr.M_H])
         elif code == fr.COLLAPSED:
             raise self._collapse(m[fr.M_T], m[fr.M_H], self._describe_nonfinite())
         else:  # ACCEPTED_RHS_NONFINITE
