@@ -9,7 +9,7 @@ writes its timing statistics (`stats_file`). Reported per run:
 - publication jitter p50 / p99: |interval between two publications - 10 ms|, publisher side;
 - CPU share: CPU seconds of the node process (all threads) per wall second (1.0 = one core);
 - achieved real-time factor (simulated / wall time) and deadline misses;
-- with recording: records written, the writer thread's CPU.
+- with recording: records written, the writer process's CPU and the node's sender thread's.
 
 Nobody subscribes in these runs, so without recording the node computes joint states only;
 with recording it also computes wrenches and poses (everything published is recorded).
@@ -133,7 +133,8 @@ def table(runs: list[Run]) -> str:
     rec = [r for r in runs if r.record]
     if rec:
         lines.append("Recording: " + "; ".join(
-            f"n = {r.n}: {int(r.get('records_written', 0))} records, writer thread {r.get('recorder_thread_cpu_s'):.2f} s CPU "
+            f"n = {r.n}: {int(r.get('records_written', 0))} records, writer process {r.get('recorder_thread_cpu_s'):.2f} s CPU, "
+            f"the node's sender thread {r.get('recorder_sender_cpu_s', float('nan')):.2f} s, "
             f"in {r.get('wall_s'):.1f} s" for r in rec) + ".")
     return "\n".join(lines)
 

@@ -168,7 +168,9 @@ class GyroSimNode(Node):
             self.recorder.close()
             stats.update(record=self.recorder.path, records_written=self.recorder.written,
                          recorder_max_backlog=self.recorder.max_backlog,
-                         recorder_thread_cpu_s=self.recorder.thread_cpu, recorder_error=self.recorder.error)
+                         recorder_thread_cpu_s=self.recorder.thread_cpu, recorder_error=self.recorder.error,
+                         recorder_sender_cpu_s=self.recorder.sender_cpu,
+                         recorder_open_cpu_s=getattr(self.recorder, "open_cpu", 0.0))
         return stats
 
 
