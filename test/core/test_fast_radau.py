@@ -402,3 +402,15 @@ def test_matrix_free_and_system_jacobian_step_in_python(monkeypatch):
     system, _ = held_system("chain_4")
     monkeypatch.setattr(R, "DENSE_MAX", -1)
     assert Radau(system)._loop is None  # noqa: SLF001
+
+
+def test_warm_up_compiles_both_ways_and_forgets():
+    """warm_up: the compiled loop and the single step run once, then the memory is reset and
+    the counters are as before; a run after it is the run of a fresh integrator."""
+    system, y0 = held_system("heavy_top", seed=5)
+    warm, fresh = Radau(system, rtol=1e-8, atol=1e-10), Radau(system, rtol=1e-8, atol=1e-10)
+    warm.warm_up(0.1, y0)
+    assert warm._loop.entry is not None  # noqa: SLF001 - compiled (or loaded): straight to it
+    assert (warm.nfev, warm.nsteps, warm.njev, warm.nlu, warm._h_abs) == (0, 0, 0, 0, None)  # noqa: SLF001
+    np.testing.assert_array_equal(warm.advance(0.1, y0, 0.2), fresh.advance(0.1, y0, 0.2))
+    assert counters(warm) == counters(fresh)

@@ -78,6 +78,8 @@ FD_MIN_SCALE = 1.0
 #: Jacobian-vector products (forward differences of the rhs at the Jacobian's point), O(n)
 #: memory; at or below it, the dense Jacobian and LU (faster for small systems)
 DENSE_MAX = 2000
+#: `warm_up` advances this far (s, relative to max(1, |t0|)): a step or two, to compile
+WARM_UP_SPAN = 1e-6
 #: GMRES (matrix-free mode): relative residual, restart length, restarts
 KRYLOV_RTOL = 1e-8
 KRYLOV_RESTART = 30
@@ -138,13 +140,19 @@ class Radau(AdaptiveIntegrator):
     On a system that offers `kernel_arguments` and `quaternion_block` (the compiled
     :class:`gyro_sim.core.system.FastChainODE`) and no `jacobian`, in the dense mode, a whole
     `advance` runs in one compiled call, :func:`gyro_sim.core.fast_radau.radau_advance`
-    (compiled, or loaded from numba's cache, when the integrator is built); on any other
+    (compiled, or loaded from numba's cache, by the first `advance` or by `warm_up`: ~20 s of
+    CPU once per version of its files, then ~0.1 s); on any other
     system, in the matrix-free mode, and for the public single step (`begin` / `take_step` /
     `dense`, which the "auto" method drives) this class steps in Python, calling the same
     arithmetic between its rhs evaluations. The two give the same bits, counters included;
     against scipy's Radau on the same rhs, Jacobian and tolerances they take the same steps
     (test/core/test_fast_radau.py). The LU is the kernels' own (partial pivoting, as
     LAPACK's getrf): the same bits in and out of compiled code.
+
+    The controller divides by the last accepted step (radau5.f's HACC); scipy's Radau keeps
+    the size that step was first tried with (`h_abs_old = h_abs`), which differs after a
+    rejection: the only difference of the step sequences besides round-off and the last step
+    before t1 (stretched by up to LAST_STEP_STRETCH here, and factored for its own size).
 
     Above DENSE_MAX states (a chain of some 300 bodies) nothing of size n^2 is formed: the
     "Jacobian" is its point (t, y, rhs(t, y)), kept and renewed by the same rules, and the two
@@ -224,14 +232,32 @@ class Radau(AdaptiveIntegrator):
             self._no_te, self._no_Y = np.zeros(0), np.zeros((0, n))
             #: the ends of the first len(_trace) accepted steps of the last compiled call (tests)
             self._trace = np.zeros(0)
-            # compile (or load) the loop now, not in the first advance: a call of no step from
-            # a valid state (unit quaternions), its memory thrown away
-            y = np.zeros(n)
-            y[self._i_q0:self._i_q0 + 4 * self._nq:4] = 1.0
-            self._pack()
-            self._mem[fast_radau.M_H_ABS] = 1.0
-            self._call_loop(0.0, y, 0.0, self._no_te, self._no_Y)
-            self._reset_memory()
+            # the loop is compiled (or loaded) by the first advance or by `warm_up`, not here:
+            # "auto" builds a Radau and drives only its single step
+
+    def warm_up(self, t0: float, y: np.ndarray) -> None:
+        """A short advance from (t0, y) in each way this integrator steps, then forgotten (the
+        memory reset, the counters kept): the compiled loop (if the system has it) and the
+        public single step ("auto" drives it) are compiled, or loaded from numba's cache, now
+        rather than in the middle of a real-time run. A failure to step is ignored: the code is
+        compiled all the same."""
+        counts = (self.nfev, self.nsteps, self.nrejected, self.njev, self.nlu)
+        system_nfev = getattr(self.system, "nfev", None)
+        span = WARM_UP_SPAN * max(1.0, abs(t0))
+        try:
+            self.advance(t0, y, t0 + span, t_eval=[t0 + 0.5 * span])
+            self.reset()
+            yc = np.array(y, dtype=float)
+            self.begin(t0, yc, t0 + span)
+            self.take_step(t0, yc, t0 + span)
+            self.dense(np.array([t0]))
+        except IntegrationError:
+            pass
+        finally:
+            self.reset()
+            self.nfev, self.nsteps, self.nrejected, self.njev, self.nlu = counts
+            if system_nfev is not None:
+                self.system.nfev = system_nfev
 
     def _reset_memory(self) -> None:
         self._h_abs_old = math.nan  # the last accepted step (NaN: none)
