@@ -63,7 +63,7 @@ STEP_TIME_RTOL = 1e-6
 STATE_RTOL = 1e-10
 #: a Newton solve from the same start against scipy's, relative to max |Z|
 NEWTON_RTOL = 1e-12
-#: a step kept for the test's own fast run: the shipped scenes' subset run in every test session
+#: the shipped scenes run in every session (the others are marked slow)
 FAST_SCENES = ("hinge_chain", "stiff_fast_rotor", "free_chain_rotors")
 SCENES = sorted(os.path.basename(p)[:-5] for p in glob.glob(
     os.path.join(os.path.dirname(__file__), "..", "..", "config", "*.yaml")) if not p.endswith("params.yaml"))
@@ -230,7 +230,8 @@ def test_controller_is_scipys_predict_factor():
         assert rk.rad_predict_factor(h, h_old, err, err_old) == ra.predict_factor(h, h_old, err, err_old)
         assert rk.rad_predict_factor(h, math.nan, err, math.nan) == ra.predict_factor(h, None, err, None)
     with np.errstate(divide="ignore"):
-        assert rk.rad_predict_factor(1e-3, 2e-3, 0.0, 0.5) == ra.predict_factor(1e-3, 2e-3, np.float64(0.0), 0.5) == math.inf
+        zero = np.float64(0.0)  # err = 0: an infinite factor (scipy: numpy's division by zero)
+        assert rk.rad_predict_factor(1e-3, 2e-3, 0.0, 0.5) == ra.predict_factor(1e-3, 2e-3, zero, 0.5) == math.inf
 
 
 def test_dense_output_is_scipys():
@@ -246,7 +247,8 @@ def test_dense_output_is_scipys():
     ref = ra.RadauDenseOutput(t_old, t_new, y_old, Z.T.dot(ra.P))(tq).T
     terms = (np.abs(Qt).sum(axis=0) + np.abs(y_old)).max()  # the size of what is summed
     np.testing.assert_allclose(Y, ref, rtol=0, atol=4 * EPS * terms)
-    np.testing.assert_allclose(Qt.T, Z.T.dot(ra.P), rtol=0, atol=4 * EPS * np.abs(Z).sum(axis=0).max() * np.abs(ra.P).max())
+    sums = np.abs(Z).sum(axis=0).max() * np.abs(ra.P).max()
+    np.testing.assert_allclose(Qt.T, Z.T.dot(ra.P), rtol=0, atol=4 * EPS * sums)
 
 
 def test_method_constants_are_scipys():
@@ -414,6 +416,9 @@ def test_warm_up_compiles_both_ways_and_forgets():
     assert (warm.nfev, warm.nsteps, warm.njev, warm.nlu, warm._h_abs) == (0, 0, 0, 0, None)  # noqa: SLF001
     np.testing.assert_array_equal(warm.advance(0.1, y0, 0.2), fresh.advance(0.1, y0, 0.2))
     assert counters(warm) == counters(fresh)
+    single = Radau(system, rtol=1e-8, atol=1e-10)
+    single.warm_up(0.1, y0, loop=False)  # what "auto" needs: the single step only
+    assert single.nfev == 0 and single._h_abs is None  # noqa: SLF001
 
 
 def test_a_recorded_radau_run_resimulates_bit_for_bit(tmp_path):

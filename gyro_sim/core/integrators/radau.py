@@ -202,12 +202,11 @@ class Radau(AdaptiveIntegrator):
         self._newton_tol = max(10 * EPS / self.rtol, min(0.03, self.rtol ** 0.5))
         #: solve without forming the Jacobian (large systems, see DENSE_MAX)
         self.matrix_free = n > DENSE_MAX and self._jac_fn is None
-        dense = not self.matrix_free
         self._atol_v = np.ascontiguousarray(np.broadcast_to(np.asarray(self.atol, dtype=float), (n,)))
-        # the Jacobian and the LU factors of MU_REAL/h I - J and MU_COMPLEX/h I - J (dense mode)
-        self._J = np.zeros((n, n) if dense else (0, 0))
-        self._LU_real = np.zeros((n, n) if dense else (0, 0))
-        self._LU_complex = np.zeros((n, n) if dense else (0, 0), dtype=complex)
+        # the Jacobian and the LU factors of MU_REAL/h I - J and MU_COMPLEX/h I - J (dense mode;
+        # (n, n) from the first Jacobian on: "auto" builds a Radau it may never run)
+        self._J, self._LU_real = np.zeros((0, 0)), np.zeros((0, 0))
+        self._LU_complex = np.zeros((0, 0), dtype=complex)
         self._piv_real = np.zeros(n, dtype=np.int64)
         self._piv_complex = np.zeros(n, dtype=np.int64)
         # the stages: Z (3, n) in y, W in the eigenbasis of A^-1, F the rhs there
@@ -223,7 +222,7 @@ class Radau(AdaptiveIntegrator):
         self._reset_memory()
         # the compiled loop (fast_radau), when the system offers the kernel
         self._loop = None
-        if n and dense and self._jac_fn is None and callable(getattr(system, "kernel_arguments", None)) \
+        if n and not self.matrix_free and self._jac_fn is None and callable(getattr(system, "kernel_arguments", None)) \
                 and callable(getattr(system, "quaternion_block", None)):
             self._loop = fast_radau.loop_for(system.kernel_arguments())
             self._i_q0, self._nq = (int(v) for v in system.quaternion_block())
@@ -235,18 +234,19 @@ class Radau(AdaptiveIntegrator):
             # the loop is compiled (or loaded) by the first advance or by `warm_up`, not here:
             # "auto" builds a Radau and drives only its single step
 
-    def warm_up(self, t0: float, y: np.ndarray) -> None:
+    def warm_up(self, t0: float, y: np.ndarray, *, loop: bool = True) -> None:
         """A short advance from (t0, y) in each way this integrator steps, then forgotten (the
-        memory reset, the counters kept): the compiled loop (if the system has it) and the
-        public single step ("auto" drives it) are compiled, or loaded from numba's cache, now
-        rather than in the middle of a real-time run. A failure to step is ignored: the code is
-        compiled all the same."""
+        memory reset, the counters kept): the compiled loop (if the system has it and `loop`)
+        and the public single step ("auto" drives it; the kernels of the Python driver) are
+        compiled, or loaded from numba's cache, now rather than in the middle of a real-time
+        run. A failure to step is ignored: the code is compiled all the same."""
         counts = (self.nfev, self.nsteps, self.nrejected, self.njev, self.nlu)
         system_nfev = getattr(self.system, "nfev", None)
         span = WARM_UP_SPAN * max(1.0, abs(t0))
         try:
-            self.advance(t0, y, t0 + span, t_eval=[t0 + 0.5 * span])
-            self.reset()
+            if loop:
+                self.advance(t0, y, t0 + span, t_eval=[t0 + 0.5 * span])
+                self.reset()
             yc = np.array(y, dtype=float)
             self.begin(t0, yc, t0 + span)
             self.take_step(t0, yc, t0 + span)
@@ -331,6 +331,13 @@ class Radau(AdaptiveIntegrator):
         f1 = self._fun(t0 + h0, y1)
         return dop_initial_step(f0, f1, sc, h0, d1, span, self.max_step, order, self.INITIAL)
 
+    def _allocate(self) -> None:
+        """The (n, n) Jacobian and LU factors of the dense mode, once."""
+        if self._J.shape[0] != self.n:
+            n = self.n
+            self._J, self._LU_real = np.zeros((n, n)), np.zeros((n, n))
+            self._LU_complex = np.zeros((n, n), dtype=complex)
+
     def _no_starting_step(self, t0: float, d1: float) -> IntegrationError:
         return IntegrationError(self.name, f"no starting step: the rhs is too large (weighted norm {d1:.3g})",
                                 t0, None)
@@ -345,6 +352,7 @@ class Radau(AdaptiveIntegrator):
         if self.matrix_free:
             self._J_point = (t, y.copy(), f.copy())
             return
+        self._allocate()
         if self._jac_fn is not None:
             J = np.asarray(self._jac_fn(t, y), dtype=float)
             if J.shape != (self.n, self.n):
@@ -576,6 +584,7 @@ class Radau(AdaptiveIntegrator):
             te, Y = self._no_te, self._no_Y
         elif not (te.flags.c_contiguous and te.flags.writeable):
             te = te.copy()
+        self._allocate()
         self._pack()
         self._call_loop(t0, y, t1, te, Y)
         self._unpack()
