@@ -262,3 +262,128 @@ def dop_dense_eval(F, y_old, t_old, h, tq, Y):
                 else:
                     acc *= 1.0 - x
             Y[r, i] = acc + y_old[i]
+
+
+# --- stiffness detection: dop853.f's h |lambda| and the "auto" method's tests --------------
+# One implementation for both drivers of gyro_sim.core.integrators.auto.Auto: its Python loop
+# (DOP853's public single step, on any system) and the detection mode of the compiled loop
+# (fast_dop853.dop853_advance) call these on the same state arrays, owned by Auto:
+#
+#     counters (COUNTERS_SIZE,) int64   the counts below
+#     attempts (REJECT_WINDOW,) int64   rejected attempts before each accepted step (a ring)
+#     window (COST_WINDOW, 2) float64   (dt, rhs evaluations) of each accepted step (a ring)
+#     cost (COST_SIZE,) float64         rhs evaluations per simulated second, by method (nan:
+#                                       not measured yet)
+#     detect (DETECT_SIZE,) float64     the constants: STIFF_HLAMB, STIFF_STEPS, NONSTIFF_RESET,
+#                                       REJECT_FRACTION (auto.py)
+#
+# The windows are as long as their arrays. Sums run oldest first, one term at a time: the
+# values of Python's `sum` over the lists the tests kept before (CPython 3.11 adds floats
+# left to right).
+
+#: counters: dop853.f's IASTI and NONSTI, then the entries of `attempts` and the slot of the
+#: next one, then those of `window`
+C_STIFF, C_NONSTIFF, C_ATTEMPTS, C_ATTEMPT_NEXT, C_WINDOW, C_WINDOW_NEXT = range(6)
+COUNTERS_SIZE = 6
+#: cost: the slots of the two methods of "auto"
+COST_DOP853, COST_RADAU = range(2)
+COST_SIZE = 2
+#: detect: the constants of the tests
+D_STIFF_HLAMB, D_STIFF_STEPS, D_NONSTIFF_RESET, D_REJECT_FRACTION = range(4)
+DETECT_SIZE = 4
+#: what dop_hlamb returns when y1 = Y12 (no estimate)
+NO_HLAMB = -1.0
+
+
+@_njit
+def dop_hlamb(h, Y12, f12, y1, f1):
+    """dop853.f's stiffness estimate (HLAMB) of an accepted step h: h |lambda| ~
+    |h| sqrt(||f1 - f12||^2 / ||y1 - Y12||^2), Y12 (n,) the last stage's state (at t + h),
+    f12 = f(Y12), y1 (n,) the new state, f1 = f(y1); NO_HLAMB if y1 = Y12."""
+    num = 0.0
+    den = 0.0
+    for i in range(y1.shape[0]):
+        dy = y1[i] - Y12[i]
+        den += dy * dy
+    if den <= 0.0:
+        return NO_HLAMB
+    for i in range(y1.shape[0]):
+        df = f1[i] - f12[i]
+        num += df * df
+    return abs(h) * math.sqrt(num / den)
+
+
+@_njit
+def auto_stiffness_test(hlamb, counters, detect):
+    """dop853.f's test on one accepted step of h |lambda| = hlamb: above STIFF_HLAMB a stiff
+    step (IASTI + 1, NONSTI = 0), else a non-stiff one (NONSTI + 1; NONSTIFF_RESET of them in a
+    row set IASTI = 0). True when IASTI reaches STIFF_STEPS: the problem is stiff."""
+    if hlamb > detect[D_STIFF_HLAMB]:
+        counters[C_NONSTIFF] = 0
+        counters[C_STIFF] += 1
+        return counters[C_STIFF] >= detect[D_STIFF_STEPS]
+    counters[C_NONSTIFF] += 1
+    if counters[C_NONSTIFF] >= detect[D_NONSTIFF_RESET]:
+        counters[C_STIFF] = 0
+    return False
+
+
+@_njit
+def auto_rejections(counters, attempts):
+    """(rejected, all) step attempts in the window: the rejected ones and every attempt."""
+    count = counters[C_ATTEMPTS]
+    rejected = 0
+    for i in range(count):
+        rejected += attempts[i]
+    return rejected, rejected + count
+
+
+@_njit
+def auto_rejection_test(rejected, counters, attempts, detect):
+    """Enters the `rejected` attempts before an accepted step in the window of the last
+    len(attempts) accepted steps. True when the window holds at least len(attempts) attempts
+    and at least REJECT_FRACTION of them were rejected: the problem is stiff."""
+    size = attempts.shape[0]
+    attempts[counters[C_ATTEMPT_NEXT]] = rejected
+    counters[C_ATTEMPT_NEXT] = (counters[C_ATTEMPT_NEXT] + 1) % size
+    if counters[C_ATTEMPTS] < size:
+        counters[C_ATTEMPTS] += 1
+    n_rej, n_all = auto_rejections(counters, attempts)
+    return n_all >= size and n_rej >= detect[D_REJECT_FRACTION] * n_all
+
+
+@_njit
+def auto_clear_attempts(counters):
+    """Empties the window of attempts."""
+    counters[C_ATTEMPTS] = 0
+    counters[C_ATTEMPT_NEXT] = 0
+
+
+@_njit
+def auto_measure(dt, nfev, counters, window, cost, method):
+    """Enters an accepted step of dt that cost nfev rhs evaluations in the window of the last
+    len(window) steps; once full, cost[method] = its evaluations / its span (if > 0)."""
+    size = window.shape[0]
+    slot = counters[C_WINDOW_NEXT]
+    window[slot, 0] = dt
+    window[slot, 1] = nfev
+    counters[C_WINDOW_NEXT] = (slot + 1) % size
+    if counters[C_WINDOW] < size:
+        counters[C_WINDOW] += 1
+    if counters[C_WINDOW] == size:
+        first = counters[C_WINDOW_NEXT]  # the oldest entry
+        span = 0.0
+        evals = 0.0
+        for i in range(size):
+            k = (first + i) % size
+            span += window[k, 0]
+            evals += window[k, 1]
+        if span > 0.0:
+            cost[method] = evals / span
+
+
+@_njit
+def auto_costlier(cost, candidate, running, margin):
+    """Is method `candidate` measured to cost more than `margin` times method `running`?"""
+    c, r = cost[candidate], cost[running]
+    return not (math.isnan(c) or math.isnan(r)) and c > margin * r

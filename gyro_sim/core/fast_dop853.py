@@ -9,6 +9,12 @@ every accepted state and output, the finite checks. It calls the articulated-bod
 :mod:`gyro_sim.core.dop853_kernels`, the very functions the Python driver calls between its
 rhs evaluations on other systems: the two drivers give the same bits.
 
+Its detection mode runs the "auto" method's dop853 phase
+(:class:`gyro_sim.core.integrators.auto.Auto`): dop853.f's h |lambda| for every accepted step
+and Auto's tests on it (stiffness, rejections, cost: dop853_kernels.auto_*), returning at
+the accepted state where one asks for a switch; the Python loop Auto runs on other systems
+calls the same kernels on the same state.
+
 DOP853 dispatches to it when its system offers `kernel_arguments` and `quaternion_block`
 (the compiled :class:`gyro_sim.core.system.FastChainODE`), through :func:`loop_for`: one
 :class:`gyro_sim.core.fast_loop.Direct` per process and types of the kernel's arguments, so a
@@ -32,14 +38,24 @@ import numpy as np
 
 from . import dop853_kernels, fast, fast_loop
 from .dop853_kernels import (
+    C_STIFF,
+    COST_DOP853,
+    COST_RADAU,
     N_EXTENDED,
     N_STAGES,
+    NO_HLAMB,
+    auto_clear_attempts,
+    auto_costlier,
+    auto_measure,
+    auto_rejection_test,
+    auto_stiffness_test,
     dop_clip,
     dop_control,
     dop_dense_coefficients,
     dop_dense_eval,
     dop_error_norm,
     dop_finite,
+    dop_hlamb,
     dop_initial_probe,
     dop_initial_step,
     dop_stage_state,
@@ -59,6 +75,15 @@ COLLAPSED = 1
 INITIAL_RHS_NONFINITE = 2
 #: the rhs at an accepted state (FSAL, or for the dense output) is not finite
 ACCEPTED_RHS_NONFINITE = 3
+#: detection mode: a test asks for a switch at the accepted state real[R_T] < t1 (the reason
+#: in status[S_REASON])
+SWITCH = 4
+
+# --- the reasons of a SWITCH, in status[S_REASON]
+#: dop853.f's test: STIFF_STEPS steps with h |lambda| > STIFF_HLAMB
+REASON_STIFF = 1
+#: REJECT_FRACTION of the last REJECT_WINDOW step attempts rejected
+REASON_REJECTED = 2
 
 #: the order of DOP853's error estimator (the starting step's exponent)
 ORDER_OF_ESTIMATOR = 7
@@ -66,13 +91,21 @@ ORDER_OF_ESTIMATOR = 7
 #: layout of the loop's outputs: floats (`real`) and integers (`status`)
 REAL_SIZE = 6
 R_T, R_H, R_H_ABS, R_ERROR, R_LAST_STEP, R_T_OLD = range(REAL_SIZE)
-STATUS_SIZE = 8
-S_STATUS, S_NFEV, S_ACCEPTED, S_REJECTED, S_OUTPUTS, S_F_NEW, S_NONFINITE, S_TRACED = range(STATUS_SIZE)
+STATUS_SIZE = 9
+(S_STATUS, S_NFEV, S_ACCEPTED, S_REJECTED, S_OUTPUTS, S_F_NEW, S_NONFINITE, S_TRACED,
+ S_REASON) = range(STATUS_SIZE)
+#: layout of `held_at`, with `held` the step whose h |lambda| waits for f(y1) (detection mode):
+#: its end (nan: none) and size
+H_T, H_H = range(2)
+HELD_AT_SIZE = 2
+#: rows of `held`: y1, Y12, f(Y12)
+H_Y1, H_Y12, H_F12 = range(3)
 
 
 @_njit
 def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, D, control,
                    initial, i_q0, nq, f, K, ys, y_new, y_old, F, bad, trace, real, status,
+                   detect, counters, attempts, window, cost, held, held_at,
                    work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
                    inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base,
                    ht0, p0, pdot, L_rotor, tau):
@@ -94,11 +127,26 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
     memory, the error norm and size of the last accepted step, its start; status
     (STATUS_SIZE,) the status (DONE, COLLAPSED, ...), rhs evaluations, accepted and rejected
     steps, outputs filled, whether f = rhs(y_new) is known, whether the last failing step had
-    a non-finite trial, the steps traced. The arguments from `work` on are those of
-    fast.rhs_kernel (`ht0` its `t0`, the start of the hold).
+    a non-finite trial, the steps traced, the reason of a SWITCH. The arguments from `work`
+    on are those of fast.rhs_kernel (`ht0` its `t0`, the start of the hold).
+
+    Detection mode (detect not empty), the "auto" method's dop853 phase
+    (gyro_sim.core.integrators.auto.Auto, whose Python loop over DOP853's public single step
+    does the same on other systems): every accepted step also gets dop853.f's h |lambda|
+    (dop853_kernels.dop_hlamb) once f(y1) is known, and after it, as in that loop, the
+    stiffness test (if h |lambda| is known), the rejection test, the cost window and, if a
+    test fired, `auto_costlier` (radau measured costlier: the detection starts over); a
+    switch asked for before t1 ends the call there (SWITCH). The tests' state: detect,
+    counters, attempts, window, cost (dop853_kernels), carried from call to call. The last
+    step of a call has no f(y1) unless the dense output needed it: it is `held` (3, size) and
+    `held_at` (HELD_AT_SIZE,), and tested at the start of the next call if that call continues
+    from its end (then a switch may end the call before its first step). Off, these are not
+    read (empty or not).
     """
+    detecting = detect.shape[0] > 0
     m = te.shape[0]
     nfev = 0
+    nfev_measured = 0  # nfev at the end of the last step measured (detection mode)
     naccepted = 0
     nrejected = 0
     j = 0
@@ -108,6 +156,7 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
     status[S_F_NEW] = 0
     status[S_NONFINITE] = 0
     status[S_STATUS] = DONE
+    status[S_REASON] = 0
     fast.rhs_kernel(t0, y, f, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
                     first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
                     flags, base, ht0, p0, pdot, L_rotor, tau)
@@ -123,6 +172,14 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
                         flags, base, ht0, p0, pdot, L_rotor, tau)
         nfev += 1
         h_mem = dop_initial_step(f, f1, sc, h0, d1, t1 - t0, max_step, ORDER_OF_ESTIMATOR, initial)
+    if detecting and status[S_STATUS] == DONE:  # the last call's last step, if this continues it
+        if held_at[H_T] == t0 and _equal(held[H_Y1], y):
+            hlamb = dop_hlamb(held_at[H_H], held[H_Y12], held[H_F12], y, f)
+            if hlamb != NO_HLAMB and auto_stiffness_test(hlamb, counters, detect):
+                status[S_STATUS] = SWITCH
+                status[S_REASON] = REASON_STIFF
+                real[R_T] = t0
+        held_at[H_T] = math.nan
     t = t0
     t_old = t0
     error = real[R_ERROR]
@@ -130,6 +187,8 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
     min_step_relative, stretch = control[4], control[5]
     while status[S_STATUS] == DONE and t < t1:
         # --- one accepted step (DOP853._step_impl)
+        rejected_before = nrejected
+        hlamb = NO_HLAMB
         h_abs = min(h_mem, max_step)
         min_step = min_step_relative * max(abs(t), abs(t1))
         rejected = False
@@ -182,6 +241,14 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
                 break
             status[S_F_NEW] = 1
             K[N_STAGES, :] = f
+            if detecting:  # ys and K[11]: the last stage
+                hlamb = dop_hlamb(last_step, ys, K[N_STAGES - 1], y_new, f)
+        elif detecting:  # f(y1) waits for the dense output or the next call
+            held[H_Y1, :] = y_new
+            held[H_Y12, :] = ys
+            held[H_F12, :] = K[N_STAGES - 1]
+            held_at[H_T] = t_new
+            held_at[H_H] = last_step
         t_old = t
         y_old[:] = y
         y[:] = y_new
@@ -206,6 +273,9 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
                     break
                 status[S_F_NEW] = 1
                 K[N_STAGES, :] = f
+                if detecting:
+                    hlamb = dop_hlamb(last_step, ys, K[N_STAGES - 1], y_new, f)
+                    held_at[H_T] = math.nan
             for st in range(N_STAGES + 1, N_EXTENDED):
                 dop_stage_state(y_old, K, A, st, last_step, ys)
                 fast.rhs_kernel(t_old + C[st] * last_step, ys, K[st], work, is_hinge, qrow, own_col,
@@ -221,6 +291,22 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
         while j < m and te[j] <= t:
             Y[j, :] = y
             j += 1
+        if detecting:  # the tests of the step (Auto._run)
+            reason = 0
+            if hlamb != NO_HLAMB and auto_stiffness_test(hlamb, counters, detect):
+                reason = REASON_STIFF
+            if auto_rejection_test(nrejected - rejected_before, counters, attempts, detect):
+                reason = REASON_REJECTED
+            auto_measure(t - t_old, nfev - nfev_measured, counters, window, cost, COST_DOP853)
+            nfev_measured = nfev
+            if reason != 0 and auto_costlier(cost, COST_RADAU, COST_DOP853, 1.0):
+                counters[C_STIFF] = 0  # radau was measured slower here: keep going
+                auto_clear_attempts(counters)
+                reason = 0
+            if reason != 0 and t < t1:
+                status[S_STATUS] = SWITCH
+                status[S_REASON] = reason
+                real[R_T] = t
     if status[S_STATUS] == DONE:
         real[R_T] = t
     real[R_H_ABS] = h_mem
@@ -232,6 +318,15 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
     status[S_REJECTED] = nrejected
     status[S_OUTPUTS] = j
     status[S_TRACED] = min(naccepted, trace.shape[0])
+
+
+@_njit
+def _equal(a, b):
+    """a == b elementwise for every element (numpy.array_equal of two (n,) arrays)."""
+    for i in range(a.shape[0]):
+        if a[i] != b[i]:
+            return False
+    return True
 
 
 _LOOPS: dict[tuple, fast_loop.Direct] = {}

@@ -7,6 +7,22 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .. import fast_dop853
+from ..dop853_kernels import (
+    C_STIFF,
+    C_WINDOW,
+    COST_DOP853,
+    COST_RADAU,
+    COST_SIZE,
+    COUNTERS_SIZE,
+    DETECT_SIZE,
+    auto_clear_attempts,
+    auto_costlier,
+    auto_measure,
+    auto_rejection_test,
+    auto_rejections,
+    auto_stiffness_test,
+)
 from .base import AdaptiveIntegrator, IntegrationError, Integrator
 from .dop853 import DOP853
 from .radau import Radau
@@ -52,6 +68,8 @@ DOP853_BOUNDARY = 5.95
 #: rho(J) from eigenvalues up to this size, above it from a few power iterations
 EIG_MAX_SIZE = 200
 POWER_ITERATIONS = 30
+#: the slot of each method in the cost array
+COST_SLOT = {"dop853": COST_DOP853, "radau": COST_RADAU}
 
 
 class StiffnessWarning(RuntimeWarning):
@@ -90,6 +108,15 @@ class Auto(Integrator):
     as the other methods do. `method` names the method in use; `error_estimate` and
     `last_step` are its; the counters add up both.
 
+    The tests on DOP853's steps (h |lambda|, rejections, cost) are one implementation,
+    :mod:`gyro_sim.core.dop853_kernels` (`dop_hlamb`, `auto_*`), on state arrays this class
+    owns, with two drivers that give the same bits (decisions, switch times, states,
+    counters): on a system with the compiled kernel (FastChainODE) DOP853's compiled loop
+    runs a whole `advance` in its detection mode (:func:`gyro_sim.core.fast_dop853.dop853_advance`),
+    stopping at the accepted state where a test asks for a switch; on any other system this
+    class steps DOP853 by its public single step (`begin` / `take_step` / `dense`) and calls
+    the tests after each accepted step. Radau runs by its public single step.
+
     References
     ----------
     .. [1] E. Hairer, S. P. Norsett, G. Wanner, "Solving Ordinary Differential Equations I",
@@ -111,6 +138,15 @@ class Auto(Integrator):
         self.explicit = DOP853(system, stiffness_estimate=True, **inner)
         self.implicit = Radau(system, **inner)
         self._current: AdaptiveIntegrator = self.explicit
+        # the tests' constants and state (dop853_kernels): counts, attempts, (dt, nfev) of
+        # steps, cost; the windows as long as their arrays
+        self._detect = np.array([STIFF_HLAMB, STIFF_STEPS, NONSTIFF_RESET, REJECT_FRACTION])
+        assert self._detect.size == DETECT_SIZE
+        self._counters = np.zeros(COUNTERS_SIZE, dtype=np.int64)
+        self._attempts = np.zeros(REJECT_WINDOW, dtype=np.int64)
+        self._window = np.zeros((COST_WINDOW, 2))
+        self._cost = np.full(COST_SIZE, math.nan)  # rhs evaluations per simulated s, by method
+        self._detection = (self._detect, self._counters, self._attempts, self._window, self._cost)
         self.reset()
 
     @property
@@ -126,18 +162,16 @@ class Auto(Integrator):
         #: (t, from, to, reason) of every switch since the last reset
         self.switches: list[tuple[float, str, str, str]] = []
         self._nonstiff_needed = NONSTIFF_STEPS
-        self._cost: dict[str, float] = {}  # rhs evaluations per simulated s, by method
+        self._cost[:] = math.nan
         self._new_episode()
         self._sync()
 
     def _new_episode(self) -> None:
         """Forget the detection state (at a reset or a switch)."""
-        self._n_stiff = self._n_nonstiff = 0  # dop853.f's IASTI, NONSTI
-        self._attempts: list[int] = []  # rejected attempts before each accepted step
+        self._counters[:] = 0  # dop853.f's IASTI, NONSTI; the attempts and cost windows empty
         self._rho: float | None = None  # spectral radius of radau's Jacobian
         self._rho_njev = -1
         self._n_easy = 0  # radau steps in a row with h rho < NONSTIFF_HRHO
-        self._window: list[tuple[float, int]] = []  # (dt, nfev) per accepted step
 
     # --- the loop ------------------------------------------------------------------------
     def _integrate(self, t0, y, t1, te, Y) -> None:
@@ -150,7 +184,10 @@ class Auto(Integrator):
         try:
             while t < t1:
                 try:
-                    t = self._run(self._current, t, y, t1, te, Y)
+                    if self._current is self.explicit and self.explicit.compiled:
+                        t = self._run_compiled(t, y, t1, te, Y)
+                    else:
+                        t = self._run(self._current, t, y, t1, te, Y)
                 except _Switch as switch:
                     t = switch.args[0]
                     self._switch(t, switch.args[1])
@@ -172,6 +209,20 @@ class Auto(Integrator):
         return IntegrationError(self.name, exc.reason, exc.t, exc.h,
                                 f"{exc.method} running" + (f"; {detail}" if detail else ""))
 
+    def _run_compiled(self, t: float, y: np.ndarray, t1: float, te, Y) -> float:
+        """DOP853's compiled loop in its detection mode advances y from t towards t1, filling Y
+        at te from the next output on: `_run` for DOP853 in one compiled call."""
+        j = self._j
+        try:
+            t, code = self.explicit._integrate_compiled(
+                t, y, t1, None if te is None else te[j:], None if Y is None else Y[j:],
+                self._detection)
+        finally:
+            self._j = j + self.explicit.outputs_filled
+        if code:
+            raise _Switch(t, self._reason(code))
+        return t
+
     def _run(self, inner: AdaptiveIntegrator, t: float, y: np.ndarray, t1: float, te, Y) -> float:
         """`inner` advances y from t towards t1 by its public single steps, as its own `advance`
         would, with the checks after each accepted step; raises _Switch(t, reason) to hand
@@ -181,7 +232,8 @@ class Auto(Integrator):
         nfev = inner.nfev
         inner.begin(t, y, t1)
         if explicit and inner.hlamb is not None:  # the previous call's last step, tested now
-            self._raise_if(t, self._stiffness_test(inner.hlamb))
+            if auto_stiffness_test(inner.hlamb, self._counters, self._detect):
+                raise _Switch(t, self._reason(fast_dop853.REASON_STIFF))
         while t < t1:
             rejected = inner.nrejected
             t_new = inner.take_step(t, y, t1)
@@ -194,19 +246,27 @@ class Auto(Integrator):
                 self._j = k
             if explicit:
                 # hlamb is None until f(y1) is known: then the next call tests this step
-                reason = None if inner.hlamb is None else self._stiffness_test(inner.hlamb)
-                reason = self._rejection_test(inner.nrejected - rejected) or reason
+                code = 0
+                if inner.hlamb is not None and auto_stiffness_test(inner.hlamb, self._counters,
+                                                                   self._detect):
+                    code = fast_dop853.REASON_STIFF
+                if auto_rejection_test(inner.nrejected - rejected, self._counters, self._attempts,
+                                       self._detect):
+                    code = fast_dop853.REASON_REJECTED
+                reason = self._reason(code) if code else None
             else:
                 reason = self._nonstiffness_test(h)
             t = t_new
             while self._j < m and te[self._j] <= t:
                 Y[self._j] = y
                 self._j += 1
-            self._measure(inner.name, h, inner.nfev - nfev)
+            auto_measure(h, inner.nfev - nfev, self._counters, self._window, self._cost,
+                         COST_SLOT[inner.name])
             nfev = inner.nfev
-            if explicit and reason is not None and self._costlier("radau", "dop853", 1.0):
-                self._n_stiff = 0  # radau was measured slower here: keep going
-                self._attempts.clear()
+            if explicit and reason is not None and auto_costlier(self._cost, COST_RADAU,
+                                                                 COST_DOP853, 1.0):
+                self._counters[C_STIFF] = 0  # radau was measured slower here: keep going
+                auto_clear_attempts(self._counters)
                 reason = None
             if not explicit and reason is None:
                 reason = self._cost_test()
@@ -216,35 +276,14 @@ class Auto(Integrator):
         inner.end(t1, y)
         return t
 
-    @staticmethod
-    def _raise_if(t: float, reason: str | None) -> None:
-        if reason is not None:
-            raise _Switch(t, reason)
-
     # --- detection -------------------------------------------------------------------------
-    def _stiffness_test(self, hlamb: float) -> str | None:
-        """dop853.f's test on one accepted step, given its h |lambda| (DOP853.hlamb); a reason
-        to switch, or None."""
-        if hlamb > STIFF_HLAMB:
-            self._n_nonstiff = 0
-            self._n_stiff += 1
-            if self._n_stiff >= STIFF_STEPS:
-                return f"stiff: h |lambda| > {STIFF_HLAMB:g} in {STIFF_STEPS} steps"
-        else:
-            self._n_nonstiff += 1
-            if self._n_nonstiff >= NONSTIFF_RESET:
-                self._n_stiff = 0
-        return None
-
-    def _rejection_test(self, rejected: int) -> str | None:
-        self._attempts.append(rejected)
-        if len(self._attempts) > REJECT_WINDOW:
-            del self._attempts[0]
-        n_rej = sum(self._attempts)
-        n_all = n_rej + len(self._attempts)
-        if n_all >= REJECT_WINDOW and n_rej >= REJECT_FRACTION * n_all:
-            return f"stiff: {n_rej} of the last {n_all} step attempts rejected"
-        return None
+    def _reason(self, code: int) -> str:
+        """The reason of a switch asked for by DOP853's tests (fast_dop853.REASON_*), read when
+        it is asked for."""
+        if code == fast_dop853.REASON_STIFF:
+            return f"stiff: h |lambda| > {STIFF_HLAMB:g} in {STIFF_STEPS} steps"
+        n_rej, n_all = auto_rejections(self._counters, self._attempts)
+        return f"stiff: {n_rej} of the last {n_all} step attempts rejected"
 
     def _nonstiffness_test(self, h: float) -> str | None:
         imp = self.implicit
@@ -265,28 +304,13 @@ class Auto(Integrator):
             return f"not stiff: h rho(J) < {NONSTIFF_HRHO:g} in {self._nonstiff_needed} steps"
         return None
 
-    def _measure(self, method: str, dt: float, nfev: int) -> None:
-        w = self._window
-        w.append((dt, nfev))
-        if len(w) > COST_WINDOW:
-            del w[0]
-        if len(w) == COST_WINDOW:
-            span = sum(x[0] for x in w)
-            if span > 0.0:
-                self._cost[method] = sum(x[1] for x in w) / span
-
-    def _costlier(self, candidate: str, running: str, margin: float) -> bool:
-        """Is `candidate` known to cost more than `margin` times `running`?"""
-        c, r = self._cost.get(candidate), self._cost.get(running)
-        return c is not None and r is not None and c > margin * r
-
     def _cost_test(self) -> str | None:
         """Radau running: a reason to hand back if it costs more than dop853 would."""
-        radau = self._cost.get("radau")
-        if radau is None or len(self._window) < COST_WINDOW:
+        radau = float(self._cost[COST_RADAU])
+        if math.isnan(radau) or self._counters[C_WINDOW] < self._window.shape[0]:
             return None
-        dop = self._cost.get("dop853")
-        if dop is None:
+        dop = float(self._cost[COST_DOP853])
+        if math.isnan(dop):
             if self._rho is None:
                 return None
             dop = DOP853_EVALS * self._rho / DOP853_BOUNDARY

@@ -10,12 +10,14 @@ from .. import fast_dop853
 from ..dop853_kernels import (
     CONTROL_SIZE,
     INITIAL_SIZE,
+    NO_HLAMB,
     dop_clip,
     dop_control,
     dop_dense_coefficients,
     dop_dense_eval,
     dop_error_norm,
     dop_finite,
+    dop_hlamb,
     dop_initial_probe,
     dop_initial_step,
     dop_stage_state,
@@ -254,24 +256,26 @@ class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
     the controller, the dense output) is :mod:`gyro_sim.core.dop853_kernels`. On a system that
     offers `kernel_arguments` and `quaternion_block` (the compiled
     :class:`gyro_sim.core.system.FastChainODE`) a whole `advance` runs in one compiled call,
-    :func:`gyro_sim.core.fast_dop853.dop853_advance`, with this class's tableau (unless
-    `stiffness_estimate`; the loop is compiled, or loaded from numba's cache, when the
-    integrator is built: ~12 s of CPU once per version of its files, then ~0.1 s); on any other
-    system, and for the public single step
-    (`begin` / `take_step` / `dense`, which the "auto" method drives), this class steps in
-    Python, calling the same arithmetic between its rhs evaluations. The two give the same
-    bits, counters included; against scipy's DOP853 on the same rhs they take the same steps
-    (times equal to ~1e-9 relative: the round-off of the error norm's cancelling sums, through
-    err^(-1/8)) with states equal to round-off (test/core/test_fast_dop853.py). The starting
-    step is `AdaptiveIntegrator._initial_step`'s, in the kernels' arithmetic.
+    :func:`gyro_sim.core.fast_dop853.dop853_advance`, with this class's tableau (the loop is
+    compiled, or loaded from numba's cache, when the integrator is built: ~12 s of CPU once
+    per version of its files, then ~0.1 s); on any other system, and for the public single
+    step (`begin` / `take_step` / `dense`, which the "auto" method drives on systems without
+    the compiled loop), this class steps in Python, calling the same arithmetic between its
+    rhs evaluations. The two give the same bits, counters included; against scipy's DOP853 on
+    the same rhs they take the same steps (times equal to ~1e-9 relative: the round-off of the
+    error norm's cancelling sums, through err^(-1/8)) with states equal to round-off
+    (test/core/test_fast_dop853.py). The starting step is `AdaptiveIntegrator._initial_step`'s,
+    in the kernels' arithmetic.
 
     With `stiffness_estimate=True`, each accepted step also gets dop853.f's estimate of
     h |lambda| (HLAMB), h ||f(y1) - f(Y12)|| / ||y1 - Y12|| (Y12 the last stage, at t + h): the
-    step times the dominant eigenvalue along it. It needs f(y1), so it is ready after the
-    `take_step` or `dense` that evaluates f(y1), or, for the last step of a call, after the
-    next call's `begin` if that call continues from the step's end. `hlamb` holds it until
-    the next `begin` or `take_step` (None: not ready, or y1 = Y12). Such an integrator steps
-    in Python.
+    step times the dominant eigenvalue along it (dop853_kernels.dop_hlamb). It needs f(y1), so
+    it is ready after the `take_step` or `dense` that evaluates f(y1), or, for the last step of
+    a call, after the next call's `begin` if that call continues from the step's end. `hlamb`
+    holds it until the next `begin` or `take_step` (None: not ready, or y1 = Y12). `advance`
+    of such an integrator steps in Python; the "auto" method's tests on these estimates run
+    in the compiled loop too (its detection mode, :meth:`_integrate_compiled` with
+    `detection`), with the same estimates, held from call to call in the same way.
 
     References
     ----------
@@ -338,11 +342,17 @@ class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
             self._no_te, self._no_Y = np.zeros(0), np.zeros((0, n))
             #: the ends of the first len(_trace) accepted steps of the last compiled call (tests)
             self._trace = np.zeros(0)
-            if not stiffness_estimate:  # compile (or load) the loop now, not in the first advance:
-                y = np.zeros(n)  # a call of no step from a valid state (unit quaternions)
-                y[self._i_q0:self._i_q0 + 4 * self._nq:4] = 1.0
-                self._call_loop(0.0, y, 0.0, self._no_te, self._no_Y, 1.0)
-                self._f[:] = 0.0
+            # the detection mode's step held for the next call (fast_dop853: held, held_at)
+            self._held = np.zeros((3, n))
+            self._held_at = np.array([math.nan, 0.0])
+            #: outputs filled by the last compiled call (also when it raised)
+            self.outputs_filled = 0
+            # compile (or load) the loop now, not in the first advance: a call of no step from
+            # a valid state (unit quaternions)
+            y = np.zeros(n)
+            y[self._i_q0:self._i_q0 + 4 * self._nq:4] = 1.0
+            self._call_loop(0.0, y, 0.0, self._no_te, self._no_Y, 1.0, _NO_DETECTION)
+            self._f[:] = 0.0
 
     # --- the Python driver ---------------------------------------------------------------------
     def _initial_step(self, t0, y0, f0, t1, order) -> float:
@@ -386,10 +396,17 @@ class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
         self.last_step = self._h = h
         return t_new
 
+    @property
+    def compiled(self) -> bool:
+        """Does `advance` (and `advance_detecting`) run the compiled loop?"""
+        return self._loop is not None
+
     def reset(self) -> None:
         super().reset()
         self.hlamb = None
         self._pending = None
+        if self._loop is not None:
+            self._held_at[fast_dop853.H_T] = math.nan
 
     def begin(self, t0: float, y: np.ndarray, t1: float) -> None:
         self.hlamb = None
@@ -417,13 +434,10 @@ class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
 
     @staticmethod
     def _hlamb(h: float, Y12: np.ndarray, f12: np.ndarray, y1: np.ndarray, f1: np.ndarray):
-        """dop853.f's h |lambda| ~ |h| ||f1 - f12|| / ||y1 - Y12||; None if y1 = Y12."""
-        dy = y1 - Y12
-        den = float(np.dot(dy, dy))
-        if den <= 0.0:
-            return None
-        df = f1 - f12
-        return abs(h) * math.sqrt(float(np.dot(df, df)) / den)
+        """dop853.f's h |lambda| ~ |h| ||f1 - f12|| / ||y1 - Y12|| (dop853_kernels.dop_hlamb,
+        as the compiled loop's detection mode); None if y1 = Y12."""
+        hlamb = dop_hlamb(h, Y12, f12, y1, f1)
+        return None if hlamb == NO_HLAMB else hlamb
 
     def _dense(self, t, y, t_new, y_new, tq: np.ndarray) -> np.ndarray:
         K, ys, h, A, C = self._K, self._ys, self._h, self._A_all, self._C_all
@@ -443,8 +457,16 @@ class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
         else:
             self._integrate_compiled(t0, y, t1, te, Y)
 
-    def _integrate_compiled(self, t0: float, y: np.ndarray, t1: float, te, Y) -> None:
-        """`_integrate` (the loop of `begin`, `take_step`, `dense`) in one compiled call."""
+    def _integrate_compiled(self, t0: float, y: np.ndarray, t1: float, te, Y,
+                            detection: tuple | None = None) -> tuple[float, int]:
+        """`_integrate` (the loop of `begin`, `take_step`, `dense`) in one compiled call.
+
+        With `detection`, the arrays (detect, counters, attempts, window, cost) of
+        dop853_kernels' stiffness detection, the loop runs in its detection mode
+        (fast_dop853.dop853_advance) and may stop at an accepted state before t1: returns
+        (the time reached, the reason of a switch asked for there, fast_dop853.REASON_*, or 0).
+        `outputs_filled`: the rows of Y filled, also when the call raises.
+        """
         fd = fast_dop853
         if te is None:
             te, Y = self._no_te, self._no_Y
@@ -454,8 +476,9 @@ class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
         real[fd.R_ERROR] = math.nan if self.error_estimate is None else self.error_estimate
         real[fd.R_LAST_STEP] = math.nan if self.last_step is None else self.last_step
         h_mem = 0.0 if self._h_abs is None else float(self._h_abs)  # 0: select the starting step
-        self._call_loop(t0, y, t1, te, Y, h_mem)
+        self._call_loop(t0, y, t1, te, Y, h_mem, _NO_DETECTION if detection is None else detection)
         r, st = real.tolist(), status.tolist()
+        self.outputs_filled = st[fd.S_OUTPUTS]
         nfev = st[fd.S_NFEV]
         self.nfev += nfev
         self.system.nfev += nfev
@@ -467,9 +490,11 @@ class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
             self.last_step = self._h = r[fd.R_LAST_STEP]
         self._f_new = st[fd.S_F_NEW] != 0
         code = st[fd.S_STATUS]
-        if code == fd.DONE:
-            self._t_old, self._t_new = r[fd.R_T_OLD], t1
-        elif code == fd.INITIAL_RHS_NONFINITE:
+        if code == fd.DONE or code == fd.SWITCH:
+            if st[fd.S_ACCEPTED]:
+                self._t_old, self._t_new = r[fd.R_T_OLD], r[fd.R_T]
+            return r[fd.R_T], st[fd.S_REASON]
+        if code == fd.INITIAL_RHS_NONFINITE:
             raise IntegrationError(self.name, "rhs is not finite at the initial state", t0, None,
                                    describe_nonfinite(self._f))
         elif code == fd.COLLAPSED:
@@ -481,10 +506,18 @@ class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
             raise IntegrationError(self.name, "rhs is not finite at the accepted state", r[fd.R_T],
                                    r[fd.R_H], describe_nonfinite(self._f))
 
-    def _call_loop(self, t0: float, y: np.ndarray, t1: float, te, Y, h_mem: float) -> None:
+    def _call_loop(self, t0: float, y: np.ndarray, t1: float, te, Y, h_mem: float,
+                   detection: tuple) -> None:
         """fast_dop853.dop853_advance with this integrator's tableau, options and scratch."""
         self._loop(t0, t1, y, te, Y, h_mem, self.max_step, self.rtol, self._atol_v,
                    self.A_ALL, self.C_ALL, self.E5, self.E3, self.D, self.CONTROL, self.INITIAL,
                    self._i_q0, self._nq,
                    self._f, self._K, self._ys, self._y_new, self._y_old, self._F, self._bad,
-                   self._trace, self._real, self._status, *self.system.kernel_arguments())
+                   self._trace, self._real, self._status, *detection, self._held, self._held_at,
+                   *self.system.kernel_arguments())
+
+
+#: the detection arrays of a plain call (fast_dop853.dop853_advance: detect empty, the others
+#: not read), of the types of Auto's
+_NO_DETECTION = (np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64),
+                 np.zeros((0, 2)), np.zeros(0))
