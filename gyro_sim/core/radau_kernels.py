@@ -14,7 +14,7 @@ order and fused multiply-adds are the library's: there the results agree to roun
 
     delta_j = (y_j + FD_REL max(|y_j|, FD_MIN)) - y_j      FD Jacobian steps  (rad_fd_delta)
     J[:, j] = (f(y + delta_j e_j) - f) / delta_j            its columns        (rad_fd_column)
-    LU of MU_REAL/h I - J and MU_COMPLEX/h I - J             partial pivoting   (rad_factor)
+    LU of MU_REAL/h I - J and MU_COMPLEX/h I - J             LAPACK's getrf     (rad_factor)
     W = TI Z, Z = T W                                        eigenbasis of A^-1 (rad_transform)
     f_real = sum_j TI[0, j] F_j - MU_REAL/h W_0             Newton residual    (rad_newton_residual)
     f_cplx = sum_j (TI[1, j] + i TI[2, j]) F_j - MU_COMPLEX/h (W_1 + i W_2)
@@ -24,10 +24,11 @@ order and fused multiply-adds are the library's: there the results agree to roun
     Gustafsson's predictive controller                       step control       (rad_control_*)
     Q = Z^T P; y(t_old + x h) = y_old + Q (x, x^2, x^3)      dense output       (rad_dense_*)
 
-The LU is this module's own (rad_lu, rad_lu_solve: Doolittle with partial pivoting, rows
-swapped as LAPACK's getrf does, the pivot of largest |Re| + |Im| as LAPACK's izamax), so
-that both drivers factor with the same bits, inside compiled code and out; scipy factors
-with LAPACK getrf (blocked, BLAS-3): the factors agree to round-off, not bit for bit.
+The LU is LAPACK's getrf (scipy's LAPACK, reached from compiled code as numba's own
+np.linalg reaches it: the factors are scipy.linalg.lu_factor's bit for bit), called by the
+compiled loop and the Python driver alike; where numba offers no such access, the textbook LU
+with partial pivoting of rad_lu (its factors agree with LAPACK's to round-off). The solves are
+this module's (rad_lu_solve, as getrs does them for one right-hand side).
 The sums run over j in increasing order, one product added at a time. No fastmath: IEEE
 arithmetic, no contraction into fused multiply-adds. Without numba these stay plain Python
 (correct, slow).
@@ -166,82 +167,129 @@ def rad_fd_column(J, j, fj, f, dj):
 
 
 # --- LU with partial pivoting ----------------------------------------------------------------
+# The factors are stored as LAPACK's getrf leaves them, column-major: an (n, n) C-ordered array
+# holding M^T (At[j, i] = M[i, j]); pivots 1-based int32 (row k was swapped with row piv[k]).
 @_njit
-def rad_lu(A, piv):
-    """LU of A (n, n) in place, with partial pivoting (Golub, Van Loan, sec. 3.4): P A = L U,
-    L unit lower (below the diagonal), U upper; at elimination step k rows k and piv[k] are
-    swapped, whole rows, as LAPACK's getrf records it. The pivot is the entry of largest
-    |Re| + |Im| (LAPACK's i?amax), the first of equals. Real or complex A. Returns 0, or
-    k + 1 if U[k, k] is exactly 0 (that column is left uneliminated: solves give inf/nan)."""
-    n = A.shape[0]
+def rad_lu(At, piv):
+    """LU of M in place, At (n, n) = M^T (M column-major), with partial pivoting (Golub, Van
+    Loan, sec. 3.4; LAPACK's dgetf2 / zgetf2): P M = L U, L unit lower, U upper, the pivot the
+    entry of largest |Re| + |Im| (LAPACK's i?amax), the first of equals; at step k rows k and
+    piv[k] - 1 are swapped, whole rows. Real or complex. Returns 0, or k + 1 for the first k
+    with U[k, k] exactly 0 (that column is left uneliminated: solves give inf/nan). The
+    textbook (unblocked) algorithm: the fallback of rad_factor where LAPACK is not reachable."""
+    n = At.shape[0]
     info = 0
     for k in range(n):
         p = k
-        big = abs(A[k, k].real) + abs(A[k, k].imag)
+        big = abs(At[k, k].real) + abs(At[k, k].imag)
         for i in range(k + 1, n):
-            v = abs(A[i, k].real) + abs(A[i, k].imag)
+            v = abs(At[k, i].real) + abs(At[k, i].imag)
             if v > big:
                 big = v
                 p = i
-        piv[k] = p
+        piv[k] = p + 1
         if p != k:
             for j in range(n):
-                tmp = A[k, j]
-                A[k, j] = A[p, j]
-                A[p, j] = tmp
-        pivot = A[k, k]
+                tmp = At[j, k]
+                At[j, k] = At[j, p]
+                At[j, p] = tmp
+        pivot = At[k, k]
         if pivot == 0:
             if info == 0:
                 info = k + 1
             continue
         for i in range(k + 1, n):
-            l = A[i, k] / pivot
-            A[i, k] = l
-            if l != 0:
-                for j in range(k + 1, n):
-                    A[i, j] -= l * A[k, j]
+            At[k, i] = At[k, i] / pivot
+        for j in range(k + 1, n):
+            u = At[j, k]
+            for i in range(k + 1, n):
+                At[j, i] -= At[k, i] * u
     return info
 
 
+if numba is not None:
+    try:  # LAPACK's getrf as numba's np.linalg calls it (scipy's LAPACK: scipy.linalg.cython_lapack)
+        from numba import types as _types
+        from numba.np.linalg import _LAPACK
+
+        _LAPACK()
+        _XGETRF_REAL = _LAPACK().numba_xxgetrf(_types.float64)
+        _XGETRF_COMPLEX = _LAPACK().numba_xxgetrf(_types.complex128)
+    except Exception:  # noqa: BLE001 - another numba layout: the textbook LU
+        _XGETRF_REAL = _XGETRF_COMPLEX = None
+else:
+    _XGETRF_REAL = _XGETRF_COMPLEX = None
+#: the LU is LAPACK's getrf (blocked, BLAS-3; scipy's lu_factor bit for bit); else rad_lu
+LAPACK_GETRF = _XGETRF_REAL is not None
+_KIND_REAL, _KIND_COMPLEX = ord("d"), ord("z")
+
+if LAPACK_GETRF:
+    @_njit
+    def _getrf_real(At, piv):
+        n = At.shape[0]
+        return _XGETRF_REAL(_KIND_REAL, n, n, At.ctypes, n, piv.ctypes)
+
+    @_njit
+    def _getrf_complex(At, piv):
+        n = At.shape[0]
+        return _XGETRF_COMPLEX(_KIND_COMPLEX, n, n, At.ctypes, n, piv.ctypes)
+elif numba is None:  # plain Python: LAPACK through scipy, the same routine
+    def _getrf_real(At, piv):
+        from scipy.linalg.lapack import get_lapack_funcs
+
+        getrf, = get_lapack_funcs(("getrf",), dtype=At.dtype)
+        lu, p, info = getrf(At.T)
+        At[:] = lu.T
+        piv[:] = p + 1
+        return max(info, 0)
+
+    _getrf_complex = _getrf_real
+else:
+    _getrf_real = _getrf_complex = rad_lu
+
+
 @_njit
-def rad_lu_solve(LU, piv, b):
-    """Solves A x = b in place (b (n,) becomes x) from rad_lu's factors of A: the row swaps,
-    then L (unit lower) forward and U backward, sums in increasing column order."""
-    n = LU.shape[0]
+def rad_lu_solve(At, piv, b):
+    """Solves M x = b in place (b (n,) becomes x) from the factors of M in At (n, n) = the
+    column-major LU (rad_factor): the row swaps, then L (unit lower) forward and U backward,
+    column by column (as LAPACK's getrs with one right-hand side: x_i -= L_ij x_j for j
+    increasing, then for j decreasing x_j /= U_jj and x_i -= U_ij x_j)."""
+    n = At.shape[0]
     for k in range(n):
-        p = piv[k]
+        p = piv[k] - 1
         if p != k:
             tmp = b[k]
             b[k] = b[p]
             b[p] = tmp
-    for i in range(n):
-        acc = b[i]
-        for j in range(i):
-            acc -= LU[i, j] * b[j]
-        b[i] = acc
-    for i in range(n - 1, -1, -1):
-        acc = b[i]
-        for j in range(i + 1, n):
-            acc -= LU[i, j] * b[j]
-        b[i] = acc / LU[i, i]
+    for j in range(n):
+        x = b[j]
+        for i in range(j + 1, n):
+            b[i] -= At[j, i] * x
+    for j in range(n - 1, -1, -1):
+        x = b[j] / At[j, j]
+        b[j] = x
+        for i in range(j):
+            b[i] -= At[j, i] * x
 
 
 @_njit
 def rad_factor(J, h, mu_real, mu_complex, LU_real, piv_real, LU_complex, piv_complex):
     """The two matrices of the simplified Newton iteration and their LU (HW II, sec. IV.8):
-    LU_real = MU_REAL/h I - J, LU_complex = MU_COMPLEX/h I - J (complex), factored in place
-    (rad_lu). Off the diagonal -J, on it MU/h - J. Returns the info of the two (0: regular)."""
+    MU_REAL/h I - J and MU_COMPLEX/h I - J (complex; off the diagonal -J, on it MU/h - J),
+    written column-major into LU_real, LU_complex (n, n) and factored there (LAPACK's getrf,
+    else rad_lu), pivots into piv_real, piv_complex (n,) int32. Returns the larger info
+    (0: both regular)."""
     n = J.shape[0]
     c_real = mu_real / h
     c_complex = complex(mu_complex.real / h, mu_complex.imag / h)
     for i in range(n):
         for j in range(n):
-            LU_real[i, j] = -J[i, j]
-            LU_complex[i, j] = -J[i, j]
+            LU_real[j, i] = -J[i, j]
+            LU_complex[j, i] = -J[i, j]
         LU_real[i, i] = c_real - J[i, i]
         LU_complex[i, i] = complex(c_complex.real - J[i, i], c_complex.imag)
-    info_real = rad_lu(LU_real, piv_real)
-    info_complex = rad_lu(LU_complex, piv_complex)
+    info_real = _getrf_real(LU_real, piv_real)
+    info_complex = _getrf_complex(LU_complex, piv_complex)
     return max(info_real, info_complex)
 
 

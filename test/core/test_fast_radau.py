@@ -19,9 +19,9 @@ How close to scipy, and why:
 - The end: the step before t1 is stretched by up to 1 % (dop853.f) and factored afresh
   for its size; scipy neither (it reuses the LU of the previous size): the last step costs
   scipy more Newton iterations, and is otherwise the same.
-- The arithmetic: scipy's sums are BLAS products (their order and fused multiply-adds are
-  the library's) and its LU is LAPACK's (blocked); the kernels add one product at a time
-  and factor with their own partial pivoting. A Newton solve from the same start: the same
+- The arithmetic: the LU factors are LAPACK's getrf, scipy's bit for bit; scipy's sums and
+  triangular solves are BLAS (their order and fused multiply-adds are the library's), the
+  kernels add one product at a time. A Newton solve from the same start: the same
   iterations, Z to round-off. The error norm is a cancelling sum (~rtol of |Z|), so its
   relative round-off is ~1e-16 / rtol, and h_new ~ err^(-1/4) takes a quarter of it each
   step: the accepted step sequence is scipy's (as many steps, accepted and rejected, as many
@@ -31,7 +31,7 @@ How close to scipy, and why:
 Reached here (scipy 1.17, OpenBLAS): on a hinge pendulum at rtol 1e-6, 508 steps (27
 rejected), step times within 4.5e-9 relative, the final state within 6e-13 of max |y|; at
 rtol 1e-9, 2870 steps, times within 2.8e-7 (the drift of err^(-1/4) over the run), state
-within 2e-12; a stiff variant (tip 1e6 x the links) at rtol 1e-8: 443 steps, 3.5e-8, 6e-15.
+within 2e-12; a stiff variant (tip 1e6 x the links) at rtol 1e-8: 443 steps, 3.5e-8, 5e-15.
 
 The compiled loop and the Python driver run the same kernels between the same rhs
 evaluations: identical bits, counters included (and so are two runs of either).
@@ -184,24 +184,30 @@ def test_newton_solve_is_scipys():
     assert np.abs(integ._Z - Z).max() <= NEWTON_RTOL * np.abs(Z).max()  # noqa: SLF001
 
 
+def _radau_matrices(n=23, h=0.01, seed=7):
+    """J (n, n) with badly scaled columns and the two matrices Radau factors."""
+    J = np.random.default_rng(seed).normal(size=(n, n)) * np.geomspace(1e-3, 1e3, n)
+    return J, h, Radau.MU_REAL / h * np.eye(n) - J, Radau.MU_COMPLEX / h * np.eye(n) - J
+
+
 def test_lu_is_lapacks():
-    """The kernels' LU with partial pivoting against LAPACK's getrf (scipy.linalg.lu_factor)
-    on the matrices Radau factors: the same pivots, factors and solutions to round-off;
+    """rad_factor's LU of the matrices Radau factors is LAPACK's getrf (scipy.linalg.lu_factor)
+    bit for bit (the same routine, column-major); the solves agree with getrs to round-off;
     real and complex."""
     sl = pytest.importorskip("scipy.linalg")
-    rng = np.random.default_rng(7)
-    n = 23
-    J = rng.normal(size=(n, n)) * np.geomspace(1e-3, 1e3, n)  # badly scaled columns
-    h = 0.01
+    if not rk.LAPACK_GETRF:
+        pytest.skip("numba offers no LAPACK here: the textbook LU (test_textbook_lu_agrees_with_lapack)")
+    J, h, M_real, M_complex = _radau_matrices()
+    n = J.shape[0]
     LU_real, LU_complex = np.empty((n, n)), np.empty((n, n), dtype=complex)
-    piv_real, piv_complex = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
+    piv_real, piv_complex = np.empty(n, dtype=np.int32), np.empty(n, dtype=np.int32)
     assert rk.rad_factor(J, h, Radau.MU_REAL, Radau.MU_COMPLEX, LU_real, piv_real, LU_complex,
                          piv_complex) == 0
-    for M, LU, piv in ((Radau.MU_REAL / h * np.eye(n) - J, LU_real, piv_real),
-                       (Radau.MU_COMPLEX / h * np.eye(n) - J, LU_complex, piv_complex)):
+    rng = np.random.default_rng(8)
+    for M, LU, piv in ((M_real, LU_real, piv_real), (M_complex, LU_complex, piv_complex)):
         lu_ref, piv_ref = sl.lu_factor(M)
-        np.testing.assert_array_equal(piv, piv_ref)
-        assert np.abs(LU - lu_ref).max() <= 1e-13 * np.abs(lu_ref).max()
+        np.testing.assert_array_equal(LU.T, lu_ref)
+        np.testing.assert_array_equal(piv - 1, piv_ref)
         b = rng.normal(size=n) + (1j * rng.normal(size=n) if M.dtype.kind == "c" else 0)
         x = b.copy()
         rk.rad_lu_solve(LU, piv, x)
@@ -209,12 +215,30 @@ def test_lu_is_lapacks():
         assert np.abs(x - x_ref).max() <= 1e-12 * np.abs(x_ref).max()
 
 
-def test_singular_matrix_gives_non_finite_solutions():
-    """An exactly singular matrix: info > 0 (as LAPACK's), and the solve is not finite, which
-    the Newton iteration turns into a failure."""
-    A = np.array([[1.0, 2.0], [2.0, 4.0]])
-    piv = np.zeros(2, dtype=np.int64)
-    assert rk.rad_lu(A, piv) == 2
+def test_textbook_lu_agrees_with_lapack():
+    """The fallback LU (rad_lu, where numba offers no LAPACK): LAPACK's pivots, factors and
+    solutions to round-off."""
+    sl = pytest.importorskip("scipy.linalg")
+    for M in _radau_matrices()[2:]:
+        At, piv = np.ascontiguousarray(M.T), np.empty(M.shape[0], dtype=np.int32)
+        assert rk.rad_lu(At, piv) == 0
+        lu_ref, piv_ref = sl.lu_factor(M)
+        np.testing.assert_array_equal(piv - 1, piv_ref)
+        assert np.abs(At.T - lu_ref).max() <= 1e-13 * np.abs(lu_ref).max()
+
+
+@pytest.mark.parametrize("lu", ("rad_factor", "rad_lu"))
+def test_singular_matrix_gives_non_finite_solutions(lu):
+    """An exactly singular matrix: info > 0 (LAPACK's convention), and the solve is not
+    finite, which the Newton iteration turns into a failure."""
+    J = np.array([[1.0, 2.0], [2.0, 4.0]])
+    piv = np.zeros(2, dtype=np.int32)
+    if lu == "rad_lu":
+        A = np.ascontiguousarray(J.T)
+        assert rk.rad_lu(A, piv) == 2
+    else:  # MU_REAL / h = 1 and the complex part 0 for a real mu: J - J = 0, singular
+        A, Ac, pc = np.empty((2, 2)), np.empty((2, 2), dtype=complex), np.zeros(2, dtype=np.int32)
+        assert rk.rad_factor(-J, 1.0, 0.0, 0j, A, piv, Ac, pc) > 0
     b = np.array([1.0, 1.0])
     rk.rad_lu_solve(A, piv, b)
     assert not np.isfinite(b).all()

@@ -207,8 +207,8 @@ class Radau(AdaptiveIntegrator):
         # (n, n) from the first Jacobian on: "auto" builds a Radau it may never run)
         self._J, self._LU_real = np.zeros((0, 0)), np.zeros((0, 0))
         self._LU_complex = np.zeros((0, 0), dtype=complex)
-        self._piv_real = np.zeros(n, dtype=np.int64)
-        self._piv_complex = np.zeros(n, dtype=np.int64)
+        self._piv_real = np.zeros(n, dtype=np.int32)  # LAPACK's pivots (1-based)
+        self._piv_complex = np.zeros(n, dtype=np.int32)
         # the stages: Z (3, n) in y, W in the eigenbasis of A^-1, F the rhs there
         self._Z0, self._Z, self._W, self._dW, self._F = (np.zeros((3, n)) for _ in range(5))
         self._ys, self._scale_v, self._delta, self._ZE, self._err, self._fe, self._y_bad = (
@@ -222,8 +222,9 @@ class Radau(AdaptiveIntegrator):
         self._reset_memory()
         # the compiled loop (fast_radau), when the system offers the kernel
         self._loop = None
-        if n and not self.matrix_free and self._jac_fn is None and callable(getattr(system, "kernel_arguments", None)) \
-                and callable(getattr(system, "quaternion_block", None)):
+        offers_kernel = callable(getattr(system, "kernel_arguments", None)) and callable(
+            getattr(system, "quaternion_block", None))
+        if n and not self.matrix_free and self._jac_fn is None and offers_kernel:
             self._loop = fast_radau.loop_for(system.kernel_arguments())
             self._i_q0, self._nq = (int(v) for v in system.quaternion_block())
             self._mem = np.zeros(fast_radau.MEM_SIZE)
