@@ -32,6 +32,13 @@ Pipeline of one evaluation (`rhs_kernel`), all about O^k in world axes:
     ABA          I, p, c  -> u'                                               (eqs 44, 51, 54)
     y'           u', w    -> quaternion rates, phi', u', rotor angle rates    (eqs 18-19)
 
+Nothing is allocated per evaluation (test/core/test_fast_alloc.py): every intermediate lives in
+the workspace `workspace(model)` gives, viewed by `_block2`/`_block3`; 3-vectors, the spherical
+elimination (3 x 3 blocks of J, H, M) and the forward sweep's acceleration are scalars, so that
+LLVM keeps them in registers. Where a product meets a known zero (a cross-product matrix) it is
+left out: the remaining terms are added in the same order, so the results are bit for bit those
+of the full products.
+
 Reactions (eqs 40, 48) are outputs and stay on the numpy path (`FastChainODE.rhs(t, y,
 out=ev)` delegates to the `ChainODE` it holds).
 
