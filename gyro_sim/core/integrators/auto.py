@@ -147,6 +147,10 @@ class Auto(Integrator):
         self._window = np.zeros((COST_WINDOW, 2))
         self._cost = np.full(COST_SIZE, math.nan)  # rhs evaluations per simulated s, by method
         self._detection = (self._detect, self._counters, self._attempts, self._window, self._cost)
+        if self.explicit.compiled:  # radau's steps enter the cost window from Python: compile
+            # (or load) that kernel now, not at the first switch (a call on scratch arrays)
+            auto_measure(0.0, 0, np.zeros_like(self._counters), np.zeros_like(self._window),
+                         np.zeros_like(self._cost), COST_RADAU)
         self.reset()
 
     @property
