@@ -430,9 +430,9 @@ def test_matrix_free_and_system_jacobian_step_in_python(monkeypatch):
     assert Radau(system)._loop is None  # noqa: SLF001
 
 
-def test_warm_up_compiles_both_ways_and_forgets():
-    """warm_up: the compiled loop and the single step run once, then the memory is reset and
-    the counters are as before; a run after it is the run of a fresh integrator."""
+def test_warm_up_compiles_and_forgets():
+    """warm_up: the compiled loop (or, loop=False, the single step) runs once, then the memory
+    is reset and the counters are as before; a run after it is the run of a fresh integrator."""
     system, y0 = held_system("heavy_top", seed=5)
     warm, fresh = Radau(system, rtol=1e-8, atol=1e-10), Radau(system, rtol=1e-8, atol=1e-10)
     warm.warm_up(0.1, y0)

@@ -236,22 +236,23 @@ class Radau(AdaptiveIntegrator):
             # "auto" builds a Radau and drives only its single step
 
     def warm_up(self, t0: float, y: np.ndarray, *, loop: bool = True) -> None:
-        """A short advance from (t0, y) in each way this integrator steps, then forgotten (the
-        memory reset, the counters kept): the compiled loop (if the system has it and `loop`)
-        and the public single step ("auto" drives it; the kernels of the Python driver) are
-        compiled, or loaded from numba's cache, now rather than in the middle of a real-time
-        run. A failure to step is ignored: the code is compiled all the same."""
+        """A short advance from (t0, y) the way this integrator will step, then forgotten (the
+        memory reset, the counters kept), so that its code is compiled, or loaded from numba's
+        cache, now rather than in the middle of a real-time run: the compiled loop if the
+        system has one and `loop`, else the public single step (the Python driver's kernels;
+        loop=False: what "auto" drives). A failure to step is ignored: the code is compiled all
+        the same."""
         counts = (self.nfev, self.nsteps, self.nrejected, self.njev, self.nlu)
         system_nfev = getattr(self.system, "nfev", None)
         span = WARM_UP_SPAN * max(1.0, abs(t0))
         try:
-            if loop:
+            if loop and self._loop is not None:
                 self.advance(t0, y, t0 + span, t_eval=[t0 + 0.5 * span])
-                self.reset()
-            yc = np.array(y, dtype=float)
-            self.begin(t0, yc, t0 + span)
-            self.take_step(t0, yc, t0 + span)
-            self.dense(np.array([t0]))
+            else:
+                yc = np.array(y, dtype=float)
+                self.begin(t0, yc, t0 + span)
+                self.take_step(t0, yc, t0 + span)
+                self.dense(np.array([t0]))
         except IntegrationError:
             pass
         finally:
