@@ -1,30 +1,37 @@
-"""The arithmetic of the gauss4 step (Jacobian-free Newton-Krylov), compiled with numba.
+"""The arithmetic of the gauss4 step (dense simplified Newton, or Newton-Krylov), compiled.
 
 One implementation, two drivers, as :mod:`gyro_sim.core.rk_kernels`:
 :class:`gyro_sim.core.integrators.gauss.Gauss4` calls these between its rhs evaluations on any
 system (the numpy reference among them), and the compiled loop
 :func:`gyro_sim.core.fast_gauss.gauss_march` calls the same functions between calls of the
 articulated-body kernel. Every number either driver looks at (norms, rates, the decisions of
-the stop tests) comes out of these functions, so both take the same steps bit for bit
-(test/core/test_gauss.py).
+the stop tests, the pivots) comes out of these functions, so both take the same steps bit for
+bit (test/core/test_gauss.py).
 
 The collocation equations of the 2-stage Gauss method for the stage increments Z (2, n)
 (Hairer, Wanner II, sec. IV.8, eq. (8.2)):
 
     G(Z) = Z - (h A (x) I) F(Z) = 0,   F_s(Z) = f(t + c_s h, y + Z_s),   y1 = y + sum_s d_s Z_s
 
-Newton: (I - h (A (x) I) diag(J_s)) dZ = -G(Z), J_s = f'(y + Z_s) at the current iterate (a
-full Newton iteration: the stage Jacobians are where the iterate is, not frozen at y). Each
-linear system is solved by GMRES (Saad-Schultz; Kelley, "Iterative Methods for Linear and
-Nonlinear Equations", SIAM 1995, sec. 3.4-3.5: Arnoldi by modified Gram-Schmidt, the
-least-squares problem by Givens rotations) on the operator applied without forming it: the
-products J_s v_s are forward differences of f in the direction v_s (Kelley, "Solving Nonlinear
-Equations with Newton's Method", SIAM 2003, sec. 3.2: Jacobian-free Newton-GMRES), two rhs
-evaluations per Krylov vector. Everything is in scaled variables, u = dZ / w with
-w_i = tol (1 + |y_i|) per component (atol = rtol = tol): the Euclidean norm of GMRES is the
-weighted norm of the stop test, whose unit is the tolerance.
+Newton: (I - h (A (x) I) diag(J_1, J_2)) dZ = -G(Z), J_s ~ f'(y + Z_s). Two ways to solve it:
 
-Memory: O(n) -- the Krylov basis V (m + 1, 2, n) and a few (2, n) arrays; nothing (n, n).
+- **dense** (systems up to a size threshold): the stage Jacobians J_s (2, n, n) by forward
+  differences (`jac_perturb`, `jac_column`: n rhs evaluations per stage), the real iteration
+  matrix M (2n, 2n) formed (`newton_matrix`) and factored by Gaussian elimination with
+  partial pivoting (`lu_factor`), both kept across steps and reused (simplified Newton) until
+  the iteration slows; each iteration is then 2 rhs evaluations and a solve (`lu_solve`,
+  O(n^2)). The round-off floor of the iteration is measured when the matrix is formed
+  (`noise_perturb`, `noise_residual`): the Newton update that a few-ulp change of the stage
+  states makes, i.e. the noise of the rhs seen through M^-1.
+- **Newton-Krylov** (above the threshold: O(n) memory): each linear system solved by GMRES
+  (Saad-Schultz; Kelley, "Iterative Methods for Linear and Nonlinear Equations", SIAM 1995,
+  sec. 3.4-3.5: Arnoldi by modified Gram-Schmidt, the least-squares problem by Givens
+  rotations) on the operator applied without forming it: the products J_s v_s are forward
+  differences of f in the direction v_s (Kelley, "Solving Nonlinear Equations with Newton's
+  Method", SIAM 2003, sec. 3.2), two rhs evaluations per Krylov vector. In scaled variables,
+  u = dZ / w with w_i = tol (1 + |y_i|) per component (atol = rtol = tol): the Euclidean norm
+  of GMRES is the weighted norm of the stop test, whose unit is the tolerance.
+
 No fastmath (IEEE arithmetic, no fused multiply-adds). Without numba these stay plain Python.
 """
 from __future__ import annotations
@@ -39,17 +46,42 @@ except ImportError:  # pragma: no cover - exercised only where numba is missing
 #: newton_test results
 NEWTON_CONTINUE, NEWTON_CONVERGED, NEWTON_DIVERGING, NEWTON_NOT_FINITE, NEWTON_STALLED = 0, 1, 2, 3, 4
 #: status of a step (both drivers): done; the state not finite after it; the rhs not finite at
-#: the stages; Newton diverging; Newton not converged within its cap; GMRES update not finite
-STEP_OK, STEP_NONFINITE, STEP_RHS_NONFINITE, STEP_DIVERGED, STEP_NOT_CONVERGED, STEP_LINEAR = range(6)
-#: the counters array (int64, 6): Newton iterations, Krylov vectors, the most Newton iterations
-#: of a step, the most Krylov vectors of a solve, rhs evaluations, steps accepted at the
-#: round-off floor (NEWTON_STALLED)
-COUNT_NEWTON, COUNT_KRYLOV, COUNT_MAX_NEWTON, COUNT_MAX_KRYLOV, COUNT_RHS, COUNT_STALLED = range(6)
-#: the parameters array (float64, 10): NEWTON_TOL, NEWTON_KAPPA, NEWTON_FIRST_TOL,
-#: NEWTON_SLOW_RATE, GMRES_RTOL, GMRES_ATOL, the finite-difference eps, NEWTON_CAP,
-#: NEWTON_STALL, NEWTON_STALL_RATE
+#: the stages; Newton diverging; Newton not converged within its cap; the linear solve's update
+#: not finite; the iteration matrix singular; the retake budget of a step spent
+(STEP_OK, STEP_NONFINITE, STEP_RHS_NONFINITE, STEP_DIVERGED, STEP_NOT_CONVERGED, STEP_LINEAR,
+ STEP_SINGULAR, STEP_BUDGET) = range(8)
+#: the counters array (int64, 10): Newton iterations, Krylov vectors, the most Newton
+#: iterations of a (sub)step, the most Krylov vectors of a solve, rhs evaluations, (sub)steps
+#: accepted at the round-off floor (NEWTON_STALLED), stage-Jacobian pairs formed (dense),
+#: iteration matrices factored (dense), (sub)steps retaken as two halves, the most rhs
+#: evaluations of one step (all its attempts), the deepest halving of a step (a substep of
+#: h / 2^depth), steps that needed a retake
+(COUNT_NEWTON, COUNT_KRYLOV, COUNT_MAX_NEWTON, COUNT_MAX_KRYLOV, COUNT_RHS, COUNT_STALLED,
+ COUNT_JACOBIAN, COUNT_LU, COUNT_RETAKEN, COUNT_MAX_STEP_RHS, COUNT_MAX_DEPTH,
+ COUNT_STEPS_RETAKEN) = range(12)
+N_COUNTS = 12
+#: the parameters array (float64, 19): NEWTON_TOL, NEWTON_KAPPA, NEWTON_FIRST_TOL,
+#: NEWTON_SLOW_RATE, GMRES_RTOL, GMRES_ATOL, the finite-difference eps of J v, NEWTON_CAP
+#: (Krylov path), NEWTON_STALL, NEWTON_STALL_RATE, DENSE_NEWTON_CAP, JACOBIAN_REFRESH_RATE,
+#: JACOBIAN_REFRESH_CAP, RETAKE_DEPTH, FLOOR_FACTOR, 1 for the dense path (0: Krylov),
+#: RETAKE_BUDGET, DENSE_KAPPA, DIVERGENCE_REFRESHES
 (PAR_TOL, PAR_KAPPA, PAR_FIRST_TOL, PAR_DIVERGE, PAR_GMRES_RTOL, PAR_GMRES_ATOL, PAR_FD_EPS,
- PAR_NEWTON_CAP, PAR_STALL, PAR_STALL_RATE) = range(10)
+ PAR_NEWTON_CAP, PAR_STALL, PAR_STALL_RATE, PAR_DENSE_CAP, PAR_REFRESH_RATE, PAR_REFRESH_CAP,
+ PAR_DEPTH, PAR_FLOOR_FACTOR, PAR_DENSE, PAR_BUDGET, PAR_DENSE_KAPPA, PAR_DIV_REFRESH) = range(19)
+N_PARAMS = 19
+#: the dense path's memory across steps (float64, 4): the step its matrix was factored for
+#: (0: none), the round-off floor measured with it (tolerance units), 1 when a new Jacobian is
+#: wanted before the next iteration, the step of the predictor's stage increments (0: none)
+DST_H, DST_FLOOR, DST_REFRESH, DST_HPRED = range(4)
+N_DSTATE = 4
+#: the matrix is reused for a step within this relative difference of its own (the substeps
+#: of successive calls differ in the last bits: t1 - t0 rounded)
+H_REUSE = 1e-9
+#: forward-difference Jacobians: the step of component j is JAC_REL_STEP max(1, |y_j|)
+JAC_REL_STEP = 1.4901161193847656e-08  # sqrt(eps)
+#: the round-off probe: each component moved by NOISE_ULPS eps (1 + |y_i|), alternating signs
+NOISE_ULPS = 4.0
+_EPS = 2.220446049250313e-16
 
 
 def _njit(fn):
@@ -257,3 +289,196 @@ def gauss_update(y, Z, D):
     polynomial, no rhs evaluation)."""
     for i in range(y.shape[0]):
         y[i] += D[0] * Z[0, i] + D[1] * Z[1, i]
+
+
+# --------------------------------------------------------------------------- starting guess
+@_njit
+def predictor_matrix(C, ratio, P):
+    """P (2, 2): Z_new = P Z_old extrapolates the collocation polynomial u of the last step
+    (u(t0 + x h) = y0 + sum_i L_i(x) Z_i, Lagrange basis of the nodes {0, c_1, c_2}) to the
+    next step of `ratio` times its size: Z_new[s] = u(1 + ratio c_s) - u(1) (HW IV.8)."""
+    for s in range(2):
+        x = 1.0 + ratio * C[s]
+        for i in range(2):
+            ci, cj = C[i], C[1 - i]
+            P[s, i] = x * (x - cj) / (ci * (ci - cj)) - (1.0 - cj) / (ci * (ci - cj))
+
+
+# --------------------------------------------------------------------------- the dense path
+@_njit
+def jac_perturb(Ys, j, Yp):
+    """Yp (n,) = Ys with component j moved by d = JAC_REL_STEP max(1, |Ys_j|) (rounded so that
+    Yp_j - Ys_j is exactly d); returns d. The column j of f' at Ys is (f(Yp) - f(Ys)) / d."""
+    for i in range(Ys.shape[0]):
+        Yp[i] = Ys[i]
+    d = JAC_REL_STEP * max(1.0, abs(Ys[j]))
+    Yp[j] = Ys[j] + d
+    return Yp[j] - Ys[j]
+
+
+@_njit
+def jac_column(Fp, F, d, J, j):
+    """Column j of J (n, n) = (Fp - F) / d (forward difference, `jac_perturb`)."""
+    inv = 1.0 / d
+    for i in range(F.shape[0]):
+        J[i, j] = (Fp[i] - F[i]) * inv
+
+
+@_njit
+def newton_matrix(J, hA, M):
+    """M (2n, 2n) = I - (h A (x) I) diag(J_1, J_2): block (s, q) = delta_sq I - hA[s, q] J_q;
+    J (2, n, n) the stage Jacobians."""
+    n = J.shape[1]
+    for s in range(2):
+        for q in range(2):
+            a = hA[s, q]
+            for i in range(n):
+                row = s * n + i
+                for j in range(n):
+                    M[row, q * n + j] = -a * J[q, i, j]
+    for i in range(2 * n):
+        M[i, i] += 1.0
+
+
+@_njit
+def lu_factor(M, piv):
+    """Gaussian elimination with partial pivoting, in place: M (m, m) -> L (unit, below the
+    diagonal) and U; piv (m,) int64 the row exchanged with row k at step k. Returns 0, or k + 1
+    when the pivot of column k is zero or not finite (the matrix is singular to working
+    precision or not finite: M is then unusable)."""
+    m = M.shape[0]
+    for k in range(m):
+        p = k
+        big = abs(M[k, k])
+        for i in range(k + 1, m):
+            a = abs(M[i, k])
+            if a > big:
+                big, p = a, i
+        piv[k] = p
+        if not (big > 0.0 and big < math.inf):
+            return k + 1
+        if p != k:
+            for j in range(m):
+                M[k, j], M[p, j] = M[p, j], M[k, j]
+        inv = 1.0 / M[k, k]
+        for i in range(k + 1, m):
+            lik = M[i, k] * inv
+            M[i, k] = lik
+            if lik != 0.0:
+                for j in range(k + 1, m):
+                    M[i, j] -= lik * M[k, j]
+    return 0
+
+
+@_njit
+def lu_solve(M, piv, b):
+    """b (m,) = M^-1 b in place, M and piv from `lu_factor`."""
+    m = M.shape[0]
+    for k in range(m):
+        p = piv[k]
+        if p != k:
+            b[k], b[p] = b[p], b[k]
+    for i in range(m):
+        acc = b[i]
+        for j in range(i):
+            acc -= M[i, j] * b[j]
+        b[i] = acc
+    for i in range(m - 1, -1, -1):
+        acc = b[i]
+        for j in range(i + 1, m):
+            acc -= M[i, j] * b[j]
+        b[i] = acc / M[i, i]
+
+
+@_njit
+def dense_residual(Z, F, hA, r):
+    """r (2n,) = -G(Z) = -Z_s + sum_q hA[s, q] F_q, the stages one after the other."""
+    n = Z.shape[1]
+    for s in range(2):
+        for i in range(n):
+            r[s * n + i] = -Z[s, i] + (hA[s, 0] * F[0, i] + hA[s, 1] * F[1, i])
+
+
+@_njit
+def dense_update(r, w, Z):
+    """Z (2, n) += the update r (2n,); returns its rms size in units of the tolerance, w."""
+    n = Z.shape[1]
+    acc = 0.0
+    for s in range(2):
+        for i in range(n):
+            u = r[s * n + i]
+            Z[s, i] += u
+            x = u / w[i]
+            acc += x * x
+    return math.sqrt(acc / (2.0 * n)) if n else 0.0
+
+
+@_njit
+def scaled_rms(r, w):
+    """rms of r (2n,) / w (n,) (both stages), in units of the tolerance."""
+    n = w.shape[0]
+    acc = 0.0
+    for s in range(2):
+        for i in range(n):
+            x = r[s * n + i] / w[i]
+            acc += x * x
+    return math.sqrt(acc / (2.0 * n)) if n else 0.0
+
+
+@_njit
+def noise_perturb(Ys, Yp):
+    """Yp (n,) = Ys moved by NOISE_ULPS eps (1 + |Ys_i|) per component, signs alternating:
+    a change at the level of the state's own round-off, to probe the rhs's."""
+    for i in range(Ys.shape[0]):
+        d = NOISE_ULPS * _EPS * (1.0 + abs(Ys[i]))
+        Yp[i] = Ys[i] + d if i % 2 == 0 else Ys[i] - d
+
+
+@_njit
+def noise_residual(Fn, F, hA, r):
+    """r (2n,) = (h A (x) I) (Fn - F): the residual that round-off of the stage states makes
+    (Fn (2, n) the rhs at `noise_perturb` of each stage). M^-1 r is the Newton update it
+    causes: the floor below which updates are noise."""
+    n = F.shape[1]
+    for s in range(2):
+        for i in range(n):
+            r[s * n + i] = hA[s, 0] * (Fn[0, i] - F[0, i]) + hA[s, 1] * (Fn[1, i] - F[1, i])
+
+
+@_njit
+def refresh_wanted(theta, norm, left, kappa, rate):
+    """Should the stage Jacobians be formed anew at the current iterate? Yes when the
+    contraction rate theta is above `rate`, or when at that rate the error estimate
+    theta^left / (1 - theta) norm would still be above kappa after the `left` iterations the
+    cap allows (HW IV.8, eq. (8.15): the iteration would not converge in time)."""
+    if theta > rate:
+        return True
+    if theta <= 0.0:
+        return False
+    return theta ** left / (1.0 - theta) * norm > kappa
+
+
+@_njit
+def noise_floor(noise, factor, stall):
+    """The round-off floor of the dense iteration (tolerance units): `factor` times the measured
+    noise of the update (`noise_residual` solved), at least `stall`; `stall` if the
+    measurement is not finite."""
+    if not (noise < math.inf):
+        return stall
+    return max(stall, factor * noise)
+
+
+@_njit
+def retake_next(ok, pos, depth, max_depth):
+    """The dyadic retake of a step: the step is cut into pieces of h / 2^depth on the grid of
+    h / 2^max_depth (positions counted in that unit). After a (sub)step of level `depth` at
+    `pos`: on success the position moves on by its size and the level coarsens by one when the
+    new position lies on the coarser grid (back to whole steps after a hard spot); on failure
+    the same piece is taken again as halves (depth + 1). Returns (pos, depth); depth >
+    max_depth: the step fails."""
+    if not ok:
+        return pos, depth + 1
+    pos += 1 << (max_depth - depth)
+    if depth > 0 and pos % (1 << (max_depth - depth + 1)) == 0:
+        depth -= 1
+    return pos, depth

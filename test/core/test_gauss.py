@@ -1,21 +1,23 @@
-"""gauss4 (Jacobian-free Newton-Krylov, compiled): order 4 against a tight dop853, |q| kept
-without projection, angular momentum of a free chain, bounded energy over a long horizon,
-Newton failures reported with their reason, the compiled and Python drivers step for step, and
-O(n) memory on a long chain."""
+"""gauss4 (dense simplified Newton or Newton-Krylov, compiled): order 4 against a tight dop853
+on both paths, |q| and the quadratic invariants of a rigid body kept to round-off, angular
+momentum of a free chain, bounded energy over a long horizon, Newton failures reported with
+their reason, the compiled and Python drivers step for step (retakes included), and O(n)
+memory on a long chain. The stiff cases (stability function, heavy tip, step moments, fast
+double gyroscope) are in test_gauss_stiff.py."""
 import tracemalloc
 
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from gyro_sim.bench.extreme import load_dict
+from gyro_sim.bench.extreme import load_dict, mass_ratio_chain
 from gyro_sim.bench.scenes import spherical_chain
 from gyro_sim.bench.stability import long_horizon
 from gyro_sim.core import fast
 from gyro_sim.core import gauss_kernels as gk
 from gyro_sim.core.integrators import INTEGRATORS, IntegrationError, make_integrator
 from gyro_sim.core.integrators import gauss
-from gyro_sim.core.integrators.gauss import GMRES_CAP, NEWTON_CAP, Gauss4
+from gyro_sim.core.integrators.gauss import DENSE_NEWTON_CAP, GMRES_CAP, Gauss4
 from gyro_sim.core.model import compile_model, initial_state
 from gyro_sim.core.scene_load import load_scene
 from gyro_sim.core.simulator import SimulationError, Simulator
@@ -34,6 +36,12 @@ def _system(seed=3, n=3, backend="auto", **kw):
 def _python(integ):
     """The Python driver on the same system (the compiled march off)."""
     integ.use_compiled = False
+    return integ
+
+
+def _no_retake(integ):
+    """The step fails at its first failing Newton iteration (no retake in halves)."""
+    integ._params[gk.PAR_DEPTH] = 0
     return integ
 
 
@@ -73,10 +81,12 @@ class Oscillator1:
         pass
 
 
+@pytest.mark.parametrize("dense", [True, False])
 @pytest.mark.parametrize("backend", ["auto", "numpy"])
-def test_convergence_order_4_on_a_chain(backend):
+def test_convergence_order_4_on_a_chain(backend, dense):
     """Error vs h against scipy's DOP853 at rtol = atol = 1e-13 (an independent reference):
-    slope ~4 (both drivers: numpy is the Python driver on the numpy reference)."""
+    slope ~4 (both drivers: numpy is the Python driver on the numpy reference; both Newton
+    paths)."""
     model, system = _system(backend=backend)
     y0, T = initial_state(model), 0.1
     sol = solve_ivp(lambda t, y: np.array(system.rhs(t, y)), (0.0, T), y0, method="DOP853",
@@ -86,17 +96,19 @@ def test_convergence_order_4_on_a_chain(backend):
     errs = []
     hs = (0.02, 0.01, 0.005)
     for h in hs:
-        y = make_integrator("gauss4", system, step=h).advance(0.0, y0, T)
+        y = Gauss4(system, step=h, dense=dense).advance(0.0, y0, T)
         errs.append(np.abs(y - ref).max())
     orders = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
     assert np.all((orders > 3.7) & (orders < 4.4)), (errs, orders)
 
 
-def test_quaternion_norms_kept_without_projection():
+@pytest.mark.parametrize("dense", [True, False])
+def test_quaternion_norms_kept_without_projection(dense):
     """The Python driver with `project` a no-op: |q| = 1 is a quadratic invariant, kept to
-    round-off by the method alone (the Newton iteration converged to round-off)."""
+    round-off by the method alone (the Newton iteration converged to round-off; the dense
+    path's simplified iteration too: DENSE_KAPPA)."""
     model, system = _system()
-    g = _python(make_integrator("gauss4", system, step=1e-3))
+    g = _python(Gauss4(system, step=1e-3, dense=dense))
     g._project = lambda y: None  # no renormalisation: the method keeps |q| itself
     y = g.advance(0.0, initial_state(model), 0.5)
     q = y[model.i_quat]
@@ -105,19 +117,20 @@ def test_quaternion_norms_kept_without_projection():
 
 # ------------------------------------------------------------------ the two drivers
 @needs_numba
+@pytest.mark.parametrize("dense", [True, False])
 @pytest.mark.parametrize("seed", range(3))
 @pytest.mark.parametrize("base", ("fixed", "free"))
-def test_compiled_march_equals_the_python_driver_bit_for_bit(seed, base):
+def test_compiled_march_equals_the_python_driver_bit_for_bit(seed, base, dense):
     """The same kernels (gauss_kernels) between the same rhs evaluations, from compiled code or
-    from Python, with held inputs and over two calls (the predictor carried across): identical
-    bits, rhs evaluations and Newton/GMRES counts."""
+    from Python, with held inputs and over two calls (the predictor and the dense path's
+    matrix carried across): identical bits, rhs evaluations and every count."""
     model = compile_model(load_scene(random_chain(seed, base=base)))
     nt, nh = len(model.torque_body), len(model.hinge_bodies)
     runs = []
     for compiled in (True, False):
         system = FastChainODE(model)
         rng = np.random.default_rng(seed)
-        g = make_integrator("gauss4", system, step=1e-3)
+        g = Gauss4(system, step=1e-3, dense=dense)
         g.use_compiled = compiled
         y = initial_state(model)
         for t0, t1 in ((0.1, 0.115), (0.115, 0.13)):  # new inputs held at each call
@@ -143,13 +156,17 @@ def test_non_finite_state_stops_the_compiled_march():
 
 
 # ------------------------------------------------------------------ failures
-@pytest.mark.parametrize("good, why", [(0, "rhs not finite at the stages"),
-                                       (2, "GMRES gave a non-finite update at iteration 0")])
-def test_newton_failure_is_reported(good, why):
-    """A rhs that turns non-finite inside the iteration (Python driver), at a stage or in a
-    Jacobian-vector product: IntegrationError with the reason."""
+@pytest.mark.parametrize("dense, good, why", [
+    (True, 0, "rhs not finite at the stages"),
+    (True, 2, "iteration matrix singular or not finite"),
+    (False, 0, "rhs not finite at the stages"),
+    (False, 2, "the linear solve gave a non-finite update at iteration 0")])
+def test_newton_failure_is_reported(dense, good, why):
+    """A rhs that turns non-finite inside the iteration (Python driver, no retake), at a stage,
+    in the finite-difference Jacobian or in a Jacobian-vector product: IntegrationError with
+    the reason."""
     model, system = _system()
-    g = _python(make_integrator("gauss4", system, step=1e-3))
+    g = _no_retake(_python(Gauss4(system, step=1e-3, dense=dense)))
     rhs = system.rhs
     calls = {"n": 0}
 
@@ -163,14 +180,15 @@ def test_newton_failure_is_reported(good, why):
         g.advance(0.0, initial_state(model), 0.01)
 
 
+@pytest.mark.parametrize("dense", [True, False])
 @pytest.mark.parametrize("compiled", [True, False])
-def test_newton_cap_reached_is_reported(compiled):
-    """Cap 1 (one Newton iteration cannot pass the stop test from Z = 0): the step fails with
-    its reason, time and step, on either driver, and y0 is not touched."""
+def test_newton_cap_reached_is_reported(compiled, dense):
+    """Cap 1 (one Newton iteration cannot pass the stop test from Z = 0), no retake: the step
+    fails with its reason, time and step, on either driver and path, and y0 is not touched."""
     model, system = _system()
-    g = make_integrator("gauss4", system, step=1e-3)
+    g = _no_retake(Gauss4(system, step=1e-3, dense=dense))
     g.use_compiled = compiled
-    g._params[gk.PAR_NEWTON_CAP] = 1
+    g._params[gk.PAR_DENSE_CAP if dense else gk.PAR_NEWTON_CAP] = 1
     y0 = initial_state(model)
     keep = y0.copy()
     with pytest.raises(IntegrationError, match=r"Newton iteration failed.*not converged in 1 iter") as info:
@@ -179,16 +197,38 @@ def test_newton_cap_reached_is_reported(compiled):
     assert np.array_equal(y0, keep)
 
 
-def test_absurd_step_on_a_stiff_scene_is_reported_not_silent():
-    """The heavy top spun at 1e5 rad/s with h = 10 ms (1000 rad a step): Newton cannot converge;
-    the Simulator reports the integrator's reason and keeps its state."""
-    sim = Simulator(fast_heavy_top(1e5), integrator="gauss4", step=1e-2)
-    y0 = sim.state.copy()
-    with pytest.raises(SimulationError, match="gauss4: Newton iteration failed") as info:
+@pytest.mark.parametrize("compiled", [True, False])
+def test_failure_after_the_bounded_retake_is_reported(compiled):
+    """A step that cannot be taken even in halves (cap 1: no substep can converge): the retake
+    halves the piece down to h / 2^RETAKE_DEPTH and gives up, on either driver, with the
+    reason and how far it halved; y0 is not touched and the attempts are counted."""
+    model, system = _system()
+    g = Gauss4(system, step=1e-3)
+    g.use_compiled = compiled
+    g._params[gk.PAR_DENSE_CAP] = 1
+    y0 = initial_state(model)
+    keep = y0.copy()
+    why = r"not converged in 1 iter.*retaken in halves down to h / 2\^"
+    with pytest.raises(IntegrationError, match=why) as info:
+        g.advance(0.0, y0, 0.01)
+    assert info.value.t == 0.0 and np.array_equal(y0, keep)
+    depth = int(g._params[gk.PAR_DEPTH])
+    assert f"h / 2^{depth}," in str(info.value)
+    assert g.counts[gk.COUNT_RETAKEN] == depth + 1 and g.counts[gk.COUNT_STEPS_RETAKEN] == 1
+    assert g.counts[gk.COUNT_MAX_STEP_RHS] <= g.worst_step_rhs
+
+
+def test_bounded_retake_stops_the_simulator_with_the_reason():
+    """The heavy tip (mass ratio 1e6) whips at t = 0.0874 s (accelerations of 4e9 rad/s^2 for
+    microseconds, the two light links passing through alignment); with a retake budget of 4
+    attempts the step cannot be taken: the Simulator reports the integrator's reason and keeps
+    its state (the default budget gets through: test_gauss_stiff.py)."""
+    sim = Simulator(mass_ratio_chain(1e6), integrator="gauss4", step=1e-3)
+    sim.integrator._params[gk.PAR_BUDGET] = 4
+    with pytest.raises(SimulationError, match="gauss4: Newton iteration failed.*retaken in halves"):
         for _ in range(10):
             sim.advance(0.01)
-    assert "diverging" in str(info.value) or "not converged" in str(info.value)
-    assert np.isfinite(sim.state).all() and sim.time < 0.1 and (sim.time > 0 or np.array_equal(sim.state, y0))
+    assert np.isfinite(sim.state).all() and abs(sim.time - 0.08) < 1e-12
 
 
 # ------------------------------------------------------------------ invariants
@@ -231,10 +271,12 @@ class EulerBody:
         pass
 
 
-def test_quadratic_invariants_of_a_free_rigid_body_to_round_off():
+@pytest.mark.parametrize("dense", [True, False])
+def test_quadratic_invariants_of_a_free_rigid_body_to_round_off(dense):
     """Euler's equations keep 2T = w . I w and |L|^2 = |I w|^2, both quadratic: gauss4 keeps
     them to round-off, 1e4 steps of h = 10 ms (measured: relative drift <= 4.4e-15 at every
-    1000th step, no growth), where rk4 loses ~1e-11. Python driver."""
+    1000th step on the Krylov path, 3.1e-15 on the dense one, no growth), where rk4 loses
+    ~1e-11. Python driver."""
     body = EulerBody()
     y0 = np.array([0.4, -1.1, 0.7])
 
@@ -244,7 +286,8 @@ def test_quadratic_invariants_of_a_free_rigid_body_to_round_off():
 
     drift = {}
     for name in ("gauss4", "rk4"):
-        g = make_integrator(name, body, step=1e-2)
+        g = (Gauss4(body, step=1e-2, dense=dense) if name == "gauss4"
+             else make_integrator(name, body, step=1e-2))
         y, k0, d = y0, invariants(y0), []
         for k in range(10):
             y = g.advance(k * 10.0, y, (k + 1) * 10.0)
@@ -267,27 +310,32 @@ def test_energy_bounded_on_a_nutating_top():
 @pytest.mark.parametrize("spin", [1e2, 1e3, 1e4])
 def test_fast_heavy_top_converges(spin):
     """The heavy top spun at 1e2, 1e3 and 1e4 rad/s (0.1, 1, 10 rad a step) at h = 1 ms: 0.1 s
-    within the Newton cap, and |q| kept."""
+    within the Newton cap (dense path: new stage Jacobians as the body turns), and |q| kept."""
     sim = Simulator(fast_heavy_top(spin), integrator="gauss4", step=1e-3)
     for _ in range(10):
         sim.advance(0.01)
     g = sim.integrator
-    assert g.nsteps == 100 and g.counts[gk.COUNT_MAX_NEWTON] <= NEWTON_CAP
+    assert g.dense and g.nsteps == 100 and g.counts[gk.COUNT_MAX_NEWTON] <= DENSE_NEWTON_CAP
     q = sim.state[sim.model.i_quat]
     assert abs(np.linalg.norm(q) - 1.0) < 1e-14
 
 
 @needs_numba
-def test_round_off_floor_is_accepted_counted_and_the_same_on_both_drivers():
-    """The top at 1e4 rad/s with GMRES at 1e-8: some steps' updates stop contracting at ~10
-    tolerance units (a world angular-velocity component near 0 carries the round-off of the
-    |w|^2 terms). Accepted as the round-off floor (counted), bit for bit on both drivers;
-    without the floor (NEWTON_STALL = 0) the first step reports divergence."""
+def test_round_off_floor_is_accepted_counted_and_the_same_on_both_drivers(monkeypatch):
+    """The top at 1e4 rad/s, Krylov path with GMRES at 1e-8: some steps' updates stop
+    contracting at ~10 tolerance units (a world angular-velocity component near 0 carries the
+    round-off of the |w|^2 terms). Accepted as the round-off floor (counted), bit for bit on
+    both drivers; without the floor (NEWTON_STALL = 0, no retake) the first step reports
+    divergence."""
+    monkeypatch.setattr(gauss, "DENSE_MAX_SIZE", 0)
     results = []
     for stall, compiled in ((gauss.NEWTON_STALL, True), (gauss.NEWTON_STALL, False), (0.0, True)):
         sim = Simulator(fast_heavy_top(1e4), integrator="gauss4", step=1e-3)
         g = sim.integrator
+        assert not g.dense
         g.use_compiled = compiled
+        if stall == 0.0:
+            _no_retake(g)
         g._params[gk.PAR_GMRES_RTOL] = 1e-8
         g._params[gk.PAR_STALL] = stall
         try:
@@ -304,14 +352,15 @@ def test_round_off_floor_is_accepted_counted_and_the_same_on_both_drivers():
 # ------------------------------------------------------------------ memory
 @needs_numba
 def test_memory_is_linear_in_the_chain_length():
-    """n = 2000 bodies (size 14000): the integrator's arrays are (GMRES_CAP + 10) rows of
-    2 size floats, and a step of the Python driver allocates nothing O(n^2) (tracemalloc peak
-    below 10 MB; a single (size, size) matrix would be 1.6 GB)."""
+    """n = 2000 bodies (size 14000, above DENSE_MAX_SIZE: the Krylov path): the integrator's
+    arrays are (GMRES_CAP + 11) rows of 2 size floats, and a step of the Python driver
+    allocates nothing O(n^2) (tracemalloc peak below 10 MB; a single (size, size) matrix
+    would be 1.6 GB)."""
     model = compile_model(load_scene(spherical_chain(2000)))
     system = make_system(model, "numba")
     g = _python(make_integrator("gauss4", system, step=1e-3))
     size = model.size
-    assert g.workspace_bytes <= (GMRES_CAP + 10) * 2 * size * 8
+    assert not g.dense and g.workspace_bytes <= (GMRES_CAP + 11) * 2 * size * 8
     y0 = initial_state(model)
     tracemalloc.start()
     try:
