@@ -21,7 +21,7 @@ WARM_UP_SCENE = "hinge_chain"
 
 #: the modules holding numba kernels (dispatchers)
 KERNEL_MODULES = ("fast", "rk_kernels", "fast_loop", "fast_outputs", "lagrange", "gauss_kernels", "fast_gauss",
-                  "dop853_kernels", "fast_dop853", "lie_kernels", "fast_lie")
+                  "dop853_kernels", "fast_dop853", "lie_kernels", "fast_lie", "radau_kernels", "fast_radau")
 #: the compiled loops each integrator runs on the numba backend, (module, name), besides the
 #: kernels every run needs (fast.py's, the outputs, a Lagrange chain's integrals); the cache
 #: counts as cold for an integrator when any of its kernels has no entry
@@ -34,8 +34,10 @@ LOOPS = {
     # fixed: its rescue (dop853) steps through the Python driver on the kernels
     "fixed": (("fast_loop", "erk_march"), ("fast_gauss", "gauss_march"), ("dop853_kernels", "dop_update")),
     "dop853": (("fast_dop853", "dop853_advance"),),
-    "auto": (("dop853_kernels", "dop_update"),),  # auto's dop853 steps through the Python driver
-    "radau": (),
+    # auto: dop853's compiled loop in its detection mode, the cost window (called while radau
+    # runs); radau's own kernels compile at the first switch to radau
+    "auto": (("fast_dop853", "dop853_advance"), ("dop853_kernels", "auto_measure")),
+    "radau": (("fast_radau", "radau_advance"),),
 }
 #: the node's default
 DEFAULT_INTEGRATOR = "fixed"

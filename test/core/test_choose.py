@@ -217,13 +217,14 @@ def test_fixed_rescues_a_call_both_fixed_step_methods_fail_with_dop853(monkeypat
 @pytest.mark.slow
 def test_fixed_carries_the_heavy_tip_through_its_whips():
     """Mass ratio 1e6 (gyro_sim.bench.extreme): the light links whip when the chain straightens
-    (accelerations ~1e8 rad/s^2 for ~0.1 ms near t = 0.0875 s). rk4 fails at any step down to
-    16 us and gauss4's Newton iteration diverges; "fixed" takes those calls with dop853 and
-    keeps the energy to 1e-3 of the kinetic energy where rk4 alone would have run away."""
+    (accelerations ~1e9 rad/s^2 for microseconds near t = 0.0874 s). rk4 fails at any step down
+    to 16 us; gauss4 gets through by halving its step, but its energy jumps there (0.35 of the
+    kinetic energy): "fixed"'s watchdog takes those calls to dop853, which keeps the energy to
+    1e-3 of the kinetic energy."""
     from gyro_sim.bench.extreme import mass_ratio_chain
 
     scene = mass_ratio_chain(1e6)
-    assert not survives(scene, "rk4", 0.1) and not survives(scene, "gauss4", 0.1)
+    assert not survives(scene, "rk4", 0.1)
     sim = Simulator(scene, integrator="fixed", step=STEP)
     e0 = sim.invariants()["energy"]
     for _ in range(30):

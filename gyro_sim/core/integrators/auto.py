@@ -218,7 +218,7 @@ class Auto(Integrator):
         at te from the next output on: `_run` for DOP853 in one compiled call."""
         j = self._j
         try:
-            t, code = self.explicit._integrate_compiled(
+            t, code = self.explicit.advance_detecting(
                 t, y, t1, None if te is None else te[j:], None if Y is None else Y[j:],
                 self._detection)
         finally:

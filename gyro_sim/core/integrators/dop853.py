@@ -457,6 +457,12 @@ class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
         else:
             self._integrate_compiled(t0, y, t1, te, Y)
 
+    def advance_detecting(self, t0: float, y: np.ndarray, t1: float, te, Y, detection: tuple) -> tuple[float, int]:
+        """For "auto": the compiled loop in its detection mode (see `_integrate_compiled`):
+        y advanced in place from t0 towards t1, Y filled at te; returns (time reached, reason
+        code or 0)."""
+        return self._integrate_compiled(t0, y, t1, te, Y, detection)
+
     def _integrate_compiled(self, t0: float, y: np.ndarray, t1: float, te, Y,
                             detection: tuple | None = None) -> tuple[float, int]:
         """`_integrate` (the loop of `begin`, `take_step`, `dense`) in one compiled call.
