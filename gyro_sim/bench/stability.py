@@ -611,6 +611,8 @@ class Report:
     sweep_steps: int = 0
     tips: list = field(default_factory=list)  # heavy_tips.TipRow
     wall: float = 0.0  # s
+    costs: list = field(default_factory=list)  # step_cost.CostRow
+    holding: dict = field(default_factory=dict)  # method -> (largest n measured holding 1 kHz, crossing)
 
     def markdown(self) -> str:
         mode = "quick mode (short horizons, small budgets)" if self.quick else "full run"
@@ -642,6 +644,7 @@ class Report:
             "",
             *self._spin_section(),
             *self._tips_section(),
+            *self._cost_section(),
             "The numbers behind the verdicts:",
             "",
             verdict_table(self.results),
@@ -682,6 +685,33 @@ class Report:
             "",
         ]
 
+    def _cost_section(self) -> list[str]:
+        from . import step_cost as sc
+
+        if not self.costs:
+            return []
+        hold = []
+        for method, (best, crossing) in self.holding.items():
+            if best is None:
+                hold.append(f"{method}: no measured n")
+            else:
+                hold.append(f"{method}: n = {best} measured" + (f", about {crossing:.0f} interpolated" if crossing else ""))
+        steps = max(r.steps for r in self.costs)
+        return [
+            "### The cost of one physics step: gauss4 beside rk4",
+            "",
+            f"`Simulator.advance({sc.STEP:g})` called {steps} times, as the node calls it, on the spherical chain "
+            "with a torque rotor on every body, under gravity; wall time of each call after a warm-up call. "
+            "gauss4's own worst case in work: the most Newton iterations of a (sub)step and the most right-hand-side "
+            "evaluations of a step (its caps bound them: gauss.py).",
+            "",
+            sc.table(self.costs),
+            "",
+            f"Largest n holding 1 kHz (median step within {sc.HOLD_FRACTION:g} of the 1 ms period): "
+            + ("; ".join(hold) if hold else "not searched (quick mode)") + ".",
+            "",
+        ]
+
     def _tips_section(self) -> list[str]:
         from . import heavy_tips as ht
 
@@ -702,7 +732,7 @@ class Report:
 
 
 #: the report's parts (--parts)
-PARTS = ("verdicts", "long", "sweep", "tips")
+PARTS = ("verdicts", "long", "sweep", "tips", "cost")
 #: CPU budget (s) of one spin-sweep run: quick, full
 SWEEP_BUDGET = (20.0, 600.0)
 
@@ -737,9 +767,35 @@ def build(quick: bool = False, keys=None, integrators=None, long_steps: int | No
         from . import heavy_tips as ht
 
         tips = ht.rows()
+    costs, holding = [], {}
+    if "cost" in parts:
+        costs, holding = step_costs(quick, backend, progress)
     resolved = _default_backend() if backend == "auto" else backend
     return Report(results, long_runs, time.process_time() - cpu0, quick, resolved, spin_runs, s_steps, tips,
-                  time.time() - wall0)
+                  time.time() - wall0, costs, holding)
+
+
+def step_costs(quick: bool, backend: str, progress=None):
+    """The cost part: step_cost rows at its SIZES for gauss4 and rk4, and for each the largest
+    n holding 1 kHz (measured by doubling n; not in quick mode)."""
+    from . import step_cost as sc
+
+    sizes, steps = (sc.QUICK_SIZES, sc.QUICK_STEPS) if quick else (sc.SIZES, sc.STEPS)
+    rows, holding = [], {}
+    total = len(sizes) * len(sc.METHODS)
+    for n in sizes:
+        for method in sc.METHODS:
+            rows.append(sc.measure(n, method, steps, backend))
+            if progress:
+                progress(len(rows), total, f"step cost: n = {n} {method}")
+    if not quick:
+        for method in sc.METHODS:
+            best, crossing, extra = sc.largest_holding(
+                rows, method, steps, backend,
+                (lambda r: progress(len(rows), total, f"step cost: n = {r.n} {r.method}")) if progress else None)
+            rows.extend(extra)
+            holding[method] = (best, crossing)
+    return rows, holding
 
 
 def to_json(report: Report) -> dict[str, Any]:
@@ -753,6 +809,9 @@ def to_json(report: Report) -> dict[str, Any]:
         "mujoco_skipped": {r.item.key: r.mujoco_skipped for r in report.results if r.mujoco_skipped},
         "spin_sweep": {"steps": report.sweep_steps, "runs": [asdict(r) for r in report.spin_runs]},
         "heavy_tips": [asdict(r) for r in report.tips],
+        "step_cost": {"rows": [asdict(r) for r in report.costs],
+                      "holding_1kHz": {k: {"largest_n_measured": v[0], "interpolated_n": v[1]}
+                                       for k, v in report.holding.items()}},
         "wall": report.wall,
     }
 
@@ -788,6 +847,6 @@ def register(sub, bench) -> None:
                    help="steps of each spin-sweep run (default 1e6, quick 1e4; 0: skip)")
     p.add_argument("--parts", nargs="+", choices=PARTS, default=list(PARTS),
                    help="the parts of the report to run (default all): verdicts, long (the long-horizon item), "
-                        "sweep (spin sweep), tips (heavy-tip table)")
+                        "sweep (spin sweep), tips (heavy-tip table), cost (gauss4 and rk4 per step at 1 kHz)")
     p.add_argument("--no-mujoco", action="store_true", help="no MuJoCo rows (verdicts and spin sweep)")
     p.set_defaults(fn=main)

@@ -115,11 +115,10 @@ class Simulator:
     def _watched_energy(self) -> int | None:
         """The index in the compiled invariants of the energy the exact motion keeps ("energy",
         or "jacobi" with speed rotors, gyro_sim.core.invariants.conserved), None when none is
-        kept (a moving base) or on the numpy backend."""
+        kept (a moving base). On the numpy backend the same numbers come from the numpy
+        invariants (`_invariants_at`)."""
         from . import fast_outputs
 
-        if self._compiled_outputs is None:
-            return None
         if "energy" in self._conserved:
             return fast_outputs.INV_ENERGY
         return fast_outputs.INV_JACOBI if "jacobi" in self._conserved else None
@@ -152,6 +151,17 @@ class Simulator:
         states (fast_outputs.publication_kernel with WANT_INVARIANTS); a new array."""
         from . import fast_outputs as fo
 
+        if self._compiled_outputs is None:  # numpy backend: the reference invariants, own workspace
+            d = getattr(self, "_watch_data", None)
+            if d is None:
+                d = self._watch_data = dyn.Data(self.model)
+            dyn.positions(self.model, d, t, y)
+            dyn.velocities(self.model, d, t, y[self.model.i_vel])
+            v = inv.invariants(self.model, d, self.system.spins(t), t)
+            out = np.zeros(fo.INV_SIZE)
+            out[fo.INV_ENERGY], out[fo.INV_KINETIC], out[fo.INV_POTENTIAL] = v["energy"], v["kinetic"], v["potential"]
+            out[fo.INV_JACOBI] = v.get("jacobi", 0.0)
+            return out
         if getattr(self, "_snapshot_kernel", None) is None:
             self._snapshot_setup()
         o, model, into = self._snapshot_scratch, self._snapshot_model, self._snapshot_nowhere
@@ -511,6 +521,17 @@ class Simulator:
         are the Simulator's scratch, valid until the next call."""
         from . import fast_outputs as fo
 
+        if self._compiled_outputs is None:  # numpy backend: the reference invariants, own workspace
+            d = getattr(self, "_watch_data", None)
+            if d is None:
+                d = self._watch_data = dyn.Data(self.model)
+            dyn.positions(self.model, d, t, y)
+            dyn.velocities(self.model, d, t, y[self.model.i_vel])
+            v = inv.invariants(self.model, d, self.system.spins(t), t)
+            out = np.zeros(fo.INV_SIZE)
+            out[fo.INV_ENERGY], out[fo.INV_KINETIC], out[fo.INV_POTENTIAL] = v["energy"], v["kinetic"], v["potential"]
+            out[fo.INV_JACOBI] = v.get("jacobi", 0.0)
+            return out
         if getattr(self, "_snapshot_kernel", None) is None:
             self._snapshot_setup()
         self.system.hold(self._t, self._p, *self._inputs())

@@ -137,3 +137,43 @@ def test_growth_classifier_on_known_shapes(shape, label):
     run = st.LongRun("x", 10**6, st.LONG_STEP, list(t), list(shape(t)), 0.0)
     st._classify(run)
     assert run.growth == label, (run.slope, run.growth)
+
+
+# ------------------------------------------------------------------ the cost of a step
+def test_step_cost_part(stability_out):
+    """The quick report times gauss4 and rk4 steps on the small chains: every run finished,
+    the quantiles are ordered, and gauss4 (2 stages, a Newton iteration) costs more than rk4
+    per step while its work stays within its caps."""
+    from gyro_sim.bench import step_cost as sc
+    from gyro_sim.core.integrators import gauss
+
+    _, data, md = stability_out
+    rows = data["step_cost"]["rows"]
+    assert {(r["n"], r["method"]) for r in rows} == {(n, m) for n in sc.QUICK_SIZES for m in sc.METHODS}
+    for r in rows:
+        assert not r["failed"] and r["steps"] == sc.QUICK_STEPS
+        assert 0 < r["median_us"] <= r["p99_us"] <= r["worst_us"]
+    by = {(r["n"], r["method"]): r for r in rows}
+    for n in sc.QUICK_SIZES:
+        g = by[n, "gauss4"]
+        assert 1 <= g["max_newton"] <= max(gauss.NEWTON_CAP, gauss.DENSE_NEWTON_CAP)
+        assert g["max_step_rhs"] > by[n, "rk4"]["max_step_rhs"]
+    assert "The cost of one physics step" in md
+
+
+def test_largest_n_holding_1khz_interpolates(monkeypatch):
+    """The search doubles n while the median step fits the budget and interpolates log-log
+    between the last two sizes: on a synthetic cost 4 us n (linear) the budget 800 us is met
+    at n = 200 exactly."""
+    from gyro_sim.bench import step_cost as sc
+
+    def fake(n, method, steps=10, backend="auto"):
+        return sc.CostRow(n, 8 * n, method, steps, 4.0 * n, 5.0 * n, 6.0 * n, 4.0 * n)
+
+    monkeypatch.setattr(sc, "measure", fake)
+    rows = [fake(n, "rk4") for n in (2, 10, 20, 100)]
+    best, crossing, extra = sc.largest_holding(rows, "rk4", 10)
+    assert [r.n for r in extra] == [200, 400]
+    assert best == 200 and crossing == pytest.approx(200.0, rel=1e-12)
+    failing = [sc.CostRow(2, 16, "gauss4", 3, 1.0, 1.0, 1.0, 1.0, failed="diverged")]
+    assert sc.largest_holding(failing, "gauss4", 10)[:2] == (None, None)

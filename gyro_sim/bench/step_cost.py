@@ -1,0 +1,152 @@
+"""The cost of one physics step at the node's rate, gauss4 beside rk4: median, tail and worst.
+
+The node advances its Simulator one physics step (1 ms) per call (`ros/loop.py`), so that is
+what is timed here: `Simulator.advance(STEP)` called STEPS times on the spherical chain of n
+links with a torque rotor on every body and gravity (`scenes.spherical_chain`, the chain of the
+scaling report; under gravity it swings and whips), after a warm-up call (compilation and the
+first Jacobian are not counted). Each call's wall time (perf_counter: what the deadline sees)
+gives the median, the 99th percentile and the worst step; the CPU time of the whole run gives
+the mean. For gauss4 the report adds its own worst case in work: the most Newton iterations
+and right-hand-side evaluations any one step took (`Gauss4.counts`), against the bound its caps
+set (gauss.py: Newton iterations, retakes).
+
+"Holds 1 kHz" means the median step fits in the physics period with a margin for the
+publication (HOLD_FRACTION of the period); the largest n that does is found by measuring
+doubling sizes past the listed ones until one does not, then interpolating log-log between
+the last two.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+#: the node's physics step (s)
+STEP = 1e-3
+#: chain lengths of the table (issue 10) and the quick run's
+SIZES = (2, 10, 20, 100)
+QUICK_SIZES = (2, 10)
+#: timed steps per run (quick)
+STEPS, QUICK_STEPS = 2000, 200
+#: the methods side by side
+METHODS = ("gauss4", "rk4")
+#: a step "holds 1 kHz" when its median is within this share of the period (the rest: publication)
+HOLD_FRACTION = 0.8
+#: the search for the largest n holding 1 kHz stops here
+SEARCH_MAX_N = 3200
+
+
+@dataclass
+class CostRow:
+    n: int
+    states: int
+    method: str
+    steps: int
+    median_us: float
+    p99_us: float
+    worst_us: float
+    mean_cpu_us: float
+    max_newton: int = 0  # gauss4: most Newton iterations of one (sub)step
+    max_step_rhs: int = 0  # gauss4: most rhs evaluations of one step
+    retaken: int = 0  # gauss4: steps retaken in pieces
+    failed: str = ""  # a SimulationError's message: the run stopped there
+
+
+def measure(n: int, method: str, steps: int = STEPS, backend: str = "auto") -> CostRow:
+    """Time `steps` calls of advance(STEP) with `method` on the n-link chain."""
+    from ..core.simulator import SimulationError, Simulator
+    from .scenes import spherical_chain
+
+    sim = Simulator(spherical_chain(n, rotors=True), integrator=method, step=STEP, backend=backend)
+    sim.advance(STEP)  # compile / load the kernels, the first Jacobian
+    counts0 = _counts(sim)
+    times = np.empty(steps)
+    failed = ""
+    cpu0 = time.process_time()
+    done = 0
+    for k in range(steps):
+        t0 = time.perf_counter()
+        try:
+            sim.advance(STEP)
+        except SimulationError as exc:
+            failed = str(exc)
+            break
+        times[k] = time.perf_counter() - t0
+        done += 1
+    cpu = time.process_time() - cpu0
+    t = times[:done] * 1e6
+    row = CostRow(n, sim.state.size, method, done, float(np.median(t)) if done else math.nan,
+                  float(np.percentile(t, 99)) if done else math.nan, float(t.max()) if done else math.nan,
+                  cpu / max(done, 1) * 1e6, failed=failed)
+    counts = _counts(sim)
+    if counts is not None:
+        from ..core import gauss_kernels as gk
+
+        row.max_newton = int(counts[gk.COUNT_MAX_NEWTON])
+        row.max_step_rhs = int(counts[gk.COUNT_MAX_STEP_RHS])
+        row.retaken = int(counts[gk.COUNT_STEPS_RETAKEN] - counts0[gk.COUNT_STEPS_RETAKEN])
+    return row
+
+
+def _counts(sim):
+    counts = getattr(sim.integrator, "counts", None)
+    return None if counts is None else np.array(counts)
+
+
+def holds(row: CostRow) -> bool:
+    return not row.failed and row.median_us <= HOLD_FRACTION * STEP * 1e6
+
+
+def largest_holding(rows: list[CostRow], method: str, steps: int, backend: str = "auto",
+                    progress=None) -> tuple[int | None, float | None, list[CostRow]]:
+    """(largest measured n whose step holds 1 kHz, the interpolated n where the median meets
+    the budget, the extra rows measured on the way) for `method`: doubling n past the largest
+    of `rows` while it still holds."""
+    mine = sorted((r for r in rows if r.method == method), key=lambda r: r.n)
+    extra = []
+    while mine and holds(mine[-1]) and mine[-1].n * 2 <= SEARCH_MAX_N:
+        row = measure(mine[-1].n * 2, method, steps, backend)
+        extra.append(row)
+        mine.append(row)
+        if progress:
+            progress(row)
+    held = [r for r in mine if holds(r)]
+    if not held:
+        return None, None, extra
+    best = held[-1]
+    above = [r for r in mine if r.n > best.n and not r.failed]
+    if not above:
+        return best.n, None, extra
+    nxt = above[0]
+    budget = HOLD_FRACTION * STEP * 1e6
+    slope = math.log(nxt.median_us / best.median_us) / math.log(nxt.n / best.n)
+    crossing = best.n * (budget / best.median_us) ** (1.0 / slope) if slope > 0 else None
+    return best.n, crossing, extra
+
+
+def table(rows: list[CostRow]) -> str:
+    by = {(r.n, r.method): r for r in rows}
+    sizes = sorted({r.n for r in rows})
+    states = {r.n: r.states for r in rows}
+    out = ["| n (states) | gauss4 median (us) | gauss4 p99 (us) | gauss4 worst (us) | gauss4 most Newton "
+           "iterations / rhs evaluations in a step | rk4 median (us) | rk4 p99 (us) | rk4 worst (us) "
+           "| gauss4 / rk4 (median) |",
+           "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for n in sizes:
+        g, r = by.get((n, "gauss4")), by.get((n, "rk4"))
+
+        def cells(x):
+            if x is None:
+                return ["not run"] * 3
+            if x.failed:
+                return [f"fails after {x.steps} steps"] + ["n/a"] * 2
+            return [f"{x.median_us:.1f}", f"{x.p99_us:.1f}", f"{x.worst_us:.1f}"]
+
+        work = f"{g.max_newton} / {g.max_step_rhs}" if g is not None and not g.failed else "n/a"
+        ratio = (f"{g.median_us / r.median_us:.1f}x" if g is not None and r is not None and not g.failed
+                 and not r.failed else "n/a")
+        out.append(f"| {n} ({states[n]}) | " + " | ".join(cells(g)) + f" | {work} | " + " | ".join(cells(r))
+                   + f" | {ratio} |")
+    return "\n".join(out)
