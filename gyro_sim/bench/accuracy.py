@@ -407,6 +407,25 @@ def summary_rows(case: Case, points: list[Point]) -> list[dict]:
     return rows
 
 
+#: the error at which dop853 is compared with MuJoCo's RK4 (issue 11: <= 0.05x its CPU)
+PEER_TARGET = 1e-8
+
+
+def peer_ratio_table(points: list[Point], target: float = PEER_TARGET) -> str:
+    """Per scene: gyro_sim dop853's CPU and MuJoCo RK4's CPU to reach `target`, and their ratio."""
+    lines = [f"| scene | gyro_sim dop853 (ms) | MuJoCo RK4 (ms) | dop853 / MuJoCo RK4 |", "|---|---:|---:|---:|"]
+    for scene in dict.fromkeys(p.scene for p in points):
+        by = by_method([p for p in points if p.scene == scene])
+        mine = cost_at(by.get("dop853", []), target)
+        peer = cost_at(by.get("MuJoCo RK4", []), target)
+        if mine is None and peer is None:
+            continue
+        ratio = f"{mine / peer:.3f}x" if mine is not None and peer is not None else "n/a"
+        lines.append(f"| {scene} | {'not reached' if mine is None else _ms(mine)} | "
+                     f"{'not reached' if peer is None else _ms(peer)} | {ratio} |")
+    return "\n".join(lines)
+
+
 def _ms(s: float) -> str:
     return f"{1e3 * s:.3g}"
 
@@ -647,6 +666,11 @@ class Report:
             "log-log between runs; x: times the cheapest):",
             "",
             summary_table(self.summary),
+            "",
+            f"gyro_sim's dop853 against MuJoCo's RK4 at a final-state error of {PEER_TARGET:g} (CPU time "
+            "interpolated as above; scenes MuJoCo can express):",
+            "",
+            peer_ratio_table(self.points),
             "",
             "References (exact where known; otherwise dop853 at rtol 1e-13, its error estimated "
             "by a second run at rtol 1e-12):",

@@ -144,3 +144,15 @@ def test_mujoco_mapping_free_base():
     run = peers.run_mujoco(scene, "RK4", 1e-4, 0.3)
     assert run.failed is None
     assert acc.state_error(run.frames, ref, 0.6, True) < 1e-8
+
+
+def test_peer_ratio_at_1e8_interpolates_both_engines():
+    """dop853 reaches 1e-8 halfway (log-log) between 1 ms (1e-6) and 10 ms (1e-10): sqrt(10)
+    ms; MuJoCo RK4 between 10 and 100 ms: 10 sqrt(10) ms; the ratio is 0.1 exactly."""
+    P = acc.Point
+    pts = [P("s", "gyro_sim", "dop853", 1e-6, 1e-3, 1e-6, None, 1, 1),
+           P("s", "gyro_sim", "dop853", 1e-10, 1e-2, 1e-10, None, 1, 1),
+           P("s", "MuJoCo", "RK4", 1e-3, 1e-2, 1e-6, None, 1, 1),
+           P("s", "MuJoCo", "RK4", 1e-4, 1e-1, 1e-10, None, 1, 1)]
+    table = acc.peer_ratio_table(pts)
+    assert "| s | 3.16 | 31.6 | 0.100x |" in table, table
