@@ -2,10 +2,15 @@
 
 Each row times one evaluation of the chain dynamics (eqs 48, 52-54 solved for u') on a
 spherical chain of n links with both backends (the numpy reference and the numba-compiled
-articulated-body recursion), the cost of one simulated second with RK4 at 1 kHz (the node's
-real-time configuration, default backend), and, in the same run, Pinocchio's `aba` on the
-same chain when the `pin` package is installed (C++ O(n) articulated-body algorithm, called
-from Python).
+articulated-body recursion), each called from Python as the integrators call it
+(`system.rhs(t, y)`: a new array y'); beside it the compiled kernel's own time, one
+evaluation inside compiled code (:func:`kernel_time`: a compiled loop calling
+`gyro_sim.core.fast.rhs_kernel` k times, divided by k), so that the difference is the cost of
+the call from Python; the cost of one simulated second with RK4 at 1 kHz (the node's
+real-time configuration, default backend; timed after a first, untimed run of the same
+advance, which compiles or loads the compiled loop); and, in the same run, Pinocchio's `aba`
+on the same chain when the `pin` package is installed (C++ O(n) articulated-body algorithm,
+called from Python), with the ratio of gyro_sim's evaluation from Python to it.
 
 A second table (:func:`fixed_step`) puts the fixed-step loop beside MuJoCo: one simulated
 second of RK4 at 1 kHz on a spherical chain with a rotor on every body, CPU seconds of
@@ -17,9 +22,12 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
+from ..core import fast
+from ..core.fast_loop import njit_with_dependencies
 from ..core.model import compile_model, initial_state
 from ..core.scene_load import load_scene
 from ..core.simulator import Simulator
@@ -49,6 +57,7 @@ class Row:
     backend: str
     sim_second_s: float
     pin_aba_us: float | None
+    kernel_us: float | None = None  # one evaluation inside compiled code (None on numpy)
 
     @property
     def ratio(self) -> float | None:
@@ -74,6 +83,22 @@ def best_time(fn, min_time: float = 0.2, repeats: int = 5) -> float:
             fn()
         best = min(best, (time.perf_counter() - t0) / number)
     return best
+
+
+@njit_with_dependencies(Path(fast.__file__), Path(__file__))
+def _kernel_loop(k, t, y, ydot, args):
+    """fast.rhs_kernel at (t, y) k times, inside compiled code."""
+    for _ in range(k):
+        fast.rhs_kernel(t, y, ydot, *args)
+
+
+def kernel_time(system, y, min_time: float) -> float:
+    """The compiled kernel's own time (s) for one evaluation of `system` (a FastChainODE) at
+    (0, y): the best per-call time of a compiled loop of 1000 evaluations, divided by 1000."""
+    k = 1000
+    ydot = np.empty(system.size)
+    args = system.kernel_arguments()
+    return best_time(lambda: _kernel_loop(k, 0.0, y, ydot, args), min_time) / k
 
 
 def pin_aba_time(scene_dict: dict, min_time: float) -> float | None:
@@ -111,14 +136,18 @@ def measure(sizes=DEFAULT_SIZES, min_time: float = 0.3, progress=None) -> list[R
         system = make_system(model, "auto")
         backend = "numpy" if isinstance(system, ChainODE) else "numba"
         t_eval = best_time(lambda: system.rhs(0.0, y), min_time)
+        t_kernel = kernel_time(system, y, min_time) if backend == "numba" else None
         sim = Simulator(scene, integrator="rk4", step=RK4_STEP)
         span = max(RK4_STEP, min(1.0, 0.05 / (4 * t_eval * 1000)))  # about 50 ms of CPU
         span = round(span / RK4_STEP) * RK4_STEP
+        sim.advance(span)  # untimed: compiles (or loads) the compiled loop
+        sim.reset()
         t0 = time.process_time()
         sim.advance(span)
         sim_second = (time.process_time() - t0) / span
         pin_t = pin_aba_time(sd, min_time)
-        rows.append(Row(n, t_numpy * 1e6, t_eval * 1e6, backend, sim_second, None if pin_t is None else pin_t * 1e6))
+        rows.append(Row(n, t_numpy * 1e6, t_eval * 1e6, backend, sim_second, None if pin_t is None else pin_t * 1e6,
+                        None if t_kernel is None else t_kernel * 1e6))
         if progress:
             progress(i + 1, len(sizes))
     return rows
@@ -237,14 +266,17 @@ def fixed_step_table(rows: list[FixedStepRow]) -> str:
 def table(rows: list[Row]) -> str:
     backend = rows[0].backend if rows else "numba"
     lines = [
-        f"| n | numpy, one evaluation (us) | {backend}, one evaluation (us) | one simulated second, RK4 1 kHz (s) "
+        f"| n | numpy, one evaluation (us) | {backend}, one evaluation from Python (us) "
+        f"| {backend} kernel's own time, in compiled code (us) | one simulated second, RK4 1 kHz (s) "
         f"| pinocchio aba (us) | {backend} / aba |",
-        "|---:|---:|---:|---:|---:|---:|",
+        "|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in rows:
         pin_s = "n/a" if r.pin_aba_us is None else f"{r.pin_aba_us:.2f}"
-        ratio = "n/a" if r.ratio is None else f"{r.ratio:.1f}x"
-        lines.append(f"| {r.n} | {r.numpy_us:.1f} | {r.eval_us:.1f} | {r.sim_second_s:.3f} | {pin_s} | {ratio} |")
+        ratio = "n/a" if r.ratio is None else f"{r.ratio:.2f}x"
+        kernel = "n/a" if r.kernel_us is None else f"{r.kernel_us:.2f}"
+        lines.append(f"| {r.n} | {r.numpy_us:.1f} | {r.eval_us:.2f} | {kernel} | {r.sim_second_s:.3f} | {pin_s} "
+                     f"| {ratio} |")
     if len(rows) >= 2:
         a, b = rows[-2], rows[-1]
         slope = np.log(b.eval_us / a.eval_us) / np.log(b.n / a.n)

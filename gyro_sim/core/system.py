@@ -11,7 +11,9 @@ same results to round-off (test/core/test_fast.py):
 - :class:`ChainODE`: the numpy reference, :mod:`gyro_sim.core.dynamics` (eqs 34-54 with a
   composite-inertia matrix); it also fills the outputs (reactions, rotor torques);
 - :class:`FastChainODE`: the compiled O(n) articulated-body kernel of
-  :mod:`gyro_sim.core.fast` for `rhs(t, y)`, the numpy reference for outputs.
+  :mod:`gyro_sim.core.fast` for `rhs(t, y)` (called through :mod:`gyro_sim.core.fast_entry`:
+  its arrays packed in two buffers, six arguments a call instead of 24), the numpy reference
+  for outputs.
 
 Backend selection: `make_system(model, backend)` with backend "auto", "numba" or "numpy"
 (:data:`BACKENDS`); `gyro_sim.core.fast.available()` tells whether numba imports.
@@ -26,7 +28,7 @@ from typing import Protocol
 import numpy as np
 
 from . import dynamics as dyn
-from . import fast, fast_loop, fast_outputs
+from . import fast, fast_entry, fast_loop, fast_outputs
 from .model import Model, initial_state
 from .rotations import EULER_SINGULAR_SIN, quat_rates
 
@@ -121,6 +123,9 @@ class ChainODE:
             y[self.quat_index] = q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
+_F64 = np.dtype(np.float64)
+
+
 class FastChainODE:
     """The chain as an ODE system y' = f(t, y) for the integrators, compiled with numba.
 
@@ -142,8 +147,15 @@ class FastChainODE:
         self.size = model.size
         self.quat_index = model.i_quat
         self.nfev = 0
-        self._model_args = fast.model_arguments(model)
-        self._work = fast.workspace(model)
+        # the kernel's arrays packed once in two buffers (fast_entry): `rhs` passes the buffers,
+        # six arguments a call; the compiled loops get views of the same buffers
+        model_args = fast.model_arguments(model)
+        inputs = fast.input_arguments(model, self._ref.t0, self._ref.p0, None, None)
+        self._fbuf, self._ibuf = fast_entry.pack(fast.workspace(model), model_args, inputs)
+        self._is_hinge = model_args[0]
+        self._args = fast_entry.kernel_arguments(self._fbuf, self._ibuf, self._is_hinge)
+        self._shape = (model.size,)
+        self._eval = self._first_eval  # then the compiled entry point of fast_entry.rhs_entry
         self._i_q0 = int(model.i_quat[0, 0]) if len(model.sph_bodies) else 0
         self._nq = len(model.sph_bodies)
         # march_explicit_rk: per tableau (by its A) the kernel's copies of A, B, C and the stages K
@@ -158,18 +170,14 @@ class FastChainODE:
             np.ascontiguousarray(model.speed_A, dtype=np.float64),
             np.ascontiguousarray(model.speed_rate, dtype=np.float64))
         self._ys = np.empty(model.size)
-        self._set_inputs(self._ref.t0, self._ref.p0, None, None)
 
     # --- inputs ------------------------------------------------------------------------------
-    def _set_inputs(self, t0, p0, hinge_tau, L_rotor) -> None:
-        """The kernel's arguments with these held inputs."""
-        inputs = fast.input_arguments(self.model, t0, p0, hinge_tau, L_rotor)
-        self._args = (self._work, *self._model_args, *inputs)
-
     def hold(self, t0: float, p0: np.ndarray | None, hinge_tau, L_rotor) -> None:
         """Hold the inputs from t0 on (the zero-order hold of `Simulator.advance`)."""
         self._ref.hold(t0, p0, hinge_tau, L_rotor)
-        self._set_inputs(t0, p0, hinge_tau, L_rotor)
+        inputs = fast.input_arguments(self.model, t0, p0, hinge_tau, L_rotor)
+        fast_entry.set_inputs(self._fbuf, self._ibuf, inputs)  # in place: the views see them
+        self._args = (*self._args[:fast_entry.T0_ARGUMENT], inputs[0], *self._args[fast_entry.T0_ARGUMENT + 1:])
 
     @property
     def inputs_version(self) -> int:
@@ -179,7 +187,8 @@ class FastChainODE:
     def kernel_arguments(self) -> tuple:
         """The arguments of :func:`gyro_sim.core.fast.rhs_kernel` after (t, y, out), with the
         inputs held now (`work`, the model's arrays, the held inputs): for compiled loops of
-        other modules that call the kernel directly. Valid until the next `hold`."""
+        other modules that call the kernel directly. Valid until the next `hold` (which
+        writes the new inputs into the same arrays)."""
         return self._args
 
     def quaternion_block(self) -> tuple[int, int]:
@@ -194,16 +203,27 @@ class FastChainODE:
     # --- the ODE -------------------------------------------------------------------------------
     def rhs(self, t: float, y: np.ndarray, out: dyn.Evaluation | None = None) -> np.ndarray:
         """y' (size,) at (t, y); with `out`, by the numpy reference, which also fills `out` and
-        `data`. y: float64 (size,), contiguous and writeable as the integrators pass it (another
-        layout is correct too, but compiles one more specialization of the kernel)."""
+        `data`. y: float64 (size,), contiguous as the integrators pass it, goes straight to the
+        compiled entry point of :func:`gyro_sim.core.fast_entry.rhs_entry` (which converts, it
+        does not check: hence the checks here); another y (dtype, layout) through numba's
+        dispatcher, correct too, but it compiles one more specialization of the kernel."""
         self.nfev += 1
+        ydot = np.empty(self.size)
+        if out is None and y.dtype is _F64 and y.shape == self._shape and y.flags.c_contiguous:
+            self._eval(t, y, ydot, self._fbuf, self._ibuf, self._is_hinge)
+            return ydot
         if out is not None:
             return self._ref.rhs(t, y, out)
-        if y.shape != (self.size,):  # the kernel does not check its indices
-            raise ValueError(f"y must have shape ({self.size},), got {y.shape}")
-        ydot = np.empty(self.size)
+        if np.shape(y) != self._shape:  # the kernel does not check its indices
+            raise ValueError(f"y must have shape ({self.size},), got {np.shape(y)}")
         fast.rhs_kernel(float(t), y, ydot, *self._args)
         return ydot
+
+    def _first_eval(self, t, y, ydot, fbuf, ibuf, is_hinge) -> None:
+        """The first evaluation: compiles (or loads) fast_entry.rhs_entry, whose compiled entry
+        point evaluates from then on."""
+        self._eval = fast_entry.entry_point()
+        self._eval(t, y, ydot, fbuf, ibuf, is_hinge)
 
     def march_explicit_rk(self, A: np.ndarray, B: np.ndarray, C: np.ndarray, t0: float,
                           y: np.ndarray, h: float, nsteps: int) -> int:
