@@ -167,6 +167,8 @@ def measure_size(n: int, publications: int, node, workdir: Path, *, subscriber_e
         for with_sub in (False, True) if subscriber_env is not None else (False,):
             if with_sub:
                 sub = _start_subscriber(out, subscriber_env, workdir)
+                if hasattr(out, "listeners"):  # at once, not over the next WANT_PERIOD
+                    out.listeners.ask_all()
             rows.append(_run(sim, out, recorder, n, publications, with_sub, progress))
     finally:
         if sub is not None:  # a clean exit: a killed reader stays matched (and slows writers) until its lease ends
@@ -232,10 +234,12 @@ def _run(sim, out, recorder, n: int, publications: int, with_sub: bool, progress
         batch = out.prepare_state(t_ns, sim, run if diag else False)
         t4 = clock()
         publisher = getattr(out, "_publisher", None)  # the call Outputs.send makes
+        listeners = getattr(out, "listeners", None)  # an optional topic nobody subscribes to is not published
+        listened = (lambda topic: True) if listeners is None else (lambda topic: listeners.listened.get(topic, True))
         for topic, _, data in batch:
             if publisher is not None:
                 fn = publisher(topic)
-                if fn is not None:
+                if fn is not None and listened(topic):
                     fn(data)
             else:
                 pub = out.pubs.get(topic)
@@ -271,7 +275,7 @@ def isolated(n: int, repeats: int = 300) -> dict[str, float]:
         def get_fully_qualified_name(self):
             return M.NAMESPACE
 
-        def create_publisher(self, cls, topic, qos):
+        def create_publisher(self, cls, topic, qos, **kwargs):
             return SimpleNamespace(get_subscription_count=lambda: 1, publish=lambda data: None)
 
     sim = _simulator(n)
@@ -343,7 +347,7 @@ def recorder_costs(n: int, publications: int = 300, workdir: str | None = None) 
         def get_fully_qualified_name(self):
             return M.NAMESPACE
 
-        def create_publisher(self, cls, topic, qos):
+        def create_publisher(self, cls, topic, qos, **kwargs):
             return SimpleNamespace(get_subscription_count=lambda: 1, publish=lambda data: None)
 
     sim = _simulator(n)

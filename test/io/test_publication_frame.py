@@ -80,7 +80,7 @@ class _Node:
     def get_fully_qualified_name(self):
         return M.NAMESPACE
 
-    def create_publisher(self, cls, topic, qos):
+    def create_publisher(self, cls, topic, qos, **kwargs):
         return SimpleNamespace(topic=topic, get_subscription_count=lambda: 1, publish=lambda data: None)
 
 
@@ -106,3 +106,88 @@ def test_node_outputs_are_the_builders_bytes_and_refuse_non_finite_numbers(backe
     sim._y, sim._cache, sim._kin_ok = bad, None, False  # noqa: SLF001 - a state the integrator would refuse
     with pytest.raises(SimulationError, match="non-finite (position|velocity)"):
         out.prepare_state(M.time_ns(sim.time), sim)
+
+
+class _Clock:
+    def __init__(self):
+        self.t = 50.0
+
+    def __call__(self):
+        return self.t
+
+
+class _CountingNode(_Node):
+    """Publishers that count their publish calls and the subscriber-count asks; `subscribers`
+    says who listens (topic -> count)."""
+
+    def __init__(self):
+        self.subscribers, self.published, self.asks = {}, [], 0
+
+    def create_publisher(self, cls, topic, qos, **kwargs):
+        def count():
+            self.asks += 1
+            return self.subscribers.get(topic, 0)
+
+        return SimpleNamespace(topic=topic, get_subscription_count=count,
+                               publish=lambda data: self.published.append(topic))
+
+
+class _Recorder:
+    def __init__(self):
+        self.batches = []
+
+    def raw_batch(self, t_ns, batch):
+        self.batches.append([topic for topic, _, _ in batch])
+
+
+def test_optional_topics_nobody_subscribes_to_are_recorded_not_published():
+    pytest.importorskip("sensor_msgs.msg")
+    from gyro_sim.ros.outputs import ASKS_PER_PUBLICATION, WANT_PERIOD, Outputs
+
+    sim = driven("hinge_chain", "numpy")
+    node, clock, rec = _CountingNode(), _Clock(), _Recorder()
+    out = Outputs(node, sim, SimpleNamespace(publish_wrenches=True, publish_poses=True), recorder=rec, clock=clock)
+    optional = [*out.wrench_topics, out.publication.poses_topic]
+    assert node.asks == len(optional)  # each asked once at the start
+
+    def publish():
+        node.published.clear()
+        sim.advance(0.01)
+        out.send(M.time_ns(sim.time), out.prepare_state(M.time_ns(sim.time), sim))
+        return set(node.published)
+
+    for _ in range(3):  # nobody listens: recorded, not published (the mandatory topics are)
+        assert publish() == {M.JOINT_STATES, M.CLOCK}
+        assert set(optional) <= set(rec.batches[-1])
+    listened = out.wrench_topics[2]
+    node.subscribers[listened] = 1
+    asks = node.asks
+    assert publish() == {M.JOINT_STATES, M.CLOCK}  # not asked again before WANT_PERIOD
+    assert node.asks == asks
+    clock.t += WANT_PERIOD * 1.01
+    for _ in range(-(-len(optional) // ASKS_PER_PUBLICATION)):  # every topic asked again within these
+        asks = node.asks
+        got = publish()
+        assert node.asks - asks <= ASKS_PER_PUBLICATION
+    assert got == {M.JOINT_STATES, M.CLOCK, listened}
+    assert set(optional) <= set(rec.batches[-1])
+
+
+def test_without_recording_wrenches_are_computed_while_one_is_listened_to():
+    pytest.importorskip("sensor_msgs.msg")
+    from gyro_sim.ros.outputs import WANT_PERIOD, Outputs
+
+    sim = driven("hinge_chain", "numpy")
+    node, clock = _CountingNode(), _Clock()
+    out = Outputs(node, sim, SimpleNamespace(publish_wrenches=True, publish_poses=True), clock=clock)
+    batch = out.prepare_state(1, sim)
+    assert [topic for topic, _, _ in batch] == [M.JOINT_STATES, M.CLOCK]
+    node.subscribers[out.wrench_topics[0]] = 1
+    clock.t += WANT_PERIOD * 1.01
+    for _ in range(len(out.wrench_topics) + 1):
+        batch = out.prepare_state(1, sim)
+    topics = [topic for topic, _, _ in batch]
+    assert set(out.wrench_topics) <= set(topics) and out.publication.poses_topic not in topics
+    node.published.clear()
+    out.send(1, batch)
+    assert set(node.published) == {M.JOINT_STATES, M.CLOCK, out.wrench_topics[0]}

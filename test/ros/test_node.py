@@ -300,3 +300,30 @@ def test_simulation_error_stops_stepping_reports_and_reset_recovers(ros):
     wait_for(lambda: [m for m in received_after(client, "/joint_states", wall) if stamp_s(m) > t_reset], 10.0,
              "joint states after the reset")
     latest_diag(client, after_wall=wall, cond=lambda v: v["state"] == "running")
+
+
+def test_wrench_publishers_add_no_event_waitables_to_the_executor(tmp_path):
+    """The per-joint wrench publishers have no QoS event handlers (each would be a waitable in
+    every wait set of the executor thread); the other topics keep rclpy's default ones."""
+    import os
+    from types import SimpleNamespace
+
+    import rclpy
+
+    from gyro_sim.io import messages as M
+    from gyro_sim.ros.outputs import Outputs
+
+    os.environ["ROS_LOG_DIR"] = str(tmp_path)
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=150 + os.getpid() % 50)
+    try:
+        node = rclpy.create_node("gyro_sim", context=context)
+        sim = reference_sim()
+        out = Outputs(node, sim, SimpleNamespace(publish_wrenches=True, publish_poses=True))
+        assert len(out.wrench_topics) == len(BODIES)
+        for topic in out.wrench_topics:
+            assert out.pubs[topic].event_handlers == [], topic
+        assert len(out.pubs[M.JOINT_STATES].event_handlers) > 0  # rclpy's defaults, as any publisher
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
