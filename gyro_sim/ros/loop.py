@@ -27,6 +27,7 @@ backwards; the log carries a "reset" event at that time.
 from __future__ import annotations
 
 import collections
+import gc
 import math
 import threading
 import time
@@ -38,7 +39,7 @@ from ..core.simulator import SimulationError
 from ..io import messages as M
 from ..io.resim import COMMAND_TIMEOUT_EVENT
 from .outputs import OutputsClosed
-from .pacing import Pacer, RateMeter, Samples, chunk_steps
+from .pacing import Histogram, Pacer, RateMeter, Samples, chunk_steps
 
 #: wall seconds between diagnostics while paused or stopped (running, they go with every
 #: publication at least gyro_sim.io.messages.DIAGNOSTICS_PERIOD simulated seconds apart)
@@ -56,6 +57,45 @@ def warm_up(sim, dt: float) -> None:
         integ_warm_up(sim.time, sim.state)
     sim.advance(dt)
     sim.reset()
+
+
+def freeze_start_up() -> int:
+    """Collect the garbage, then move every object left (imports, compiled code, the scene,
+    rclpy) into the collector's permanent generation; returns how many there are.
+
+    A full (generation 2) collection scans every tracked object: on the start-up's heap that
+    took 100-150 ms, on whichever thread allocated at the wrong moment, the physics thread
+    included (measured in the node at n = 100; the collection holds the interpreter lock, so
+    the physics thread waits for it in any thread). Frozen objects are never scanned: a full
+    collection then scans what the run made, a few thousand objects."""
+    gc.collect()
+    gc.freeze()
+    return gc.get_freeze_count()
+
+
+class GcPauses:
+    """The collector's pauses in any thread of the process (gc.callbacks): a collection holds
+    the interpreter lock, so the physics thread waits for it wherever it runs."""
+
+    def __init__(self, clock=time.perf_counter):
+        self.clock = clock
+        self.pauses = Histogram()
+        self._start: float | None = None
+
+    def __call__(self, phase: str, info: dict) -> None:
+        if phase == "start":
+            self._start = self.clock()
+        elif self._start is not None:
+            self.pauses.add(self.clock() - self._start)
+            self._start = None
+
+    def install(self) -> None:
+        if self not in gc.callbacks:
+            gc.callbacks.append(self)
+
+    def remove(self) -> None:
+        if self in gc.callbacks:
+            gc.callbacks.remove(self)
 
 
 def check_command(values, n_axes: int) -> str | None:
@@ -143,6 +183,8 @@ class SimLoop:
         self.thread = threading.Thread(target=self._run, name="gyro_sim-physics", daemon=True)
         self.wall_start = self.cpu_start = None
         self.wall_end = self.cpu_end = None
+        self.gc_pauses = GcPauses()
+        self.frozen = 0  # objects of the start-up frozen out of the collector's reach
 
     # --- from other threads ----------------------------------------------------------------------
     def submit_command(self, raw: bytes, values) -> str | None:
@@ -166,12 +208,16 @@ class SimLoop:
         return True, req.message
 
     def start(self) -> None:
+        """Start the physics thread (the start-up's objects frozen first: `freeze_start_up`)."""
+        self.frozen = freeze_start_up()
+        self.gc_pauses.install()
         self.thread.start()
 
     def stop(self, timeout: float = 5.0) -> None:
         self._stop.set()
         if self.thread.is_alive() and self.thread is not threading.current_thread():
             self.thread.join(timeout)
+        self.gc_pauses.remove()
 
     # --- time --------------------------------------------------------------------------------------
     @property
@@ -419,4 +465,8 @@ class SimLoop:
             "slipped_s": self.pacer.slipped,
             "commands_accepted": self.counters.accepted,
             "commands_rejected": self.counters.rejected,
+            "gc_frozen_objects": self.frozen,
+            "gc_collections": self.gc_pauses.pauses.n,
+            "gc_pause_max_us": (self.gc_pauses.pauses.max if self.gc_pauses.pauses.n else 0.0) * 1e6,
+            "gc_pause_total_ms": self.gc_pauses.pauses.total * 1e3,
         }

@@ -208,3 +208,40 @@ def test_a_command_flood_keeps_only_the_latest_for_the_next_step():
     assert out.commands == [(0, b"9999")]
     assert loop.sim.axis_moments[1] == pytest.approx(1e-6 * 9999)
     assert loop.counters.accepted == 10_000 and loop.counters.superseded == 9_999 and loop.counters.rejected == 1
+
+
+def test_gc_pauses_are_timed_from_the_collectors_callbacks():
+    from gyro_sim.ros.loop import GcPauses
+
+    clock = FakeClock()
+    meter = GcPauses(clock=clock)
+    meter("stop", {"generation": 0})  # a stop without its start (installed mid-collection): not counted
+    for pause in (2e-4, 3e-3):
+        meter("start", {"generation": 2})
+        clock.t += pause
+        meter("stop", {"generation": 2})
+    assert meter.pauses.n == 2
+    assert meter.pauses.max == pytest.approx(3e-3)
+    assert meter.pauses.total == pytest.approx(3.2e-3)
+
+
+def test_start_freezes_the_start_up_heap_and_times_collections():
+    import gc
+
+    clock = FakeClock()
+    loop, out = make_loop(clock)
+    before = [object(), [1, 2]]  # a tracked container made during the start-up
+    assert any(o is before for o in gc.get_objects())
+    loop.start()
+    try:
+        assert loop.frozen == gc.get_freeze_count() > 0
+        assert not any(o is before for o in gc.get_objects())  # out of every generation the collector scans
+        assert loop.gc_pauses in gc.callbacks
+        n = loop.gc_pauses.pauses.n
+        gc.collect()
+        assert loop.gc_pauses.pauses.n == n + 1
+    finally:
+        loop.stop()
+    assert loop.gc_pauses not in gc.callbacks
+    s = loop.summary()
+    assert s["gc_collections"] >= 1 and s["gc_frozen_objects"] == loop.frozen
