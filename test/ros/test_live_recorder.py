@@ -9,7 +9,7 @@ from gyro_sim import Simulator, load_scene
 from gyro_sim.io import messages as M
 from gyro_sim.io.mcap_log import DEFAULT_FLUSH_PERIOD, iter_messages
 from gyro_sim.io.safe_paths import OutputError
-from gyro_sim.ros.recorder import SEND_PERIOD, LiveRecorder
+from gyro_sim.ros.recorder import SEND_PERIOD, WRITER_NICE, LiveRecorder
 
 
 def test_live_recorder_writes_the_bytes_it_gets(tmp_path):
@@ -31,3 +31,17 @@ def test_live_recorder_writes_the_bytes_it_gets(tmp_path):
     with pytest.raises(OutputError):
         LiveRecorder(str(tmp_path / "live.mcap"), scene=sim.scene, params={})
     LiveRecorder(str(tmp_path / "live.mcap"), scene=sim.scene, params={}, overwrite=True).close()
+
+
+def test_the_writer_process_runs_at_a_lower_priority_than_the_node(tmp_path):
+    """The writer process yields the CPU to the node (its niceness WRITER_NICE above the node's,
+    as far as the system's maximum of 19 allows)."""
+    import os
+
+    sim = Simulator(load_scene("hinge_chain"))
+    rec = LiveRecorder(str(tmp_path / "nice.mcap"), scene=sim.scene, params={})
+    try:
+        assert WRITER_NICE > 0
+        assert rec.writer.nice == min(19, os.getpriority(os.PRIO_PROCESS, 0) + WRITER_NICE)
+    finally:
+        rec.close()
