@@ -9,7 +9,9 @@ writes its timing statistics (`stats_file`). Reported per run:
 - publication jitter p50 / p99: |interval between two publications - 10 ms|, publisher side;
 - CPU share: CPU seconds of the node process (all threads) per wall second (1.0 = one core);
 - achieved real-time factor (simulated / wall time) and deadline misses;
-- with recording: records written, the writer process's CPU and the node's sender thread's.
+- with recording: records written, the writer process's CPU and the node's sender thread's;
+- the longest garbage-collector pause (any thread: it holds the interpreter lock) and the
+  machine's 1-minute load average at the start and end of the run (other processes included).
 
 Nobody subscribes in these runs, so without recording the node computes joint states only;
 with recording it also computes wrenches and poses (everything published is recorded).
@@ -86,6 +88,7 @@ def run_node(n: int, record: bool, seconds: float, workdir: Path, index: int = 0
                ROS_LOG_DIR=str(workdir / "ros_log"), OPENBLAS_NUM_THREADS="1")
     root = str(Path(__file__).resolve().parents[2])
     env["PYTHONPATH"] = os.pathsep.join([root, env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    load0 = os.getloadavg()[0]
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         out, err = proc.communicate(timeout=3 * seconds + 20)  # an overloaded run is cut short
@@ -94,7 +97,8 @@ def run_node(n: int, record: bool, seconds: float, workdir: Path, index: int = 0
         out, err = proc.communicate(timeout=30)
     if proc.returncode != 0 or not stats.exists():
         raise RuntimeError(f"gyro_sim_node failed (n = {n}, record = {record}, exit {proc.returncode}):\n{err[-2000:]}")
-    return Run(n, record, json.loads(stats.read_text()))
+    # the machine's 1-minute load average when the run started and ended (the node included)
+    return Run(n, record, {**json.loads(stats.read_text()), "load_start": load0, "load_end": os.getloadavg()[0]})
 
 
 def measure(sizes=DEFAULT_SIZES, seconds: float = DEFAULT_SECONDS, progress=None, node_command=NODE_COMMAND,
@@ -112,15 +116,16 @@ def measure(sizes=DEFAULT_SIZES, seconds: float = DEFAULT_SECONDS, progress=None
 def table(runs: list[Run]) -> str:
     lines = [
         "| n | recording | step p50 (us) | step p99 (us) | publish jitter p50 (us) | publish jitter p99 (us) "
-        "| CPU share | achieved RTF | deadline misses |",
-        "|---:|---|---:|---:|---:|---:|---:|---:|---:|",
+        "| CPU share | achieved RTF | deadline misses | longest GC pause (us) | load (start / end) |",
+        "|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in runs:
         lines.append(
             f"| {r.n} | {'yes' if r.record else 'no'} | {r.get('step_time_p50_us'):.0f} | {r.get('step_time_p99_us'):.0f} "
             f"| {r.get('publish_jitter_p50_us'):.0f} | {r.get('publish_jitter_p99_us'):.0f} "
             f"| {100 * r.get('cpu_share'):.0f} % | {r.get('real_time_factor_achieved'):.3f} "
-            f"| {int(r.get('deadline_misses', 0))} |"
+            f"| {int(r.get('deadline_misses', 0))} | {r.get('gc_pause_max_us'):.0f} "
+            f"| {r.get('load_start'):.2f} / {r.get('load_end'):.2f} |"
         )
     held = [r.n for r in runs if r.holds and not r.record]
     held_rec = [r.n for r in runs if r.holds and r.record]
