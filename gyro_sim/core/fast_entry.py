@@ -6,9 +6,8 @@ arguments of :func:`gyro_sim.core.fast.rhs_kernel` cost ~3 us a call, several ti
 kernel's own work on a short chain. Here the kernel's arrays live in two buffers built once,
 one float64 (`fbuf`) and one int64 (`ibuf`, a header of offsets first), and
 :func:`rhs_entry` takes six arguments, `(t, y, ydot, fbuf, ibuf, is_hinge)`: it cuts the
-buffers into the kernel's arrays (contiguous slices, reshaped: C-ordered views of the same
-types as every other caller passes, so the kernel's one specialisation serves it) and calls
-the kernel. The results are those of the kernel called with the separate arrays, bit for bit.
+buffers into the kernel's arrays (`_view`: C-ordered views of the same types as every other
+caller passes, so the kernel's one specialisation serves it) and calls the kernel. The results are those of the kernel called with the separate arrays, bit for bit.
 
 `is_hinge` (bool) stays an argument of its own: a bool view of an integer buffer would be
 another array type for the kernel, i.e. one more specialisation to compile.
@@ -33,6 +32,10 @@ from .fast_loop import njit_with_dependencies
 
 try:
     import numba
+    from numba.core import cgutils, types
+    from numba.core.imputils import impl_ret_borrowed
+    from numba.extending import intrinsic
+    from numba.np.arrayobj import make_array, populate_array
 except ImportError:  # pragma: no cover - exercised only where numba is missing
     numba = None
 
@@ -108,22 +111,59 @@ def kernel_arguments(fbuf: np.ndarray, ibuf: np.ndarray, is_hinge: np.ndarray) -
             f(H_TAU, N))
 
 
+if numba is not None:
+    @intrinsic
+    def _view(typingctx, buf, start, shape):
+        """buf[start : start + prod(shape)] as a C-ordered array of `shape` (a tuple of ints),
+        sharing buf's memory (and keeping it alive), for buf a C-contiguous vector. Unchecked:
+        the header of `pack` keeps every block inside its buffer. numba's reshape of a slice
+        gives the same array but calls a C helper (~50 ns, six times an evaluation); this
+        only fills the array's fields."""
+        if not (isinstance(buf, types.Array) and buf.ndim == 1 and buf.layout == "C"
+                and isinstance(start, types.Integer) and isinstance(shape, types.UniTuple)
+                and isinstance(shape.dtype, types.Integer)):
+            return None
+        nd = shape.count
+        view_type = buf.copy(ndim=nd, layout="C")
+
+        def codegen(context, builder, sig, args):
+            src = make_array(sig.args[0])(context, builder, value=args[0])
+            dims = [context.cast(builder, d, shape.dtype, types.intp)
+                    for d in cgutils.unpack_tuple(builder, args[2], nd)]
+            strides = [src.itemsize] * nd  # C order: the last axis varies fastest
+            for i in range(nd - 2, -1, -1):
+                strides[i] = builder.mul(strides[i + 1], dims[i + 1])
+            data = builder.gep(src.data, [context.cast(builder, args[1], sig.args[1], types.intp)])
+            view = make_array(view_type)(context, builder)
+            populate_array(view, data=data, shape=dims, strides=strides, itemsize=src.itemsize,
+                           meminfo=src.meminfo, parent=src.parent)
+            return impl_ret_borrowed(context, builder, view_type, view._getvalue())
+
+        return view_type(buf, start, shape), codegen
+else:  # pragma: no cover - exercised only where numba is missing
+    def _view(buf, start, shape):
+        return buf[start:start + int(np.prod(shape))].reshape(shape)
+
+
 @_njit
 def rhs_entry(t, y, ydot, fbuf, ibuf, is_hinge):
-    """y' (size,) at (t, y) into ydot: fast.rhs_kernel on the arrays packed in (fbuf, ibuf)."""
+    """y' (size,) at (t, y) into ydot: fast.rhs_kernel on the arrays packed in (fbuf, ibuf).
+    Raises ValueError unless y is contiguous and of ydot's length (the kernel does not check
+    its indices; a few ns here, ~0.1 us as numpy attribute reads before the call)."""
+    if y.shape[0] != ydot.shape[0] or y.strides[0] != y.itemsize:
+        raise ValueError("y must be a contiguous vector of the state's size")
     n, N, nt = ibuf[H_N], ibuf[H_NCOL], ibuf[H_NT]
     w0, ha, s0, m0, fm, in0 = ibuf[H_WORK], ibuf[H_HINGE_AXIS], ibuf[H_S], ibuf[H_MASS], ibuf[H_FIRST_MOMENT], ibuf[H_INERTIA]
     ls, ta, tA, b0, t0 = ibuf[H_LAM_SPEED], ibuf[H_TORQUE_AXIS], ibuf[H_TORQUE_A], ibuf[H_BASE], ibuf[H_T0]
     p0, pd, L0, tau0 = ibuf[H_P0], ibuf[H_PDOT], ibuf[H_L], ibuf[H_TAU]
     q0, oc, cs, tb, fl = ibuf[H_QROW], ibuf[H_OWN_COL], ibuf[H_COL_START], ibuf[H_TORQUE_BODY], ibuf[H_FLAGS]
-    fast.rhs_kernel(t, y, ydot, fbuf[w0:ha], is_hinge, ibuf[q0:q0 + n], ibuf[oc:oc + n],
-                    ibuf[cs:cs + n + 1], fbuf[ha:ha + 3 * n].reshape((n, 3)),
-                    fbuf[s0:s0 + 3 * n].reshape((n, 3)), fbuf[m0:m0 + n],
-                    fbuf[fm:fm + 3 * n].reshape((n, 3)), fbuf[in0:in0 + 9 * n].reshape((n, 3, 3)),
-                    fbuf[ls:ls + 3 * n].reshape((n, 3)), ibuf[tb:tb + nt],
-                    fbuf[ta:ta + 3 * nt].reshape((nt, 3)), fbuf[tA:tA + nt], ibuf[fl:fl + 7],
-                    fbuf[b0:b0 + 7], fbuf[t0], fbuf[p0:p0 + nt], fbuf[pd:pd + nt],
-                    fbuf[L0:L0 + nt], fbuf[tau0:tau0 + N])
+    fast.rhs_kernel(t, y, ydot, _view(fbuf, w0, (ha - w0,)), is_hinge, _view(ibuf, q0, (n,)),
+                    _view(ibuf, oc, (n,)), _view(ibuf, cs, (n + 1,)), _view(fbuf, ha, (n, 3)),
+                    _view(fbuf, s0, (n, 3)), _view(fbuf, m0, (n,)), _view(fbuf, fm, (n, 3)),
+                    _view(fbuf, in0, (n, 3, 3)), _view(fbuf, ls, (n, 3)), _view(ibuf, tb, (nt,)),
+                    _view(fbuf, ta, (nt, 3)), _view(fbuf, tA, (nt,)), _view(ibuf, fl, (7,)),
+                    _view(fbuf, b0, (7,)), fbuf[t0], _view(fbuf, p0, (nt,)), _view(fbuf, pd, (nt,)),
+                    _view(fbuf, L0, (nt,)), _view(fbuf, tau0, (N,)))
 
 
 def entry_point():

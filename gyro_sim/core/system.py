@@ -204,14 +204,18 @@ class FastChainODE:
     def rhs(self, t: float, y: np.ndarray, out: dyn.Evaluation | None = None) -> np.ndarray:
         """y' (size,) at (t, y); with `out`, by the numpy reference, which also fills `out` and
         `data`. y: float64 (size,), contiguous as the integrators pass it, goes straight to the
-        compiled entry point of :func:`gyro_sim.core.fast_entry.rhs_entry` (which converts, it
-        does not check: hence the checks here); another y (dtype, layout) through numba's
-        dispatcher, correct too, but it compiles one more specialization of the kernel."""
+        compiled entry point of :func:`gyro_sim.core.fast_entry.rhs_entry`, which checks its
+        length and stride; its dtype and dimensions are checked here, as the entry point
+        converts without checking them. Another y (dtype, layout) goes through numba's
+        dispatcher: correct too, but it compiles one more specialization of the kernel."""
         self.nfev += 1
         ydot = np.empty(self.size)
-        if out is None and y.dtype is _F64 and y.shape == self._shape and y.flags.c_contiguous:
-            self._eval(t, y, ydot, self._fbuf, self._ibuf, self._is_hinge)
-            return ydot
+        if out is None and y.dtype is _F64 and y.ndim == 1:
+            try:
+                self._eval(t, y, ydot, self._fbuf, self._ibuf, self._is_hinge)
+                return ydot
+            except ValueError:  # not contiguous, or not of the state's size
+                pass
         if out is not None:
             return self._ref.rhs(t, y, out)
         if np.shape(y) != self._shape:  # the kernel does not check its indices

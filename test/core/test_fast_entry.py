@@ -133,7 +133,7 @@ def test_time_as_int_or_numpy_float():
 
 
 def test_wrong_shape_is_refused():
-    """The entry point does not check y: rhs does, before it."""
+    """rhs refuses a y of another shape (the kernel does not check its indices)."""
     model = compile_model(load_scene(spherical_chain(2)))
     fst = FastChainODE(model)
     y = initial_state(model)
@@ -141,3 +141,22 @@ def test_wrong_shape_is_refused():
     for bad in (y[:-1], np.concatenate([y, y]), y.reshape(1, -1)):
         with pytest.raises(ValueError, match="shape"):
             fst.rhs(0.0, bad)
+
+
+def test_entry_checks_length_and_stride():
+    """The compiled entry refuses a y not of ydot's length, or not contiguous (whose elements
+    its C-ordered type would read at the wrong places)."""
+    model = compile_model(load_scene(spherical_chain(2)))
+    margs = fast.model_arguments(model)
+    fbuf, ibuf = fast_entry.pack(fast.workspace(model), margs,
+                                 fast.input_arguments(model, 0.0, None, None, None))
+    entry = fast_entry.entry_point()
+    y = initial_state(model)
+    ydot = np.empty(model.size)
+    entry(0.0, y, ydot, fbuf, ibuf, margs[0])
+    assert np.array_equal(ydot, direct(model, 0.0, y, (0.0, None, None, None)))
+    strided = np.zeros(2 * model.size)
+    strided[::2] = y
+    for bad in (y[:-1], np.concatenate([y, y]), strided[::2]):
+        with pytest.raises(ValueError, match="contiguous vector"):
+            entry(0.0, bad, ydot, fbuf, ibuf, margs[0])
