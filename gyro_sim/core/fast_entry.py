@@ -35,7 +35,6 @@ try:
     from numba.core import cgutils, types
     from numba.core.imputils import impl_ret_borrowed
     from numba.extending import intrinsic
-    from numba.np.arrayobj import make_array, populate_array
 except ImportError:  # pragma: no cover - exercised only where numba is missing
     numba = None
 
@@ -127,17 +126,29 @@ if numba is not None:
         view_type = buf.copy(ndim=nd, layout="C")
 
         def codegen(context, builder, sig, args):
-            src = make_array(sig.args[0])(context, builder, value=args[0])
+            source, view = (context.data_model_manager[ty] for ty in (sig.args[0], view_type))
+
+            def field(name):
+                return builder.extract_value(args[0], source.get_field_position(name))
+
             dims = [context.cast(builder, d, shape.dtype, types.intp)
                     for d in cgutils.unpack_tuple(builder, args[2], nd)]
-            strides = [src.itemsize] * nd  # C order: the last axis varies fastest
+            itemsize = field("itemsize")
+            strides = [itemsize] * nd  # C order: the last axis varies fastest
             for i in range(nd - 2, -1, -1):
                 strides[i] = builder.mul(strides[i + 1], dims[i + 1])
-            data = builder.gep(src.data, [context.cast(builder, args[1], sig.args[1], types.intp)])
-            view = make_array(view_type)(context, builder)
-            populate_array(view, data=data, shape=dims, strides=strides, itemsize=src.itemsize,
-                           meminfo=src.meminfo, parent=src.parent)
-            return impl_ret_borrowed(context, builder, view_type, view._getvalue())
+            nitems = dims[0]
+            for d in dims[1:]:
+                nitems = builder.mul(nitems, d)
+            offset = context.cast(builder, args[1], sig.args[1], types.intp)
+            value = cgutils.get_null_value(context.get_value_type(view_type))
+            for name, v in (("meminfo", field("meminfo")), ("parent", field("parent")),
+                            ("nitems", nitems), ("itemsize", itemsize),
+                            ("data", builder.gep(field("data"), [offset])),
+                            ("shape", cgutils.pack_array(builder, dims)),
+                            ("strides", cgutils.pack_array(builder, strides))):
+                value = builder.insert_value(value, v, view.get_field_position(name))
+            return impl_ret_borrowed(context, builder, view_type, value)
 
         return view_type(buf, start, shape), codegen
 else:  # pragma: no cover - exercised only where numba is missing
