@@ -105,14 +105,40 @@ def available() -> bool:
 def _njit(fn):
     """Compiled in nopython mode and cached on disk. IEEE arithmetic (no fastmath: results
     must equal the numpy reference to round-off); numpy's error model (x / 0 -> inf rather
-    than an exception: non-finite states are caught by the integrators and the Simulator)."""
+    than an exception: non-finite states are caught by the integrators and the Simulator).
+
+    Without numba's reference counting (`_nrt=False`): these kernels allocate nothing and
+    return no array, and counting every array argument and view at every call (an atomic
+    increment and decrement each) cost ~20 % of an evaluation. Only `_njit_alloc` functions
+    (the rare heavy-tip path) count. The options are given explicitly: numba lets a callee
+    inherit `nrt` and `forceinline` from its caller where they are not set.
+    """
     if numba is None:
         return fn
-    return numba.njit(cache=True, error_model="numpy")(fn)
+    return numba.njit(cache=True, error_model="numpy", _nrt=False, forceinline=False)(fn)
+
+
+def _njit_inline(fn):
+    """`_njit`, always inlined by LLVM into its callers (`forceinline`): the stages of
+    `rhs_kernel` and the small helpers. A call of a stage passed its ~100 words of array
+    structs on the stack (~15 % of an evaluation); inlined, the arrays' shapes and strides are
+    loaded once. Same operations: the results are bit for bit those of the calls."""
+    if numba is None:
+        return fn
+    return numba.njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)(fn)
+
+
+def _njit_alloc(fn):
+    """`_njit` with numba's reference counting, for the functions that allocate (the heavy-tip
+    path of `_aba`, never taken on chains without a subtree STABLE_ABA_RATIO times heavier
+    than its carrier)."""
+    if numba is None:
+        return fn
+    return numba.njit(cache=True, error_model="numpy", _nrt=True, forceinline=False)(fn)
 
 
 # --- small fixed-size helpers (inlined by LLVM) ----------------------------------------------
-@_njit
+@_njit_inline
 def _cross(a, b, out):
     """out = a x b (3,); out must not alias a or b."""
     out[0] = a[1] * b[2] - a[2] * b[1]
@@ -120,7 +146,7 @@ def _cross(a, b, out):
     out[2] = a[0] * b[1] - a[1] * b[0]
 
 
-@_njit
+@_njit_inline
 def _cross_add(a, b, out):
     """out += a x b (3,); out must not alias a or b."""
     out[0] += a[1] * b[2] - a[2] * b[1]
@@ -128,19 +154,19 @@ def _cross_add(a, b, out):
     out[2] += a[0] * b[1] - a[1] * b[0]
 
 
-@_njit
+@_njit_inline
 def _matvec(A, x, out):
     """out = A x for A (3, 3), x (3,)."""
     for i in range(3):
         out[i] = A[i, 0] * x[0] + A[i, 1] * x[1] + A[i, 2] * x[2]
 
 
-@_njit
+@_njit_inline
 def _dot6(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] + a[4] * b[4] + a[5] * b[5]
 
 
-@_njit
+@_njit_inline
 def _skew(d, D):
     """D = d x (the matrix of the cross product with d)."""
     D[0, 0], D[0, 1], D[0, 2] = 0.0, -d[2], d[1]
@@ -148,7 +174,7 @@ def _skew(d, D):
     D[2, 0], D[2, 1], D[2, 2] = -d[1], d[0], 0.0
 
 
-@_njit
+@_njit_inline
 def _quat_to_matrix(q0, q1, q2, q3):
     """R (3, 3) of a quaternion (w, x, y, z) as a tuple of its 9 entries, row by row, divided by
     |q|^2 as rotations.quat_to_matrix does (a rotation even for the non-unit quaternions of
@@ -162,7 +188,7 @@ def _quat_to_matrix(q0, q1, q2, q3):
             (q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3) / nn)
 
 
-@_njit
+@_njit_inline
 def _quat_rate(q0, q1, q2, q3, w0, w1, w2):
     """q' (4-tuple) = 1/2 (0, w) (x) q of a quaternion (w, x, y, z), w in world components
     (rotations.quat_rates in the same operations)."""
@@ -172,14 +198,14 @@ def _quat_rate(q0, q1, q2, q3, w0, w1, w2):
             0.5 * (q0 * w2 + (w0 * q2 - w1 * q1)))
 
 
-@_njit
+@_njit_inline
 def _rotor_angle_rate(p, w0, w1, w2, e0, e1, e2):
     """kappa' = p - w . e (eqs 18-19) of a rotor of spin p about the world axis e on a body
     turning at w (dynamics.torque_rotor_rates in the same operations)."""
     return p - (w0 * e0 + w1 * e1 + w2 * e2)
 
 
-@_njit
+@_njit_inline
 def _inv3_sym(J00, J01, J02, J11, J12, J22):
     """J^-1 of a symmetric positive definite J (3, 3) from its upper triangle (adjugate): its
     upper triangle (d00, d01, d02, d11, d12, d22), the inverse exactly symmetric."""
@@ -255,7 +281,7 @@ def _shift_inertia(I, d, out, Dx, T, G):
 
 
 
-@_njit
+@_njit_inline
 def _shift_mass(m00, m01, m02, m11, m12, m22, d0, d1, d2, IA, kp):
     """IA[kp] += [[0, 0], [0, Ma]] moved from P to Q = P - d: the apparent mass Ma (symmetric,
     its upper triangle) passed through a spherical joint at P. With T = d x Ma:
@@ -318,7 +344,7 @@ def _shift_mass(m00, m01, m02, m11, m12, m22, d0, d1, d2, IA, kp):
 
 
 # --- stages -----------------------------------------------------------------------------------
-@_njit
+@_njit_inline
 def _positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, hk, Aw, e_w):
     """World components of each body's constants: R^k (quaternion, or eq 50 for a hinge),
     s^k, h^k = m^k c^k, the inertia A^k about O^k (eq 30) and the hinge axis e^k."""
@@ -370,7 +396,7 @@ def _positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, 
                 Aw[k, b, a] = Aw[k, a, b]
 
 
-@_njit
+@_njit_inline
 def _velocities(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, i_vel,
                 s_w, e_w, w, vO, c):
     """w^k (prefix sums of the joint rates, eqs 50, 53), v(O^k) (eq 34) and the joint bias
@@ -422,7 +448,7 @@ def _velocities(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, 
         c[k, 5] = v0 * wr1 - v1 * wr0
 
 
-@_njit
+@_njit_inline
 def _bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
                  torque_A, p, L_rotor, has_gravity, gravity, lam_b, dlam_b, I6, pb):
     """Spatial inertias I6 (n, 6, 6) and body forces at zero acceleration pb (n, 6) about O^k,
@@ -495,7 +521,7 @@ def _bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque
         pb[k, 0], pb[k, 1], pb[k, 2], pb[k, 3], pb[k, 4], pb[k, 5] = f0, f1, f2, f3, f4, f5
 
 
-@_njit
+@_njit_inline
 def _joint_columns(is_hinge, own_col, base_type, e_w, S):
     """Unit motions S_j (N, 6) of the velocity columns about their body's O^k (dyn.joint_columns
     moved there): spherical (e_i, 0), hinge (e^k, 0), free base (0, e_i)."""
@@ -778,6 +804,16 @@ def _aba(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udo
     # a heavy subtree: what decides is the mass its elimination passes on (an articulated, not a
     # rigid, inertia: a uniform chain of 1000 links passes on about a link's mass at each joint),
     # known only once the classic elimination has run
+    _aba_heavy(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
+               Ia, pa, Dx, T, G, x)
+
+
+@_njit_alloc
+def _aba_heavy(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot, Ia, pa, Dx,
+               T, G, x):
+    """`_aba` where a subtree is more than STABLE_ABA_RATIO times heavier than its carrier:
+    `_aba_classic`, and `_aba_stable` from the bodies' own inertias again if the classic
+    elimination passed on too much (arguments as `_aba`)."""
     IA0 = IA.copy()
     pA0 = pA.copy()
     if _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
@@ -787,7 +823,7 @@ def _aba(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udo
         _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot)
 
 
-@_njit
+@_njit_alloc
 def _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot):
     """`_aba` for heavy subtrees on light carriers (and any other chain, at ~2.5 x the cost of
     `_aba_classic`).
@@ -984,7 +1020,7 @@ def _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Di
     _aba_resolve(col_start, S, s_w, W, Dinv, res, u, F, udot)
 
 
-@_njit
+@_njit_alloc
 def _aba_resolve(col_start, S, s_w, W, Dinv, rhs, u, P, udot):
     """udot += M^-1 rhs (N,) with the elimination `_aba` left in W (U D^-1) and Dinv: its two
     sweeps with no bias and no base motion. u (N,), P (n, 6): scratch."""
@@ -1021,19 +1057,51 @@ def _aba_resolve(col_start, S, s_w, W, Dinv, rhs, u, P, udot):
                 A[r] += S[j0 + a, r] * acc
 
 
-@_njit
-def _block2(work, o, n, m):
-    """work[o : o + n m] as an (n, m) C-ordered view. as_strided, not reshape: numba's reshape
-    calls a C helper (~40 ns, twenty times per evaluation)."""
-    it = work.itemsize
-    return np.lib.stride_tricks.as_strided(work[o:], shape=(n, m), strides=(m * it, it))
+def _view_codegen(context, builder, sig, args):
+    """Lowering of `_block`: the array struct of a C-ordered view of work[o:] of the given
+    shape, borrowed (no meminfo: nothing is counted; valid while `work` is, i.e. during the
+    call that made it)."""
+    from numba.core import types as nbt
+    from numba.np.arrayobj import make_array, populate_array
+
+    src = make_array(sig.args[0])(context, builder, args[0])
+    out = make_array(sig.return_type)(context, builder)
+    o, *dims = (context.cast(builder, v, t, nbt.intp) for v, t in zip(args[1:], sig.args[1:]))
+    strides = [src.itemsize]
+    for d in reversed(dims[1:]):
+        strides.insert(0, builder.mul(strides[0], d))
+    populate_array(out, data=builder.gep(src.data, [o]), shape=dims, strides=strides,
+                   itemsize=src.itemsize, meminfo=None)
+    return out._getvalue()
 
 
-@_njit
-def _block3(work, o, n, m, q):
-    """work[o : o + n m q] as an (n, m, q) C-ordered view (as `_block2`)."""
-    it = work.itemsize
-    return np.lib.stride_tricks.as_strided(work[o:], shape=(n, m, q), strides=(m * q * it, q * it, it))
+if numba is not None and not numba.config.DISABLE_JIT:
+    from numba.core import types as _nbt
+    from numba.extending import intrinsic as _intrinsic
+
+    # work[o : o + n m ...] (work contiguous) as a C-ordered (n, m, ...) view. An intrinsic:
+    # numba's reshape calls a C helper (~40 ns, twenty times per evaluation) and as_strided
+    # gives a layout-"A" array (every index scaled by strides loaded at run time), both counted.
+    @_intrinsic
+    def _block1(typingctx, work, o, n):
+        return _nbt.Array(work.dtype, 1, "C")(work, o, n), _view_codegen
+
+    @_intrinsic
+    def _block2(typingctx, work, o, n, m):
+        return _nbt.Array(work.dtype, 2, "C")(work, o, n, m), _view_codegen
+
+    @_intrinsic
+    def _block3(typingctx, work, o, n, m, q):
+        return _nbt.Array(work.dtype, 3, "C")(work, o, n, m, q), _view_codegen
+else:  # plain Python: without numba, or NUMBA_DISABLE_JIT (the 80-digit oracle, bench.heavy_tips)
+    def _block1(work, o, n):
+        return work[o:o + n]
+
+    def _block2(work, o, n, m):
+        return work[o:o + n * m].reshape(n, m)
+
+    def _block3(work, o, n, m, q):
+        return work[o:o + n * m * q].reshape(n, m, q)
 
 
 @_njit
@@ -1088,18 +1156,18 @@ def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis,
     o += 6 * N
     W = _block2(work, o, N, 6)
     o += 6 * N
-    u = work[o:o + N]
+    u = _block1(work, o, N)
     o += N
-    p = work[o:o + nt]
+    p = _block1(work, o, nt)
     o += nt
     # fixed scratch (WORK_FIXED): Ia 36, pa 6, Dx 9, T 9, G 9, x 6, a_base 6
     Ia = _block2(work, o, 6, 6)
-    pa = work[o + 36:o + 42]
+    pa = _block1(work, o + 36, 6)
     Dx = _block2(work, o + 42, 3, 3)
     T = _block2(work, o + 51, 3, 3)
     G = _block2(work, o + 60, 3, 3)
-    x = work[o + 69:o + 75]
-    a_base = work[o + 75:o + 81]
+    x = _block1(work, o + 69, 6)
+    a_base = _block1(work, o + 75, 6)
 
     # positions, velocities
     _positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, hk, Aw, e_w)
