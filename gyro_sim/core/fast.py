@@ -1058,21 +1058,29 @@ def _aba_resolve(col_start, S, s_w, W, Dinv, rhs, u, P, udot):
 
 
 def _view_codegen(context, builder, sig, args):
-    """Lowering of `_block`: the array struct of a C-ordered view of work[o:] of the given
-    shape, borrowed (no meminfo: nothing is counted; valid while `work` is, i.e. during the
-    call that made it)."""
+    """Lowering of `_block1/2/3`: the array value of a C-ordered view of work[o:] of the given
+    shape (its fields filled through numba's data model), borrowed: no meminfo, so nothing is
+    counted; valid while `work` is, i.e. during the call that made it."""
+    from numba.core import cgutils
     from numba.core import types as nbt
-    from numba.np.arrayobj import make_array, populate_array
 
-    src = make_array(sig.args[0])(context, builder, args[0])
-    out = make_array(sig.return_type)(context, builder)
+    source = context.data_model_manager[sig.args[0]]
+    view = context.data_model_manager[sig.return_type]
     o, *dims = (context.cast(builder, v, t, nbt.intp) for v, t in zip(args[1:], sig.args[1:]))
-    strides = [src.itemsize]
+    itemsize = builder.extract_value(args[0], source.get_field_position("itemsize"))
+    data = builder.extract_value(args[0], source.get_field_position("data"))
+    strides = [itemsize]
+    nitems = dims[-1]
     for d in reversed(dims[1:]):
         strides.insert(0, builder.mul(strides[0], d))
-    populate_array(out, data=builder.gep(src.data, [o]), shape=dims, strides=strides,
-                   itemsize=src.itemsize, meminfo=None)
-    return out._getvalue()
+    for d in dims[:-1]:
+        nitems = builder.mul(nitems, d)
+    value = cgutils.get_null_value(context.get_value_type(sig.return_type))  # meminfo, parent: null
+    for name, v in (("nitems", nitems), ("itemsize", itemsize), ("data", builder.gep(data, [o])),
+                    ("shape", cgutils.pack_array(builder, dims)),
+                    ("strides", cgutils.pack_array(builder, strides))):
+        value = builder.insert_value(value, v, view.get_field_position(name))
+    return value
 
 
 if numba is not None and not numba.config.DISABLE_JIT:
@@ -1082,17 +1090,25 @@ if numba is not None and not numba.config.DISABLE_JIT:
     # work[o : o + n m ...] (work contiguous) as a C-ordered (n, m, ...) view. An intrinsic:
     # numba's reshape calls a C helper (~40 ns, twenty times per evaluation) and as_strided
     # gives a layout-"A" array (every index scaled by strides loaded at run time), both counted.
+    def _view_typing(work, nd, *ints):
+        """(signature, codegen) of the view of a vector `work` with nd axes (None: not for
+        these argument types)."""
+        if not (isinstance(work, _nbt.Array) and work.ndim == 1
+                and all(isinstance(i, _nbt.Integer) for i in ints)):
+            return None
+        return _nbt.Array(work.dtype, nd, "C")(work, *ints), _view_codegen
+
     @_intrinsic
     def _block1(typingctx, work, o, n):
-        return _nbt.Array(work.dtype, 1, "C")(work, o, n), _view_codegen
+        return _view_typing(work, 1, o, n)
 
     @_intrinsic
     def _block2(typingctx, work, o, n, m):
-        return _nbt.Array(work.dtype, 2, "C")(work, o, n, m), _view_codegen
+        return _view_typing(work, 2, o, n, m)
 
     @_intrinsic
     def _block3(typingctx, work, o, n, m, q):
-        return _nbt.Array(work.dtype, 3, "C")(work, o, n, m, q), _view_codegen
+        return _view_typing(work, 3, o, n, m, q)
 else:  # plain Python: without numba, or NUMBA_DISABLE_JIT (the 80-digit oracle, bench.heavy_tips)
     def _block1(work, o, n):
         return work[o:o + n]
