@@ -10,7 +10,9 @@ the call from Python; the cost of one simulated second with RK4 at 1 kHz (the no
 real-time configuration, default backend; timed after a first, untimed run of the same
 advance, which compiles or loads the compiled loop); and, in the same run, Pinocchio's `aba`
 on the same chain when the `pin` package is installed (C++ O(n) articulated-body algorithm,
-called from Python), with the ratio of gyro_sim's evaluation from Python to it.
+called from Python), with the ratio of gyro_sim's evaluation from Python to it. Every
+per-call time is the fastest of many batches of about a millisecond (:func:`best_time`), so
+that on a busy machine some batches run undisturbed.
 
 A second table (:func:`fixed_step`) puts the fixed-step loop beside MuJoCo: one simulated
 second of RK4 at 1 kHz on a spherical chain with a rotor on every body, CPU seconds of
@@ -64,8 +66,10 @@ class Row:
         return None if self.pin_aba_us is None else self.eval_us / self.pin_aba_us
 
 
-def best_time(fn, min_time: float = 0.2, repeats: int = 5) -> float:
-    """Best per-call time (s) over `repeats` batches of about `min_time` seconds each."""
+def best_time(fn, min_time: float = 0.2, repeats: int = 5, batch_time: float = 1e-3) -> float:
+    """Best per-call time (s): the fastest of batches of about `batch_time` seconds each, run
+    for about `min_time` seconds in all (at least `repeats` batches). Short batches, so that on
+    a busy machine some of them run undisturbed."""
     fn()
     number = 1
     while True:
@@ -73,15 +77,16 @@ def best_time(fn, min_time: float = 0.2, repeats: int = 5) -> float:
         for _ in range(number):
             fn()
         dt = time.perf_counter() - t0
-        if dt >= min_time / repeats or number > 1_000_000:
+        if dt >= batch_time or number > 1_000_000:
             break
-        number *= 4
-    best = dt / number
-    for _ in range(repeats - 1):
+        number *= 2
+    best, spent, batches = dt / number, dt, 1
+    while spent < min_time or batches < repeats:
         t0 = time.perf_counter()
         for _ in range(number):
             fn()
-        best = min(best, (time.perf_counter() - t0) / number)
+        dt = time.perf_counter() - t0
+        best, spent, batches = min(best, dt / number), spent + dt, batches + 1
     return best
 
 

@@ -12,7 +12,7 @@ same results to round-off (test/core/test_fast.py):
   composite-inertia matrix); it also fills the outputs (reactions, rotor torques);
 - :class:`FastChainODE`: the compiled O(n) articulated-body kernel of
   :mod:`gyro_sim.core.fast` for `rhs(t, y)` (called through :mod:`gyro_sim.core.fast_entry`:
-  its arrays packed in two buffers, six arguments a call instead of 24), the numpy reference
+  its arrays packed in one buffer, four arguments a call instead of 24), the numpy reference
   for outputs.
 
 Backend selection: `make_system(model, backend)` with backend "auto", "numba" or "numpy"
@@ -124,6 +124,7 @@ class ChainODE:
 
 
 _F64 = np.dtype(np.float64)
+_empty = np.empty  # FastChainODE.rhs: a global name, one attribute lookup less per call
 
 
 class FastChainODE:
@@ -147,13 +148,11 @@ class FastChainODE:
         self.size = model.size
         self.quat_index = model.i_quat
         self.nfev = 0
-        # the kernel's arrays packed once in two buffers (fast_entry): `rhs` passes the buffers,
-        # six arguments a call; the compiled loops get views of the same buffers
-        model_args = fast.model_arguments(model)
+        # the kernel's arrays packed once in one buffer (fast_entry): `rhs` passes it, four
+        # arguments a call; the compiled loops get views of the same buffer
         inputs = fast.input_arguments(model, self._ref.t0, self._ref.p0, None, None)
-        self._fbuf, self._ibuf = fast_entry.pack(fast.workspace(model), model_args, inputs)
-        self._is_hinge = model_args[0]
-        self._args = fast_entry.kernel_arguments(self._fbuf, self._ibuf, self._is_hinge)
+        self._buf = fast_entry.pack(fast.workspace(model), fast.model_arguments(model), inputs)
+        self._args = fast_entry.kernel_arguments(self._buf)
         self._shape = (model.size,)
         self._eval = self._first_eval  # then the compiled entry point of fast_entry.rhs_entry
         self._i_q0 = int(model.i_quat[0, 0]) if len(model.sph_bodies) else 0
@@ -176,7 +175,7 @@ class FastChainODE:
         """Hold the inputs from t0 on (the zero-order hold of `Simulator.advance`)."""
         self._ref.hold(t0, p0, hinge_tau, L_rotor)
         inputs = fast.input_arguments(self.model, t0, p0, hinge_tau, L_rotor)
-        fast_entry.set_inputs(self._fbuf, self._ibuf, inputs)  # in place: the views see them
+        fast_entry.set_inputs(self._buf, inputs)  # in place: the views see them
         self._args = (*self._args[:fast_entry.T0_ARGUMENT], inputs[0], *self._args[fast_entry.T0_ARGUMENT + 1:])
 
     @property
@@ -209,10 +208,10 @@ class FastChainODE:
         converts without checking them. Another y (dtype, layout) goes through numba's
         dispatcher: correct too, but it compiles one more specialization of the kernel."""
         self.nfev += 1
-        ydot = np.empty(self.size)
+        ydot = _empty(self.size)
         if out is None and y.dtype is _F64 and y.ndim == 1:
             try:
-                self._eval(t, y, ydot, self._fbuf, self._ibuf, self._is_hinge)
+                self._eval(t, y, ydot, self._buf)
                 return ydot
             except ValueError:  # not contiguous, or not of the state's size
                 pass
@@ -223,11 +222,11 @@ class FastChainODE:
         fast.rhs_kernel(float(t), y, ydot, *self._args)
         return ydot
 
-    def _first_eval(self, t, y, ydot, fbuf, ibuf, is_hinge) -> None:
+    def _first_eval(self, t, y, ydot, buf) -> None:
         """The first evaluation: compiles (or loads) fast_entry.rhs_entry, whose compiled entry
         point evaluates from then on."""
         self._eval = fast_entry.entry_point()
-        self._eval(t, y, ydot, fbuf, ibuf, is_hinge)
+        self._eval(t, y, ydot, buf)
 
     def march_explicit_rk(self, A: np.ndarray, B: np.ndarray, C: np.ndarray, t0: float,
                           y: np.ndarray, h: float, nsteps: int) -> int:

@@ -1,5 +1,5 @@
-"""FastChainODE.rhs through gyro_sim.core.fast_entry (the kernel's arrays packed in two buffers,
-six arguments a call) against the kernel called directly with the separate arrays of
+"""FastChainODE.rhs through gyro_sim.core.fast_entry (the kernel's arrays packed in one buffer,
+four arguments a call) against the kernel called directly with the separate arrays of
 `fast.model_arguments` and `fast.input_arguments` (bit for bit: same kernel, same arrays) and
 against the numpy reference ChainODE.rhs (round-off), before and after holds of new inputs.
 """
@@ -91,9 +91,9 @@ def test_buffers_of_models_with_empty_blocks(scene):
     model = compile_model(load_scene(scene))
     assert len(model.torque_body) == 0 and (not model.is_hinge.any() or model.is_hinge.all())
     held = (0.25, None, np.full(len(model.hinge_bodies), 0.1) if len(model.hinge_bodies) else None, None)
-    fbuf, ibuf = fast_entry.pack(fast.workspace(model), fast.model_arguments(model),
-                                 fast.input_arguments(model, *held))
-    packed = fast_entry.kernel_arguments(fbuf, ibuf, fast.model_arguments(model)[0])
+    buf = fast_entry.pack(fast.workspace(model), fast.model_arguments(model),
+                          fast.input_arguments(model, *held))
+    packed = fast_entry.kernel_arguments(buf)
     separate = (fast.workspace(model), *fast.model_arguments(model), *fast.input_arguments(model, *held))
     assert len(packed) == len(separate) == 21
     for a, b in zip(packed, separate):
@@ -147,16 +147,15 @@ def test_entry_checks_length_and_stride():
     """The compiled entry refuses a y not of ydot's length, or not contiguous (whose elements
     its C-ordered type would read at the wrong places)."""
     model = compile_model(load_scene(spherical_chain(2)))
-    margs = fast.model_arguments(model)
-    fbuf, ibuf = fast_entry.pack(fast.workspace(model), margs,
-                                 fast.input_arguments(model, 0.0, None, None, None))
+    buf = fast_entry.pack(fast.workspace(model), fast.model_arguments(model),
+                          fast.input_arguments(model, 0.0, None, None, None))
     entry = fast_entry.entry_point()
     y = initial_state(model)
     ydot = np.empty(model.size)
-    entry(0.0, y, ydot, fbuf, ibuf, margs[0])
+    entry(0.0, y, ydot, buf)
     assert np.array_equal(ydot, direct(model, 0.0, y, (0.0, None, None, None)))
     strided = np.zeros(2 * model.size)
     strided[::2] = y
     for bad in (y[:-1], np.concatenate([y, y]), strided[::2]):
         with pytest.raises(ValueError, match="contiguous vector"):
-            entry(0.0, bad, ydot, fbuf, ibuf, margs[0])
+            entry(0.0, bad, ydot, buf)
