@@ -20,12 +20,13 @@ WARM_UP_SCENE = "hinge_chain"
 
 
 #: the modules holding numba kernels (dispatchers)
-KERNEL_MODULES = ("fast", "rk_kernels", "fast_loop", "fast_outputs", "lagrange", "gauss_kernels", "fast_gauss",
+KERNEL_MODULES = ("fast", "fast_entry", "rk_kernels", "fast_loop", "fast_outputs", "lagrange", "gauss_kernels", "fast_gauss",
                   "dop853_kernels", "fast_dop853", "lie_kernels", "fast_lie", "radau_kernels", "fast_radau")
 #: the compiled loops each integrator runs on the numba backend, (module, name), besides the
-#: kernels every run needs (fast.py's, the outputs, a Lagrange chain's integrals); the cache
-#: counts as cold for an integrator when any of its kernels has no entry
-COMMON_KERNELS = (("fast_outputs", "outputs_kernel"), ("fast_outputs", "publication_kernel"), ("lagrange", "_sums_82"),
+#: kernels every run needs (fast.py's, the entry of one evaluation from Python, the outputs, a
+#: Lagrange chain's integrals); the cache counts as cold for an integrator when any of its
+#: kernels has no entry
+COMMON_KERNELS = (("fast_entry", "rhs_entry"), ("fast_outputs", "outputs_kernel"), ("fast_outputs", "publication_kernel"), ("lagrange", "_sums_82"),
                   ("lagrange", "_sums_85"))
 LOOPS = {
     "rk4": (("fast_loop", "erk_march"),),
