@@ -10,6 +10,10 @@ writes its timing statistics (`stats_file`). Reported per run:
 - CPU share: CPU seconds of the node process (all threads) per wall second (1.0 = one core);
 - achieved real-time factor (simulated / wall time) and deadline misses;
 - with recording: records written, the writer process's CPU and the node's sender thread's;
+- how many misses came after the physics thread had waited, ready to run, more than a physics
+  period for a CPU (the OS gave the CPUs to other threads or processes), its whole wait for a
+  CPU over the run (Linux schedstat), and the CPU time the hypervisor took from this virtual
+  machine meanwhile (steal, all CPUs; 10 ms ticks);
 - the longest garbage-collector pause (any thread: it holds the interpreter lock) and the
   machine's 1-minute load average at the start and end of the run (other processes included).
 
@@ -116,15 +120,17 @@ def measure(sizes=DEFAULT_SIZES, seconds: float = DEFAULT_SECONDS, progress=None
 def table(runs: list[Run]) -> str:
     lines = [
         "| n | recording | step p50 (us) | step p99 (us) | publish jitter p50 (us) | publish jitter p99 (us) "
-        "| CPU share | achieved RTF | deadline misses | longest GC pause (us) | load (start / end) |",
-        "|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| CPU share | achieved RTF | deadline misses | of which after waiting for a CPU "
+        "| physics thread waiting for a CPU (ms) | host steal (ms) | longest GC pause (us) | load (start / end) |",
+        "|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in runs:
         lines.append(
             f"| {r.n} | {'yes' if r.record else 'no'} | {r.get('step_time_p50_us'):.0f} | {r.get('step_time_p99_us'):.0f} "
             f"| {r.get('publish_jitter_p50_us'):.0f} | {r.get('publish_jitter_p99_us'):.0f} "
             f"| {100 * r.get('cpu_share'):.0f} % | {r.get('real_time_factor_achieved'):.3f} "
-            f"| {int(r.get('deadline_misses', 0))} | {r.get('gc_pause_max_us'):.0f} "
+            f"| {int(r.get('deadline_misses', 0))} | {int(r.get('cpu_wait_misses', 0))} "
+            f"| {1e3 * r.get('physics_cpu_wait_s'):.0f} | {1e3 * r.get('host_steal_s'):.0f} | {r.get('gc_pause_max_us'):.0f} "
             f"| {r.get('load_start'):.2f} / {r.get('load_end'):.2f} |"
         )
     held = [r.n for r in runs if r.holds and not r.record]

@@ -39,7 +39,7 @@ from ..core.simulator import SimulationError
 from ..io import messages as M
 from ..io.resim import COMMAND_TIMEOUT_EVENT
 from .outputs import OutputsClosed
-from .pacing import Histogram, Pacer, RateMeter, Samples, chunk_steps
+from .pacing import Histogram, Pacer, RateMeter, RunDelay, Samples, chunk_steps, host_steal
 
 #: wall seconds between diagnostics while paused or stopped (running, they go with every
 #: publication at least gyro_sim.io.messages.DIAGNOSTICS_PERIOD simulated seconds apart)
@@ -139,9 +139,13 @@ class SimLoop:
         publish_diagnostics(t_ns, sim, run_status), record_command(t_ns, raw), event(t_ns, text);
         t_ns: node time in integer nanoseconds
     clock, sleep : injectable for tests
+    run_delay : seconds the calling thread has waited for a CPU so far (pacing.RunDelay; tests
+        inject their own): a deadline miss is counted as a *CPU-wait miss* too when the physics
+        thread waited, runnable, more than one physics period for a CPU since the previous
+        deadline check (the OS gave the CPUs to others: diagnostics of a miss, not a change to it)
     """
 
-    def __init__(self, sim, config, outputs, clock=time.monotonic, sleep=time.sleep):
+    def __init__(self, sim, config, outputs, clock=time.monotonic, sleep=time.sleep, run_delay=None):
         self.sim, self.config, self.out = sim, config, outputs
         self.clock = clock
         self.dt = config.dt
@@ -184,6 +188,10 @@ class SimLoop:
         self.wall_start = self.cpu_start = None
         self.wall_end = self.cpu_end = None
         self.gc_pauses = GcPauses()
+        self.run_delay = RunDelay() if run_delay is None else run_delay
+        self.cpu_wait_misses = 0  # deadline misses with more than a period of waiting for a CPU before them
+        self._cpu_wait = [math.nan, math.nan]  # the physics thread's wait for a CPU at its start, at the last check
+        self._steal = [math.nan, math.nan]  # the host's steal at the start and the end
         self.frozen = 0  # objects of the start-up frozen out of the collector's reach
 
     # --- from other threads ----------------------------------------------------------------------
@@ -260,6 +268,8 @@ class SimLoop:
     # --- the loop ------------------------------------------------------------------------------------
     def _run(self) -> None:
         self.wall_start, self.cpu_start = self.clock(), time.process_time()
+        self._cpu_wait = [self.run_delay()] * 2
+        self._steal[0] = host_steal()
         self.pacer.restart(self.node_time)
         self.rate.mark(self.node_time)
         self._next_idle_diag = self.clock()
@@ -277,7 +287,10 @@ class SimLoop:
                     break
                 self._chunk()
                 batch = self._prepare() if self.steps % self.per_publish == 0 and self.failure is None else None
-                self.pacer.wait(self.node_time)
+                waited = self.run_delay()
+                if not self.pacer.wait(self.node_time) and waited - self._cpu_wait[1] > self.pacer.tolerance:
+                    self.cpu_wait_misses += 1
+                self._cpu_wait[1] = waited
                 self._send(batch)
         except OutputsClosed:
             pass
@@ -287,6 +300,10 @@ class SimLoop:
             self.crash = traceback.format_exc()
         finally:
             self.wall_end, self.cpu_end = self.clock(), time.process_time()
+            self._cpu_wait[1] = self.run_delay()
+            self._steal[1] = host_steal()
+            if isinstance(self.run_delay, RunDelay):
+                self.run_delay.close()
             self.finished.set()
 
     def _done(self) -> bool:
@@ -465,6 +482,9 @@ class SimLoop:
             "slipped_s": self.pacer.slipped,
             "commands_accepted": self.counters.accepted,
             "commands_rejected": self.counters.rejected,
+            "cpu_wait_misses": self.cpu_wait_misses,
+            "physics_cpu_wait_s": self._cpu_wait[1] - self._cpu_wait[0],
+            "host_steal_s": self._steal[1] - self._steal[0],
             "gc_frozen_objects": self.frozen,
             "gc_collections": self.gc_pauses.pauses.n,
             "gc_pause_max_us": (self.gc_pauses.pauses.max if self.gc_pauses.pauses.n else 0.0) * 1e6,

@@ -27,8 +27,10 @@ def test_bench_realtime_quick(tmp_path):
         assert 0 < float(cells[6].rstrip(" %")) < 250  # CPU share of a 2-core machine, in %
         assert 0.05 < float(cells[7]) < 1.2  # achieved real-time factor, target 1
         assert int(cells[8]) >= 0
-        assert float(cells[9]) >= 0  # longest GC pause (us)
-        load_start, load_end = (float(x) for x in cells[10].split("/"))
+        assert 0 <= int(cells[9]) <= int(cells[8])  # misses after waiting for a CPU
+        assert float(cells[10]) >= 0 and float(cells[11]) >= 0  # waiting for a CPU, steal (ms)
+        assert float(cells[12]) >= 0  # longest GC pause (us)
+        load_start, load_end = (float(x) for x in cells[13].split("/"))
         assert load_start >= 0 and load_end >= 0
     assert "Largest n holding real time" in text
     runs = json.loads((tmp_path / "realtime.json").read_text())

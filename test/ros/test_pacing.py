@@ -1,6 +1,7 @@
 """The physics loop without ROS: pacing against a fake clock, commands, timeout, reset, pause."""
 from __future__ import annotations
 
+import os
 import threading
 import time
 
@@ -245,3 +246,52 @@ def test_start_freezes_the_start_up_heap_and_times_collections():
     assert loop.gc_pauses not in gc.callbacks
     s = loop.summary()
     assert s["gc_collections"] >= 1 and s["gc_frozen_objects"] == loop.frozen
+
+
+def test_run_delay_and_host_steal_read_the_kernels_figures(tmp_path):
+    import math
+
+    from gyro_sim.ros.pacing import RunDelay, host_steal
+
+    f = tmp_path / "schedstat"
+    f.write_text("123456 4500000000 7\n")  # ns on the CPU, ns waiting for one, time slices
+    rd = RunDelay(str(f))
+    assert rd() == pytest.approx(4.5)
+    f.write_text("123456 4750000000 9\n")  # read again through the same descriptor
+    assert rd() == pytest.approx(4.75)
+    rd.close()
+    assert math.isnan(RunDelay(str(tmp_path / "none"))())
+    st = tmp_path / "stat"
+    st.write_text("cpu  10 20 30 40 50 60 70 250 0 0\ncpu0 1 2 3 4 5 6 7 8 0 0\n")
+    assert host_steal(str(st)) == pytest.approx(250 / os.sysconf("SC_CLK_TCK"))
+    assert math.isnan(host_steal(str(tmp_path / "none")))
+
+
+def test_misses_after_waiting_for_a_cpu_are_told_apart():
+    """A miss preceded by more than a physics period of waiting for a CPU (the run delay the
+    kernel reports) counts as a CPU-wait miss; the misses themselves are counted as before."""
+    for wait_per_check, expect_all in ((0.0, False), (5e-3, True)):
+        clock = FakeClock()
+        waited = [0.0]
+
+        def run_delay():
+            waited[0] += wait_per_check
+            return waited[0]
+
+        cfg = validate({"scene": "hinge_chain", "physics_rate": 250.0, "publish_rate": 50.0})
+        sim = Simulator(cfg.scene, integrator=cfg.integrator, step=cfg.dt)
+        advance = sim.advance
+
+        def slow(dt):
+            advance(dt)
+            clock.t += 6e-3  # late at every check
+
+        sim.advance = slow
+        out = Outputs()
+        loop = SimLoop(sim, cfg, out, clock=clock, sleep=clock.sleep, run_delay=run_delay)
+        run_until(loop, lambda: len(out.states) >= 20)
+        assert loop.pacer.misses > 10
+        assert loop.cpu_wait_misses == (loop.pacer.misses if expect_all else 0)
+        s = loop.summary()
+        assert s["cpu_wait_misses"] == loop.cpu_wait_misses
+        assert s["physics_cpu_wait_s"] == pytest.approx(waited[0] - wait_per_check)  # the last read less the first
