@@ -99,10 +99,15 @@ def _kernel_loop(k, t, y, ydot, args):
 
 def kernel_time(system, y, min_time: float) -> float:
     """The compiled kernel's own time (s) for one evaluation of `system` (a FastChainODE) at
-    (0, y): the best per-call time of a compiled loop of 1000 evaluations, divided by 1000."""
-    k = 1000
+    (0, y): the best per-call time of a compiled loop of k evaluations, divided by k; k such
+    that one loop takes ~0.2 ms (shorter than best_time's batches: a busy machine
+    disturbs a long loop)."""
     ydot = np.empty(system.size)
     args = system.kernel_arguments()
+    _kernel_loop(1, 0.0, y, ydot, args)  # compiled or loaded
+    t0 = time.perf_counter()
+    _kernel_loop(100, 0.0, y, ydot, args)
+    k = max(1, int(2e-4 / max((time.perf_counter() - t0) / 100, 1e-9)))
     return best_time(lambda: _kernel_loop(k, 0.0, y, ydot, args), min_time) / k
 
 

@@ -176,7 +176,8 @@ class FastChainODE:
         self._ref.hold(t0, p0, hinge_tau, L_rotor)
         inputs = fast.input_arguments(self.model, t0, p0, hinge_tau, L_rotor)
         fast_entry.set_inputs(self._buf, inputs)  # in place: the views see them
-        self._args = (*self._args[:fast_entry.T0_ARGUMENT], inputs[0], *self._args[fast_entry.T0_ARGUMENT + 1:])
+        i = fast_entry.T0_ARGUMENT  # the held t0 is a float: a new tuple
+        self._args = (*self._args[:i], inputs[0], *self._args[i + 1:])
 
     @property
     def inputs_version(self) -> int:
