@@ -3,6 +3,11 @@ four arguments a call) against the kernel called directly with the separate arra
 `fast.model_arguments` and `fast.input_arguments` (bit for bit: same kernel, same arrays) and
 against the numpy reference ChainODE.rhs (round-off), before and after holds of new inputs.
 """
+import json
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -159,3 +164,46 @@ def test_entry_checks_length_and_stride():
     for bad in (y[:-1], np.concatenate([y, y]), strided[::2]):
         with pytest.raises(ValueError, match="contiguous vector"):
             entry(0.0, bad, ydot, buf)
+
+
+ALLOC_PROBE = r"""
+import json
+import numba
+import numpy as np
+from numba.core.runtime import rtsys
+from gyro_sim import load_scene
+from gyro_sim.bench.scenes import spherical_chain
+from gyro_sim.core import fast, fast_entry
+from gyro_sim.core.model import compile_model, initial_state
+
+@numba.njit
+def repeat(m, t, y, ydot, buf):
+    for i in range(m):
+        fast_entry.rhs_entry(t + 0.001 * i, y, ydot, buf)
+
+model = compile_model(load_scene(spherical_chain(3, rotors=True)))
+y = initial_state(model)
+buf = fast_entry.pack(fast.workspace(model), fast.model_arguments(model),
+                      fast.input_arguments(model, 0.0, None, None, None))
+ydot = np.empty(model.size)
+repeat(1, 0.0, y, ydot, buf)  # compiled (and numba's runtime started)
+counts = []
+for m in (1, 1, 11):
+    before = rtsys.get_allocation_stats().alloc
+    repeat(m, 0.0, y, ydot, buf)
+    counts.append(rtsys.get_allocation_stats().alloc - before)
+print(json.dumps(counts))
+"""
+
+
+def test_entry_views_allocate_nothing():
+    """The views rhs_entry cuts from the buffer allocate nothing: eleven evaluations inside one
+    compiled call count the same allocations as one (the arguments' unboxing at the call;
+    numba's own counters, NUMBA_NRT_STATS, set before numba imports: a subprocess)."""
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    proc = subprocess.run([sys.executable, "-c", ALLOC_PROBE], env={**os.environ, "NUMBA_NRT_STATS": "1"},
+                          cwd=root, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    counts = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert counts[0] == counts[1], counts  # the count is repeatable
+    assert counts[2] == counts[1], counts
