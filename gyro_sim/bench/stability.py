@@ -701,7 +701,8 @@ class Report:
             "### The cost of one physics step: gauss4 beside rk4",
             "",
             f"`Simulator.advance({sc.STEP:g})` called {steps} times, as the node calls it, on the spherical chain "
-            "with a torque rotor on every body, under gravity; wall time of each call after a warm-up call. "
+            "with a torque rotor on every body, under gravity; CPU time of the calling thread in each call "
+            "(the method's own cost, whatever else the machine runs), after a warm-up call. "
             "gauss4's own worst case in work: the most Newton iterations of a (sub)step and the most right-hand-side "
             "evaluations of a step (its caps bound them: gauss.py).",
             "",
