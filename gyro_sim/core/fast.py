@@ -120,7 +120,7 @@ def _njit(fn):
 
 def _njit_inline(fn):
     """`_njit`, always inlined by LLVM into its callers (`forceinline`): the stages of
-    `rhs_kernel` and the small helpers. A call of a stage passed its ~100 words of array
+    `rhs_kernel` (the elimination `_aba`/`_aba_classic` included) and the small helpers. A call of a stage passed its ~100 words of array
     structs on the stack (~15 % of an evaluation); inlined, the arrays' shapes and strides are
     loaded once. Same operations: the results are bit for bit those of the calls."""
     if numba is None:
@@ -612,7 +612,7 @@ def _hinge_reflector(e, H):
     return -sg
 
 
-@_njit
+@_njit_inline
 def _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
                  Ia, pa, Dx, T, G, x):
     """`_aba` as Featherstone writes it, the articulated inertias formed: I^a = I^A - U D^-1 U^T.
@@ -776,7 +776,7 @@ def _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, D
     return worst
 
 
-@_njit
+@_njit_inline
 def _aba(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot, Ia, pa, Dx, T, G, x):
     """Articulated-body algorithm: u' (N,) of the closure rows S_j . F_subtree(k(j)) = tau_j
     (eqs 44, 51, 54; Featherstone 2008, Table 7.1), about each body's O^k in world axes.
