@@ -15,7 +15,8 @@ kernel. The results are those of the kernel called with the separate arrays, bit
                                            # fast.input_arguments
     set_inputs(buf, inputs)                # after a new hold, in place
     kernel_arguments(buf)                  # the kernel's 21 arguments as views of buf
-    rhs_entry(t, y, ydot, buf)             # compiled: y' into ydot
+    rhs_entry(t, y, ydot, buf)             # compiled: y' into ydot, counted in the header
+    buf.view(np.int64)[H_NFEV]             # the evaluations counted
 
 Caching as :mod:`gyro_sim.core.fast_loop` (`njit_with_dependencies`): rhs_entry compiles the
 kernel into itself, so its cache is keyed on fast.py and this file.
@@ -33,7 +34,7 @@ try:
     import numba
     from numba.core import cgutils, types
     from numba.core.imputils import impl_ret_borrowed
-    from numba.extending import intrinsic
+    from numba.extending import intrinsic, overload
 except ImportError:  # pragma: no cover - exercised only where numba is missing
     numba = None
 
@@ -47,7 +48,10 @@ H_N, H_NCOL, H_NT = 0, 1, 2
 (H_WORK, H_HINGE_AXIS, H_S, H_MASS, H_FIRST_MOMENT, H_INERTIA, H_LAM_SPEED, H_TORQUE_AXIS,
  H_TORQUE_A, H_BASE, H_T0, H_P0, H_PDOT, H_L, H_TAU) = range(3, 18)
 H_QROW, H_OWN_COL, H_COL_START, H_TORQUE_BODY, H_FLAGS, H_IS_HINGE = range(18, 24)
-HEADER = 24
+#: a counter (int64) of the evaluations rhs_entry ran on this buffer (FastChainODE.nfev); the
+#: buffer's length in words
+H_NFEV, H_WORDS = 24, 25
+HEADER = 26
 #: the float arrays of model_arguments as they sit in the buffer, by their header entries
 _MODEL_FLOATS = ((4, H_HINGE_AXIS), (5, H_S), (6, H_MASS), (7, H_FIRST_MOMENT), (8, H_INERTIA),
                  (9, H_LAM_SPEED), (11, H_TORQUE_AXIS), (12, H_TORQUE_A), (14, H_BASE))
@@ -73,7 +77,8 @@ def pack(work: np.ndarray, model_args: tuple, inputs: tuple) -> np.ndarray:
         header[h] = o
         o += a.size
     header[H_IS_HINGE] = o
-    buf = np.zeros(o + -(-n // _WORD))
+    header[H_WORDS] = o + -(-n // _WORD)
+    buf = np.zeros(header[H_WORDS])
     words = buf.view(np.int64)
     words[:HEADER] = header
     for h, a in floats:
@@ -114,6 +119,12 @@ def kernel_arguments(buf: np.ndarray) -> tuple:
             f(H_LAM_SPEED, n, 3), i(H_TORQUE_BODY, nt), f(H_TORQUE_AXIS, nt, 3), f(H_TORQUE_A, nt),
             i(H_FLAGS, 7), f(H_BASE, 7), float(buf[words[H_T0]]), f(H_P0, nt), f(H_PDOT, nt),
             f(H_L, nt), f(H_TAU, N))
+
+
+def _buffer(buf):
+    """The buffer of `pack`, given as itself or (compiled code only) as its address
+    (`buf.ctypes.data`, an int: no array for the entry point to unbox, ~0.03 us a call)."""
+    return buf
 
 
 if numba is not None:
@@ -157,6 +168,36 @@ if numba is not None:
             return impl_ret_borrowed(context, builder, view_type, value)
 
         return view_type(buf, start, shape), codegen
+
+    @intrinsic
+    def _vector_at(typingctx, address, size):
+        """The float64 vector of `size` at `address` (an integer), owned elsewhere (no meminfo,
+        no parent): the caller keeps the memory alive."""
+        if not (isinstance(address, types.Integer) and isinstance(size, types.Integer)):
+            return None
+        vector = types.Array(types.float64, 1, "C")
+
+        def codegen(context, builder, sig, args):
+            model = context.data_model_manager[vector]
+            item = context.get_constant(types.intp, _WORD)
+            size = context.cast(builder, args[1], sig.args[1], types.intp)
+            data = builder.inttoptr(args[0], context.get_value_type(types.CPointer(types.float64)))
+            value = cgutils.get_null_value(context.get_value_type(vector))  # meminfo, parent: null
+            for name, v in (("nitems", size), ("itemsize", item), ("data", data),
+                            ("shape", cgutils.pack_array(builder, [size])),
+                            ("strides", cgutils.pack_array(builder, [item]))):
+                value = builder.insert_value(value, v, model.get_field_position(name))
+            return value
+
+        return vector(address, size), codegen
+
+    @overload(_buffer)
+    def _buffer_overload(buf):
+        if isinstance(buf, types.Array):
+            return lambda buf: buf
+        if isinstance(buf, types.Integer):  # its address: its length in its header
+            return lambda buf: _vector_at(buf, _vector_at(buf, HEADER).view(np.int64)[H_WORDS])
+        return None
 else:  # pragma: no cover - exercised only where numba is missing
     def _view(buf, start, shape):
         return buf[start:start + int(np.prod(shape))].reshape(shape)
@@ -164,12 +205,16 @@ else:  # pragma: no cover - exercised only where numba is missing
 
 @_njit
 def rhs_entry(t, y, ydot, buf):
-    """y' (size,) at (t, y) into ydot: fast.rhs_kernel on the arrays packed in buf (`pack`).
+    """y' (size,) at (t, y) into ydot: fast.rhs_kernel on the arrays packed in buf (`pack`;
+    or its address, an int, which the caller keeps alive).
     Raises ValueError unless y is contiguous and of ydot's length (the kernel does not check
-    its indices; a few ns here, ~0.1 us as numpy attribute reads before the call)."""
+    its indices; a few ns here, ~0.1 us as numpy attribute reads before the call). Counts the
+    evaluation in the header's word H_NFEV (a few ns here, ~0.05 us as `self.nfev += 1`)."""
     if y.shape[0] != ydot.shape[0] or y.strides[0] != y.itemsize:
         raise ValueError("y must be a contiguous vector of the state's size")
+    buf = _buffer(buf)
     h = buf.view(np.int64)
+    h[H_NFEV] += 1
     n, N, nt = h[H_N], h[H_NCOL], h[H_NT]
     w0, ha = h[H_WORK], h[H_HINGE_AXIS]
     is_hinge = _view(buf.view(np.bool_), _WORD * h[H_IS_HINGE], (n,))
@@ -185,11 +230,12 @@ def rhs_entry(t, y, ydot, buf):
 
 
 def entry_point():
-    """rhs_entry's compiled entry point for (a float, then three float64 C-contiguous vectors),
-    compiled or loaded from the disk cache now: it converts its arguments to these types
-    without checking them (as fast_loop.Direct). Without numba, the plain function."""
+    """rhs_entry's compiled entry point for (a float, two float64 C-contiguous vectors, the
+    buffer's address as an int64: `entry(t, y, ydot, buf.ctypes.data)`), compiled or loaded
+    from the disk cache now: it converts its arguments to these types without checking them
+    (as fast_loop.Direct). Without numba, the plain function (which takes the buffer itself)."""
     if numba is None:
         return rhs_entry
-    signature = (numba.float64, numba.float64[::1], numba.float64[::1], numba.float64[::1])
+    signature = (numba.float64, numba.float64[::1], numba.float64[::1], numba.int64)
     rhs_entry.compile(signature)
     return rhs_entry.overloads[signature].entry_point

@@ -147,14 +147,14 @@ class FastChainODE:
         self.data = self._ref.data
         self.size = model.size
         self.quat_index = model.i_quat
-        self.nfev = 0
         # the kernel's arrays packed once in one buffer (fast_entry): `rhs` passes it, four
         # arguments a call; the compiled loops get views of the same buffer
         inputs = fast.input_arguments(model, self._ref.t0, self._ref.p0, None, None)
         self._buf = fast_entry.pack(fast.workspace(model), fast.model_arguments(model), inputs)
+        self._words = self._buf.view(np.int64)  # nfev: the word the compiled entry counts in
         self._args = fast_entry.kernel_arguments(self._buf)
         self._shape = (model.size,)
-        self._eval = self._first_eval  # then the compiled entry point of fast_entry.rhs_entry
+        self.rhs = self._make_rhs()
         self._i_q0 = int(model.i_quat[0, 0]) if len(model.sph_bodies) else 0
         self._nq = len(model.sph_bodies)
         # march_explicit_rk: per tableau (by its A) the kernel's copies of A, B, C and the stages K
@@ -201,33 +201,60 @@ class FastChainODE:
         return self._ref.spins(t)
 
     # --- the ODE -------------------------------------------------------------------------------
-    def rhs(self, t: float, y: np.ndarray, out: dyn.Evaluation | None = None) -> np.ndarray:
-        """y' (size,) at (t, y); with `out`, by the numpy reference, which also fills `out` and
-        `data`. y: float64 (size,), contiguous as the integrators pass it, goes straight to the
-        compiled entry point of :func:`gyro_sim.core.fast_entry.rhs_entry`, which checks its
-        length and stride; its dtype and dimensions are checked here, as the entry point
-        converts without checking them. Another y (dtype, layout) goes through numba's
-        dispatcher: correct too, but it compiles one more specialization of the kernel."""
-        self.nfev += 1
-        ydot = _empty(self.size)
-        if out is None and y.dtype is _F64 and y.ndim == 1:
-            try:
-                self._eval(t, y, ydot, self._buf)
-                return ydot
-            except ValueError:  # not contiguous, or not of the state's size
-                pass
+    @property
+    def nfev(self) -> int:
+        """Evaluations of y' counted (rhs, march_explicit_rk, the compiled loops that add
+        theirs); settable (the integrators add to it, reset or restore it)."""
+        return int(self._words[fast_entry.H_NFEV])
+
+    @nfev.setter
+    def nfev(self, value: int) -> None:
+        self._words[fast_entry.H_NFEV] = value
+
+    def _make_rhs(self):
+        """`rhs(t, y, out=None)`: y' (size,) at (t, y); with `out`, by the numpy reference, which
+        also fills `out` and `data`. An instance attribute, a closure over the buffer and the
+        entry point (cell reads, not attribute lookups: the call from Python is ~3x the kernel's
+        own work on a short chain). y: float64 (size,), contiguous as the integrators pass it,
+        goes straight to the compiled entry point of :func:`gyro_sim.core.fast_entry.rhs_entry`
+        (compiled or loaded at the first call), which checks its length and stride and counts
+        nfev; its dtype and dimensions are checked here, as the entry point converts without
+        checking them. Another y (dtype, layout) goes through numba's dispatcher
+        (`_rhs_other`): correct too, but it compiles one more specialization of the kernel."""
+        buf, size, other = self._buf, self.size, self._rhs_other
+        address = buf.ctypes.data  # the entry takes the address; `other` (self) keeps buf alive
+
+        def first(t, y, ydot, address):
+            nonlocal entry
+            entry = fast_entry.entry_point()
+            entry(t, y, ydot, address)
+
+        entry = first
+
+        def rhs(t: float, y: np.ndarray, out: dyn.Evaluation | None = None) -> np.ndarray:
+            if out is None and y.dtype is _F64 and y.ndim == 1:
+                ydot = _empty(size)
+                try:
+                    entry(t, y, ydot, address)
+                    return ydot
+                except ValueError:  # not contiguous, or not of the state's size: not counted
+                    pass
+            return other(t, y, out)
+
+        rhs.__doc__ = self._make_rhs.__doc__
+        return rhs
+
+    def _rhs_other(self, t: float, y, out: dyn.Evaluation | None) -> np.ndarray:
+        """rhs for what the compiled entry point does not take: outputs (`out`), another dtype
+        or layout of y."""
+        self._words[fast_entry.H_NFEV] += 1
         if out is not None:
             return self._ref.rhs(t, y, out)
         if np.shape(y) != self._shape:  # the kernel does not check its indices
             raise ValueError(f"y must have shape ({self.size},), got {np.shape(y)}")
+        ydot = _empty(self.size)
         fast.rhs_kernel(float(t), y, ydot, *self._args)
         return ydot
-
-    def _first_eval(self, t, y, ydot, buf) -> None:
-        """The first evaluation: compiles (or loads) fast_entry.rhs_entry, whose compiled entry
-        point evaluates from then on."""
-        self._eval = fast_entry.entry_point()
-        self._eval(t, y, ydot, buf)
 
     def march_explicit_rk(self, A: np.ndarray, B: np.ndarray, C: np.ndarray, t0: float,
                           y: np.ndarray, h: float, nsteps: int) -> int:

@@ -13,6 +13,7 @@ import pytest
 
 from gyro_sim import load_scene
 from gyro_sim.bench.scenes import spherical_chain
+from gyro_sim.core import dynamics as dyn
 from gyro_sim.core import fast, fast_entry
 from gyro_sim.core.model import compile_model, initial_state
 from gyro_sim.core.system import ChainODE, FastChainODE
@@ -154,16 +155,44 @@ def test_entry_checks_length_and_stride():
     model = compile_model(load_scene(spherical_chain(2)))
     buf = fast_entry.pack(fast.workspace(model), fast.model_arguments(model),
                           fast.input_arguments(model, 0.0, None, None, None))
-    entry = fast_entry.entry_point()
+    entry = fast_entry.entry_point()  # takes the buffer's address
     y = initial_state(model)
     ydot = np.empty(model.size)
-    entry(0.0, y, ydot, buf)
+    entry(0.0, y, ydot, buf.ctypes.data)
     assert np.array_equal(ydot, direct(model, 0.0, y, (0.0, None, None, None)))
     strided = np.zeros(2 * model.size)
     strided[::2] = y
     for bad in (y[:-1], np.concatenate([y, y]), strided[::2]):
         with pytest.raises(ValueError, match="contiguous vector"):
-            entry(0.0, bad, ydot, buf)
+            entry(0.0, bad, ydot, buf.ctypes.data)
+    assert buf.view(np.int64)[fast_entry.H_NFEV] == 1  # the refused calls not counted
+
+
+def test_nfev_counts_every_evaluation():
+    """FastChainODE.nfev (a word of the buffer the compiled entry counts in): one per rhs call,
+    whichever path (entry point, another dtype, outputs), plus the marches' stages; settable."""
+    model = compile_model(load_scene(spherical_chain(2, rotors=True)))
+    fst = FastChainODE(model)
+    y = initial_state(model)
+    assert fst.nfev == 0
+    for _ in range(3):
+        fst.rhs(0.0, y)
+    strided = np.zeros(2 * model.size)
+    strided[::2] = y
+    fst.rhs(0.0, strided[::2])  # refused by the entry, then numba's dispatcher
+    fst.rhs(0.0, y, out=dyn.Evaluation())
+    assert fst.nfev == 5
+    A, B, C = np.zeros((4, 4)), np.full(4, 0.25), np.zeros(4)
+    assert fst.march_explicit_rk(A, B, C, 0.0, y.copy(), 1e-3, 5) == 5
+    assert fst.nfev == 5 + 4 * 5
+    fst.nfev += 7
+    assert fst.nfev == 32
+    fst.nfev = 0
+    fst.rhs(0.0, y)
+    assert fst.nfev == 1
+    with pytest.raises(ValueError):
+        fst.rhs(0.0, y[:-1])
+    assert fst.nfev == 2  # counted by the path that refused it (as ChainODE counts every call)
 
 
 ALLOC_PROBE = r"""
@@ -173,6 +202,7 @@ import numpy as np
 from numba.core.runtime import rtsys
 from gyro_sim import load_scene
 from gyro_sim.bench.scenes import spherical_chain
+from gyro_sim.core import dynamics as dyn
 from gyro_sim.core import fast, fast_entry
 from gyro_sim.core.model import compile_model, initial_state
 
