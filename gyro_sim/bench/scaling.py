@@ -18,7 +18,9 @@ A second table (:func:`fixed_step`) puts the fixed-step loop beside MuJoCo: one 
 second of RK4 at 1 kHz on a spherical chain with a rotor on every body, CPU seconds of
 gyro_sim (one `advance(1 s)`, i.e. one compiled loop; and 1000 `advance(1 ms)` calls, the
 node's pattern) against MuJoCo's `mj_step` with its RK4 at the same step on the same chain
-(rotors as hinge bodies, gyro_sim.bench.peers), medians of `FIXED_STEP_REPEATS` runs.
+(rotors as hinge bodies, gyro_sim.bench.peers), medians of `FIXED_STEP_REPEATS` runs (one
+above MUJOCO_MAX_N), each simulator after an untimed warm-up run; with the growth exponent of
+each method from n = 100 to 1000 (:func:`growth_exponents`).
 """
 from __future__ import annotations
 
@@ -189,18 +191,41 @@ def _median_cpu(fn, repeats: int) -> float:
     return float(np.median(out))
 
 
+def _warm_up(sim) -> None:
+    """One untimed 10 ms advance, then back to the initial state: what a run does once
+    (loading compiled code, first calls) out of the timed runs."""
+    sim.advance(10 * RK4_STEP)
+    sim.reset()
+
+
+def growth_exponents(rows: list[FixedStepRow], lo: int = 100, hi: int = 1000) -> dict[str, float]:
+    """Per method, the log-log slope of CPU per simulated second between the rows n = lo and
+    n = hi (1: O(n), 2: O(n^2)); empty unless both rows were run."""
+    by_n = {r.n: r for r in rows}
+    if lo not in by_n or hi not in by_n:
+        return {}
+    a, b = by_n[lo], by_n[hi]
+    pairs = {"rk4 one advance": (a.one_call_s, b.one_call_s),
+             "rk4 per step": (a.per_step_s, b.per_step_s)}
+    pairs.update({k: (a.others[k], b.others[k]) for k in a.others if k in b.others})
+    return {k: float(np.log(y / x) / np.log(hi / lo)) for k, (x, y) in pairs.items()}
+
+
 def fixed_step(sizes=FIXED_STEP_SIZES, seconds: float = 1.0, repeats: int = FIXED_STEP_REPEATS,
                progress=None) -> list[FixedStepRow]:
     """CPU seconds per simulated second of RK4 at 1 kHz, gyro_sim (numba) and MuJoCo mj_step
     (up to MUJOCO_MAX_N), and of the other fixed-step methods (OTHER_FIXED) in 10 ms advances.
-    Above n = 100 one run of at most 0.2 simulated s each."""
+    Every simulator first runs one untimed 10 ms advance (compiled code loaded, first-call
+    work, the chooser's start-up check), then `seconds` simulated seconds per timed run, reset
+    before each: the median of `repeats` runs, one run above n = MUJOCO_MAX_N."""
     rows = []
     for i, n in enumerate(sizes):
         scene = load_scene(spherical_chain(n, rotors=True))
         sim = Simulator(scene, integrator="rk4", step=RK4_STEP, backend="numba")
         big = n > MUJOCO_MAX_N
-        seconds_n, repeats_n = (min(seconds, 0.2), 1) if big else (seconds, repeats)
+        seconds_n, repeats_n = seconds, (1 if big else repeats)
         steps = int(round(seconds_n / RK4_STEP))
+        _warm_up(sim)
 
         def one_call():
             sim.reset()
@@ -216,6 +241,7 @@ def fixed_step(sizes=FIXED_STEP_SIZES, seconds: float = 1.0, repeats: int = FIXE
         others = {}
         for name in OTHER_FIXED:
             other = Simulator(scene, integrator=name, step=RK4_STEP, backend="numba")
+            _warm_up(other)
 
             def chunks(other=other):
                 other.reset()
@@ -274,6 +300,10 @@ def fixed_step_table(rows: list[FixedStepRow]) -> str:
                      f"{'n/a' if a is None else f'{a:.2f}x'} | {'n/a' if b is None else f'{b:.2f}x'} | "
                      f"{r.one_call_s * 1e3 / r.n:.2f} | "
                      + " | ".join(f"{r.others[k] * 1e3:.1f}" if k in r.others else "" for k in names) + " |")
+    slopes = growth_exponents(rows)
+    if slopes:
+        lines.append("\nGrowth exponent from n = 100 to 1000 (log-log slope of the CPU per simulated "
+                     "second; 1 is O(n)): " + ", ".join(f"{k} {v:.2f}" for k, v in slopes.items()))
     return "\n".join(lines)
 
 
