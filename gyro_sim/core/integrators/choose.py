@@ -144,18 +144,28 @@ class Choice:
 
 
 def body_rate_bound(model, y: np.ndarray) -> float:
-    """An upper bound of the largest body angular speed |w^k| (rad/s) in state y: the sum over
-    the chain of its joints' relative rates (a spherical joint's |u| over its 3 columns, a
-    hinge's |phi'|; eqs 34, 50: w^k is the sum of the relative rates up to body k). Rotors do
+    """An upper bound of the largest body angular speed |w^k| (rad/s) in state y, in O(n).
+
+    w^k is the sum of the relative rates of the joints up to body k (eqs 34, 50): a spherical
+    joint's relative rate is its three velocity columns (world components, model.py), a hinge's
+    is phi_k' e^k. So the spherical part is summed as vectors (exact), the hinges' |phi'| are
+    added to its length (their axes need the rotations: the triangle inequality instead), and
+    the largest over the bodies is returned: exact on a spherical chain, where the sum of every
+    joint's rate grew with the chain's length (n = 1000 links at 3 rad/s: 404 rad/s). Rotors do
     not count: an axisymmetric rotor's angle never enters the dynamics (eqs 18-19), only its
     momentum does, so its spin needs no resolving; nor does a base's translation."""
+    n = model.n
+    if n == 0:
+        return 0.0
     u = y[model.i_vel]
-    total = 0.0
+    vec = np.zeros((n, 3))
     if len(model.col_sph):
-        total += float(np.sqrt((u[model.col_sph] ** 2).sum(axis=1)).sum())
+        vec[model.sph_bodies] = u[model.col_sph]
+    hinge = np.zeros(n)
     if len(model.col_hinge):
-        total += float(np.abs(u[model.col_hinge]).sum())
-    return total
+        hinge[model.hinge_bodies] = np.abs(u[model.col_hinge])
+    w = np.cumsum(vec, axis=0)
+    return float((np.sqrt((w * w).sum(axis=1)) + np.cumsum(hinge)).max())
 
 
 def substeps_for(h: float, omega: float, now: int = 1) -> int:
