@@ -148,7 +148,9 @@ class Simulator:
     def _invariants_at(self, t: float, y: np.ndarray) -> np.ndarray:
         """The compiled invariants (fast_outputs.INV_*) at (t, y) with the inputs the system
         holds (those of the call under way: no new hold), computing nothing else but the joint
-        states (fast_outputs.publication_kernel with WANT_INVARIANTS); a new array."""
+        states (fast_outputs.publication_kernel with WANT_INVARIANTS); a new array. On the numpy
+        backend the energies (INV_ENERGY, INV_KINETIC, INV_POTENTIAL, INV_JACOBI) from the
+        numpy invariants, the rest zero."""
         from . import fast_outputs as fo
 
         if self._compiled_outputs is None:  # numpy backend: the reference invariants, own workspace
@@ -521,17 +523,6 @@ class Simulator:
         are the Simulator's scratch, valid until the next call."""
         from . import fast_outputs as fo
 
-        if self._compiled_outputs is None:  # numpy backend: the reference invariants, own workspace
-            d = getattr(self, "_watch_data", None)
-            if d is None:
-                d = self._watch_data = dyn.Data(self.model)
-            dyn.positions(self.model, d, t, y)
-            dyn.velocities(self.model, d, t, y[self.model.i_vel])
-            v = inv.invariants(self.model, d, self.system.spins(t), t)
-            out = np.zeros(fo.INV_SIZE)
-            out[fo.INV_ENERGY], out[fo.INV_KINETIC], out[fo.INV_POTENTIAL] = v["energy"], v["kinetic"], v["potential"]
-            out[fo.INV_JACOBI] = v.get("jacobi", 0.0)
-            return out
         if getattr(self, "_snapshot_kernel", None) is None:
             self._snapshot_setup()
         self.system.hold(self._t, self._p, *self._inputs())
