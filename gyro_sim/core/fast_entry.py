@@ -7,8 +7,9 @@ argument): the 24 arguments of :func:`gyro_sim.core.fast.rhs_kernel` cost ~2-3 u
 more than the kernel's own work on a short chain. Here the kernel's arrays live in one float64
 buffer built once (`pack`: a header of sizes and offsets, the floats, the ints as int64 bit
 patterns, is_hinge as bytes), and :func:`rhs_entry` takes four arguments, `(t, y, ydot, buf)`:
-it cuts the buffer into the kernel's arrays (`_view`: C-ordered views of the same types as
-every other caller passes, so the kernel's one specialisation serves it) and calls the
+it cuts the buffer into the kernel's arrays (fast's `block1/2/3`, the views the kernel cuts its
+workspace with: C-ordered, of the same types as every other caller passes, so the kernel's one
+specialisation serves it) and calls the
 kernel. The results are those of the kernel called with the separate arrays, bit for bit.
 
     buf = pack(work, model_args, inputs)   # fast.workspace, fast.model_arguments,
@@ -33,7 +34,6 @@ from .fast_loop import njit_with_dependencies
 try:
     import numba
     from numba.core import cgutils, types
-    from numba.core.imputils import impl_ret_borrowed
     from numba.extending import intrinsic, overload
 except ImportError:  # pragma: no cover - exercised only where numba is missing
     numba = None
@@ -129,47 +129,6 @@ def _buffer(buf):
 
 if numba is not None:
     @intrinsic
-    def _view(typingctx, buf, start, shape):
-        """buf[start : start + prod(shape)] as a C-ordered array of `shape` (a tuple of ints),
-        sharing buf's memory (and keeping it alive), for buf a C-contiguous vector. Unchecked:
-        the header of `pack` keeps every block inside its buffer. numba's reshape of a slice
-        gives the same array but calls a C helper (~50 ns, six times an evaluation); this
-        only fills the array's fields."""
-        if not (isinstance(buf, types.Array) and buf.ndim == 1 and buf.layout == "C"
-                and isinstance(start, types.Integer) and isinstance(shape, types.UniTuple)
-                and isinstance(shape.dtype, types.Integer)):
-            return None
-        nd = shape.count
-        view_type = buf.copy(ndim=nd, layout="C")
-
-        def codegen(context, builder, sig, args):
-            source, view = (context.data_model_manager[ty] for ty in (sig.args[0], view_type))
-
-            def field(name):
-                return builder.extract_value(args[0], source.get_field_position(name))
-
-            dims = [context.cast(builder, d, shape.dtype, types.intp)
-                    for d in cgutils.unpack_tuple(builder, args[2], nd)]
-            itemsize = field("itemsize")
-            strides = [itemsize] * nd  # C order: the last axis varies fastest
-            for i in range(nd - 2, -1, -1):
-                strides[i] = builder.mul(strides[i + 1], dims[i + 1])
-            nitems = dims[0]
-            for d in dims[1:]:
-                nitems = builder.mul(nitems, d)
-            offset = context.cast(builder, args[1], sig.args[1], types.intp)
-            value = cgutils.get_null_value(context.get_value_type(view_type))
-            for name, v in (("meminfo", field("meminfo")), ("parent", field("parent")),
-                            ("nitems", nitems), ("itemsize", itemsize),
-                            ("data", builder.gep(field("data"), [offset])),
-                            ("shape", cgutils.pack_array(builder, dims)),
-                            ("strides", cgutils.pack_array(builder, strides))):
-                value = builder.insert_value(value, v, view.get_field_position(name))
-            return impl_ret_borrowed(context, builder, view_type, value)
-
-        return view_type(buf, start, shape), codegen
-
-    @intrinsic
     def _vector_at(typingctx, address, size):
         """The float64 vector of `size` at `address` (an integer), owned elsewhere (no meminfo,
         no parent): the caller keeps the memory alive."""
@@ -198,9 +157,6 @@ if numba is not None:
         if isinstance(buf, types.Integer):  # its address: its length in its header
             return lambda buf: _vector_at(buf, _vector_at(buf, HEADER).view(np.int64)[H_WORDS])
         return None
-else:  # pragma: no cover - exercised only where numba is missing
-    def _view(buf, start, shape):
-        return buf[start:start + int(np.prod(shape))].reshape(shape)
 
 
 @_njit
@@ -217,16 +173,16 @@ def rhs_entry(t, y, ydot, buf):
     h[H_NFEV] += 1
     n, N, nt = h[H_N], h[H_NCOL], h[H_NT]
     w0, ha = h[H_WORK], h[H_HINGE_AXIS]
-    is_hinge = _view(buf.view(np.bool_), _WORD * h[H_IS_HINGE], (n,))
-    fast.rhs_kernel(t, y, ydot, _view(buf, w0, (ha - w0,)), is_hinge, _view(h, h[H_QROW], (n,)),
-                    _view(h, h[H_OWN_COL], (n,)), _view(h, h[H_COL_START], (n + 1,)), _view(buf, ha, (n, 3)),
-                    _view(buf, h[H_S], (n, 3)), _view(buf, h[H_MASS], (n,)),
-                    _view(buf, h[H_FIRST_MOMENT], (n, 3)), _view(buf, h[H_INERTIA], (n, 3, 3)),
-                    _view(buf, h[H_LAM_SPEED], (n, 3)), _view(h, h[H_TORQUE_BODY], (nt,)),
-                    _view(buf, h[H_TORQUE_AXIS], (nt, 3)), _view(buf, h[H_TORQUE_A], (nt,)),
-                    _view(h, h[H_FLAGS], (7,)), _view(buf, h[H_BASE], (7,)), buf[h[H_T0]],
-                    _view(buf, h[H_P0], (nt,)), _view(buf, h[H_PDOT], (nt,)),
-                    _view(buf, h[H_L], (nt,)), _view(buf, h[H_TAU], (N,)))
+    # the views fast.rhs_kernel cuts its workspace with: C-ordered, uncounted
+    is_hinge = fast.block1(buf.view(np.bool_), _WORD * h[H_IS_HINGE], n)
+    b1, b2, b3 = fast.block1, fast.block2, fast.block3
+    fast.rhs_kernel(
+        t, y, ydot, b1(buf, w0, ha - w0), is_hinge, b1(h, h[H_QROW], n), b1(h, h[H_OWN_COL], n),
+        b1(h, h[H_COL_START], n + 1), b2(buf, ha, n, 3), b2(buf, h[H_S], n, 3), b1(buf, h[H_MASS], n),
+        b2(buf, h[H_FIRST_MOMENT], n, 3), b3(buf, h[H_INERTIA], n, 3, 3), b2(buf, h[H_LAM_SPEED], n, 3),
+        b1(h, h[H_TORQUE_BODY], nt), b2(buf, h[H_TORQUE_AXIS], nt, 3), b1(buf, h[H_TORQUE_A], nt),
+        b1(h, h[H_FLAGS], 7), b1(buf, h[H_BASE], 7), buf[h[H_T0]], b1(buf, h[H_P0], nt),
+        b1(buf, h[H_PDOT], nt), b1(buf, h[H_L], nt), b1(buf, h[H_TAU], N))
 
 
 def entry_point():
