@@ -14,6 +14,8 @@ writes its timing statistics (`stats_file`). Reported per run:
   period for a CPU (the OS gave the CPUs to other threads or processes), its whole wait for a
   CPU over the run (Linux schedstat), and the CPU time the hypervisor took from this virtual
   machine meanwhile (steal, all CPUs; 10 ms ticks);
+- the physics thread's scheduling: SCHED_FIFO at the node's `thread_priority` where the
+  system allows it, else 0 (normal); `--thread-priority 0 50` runs both, for the comparison;
 - the longest garbage-collector pause (any thread: it holds the interpreter lock) and the
   machine's 1-minute load average at the start and end of the run (other processes included).
 
@@ -44,6 +46,8 @@ HOLDS = 0.99
 #: 100-link chain falls, whips, and RK4 at the node's 1 ms diverges at t = 5.2 s; in space it
 #: stays regular for 60 s and more (energy drift 7e-6 J in 60 s). The cost per step is the same.
 GRAVITY = False
+#: the physics thread's SCHED_FIFO priority asked for (the node's default thread_priority)
+DEFAULT_PRIORITY = 50
 
 
 @dataclass
@@ -51,6 +55,7 @@ class Run:
     n: int
     record: bool
     stats: dict
+    priority: int = DEFAULT_PRIORITY
 
     def get(self, key: str, default=float("nan")):
         v = self.stats.get(key)
@@ -71,7 +76,7 @@ NODE_COMMAND = (sys.executable, "-m", "gyro_sim.ros.node")
 
 
 def run_node(n: int, record: bool, seconds: float, workdir: Path, index: int = 0, node_command=NODE_COMMAND,
-             backend: str = "auto") -> Run:
+             backend: str = "auto", priority: int = DEFAULT_PRIORITY) -> Run:
     """One node run on spherical_chain(n); its statistics."""
     import yaml
 
@@ -79,12 +84,12 @@ def run_node(n: int, record: bool, seconds: float, workdir: Path, index: int = 0
 
     scene = workdir / f"chain_{n}.yaml"
     scene.write_text(yaml.safe_dump(spherical_chain(n, gravity=GRAVITY), sort_keys=False))
-    stats = workdir / f"stats_{n}_{int(record)}.json"
+    stats = workdir / f"stats_{n}_{int(record)}_{priority}.json"
     params = [f"scene:={scene}", f"physics_rate:={PHYSICS_RATE}", f"publish_rate:={PUBLISH_RATE}",
               "real_time_factor:=1.0", "integrator:=rk4", f"backend:={backend}", f"duration:={seconds}",
-              f"stats_file:={stats}"]
+              f"stats_file:={stats}", f"thread_priority:={priority}"]
     if record:
-        params.append(f"record:={workdir / f'chain_{n}.mcap'}")
+        params.append(f"record:={workdir / f'chain_{n}_{priority}.mcap'}")
     cmd = [*node_command, "--ros-args"]
     for p in params:
         cmd += ["-p", p]
@@ -102,31 +107,33 @@ def run_node(n: int, record: bool, seconds: float, workdir: Path, index: int = 0
     if proc.returncode != 0 or not stats.exists():
         raise RuntimeError(f"gyro_sim_node failed (n = {n}, record = {record}, exit {proc.returncode}):\n{err[-2000:]}")
     # the machine's 1-minute load average when the run started and ended (the node included)
-    return Run(n, record, {**json.loads(stats.read_text()), "load_start": load0, "load_end": os.getloadavg()[0]})
+    return Run(n, record, {**json.loads(stats.read_text()), "load_start": load0, "load_end": os.getloadavg()[0]},
+               priority)
 
 
 def measure(sizes=DEFAULT_SIZES, seconds: float = DEFAULT_SECONDS, progress=None, node_command=NODE_COMMAND,
-            backend: str = "auto") -> list[Run]:
+            backend: str = "auto", priorities=(DEFAULT_PRIORITY,)) -> list[Run]:
     runs = []
     with tempfile.TemporaryDirectory(prefix="gyro_sim_realtime_") as tmp:
-        cases = [(n, rec) for n in sizes for rec in (False, True)]
-        for i, (n, rec) in enumerate(cases):
-            runs.append(run_node(n, rec, seconds, Path(tmp), i, node_command, backend))
+        cases = [(n, rec, p) for n in sizes for rec in (False, True) for p in priorities]
+        for i, (n, rec, p) in enumerate(cases):
+            runs.append(run_node(n, rec, seconds, Path(tmp), i, node_command, backend, p))
             if progress:
-                progress(i + 1, len(cases), f"n = {n}{' recording' if rec else ''}")
+                progress(i + 1, len(cases), f"n = {n}{' recording' if rec else ''}, thread_priority {p}")
     return runs
 
 
 def table(runs: list[Run]) -> str:
     lines = [
-        "| n | recording | step p50 (us) | step p99 (us) | publish jitter p50 (us) | publish jitter p99 (us) "
+        "| n | recording | FIFO priority (asked / got) | step p50 (us) | step p99 (us) | publish jitter p50 (us) | publish jitter p99 (us) "
         "| CPU share | achieved RTF | deadline misses | of which after waiting for a CPU "
         "| physics thread waiting for a CPU (ms) | host steal (ms) | longest GC pause (us) | load (start / end) |",
-        "|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in runs:
         lines.append(
-            f"| {r.n} | {'yes' if r.record else 'no'} | {r.get('step_time_p50_us'):.0f} | {r.get('step_time_p99_us'):.0f} "
+            f"| {r.n} | {'yes' if r.record else 'no'} | {r.priority} / {int(r.get('physics_thread_priority', 0))} "
+            f"| {r.get('step_time_p50_us'):.0f} | {r.get('step_time_p99_us'):.0f} "
             f"| {r.get('publish_jitter_p50_us'):.0f} | {r.get('publish_jitter_p99_us'):.0f} "
             f"| {100 * r.get('cpu_share'):.0f} % | {r.get('real_time_factor_achieved'):.3f} "
             f"| {int(r.get('deadline_misses', 0))} | {int(r.get('cpu_wait_misses', 0))} "
@@ -147,6 +154,8 @@ def table(runs: list[Run]) -> str:
             f"n = {r.n}: {int(r.get('records_written', 0))} records, writer process {r.get('recorder_thread_cpu_s'):.2f} s CPU, "
             f"the node's sender thread {r.get('recorder_sender_cpu_s', float('nan')):.2f} s, "
             f"in {r.get('wall_s'):.1f} s" for r in rec) + ".")
+    if any(r.priority and not r.get("physics_thread_priority", 0) for r in runs):
+        lines.append("SCHED_FIFO was refused here: every run used the normal scheduler (an rtprio limit allows it).")
     return "\n".join(lines)
 
 
@@ -157,12 +166,13 @@ def plot(runs: list[Run], path: str) -> None:
     import matplotlib.pyplot as plt
 
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4))
-    for rec, style in ((False, "o-"), (True, "s--")):
-        rs = [r for r in runs if r.record == rec]
+    priorities = sorted({r.priority for r in runs})
+    for (rec, style), prio in ((c, p) for c in ((False, "o-"), (True, "s--")) for p in priorities):
+        rs = [r for r in runs if r.record == rec and r.priority == prio]
         if not rs:
             continue
         n = [r.n for r in rs]
-        label = "recording" if rec else "no recording"
+        label = ("recording" if rec else "no recording") + (f", priority {prio}" if len(priorities) > 1 else "")
         a1.plot(n, [r.get("step_time_p50_us") for r in rs], style, label=f"p50, {label}")
         a1.plot(n, [r.get("step_time_p99_us") for r in rs], style, alpha=0.5, label=f"p99, {label}")
         a2.plot(n, [r.get("real_time_factor_achieved") for r in rs], style, label=f"achieved RTF, {label}")
@@ -198,7 +208,8 @@ def cmd_bench_realtime(args) -> int:
     t0 = time.perf_counter()
     load0 = os.getloadavg()[0]
     try:
-        runs = measure(sizes, seconds, progress=Progress("realtime"), backend=args.backend)
+        runs = measure(sizes, seconds, progress=Progress("realtime"), backend=args.backend,
+                       priorities=tuple(args.thread_priority))
     except RuntimeError as exc:
         print(f"gyro-sim bench realtime: {exc}", file=sys.stderr)
         return 1
@@ -221,6 +232,9 @@ def register(sub, bench) -> None:
     r.add_argument("--seconds", type=float, default=DEFAULT_SECONDS, help="simulated seconds per run")
     r.add_argument("--quick", action="store_true", help=f"n = 2 only, {QUICK_SECONDS:g} s runs (CI)")
     r.add_argument("--backend", default="auto", help="dynamics of the node: auto | numba | numpy")
+    r.add_argument("--thread-priority", type=int, nargs="+", default=[DEFAULT_PRIORITY], choices=range(100),
+                   metavar="P", help=f"the node's thread_priority, 0-99 (0: normal scheduler); several: a run each "
+                   f"(default {DEFAULT_PRIORITY}, the node's)")
     r.add_argument("--out", default="out/bench", help="directory for realtime.md, realtime.json, realtime.png")
     r.add_argument("--force", action="store_true", help="replace existing report files in --out")
     r.set_defaults(fn=cmd_bench_realtime)

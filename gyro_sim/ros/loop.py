@@ -39,7 +39,7 @@ from ..core.simulator import SimulationError
 from ..io import messages as M
 from ..io.resim import COMMAND_TIMEOUT_EVENT
 from .outputs import OutputsClosed
-from .pacing import Histogram, Pacer, RateMeter, RunDelay, Samples, chunk_steps, host_steal
+from .pacing import Histogram, Pacer, RateMeter, RunDelay, Samples, chunk_steps, host_steal, realtime_priority
 
 #: wall seconds between diagnostics while paused or stopped (running, they go with every
 #: publication at least gyro_sim.io.messages.DIAGNOSTICS_PERIOD simulated seconds apart)
@@ -193,6 +193,11 @@ class SimLoop:
         self._cpu_wait = [math.nan, math.nan]  # the physics thread's wait for a CPU at its start, at the last check
         self._steal = [math.nan, math.nan]  # the host's steal at the start and the end
         self.frozen = 0  # objects of the start-up frozen out of the collector's reach
+        #: the physics thread's SCHED_FIFO priority in effect (0: normal scheduler) and one line
+        #: saying how it is scheduled, set by the thread when it starts (`started` then set)
+        self.priority = 0
+        self.scheduling = ""
+        self.started = threading.Event()
 
     # --- from other threads ----------------------------------------------------------------------
     def submit_command(self, raw: bytes, values) -> str | None:
@@ -266,7 +271,19 @@ class SimLoop:
             req.done.set()
 
     # --- the loop ------------------------------------------------------------------------------------
+    def _schedule(self) -> None:
+        """This (the physics) thread's scheduling: SCHED_FIFO at config.thread_priority while
+        pacing in real time (pacing.realtime_priority); as fast as possible it never sleeps, and a
+        FIFO thread that never sleeps would take its CPU from everything else: normal then."""
+        wanted = int(getattr(self.config, "thread_priority", 0))
+        if self.rtf > 0:
+            self.priority, self.scheduling = realtime_priority(wanted)
+        else:
+            self.scheduling = "normal scheduler (real_time_factor 0: as fast as possible, never sleeping)"
+        self.started.set()
+
     def _run(self) -> None:
+        self._schedule()
         self.wall_start, self.cpu_start = self.clock(), time.process_time()
         self._cpu_wait = [self.run_delay()] * 2
         self._steal[0] = host_steal()
@@ -419,6 +436,7 @@ class SimLoop:
             "last_command_effective_s": c.last_effective,
             "moments_applied_since_s": c.moments_since,
             "backend": sim.backend,
+            "physics_thread_priority": self.priority,
         }
         if c.last_reject_reason:
             values["last_reject_reason"] = c.last_reject_reason
@@ -486,6 +504,8 @@ class SimLoop:
             "physics_cpu_wait_s": self._cpu_wait[1] - self._cpu_wait[0],
             "host_steal_s": self._steal[1] - self._steal[0],
             "gc_frozen_objects": self.frozen,
+            "physics_thread_priority": self.priority,
+            "physics_thread_scheduling": self.scheduling,
             "gc_collections": self.gc_pauses.pauses.n,
             "gc_pause_max_us": (self.gc_pauses.pauses.max if self.gc_pauses.pauses.n else 0.0) * 1e6,
             "gc_pause_total_ms": self.gc_pauses.pauses.total * 1e3,

@@ -42,6 +42,8 @@ from .params import PARAMETERS, ParameterError, validate  # noqa: E402
 #: GIL switch interval (s) while the node runs: bounds how long the physics thread, woken at
 #: its deadline, waits for the executor thread (Python's default is 5 ms)
 SWITCH_INTERVAL = 5e-4
+#: longest wait (s) for the physics thread to say how it is scheduled (it does so first thing)
+STARTED_TIMEOUT = 1.0
 #: longest wait of the executor (s): how soon a signal is acted on
 SPIN_PERIOD = 0.1
 #: the largest share of the interpreter the executor thread takes while callbacks keep coming:
@@ -248,6 +250,10 @@ def _main(argv, shutdown: Shutdown) -> int:
             shutdown.starting = False
             if not shutdown.requested.is_set():
                 node.loop.start()
+                if node.loop.started.wait(STARTED_TIMEOUT):  # how the physics thread is scheduled
+                    log = node.get_logger().info if node.loop.priority or not node.config.thread_priority \
+                        or node.config.real_time_factor <= 0 else node.get_logger().warning
+                    log(f"physics thread: {node.loop.scheduling}")
             while not shutdown.requested.is_set() and not node.loop.finished.is_set():
                 t0 = time.monotonic()
                 executor.spin_once(timeout_sec=SPIN_PERIOD)

@@ -237,3 +237,29 @@ def host_steal(path: str = "/proc/stat") -> float:
         return int(fields[8]) / os.sysconf("SC_CLK_TCK")
     except (OSError, ValueError, IndexError, AttributeError):
         return math.nan
+
+
+def realtime_priority(priority: int, setscheduler=None) -> tuple[int, str]:
+    """Put the calling thread under the SCHED_FIFO policy at `priority` (1-99), as ros2_control
+    does with its control thread (`thread_priority`), where the system allows it (root, or an
+    rtprio limit: `ulimit -r`, /etc/security/limits.conf). Returns (the FIFO priority in
+    effect, 0 for the normal scheduler; one line saying so and, if refused, why and how to
+    allow it).
+
+    A FIFO thread that becomes runnable (its sleep until a deadline ends) preempts every
+    normal thread on its CPU at once: under load, a normal thread waits for a CPU for up to
+    a scheduler slice (a few ms), which is a deadline miss at 1 kHz. Linux keeps 5 % of
+    every CPU second for normal threads (sched_rt_runtime_us), so a FIFO thread cannot
+    lock a machine up. `setscheduler` is injectable for tests (os.sched_setscheduler)."""
+    priority = int(priority)
+    if priority <= 0:
+        return 0, "normal scheduler (thread_priority 0)"
+    setscheduler = setscheduler or getattr(os, "sched_setscheduler", None)
+    if setscheduler is None or not hasattr(os, "SCHED_FIFO"):
+        return 0, f"normal scheduler: SCHED_FIFO (thread_priority {priority}) is not available on this system"
+    try:
+        setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))  # 0: the calling thread (Linux)
+    except OSError as exc:
+        return 0, (f"normal scheduler: SCHED_FIFO priority {priority} refused ({exc.strerror or exc}); "
+                   f"allow it with an rtprio limit (ulimit -r, /etc/security/limits.conf) or set thread_priority:=0")
+    return priority, f"SCHED_FIFO priority {priority}"

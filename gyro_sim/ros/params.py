@@ -53,6 +53,9 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("publish_poses", bool, True, "publish ~/poses (computed only while someone listens or records)"),
     Parameter("stats_file", str, "", "write the run's timing statistics as JSON to this file at exit; empty = none"),
     Parameter("overwrite", bool, False, "replace existing record / stats_file files (never the scene file)"),
+    Parameter("thread_priority", float, 50.0,
+              "SCHED_FIFO priority (1-99) of the physics thread while pacing in real time, where the system allows "
+              "it (as ros2_control's thread_priority); 0 = the normal scheduler", 0.0, 99.0),
 )
 
 
@@ -76,6 +79,7 @@ class NodeConfig:
     publish_poses: bool
     stats_file: str
     overwrite: bool = False
+    thread_priority: float = 0.0
 
     @property
     def dt(self) -> float:
@@ -124,6 +128,8 @@ def validate(values: dict) -> NodeConfig:
         elif p.kind is str and not isinstance(v[p.name], str):
             problems.append(f"{p.name}: expected a string, got {v[p.name]!r}")
     bad = {m.split(":")[0] for m in problems}
+    if "thread_priority" not in bad and v["thread_priority"] != int(v["thread_priority"]):
+        problems.append(f"thread_priority: must be a whole number (0-99), got {v['thread_priority']!r}")
     if not {"physics_rate", "publish_rate"} & bad:
         ratio = v["physics_rate"] / v["publish_rate"]
         if ratio < 1 - RATIO_TOLERANCE:

@@ -130,6 +130,19 @@ def test_params_file_and_override_honoured(ros):
     assert [k for k in v if k.startswith("axis_moment_")] == [f"axis_moment_{a}_Nm" for a in ("wheel2", "arm3", "arm4")]
 
 
+def test_the_node_says_how_its_physics_thread_is_scheduled(ros):
+    """thread_priority defaults to 50: SCHED_FIFO where the system allows it, else the normal
+    scheduler with the reason; the start-up log and /diagnostics agree on which."""
+    node, client = ros
+    prio = int(latest_diag(client)["physics_thread_priority"])
+    line = wait_for(lambda: [x for x in (node.stderr + node.stdout).splitlines() if "physics thread:" in x],
+                    5.0, "the physics thread's scheduling line")[0]
+    if prio:
+        assert prio == 50 and line.endswith("physics thread: SCHED_FIFO priority 50"), line
+    else:
+        assert "normal scheduler: SCHED_FIFO priority 50 refused" in line, line
+
+
 def test_joint_states_rate_names_and_stamps(ros):
     node, client = ros
     t0 = time.monotonic()

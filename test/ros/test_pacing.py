@@ -11,7 +11,7 @@ import pytest
 from gyro_sim.core.simulator import Simulator
 from gyro_sim.paths import find_scene
 from gyro_sim.ros.loop import Request, SimLoop, check_command
-from gyro_sim.ros.pacing import Pacer, chunk_steps
+from gyro_sim.ros.pacing import Pacer, chunk_steps, realtime_priority
 from gyro_sim.ros.params import ParameterError, validate
 
 
@@ -51,6 +51,8 @@ class Outputs:
 
 
 def make_loop(clock, step_cost=0.0, **params):
+    # the fake clock's loop never sleeps: a SCHED_FIFO thread that never sleeps would hold a CPU
+    params = {"thread_priority": 0, **params}
     cfg = validate({"scene": "hinge_chain", "physics_rate": 250.0, "publish_rate": 50.0, **params})
     sim = Simulator(cfg.scene, integrator=cfg.integrator, step=cfg.dt)
     if step_cost:
@@ -278,7 +280,7 @@ def test_misses_after_waiting_for_a_cpu_are_told_apart():
             waited[0] += wait_per_check
             return waited[0]
 
-        cfg = validate({"scene": "hinge_chain", "physics_rate": 250.0, "publish_rate": 50.0})
+        cfg = validate({"scene": "hinge_chain", "physics_rate": 250.0, "publish_rate": 50.0, "thread_priority": 0})
         sim = Simulator(cfg.scene, integrator=cfg.integrator, step=cfg.dt)
         advance = sim.advance
 
@@ -295,3 +297,55 @@ def test_misses_after_waiting_for_a_cpu_are_told_apart():
         s = loop.summary()
         assert s["cpu_wait_misses"] == loop.cpu_wait_misses
         assert s["physics_cpu_wait_s"] == pytest.approx(waited[0] - wait_per_check)  # the last read less the first
+
+
+def test_realtime_priority_asks_fifo_and_says_when_refused():
+    calls = []
+
+    def granted(pid, policy, param):
+        calls.append((pid, policy, param.sched_priority))
+
+    assert realtime_priority(50, granted) == (50, "SCHED_FIFO priority 50")
+    assert calls == [(0, os.SCHED_FIFO, 50)]  # 0: the calling thread
+
+    def refused(pid, policy, param):
+        raise PermissionError(1, "Operation not permitted")
+
+    prio, line = realtime_priority(50, refused)
+    assert prio == 0 and "refused (Operation not permitted)" in line and "thread_priority:=0" in line
+    calls.clear()
+    assert realtime_priority(0, granted)[0] == 0 and not calls  # 0: never asked
+
+
+def test_thread_priority_is_a_whole_number_from_0_to_99():
+    assert validate({"thread_priority": 10}).thread_priority == 10
+    for bad, says in ((2.5, "whole number"), (100, "<= 99"), (-1, ">= 0")):
+        with pytest.raises(ParameterError, match=f"thread_priority: .*{says}"):
+            validate({"thread_priority": bad})
+
+
+def test_the_physics_thread_is_fifo_only_while_pacing_in_real_time():
+    """A real thread, the real scheduler: FIFO at the priority asked for while pacing (if the
+    system allows it: then the thread reads SCHED_FIFO back itself), never as fast as possible."""
+    for rtf, prio in ((1.0, 7), (0.0, 7)):
+        clock = FakeClock()
+        loop, _ = make_loop(clock, real_time_factor=rtf, thread_priority=prio, duration=0.02)
+        seen = []
+        body = loop._run
+
+        def run():
+            body()
+            seen.append((os.sched_getscheduler(0), os.sched_getparam(0).sched_priority))
+
+        loop.thread = threading.Thread(target=run, daemon=True)
+        loop.start()
+        loop.thread.join(10)
+        assert loop.started.is_set() and not loop.crash
+        if rtf == 0.0:
+            assert loop.priority == 0 and "as fast as possible" in loop.scheduling
+            assert seen == [(os.SCHED_OTHER, 0)]
+        elif loop.priority:
+            assert loop.scheduling == "SCHED_FIFO priority 7" and seen == [(os.SCHED_FIFO, 7)]
+        else:  # refused here (no rtprio limit): said so, and the thread is as it was
+            assert "refused" in loop.scheduling and seen == [(os.SCHED_OTHER, 0)]
+        assert loop.summary()["physics_thread_priority"] == loop.priority
