@@ -35,9 +35,9 @@ LOOPS = {
     # fixed: its rescue (dop853) steps through the Python driver on the kernels
     "fixed": (("fast_loop", "erk_march"), ("fast_gauss", "gauss_march"), ("dop853_kernels", "dop_update")),
     "dop853": (("fast_dop853", "dop853_advance"),),
-    # auto: dop853's compiled loop in its detection mode, the cost window (called while radau
-    # runs); radau's own kernels compile at the first switch to radau
-    "auto": (("fast_dop853", "dop853_advance"), ("dop853_kernels", "auto_measure")),
+    # auto: dop853's and radau's compiled loops in their detection modes (both built with the
+    # integrator: radau's is loaded, or compiled, before the first switch to it)
+    "auto": (("fast_dop853", "dop853_advance"), ("fast_radau", "radau_advance")),
     "radau": (("fast_radau", "radau_advance"),),
 }
 #: the node's default

@@ -12,6 +12,13 @@ directly and the arithmetic of :mod:`gyro_sim.core.radau_kernels` (the starting 
 :mod:`gyro_sim.core.dop853_kernels`), the very functions the Python driver calls between its
 rhs evaluations on other systems: the two drivers give the same bits.
 
+Its detection mode runs the "auto" method's radau phase
+(:class:`gyro_sim.core.integrators.auto.Auto`): rho(J) whenever the Jacobian is refreshed,
+and after every accepted step Auto's tests on h rho and on the cost (radau_kernels.auto_*,
+dop853_kernels.auto_measure), returning at the accepted state where one asks for the
+hand-back to dop853; the Python loop Auto runs on other systems calls the same kernels on the
+same state.
+
 Radau dispatches to it when its system offers `kernel_arguments` and `quaternion_block` (the
 compiled :class:`gyro_sim.core.system.FastChainODE`), has no `jacobian`, and is at most
 DENSE_MAX states (the matrix-free mode steps in Python), through :func:`loop_for`: one
@@ -39,7 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from . import dop853_kernels, fast, fast_loop, radau_kernels
-from .dop853_kernels import dop_initial_probe, dop_initial_step
+from .dop853_kernels import COST_RADAU, auto_measure, dop_initial_probe, dop_initial_step
 from .radau_kernels import (
     C_LAST_STEP_STRETCH,
     C_LU_REUSE_RTOL,
@@ -47,8 +54,13 @@ from .radau_kernels import (
     C_MIN_STEP_RELATIVE,
     C_NEWTON_FAIL_FACTOR,
     C_NEWTON_MAXITER,
+    EASY_RHO,
+    EASY_STALE,
     NEWTON_CONVERGED,
     NEWTON_DIVERGING,
+    auto_cost_test,
+    auto_nonstiffness_test,
+    auto_spectral_radius,
     rad_add,
     rad_clip,
     rad_control_accepted,
@@ -87,6 +99,15 @@ INITIAL_RHS_NONFINITE = 2
 ACCEPTED_RHS_NONFINITE = 3
 #: no starting step is representable (|f0| too large against |y0|; mem[M_H]: ||f0|| weighted)
 NO_STARTING_STEP = 4
+#: detection mode: a test asks for a hand-back to dop853 at the accepted state mem[M_T] < t1
+#: (the reason in flags[F_REASON])
+SWITCH = 5
+
+# --- the reasons of a SWITCH, in flags[F_REASON] (after fast_dop853's REASON_STIFF, _REJECTED)
+#: h rho(J) < NONSTIFF_HRHO in the steps needed in a row
+REASON_NONSTIFF = 3
+#: radau costs COST_MARGIN times what dop853 did (or would)
+REASON_COSTLY = 4
 
 #: the order of Radau's error estimator (the starting step's exponent)
 ORDER_OF_ESTIMATOR = 3
@@ -104,10 +125,11 @@ MEM_SIZE = 12
 #: layout of `flags`: a Jacobian is there, taken at the current state, to be renewed; LU factors
 #: are there; a collocation polynomial is there (all 0/1, in and out); outputs: the status,
 #: rhs evaluations, Jacobians, LU factorisations, accepted and rejected steps, outputs filled,
-#: whether f = rhs(y_new) is known, the non-finite trial of a failing step, the steps traced
-FLAGS_SIZE = 15
+#: whether f = rhs(y_new) is known, the non-finite trial of a failing step, the steps traced,
+#: the reason of a SWITCH
+FLAGS_SIZE = 16
 (F_HAS_J, F_CURRENT_JAC, F_RECOMPUTE_JAC, F_HAS_LU, F_HAS_SOL, F_STATUS, F_NFEV, F_NJEV, F_NLU,
- F_ACCEPTED, F_REJECTED, F_OUTPUTS, F_F_NEW, F_NONFINITE, F_TRACED) = range(FLAGS_SIZE)
+ F_ACCEPTED, F_REJECTED, F_OUTPUTS, F_F_NEW, F_NONFINITE, F_TRACED, F_REASON) = range(FLAGS_SIZE)
 
 
 @_njit
@@ -136,7 +158,7 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
                   mu_complex, control, initial, fd_rel_step, fd_min_scale, i_q0, nq,
                   f, J, LU_real, piv_real, LU_complex, piv_complex, Z0, Z, W, dW, F, ys, f_real,
                   f_complex, scale, delta, ZE, err, fe, y_new, y_old, y_bad, bad, Qt, sol_y, y_end,
-                  trace, mem, flags,
+                  trace, mem, flags, counters, window, cost, handback, easy, power,
                   work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
                   inertia, lam_speed, torque_body, torque_axis, torque_A, flags_k, base,
                   ht0, p0, pdot, L_rotor, tau):
@@ -157,9 +179,22 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
     complex); y_bad (size,) and bad (3,): the state or stages of the last non-finite trial.
     trace (k,): the ends of the first k accepted steps (k may be 0). The arguments from `work`
     on are those of fast.rhs_kernel (`flags_k` its `flags`, `ht0` its `t0`).
+
+    Detection mode (handback not empty), the "auto" method's radau phase
+    (gyro_sim.core.integrators.auto.Auto, whose Python loop over Radau's public single step
+    does the same on other systems): after every accepted step, as in that loop, rho(J) of
+    the Jacobian in use if it was refreshed since the last rho (radau_kernels.
+    auto_spectral_radius; `power` (size,) the start of its power iterations), the
+    non-stiffness test on h rho, the cost window (dop853_kernels.auto_measure) and, if the
+    first did not fire, the cost test (radau_kernels.auto_*); a hand-back asked for before t1
+    ends the call there (SWITCH, as a call that ended there: the next continues from it). The
+    tests' state: counters, window, cost (dop853_kernels), handback, easy (radau_kernels),
+    carried from call to call. Off, these are not read (empty or not).
     """
+    detecting = handback.shape[0] > 0
     m = te.shape[0]
     nfev = 0
+    nfev_measured = 0  # nfev at the end of the last step measured (detection mode)
     njev = 0
     nlu = 0
     naccepted = 0
@@ -183,6 +218,7 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
     f_new = False
     t_fail = t0
     h_fail = 0.0
+    reason = 0
     j = 0
     while j < m and te[j] <= t0:
         Y[j, :] = y
@@ -247,6 +283,8 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
             has_lu = False
             current_jac = True
             recompute_jac = False
+            if detecting:
+                easy[EASY_STALE] = 1.0
         while True:
             if h_abs < min_step:
                 status = COLLAPSED
@@ -304,6 +342,8 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
                 njev += 1
                 has_lu = False
                 current_jac = True
+                if detecting:
+                    easy[EASY_STALE] = 1.0
             if not converged:
                 h_abs = abs(h) * control[C_NEWTON_FAIL_FACTOR]
                 has_lu = False
@@ -385,8 +425,21 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
         while j < m and te[j] <= t:
             Y[j, :] = y
             j += 1
-    if status == DONE:  # end: the next call continues if it starts here
-        mem[M_T_END] = t1
+        if detecting:  # the tests of the step (Auto._run)
+            if easy[EASY_STALE] != 0.0:  # rho of the Jacobian refreshed since the last one
+                easy[EASY_RHO] = auto_spectral_radius(J, power, handback)
+                easy[EASY_STALE] = 0.0
+            reason = REASON_NONSTIFF if auto_nonstiffness_test(t - t_old, easy, handback) else 0
+            auto_measure(t - t_old, nfev - nfev_measured, counters, window, cost, COST_RADAU)
+            nfev_measured = nfev
+            if reason == 0 and auto_cost_test(cost, counters, window, easy, handback):
+                reason = REASON_COSTLY
+            if reason != 0 and t < t1:
+                status = SWITCH
+                break
+            reason = 0
+    if status == DONE or status == SWITCH:  # end: the next call continues if it starts here
+        mem[M_T_END] = t1 if status == DONE else t
         y_end[:] = y
         mem[M_T] = t
     else:
@@ -416,6 +469,7 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
     flags[F_F_NEW] = f_new
     flags[F_NONFINITE] = nonfinite
     flags[F_TRACED] = min(naccepted, trace.shape[0])
+    flags[F_REASON] = reason
 
 
 _LOOPS: dict[tuple, fast_loop.Direct] = {}

@@ -48,6 +48,10 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
+from .dop853_kernels import C_WINDOW, COST_DOP853, COST_RADAU
+
 try:
     import numba
 except ImportError:  # pragma: no cover - exercised only where numba is missing
@@ -483,3 +487,141 @@ def rad_dense_eval(Qt, y_old, t_old, h, tq, Y):
         x3 = x2 * x
         for i in range(y_old.shape[0]):
             Y[r, i] = (Qt[0, i] * x + Qt[1, i] * x2 + Qt[2, i] * x3) + y_old[i]
+
+
+# --- the "auto" method's hand-back tests on radau's steps --------------------------------------
+# One implementation for both drivers of the radau phase of gyro_sim.core.integrators.auto.Auto:
+# its Python loop (Radau's public single step, on any system) and the detection mode of the
+# compiled loop (fast_radau.radau_advance) call these on the same state arrays, owned by Auto,
+# beside those of dop853_kernels (counters, window, cost: the cost window of dop853_kernels'
+# auto_measure):
+#
+#     handback (HANDBACK_SIZE,) float64  the constants: NONSTIFF_HRHO, COST_MARGIN,
+#                                         DOP853_EVALS, DOP853_BOUNDARY, EIG_MAX_SIZE,
+#                                         POWER_ITERATIONS (auto.py)
+#     easy (EASY_SIZE,) float64           rho(J) of radau's Jacobian (NaN: none yet), 1 while a
+#                                         Jacobian refreshed since is waiting for its rho, the
+#                                         steps in a row with h rho < NONSTIFF_HRHO, the count of
+#                                         them that hands back
+#     power (n,) float64                  the start of the power iterations (n > EIG_MAX_SIZE)
+HB_NONSTIFF_HRHO, HB_COST_MARGIN, HB_DOP853_EVALS, HB_DOP853_BOUNDARY, HB_EIG_MAX_SIZE, \
+    HB_POWER_ITERATIONS = range(6)
+HANDBACK_SIZE = 6
+EASY_RHO, EASY_STALE, EASY_STEPS, EASY_NEEDED = range(4)
+EASY_SIZE = 4
+
+if numba is not None:
+    try:  # LAPACK's geev as numba's np.linalg.eigvals calls it (scipy's LAPACK)
+        _XGEEV_REAL = _LAPACK().numba_ez_rgeev(_types.float64)
+    except Exception:  # noqa: BLE001 - another numba layout: eigvals of the complex matrix
+        _XGEEV_REAL = None
+else:
+    _XGEEV_REAL = None
+_JOB_NONE = ord("N")
+
+if _XGEEV_REAL is not None:
+    @_njit
+    def _geev_real(At, wr, wi, v):
+        """Eigenvalues wr + i wi of M from At (n, n) = M^T (M column-major; destroyed)."""
+        n = At.shape[0]
+        return _XGEEV_REAL(_KIND_REAL, _JOB_NONE, _JOB_NONE, n, At.ctypes, n, wr.ctypes, wi.ctypes,
+                           v.ctypes, 1, v.ctypes, 1)
+
+    @_njit
+    def _eig_radius(J):
+        """max |eigenvalue| of J (n, n), n > 0, by LAPACK's dgeev."""
+        n = J.shape[0]
+        At = np.empty((n, n))
+        for i in range(n):
+            for j in range(n):
+                At[j, i] = J[i, j]
+        wr, wi, v = np.empty(n), np.empty(n), np.empty(1)
+        _geev_real(At, wr, wi, v)
+        rho = 0.0
+        for i in range(n):
+            r = math.hypot(wr[i], wi[i])
+            if r > rho or r != r:
+                rho = r
+        return rho
+else:
+    @_njit
+    def _eig_radius(J):
+        """max |eigenvalue| of J (n, n), n > 0 (numba's eigvals: the complex matrix, whose
+        eigenvalues need no change of domain; numpy's without numba)."""
+        w = np.linalg.eigvals(J.astype(np.complex128))
+        rho = 0.0
+        for i in range(w.shape[0]):
+            r = abs(w[i])
+            if r > rho or r != r:
+                rho = r
+        return rho
+
+
+@_njit
+def auto_spectral_radius(J, power, handback):
+    """rho(J) = max |eigenvalue| of J (n, n): inf if J is not finite, 0 for n = 0; up to
+    EIG_MAX_SIZE states from the eigenvalues (LAPACK's dgeev), above it |J x| after
+    POWER_ITERATIONS power iterations from x = power (n,) (x <- J x / |J x|; Golub, Van Loan,
+    sec. 7.3.1: an estimate, from below where the dominant eigenvalues are a complex pair)."""
+    n = J.shape[0]
+    for i in range(n):
+        for j in range(n):
+            if not (abs(J[i, j]) < math.inf):
+                return math.inf
+    if n == 0:
+        return 0.0
+    if n <= handback[HB_EIG_MAX_SIZE]:
+        return _eig_radius(J)
+    x = power.copy()
+    y = np.empty(n)
+    rho = 0.0
+    for _ in range(int(handback[HB_POWER_ITERATIONS])):
+        acc2 = 0.0
+        for i in range(n):
+            acc = 0.0
+            for j in range(n):
+                acc += J[i, j] * x[j]
+            y[i] = acc
+            acc2 += acc * acc
+        rho = math.sqrt(acc2)
+        if rho == 0.0:
+            return 0.0
+        for i in range(n):
+            x[i] = y[i] / rho
+    return rho
+
+
+@_njit
+def auto_nonstiffness_test(h, easy, handback):
+    """An accepted radau step h, with rho(J) = easy[EASY_RHO]: h rho < NONSTIFF_HRHO (an
+    explicit step of that size is well inside dop853's stability region) counts one more easy
+    step in a row, else (or no rho yet) none. True when the count reaches easy[EASY_NEEDED]:
+    the problem is not stiff (any more)."""
+    rho = easy[EASY_RHO]
+    if rho != rho or abs(h) * rho >= handback[HB_NONSTIFF_HRHO]:
+        easy[EASY_STEPS] = 0.0
+        return False
+    easy[EASY_STEPS] += 1.0
+    return easy[EASY_STEPS] >= easy[EASY_NEEDED]
+
+
+@_njit
+def auto_dop853_cost(cost, easy, handback):
+    """dop853's rhs evaluations per simulated second: measured (cost[COST_DOP853]), else
+    estimated at its stability limit on the imaginary axis, DOP853_EVALS rho / DOP853_BOUNDARY
+    (NaN without rho)."""
+    dop = cost[COST_DOP853]
+    if dop != dop:
+        dop = handback[HB_DOP853_EVALS] * easy[EASY_RHO] / handback[HB_DOP853_BOUNDARY]
+    return dop
+
+
+@_njit
+def auto_cost_test(cost, counters, window, easy, handback):
+    """Radau running, its cost window full: True when radau costs more than COST_MARGIN times
+    what dop853 did (or would: auto_dop853_cost)."""
+    radau = cost[COST_RADAU]
+    if radau != radau or counters[C_WINDOW] < window.shape[0]:
+        return False
+    dop = auto_dop853_cost(cost, easy, handback)
+    return dop == dop and radau > handback[HB_COST_MARGIN] * dop

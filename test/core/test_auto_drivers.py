@@ -1,12 +1,14 @@
-"""The "auto" integrator's two drivers of its dop853 phase give the same bits.
+"""The "auto" integrator's two drivers of its dop853 and radau phases give the same bits.
 
 On a system with the compiled kernel (FastChainODE), Auto runs DOP853's compiled loop in its
 detection mode (gyro_sim.core.fast_dop853.dop853_advance): h |lambda| of every accepted step,
 the stiffness and rejection tests and the cost window inside compiled code, returning where a
-test asks for a switch. On other systems it steps DOP853 by its public single step and calls
-the same tests after each step: that Python loop is the reference here (the loop Auto ran on
-every system before the compiled one), on the same system with the compiled loop switched
-off. States, outputs at t_eval, switch times and reasons, counters: identical.
+test asks for a switch; and likewise Radau's (gyro_sim.core.fast_radau.radau_advance): rho(J)
+when the Jacobian is refreshed, the non-stiffness and cost tests, the cost window. On other
+systems it steps either method by its public single step and calls the same tests after each
+step: that Python loop is the reference here (the loop Auto ran on every system before the
+compiled ones), on the same system with the compiled loops switched off. States, outputs at
+t_eval, switch times and reasons, counters: identical.
 """
 import warnings
 
@@ -38,8 +40,10 @@ def drivers(scene: dict, rtol: float):
     system = FastChainODE(model)
     compiled = make_integrator("auto", system, rtol=rtol, atol=rtol * 1e-2)
     python = make_integrator("auto", system, rtol=rtol, atol=rtol * 1e-2)
-    python.explicit._loop = None  # noqa: SLF001 - the Python loop on the same system
-    assert compiled.explicit.compiled and not python.explicit.compiled
+    python.explicit._loop = None  # noqa: SLF001 - the Python loops on the same system
+    python.implicit._loop = None  # noqa: SLF001
+    assert compiled.explicit.compiled and compiled.implicit.compiled
+    assert not (python.explicit.compiled or python.implicit.compiled)
     return compiled, python, initial_state(model)
 
 
@@ -74,6 +78,8 @@ def assert_same(a, b, ra, rb):
     assert (a.error_estimate, a.last_step) == (b.error_estimate, b.last_step)
     np.testing.assert_array_equal(a._counters, b._counters)  # noqa: SLF001
     np.testing.assert_array_equal(a._cost, b._cost)  # noqa: SLF001
+    np.testing.assert_array_equal(a._easy, b._easy)  # noqa: SLF001
+    np.testing.assert_array_equal(a._window, b._window)  # noqa: SLF001
 
 
 def test_not_stiff_chain():
@@ -122,6 +128,38 @@ def test_back_to_dop853_when_radau_costs_more():
     assert_same(a, b, ra, rb)
 
 
+@pytest.mark.parametrize("chunk", [0.01, 0.25])
+def test_hand_back_when_not_stiff(monkeypatch, chunk):
+    """The non-stiffness test made easy to pass (h rho < 1e4: every step of radau here, whose
+    steps are ~10 ms against rho = 1080): radau hands back after NONSTIFF_STEPS steps, dop853
+    finds the stiffness again, radau waits twice as long the next time; the same bits from
+    both drivers, outputs at t_eval included, through every switch."""
+    monkeypatch.setattr(auto_module, "NONSTIFF_HRHO", 1e4)
+    monkeypatch.setattr(auto_module, "NONSTIFF_STEPS", 5)
+    a, b, y0 = drivers(ROTOR, 1e-8)
+    t_eval = np.linspace(0.0, 1.0, 61)
+    ra, rb = run(a, y0, 1.0, chunk, t_eval), run(b, y0, 1.0, chunk, t_eval)
+    kinds = [s[1:3] for s in a.switches]
+    assert kinds[:3] == [("dop853", "radau"), ("radau", "dop853"), ("dop853", "radau")]
+    backs = [s[3] for s in a.switches if s[2] == "dop853"]
+    assert backs == [f"not stiff: h rho(J) < 10000 in {5 * 2 ** k} steps" for k in range(len(backs))]
+    assert len(backs) >= (3 if chunk == 0.01 else 1)  # 5, 10, 20 steps: doubled each time
+    assert_same(a, b, ra, rb)
+
+
+def test_power_iterations(monkeypatch):
+    """rho(J) by power iterations (the rule above EIG_MAX_SIZE states, here lowered below the
+    rotor's 8): the same bits from both drivers; an estimate of the nutation's 1080 rad/s."""
+    monkeypatch.setattr(auto_module, "EIG_MAX_SIZE", 4)
+    a, b, y0 = drivers(ROTOR, 1e-8)
+    ra, rb = run(a, y0, 0.5, 0.01), run(b, y0, 0.5, 0.01)
+    assert [s[1:3] for s in a.switches][:1] == [("dop853", "radau")]
+    rho = a._easy[0]  # noqa: SLF001
+    w_n, _ = ex.fast_rotor_frequencies(ex.fast_rotor_spin(1e4))
+    assert rho == pytest.approx(w_n, rel=1e-2)
+    assert_same(a, b, ra, rb)
+
+
 def test_rejection_test(monkeypatch):
     """The rejection test (the stiffness test off, a short window) switches in both drivers
     at the same step, with the same counts in the reason."""
@@ -143,11 +181,11 @@ def test_reset_forgets_the_held_step():
 
 
 def test_numpy_backend_steps_in_python():
-    """Without the compiled kernel (the numpy reference backend) auto steps dop853 in Python
-    and detects the same stiffness."""
+    """Without the compiled kernel (the numpy reference backend) auto steps dop853 and radau in
+    Python and detects the same stiffness."""
     model = compile_model(load_scene(ROTOR))
     integ = make_integrator("auto", make_system(model, "numpy"), rtol=1e-8, atol=1e-10)
-    assert not integ.explicit.compiled
+    assert not (integ.explicit.compiled or integ.implicit.compiled)
     run(integ, initial_state(model), 0.2, 0.01)
     assert [s[1:3] for s in integ.switches] == [("dop853", "radau")]
 
@@ -216,3 +254,58 @@ def test_hlamb_is_the_norm_ratio():
     ref = abs(h) * np.linalg.norm(f1 - f12) / np.linalg.norm(y1 - Y12)
     assert dk.dop_hlamb(h, Y12, f12, y1, f1) == pytest.approx(ref, rel=1e-14)
     assert dk.dop_hlamb(h, y1, f12, y1, f1) == dk.NO_HLAMB
+
+
+def test_spectral_radius_kernel():
+    """auto_spectral_radius against numpy's eigenvalues (to round-off: another LAPACK build
+    may order its operations otherwise): a random matrix, a rotation-like one (+-i w, the
+    gyroscopic case), a non-finite one; above EIG_MAX_SIZE the power iterations converge to
+    a dominant real eigenvalue."""
+    from gyro_sim.core import radau_kernels as rk
+
+    handback = np.array([2.0, 1.5, 12.0, 5.95, 50.0, 200.0])
+    rng = np.random.default_rng(3)
+    J = rng.normal(size=(9, 9))
+    power = np.zeros(0)
+    assert rk.auto_spectral_radius(J, power, handback) == pytest.approx(
+        np.max(np.abs(np.linalg.eigvals(J))), rel=1e-12)
+    w = 1080.0
+    R = np.array([[0.0, w, 0.0], [-w, 0.0, 0.0], [0.0, 0.0, -3.0]])
+    assert rk.auto_spectral_radius(R, power, handback) == pytest.approx(w, rel=1e-13)
+    assert rk.auto_spectral_radius(np.zeros((0, 0)), power, handback) == 0.0
+    bad = J.copy()
+    bad[2, 3] = np.nan
+    assert rk.auto_spectral_radius(bad, power, handback) == np.inf
+    # 60 states > EIG_MAX_SIZE = 50: power iterations, eigenvalues 1..59 and -100 (dominant)
+    Q, _ = np.linalg.qr(rng.normal(size=(60, 60)))
+    D = np.diag(np.r_[np.arange(1.0, 60.0), -100.0])
+    big = Q @ D @ Q.T
+    est = rk.auto_spectral_radius(big, rng.normal(size=60), handback)
+    assert est == pytest.approx(100.0, rel=1e-6)
+
+
+def test_hand_back_tests_are_the_rules():
+    """auto_nonstiffness_test and auto_cost_test against the rules in auto.py, written out:
+    NEEDED steps in a row with h rho < NONSTIFF_HRHO; radau's measured cost above
+    COST_MARGIN x dop853's (measured, else 12 rho / 5.95), once its window is full."""
+    from gyro_sim.core import dop853_kernels as dk
+    from gyro_sim.core import radau_kernels as rk
+
+    handback = np.array([2.0, 1.5, 12.0, 5.95, 200.0, 30.0])
+    easy = np.array([np.nan, 0.0, 0.0, 3.0])
+    assert not rk.auto_nonstiffness_test(1e-3, easy, handback)  # no rho yet
+    easy[rk.EASY_RHO] = 1000.0
+    steps = [1e-3, 1e-3, 3e-3, 1e-3, 1e-3, 1e-3]  # h rho = 1, 1, 3 (breaks the row), 1, 1, 1
+    assert [rk.auto_nonstiffness_test(h, easy, handback) for h in steps] == \
+        [False, False, False, False, False, True]
+    counters = np.zeros(dk.COUNTERS_SIZE, dtype=np.int64)
+    window = np.zeros((4, 2))
+    cost = np.full(dk.COST_SIZE, np.nan)
+    cost[dk.COST_RADAU] = 3000.0
+    assert not rk.auto_cost_test(cost, counters, window, easy, handback)  # window not full
+    counters[dk.C_WINDOW] = 4
+    # dop853 never measured: 12 x 1000 / 5.95 = 2017 per s; 3000 < 1.5 x 2017
+    assert not rk.auto_cost_test(cost, counters, window, easy, handback)
+    assert rk.auto_dop853_cost(cost, easy, handback) == pytest.approx(12 * 1000 / 5.95)
+    cost[dk.COST_DOP853] = 1900.0  # measured: 3000 > 1.5 x 1900
+    assert rk.auto_cost_test(cost, counters, window, easy, handback)

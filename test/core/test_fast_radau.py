@@ -473,3 +473,57 @@ def test_python_driver_on_the_numpy_reference_agrees():
     (a, *ca), (b, *cb) = runs
     assert ca == cb
     assert np.abs(a - b).max() <= 1e-10 * np.abs(a).max()
+
+
+# ------------------------------------------------------------------ the detection mode ("auto")
+def _detection(n, nonstiff_hrho, needed, margin=math.inf):
+    """The detection arrays of radau_advance (as Auto builds them): counters, window, cost
+    (dop853_kernels), handback, easy (radau_kernels), power."""
+    from gyro_sim.core import dop853_kernels as dk
+
+    handback = np.array([nonstiff_hrho, margin, 12.0, 5.95, 200.0, 30.0])
+    easy = np.array([math.nan, 1.0, 0.0, needed])
+    return (np.zeros(dk.COUNTERS_SIZE, dtype=np.int64), np.zeros((20, 2)), np.full(dk.COST_SIZE, math.nan),
+            handback, easy, np.zeros(0))
+
+
+def test_detection_mode_that_never_fires_is_the_plain_loop():
+    """The tests of "auto" run after every step (h rho < 0 never holds, the cost margin is
+    infinite): the same steps and bits as the plain loop; rho is the final Jacobian's
+    (against numpy's eigenvalues); the cost window full, radau's cost measured."""
+    from gyro_sim.core import dop853_kernels as dk
+
+    system, y0 = held_system(stiff_hinges())
+    plain, detecting = (Radau(system, rtol=1e-8, atol=1e-10) for _ in range(2))
+    det = _detection(y0.size, 0.0, 3.0)
+    y_plain, y_det = y0.copy(), y0.copy()
+    for k in range(5):
+        t0, t1 = 0.1 + 0.1 * k, 0.2 + 0.1 * k
+        y_plain = plain.advance(t0, y_plain, t1)
+        assert detecting.advance_detecting(t0, y_det, t1, None, None, det) == (t1, 0)
+    np.testing.assert_array_equal(y_plain, y_det)
+    assert counters(plain) == counters(detecting)
+    counts, window, cost, _, easy, _ = det
+    rho = np.max(np.abs(np.linalg.eigvals(detecting.jacobian)))
+    assert easy[rk.EASY_RHO] == pytest.approx(rho, rel=1e-10) and easy[rk.EASY_STALE] == 0.0
+    assert easy[rk.EASY_STEPS] == 0.0
+    assert counts[dk.C_WINDOW] == window.shape[0] and cost[dk.COST_RADAU] > 0.0
+
+
+def test_detection_mode_stops_at_the_accepted_state():
+    """h rho < inf holds for every step: the 3rd accepted step asks for the hand-back, the
+    call ends there (SWITCH, REASON_NONSTIFF) with the state and counters of a plain call to
+    that time (but one rhs evaluation: at the new state, for a next step, as the Python loop
+    of "auto" evaluates it); the next plain call continues from it as from the end of a call."""
+    system, y0 = held_system(stiff_hinges())
+    stopped, plain = (Radau(system, rtol=1e-8, atol=1e-10) for _ in range(2))
+    stopped._trace = np.zeros(10)  # noqa: SLF001 - the ends of the steps
+    y_s = y0.copy()
+    t, code = stopped.advance_detecting(0.1, y_s, 1.0, None, None, _detection(y0.size, math.inf, 3.0))
+    assert code == fast_radau.REASON_NONSTIFF and stopped.nsteps == 3
+    assert t == stopped._trace[2] < 1.0  # noqa: SLF001
+    y_p = plain.advance(0.1, y0, t)
+    np.testing.assert_array_equal(y_s, y_p)
+    assert counters(stopped)[1:] == counters(plain)[1:] and stopped.nfev == plain.nfev + 1
+    np.testing.assert_array_equal(stopped.advance(t, y_s, 1.0), plain.advance(t, y_p, 1.0))
+    assert counters(stopped)[1:] == counters(plain)[1:] and stopped.nfev == plain.nfev + 1

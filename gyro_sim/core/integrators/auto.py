@@ -7,10 +7,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .. import fast_dop853
+from .. import fast_dop853, fast_radau
 from ..dop853_kernels import (
     C_STIFF,
-    C_WINDOW,
     COST_DOP853,
     COST_RADAU,
     COST_SIZE,
@@ -22,6 +21,18 @@ from ..dop853_kernels import (
     auto_rejection_test,
     auto_rejections,
     auto_stiffness_test,
+)
+from ..radau_kernels import (
+    EASY_NEEDED,
+    EASY_RHO,
+    EASY_SIZE,
+    EASY_STALE,
+    EASY_STEPS,
+    HANDBACK_SIZE,
+    auto_cost_test,
+    auto_dop853_cost,
+    auto_nonstiffness_test,
+    auto_spectral_radius,
 )
 from .base import AdaptiveIntegrator, IntegrationError, Integrator
 from .dop853 import DOP853
@@ -65,7 +76,8 @@ COST_MARGIN = 1.5
 #: evaluations per simulated second
 DOP853_EVALS = 12
 DOP853_BOUNDARY = 5.95
-#: rho(J) from eigenvalues up to this size, above it from a few power iterations
+#: rho(J) from eigenvalues up to this size, above it from a few power iterations (from a
+#: start drawn once, np.random.default_rng(0))
 EIG_MAX_SIZE = 200
 POWER_ITERATIONS = 30
 #: the slot of each method in the cost array
@@ -115,7 +127,14 @@ class Auto(Integrator):
     runs a whole `advance` in its detection mode (:func:`gyro_sim.core.fast_dop853.dop853_advance`),
     stopping at the accepted state where a test asks for a switch; on any other system this
     class steps DOP853 by its public single step (`begin` / `take_step` / `dense`) and calls
-    the tests after each accepted step. Radau runs by its public single step.
+    the tests after each accepted step. Likewise Radau's phase: the tests on its steps
+    (rho(J) when its Jacobian is refreshed, h rho, cost) are one implementation,
+    :mod:`gyro_sim.core.radau_kernels` (`auto_*`), run inside Radau's compiled loop in its
+    detection mode (:func:`gyro_sim.core.fast_radau.radau_advance`: one compiled call per
+    `advance`, stopping where a test asks for the hand-back) on a system where Radau has it
+    (FastChainODE, dense mode), and after each of its public single steps otherwise (the
+    matrix-free mode among them, whose rho is a Krylov estimate,
+    :func:`gyro_sim.core.integrators.choose.spectral_radius_estimate`).
 
     References
     ----------
@@ -147,10 +166,24 @@ class Auto(Integrator):
         self._window = np.zeros((COST_WINDOW, 2))
         self._cost = np.full(COST_SIZE, math.nan)  # rhs evaluations per simulated s, by method
         self._detection = (self._detect, self._counters, self._attempts, self._window, self._cost)
-        if self.explicit.compiled:  # radau's steps enter the cost window from Python: compile
-            # (or load) that kernel now, not at the first switch (a call on scratch arrays)
-            auto_measure(0.0, 0, np.zeros_like(self._counters), np.zeros_like(self._window),
-                         np.zeros_like(self._cost), COST_RADAU)
+        # the hand-back tests' constants and state (radau_kernels), the power iterations' start
+        self._handback = np.array([NONSTIFF_HRHO, COST_MARGIN, DOP853_EVALS, DOP853_BOUNDARY,
+                                   EIG_MAX_SIZE, POWER_ITERATIONS], dtype=float)
+        assert self._handback.size == HANDBACK_SIZE
+        self._easy = np.zeros(EASY_SIZE)
+        n = self.explicit.n
+        self._power = (np.random.default_rng(0).standard_normal(n) if n > EIG_MAX_SIZE
+                       else np.zeros(0))
+        self._handback_detection = (self._counters, self._window, self._cost, self._handback,
+                                    self._easy, self._power)
+        if self.implicit.compiled:  # compile (or load) radau's loop now, not at the first switch
+            self.implicit.load_loop()
+        elif self.explicit.compiled:  # radau's steps are tested from Python: those kernels
+            counters, window = np.zeros_like(self._counters), np.zeros_like(self._window)
+            cost, easy = np.zeros_like(self._cost), np.zeros_like(self._easy)
+            auto_measure(0.0, 0, counters, window, cost, COST_RADAU)
+            auto_nonstiffness_test(0.0, easy, self._handback)
+            auto_cost_test(cost, counters, window, easy, self._handback)
         self.reset()
 
     @property
@@ -165,7 +198,7 @@ class Auto(Integrator):
         self._current = self.explicit
         #: (t, from, to, reason) of every switch since the last reset
         self.switches: list[tuple[float, str, str, str]] = []
-        self._nonstiff_needed = NONSTIFF_STEPS
+        self._easy[EASY_NEEDED] = NONSTIFF_STEPS
         self._cost[:] = math.nan
         self._new_episode()
         self._sync()
@@ -173,9 +206,9 @@ class Auto(Integrator):
     def _new_episode(self) -> None:
         """Forget the detection state (at a reset or a switch)."""
         self._counters[:] = 0  # dop853.f's IASTI, NONSTI; the attempts and cost windows empty
-        self._rho: float | None = None  # spectral radius of radau's Jacobian
-        self._rho_njev = -1
-        self._n_easy = 0  # radau steps in a row with h rho < NONSTIFF_HRHO
+        self._easy[EASY_RHO] = math.nan  # rho(J) of radau's Jacobian: none yet,
+        self._easy[EASY_STALE] = 1.0  # to be computed at the first test
+        self._easy[EASY_STEPS] = 0.0  # radau steps in a row with h rho < NONSTIFF_HRHO
 
     # --- the loop ------------------------------------------------------------------------
     def _integrate(self, t0, y, t1, te, Y) -> None:
@@ -188,7 +221,7 @@ class Auto(Integrator):
         try:
             while t < t1:
                 try:
-                    if self._current is self.explicit and self.explicit.compiled:
+                    if self._current.compiled:
                         t = self._run_compiled(t, y, t1, te, Y)
                     else:
                         t = self._run(self._current, t, y, t1, te, Y)
@@ -214,15 +247,16 @@ class Auto(Integrator):
                                 f"{exc.method} running" + (f"; {detail}" if detail else ""))
 
     def _run_compiled(self, t: float, y: np.ndarray, t1: float, te, Y) -> float:
-        """DOP853's compiled loop in its detection mode advances y from t towards t1, filling Y
-        at te from the next output on: `_run` for DOP853 in one compiled call."""
+        """The running method's compiled loop in its detection mode advances y from t towards
+        t1, filling Y at te from the next output on: `_run` in one compiled call."""
         j = self._j
+        inner = self._current
+        detection = self._detection if inner is self.explicit else self._handback_detection
         try:
-            t, code = self.explicit.advance_detecting(
-                t, y, t1, None if te is None else te[j:], None if Y is None else Y[j:],
-                self._detection)
+            t, code = inner.advance_detecting(
+                t, y, t1, None if te is None else te[j:], None if Y is None else Y[j:], detection)
         finally:
-            self._j = j + self.explicit.outputs_filled
+            self._j = j + inner.outputs_filled
         if code:
             raise _Switch(t, self._reason(code))
         return t
@@ -234,6 +268,7 @@ class Auto(Integrator):
         m = 0 if te is None else te.size
         explicit = inner is self.explicit
         nfev = inner.nfev
+        njev = inner.njev
         inner.begin(t, y, t1)
         if explicit and inner.hlamb is not None:  # the previous call's last step, tested now
             if auto_stiffness_test(inner.hlamb, self._counters, self._detect):
@@ -259,6 +294,9 @@ class Auto(Integrator):
                     code = fast_dop853.REASON_REJECTED
                 reason = self._reason(code) if code else None
             else:
+                if inner.njev != njev:  # a Jacobian refreshed: its rho is due
+                    self._easy[EASY_STALE] = 1.0
+                    njev = inner.njev
                 reason = self._nonstiffness_test(h)
             t = t_new
             while self._j < m and te[self._j] <= t:
@@ -282,51 +320,48 @@ class Auto(Integrator):
 
     # --- detection -------------------------------------------------------------------------
     def _reason(self, code: int) -> str:
-        """The reason of a switch asked for by DOP853's tests (fast_dop853.REASON_*), read when
-        it is asked for."""
+        """The reason of a switch asked for by a test (fast_dop853.REASON_*,
+        fast_radau.REASON_*), read when it is asked for."""
         if code == fast_dop853.REASON_STIFF:
             return f"stiff: h |lambda| > {STIFF_HLAMB:g} in {STIFF_STEPS} steps"
-        n_rej, n_all = auto_rejections(self._counters, self._attempts)
-        return f"stiff: {n_rej} of the last {n_all} step attempts rejected"
+        if code == fast_dop853.REASON_REJECTED:
+            n_rej, n_all = auto_rejections(self._counters, self._attempts)
+            return f"stiff: {n_rej} of the last {n_all} step attempts rejected"
+        if code == fast_radau.REASON_NONSTIFF:
+            return f"not stiff: h rho(J) < {NONSTIFF_HRHO:g} in {int(self._easy[EASY_NEEDED])} steps"
+        radau = float(self._cost[COST_RADAU])
+        dop = float(auto_dop853_cost(self._cost, self._easy, self._handback))
+        return f"radau costs {radau:.3g} rhs evaluations per simulated s, dop853 {dop:.3g}"
 
     def _nonstiffness_test(self, h: float) -> str | None:
-        imp = self.implicit
-        if imp.njev != self._rho_njev and imp.jacobian is not None:
-            self._rho = _spectral_radius(imp.jacobian)
-            self._rho_njev = imp.njev
-        elif imp.njev != self._rho_njev and imp.jacobian_point is not None:  # matrix-free radau
+        """Radau running, after its step h: rho(J) if its Jacobian was refreshed since the last
+        rho, then the test on h rho (radau_kernels.auto_nonstiffness_test)."""
+        imp, easy = self.implicit, self._easy
+        if easy[EASY_STALE] and imp.jacobian is not None:
+            easy[EASY_RHO] = auto_spectral_radius(imp.jacobian, self._power, self._handback)
+            easy[EASY_STALE] = 0.0
+        elif easy[EASY_STALE] and imp.jacobian_point is not None:  # matrix-free radau
             from .choose import spectral_radius_estimate
 
             t_j, y_j = imp.jacobian_point
-            self._rho = spectral_radius_estimate(self._fun, t_j, y_j)
-            self._rho_njev = imp.njev
-        if self._rho is None or abs(h) * self._rho >= NONSTIFF_HRHO:
-            self._n_easy = 0
-            return None
-        self._n_easy += 1
-        if self._n_easy >= self._nonstiff_needed:
-            return f"not stiff: h rho(J) < {NONSTIFF_HRHO:g} in {self._nonstiff_needed} steps"
+            easy[EASY_RHO] = spectral_radius_estimate(self._fun, t_j, y_j)
+            easy[EASY_STALE] = 0.0
+        if auto_nonstiffness_test(h, easy, self._handback):
+            return self._reason(fast_radau.REASON_NONSTIFF)
         return None
 
     def _cost_test(self) -> str | None:
-        """Radau running: a reason to hand back if it costs more than dop853 would."""
-        radau = float(self._cost[COST_RADAU])
-        if math.isnan(radau) or self._counters[C_WINDOW] < self._window.shape[0]:
-            return None
-        dop = float(self._cost[COST_DOP853])
-        if math.isnan(dop):
-            if self._rho is None:
-                return None
-            dop = DOP853_EVALS * self._rho / DOP853_BOUNDARY
-        if radau > COST_MARGIN * dop:
-            return f"radau costs {radau:.3g} rhs evaluations per simulated s, dop853 {dop:.3g}"
+        """Radau running: a reason to hand back if it costs more than dop853 would
+        (radau_kernels.auto_cost_test)."""
+        if auto_cost_test(self._cost, self._counters, self._window, self._easy, self._handback):
+            return self._reason(fast_radau.REASON_COSTLY)
         return None
 
     def _switch(self, t: float, reason: str) -> None:
         old = self._current
         new = self.implicit if old is self.explicit else self.explicit
         if new is self.implicit and any(s[2] == "dop853" for s in self.switches):
-            self._nonstiff_needed *= 2  # stiff again after a return: wait longer next time
+            self._easy[EASY_NEEDED] *= 2  # stiff again after a return: wait longer next time
         self.switches.append((float(t), old.name, new.name, reason))
         kind = reason.split(":")[0]
         warnings.warn(f"auto integrator: {old.name} -> {new.name} ({kind})", StiffnessWarning,
@@ -344,19 +379,3 @@ class Auto(Integrator):
         self.last_step = self._current.last_step
         self.order = self._current.order
 
-
-def _spectral_radius(J: np.ndarray) -> float:
-    """max |eigenvalue| of J (n, n): exact up to EIG_MAX_SIZE, else by power iterations."""
-    if not np.isfinite(J).all():
-        return math.inf
-    if J.shape[0] <= EIG_MAX_SIZE:
-        return float(np.max(np.abs(np.linalg.eigvals(J)))) if J.size else 0.0
-    x = np.random.default_rng(0).standard_normal(J.shape[0])
-    rho = 0.0
-    for _ in range(POWER_ITERATIONS):
-        x = J @ x
-        rho = float(np.linalg.norm(x))
-        if rho == 0.0:
-            return 0.0
-        x /= rho
-    return rho

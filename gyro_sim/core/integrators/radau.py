@@ -140,10 +140,11 @@ class Radau(AdaptiveIntegrator):
     On a system that offers `kernel_arguments` and `quaternion_block` (the compiled
     :class:`gyro_sim.core.system.FastChainODE`) and no `jacobian`, in the dense mode, a whole
     `advance` runs in one compiled call, :func:`gyro_sim.core.fast_radau.radau_advance`
-    (compiled, or loaded from numba's cache, by the first `advance` or by `warm_up`: ~20 s of
-    CPU once per version of its files, then ~0.1 s); on any other
+    (compiled, or loaded from numba's cache, by the first `advance`, by `warm_up` or by
+    `load_loop`: ~20 s of CPU once per version of its files, then ~0.1 s), in the "auto"
+    method's radau phase too (`advance_detecting`, its tests inside the loop); on any other
     system, in the matrix-free mode, and for the public single step (`begin` / `take_step` /
-    `dense`, which the "auto" method drives) this class steps in Python, calling the same
+    `dense`, which "auto" drives where there is no compiled loop) this class steps in Python, calling the same
     arithmetic between its rhs evaluations. The two give the same bits, counters included;
     against scipy's Radau on the same rhs, Jacobian and tolerances they take the same steps
     (test/core/test_fast_radau.py). The LU is the kernels' own (partial pivoting, as
@@ -232,15 +233,17 @@ class Radau(AdaptiveIntegrator):
             self._no_te, self._no_Y = np.zeros(0), np.zeros((0, n))
             #: the ends of the first len(_trace) accepted steps of the last compiled call (tests)
             self._trace = np.zeros(0)
-            # the loop is compiled (or loaded) by the first advance or by `warm_up`, not here:
-            # "auto" builds a Radau and drives only its single step
+            #: outputs filled by the last compiled call (also when it raised)
+            self.outputs_filled = 0
+            # the loop is compiled (or loaded) by the first advance, by `warm_up` or by
+            # `load_loop`, not here: "auto" builds a Radau it may never run
 
     def warm_up(self, t0: float, y: np.ndarray, *, loop: bool = True) -> None:
         """A short advance from (t0, y) the way this integrator will step, then forgotten (the
         memory reset, the counters kept), so that its code is compiled, or loaded from numba's
         cache, now rather than in the middle of a real-time run: the compiled loop if the
         system has one and `loop`, else the public single step (the Python driver's kernels;
-        loop=False: what "auto" drives). A failure to step is ignored: the code is compiled all
+        loop=False: what "auto" drives where the loop is not compiled). A failure to step is ignored: the code is compiled all
         the same."""
         counts = (self.nfev, self.nsteps, self.nrejected, self.njev, self.nlu)
         system_nfev = getattr(self.system, "nfev", None)
@@ -260,6 +263,26 @@ class Radau(AdaptiveIntegrator):
             self.nfev, self.nsteps, self.nrejected, self.njev, self.nlu = counts
             if system_nfev is not None:
                 self.system.nfev = system_nfev
+
+    @property
+    def compiled(self) -> bool:
+        """Does `advance` (and `advance_detecting`) run the compiled loop?"""
+        return self._loop is not None
+
+    def load_loop(self) -> None:
+        """Compile the loop, or load it from numba's cache, now (the "auto" method, which may
+        switch to radau in the middle of a real-time run): a call of no step from a valid state
+        (unit quaternions), then forgotten. Nothing without the compiled loop."""
+        if self._loop is None:
+            return
+        n = self.n
+        y = np.zeros(n)
+        y[self._i_q0:self._i_q0 + 4 * self._nq:4] = 1.0
+        self._allocate()
+        self._pack()
+        self._call_loop(0.0, y, 0.0, self._no_te, self._no_Y, _NO_DETECTION)
+        self._reset_memory()
+        self._f[:] = 0.0
 
     def _reset_memory(self) -> None:
         self._h_abs_old = math.nan  # the last accepted step (NaN: none)
@@ -579,8 +602,23 @@ class Radau(AdaptiveIntegrator):
         self.nrejected += st[fr.F_REJECTED]
         self._f_new = st[fr.F_F_NEW] != 0
 
-    def _integrate_compiled(self, t0: float, y: np.ndarray, t1: float, te, Y) -> None:
-        """`_integrate` (the loop of `begin`, `take_step`, `dense`, `end`) in one compiled call."""
+    def advance_detecting(self, t0: float, y: np.ndarray, t1: float, te, Y, detection: tuple) -> tuple[float, int]:
+        """For "auto": the compiled loop in its detection mode (see `_integrate_compiled`):
+        y advanced in place from t0 towards t1 > t0, Y filled at te; returns (time reached,
+        reason code or 0)."""
+        return self._integrate_compiled(t0, y, t1, te, Y, detection)
+
+    def _integrate_compiled(self, t0: float, y: np.ndarray, t1: float, te, Y,
+                            detection: tuple | None = None) -> tuple[float, int]:
+        """`_integrate` (the loop of `begin`, `take_step`, `dense`, `end`) in one compiled call.
+
+        With `detection`, the arrays (counters, window, cost, handback, easy, power) of the
+        "auto" method's tests on radau's steps (dop853_kernels, radau_kernels), the loop runs
+        in its detection mode (fast_radau.radau_advance) and may stop at an accepted state
+        before t1, as a call that ended there: returns (the time reached, the reason of a
+        hand-back asked for there, fast_radau.REASON_*, or 0). `outputs_filled`: the rows of
+        Y filled, also when the call raises.
+        """
         fr = fast_radau
         if te is None:
             te, Y = self._no_te, self._no_Y
@@ -588,13 +626,16 @@ class Radau(AdaptiveIntegrator):
             te = te.copy()
         self._allocate()
         self._pack()
-        self._call_loop(t0, y, t1, te, Y)
+        self._call_loop(t0, y, t1, te, Y, _NO_DETECTION if detection is None else detection)
         self._unpack()
         m, st = self._mem.tolist(), self._flags.tolist()
+        self.outputs_filled = st[fr.F_OUTPUTS]
         code = st[fr.F_STATUS]
-        if code == fr.DONE:
-            self._t_old, self._t_new = m[fr.M_T_OLD], t1
-        elif code == fr.INITIAL_RHS_NONFINITE:
+        if code == fr.DONE or code == fr.SWITCH:
+            if st[fr.F_ACCEPTED]:
+                self._t_old, self._t_new = m[fr.M_T_OLD], m[fr.M_T]
+            return m[fr.M_T], st[fr.F_REASON]
+        if code == fr.INITIAL_RHS_NONFINITE:
             raise IntegrationError(self.name, "rhs is not finite at the initial state", t0, None,
                                    describe_nonfinite(self._f))
         elif code == fr.NO_STARTING_STEP:
@@ -605,7 +646,7 @@ class Radau(AdaptiveIntegrator):
             raise IntegrationError(self.name, "rhs is not finite at the accepted state", m[fr.M_T],
                                    m[fr.M_H], describe_nonfinite(self._f))
 
-    def _call_loop(self, t0: float, y: np.ndarray, t1: float, te, Y) -> None:
+    def _call_loop(self, t0: float, y: np.ndarray, t1: float, te, Y, detection: tuple) -> None:
         """fast_radau.radau_advance with this integrator's method, options, memory, scratch."""
         self._loop(t0, t1, y, te, Y, self.max_step, self.rtol, self._atol_v, self._newton_tol,
                    self.C, self.E, self.T, self.TI, self.P, self.MU_REAL, self.MU_COMPLEX,
@@ -614,5 +655,11 @@ class Radau(AdaptiveIntegrator):
                    self._piv_complex, self._Z0, self._Z, self._W, self._dW, self._F, self._ys,
                    self._f_real, self._f_complex, self._scale_v, self._delta, self._ZE, self._err,
                    self._fe, self._y_new, self._y_old, self._y_bad, self._bad, self._Qt,
-                   self._sol_y, self._y_end, self._trace, self._mem, self._flags,
+                   self._sol_y, self._y_end, self._trace, self._mem, self._flags, *detection,
                    *self.system.kernel_arguments())
+
+
+#: the detection arrays of a plain call (fast_radau.radau_advance: handback empty, the others
+#: not read), of the types of Auto's: counters, window, cost, handback, easy, power
+_NO_DETECTION = (np.zeros(0, dtype=np.int64), np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0),
+                 np.zeros(0))
