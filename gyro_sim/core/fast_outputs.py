@@ -28,10 +28,46 @@ import numpy as np
 from pathlib import Path
 
 from . import fast
-from .fast import _bias_forces, _cross, _cross_add, _dot6, _joint_columns, _matvec, _positions, _velocities
-from .fast_loop import njit_with_dependencies
+from .fast import block1, block2, block3
+from .fast import _bias_forces, _cross, _cross_add, _dot6, _matvec, _positions, _velocities
+from .fast_loop import cache_directory, njit_with_dependencies
 
-_njit = njit_with_dependencies(Path(fast.__file__), Path(__file__))
+_FILES = (Path(fast.__file__), Path(__file__))
+_njit = njit_with_dependencies(*_FILES)
+
+
+def _njit_options(**options):
+    """A decorator: `_njit` (cached by the digest of _FILES) with numba's options `options`."""
+
+    def decorate(fn):
+        try:
+            import numba
+        except ImportError:  # pragma: no cover - exercised only where numba is missing
+            return fn
+        saved = numba.config.CACHE_DIR
+        numba.config.CACHE_DIR = str(cache_directory(_FILES))
+        try:
+            return numba.njit(cache=True, error_model="numpy", **options)(fn)
+        finally:
+            numba.config.CACHE_DIR = saved
+
+    return decorate
+
+
+#: always inlined by LLVM into its callers (numba's `forceinline`, as fast's stages): a helper
+#: called per body or per value passes no array structs and makes no view. Same operations,
+#: same results bit for bit.
+_njit_inline = _njit_options(forceinline=True)
+#: without numba's reference counting (as fast.rhs_kernel): for a kernel that allocates nothing
+#: and returns no array, where counting every array argument and view costs ~20 %
+_njit_uncounted = _njit_options(_nrt=False, forceinline=False)
+
+
+# fast.rhs_kernel's workspace as publication_kernel reads it after the kernel ran (its first
+# blocks, in its order: R 9, s_w 3, hk 3, Aw 9, e_w 3, w 3, vO 3, c 6, I6 36, pb 6, Dinv 36,
+# lam_b 3, dlam_b 3 words per body; S, U, W 6, u 1 per column; p 1 per torque rotor)
+assert fast.WORK_PER_BODY == 123 and fast.WORK_PER_COLUMN == 19 and fast.WORK_PER_ROTOR == 1, \
+    "fast.rhs_kernel's workspace changed: update publication_kernel's views of it"
 
 #: entries of `inv`, the invariants' output vector
 INV_ENERGY, INV_KINETIC, INV_POTENTIAL, INV_JACOBI, INV_VERTICAL = 0, 1, 2, 3, 4
@@ -69,18 +105,20 @@ def _matrix_to_quat(R, q):
         q[a] = sgn * q[a] / nrm
 
 
-@_njit
-def _euler(R, w, down, singular, ang, rate):
-    """Euler angles (psi, theta, phi) and their rates of world_R_body R (3, 3) turning at w (3,)
-    (rotations.matrices_to_euler, omegas_to_euler_rates), in scalars: cos and sin of psi from
-    the entries atan2 takes them from, of theta from its cosine (the same numbers to round-off)."""
-    D00 = down[0, 0] * R[0, 0] + down[1, 0] * R[1, 0] + down[2, 0] * R[2, 0]
-    D10 = down[0, 1] * R[0, 0] + down[1, 1] * R[1, 0] + down[2, 1] * R[2, 0]
-    D20 = down[0, 2] * R[0, 0] + down[1, 2] * R[1, 0] + down[2, 2] * R[2, 0]
-    D21 = down[0, 2] * R[0, 1] + down[1, 2] * R[1, 1] + down[2, 2] * R[2, 1]
-    D02 = down[0, 0] * R[0, 2] + down[1, 0] * R[1, 2] + down[2, 0] * R[2, 2]
-    D12 = down[0, 1] * R[0, 2] + down[1, 1] * R[1, 2] + down[2, 1] * R[2, 2]
-    D22 = down[0, 2] * R[0, 2] + down[1, 2] * R[1, 2] + down[2, 2] * R[2, 2]
+@_njit_inline
+def _euler(Rs, ws, k, down, singular, angs, rates):
+    """Euler angles (psi, theta, phi) and their rates of world_R_body R = Rs[k] (3, 3) turning at
+    w = ws[k] (3,) (rotations.matrices_to_euler, omegas_to_euler_rates) into angs[k], rates[k],
+    in scalars: cos and sin of psi from the entries atan2 takes them from, of theta from its
+    cosine (the same numbers to round-off). The stacks and k, not views of them: no view is
+    made per body."""
+    D00 = down[0, 0] * Rs[k, 0, 0] + down[1, 0] * Rs[k, 1, 0] + down[2, 0] * Rs[k, 2, 0]
+    D10 = down[0, 1] * Rs[k, 0, 0] + down[1, 1] * Rs[k, 1, 0] + down[2, 1] * Rs[k, 2, 0]
+    D20 = down[0, 2] * Rs[k, 0, 0] + down[1, 2] * Rs[k, 1, 0] + down[2, 2] * Rs[k, 2, 0]
+    D21 = down[0, 2] * Rs[k, 0, 1] + down[1, 2] * Rs[k, 1, 1] + down[2, 2] * Rs[k, 2, 1]
+    D02 = down[0, 0] * Rs[k, 0, 2] + down[1, 0] * Rs[k, 1, 2] + down[2, 0] * Rs[k, 2, 2]
+    D12 = down[0, 1] * Rs[k, 0, 2] + down[1, 1] * Rs[k, 1, 2] + down[2, 1] * Rs[k, 2, 2]
+    D22 = down[0, 2] * Rs[k, 0, 2] + down[1, 2] * Rs[k, 1, 2] + down[2, 2] * Rs[k, 2, 2]
     ct = min(1.0, max(-1.0, D22))
     theta = math.acos(ct)
     h = math.hypot(D02, D12)
@@ -91,15 +129,34 @@ def _euler(R, w, down, singular, ang, rate):
         psi, phi = math.atan2(D10, D00), 0.0
         h0 = math.hypot(D00, D10)
         c, s = (D00 / h0, D10 / h0) if h0 > 0.0 else (1.0, 0.0)
-    ang[0], ang[1], ang[2] = psi, theta, phi
-    wd0 = w[0] * down[0, 0] + w[1] * down[1, 0] + w[2] * down[2, 0]
-    wd1 = w[0] * down[0, 1] + w[1] * down[1, 1] + w[2] * down[2, 1]
-    wd2 = w[0] * down[0, 2] + w[1] * down[1, 2] + w[2] * down[2, 2]
+    angs[k, 0], angs[k, 1], angs[k, 2] = psi, theta, phi
+    wd0 = ws[k, 0] * down[0, 0] + ws[k, 1] * down[1, 0] + ws[k, 2] * down[2, 0]
+    wd1 = ws[k, 0] * down[0, 1] + ws[k, 1] * down[1, 1] + ws[k, 2] * down[2, 1]
+    wd2 = ws[k, 0] * down[0, 2] + ws[k, 1] * down[1, 2] + ws[k, 2] * down[2, 2]
     st = math.sqrt((1.0 - ct) * (1.0 + ct))  # sin(theta) >= 0, theta in [0, pi]
     dphi = (wd0 * s - wd1 * c) / st if st > singular else 0.0
-    rate[0] = wd2 - dphi * ct
-    rate[1] = wd0 * c + wd1 * s
-    rate[2] = dphi
+    rates[k, 0] = wd2 - dphi * ct
+    rates[k, 1] = wd0 * c + wd1 * s
+    rates[k, 2] = dphi
+
+
+def _held_t0_index() -> int:
+    """Where the held t0 sits among fast.rhs_kernel's arguments after (t, y, ydot)."""
+    import inspect
+
+    kernel = getattr(fast.rhs_kernel, "py_func", fast.rhs_kernel)
+    return list(inspect.signature(kernel).parameters).index("t0") - 3
+
+
+#: the held inputs (t0, p0, pdot, L_rotor, tau) start here in the arguments of fast.rhs_kernel
+#: after (t, y, ydot) (FastChainODE.kernel_arguments())
+HELD_T0 = _held_t0_index()
+
+
+def held_inputs(model, t0: float, p0, hinge_tau, L_rotor) -> tuple:
+    """(t0, p0, pdot, L_rotor, tau) as fast.rhs_kernel reads them (fast.input_arguments), for a
+    caller that passes the inputs of the kernel itself instead of holding them in the system."""
+    return fast.input_arguments(model, t0, p0, hinge_tau, L_rotor)
 
 
 #: bits of `want` (publication_kernel): the parts computed beyond the joint states
@@ -113,22 +170,31 @@ NONFINITE_FIELDS = (None, "position", "velocity", "effort", "body_position", "bo
                     "wrench_force", "wrench_moment")
 
 
-@_njit
-def _put(dst, at, i, v):
-    """v into dst at the slots at[c, i] of every copy c; False if v is not finite."""
+@_njit_inline
+def _put(dst, at, k, i, v):
+    """v into dst at the slots at[c, k, i] of every copy c; False if v is not finite."""
     for c in range(at.shape[0]):
-        dst[at[c, i]] = v
+        dst[at[c, k, i]] = v
     return abs(v) < math.inf
 
 
-@_njit
+def scratch_size(n: int) -> int:
+    """The words of publication_kernel's `scratch` for n bodies."""
+    return SCRATCH_PER_BODY * n + SCRATCH_FIXED
+
+
+#: publication_kernel's scratch: I6 36, pb 6, dlam_b 3, acc 6 words per body; 3-vectors and A (6)
+SCRATCH_PER_BODY, SCRATCH_FIXED = 51, 24
+
+
+@_njit_uncounted
 def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
                        first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
                        base, t0, p0, pdot, L_rotor, tau,
                        base_position, down, singular, speed_body, speed_axis, speed_A, speed_rate,
                        want, joint_kind, joint_ref,
                        R, w, vO, O, quat, euler, euler_rate, L_speed, wrench_force, wrench_moment, inv,
-                       position, velocity, effort, dst, at_joint, at_position, at_quat, at_wrench):
+                       position, velocity, effort, dst, at_joint, at_position, at_quat, at_wrench, scratch):
     """What one publication asks for at (t, y), in one pass: the joint states always, wrenches,
     poses and invariants when `want` says so; written into the output arrays and, for each
     copy c, into dst at the slots at_...[c] (any flat float64 buffer: the messages' bytes).
@@ -145,7 +211,8 @@ def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hin
     frame (WANT_WRENCHES), inv (INV_SIZE,) (WANT_INVARIANTS), position, velocity, effort (J,)
     the joint states. Scatter: dst (m,) float64; at_joint (c, 3, J) slots of position, velocity,
     effort; at_position (c, n, 3), at_quat (c, n, 4) (w, x, y, z), at_wrench (c, n, 6) (force,
-    moment); c = 0 writes none.
+    moment); c = 0 writes none. scratch: float64 (scratch_size(n),), overwritten (this kernel
+    allocates nothing: compiled without reference counting, as fast.rhs_kernel).
 
     Returns 0, or the index in NONFINITE_FIELDS of the first output found not finite (the
     joint states, and the poses and wrenches asked for, are all checked as they are written).
@@ -157,37 +224,70 @@ def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hin
     do_wrench = (want & WANT_WRENCHES) != 0
     do_bodies = (want & WANT_BODIES) != 0
     do_inv = (want & WANT_INVARIANTS) != 0
-    if do_wrench or nv > 0:  # the accelerations: u' into ydot
+    # the kinematics in the views fast.rhs_kernel cuts its workspace with (its layout, above):
+    # the kernel leaves them there when it runs, else they are computed here into the same views
+    o = 0
+    R_k = block3(work, o, n, 3, 3)
+    o += 9 * n
+    s_w = block2(work, o, n, 3)
+    o += 3 * n
+    hk = block2(work, o, n, 3)
+    o += 3 * n
+    Aw = block3(work, o, n, 3, 3)
+    o += 9 * n
+    e_w = block2(work, o, n, 3)
+    o += 3 * n
+    w_k = block2(work, o, n, 3)
+    o += 3 * n
+    vO_k = block2(work, o, n, 3)
+    o += 3 * n
+    c = block2(work, o, n, 6)
+    o += 6 * n + 36 * n + 6 * n + 36 * n  # c, then I6, pb, Dinv (the elimination's: not read)
+    lam_b = block2(work, o, n, 3)
+    o += 6 * n  # lam_b, dlam_b
+    S = block2(work, o, N, 6)
+    o += 19 * N  # S, U, W, u
+    p = block1(work, o, nt)
+    if do_wrench or nv > 0:  # the accelerations: u' into ydot; the kinematics, p (29), S as above
         fast.rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
                         first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
                         base, t0, p0, pdot, L_rotor, tau)
-    s_w = np.empty((n, 3))
-    hk = np.empty((n, 3))
-    Aw = np.empty((n, 3, 3))
-    e_w = np.empty((n, 3))
-    c = np.empty((n, 6))
-    lam_b = np.empty((n, 3))
-    p = np.empty(nt)
-    tmp = np.empty(3)
-    for i in range(nt):
-        p[i] = p0[i] + pdot[i] * (t - t0)  # (29)
-    _positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, hk, Aw, e_w)
-    _velocities(t, y, is_hinge, own_col, base_type, amp, W, i_vel, s_w, e_w, w, vO, c)
+    else:
+        for i in range(nt):
+            p[i] = p0[i] + pdot[i] * (t - t0)  # (29)
+        _positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R_k, s_w, hk, Aw, e_w)
+        _velocities(t, y, is_hinge, own_col, base_type, amp, W, i_vel, s_w, e_w, w_k, vO_k, c)
+    for k in range(n):  # the outputs' copies
+        for a in range(3):
+            w[k, a] = w_k[k, a]
+            vO[k, a] = vO_k[k, a]
+            for b in range(3):
+                R[k, a, b] = R_k[k, a, b]
+    q = 0
+    I6 = block3(scratch, q, n, 6, 6)
+    q += 36 * n
+    pb = block2(scratch, q, n, 6)
+    q += 6 * n
+    dlam_b = block2(scratch, q, n, 3)
+    q += 3 * n
+    acc = block2(scratch, q, n, 6)
+    q += 6 * n
+    tmp = block1(scratch, q, 3)
+    A = block1(scratch, q + 3, 6)
+    L = block1(scratch, q + 9, 3)
+    P = block1(scratch, q + 12, 3)
+    hsum = block1(scratch, q + 15, 3)
+    ang = block1(scratch, q + 18, 3)
+    lin = block1(scratch, q + 21, 3)  # q + 24 = scratch_size(n)
     bad = 0
-    acc = np.empty((0, 6))
     if do_wrench or nv > 0:
         # body inertias and forces at zero acceleration (as rhs_kernel, which overwrote its own)
-        I6 = np.empty((n, 6, 6))
-        pb = np.empty((n, 6))
-        dlam_b = np.empty((n, 3))
-        S = np.empty((N, 6))
         _bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
                      torque_A, p, L_rotor, has_gravity, gravity, lam_b, dlam_b, I6, pb)
-        _joint_columns(is_hinge, own_col, base_type, e_w, S)
         udot = ydot[i_vel:i_vel + N]
         # body accelerations about O^k: A^k = A^{k-1} moved to O^k + c^k + S_k u'_k
-        acc = np.empty((n, 6))
-        A = np.zeros(6)
+        for a in range(6):
+            A[a] = 0.0
         if base_type == fast.BASE_MOVING:
             sw = -W * W * math.sin(W * t)
             for a in range(3):
@@ -223,9 +323,9 @@ def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hin
                     m = R[k, 0, a] * Fa0 + R[k, 1, a] * Fa1 + R[k, 2, a] * Fa2
                     wrench_force[k, a] = f
                     wrench_moment[k, a] = m
-                    if not _put(dst, at_wrench[:, k], a, f) and bad == 0:
+                    if not _put(dst, at_wrench, k, a, f) and bad == 0:
                         bad = 6
-                    if not _put(dst, at_wrench[:, k], 3 + a, m) and bad == 0:
+                    if not _put(dst, at_wrench, k, 3 + a, m) and bad == 0:
                         bad = 7
         # speed rotors: the motor keeps kappa' constant, L_i = A_i (w' . e_i)
         for i in range(nv):
@@ -233,9 +333,6 @@ def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hin
             _matvec(R[k], speed_axis[i], tmp)
             L_speed[i] = speed_A[i] * (acc[k, 0] * tmp[0] + acc[k, 1] * tmp[1] + acc[k, 2] * tmp[2])
     elif do_inv and has_lam:
-        I6 = np.empty((n, 6, 6))
-        pb = np.empty((n, 6))
-        dlam_b = np.empty((n, 3))
         _bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
                      torque_A, p, L_rotor, has_gravity, gravity, lam_b, dlam_b, I6, pb)
     # joint points
@@ -254,7 +351,7 @@ def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hin
     all_euler = (want & WANT_EULER_ALL) != 0
     for k in range(n):
         if all_euler or not is_hinge[k]:
-            _euler(R[k], w[k], down, singular, euler[k], euler_rate[k])
+            _euler(R, w, k, down, singular, euler, euler_rate)
     # poses
     if do_bodies:
         for k in range(n):
@@ -266,10 +363,10 @@ def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hin
                 for a in range(4):
                     quat[k, a] = y[i + a] / nrm
             for a in range(3):
-                if not _put(dst, at_position[:, k], a, O[k, a]) and bad == 0:
+                if not _put(dst, at_position, k, a, O[k, a]) and bad == 0:
                     bad = 4
             for a in range(4):
-                if not _put(dst, at_quat[:, k], a, quat[k, a]) and bad == 0:
+                if not _put(dst, at_quat, k, a, quat[k, a]) and bad == 0:
                     bad = 5
     # joint states
     for j in range(joint_kind.shape[0]):
@@ -289,11 +386,11 @@ def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hin
         else:
             pos, vel, eff = speed_rate[ref] * t, speed_rate[ref], L_speed[ref]
         position[j], velocity[j], effort[j] = pos, vel, eff
-        if not _put(dst, at_joint[:, 0], j, pos) and bad == 0:
+        if not _put(dst, at_joint, 0, j, pos) and bad == 0:
             bad = 1
-        if not _put(dst, at_joint[:, 1], j, vel) and bad == 0:
+        if not _put(dst, at_joint, 1, j, vel) and bad == 0:
             bad = 2
-        if not _put(dst, at_joint[:, 2], j, eff) and bad == 0:
+        if not _put(dst, at_joint, 2, j, eff) and bad == 0:
             bad = 3
     if not do_inv:
         return bad
@@ -301,11 +398,8 @@ def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hin
     T = 0.0
     V = 0.0
     lam_dot = 0.0
-    L = np.zeros(3)
-    P = np.zeros(3)
-    hsum = np.zeros(3)
-    ang = np.empty(3)
-    lin = np.empty(3)
+    for a in range(3):
+        L[a] = P[a] = hsum[a] = 0.0
     for k in range(n):
         _matvec(Aw[k], w[k], ang)  # A w + h x v(O)
         _cross_add(hk[k], vO[k], ang)
@@ -369,4 +463,4 @@ def outputs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_a
                        R, w, vO, O, quat, euler, euler_rate, L_speed, wrench_force, wrench_moment, inv,
                        nothing, nothing, nothing, nothing, np.empty((0, 3, 0), dtype=np.int64),
                        np.empty((0, R.shape[0], 3), dtype=np.int64), np.empty((0, R.shape[0], 4), dtype=np.int64),
-                       np.empty((0, R.shape[0], 6), dtype=np.int64))
+                       np.empty((0, R.shape[0], 6), dtype=np.int64), np.empty(SCRATCH_PER_BODY * R.shape[0] + SCRATCH_FIXED))

@@ -175,7 +175,7 @@ class Simulator:
             float(t), np.ascontiguousarray(y, dtype=np.float64), o["ydot"], *self.system.kernel_arguments(),
             *model[:7], int(fo.WANT_INVARIANTS), *model[8:], o["R"], o["w"], o["vO"], o["O"], o["quat"], o["euler"],
             o["euler_rate"], o["L_speed"], o["wrench_force"], o["wrench_moment"], o["inv"], js[0], js[1], js[2],
-            into.dst, into.joint, into.position, into.quaternion, into.wrench)
+            into.dst, into.joint, into.position, into.quaternion, into.wrench, o["scratch"])
         return o["inv"].copy()
 
     def _joint_layout(self) -> None:
@@ -202,6 +202,14 @@ class Simulator:
                 idx.append(3 * n + nh + nt + i)
         self._joint_names = names
         self._joint_index = np.array(idx, dtype=np.intp)
+        #: the snapshot's names (joint states, axes, bodies): one tuple each for the simulator's life
+        self._snapshot_names = (tuple(names), tuple(m.axis_names), tuple(m.names))
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """The names of the joint-state entries in order (SPEC.md), those of every snapshot: the
+        same tuple for the simulator's life."""
+        return self._snapshot_names[0]
 
     def _joint_arrays(self, euler, rates, kdot_t, L_v, hinge_tau, L_rotor):
         """position, velocity, effort (J,) of the joint states from their sources (see
@@ -489,11 +497,13 @@ class Simulator:
             "ydot": np.zeros(m.size), "R": np.zeros((n, 3, 3)), "w": np.zeros((n, 3)), "vO": np.zeros((n, 3)),
             "O": np.zeros((n, 3)), "quat": np.zeros((n, 4)), "euler": np.zeros((n, 3)), "euler_rate": np.zeros((n, 3)),
             "L_speed": np.zeros(nv), "wrench_force": np.zeros((n, 3)), "wrench_moment": np.zeros((n, 3)),
-            "inv": np.zeros(fast_outputs.INV_SIZE)}
+            "inv": np.zeros(fast_outputs.INV_SIZE), "scratch": np.zeros(fast_outputs.scratch_size(n))}
         J = len(self._joint_names)
         self._snapshot_nowhere = Scatter(np.zeros(0), *(np.zeros((0, *shape), dtype=np.int64)
                                                       for shape in ((3, J), (n, 3), (n, 4), (n, 6))))
-        self._snapshot_names = (tuple(self._joint_names), tuple(m.axis_names), tuple(m.names))
+        self._snapshot_inputs = None  # (moments, pdot, L_rotor, tau) of `_held_now`
+        self._snapshot_t0 = fast_outputs.HELD_T0  # where the held inputs start in kernel_arguments()
+        self._snapshot_joints = (np.empty(J), np.empty(J), np.empty(J))  # write_outputs' joint states
 
     def _joint_arrays_sources(self) -> tuple[np.ndarray, np.ndarray]:
         """The joint-state entries for the compiled outputs: (kind, ref) (J,) int64, kind one of
@@ -514,6 +524,42 @@ class Simulator:
                 kind.append(fo.JOINT_SPEED_ROTOR), ref.append(i - 3 * n - nh - nt)
         return np.array(kind, dtype=np.int64), np.array(ref, dtype=np.int64)
 
+    def _held_now(self) -> tuple:
+        """The arguments of fast.rhs_kernel after (t, y, ydot) with the inputs held from now on
+        (what `system.hold(t, p, *self._inputs())` would leave, without holding: the system
+        keeps the hold of the last advance, and only the held t0 and spins change from one
+        publication to the next; the rest is made again only when the commands change)."""
+        inputs = self._snapshot_inputs
+        if inputs is None or inputs[0] is not self._moments:
+            from .fast_outputs import held_inputs
+
+            _, _, pdot, L, tau = held_inputs(self.model, self._t, None, *self._inputs())
+            inputs = self._snapshot_inputs = (self._moments, pdot, L, tau)
+        p = self._p
+        if p is None:  # no torque rotors
+            p = inputs[1]
+        elif p.dtype != np.float64 or not p.flags.c_contiguous:  # the compiled entry does not convert
+            p = self._p = np.ascontiguousarray(p, dtype=np.float64)
+        return (*self.system.kernel_arguments()[:self._snapshot_t0], float(self._t), p, *inputs[1:])
+
+    def _compiled_call(self, want: int, into: Scatter, pos, vel, eff) -> int:
+        """fast_outputs.publication_kernel at the current state: the outputs into the scratch
+        arrays, the joint states into pos, vel, eff (J,), the numbers also into the slots of
+        `into`; returns its index in NONFINITE_FIELDS of the first output found not finite (0:
+        none)."""
+        if getattr(self, "_snapshot_kernel", None) is None:
+            self._snapshot_setup()
+        o = self._snapshot_scratch
+        y = self._y
+        if y.dtype != np.float64 or not y.flags.c_contiguous:  # the compiled entry does not convert
+            y = self._y = np.ascontiguousarray(y, dtype=np.float64)
+        model = self._snapshot_model
+        return self._snapshot_kernel(
+            float(self._t), y, o["ydot"], *self._held_now(), *model[:7], want,
+            *model[8:], o["R"], o["w"], o["vO"], o["O"], o["quat"], o["euler"], o["euler_rate"], o["L_speed"],
+            o["wrench_force"], o["wrench_moment"], o["inv"], pos, vel, eff,
+            into.dst, into.joint, into.position, into.quaternion, into.wrench, o["scratch"])
+
     def _outputs_compiled(self, want: int | None = None, into: Scatter | None = None, fresh: bool = True) -> dict:
         """The outputs of the current state from one compiled call
         (fast_outputs.publication_kernel): the arrays of FastChainODE.outputs by name, and the
@@ -525,23 +571,30 @@ class Simulator:
 
         if getattr(self, "_snapshot_kernel", None) is None:
             self._snapshot_setup()
-        self.system.hold(self._t, self._p, *self._inputs())
-        o = self._snapshot_scratch
-        into = self._snapshot_nowhere if into is None else into
         J = len(self._joint_names)
         pos, vel, eff = np.empty(J), np.empty(J), np.empty(J)
-        y = self._y
-        if y.dtype != np.float64 or not y.flags.c_contiguous:  # the compiled entry does not convert
-            y = self._y = np.ascontiguousarray(y, dtype=np.float64)
-        model = self._snapshot_model
-        bad = self._snapshot_kernel(
-            float(self._t), y, o["ydot"], *self.system.kernel_arguments(), *model[:7], int(fo.WANT_ALL if want is None else want),
-            *model[8:], o["R"], o["w"], o["vO"], o["O"], o["quat"], o["euler"], o["euler_rate"], o["L_speed"],
-            o["wrench_force"], o["wrench_moment"], o["inv"], pos, vel, eff,
-            into.dst, into.joint, into.position, into.quaternion, into.wrench)
-        out = {k: v.copy() for k, v in o.items()} if fresh else dict(o)
+        bad = self._compiled_call(int(fo.WANT_ALL if want is None else want),
+                                  self._snapshot_nowhere if into is None else into, pos, vel, eff)
+        o = self._snapshot_scratch
+        out = {k: v.copy() for k, v in o.items() if k != "scratch"} if fresh else dict(o)
         out.update(position=pos, velocity=vel, effort=eff, nonfinite=bad)
         return out
+
+    def write_outputs(self, into: Scatter, *, bodies: bool = True, wrenches: bool = True) -> str | None:
+        """The joint states, and the poses (`bodies`) and wrenches asked for, of the current state
+        written into the slots of `into` only, without a Snapshot (a publication without
+        diagnostics: gyro_sim.ros.outputs); the slots `into` has must be asked. Returns the name
+        of the first field found not finite (Snapshot.nonfinite's names), None when all are:
+        then nothing non-finite was written. Same numbers as `snapshot(into=...)`."""
+        if self._compiled_outputs is None:
+            return self.snapshot(bodies=bodies, wrenches=wrenches, invariants=False, into=into).nonfinite()
+        from . import fast_outputs as fo
+
+        want = (fo.WANT_BODIES if bodies else 0) | (fo.WANT_WRENCHES if wrenches else 0)
+        bad = self._compiled_call(want, into, *self._snapshot_joints)
+        if bad:
+            return fo.NONFINITE_FIELDS[bad]
+        return None if math.isfinite(self._t) else "time"
 
     def _joint_arrays_compiled(self, o: dict):
         return o["position"], o["velocity"], o["effort"]
@@ -589,9 +642,7 @@ class Simulator:
         return kw
 
     def _snapshot(self, pos, vel, eff, kw: dict, arrays_checked: bool = False) -> Snapshot:
-        names = getattr(self, "_snapshot_names", None)
-        if names is None:
-            names = (tuple(self._joint_names), tuple(self.model.axis_names), tuple(self.model.names))
+        names = self._snapshot_names
         return Snapshot(
             time=self._t, joint_names=names[0], position=pos, velocity=vel, effort=eff, axis_names=names[1],
             axis_moments=self._moments.copy(), integrator=self.integrator_name, error_estimate=self.error_estimate,
