@@ -119,3 +119,30 @@ def test_failure_is_reported_as_auto():
     assert err.value.method == "auto" and 0.4 < err.value.t <= 0.5
     assert "radau running" in str(err.value)  # dop853 collapsed first, radau tried
     assert integ.switches and integ.switches[0][1:3] == ("dop853", "radau")
+
+
+def test_one_compiled_call_per_advance_in_radau():
+    """On the numba backend radau's phase runs in its compiled loop: one call of it per
+    `advance` from the switch on (the call that switches: dop853's loop, then radau's), and the
+    loop is there before the first switch (loaded with the integrator)."""
+    pytest.importorskip("numba")
+    sim = Simulator(ex.fast_rotor_precession(1e4), integrator="auto", rtol=1e-8, atol=1e-10,
+                    backend="numba")
+    integ = sim.integrator
+    assert integ.explicit.compiled and integ.implicit.compiled
+    assert integ.implicit._loop.entry is not None  # noqa: SLF001 - loaded: straight to it
+    loop, calls = integ.implicit._loop, []  # noqa: SLF001
+
+    def counted(*args):
+        calls.append(sim.time)
+        return loop(*args)
+
+    integ.implicit._loop = counted  # noqa: SLF001
+    ends = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", StiffnessWarning)
+        for _ in range(50):
+            sim.advance(0.01)
+            ends.append(sim.time)
+    (t_switch, *_), = integ.switches
+    assert len(calls) == sum(1 for t in ends if t > t_switch) > 30
