@@ -13,11 +13,15 @@ every body (in space: no gravity, as bench realtime), RK4 at 1 ms, with wrenches
 Parts (wall time on the calling thread, medians and p99 over the publications):
 
 - kernel: the compiled outputs call alone (`Simulator._outputs_compiled`);
-- snapshot: `Simulator.snapshot` as the node asks for it, minus the kernel;
-- bytes: `Publication.messages` from that snapshot, with the finite check;
+- snapshot: what prepare_state asks of the Simulator, minus the kernel: `Simulator.write_outputs`
+  (the numbers into the frame and their finite check, no Snapshot) without diagnostics,
+  `Simulator.snapshot` with them;
+- bytes: the frame's messages (`Frame.messages`: the stamps and one block), and the
+  diagnostics' bytes when they go;
 - prepare: `Outputs.prepare_state` as a whole (what the node times as output_time);
-- publish: the rclpy `publish(bytes)` calls of the batch, without a subscriber and with one
-  (a separate process subscribing to every topic, raw);
+- publish: `Outputs.publish`, the rclpy `publish(bytes)` calls of the batch (optional topics only
+  where someone subscribes), without a subscriber and with one (a separate process subscribing
+  to every topic, raw);
 - record: the recorder hand-off, as `Outputs.send` makes it;
 - total: prepare + publish + record, what the physics thread pays per publication.
 
@@ -223,28 +227,20 @@ def _run(sim, out, recorder, n: int, publications: int, with_sub: bool, progress
         _kernel(sim, out, diag)
         t1 = clock()
         frame = _frame(out)
+        snap = None
         if frame is None:
             snap = sim.snapshot(bodies=True, wrenches=True, invariants=diag)
-        else:
+        elif diag or not hasattr(sim, "write_outputs"):
             snap = sim.snapshot(bodies=True, wrenches=True, invariants=diag, into=frame.scatter)
+        else:
+            sim.write_outputs(frame.scatter, bodies=True, wrenches=True)
         t2 = clock()
         _bytes(sim, out, snap, t_ns, run if diag else False)
         t3 = clock()
         # what the physics thread runs: prepare, then send (split into its two halves)
         batch = out.prepare_state(t_ns, sim, run if diag else False)
         t4 = clock()
-        publisher = getattr(out, "_publisher", None)  # the call Outputs.send makes
-        listeners = getattr(out, "listeners", None)  # an optional topic nobody subscribes to is not published
-        listened = (lambda topic: True) if listeners is None else (lambda topic: listeners.listened.get(topic, True))
-        for topic, _, data in batch:
-            if publisher is not None:
-                fn = publisher(topic)
-                if fn is not None and listened(topic):
-                    fn(data)
-            else:
-                pub = out.pubs.get(topic)
-                if pub is not None:
-                    pub.publish(data)
+        _publish(out, batch)
         t5 = clock()
         _hand_off(recorder, t_ns, batch)
         t6 = clock()
@@ -260,6 +256,26 @@ def _run(sim, out, recorder, n: int, publications: int, with_sub: bool, progress
         if progress is not None and i % 50 == 0:
             progress(i, publications, f"n = {n}{' (subscriber)' if with_sub else ''}")
     return row
+
+
+def _publish(out, batch) -> None:
+    """The rclpy half of `Outputs.send` (`Outputs.publish` where it has one)."""
+    publish = getattr(out, "publish", None)
+    if publish is not None:
+        publish(batch)
+        return
+    publisher = getattr(out, "_publisher", None)  # the call Outputs.send makes
+    listeners = getattr(out, "listeners", None)  # an optional topic nobody subscribes to is not published
+    listened = (lambda topic: True) if listeners is None else (lambda topic: listeners.listened.get(topic, True))
+    for topic, _, data in batch:
+        if publisher is not None:
+            fn = publisher(topic)
+            if fn is not None and listened(topic):
+                fn(data)
+        else:
+            pub = out.pubs.get(topic)
+            if pub is not None:
+                pub.publish(data)
 
 
 def isolated(n: int, repeats: int = 300) -> dict[str, float]:
@@ -300,7 +316,8 @@ def isolated(n: int, repeats: int = 300) -> dict[str, float]:
         res["kernel, + wrenches, poses"] = med(lambda: sim._outputs_compiled(  # noqa: SLF001
             fo.WANT_BODIES | fo.WANT_WRENCHES, scatter, fresh=False))
         res["snapshot"] = med(lambda: sim.snapshot(invariants=False, into=scatter))
-        snap = sim.snapshot(invariants=False, into=scatter)
+        if hasattr(sim, "write_outputs"):
+            res["write_outputs"] = med(lambda: sim.write_outputs(scatter))
         res["bytes"] = med(lambda: frame.messages(1))
     else:
         res["kernel, + wrenches, poses"] = med(lambda: sim._outputs_compiled())  # noqa: SLF001

@@ -583,18 +583,18 @@ class Simulator:
     def write_outputs(self, into: Scatter, *, bodies: bool = True, wrenches: bool = True) -> str | None:
         """The joint states, and the poses (`bodies`) and wrenches asked for, of the current state
         written into the slots of `into` only, without a Snapshot (a publication without
-        diagnostics: gyro_sim.ros.outputs); the slots `into` has must be asked. Returns the name
-        of the first field found not finite (Snapshot.nonfinite's names), None when all are:
-        then nothing non-finite was written. Same numbers as `snapshot(into=...)`."""
+        diagnostics: gyro_sim.ros.outputs); the slots `into` has must be asked. Returns None when
+        every number written is finite, else the field `Snapshot.nonfinite` names (the slots
+        then hold what was found: not to be sent). Same numbers as `snapshot(into=...)`."""
         if self._compiled_outputs is None:
             return self.snapshot(bodies=bodies, wrenches=wrenches, invariants=False, into=into).nonfinite()
         from . import fast_outputs as fo
 
         want = (fo.WANT_BODIES if bodies else 0) | (fo.WANT_WRENCHES if wrenches else 0)
-        bad = self._compiled_call(want, into, *self._snapshot_joints)
-        if bad:
-            return fo.NONFINITE_FIELDS[bad]
-        return None if math.isfinite(self._t) else "time"
+        if self._compiled_call(want, into, *self._snapshot_joints) or not math.isfinite(self._t):
+            # the name Snapshot.nonfinite gives (its order of the fields), from a snapshot of the state
+            return self.snapshot(bodies=bodies, wrenches=wrenches, invariants=False).nonfinite() or "time"
+        return None
 
     def _joint_arrays_compiled(self, o: dict):
         return o["position"], o["velocity"], o["effort"]

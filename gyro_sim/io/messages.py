@@ -503,19 +503,58 @@ class Frame:
 
     def messages(self, t_ns: int) -> FrameBatch:
         """[(topic, type, bytes)] with the numbers the last `snapshot(into=self.scatter)` wrote
-        and every stamp t_ns, cut from one block (`block`, with the `layout`)."""
+        and every stamp t_ns, in one block (`block`, with the `layout`) from which each message
+        is cut when asked."""
         sec, nsec = divmod(int(t_ns), NS_PER_S)
         self._u32[self._sec] = sec & 0xFFFFFFFF  # int32 seconds, two's complement
         self._u32[self._nsec] = nsec
-        data = self.buffer.tobytes()
-        out = FrameBatch(zip(self.topics, self.types, map(data.__getitem__, self._slices)))
-        out.block, out.layout = data, self.layout
-        return out
+        return FrameBatch(self.buffer.tobytes(), self.layout)
 
 
-class FrameBatch(list):
-    """A publication's [(topic, type, bytes)] from a :class:`Frame`: its first len(layout) items
-    are `block[start:stop]` for each (topic, type, start, stop) of `layout`; items appended after
-    them (the diagnostics) are not in the block."""
+class FrameBatch:
+    """A publication's [(topic, type, bytes)] from a :class:`Frame`, as a sequence: its first
+    len(layout) items are `block[start:stop]` for each (topic, type, start, stop) of `layout`,
+    cut when read (a message only recorded goes as part of the block, never cut: ~70 ns a
+    message, 100 wrench topics at n = 100); items appended after them (`extra`: the diagnostics)
+    are not in the block."""
 
-    __slots__ = ("block", "layout")
+    __slots__ = ("block", "layout", "extra")
+
+    def __init__(self, block: bytes, layout: tuple) -> None:
+        self.block, self.layout = block, layout
+        self.extra: list[tuple[str, str, bytes]] = []
+
+    def append(self, item: tuple[str, str, bytes]) -> None:
+        self.extra.append(item)
+
+    def __len__(self) -> int:
+        return len(self.layout) + len(self.extra)
+
+    def __iter__(self):
+        block = self.block
+        for topic, msgtype, a, b in self.layout:
+            yield topic, msgtype, block[a:b]
+        yield from self.extra
+
+    def __getitem__(self, i):
+        if isinstance(i, slice):
+            return [self[j] for j in range(*i.indices(len(self)))]
+        n = len(self.layout)
+        j = i + len(self) if i < 0 else i
+        if 0 <= j < n:
+            topic, msgtype, a, b = self.layout[j]
+            return topic, msgtype, self.block[a:b]
+        if j < 0:
+            raise IndexError(i)
+        return self.extra[j - n]
+
+    def __eq__(self, other) -> bool:
+        try:
+            return len(self) == len(other) and all(a == b for a, b in zip(self, other))
+        except TypeError:
+            return NotImplemented
+
+    __hash__ = None
+
+    def __repr__(self) -> str:
+        return f"FrameBatch({list(self)!r})"

@@ -179,6 +179,13 @@ class Outputs:
             if frame is None:
                 frame = self._frames[key] = self.publication.frame(self._joint_names, wrenches=wrenches, poses=poses,
                                                                    tf=tf)
+            names = sim.joint_names
+            if diagnostics_run is False and (names is frame.joint_names or names == frame.joint_names):
+                # no diagnostics: the numbers into the frame and their check, no snapshot
+                bad = sim.write_outputs(frame.scatter, bodies=poses or tf, wrenches=wrenches)
+                if bad is not None:
+                    raise SimulationError(f"t = {sim.time:.6g} s: non-finite {bad} (not published)")
+                return frame.messages(t_ns)
         snap = sim.snapshot(bodies=poses or tf, wrenches=wrenches, invariants=diagnostics_run is not False,
                             into=None if frame is None else frame.scatter)
         bad = snap.nonfinite()  # the arrays were checked as they were computed: then only the scalars
@@ -213,9 +220,31 @@ class Outputs:
     def send(self, t_ns: int, batch: list) -> None:
         """Publish a prepared state (and hand the same bytes to the recorder, the batch itself:
         it is not changed after). An optional topic nobody subscribes to is only recorded."""
+        self.publish(batch)
+        if self.recorder is not None:  # one call: the recorder's sender thread takes it from there
+            self.recorder.raw_batch(t_ns, batch)
+
+    def publish(self, batch) -> None:
+        """The rclpy half of `send`: each message of the batch on its topic, except optional
+        topics nobody subscribes to (a FrameBatch's messages are cut from its block only for
+        the topics published)."""
         get = self._publish_fn.get
         listened = self.listeners.listened.get
-        for topic, _, data in batch:
+        layout = getattr(batch, "layout", None)
+        if layout is not None:
+            block, rest = batch.block, batch.extra
+        else:
+            block, layout, rest = b"", (), batch
+        for topic, _, a, b in layout:
+            fn = get(topic, False)
+            if fn is False:
+                fn = self._publisher(topic)
+            if fn is not None and listened(topic, True):
+                try:
+                    fn(block[a:b])
+                except Exception as exc:  # the context went away (shutdown under way)
+                    raise OutputsClosed(str(exc)) from exc
+        for topic, _, data in rest:
             fn = get(topic, False)
             if fn is False:
                 fn = self._publisher(topic)
@@ -224,8 +253,6 @@ class Outputs:
                     fn(data)
                 except Exception as exc:  # the context went away (shutdown under way)
                     raise OutputsClosed(str(exc)) from exc
-        if self.recorder is not None:  # one call: the recorder's sender thread takes it from there
-            self.recorder.raw_batch(t_ns, batch)
 
     def publish_diagnostics(self, t_ns: int, sim, run: M.Status) -> None:
         """Diagnostics alone (paused, stopped): the dynamics of the state kept, and the run."""

@@ -191,3 +191,21 @@ def test_without_recording_wrenches_are_computed_while_one_is_listened_to():
     node.published.clear()
     out.send(1, batch)
     assert set(node.published) == {M.JOINT_STATES, M.CLOCK, out.wrench_topics[0]}
+
+
+def test_frame_batch_is_the_sequence_of_its_messages():
+    sim = driven("hinge_chain", "numpy")
+    pub = M.Publication(sim.model.names)
+    frame = pub.frame(sim.snapshot().joint_names, wrenches=True, poses=True, tf=True)
+    sim.snapshot(bodies=True, wrenches=True, invariants=False, into=frame.scatter)
+    batch = frame.messages(7)
+    diag = (M.DIAGNOSTICS, M.DIAGNOSTICS_TYPE, M.diagnostic_array(7, [M.Status("run", {"i": 1})]))
+    batch.append(diag)
+    items = [(t, ty, batch.block[a:b]) for t, ty, a, b in frame.layout] + [diag]
+    assert len(batch) == len(items) and list(batch) == items and batch == items
+    assert [batch[i] for i in range(-len(items), len(items))] == items + items
+    assert batch[len(frame.layout):] == [diag] and batch[1:3] == items[1:3] and batch[::-2] == items[::-2]
+    with pytest.raises(IndexError):
+        batch[len(items)]
+    with pytest.raises(IndexError):
+        batch[-len(items) - 1]
