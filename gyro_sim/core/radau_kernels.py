@@ -211,7 +211,9 @@ def rad_lu(At, piv):
     return info
 
 
-if numba is not None:
+#: the kernels are compiled (numba, and not NUMBA_DISABLE_JIT): LAPACK is reached as numba reaches it
+_COMPILED = numba is not None and not numba.config.DISABLE_JIT
+if _COMPILED:
     try:  # LAPACK's getrf as numba's np.linalg calls it (scipy's LAPACK: scipy.linalg.cython_lapack)
         from numba import types as _types
         from numba.np.linalg import _LAPACK
@@ -237,7 +239,7 @@ if LAPACK_GETRF:
     def _getrf_complex(At, piv):
         n = At.shape[0]
         return _XGETRF_COMPLEX(_KIND_COMPLEX, n, n, At.ctypes, n, piv.ctypes)
-elif numba is None:  # plain Python: LAPACK through scipy, the same routine
+elif not _COMPILED:  # plain Python: LAPACK through scipy, the same routine
     def _getrf_real(At, piv):
         from scipy.linalg.lapack import get_lapack_funcs
 
@@ -510,13 +512,12 @@ HANDBACK_SIZE = 6
 EASY_RHO, EASY_STALE, EASY_STEPS, EASY_NEEDED = range(4)
 EASY_SIZE = 4
 
-if numba is not None:
+_XGEEV_REAL = None
+if _COMPILED:
     try:  # LAPACK's geev as numba's np.linalg.eigvals calls it (scipy's LAPACK)
         _XGEEV_REAL = _LAPACK().numba_ez_rgeev(_types.float64)
     except Exception:  # noqa: BLE001 - another numba layout: eigvals of the complex matrix
         _XGEEV_REAL = None
-else:
-    _XGEEV_REAL = None
 _JOB_NONE = ord("N")
 
 if _XGEEV_REAL is not None:
@@ -536,18 +537,23 @@ if _XGEEV_REAL is not None:
             for j in range(n):
                 At[j, i] = J[i, j]
         wr, wi, v = np.empty(n), np.empty(n), np.empty(1)
-        _geev_real(At, wr, wi, v)
+        if _geev_real(At, wr, wi, v) != 0:  # the QR iteration did not converge: no rho, no
+            return math.inf  # hand-back by it (numpy's eigvals raises here)
         rho = 0.0
         for i in range(n):
             r = math.hypot(wr[i], wi[i])
             if r > rho or r != r:
                 rho = r
         return rho
+elif not _COMPILED:  # plain Python: numpy's eigenvalues
+    def _eig_radius(J):
+        """max |eigenvalue| of J (n, n), n > 0."""
+        return float(np.max(np.abs(np.linalg.eigvals(J))))
 else:
     @_njit
     def _eig_radius(J):
-        """max |eigenvalue| of J (n, n), n > 0 (numba's eigvals: the complex matrix, whose
-        eigenvalues need no change of domain; numpy's without numba)."""
+        """max |eigenvalue| of J (n, n), n > 0 (numba's eigvals of the complex matrix, whose
+        eigenvalues need no change of domain)."""
         w = np.linalg.eigvals(J.astype(np.complex128))
         rho = 0.0
         for i in range(w.shape[0]):
