@@ -334,15 +334,20 @@ def diagnostic_array(t_ns: int, statuses: Sequence[Status]) -> bytes:
         w.string(st.message)
         w.string(st.hardware_id)
         w.u32(len(st.values))
+        texts = []
         for k, v in st.values.items():
             if k in STRING_KEYS:
                 text = str(v)
+            elif type(v) is float:  # most values: repr(float(v)) is repr(v)
+                if not math.isfinite(v):
+                    raise NonFiniteError(f"diagnostics {k}: expected a finite number, got {v!r}")
+                text = repr(v)
             else:
                 if isinstance(v, str) or not math.isfinite(v):
                     raise NonFiniteError(f"diagnostics {k}: expected a finite number, got {v!r}")
                 text = repr(int(v)) if isinstance(v, (int, np.integer)) else repr(float(v))
-            w.string(k)
-            w.string(text)
+            texts += (k, text)
+        w.string_run(texts)
     return bytes(w)
 
 

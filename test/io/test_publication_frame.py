@@ -209,3 +209,19 @@ def test_frame_batch_is_the_sequence_of_its_messages():
         batch[len(items)]
     with pytest.raises(IndexError):
         batch[-len(items) - 1]
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_node_diagnostics_refuse_a_non_finite_scalar(backend):
+    pytest.importorskip("sensor_msgs.msg")
+    from gyro_sim.ros.outputs import Outputs
+
+    sim = driven("hinge_chain", backend)
+    out = Outputs(_Node(), sim, SimpleNamespace(publish_wrenches=True, publish_poses=True))
+    for _ in range(2):  # the frame made
+        out.prepare_state(M.time_ns(sim.time), sim)
+    out.prepare_state(M.time_ns(sim.time), sim, None)  # with diagnostics: all finite
+    sim._work = float("nan")  # noqa: SLF001 - a scalar only the diagnostics carry
+    out.prepare_state(M.time_ns(sim.time), sim)  # not in these messages
+    with pytest.raises(SimulationError, match="non-finite work"):
+        out.prepare_state(M.time_ns(sim.time), sim, None)
