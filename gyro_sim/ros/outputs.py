@@ -77,6 +77,7 @@ class Listeners:
         self._asked = [-math.inf] * len(self.topics)
         self._next = 0
         self.asks = 0  # subscriber counts asked so far
+        self.version = 0  # counts the changes of `listened`
         self.refresh(per_call=len(self.topics))
 
     def _ask(self, i: int, now: float) -> None:
@@ -85,6 +86,7 @@ class Listeners:
         self.asks += 1
         if on != self.listened[topic]:
             self.listened[topic] = on
+            self.version += 1
             self.count[self.kinds[topic]] += 1 if on else -1
         self._asked[i] = now
 
@@ -160,6 +162,9 @@ class Outputs:
         self._frames: dict[tuple[bool, bool, bool], M.Frame] = {}
         self._joint_names: tuple[str, ...] | None = None
         self._publish_fn: dict[str, object] = {}  # topic -> the call that publishes its bytes (None: none)
+        #: (layout, listeners' version, ((publish call, start, stop), ...)): what `publish` does
+        #: with a FrameBatch of that layout while nobody starts or stops listening
+        self._plan: tuple | None = None
 
     # --- called by the physics loop -------------------------------------------------------------
     def prepare_state(self, t_ns: int, sim, diagnostics_run: M.Status | None | bool = False) -> list:
@@ -238,15 +243,15 @@ class Outputs:
         get = self._publish_fn.get
         listened = self.listeners.listened.get
         layout = getattr(batch, "layout", None)
+        rest = batch
         if layout is not None:
+            plan = self._plan
+            if plan is None or plan[0] is not layout or plan[1] != self.listeners.version:
+                calls = tuple((fn, a, b) for fn, (topic, _, a, b) in zip(map(self._publisher, (x[0] for x in layout)), layout)
+                              if fn is not None and listened(topic, True))
+                plan = self._plan = (layout, self.listeners.version, calls)
             block, rest = batch.block, batch.extra
-        else:
-            block, layout, rest = b"", (), batch
-        for topic, _, a, b in layout:
-            fn = get(topic, False)
-            if fn is False:
-                fn = self._publisher(topic)
-            if fn is not None and listened(topic, True):
+            for fn, a, b in plan[2]:
                 try:
                     fn(block[a:b])
                 except Exception as exc:  # the context went away (shutdown under way)
