@@ -545,7 +545,7 @@ class Simulator:
     def _compiled_call(self, want: int, into: Scatter, pos, vel, eff) -> int:
         """fast_outputs.publication_kernel at the current state: the outputs into the scratch
         arrays, the joint states into pos, vel, eff (J,), the numbers also into the slots of
-        `into`; returns its index in NONFINITE_FIELDS of the first output found not finite (0:
+        `into`; returns its index in NONFINITE_FIELDS of a field found not finite (0:
         none)."""
         if getattr(self, "_snapshot_kernel", None) is None:
             self._snapshot_setup()
@@ -564,7 +564,7 @@ class Simulator:
         """The outputs of the current state from one compiled call
         (fast_outputs.publication_kernel): the arrays of FastChainODE.outputs by name, and the
         joint states "position", "velocity", "effort" (new arrays), "nonfinite" (0, or the index in
-        fast_outputs.NONFINITE_FIELDS of the first output found not finite). want: WANT_* bits
+        fast_outputs.NONFINITE_FIELDS of a field found not finite). want: WANT_* bits
         (None: every part); into: a Scatter to write into as well. fresh=False: the other arrays
         are the Simulator's scratch, valid until the next call."""
         from . import fast_outputs as fo
