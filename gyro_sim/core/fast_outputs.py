@@ -16,6 +16,13 @@ Pipeline (all world components, about O^k unless said):
     joint angles    R, w          -> Euler angles and rates (rotations.matrices_to_euler)
     invariants      R, w, v       -> energy (eq 33 + potential), momenta (eq 79)
 
+One publication (:func:`publication_kernel`, Simulator.write_outputs and snapshot) allocates
+nothing: the kinematics are those fast.rhs_kernel leaves in its workspace when it runs (wrenches
+and speed rotors need its accelerations; otherwise they are computed here into the same views),
+the rest lives in a scratch vector the caller keeps (`scratch_size`), so the kernel is compiled
+without reference counting; the numbers are computed first, then put into the messages' slots
+and checked finite in plain loops.
+
 Its cache is keyed as the loops' of :mod:`gyro_sim.core.fast_loop` (a digest of every file
 whose kernels it compiles in).
 """
