@@ -502,8 +502,16 @@ class Simulator:
         self._snapshot_nowhere = Scatter(np.zeros(0), *(np.zeros((0, *shape), dtype=np.int64)
                                                       for shape in ((3, J), (n, 3), (n, 4), (n, 6))))
         self._snapshot_inputs = None  # (moments, pdot, L_rotor, tau) of `_held_now`
-        self._snapshot_t0 = fast_outputs.HELD_T0  # where the held inputs start in kernel_arguments()
+        # the kernel's arguments that stay the same objects from call to call: ydot and those of
+        # fast.rhs_kernel before its held inputs (the system's workspace and model, packed once);
+        # the model beyond them; the joint-state entries and the outputs
+        o, model = self._snapshot_scratch, self._snapshot_model
+        self._snapshot_arguments = (
+            (o["ydot"], *self.system.kernel_arguments()[:fast_outputs.HELD_T0]), model[:7],
+            (*model[8:], o["R"], o["w"], o["vO"], o["O"], o["quat"], o["euler"], o["euler_rate"], o["L_speed"],
+             o["wrench_force"], o["wrench_moment"], o["inv"]))
         self._snapshot_joints = (np.empty(J), np.empty(J), np.empty(J))  # write_outputs' joint states
+        self._snapshot_want = (fast_outputs.WANT_BODIES, fast_outputs.WANT_WRENCHES)
 
     def _joint_arrays_sources(self) -> tuple[np.ndarray, np.ndarray]:
         """The joint-state entries for the compiled outputs: (kind, ref) (J,) int64, kind one of
@@ -525,8 +533,8 @@ class Simulator:
         return np.array(kind, dtype=np.int64), np.array(ref, dtype=np.int64)
 
     def _held_now(self) -> tuple:
-        """The arguments of fast.rhs_kernel after (t, y, ydot) with the inputs held from now on
-        (what `system.hold(t, p, *self._inputs())` would leave, without holding: the system
+        """(p0, pdot, L_rotor, tau): the inputs fast.rhs_kernel reads after its t0, held from now
+        on (what `system.hold(t, p, *self._inputs())` would leave, without holding: the system
         keeps the hold of the last advance, and only the held t0 and spins change from one
         publication to the next; the rest is made again only when the commands change)."""
         inputs = self._snapshot_inputs
@@ -540,7 +548,7 @@ class Simulator:
             p = inputs[1]
         elif p.dtype != np.float64 or not p.flags.c_contiguous:  # the compiled entry does not convert
             p = self._p = np.ascontiguousarray(p, dtype=np.float64)
-        return (*self.system.kernel_arguments()[:self._snapshot_t0], float(self._t), p, *inputs[1:])
+        return (p, *inputs[1:])
 
     def _compiled_call(self, want: int, into: Scatter, pos, vel, eff) -> int:
         """fast_outputs.publication_kernel at the current state: the outputs into the scratch
@@ -549,16 +557,14 @@ class Simulator:
         none)."""
         if getattr(self, "_snapshot_kernel", None) is None:
             self._snapshot_setup()
-        o = self._snapshot_scratch
         y = self._y
         if y.dtype != np.float64 or not y.flags.c_contiguous:  # the compiled entry does not convert
             y = self._y = np.ascontiguousarray(y, dtype=np.float64)
-        model = self._snapshot_model
-        return self._snapshot_kernel(
-            float(self._t), y, o["ydot"], *self._held_now(), *model[:7], want,
-            *model[8:], o["R"], o["w"], o["vO"], o["O"], o["quat"], o["euler"], o["euler_rate"], o["L_speed"],
-            o["wrench_force"], o["wrench_moment"], o["inv"], pos, vel, eff,
-            into.dst, into.joint, into.position, into.quaternion, into.wrench, o["scratch"])
+        head, middle, tail = self._snapshot_arguments
+        t = float(self._t)
+        return self._snapshot_kernel(t, y, *head, t, *self._held_now(), *middle, want, *tail, pos, vel, eff,
+                                     into.dst, into.joint, into.position, into.quaternion, into.wrench,
+                                     self._snapshot_scratch["scratch"])
 
     def _outputs_compiled(self, want: int | None = None, into: Scatter | None = None, fresh: bool = True) -> dict:
         """The outputs of the current state from one compiled call
@@ -588,9 +594,10 @@ class Simulator:
         then hold what was found: not to be sent). Same numbers as `snapshot(into=...)`."""
         if self._compiled_outputs is None:
             return self.snapshot(bodies=bodies, wrenches=wrenches, invariants=False, into=into).nonfinite()
-        from . import fast_outputs as fo
-
-        want = (fo.WANT_BODIES if bodies else 0) | (fo.WANT_WRENCHES if wrenches else 0)
+        if getattr(self, "_snapshot_kernel", None) is None:
+            self._snapshot_setup()
+        want_bodies, want_wrenches = self._snapshot_want
+        want = (want_bodies if bodies else 0) | (want_wrenches if wrenches else 0)
         if self._compiled_call(want, into, *self._snapshot_joints) or not math.isfinite(self._t):
             # the name Snapshot.nonfinite gives (its order of the fields), from a snapshot of the state
             return self.snapshot(bodies=bodies, wrenches=wrenches, invariants=False).nonfinite() or "time"
