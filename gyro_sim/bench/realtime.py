@@ -16,6 +16,10 @@ writes its timing statistics (`stats_file`). Reported per run:
   machine meanwhile (steal, all CPUs; 10 ms ticks);
 - the physics thread's scheduling: SCHED_FIFO at the node's `thread_priority` where the
   system allows it, else 0 (normal); `--thread-priority 0 50` runs both, for the comparison;
+- the floor: a thread of the bench process (`pacing.Floor`) that only sleeps to the same
+  wake-up deadlines (2 ms, a miss beyond 1 ms, the same scheduling) while the node runs,
+  its misses scaled to the node's wall time: what the machine itself misses (host steal,
+  timer latency), without the node's work or interpreter lock;
 - the longest garbage-collector pause (any thread: it holds the interpreter lock) and the
   machine's 1-minute load average at the start and end of the run (other processes included).
 
@@ -33,6 +37,8 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
+
+from ..ros.pacing import Floor
 
 DEFAULT_SIZES = (2, 10, 20, 50, 100)
 QUICK_SIZES = (2,)
@@ -98,17 +104,25 @@ def run_node(n: int, record: bool, seconds: float, workdir: Path, index: int = 0
     root = str(Path(__file__).resolve().parents[2])
     env["PYTHONPATH"] = os.pathsep.join([root, env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
     load0 = os.getloadavg()[0]
+    floor = Floor(2.0 / PHYSICS_RATE, 1.0 / PHYSICS_RATE, priority).start()  # the machine's own misses
+    floor_t0 = time.monotonic()
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         out, err = proc.communicate(timeout=3 * seconds + 20)  # an overloaded run is cut short
     except subprocess.TimeoutExpired:
         proc.send_signal(signal.SIGINT)
         out, err = proc.communicate(timeout=30)
+    finally:
+        floor_misses, floor_wall = floor.stop(), time.monotonic() - floor_t0
     if proc.returncode != 0 or not stats.exists():
         raise RuntimeError(f"gyro_sim_node failed (n = {n}, record = {record}, exit {proc.returncode}):\n{err[-2000:]}")
     # the machine's 1-minute load average when the run started and ended (the node included)
-    return Run(n, record, {**json.loads(stats.read_text()), "load_start": load0, "load_end": os.getloadavg()[0]},
-               priority)
+    st = json.loads(stats.read_text())
+    # the floor ran from before the node's start-up to its exit: its misses scaled to the run's wall time
+    st.update(load_start=load0, load_end=os.getloadavg()[0], floor_misses=floor_misses, floor_wall_s=floor_wall,
+              floor_priority=floor.got_priority,
+              floor_misses_scaled=floor_misses * st.get("wall_s", 0.0) / floor_wall if floor_wall > 0 else float("nan"))
+    return Run(n, record, st, priority)
 
 
 def measure(sizes=DEFAULT_SIZES, seconds: float = DEFAULT_SECONDS, progress=None, node_command=NODE_COMMAND,
@@ -127,8 +141,9 @@ def table(runs: list[Run]) -> str:
     lines = [
         "| n | recording | FIFO priority (asked / got) | step p50 (us) | step p99 (us) | publish jitter p50 (us) | publish jitter p99 (us) "
         "| CPU share | achieved RTF | deadline misses | of which after waiting for a CPU "
-        "| physics thread waiting for a CPU (ms) | host steal (ms) | longest GC pause (us) | load (start / end) |",
-        "|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| physics thread waiting for a CPU (ms) | host steal (ms) | floor: misses of a bare paced thread beside it "
+        "| longest GC pause (us) | load (start / end) |",
+        "|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in runs:
         lines.append(
@@ -137,7 +152,8 @@ def table(runs: list[Run]) -> str:
             f"| {r.get('publish_jitter_p50_us'):.0f} | {r.get('publish_jitter_p99_us'):.0f} "
             f"| {100 * r.get('cpu_share'):.0f} % | {r.get('real_time_factor_achieved'):.3f} "
             f"| {int(r.get('deadline_misses', 0))} | {int(r.get('cpu_wait_misses', 0))} "
-            f"| {1e3 * r.get('physics_cpu_wait_s'):.0f} | {1e3 * r.get('host_steal_s'):.0f} | {r.get('gc_pause_max_us'):.0f} "
+            f"| {1e3 * r.get('physics_cpu_wait_s'):.0f} | {1e3 * r.get('host_steal_s'):.0f} "
+            f"| {r.get('floor_misses_scaled'):.0f} | {r.get('gc_pause_max_us'):.0f} "
             f"| {r.get('load_start'):.2f} / {r.get('load_end'):.2f} |"
         )
     held = [r.n for r in runs if r.holds and not r.record]

@@ -263,3 +263,44 @@ def realtime_priority(priority: int, setscheduler=None) -> tuple[int, str]:
         return 0, (f"normal scheduler: SCHED_FIFO priority {priority} refused ({exc.strerror or exc}); "
                    f"allow it with an rtprio limit (ulimit -r, /etc/security/limits.conf) or set thread_priority:=0")
     return priority, f"SCHED_FIFO priority {priority}"
+
+
+class Floor:
+    """The machine's own floor of deadline misses: a thread that does nothing but sleep to the
+    physics loop's wake-up deadlines (every `period` s, `Pacer` with the loop's tolerance, the
+    same scheduling as `realtime_priority` gives the physics thread) and counts the misses. Run
+    beside the node, it meets the same host steal, timer latency and CPU contention without
+    any of the node's work or its interpreter lock (a separate process): what it misses, the
+    node cannot be expected to hold."""
+
+    def __init__(self, period: float = 2e-3, tolerance: float = 1e-3, priority: int = 0, clock=time.monotonic,
+                 sleep=time.sleep):
+        self.period, self.priority = float(period), int(priority)
+        self.pacer = Pacer(1.0, tolerance, clock=clock, sleep=sleep)
+        self.wakeups = 0
+        self.got_priority = 0
+        self._stop = False
+        self._thread = None
+
+    def _run(self) -> None:
+        self.got_priority = realtime_priority(self.priority)[0] if self.priority else 0
+        self.pacer.restart(0.0)
+        k = 0
+        while not self._stop:
+            k += 1
+            self.pacer.wait(k * self.period)
+            self.wakeups += 1
+
+    def start(self) -> "Floor":
+        import threading
+
+        self._thread = threading.Thread(target=self._run, name="gyro_sim-floor", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> int:
+        """Stop; the misses counted."""
+        self._stop = True
+        if self._thread is not None:
+            self._thread.join(5.0)
+        return self.pacer.misses

@@ -31,11 +31,14 @@ def test_bench_realtime_quick(tmp_path):
         assert int(cells[9]) >= 0, line
         assert 0 <= int(cells[10]) <= int(cells[9]), line  # misses after waiting for a CPU
         assert float(cells[11]) >= 0 and float(cells[12]) >= 0, line  # waiting for a CPU, steal (ms)
-        assert float(cells[13]) >= 0, line  # longest GC pause (us)
-        load_start, load_end = (float(x) for x in cells[14].split("/"))
+        assert int(cells[13]) >= 0, line  # the floor's misses (a bare paced thread beside the node)
+        assert float(cells[14]) >= 0, line  # longest GC pause (us)
+        load_start, load_end = (float(x) for x in cells[15].split("/"))
         assert load_start >= 0 and load_end >= 0, line
     assert "Largest n holding real time" in text
     runs = json.loads((tmp_path / "realtime.json").read_text())
     assert len(runs) == 2 and runs[1]["records_written"] > 100 and runs[1]["recorder_error"] is None
     assert all(abs(run["node_time_s"] - 2.0) < 1e-6 for run in runs)
+    # the floor thread woke every 2 ms from the node's start to its exit (several s): it ran
+    assert all(run["floor_wall_s"] > 2.0 and run["floor_priority"] in (0, 50) for run in runs)
     assert (tmp_path / "realtime.png").stat().st_size > 1000

@@ -11,7 +11,7 @@ import pytest
 from gyro_sim.core.simulator import Simulator
 from gyro_sim.paths import find_scene
 from gyro_sim.ros.loop import Request, SimLoop, check_command
-from gyro_sim.ros.pacing import Pacer, chunk_steps, realtime_priority
+from gyro_sim.ros.pacing import Floor, Pacer, chunk_steps, realtime_priority
 from gyro_sim.ros.params import ParameterError, validate
 
 
@@ -351,3 +351,20 @@ def test_the_physics_thread_is_fifo_only_while_pacing_in_real_time():
         else:  # refused here (no rtprio limit): said so, and the thread is as it was
             assert "refused" in loop.scheduling and seen == [(os.SCHED_OTHER, 0)]
         assert loop.summary()["physics_thread_priority"] == loop.priority
+
+
+def test_the_floor_counts_the_wake_ups_the_machine_delays():
+    """Floor: a thread sleeping to 2 ms deadlines; every 50th sleep overshoots by 3 ms (a
+    stolen CPU): exactly those are misses (beyond the 1 ms tolerance), the rest are not."""
+    clock = FakeClock()
+    sleeps = [0]
+
+    def sleep(s):
+        sleeps[0] += 1
+        clock.sleep(s + (3e-3 if sleeps[0] % 50 == 0 else 0.0))
+
+    floor = Floor(2e-3, 1e-3, clock=clock, sleep=sleep).start()
+    while floor.wakeups < 1000:
+        time.sleep(0.001)
+    misses = floor.stop()
+    assert misses == sleeps[0] // 50 > 0 and floor.got_priority == 0
