@@ -180,8 +180,9 @@ def plot(runs: list[Run], path: str) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import numpy as np
 
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4))
+    fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(15, 4.4))
     priorities = sorted({r.priority for r in runs})
     for (rec, style), prio in ((c, p) for c in ((False, "o-"), (True, "s--")) for p in priorities):
         rs = [r for r in runs if r.record == rec and r.priority == prio]
@@ -206,6 +207,21 @@ def plot(runs: list[Run], path: str) -> None:
     a2.set_ylabel("real-time factor / CPU share (1 = one core)")
     a2.legend(fontsize=8)
     a2.grid(alpha=0.3)
+    # the misses of each run beside the machine's floor and the host's steal
+    x = np.arange(len(runs))
+    a3.bar(x - 0.2, [r.get("deadline_misses", 0) for r in runs], 0.4, label="node: deadline misses")
+    a3.bar(x + 0.2, [r.get("floor_misses_scaled", np.nan) for r in runs], 0.4,
+           label="floor: a bare thread sleeping to the same deadlines")
+    a3.bar(x - 0.2, [r.get("cpu_wait_misses", 0) for r in runs], 0.4, fill=False, hatch="//",
+           label="of the node's: after waiting for a CPU")
+    for i, r in enumerate(runs):
+        a3.annotate(f"{1e3 * r.get('host_steal_s'):.0f}", (i, 0), xytext=(0, 3),
+                    textcoords="offset points", ha="center", fontsize=7)
+    a3.set_xticks(x, [f"{r.n}{'R' if r.record else ''}\nP{r.priority}" for r in runs], fontsize=7)
+    a3.set_xlabel("run: n (R: recording), P: FIFO priority asked", fontsize=8)
+    a3.set_ylabel(f"misses in {max(r.get('node_time_s', 0) for r in runs):.0f} s (numbers: host steal, ms)")
+    a3.legend(fontsize=7)
+    a3.grid(alpha=0.3, axis="y")
     backends = ", ".join(sorted({str(r.stats.get("backend")) for r in runs}))
     fig.suptitle(f"gyro_sim_node, physics {PHYSICS_RATE:g} Hz, publish {PUBLISH_RATE:g} Hz, RK4, {backends} dynamics")
     fig.tight_layout()
