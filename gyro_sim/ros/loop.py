@@ -39,13 +39,19 @@ from ..core.simulator import SimulationError
 from ..io import messages as M
 from ..io.resim import COMMAND_TIMEOUT_EVENT
 from .outputs import OutputsClosed
-from .pacing import Histogram, Pacer, RateMeter, RunDelay, Samples, chunk_steps, host_steal, realtime_priority
+from .pacing import (Histogram, Pacer, RateMeter, RunDelay, Samples, chunk_steps, host_steal, normal_priority,
+                     realtime_priority)
 
 #: wall seconds between diagnostics while paused or stopped (running, they go with every
 #: publication at least gyro_sim.io.messages.DIAGNOSTICS_PERIOD simulated seconds apart)
 IDLE_DIAGNOSTICS_PERIOD = 1.0
 #: longest sleep while paused or stopped (s): how fast requests are served then
 IDLE_PERIOD = 0.05
+#: a SCHED_FIFO physics thread that has not slept for this long (wall s: it cannot keep up with
+#: real time) goes back to the normal scheduler: a FIFO thread that never sleeps holds its CPU
+#: from every normal thread (on one core: the executor, the signals, the recorder) for 95 % of
+#: every second
+FIFO_DEMOTE_AFTER = 1.0
 
 
 def warm_up(sim, dt: float) -> None:
@@ -282,6 +288,16 @@ class SimLoop:
             self.scheduling = "normal scheduler (real_time_factor 0: as fast as possible, never sleeping)"
         self.started.set()
 
+    def _demote(self) -> None:
+        """Back to the normal scheduler (the thread cannot keep up: it never sleeps); said in the
+        log and its events, the diagnostics and the stats."""
+        normal_priority()
+        self.scheduling = (f"normal scheduler since node time {self.node_time:.3f} s: SCHED_FIFO priority "
+                           f"{self.priority} dropped, the physics thread had not slept for {FIFO_DEMOTE_AFTER:g} s "
+                           f"(behind real time)")
+        self.priority = 0
+        self.out.event(self.node_ns, f"physics thread: {self.scheduling}")
+
     def _run(self) -> None:
         self._schedule()
         self.wall_start, self.cpu_start = self.clock(), time.process_time()
@@ -307,6 +323,8 @@ class SimLoop:
                 waited = self.run_delay()
                 if not self.pacer.wait(self.node_time) and waited - self._cpu_wait[1] > self.pacer.tolerance:
                     self.cpu_wait_misses += 1
+                if self.priority and self.clock() - self.pacer.last_sleep > FIFO_DEMOTE_AFTER:
+                    self._demote()
                 self._cpu_wait[1] = waited
                 self._send(batch)
         except OutputsClosed:

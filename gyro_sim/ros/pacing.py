@@ -70,6 +70,7 @@ class Pacer:
         """Make `sim_time` the simulated time of now (start, after a pause or a reset)."""
         self.origin = self.clock()
         self.sim0 = float(sim_time)
+        self.last_sleep = self.origin  # clock time of the last wait that slept (or of the restart)
 
     def deadline(self, sim_time: float) -> float:
         """The wall time (clock units) at which `sim_time` is due."""
@@ -92,6 +93,7 @@ class Pacer:
             while now < deadline:
                 self.sleep(deadline - now)
                 now = self.clock()
+            self.last_sleep = now
             return True
         late = now - deadline
         if late <= self.tolerance:
@@ -237,6 +239,16 @@ def host_steal(path: str = "/proc/stat") -> float:
         return int(fields[8]) / os.sysconf("SC_CLK_TCK")
     except (OSError, ValueError, IndexError, AttributeError):
         return math.nan
+
+
+def normal_priority(setscheduler=None) -> None:
+    """Put the calling thread back under the normal scheduler (SCHED_OTHER)."""
+    setscheduler = setscheduler or getattr(os, "sched_setscheduler", None)
+    if setscheduler is not None and hasattr(os, "SCHED_OTHER"):
+        try:
+            setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        except OSError:  # pragma: no cover - lowering one's own policy is always allowed
+            pass
 
 
 def realtime_priority(priority: int, setscheduler=None) -> tuple[int, str]:

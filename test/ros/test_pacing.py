@@ -368,3 +368,24 @@ def test_the_floor_counts_the_wake_ups_the_machine_delays():
         time.sleep(0.001)
     misses = floor.stop()
     assert misses == sleeps[0] // 50 > 0 and floor.got_priority == 0
+
+
+def test_a_fifo_thread_that_cannot_keep_up_goes_back_to_the_normal_scheduler(monkeypatch):
+    """Steps that cost 3x real time: the thread never sleeps; after FIFO_DEMOTE_AFTER of wall
+    time without a sleep it drops SCHED_FIFO (scheduler calls faked: the fake clock's loop
+    must not really run under FIFO), says so in an event and the stats, and goes on."""
+    from gyro_sim.ros import loop as loop_module
+
+    calls = []
+    monkeypatch.setattr(loop_module, "realtime_priority", lambda p: (calls.append(("fifo", p)) or (p, f"SCHED_FIFO priority {p}")))
+    monkeypatch.setattr(loop_module, "normal_priority", lambda: calls.append(("normal",)))
+    clock = FakeClock()
+    loop, out = make_loop(clock, step_cost=3 * 4e-3, thread_priority=7)  # a 4 ms step costs 12 ms
+    run_until(loop, lambda: clock.t > 100.0 + 3 * loop_module.FIFO_DEMOTE_AFTER)
+    assert calls[:2] == [("fifo", 7), ("normal",)] and len(calls) == 2
+    assert loop.priority == 0 and "SCHED_FIFO priority 7 dropped" in loop.scheduling
+    demoted = [(t, text) for t, text in out.events if "physics thread: normal scheduler since" in text]
+    assert len(demoted) == 1
+    # demoted about FIFO_DEMOTE_AFTER of wall time after the start (node time runs at 1/3 of it)
+    assert 0.2 < demoted[0][0] * 1e-9 < 0.6, demoted
+    assert loop.summary()["physics_thread_priority"] == 0
