@@ -1120,25 +1120,11 @@ else:  # plain Python: without numba, or NUMBA_DISABLE_JIT (the 80-digit oracle,
         return work[o:o + n * m * q].reshape(n, m, q)
 
 
-@_njit
-def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
-                flags, base, t0, p0, pdot, L_rotor, tau):
-    """y' (size,) at (t, y) into ydot: what system.ChainODE.rhs computes.
-
-    work: float workspace of n WORK_PER_BODY + N WORK_PER_COLUMN + nt + WORK_FIXED (`workspace`);
-    nothing is allocated per call.
-    flags (int, 7): base type, has gravity, has lambda (rotors), i_r0, i_vel, i_kappa, N.
-    base (float, 7): moving-base amplitude (3), W = 2 pi f, gravity (3).
-    Held inputs: torque-rotor spins p_i = p0_i + pdot_i (t - t0) (eq 29), their torques
-    L_rotor, the generalized forces tau (N,) of the columns (hinge commands, eq 51).
-    """
-    base_type, has_gravity, has_lam = flags[0], flags[1] != 0, flags[2] != 0
-    i_r0, i_vel, i_kap, N = flags[3], flags[4], flags[5], flags[6]
-    base_amplitude, base_omega, gravity = base[0:3], base[3], base[4:7]
-    n = mass.shape[0]
-    nt = torque_body.shape[0]
-    # workspace views
+@_njit_inline
+def workspace_views(work, n, N, nt):
+    """`rhs_kernel`'s workspace (`workspace`) cut into its views, the one place its layout is
+    written: R, s_w, hk, Aw, e_w, w, vO, c (the kinematics, left there by every call), I6, pb,
+    Dinv, lam_b, dlam_b, S, U, W, u, p, then the fixed scratch Ia, pa, Dx, T, G, x, a_base."""
     o = 0
     R = block3(work, o, n, 3, 3)
     o += 9 * n
@@ -1184,6 +1170,30 @@ def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis,
     G = block2(work, o + 60, 3, 3)
     x = block1(work, o + 69, 6)
     a_base = block1(work, o + 75, 6)
+    return (R, s_w, hk, Aw, e_w, w, vO, c, I6, pb, Dinv, lam_b, dlam_b, S, U, W, u, p,
+            Ia, pa, Dx, T, G, x, a_base)
+
+
+@_njit
+def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
+                flags, base, t0, p0, pdot, L_rotor, tau):
+    """y' (size,) at (t, y) into ydot: what system.ChainODE.rhs computes.
+
+    work: float workspace of n WORK_PER_BODY + N WORK_PER_COLUMN + nt + WORK_FIXED (`workspace`);
+    nothing is allocated per call.
+    flags (int, 7): base type, has gravity, has lambda (rotors), i_r0, i_vel, i_kappa, N.
+    base (float, 7): moving-base amplitude (3), W = 2 pi f, gravity (3).
+    Held inputs: torque-rotor spins p_i = p0_i + pdot_i (t - t0) (eq 29), their torques
+    L_rotor, the generalized forces tau (N,) of the columns (hinge commands, eq 51).
+    """
+    base_type, has_gravity, has_lam = flags[0], flags[1] != 0, flags[2] != 0
+    i_r0, i_vel, i_kap, N = flags[3], flags[4], flags[5], flags[6]
+    base_amplitude, base_omega, gravity = base[0:3], base[3], base[4:7]
+    n = mass.shape[0]
+    nt = torque_body.shape[0]
+    (R, s_w, hk, Aw, e_w, w, vO, c, I6, pb, Dinv, lam_b, dlam_b, S, U, W, u, p,
+     Ia, pa, Dx, T, G, x, a_base) = workspace_views(work, n, N, nt)
 
     # positions, velocities
     _positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, hk, Aw, e_w)

@@ -252,30 +252,10 @@ def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hin
     do_wrench = (want & WANT_WRENCHES) != 0
     do_bodies = (want & WANT_BODIES) != 0
     do_inv = (want & WANT_INVARIANTS) != 0
-    # the kinematics in the views fast.rhs_kernel cuts its workspace with (its layout, above):
+    # the kinematics in the views fast.rhs_kernel cuts its workspace with (fast.workspace_views):
     # the kernel leaves them there when it runs, else they are computed here into the same views
-    o = 0
-    R_k = block3(work, o, n, 3, 3)
-    o += 9 * n
-    s_w = block2(work, o, n, 3)
-    o += 3 * n
-    hk = block2(work, o, n, 3)
-    o += 3 * n
-    Aw = block3(work, o, n, 3, 3)
-    o += 9 * n
-    e_w = block2(work, o, n, 3)
-    o += 3 * n
-    w_k = block2(work, o, n, 3)
-    o += 3 * n
-    vO_k = block2(work, o, n, 3)
-    o += 3 * n
-    c = block2(work, o, n, 6)
-    o += 6 * n + 36 * n + 6 * n + 36 * n  # c, then I6, pb, Dinv (the elimination's: not read)
-    lam_b = block2(work, o, n, 3)
-    o += 6 * n  # lam_b, dlam_b
-    S = block2(work, o, N, 6)
-    o += 19 * N  # S, U, W, u
-    p = block1(work, o, nt)
+    (R_k, s_w, hk, Aw, e_w, w_k, vO_k, c, _, _, _, lam_b, _, S, _, _, _, p,
+     _, _, _, _, _, _, _) = fast.workspace_views(work, n, N, nt)
     if do_wrench or nv > 0:  # the accelerations: u' into ydot; the kinematics, p (29), S as above
         fast.rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
                         first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,

@@ -281,7 +281,7 @@ class SimLoop:
         """This (the physics) thread's scheduling: SCHED_FIFO at config.thread_priority while
         pacing in real time (pacing.realtime_priority); as fast as possible it never sleeps, and a
         FIFO thread that never sleeps would take its CPU from everything else: normal then."""
-        wanted = int(getattr(self.config, "thread_priority", 0))
+        wanted = int(self.config.thread_priority)
         if self.rtf > 0:
             self.priority, self.scheduling = realtime_priority(wanted)
         else:
