@@ -310,6 +310,10 @@ class Floor:
         self._thread.start()
         return self
 
+    def stop_soon(self) -> None:
+        """Ask the thread to stop after its current wait (from any thread)."""
+        self._stop = True
+
     def stop(self) -> int:
         """Stop; the misses counted."""
         self._stop = True

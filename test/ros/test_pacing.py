@@ -358,16 +358,22 @@ def test_the_floor_counts_the_wake_ups_the_machine_delays():
     stolen CPU): exactly those are misses (beyond the 1 ms tolerance), the rest are not."""
     clock = FakeClock()
     sleeps = [0]
+    floors = []
 
     def sleep(s):
         sleeps[0] += 1
         clock.sleep(s + (3e-3 if sleeps[0] % 50 == 0 else 0.0))
+        if sleeps[0] == 1001:  # the thread stops itself here: the miss after the 1000th is counted
+            floors[0].stop_soon()
 
-    floor = Floor(2e-3, 1e-3, clock=clock, sleep=sleep).start()
-    while floor.wakeups < 1000:
+    floor = Floor(2e-3, 1e-3, clock=clock, sleep=sleep)
+    floors.append(floor)
+    floor.start()
+    while sleeps[0] < 1001:
         time.sleep(0.001)
-    misses = floor.stop()
-    assert misses == sleeps[0] // 50 > 0 and floor.got_priority == 0
+    misses = floor.stop()  # joins the thread, which ends after the wait of its 1001st sleep
+    assert sleeps[0] == 1001
+    assert misses == 1000 // 50 and floor.got_priority == 0
 
 
 def test_a_fifo_thread_that_cannot_keep_up_goes_back_to_the_normal_scheduler(monkeypatch):
