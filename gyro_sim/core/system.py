@@ -200,6 +200,11 @@ class FastChainODE:
         """Absolute torque-rotor spins p_i(t) (eq 29 integrated over the hold)."""
         return self._ref.spins(t)
 
+    @property
+    def hinge_tau(self) -> np.ndarray | None:
+        """The commanded hinge moments held now (ChainODE's), or None."""
+        return self._ref.hinge_tau
+
     # --- the ODE -------------------------------------------------------------------------------
     @property
     def nfev(self) -> int:

@@ -201,8 +201,9 @@ def _quat_err(y, ref):
 # ------------------------------------------------------------------ registry
 def test_registry_and_documentation():
     # the named methods, plus "auto" (dop853 that switches to radau on stiffness) and "fixed"
-    # (rk4 that switches to gauss4: test_choose.py)
-    assert set(INTEGRATORS) == set(NAMES) | {"auto", "fixed"}
+    # (rk4 that switches to gauss4: test_choose.py), and "gauss4s" (gauss4 on the chain's
+    # canonical equations: chains only, test_gauss_canonical.py)
+    assert set(INTEGRATORS) == set(NAMES) | {"auto", "fixed", "gauss4s"}
     for name, cls in INTEGRATORS.items():
         assert cls.name == name
         assert isinstance(cls.order, int)

@@ -12,6 +12,7 @@ dop853    Dormand-Prince 8(5,3)                   8      adaptive  order 7      
 radau     Radau IIA, 3 stages (stiff)             5      adaptive  collocation   radau.py
 lie4      commutator-free Lie group RK (CF4)      4      fixed     no            lie4.py
 gauss4    Gauss-Legendre collocation, 2 stages    4      fixed     no            gauss.py
+gauss4s   gauss4 on the canonical equations       4      fixed     no            gauss_canonical.py
 fixed     rk4, gauss4 where stiff (estimated)     4      fixed     no            choose.py
 auto      dop853, radau while stiff (detected)    8 / 5  adaptive  yes           auto.py
 ========  ======================================  =====  ========  ============  ==========
@@ -66,6 +67,7 @@ from .base import (
 from .choose import CHECK_PERIOD, RK4_RETURN, SceneFixedStep
 from .dop853 import DOP853
 from .gauss import NEWTON_CAP, NEWTON_SLOW_RATE, NEWTON_TOL, Gauss4
+from .gauss_canonical import Gauss4S
 from .lie4 import Lie4
 from .radau import (
     FD_MIN_SCALE,
@@ -85,7 +87,7 @@ if TYPE_CHECKING:
 
 #: the methods by name
 INTEGRATORS: dict[str, type[Integrator]] = {
-    cls.name: cls for cls in (RK4, DOP853, Radau, Lie4, Auto, Gauss4, SceneFixedStep)
+    cls.name: cls for cls in (RK4, DOP853, Radau, Lie4, Auto, Gauss4, Gauss4S, SceneFixedStep)
 }
 
 
@@ -109,7 +111,7 @@ def make_integrator(
 
 __all__ = [
     "INTEGRATORS", "make_integrator", "Integrator", "FixedStepIntegrator", "AdaptiveIntegrator",
-    "ExplicitRungeKutta", "RK4", "Lie4", "Gauss4", "SceneFixedStep", "CHECK_PERIOD", "RK4_RETURN", "DOP853", "Radau", "Auto", "IntegrationError",
+    "ExplicitRungeKutta", "RK4", "Lie4", "Gauss4", "Gauss4S", "SceneFixedStep", "CHECK_PERIOD", "RK4_RETURN", "DOP853", "Radau", "Auto", "IntegrationError",
     "StiffnessWarning", "EPS", "SAFETY", "MIN_FACTOR", "MAX_FACTOR", "MIN_RTOL",
     "MIN_STEP_RELATIVE", "LAST_STEP_STRETCH", "STEP_COUNT_SLACK", "MAX_REPORTED_COMPONENTS",
     "NEWTON_MAXITER", "RADAU_SLOW_ITER", "RADAU_SLOW_RATE", "RADAU_KEEP_STEP",
