@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import fast, fast_loop
+from . import fast, fast_canonical, fast_loop
 from . import gauss_kernels as gk
 from .gauss_kernels import (
     COUNT_JACOBIAN,
@@ -77,7 +77,8 @@ from .gauss_kernels import (
 )
 
 #: the files the march compiles in (the key of its cache directory)
-DEPENDENCIES = (Path(fast.__file__), Path(gk.__file__), Path(fast_loop.__file__), Path(__file__))
+DEPENDENCIES = (Path(fast.__file__), Path(gk.__file__), Path(fast_loop.__file__),
+                Path(fast_canonical.__file__), Path(__file__))
 _njit = fast_loop.njit_with_dependencies(*DEPENDENCIES)
 
 #: the arrays of the workspace tuple, in order (shapes: n the size, m GMRES_CAP or 0 on the
@@ -91,10 +92,30 @@ WS_FIELDS = ("Z", "Zp", "Zs", "Zb", "ys", "y0", "Ys", "F", "Fp", "Yp", "w", "V",
              "J", "M", "piv", "r", "P")
 
 
+def _field(t, y, out, kargs):
+    """out = f(t, y): the chain's kernel (fast.rhs_kernel) for a FastChainODE's arguments, the
+    canonical one (fast_canonical.canonical_kernel: gauss4s) for a FastCanonicalChain's, which
+    are longer; chosen when the march is compiled for the arguments' types."""
+    if len(kargs) == fast_canonical.CHAIN_ARGUMENTS:
+        fast.rhs_kernel(t, y, out, *kargs)
+    else:
+        fast_canonical.canonical_kernel(t, y, out, *kargs)
+
+
+if fast.numba is not None:
+    from numba.extending import overload
+
+    @overload(_field, inline="always")
+    def _field_typed(t, y, out, kargs):
+        if len(kargs) == fast_canonical.CHAIN_ARGUMENTS:
+            return lambda t, y, out, kargs: fast.rhs_kernel(t, y, out, *kargs)
+        return lambda t, y, out, kargs: fast_canonical.canonical_kernel(t, y, out, *kargs)
+
+
 @_njit
 def _rhs(t, y, out, counts, kargs):
-    """out = f(t, y) by the articulated-body kernel, counted."""
-    fast.rhs_kernel(t, y, out, *kargs)
+    """out = f(t, y) by the articulated-body kernel (or the canonical one: `_field`), counted."""
+    _field(t, y, out, kargs)
     counts[COUNT_RHS] += 1
 
 

@@ -14,7 +14,8 @@ from gyro_sim.core.canonical import CanonicalChain
 from gyro_sim.core.integrators import RK4, Gauss4, IntegrationError, make_integrator
 from gyro_sim.core.model import compile_model, initial_state
 from gyro_sim.core.simulator import Simulator
-from gyro_sim.core.system import ChainODE, make_system
+from gyro_sim.core import fast
+from gyro_sim.core.system import ChainODE, FastChainODE, make_system
 
 from .chains import random_chain
 from .test_fast import chain_scene, hold_random
@@ -70,6 +71,44 @@ def test_vector_field_is_hamiltonian(seed, base):
     assert np.abs(hess - hess.T).max() <= 1e-6 * np.abs(hess).max()
 
 
+needs_numba = pytest.mark.skipif(not fast.available(), reason="numba is not installed")
+
+
+@needs_numba
+@pytest.mark.parametrize("seed,base", CASES)
+def test_compiled_field_and_state_match_numpy(seed, base):
+    """fast_canonical's kernels against canonical.py's numpy form, off |q| = 1 and q . p = 0
+    too (the O(n) elimination against the dense solve of M)."""
+    from gyro_sim.core.fast_canonical import FastCanonicalChain
+
+    model, ode, can = _canonical(seed, base)
+    fode = FastChainODE(model)
+    hold_random(np.random.default_rng(seed), model, fode)
+    fc = FastCanonicalChain(fode)
+    z = can.momenta(0.3, initial_state(model))
+    z[can.i_quat] *= 1.1
+    z[can.i_pq] += 0.05 * z[can.i_quat]
+    a, b = can.rhs(0.3, z), fc.rhs(0.3, z)
+    assert np.abs(a - b).max() <= 1e-13 * np.abs(a).max()
+    ya, yb = can.state(0.3, z), fc.state(0.3, z)
+    assert np.abs(ya - yb).max() <= 1e-13 * np.abs(ya).max()
+
+
+@needs_numba
+def test_compiled_march_is_the_python_driver():
+    """gauss4s on the compiled system: the compiled march and the Python driver (the same
+    kernels between evaluations) give the same steps, bit for bit."""
+    model = compile_model(load_scene(random_chain(5, n=3, commands=False)))
+    y0 = initial_state(model)
+    out = []
+    for compiled in (True, False):
+        integ = make_integrator("gauss4s", make_system(model, "numba"), step=1e-3)
+        integ.inner.use_compiled = compiled
+        out.append((integ.advance(0.0, y0, 0.05), integ.counts.copy()))
+    assert np.array_equal(out[0][0], out[1][0])
+    assert np.array_equal(out[0][1], out[1][1])
+
+
 def _step_map_defect(integ, can, t, z, h):
     """|Phi^T J Phi - J| / |Phi|^2 of one step's map Phi (central differences)."""
     nq = can.nq
@@ -113,7 +152,6 @@ def _free_floating():
     return load_scene(sc)
 
 
-@pytest.mark.slow
 def test_free_floating_chain_keeps_its_momenta_to_round_off():
     """1e4 steps of 1 ms: the linear and angular momentum of a free-floating chain stay at
     their initial values to round-off with gauss4s (bilinear in (q, p): kept exactly by a

@@ -49,7 +49,12 @@ class Gauss4S(FixedStepIntegrator):
         if getattr(system, "model", None) is None:
             raise ValueError("gauss4s integrates a chain (a system with a `model`), not a general ODE")
         super().__init__(system, **options)
-        self.canonical = CanonicalChain(system)
+        if callable(getattr(system, "kernel_arguments", None)):  # compiled: FastChainODE
+            from ..fast_canonical import FastCanonicalChain
+
+            self.canonical: CanonicalChain = FastCanonicalChain(system)
+        else:
+            self.canonical = CanonicalChain(system)
         self.inner = Gauss4(self.canonical, dense=dense, **options)
         self.counts = self.inner.counts
         self._end: tuple[float, np.ndarray, np.ndarray] | None = None
