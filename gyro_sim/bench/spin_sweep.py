@@ -17,7 +17,7 @@ theta_k and psi_k' = kappa stay constant, phi_k' is constant
   wheel at -300 rad/s) with top 1's proper rotation phi_1' = spin (the slow root kappa of
   eq 88; top 2's phi_2' follows from it: ~0.5 x spin).
 
-Every method (gyro_sim rk4, lie4, gauss4, fixed at h = 1 ms, `advance` in 10 ms calls as the
+Every method (gyro_sim rk4, lie4, gauss4, gauss4s, fixed at h = 1 ms, `advance` in 10 ms calls as the
 node; MuJoCo RK4 and implicitfast at the same step, peers.MujocoChain) runs `steps` steps
 (1e6 in the full report, 1e4 in quick mode), sampled SAMPLES times:
 
@@ -54,7 +54,7 @@ STEP = 1e-3
 CHUNK = 0.01
 SAMPLES = 200
 #: the methods: gyro_sim integrators, then MuJoCo's (label -> MuJoCo integrator)
-GYRO_METHODS = ("rk4", "lie4", "gauss4", "fixed")
+GYRO_METHODS = ("rk4", "lie4", "gauss4", "gauss4s", "fixed")
 MUJOCO_METHODS = {"mujoco RK4": "RK4", "mujoco implicitfast": "implicitfast"}
 METHODS = (*GYRO_METHODS, *MUJOCO_METHODS)
 #: the scenes: key -> (title, builder)

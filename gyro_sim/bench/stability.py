@@ -58,6 +58,7 @@ SETTINGS: dict[str, dict[str, float]] = {
     "rk4": {"step": 1e-3},
     "lie4": {"step": 1e-3},
     "gauss4": {"step": 1e-3},
+    "gauss4s": {"step": 1e-3},
     "fixed": {"step": 1e-3},
     "dop853": {"rtol": 1e-8},
     "radau": {"rtol": 1e-8},
@@ -698,13 +699,13 @@ class Report:
                 hold.append(f"{method}: n = {best} measured" + (f", about {crossing:.0f} interpolated" if crossing else ""))
         steps = max(r.steps for r in self.costs)
         return [
-            "### The cost of one physics step: gauss4 beside rk4",
+            "### The cost of one physics step: gauss4s and gauss4 beside rk4",
             "",
             f"`Simulator.advance({sc.STEP:g})` called {steps} times, as the node calls it, on the spherical chain "
             "with a torque rotor on every body, under gravity; CPU time of the calling thread in each call "
             "(the method's own cost, whatever else the machine runs), after a warm-up call. "
-            "gauss4's own worst case in work: the most Newton iterations of a (sub)step and the most right-hand-side "
-            "evaluations of a step (its caps bound them: gauss.py).",
+            "The Gauss methods' own worst case in work: the most Newton iterations of a (sub)step and the most "
+            "right-hand-side evaluations of a step (their caps bound them: gauss.py).",
             "",
             sc.table(self.costs),
             "",
@@ -777,7 +778,7 @@ def build(quick: bool = False, keys=None, integrators=None, long_steps: int | No
 
 
 def step_costs(quick: bool, backend: str, progress=None):
-    """The cost part: step_cost rows at its SIZES for gauss4 and rk4, and for each the largest
+    """The cost part: step_cost rows at its SIZES for its METHODS, and for each the largest
     n holding 1 kHz (measured by doubling n; not in quick mode)."""
     from . import step_cost as sc
 
@@ -848,6 +849,6 @@ def register(sub, bench) -> None:
                    help="steps of each spin-sweep run (default 1e6, quick 1e4; 0: skip)")
     p.add_argument("--parts", nargs="+", choices=PARTS, default=list(PARTS),
                    help="the parts of the report to run (default all): verdicts, long (the long-horizon item), "
-                        "sweep (spin sweep), tips (heavy-tip table), cost (gauss4 and rk4 per step at 1 kHz)")
+                        "sweep (spin sweep), tips (heavy-tip table), cost (gauss4s, gauss4 and rk4 per step at 1 kHz)")
     p.add_argument("--no-mujoco", action="store_true", help="no MuJoCo rows (verdicts and spin sweep)")
     p.set_defaults(fn=main)

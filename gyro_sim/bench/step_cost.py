@@ -1,4 +1,5 @@
-"""The cost of one physics step at the node's rate, gauss4 beside rk4: median, tail and worst.
+"""The cost of one physics step at the node's rate, gauss4s and gauss4 beside rk4: median, tail
+and worst.
 
 The node advances its Simulator one physics step (1 ms) per call (`ros/loop.py`), so that is
 what is timed here: `Simulator.advance(STEP)` called STEPS times on the spherical chain of n
@@ -7,9 +8,9 @@ scaling report; under gravity it swings and whips), after a warm-up call (compil
 first Jacobian are not counted). Each call's CPU time on the calling thread (thread_time: the
 method's own cost, not the time other processes of a shared machine take from it) gives the
 median, the 99th percentile and the worst step; the wall time of the whole run gives the mean
-the deadline sees (`mean_wall_us`). For gauss4 the report adds its own worst case in work: the most Newton iterations
-and right-hand-side evaluations any one step took (`Gauss4.counts`), against the bound its caps
-set (gauss.py: Newton iterations, retakes).
+the deadline sees (`mean_wall_us`). For the Gauss methods the report adds their own worst case in
+work: the most Newton iterations and right-hand-side evaluations any one step took (their
+`counts`), against the bound their caps set (gauss.py: Newton iterations, retakes).
 
 "Holds 1 kHz" means the median step fits in the physics period with a margin for the
 publication (HOLD_FRACTION of the period); the largest n that does is found by measuring
@@ -32,7 +33,9 @@ QUICK_SIZES = (2, 10)
 #: timed steps per run (quick)
 STEPS, QUICK_STEPS = 2000, 200
 #: the methods side by side
-METHODS = ("gauss4", "rk4")
+METHODS = ("gauss4s", "gauss4", "rk4")
+#: the explicit method the others are compared with
+BASELINE = "rk4"
 #: a step "holds 1 kHz" when its median is within this share of the period (the rest: publication)
 HOLD_FRACTION = 0.8
 #: the search for the largest n holding 1 kHz stops here
@@ -49,9 +52,9 @@ class CostRow:
     p99_us: float
     worst_us: float
     mean_wall_us: float
-    max_newton: int = 0  # gauss4: most Newton iterations of one (sub)step
-    max_step_rhs: int = 0  # gauss4: most rhs evaluations of one step
-    retaken: int = 0  # gauss4: steps retaken in pieces
+    max_newton: int = 0  # Gauss methods: most Newton iterations of one (sub)step
+    max_step_rhs: int = 0  # Gauss methods: most rhs evaluations of one step
+    retaken: int = 0  # Gauss methods: steps retaken in pieces
     failed: str = ""  # a SimulationError's message: the run stopped there
 
 
@@ -128,26 +131,25 @@ def largest_holding(rows: list[CostRow], method: str, steps: int, backend: str =
 
 
 def table(rows: list[CostRow]) -> str:
+    """One line per chain and method: median, p99, worst, the work of the worst step (Gauss
+    methods) and the median against BASELINE's on the same chain."""
     by = {(r.n, r.method): r for r in rows}
-    sizes = sorted({r.n for r in rows})
-    states = {r.n: r.states for r in rows}
-    out = ["| n (states) | gauss4 median (us) | gauss4 p99 (us) | gauss4 worst (us) | gauss4 most Newton "
-           "iterations / rhs evaluations in a step | rk4 median (us) | rk4 p99 (us) | rk4 worst (us) "
-           "| gauss4 / rk4 (median) |",
-           "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
-    for n in sizes:
-        g, r = by.get((n, "gauss4")), by.get((n, "rk4"))
-
-        def cells(x):
+    methods = [m for m in METHODS if any(r.method == m for r in rows)]
+    out = ["| n (states) | method | median (us) | p99 (us) | worst (us) | most Newton iterations / rhs "
+           f"evaluations in a step | median / {BASELINE}'s |",
+           "|---:|---|---:|---:|---:|---:|---:|"]
+    for n in sorted({r.n for r in rows}):
+        base = by.get((n, BASELINE))
+        for m in methods:
+            x = by.get((n, m))
             if x is None:
-                return ["not run"] * 3
+                continue
             if x.failed:
-                return [f"fails after {x.steps} steps"] + ["n/a"] * 2
-            return [f"{x.median_us:.1f}", f"{x.p99_us:.1f}", f"{x.worst_us:.1f}"]
-
-        work = f"{g.max_newton} / {g.max_step_rhs}" if g is not None and not g.failed else "n/a"
-        ratio = (f"{g.median_us / r.median_us:.1f}x" if g is not None and r is not None and not g.failed
-                 and not r.failed else "n/a")
-        out.append(f"| {n} ({states[n]}) | " + " | ".join(cells(g)) + f" | {work} | " + " | ".join(cells(r))
-                   + f" | {ratio} |")
+                cells = [f"fails after {x.steps} steps", "n/a", "n/a", "n/a", "n/a"]
+            else:
+                work = f"{x.max_newton} / {x.max_step_rhs}" if x.max_step_rhs else "n/a"
+                ratio = (f"{x.median_us / base.median_us:.1f}x" if base is not None and not base.failed
+                         else "n/a")
+                cells = [f"{x.median_us:.1f}", f"{x.p99_us:.1f}", f"{x.worst_us:.1f}", work, ratio]
+            out.append(f"| {n} ({x.states}) | {m} | " + " | ".join(cells) + " |")
     return "\n".join(out)
