@@ -14,14 +14,14 @@ import time
 #: measured cold compile (CPU s) of what a run with each integrator needs, NUMBA_CACHE_DIR pointing
 #: at an empty directory, on the project's 2-core machine (README; wall time is longer on a busy
 #: machine): every loop compiles the dynamics kernel into itself again, which is most of it
-COMPILE_SECONDS = {"fixed": 130, "gauss4": 80, "lie4": 70, "dop853": 75, "rk4": 65, "auto": 105, "radau": 95}
+COMPILE_SECONDS = {"fixed": 130, "gauss4s": 120, "gauss4": 80, "lie4": 70, "dop853": 75, "rk4": 65, "auto": 105, "radau": 95}
 #: the scene compiled for: one signature serves every scene (fast.py), any small one will do
 WARM_UP_SCENE = "hinge_chain"
 
 
 #: the modules holding numba kernels (dispatchers)
 KERNEL_MODULES = ("fast", "fast_entry", "rk_kernels", "fast_loop", "fast_outputs", "lagrange", "gauss_kernels", "fast_gauss",
-                  "dop853_kernels", "fast_dop853", "lie_kernels", "fast_lie", "radau_kernels", "fast_radau")
+                  "fast_canonical", "dop853_kernels", "fast_dop853", "lie_kernels", "fast_lie", "radau_kernels", "fast_radau")
 #: the compiled loops each integrator runs on the numba backend, (module, name), besides the
 #: kernels every run needs (fast.py's, the entry of one evaluation from Python, the outputs, a
 #: Lagrange chain's integrals); the cache counts as cold for an integrator when any of its
@@ -32,8 +32,13 @@ LOOPS = {
     "rk4": (("fast_loop", "erk_march"),),
     "lie4": (("fast_lie", "lie_march"),),
     "gauss4": (("fast_gauss", "gauss_march"),),
-    # fixed: its rescue (dop853) steps through the Python driver on the kernels
-    "fixed": (("fast_loop", "erk_march"), ("fast_gauss", "gauss_march"), ("dop853_kernels", "dop_update")),
+    # gauss4s: gauss4's march over the canonical field (a second specialization of the march)
+    "gauss4s": (("fast_gauss", "gauss_march"), ("fast_canonical", "canonical_kernel"),
+                ("fast_canonical", "state_kernel")),
+    # fixed: rk4, gauss4s on a stiff scene, and its rescue (dop853) through the Python driver on
+    # the kernels
+    "fixed": (("fast_loop", "erk_march"), ("fast_gauss", "gauss_march"), ("fast_canonical", "canonical_kernel"),
+              ("fast_canonical", "state_kernel"), ("dop853_kernels", "dop_update")),
     "dop853": (("fast_dop853", "dop853_advance"),),
     # auto: dop853's and radau's compiled loops in their detection modes (both built with the
     # integrator: radau's is loaded, or compiled, before the first switch to it)

@@ -1314,3 +1314,13 @@ def workspace(model: Model) -> np.ndarray:
     + nt WORK_PER_ROTOR + WORK_FIXED (nt torque rotors)."""
     return np.zeros(model.n * WORK_PER_BODY + model.N * WORK_PER_COLUMN
                     + len(model.torque_body) * WORK_PER_ROTOR + WORK_FIXED)
+
+
+# --- the stages other compiled modules build on (fast_canonical: the canonical field) ---------
+#: inlined there as here; the same dispatchers under public names
+positions_stage = _positions
+velocities_stage = _velocities
+joint_columns_stage = _joint_columns
+articulated_solve = _aba
+quat_rate = _quat_rate
+rotor_angle_rate = _rotor_angle_rate

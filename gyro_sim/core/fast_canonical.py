@@ -8,15 +8,15 @@ three more: `zrow` (n, 2), the z index of each body's coordinate (quaternion or 
 and of its momentum; `cflags` (i_pr, i_kappa of z, the model's size); `cwork`, the scratch
 (`canonical_workspace`). The stages, about each body's O^k in world axes as in fast.py:
 
-    positions   z        -> R^k (of q / |q|), s^k, m^k c^k, A^k, e^k      (fast._positions)
+    positions   z        -> R^k (of q / |q|), s^k, m^k c^k, A^k, e^k      (fast.positions_stage)
     momenta     z, t     -> pi^k = Im(p^k (x) conj(q^k)) / 2, the joint momenta p_rel (sums
                             of pi over the spherical bodies from k on; e . that + p_phi at a
                             hinge), minus their part at zero rates b (gyrostatic moments
                             lambda(t), a moving base's velocity)
     rates       p_rel    -> u: M u = p_rel - b by the articulated-body elimination with no
-                            bias force, no bias acceleration (fast._aba: its square-root form
+                            bias force, no bias acceleration (fast.articulated_solve: its square-root form
                             for heavy subtrees too)
-    velocities  u        -> w^k, v(O^k)                                  (fast._velocities)
+    velocities  u        -> w^k, v(O^k)                                  (fast.velocities_stage)
     field                -> subtree momenta (H_k about O^k, P_k), external wrench (gravity),
                             p_rel' = S' . h + S . F + tau, then the canonical rates
 
@@ -81,7 +81,7 @@ def _rates(t, z, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, 
             q0, q1, q2, q3 = z[j], z[j + 1], z[j + 2], z[j + 3]
             nq = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
             y[i], y[i + 1], y[i + 2], y[i + 3] = q0 / nq, q1 / nq, q2 / nq, q3 / nq
-    fast._positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, hk, Aw, e_w)
+    fast.positions_stage(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, hk, Aw, e_w)
     # gyrostatic moments lambda^k (body axes) at t (eq 31, p_i(t) by eq 29)
     if has_lam:
         for k in range(n):
@@ -158,12 +158,12 @@ def _rates(t, z, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, 
                 I6[k, 3 + a, b] = I6[k, b, 3 + a]
     for a in range(6):
         a_base[a] = 0.0
-    fast._joint_columns(is_hinge, own_col, base_type, e_w, S)
-    fast._aba(is_hinge, col_start, S, I6, pb, c, prel, a_base, s_w, U, W, u, Dinv, rate,
+    fast.joint_columns_stage(is_hinge, own_col, base_type, e_w, S)
+    fast.articulated_solve(is_hinge, col_start, S, I6, pb, c, prel, a_base, s_w, U, W, u, Dinv, rate,
               Ia, pa, Dx, T, G, x)
     for j in range(N):
         y[i_vel + j] = rate[j]
-    fast._velocities(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, i_vel,
+    fast.velocities_stage(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, i_vel,
                      s_w, e_w, w, vO, c)
 
 
@@ -274,7 +274,7 @@ def canonical_kernel(t, z, zdot, work, is_hinge, qrow, own_col, col_start, hinge
             zdot[jm + 1] = (a0 * q1 + a1 * q0 + a2 * q3 - a3 * q2) * inv
             zdot[jm + 2] = (a0 * q2 - a1 * q3 + a2 * q0 + a3 * q1) * inv
             zdot[jm + 3] = (a0 * q3 + a1 * q2 - a2 * q1 + a3 * q0) * inv
-            zdot[jq], zdot[jq + 1], zdot[jq + 2], zdot[jq + 3] = fast._quat_rate(q0, q1, q2, q3, w0, w1, w2)
+            zdot[jq], zdot[jq + 1], zdot[jq + 2], zdot[jq + 3] = fast.quat_rate(q0, q1, q2, q3, w0, w1, w2)
             B0, B1, B2 = B0 + c1, B1 + c2, B2 + c3
             D0, D1, D2 = dprel[jc], dprel[jc + 1], dprel[jc + 2]
     if base_type == fast.BASE_FREE:
@@ -288,7 +288,7 @@ def canonical_kernel(t, z, zdot, work, is_hinge, qrow, own_col, col_start, hinge
         e0 = R[k, 0, 0] * ax0 + R[k, 0, 1] * ax1 + R[k, 0, 2] * ax2
         e1 = R[k, 1, 0] * ax0 + R[k, 1, 1] * ax1 + R[k, 1, 2] * ax2
         e2 = R[k, 2, 0] * ax0 + R[k, 2, 1] * ax1 + R[k, 2, 2] * ax2
-        zdot[i_kap + i] = fast._rotor_angle_rate(pt, w[k, 0], w[k, 1], w[k, 2], e0, e1, e2)
+        zdot[i_kap + i] = fast.rotor_angle_rate(pt, w[k, 0], w[k, 1], w[k, 2], e0, e1, e2)
 
 
 @_njit

@@ -40,8 +40,8 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("real_time_factor", float, 1.0, "simulated seconds per wall second; 0 = as fast as possible",
               0.0, 1000.0),
     Parameter("integrator", str, "fixed",
-              "fixed (rk4, or gauss4 while the scene is stiff for rk4: chosen for the scene and re-checked as it moves) "
-              "| rk4 | lie4 | gauss4 | dop853 | radau | auto (fixed-step methods take one step per physics step)"),
+              "fixed (rk4, or gauss4s while the scene is stiff for rk4: chosen for the scene and re-checked as it moves) "
+              "| rk4 | lie4 | gauss4 | gauss4s | dop853 | radau | auto (fixed-step methods take one step per physics step)"),
     Parameter("backend", str, "auto", "dynamics: auto (numba-compiled when numba is installed, else numpy) | numba | numpy"),
     Parameter("rtol", float, 1e-8, "relative tolerance of adaptive integrators", 1e-14, 1.0),
     Parameter("atol", float, 1e-10, "absolute tolerance of adaptive integrators", 0.0, 1.0),

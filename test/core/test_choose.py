@@ -1,5 +1,6 @@
 """The node's fixed-step method (gyro_sim.core.integrators.choose): rk4 where it is stable at
-the step, gauss4 where the scene is stiff, and the choice checked against a 1 s run."""
+the step, gauss4s (gauss4 on a system that is not a chain) where the scene is stiff, and the
+choice checked against a 1 s run."""
 import math
 
 import numpy as np
@@ -184,12 +185,14 @@ def test_fixed_takes_a_call_again_with_gauss4_when_rk4_blows_up(monkeypatch):
     assert integ.current == "gauss4" and "non-finite" in integ.reason
     assert len(integ.switches) == 1 and integ.switches[0][0] == 0.0
     assert np.hypot(*y) == pytest.approx(1.0, abs=1e-12)
-def test_fixed_takes_gauss4_where_rotors_stiffen_the_scene():
+def test_fixed_takes_gauss4s_where_rotors_stiffen_the_scene():
     """A stiffness no substep count addresses (a fast rotor's nutation, no body turning fast):
-    gauss4 at the step, past rk4's limit (h = 2.5 ms: h |lambda| ~ 2.8)."""
+    gauss4s (a chain's implicit rung) at the step, past rk4's limit (h = 2.5 ms: h |lambda| ~
+    2.8)."""
     sim = Simulator("stiff_fast_rotor", integrator="fixed", step=2.5e-3)
     sim.advance(CALL)
-    assert sim.integrator.current == "gauss4" and sim.integrator.substeps == 1
+    assert sim.integrator.implicit == "gauss4s"
+    assert sim.integrator.current == "gauss4s" and sim.integrator.substeps == 1
     assert "stiff for rk4" in sim.integrator.reason, sim.integrator.reason
 
 
@@ -234,9 +237,9 @@ def test_fixed_rescues_a_call_both_fixed_step_methods_fail_with_dop853(monkeypat
 def test_fixed_carries_the_heavy_tip_through_its_whips():
     """Mass ratio 1e6 (gyro_sim.bench.extreme): the light links whip when the chain straightens
     (accelerations ~1e9 rad/s^2 for microseconds near t = 0.0874 s). rk4 fails at any step down
-    to 16 us; gauss4 gets through by halving its step, but its energy jumps there (0.35 of the
-    kinetic energy): "fixed"'s watchdog takes those calls to dop853, which keeps the energy to
-    1e-3 of the kinetic energy."""
+    to 16 us; the implicit rung gets through by halving its step, but its energy jumps there
+    (gauss4: 0.35 of the kinetic energy): "fixed"'s watchdog takes those calls to dop853, which
+    keeps the energy to 1e-3 of the kinetic energy."""
     from gyro_sim.bench.extreme import mass_ratio_chain
 
     scene = mass_ratio_chain(1e6)
@@ -282,7 +285,7 @@ def test_fixed_re_simulates_bit_for_bit_with_its_switches():
 
 
 def test_warm_up_runs_both_methods_and_leaves_no_trace():
-    """The node calls it before real time starts: gauss4's path is compiled (or loaded) then,
+    """The node calls it before real time starts: gauss4s's path is compiled (or loaded) then,
     not at the first switch; state, counters and the choice are as before."""
     sim = Simulator("hinge_chain", integrator="fixed", step=STEP)
     integ, y0 = sim.integrator, sim.state
@@ -292,7 +295,7 @@ def test_warm_up_runs_both_methods_and_leaves_no_trace():
         call = getattr(m, attr)
         setattr(m, attr, lambda t0, y, t1, call=call, name=name: (calls.append(name), call(t0, y, t1))[1])
     integ.warm_up(sim.time, y0)
-    assert sorted(calls) == ["dop853", "gauss4", "rk4"]
+    assert sorted(calls) == ["dop853", "gauss4s", "rk4"]
     assert all(m.nsteps == m.nfev == m.nrejected == 0 for m in integ.methods.values())
     assert np.array_equal(sim.state, y0) and integ.current == "" and integ.switches == []
 

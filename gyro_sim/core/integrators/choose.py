@@ -1,6 +1,9 @@
-"""The node's fixed-step method for a scene: rk4 where it is stable at the step, gauss4 where
-the scene is stiff (issue 10, item 2); and the integrator "fixed" that makes this choice at the
-start and again as the motion changes (:class:`SceneFixedStep`, the node's default).
+"""The node's fixed-step method for a scene: rk4 where it is stable at the step, gauss4s (the
+Gauss method on the chain's canonical equations: A-stable and symplectic, momenta kept to
+round-off) where the scene is stiff (issue 10, item 2); and the integrator "fixed" that makes
+this choice at the start and again as the motion changes (:class:`SceneFixedStep`, the node's
+default). On a system that is not a chain the implicit rung is gauss4, the same method on the
+system's own state. Below, "gauss4" stands for either where the two behave alike.
 
 RK4 is stable for h lambda inside its stability region, which reaches RK4_IMAG_LIMIT = 2 sqrt 2
 along the imaginary axis (gyroscopic nutation: eigenvalues +-i w) and 2.785 along the negative
@@ -85,7 +88,12 @@ RECHECK_DIM = 10
 SPIN_RESOLVE = 0.25
 #: most substeps of one physics step
 MAX_SUBSTEPS = 64
-#: "fixed": the last resort of a call that rk4 and gauss4 both fail (adaptive, error-controlled)
+#: "fixed": the method of a stiff chain (symplectic: docs/STRUCTURE_PRESERVING.md); a system
+#: that is not a chain (no `model`) gets gauss4, the same method on its own state
+IMPLICIT = "gauss4s"
+IMPLICIT_PLAIN = "gauss4"
+#: "fixed": the last resort of a call that rk4 and the implicit method both fail (adaptive,
+#: error-controlled)
 RESCUE = "dop853"
 #: the rescue's tolerances (or the integrator's, when tighter): the calls it takes are the
 #: violent ones (the step moments of 1e3 x gravity on the hinge chain drift 1.5e-5 in energy
@@ -129,7 +137,7 @@ def spectral_radius_estimate(rhs, t: float, y: np.ndarray, dim: int = KRYLOV_DIM
 
 @dataclass(frozen=True)
 class Choice:
-    """A fixed-step method for a physics step h: `method` ("rk4" or "gauss4") in `substeps`
+    """A fixed-step method for a physics step h: `method` ("rk4", "gauss4s" or "gauss4") in `substeps`
     equal substeps of h, why (one line), and the estimated h |lambda| of one substep."""
 
     method: str
@@ -187,7 +195,7 @@ def fixed_step_choice(sim, dt: float) -> Choice:
 
     The substeps resolve the fastest body's rotation (`substeps_for`); the method is rk4 when
     the substep times the estimated largest |eigenvalue| of the rhs's Jacobian at the current
-    state (commands held) is below RK4_SAFETY x RK4_IMAG_LIMIT, else gauss4. Call it on a
+    state (commands held) is below RK4_SAFETY x RK4_IMAG_LIMIT, else gauss4s. Call it on a
     Simulator just built or reset (the node chooses at start): the rhs is held with the scene's
     own rotor spins and no commanded moments. `sim` is not advanced.
     """
@@ -196,7 +204,7 @@ def fixed_step_choice(sim, dt: float) -> Choice:
     m = sim.model
     p0 = m.torque_p0.copy() if len(m.torque_body) else None
     sim.system.hold(sim.time, p0, None, None)  # the reset state's inputs, as advance holds them
-    return _choice(sim.system.rhs, sim.time, sim.state, dt, "rk4", omega=body_rate_bound(m, sim.state))
+    return _choice(sim.system.rhs, sim.time, sim.state, dt, "rk4", omega=body_rate_bound(m, sim.state))  # a chain: gauss4s
 
 
 def fixed_step_method(sim, dt: float) -> tuple[str, str]:
@@ -207,10 +215,11 @@ def fixed_step_method(sim, dt: float) -> tuple[str, str]:
 
 
 def _choice(rhs, t: float, y: np.ndarray, h: float, now: str, dim: int = KRYLOV_DIM, omega: float = 0.0,
-            k_now: int = 1) -> Choice:
+            k_now: int = 1, implicit: str = IMPLICIT) -> Choice:
     """The Choice at (t, y) for step h, given the method used `now` (the hysteresis of
-    RK4_RETURN applies when leaving gauss4) and its substeps `k_now`, from `dim` Krylov
-    vectors, with body angular speeds up to `omega`."""
+    RK4_RETURN applies when leaving the implicit method) and its substeps `k_now`, from `dim`
+    Krylov vectors, with body angular speeds up to `omega`; `implicit` names the method of a
+    stiff scene."""
     k = substeps_for(h, omega, k_now)
     hl = h / k * spectral_radius_estimate(rhs, t, y, dim)
     limit = RK4_SAFETY * RK4_IMAG_LIMIT
@@ -218,18 +227,20 @@ def _choice(rhs, t: float, y: np.ndarray, h: float, now: str, dim: int = KRYLOV_
     sub = f" x{k} substeps (a body turns up to {h * omega:.2g} rad a step)" if k > 1 else ""
     if hl < back:
         return Choice("rk4", k, f"rk4{sub}: h |lambda| = {hl:.2g} (stable below {limit:.2g})", hl)
-    return Choice("gauss4", k, f"gauss4{sub}: h |lambda| = {hl:.2g}: stiff for rk4 "
+    return Choice(implicit, k, f"{implicit}{sub}: h |lambda| = {hl:.2g}: stiff for rk4 "
                                f"(rk4 needs below {back:.2g} at h = {h / k:.3g} s)", hl)
 
 
 class SceneFixedStep(FixedStepIntegrator):
-    """"fixed": rk4 where the scene is soft at the step, gauss4 where it is stiff, re-chosen
+    """"fixed": rk4 where the scene is soft at the step, gauss4s where it is stiff (gauss4 on a
+    system that is not a chain: `implicit`), re-chosen
     as the motion and the commands change (see the module docstring). Order 4 (both methods
     are), fixed step, one step per physics step.
 
     Attributes
     ----------
-    current : the method stepping now ("rk4" or "gauss4").
+    current : the method stepping now ("rk4", `implicit` or the rescue's "dop853").
+    implicit : "gauss4s" on a chain, "gauss4" on another system.
     substeps : substeps of one step now (1: none): the fastest body turns at most
         SPIN_RESOLVE rad in one.
     reason : one line: why (the substeps, h |lambda| of a substep against rk4's limit).
@@ -251,11 +262,16 @@ class SceneFixedStep(FixedStepIntegrator):
     def __init__(self, system, **options):
         super().__init__(system, **options)
         from .gauss import Gauss4  # here: gauss imports this package's base, not the reverse
+        from .gauss_canonical import Gauss4S
         from .rk4 import RK4
 
         from .dop853 import DOP853
 
-        self.methods = {"rk4": RK4(system, **options), "gauss4": Gauss4(system, **options),
+        chain = getattr(system, "model", None) is not None
+        #: the method of a stiff scene: gauss4s on a chain, gauss4 on any other system
+        self.implicit = IMPLICIT if chain else IMPLICIT_PLAIN
+        implicit = Gauss4S(system, **options) if chain else Gauss4(system, **options)
+        self.methods = {"rk4": RK4(system, **options), self.implicit: implicit,
                         RESCUE: DOP853(_Plain(system), **{**options, "max_step": self.step,
                                                            "rtol": min(RESCUE_RTOL, self.rtol),
                                                            "atol": np.minimum(RESCUE_ATOL, self.atol)})}
@@ -348,7 +364,7 @@ class SceneFixedStep(FixedStepIntegrator):
         if self._due(t0, y):
             dim = RECHECK_DIM if self.current else KRYLOV_DIM
             c = _choice(self._counted_rhs, t0, y, self.step, self.current or "rk4", dim, self._body_rate(y),
-                        self.substeps)
+                        self.substeps, self.implicit)
             self.reason, self.h_lambda = c.reason, c.h_lambda
             self._switch(t0, c.method, c.substeps)
             self._last_check = t0
@@ -374,7 +390,7 @@ class SceneFixedStep(FixedStepIntegrator):
                     y[:] = self._y0
                     if self.current == RESCUE:
                         raise
-                    after = "gauss4" if self.current == "rk4" else RESCUE
+                    after = self.implicit if self.current == "rk4" else RESCUE
                     what = (f"failed ({e.reason})" if self.current != "rk4" or "watchdog" in e.reason
                             else "left a non-finite state")
                     self.reason = f"{after}: {self._label()} {what} at t = {e.t:.6g} s"

@@ -9,9 +9,10 @@ the energy error stays bounded over long times instead of growing, and every qua
 invariant of the canonical flow is kept to round-off: the world angular momentum (sum of the
 bodies' quasi-momenta, bilinear in (q, p); docs/STRUCTURE_PRESERVING.md), |q|^2 and q . p.
 
-The caller's state y (the package's layout) is converted to canonical z at the start of an
-`advance` and back at its end; the z of the last end is kept, so a run of calls that continue
-each other converts once (the conversion's round-off would otherwise enter each call).
+The caller's state y (the package's layout) is converted to canonical z at the start of a march
+(`advance`, or "fixed"'s `march`) and back at its end; the z of the last end is kept, so a run
+of calls that continue each other converts once (the conversion's round-off would otherwise
+enter each call).
 """
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..canonical import CanonicalChain
-from .base import FixedStepIntegrator, IntegrationError
+from .base import FixedStepIntegrator, IntegrationError, describe_nonfinite
 from .gauss import Gauss4
 
 if TYPE_CHECKING:
@@ -59,6 +60,18 @@ class Gauss4S(FixedStepIntegrator):
         self.counts = self.inner.counts
         self._end: tuple[float, np.ndarray, np.ndarray] | None = None
 
+    @property
+    def step(self) -> float:
+        """The step; setting it sets the inner gauss4's too (as "fixed" does for substeps)."""
+        return self._step
+
+    @step.setter
+    def step(self, value: float) -> None:
+        self._step = float(value)
+        inner = self.__dict__.get("inner")
+        if inner is not None:
+            inner.step = self._step
+
     def reset(self) -> None:
         super().reset()
         self.inner.reset()
@@ -67,26 +80,25 @@ class Gauss4S(FixedStepIntegrator):
     def _z(self, t0: float, y: np.ndarray) -> np.ndarray:
         end = self._end
         if end is not None and end[0] == t0 and np.array_equal(end[1], y):
-            return end[2].copy()
+            return end[2]
         return self.canonical.momenta(t0, y)
 
-    def _integrate(self, t0, y, t1, te, Y) -> None:
+    def _march(self, t0: float, y: np.ndarray, t1: float) -> None:
+        """y (the package's state) from t0 to t1 in place, through z: steps of the inner gauss4
+        on the canonical system."""
         z = self._z(t0, y)
-        t = t0
         try:
-            if te is not None:
-                for j, tj in enumerate(te):
-                    if tj > t:
-                        self.inner.march(t, z, tj)
-                        t = tj
-                    Y[j] = self.canonical.state(t, z)
-            if t1 > t:
-                self.inner.march(t, z, t1)
+            self.inner.march(t0, z, t1)
         except IntegrationError as err:
+            self._end = None
             raise IntegrationError(self.name, err.reason, err.t, err.h) from None
         finally:
             self._mirror()
         y[:] = self.canonical.state(t1, z)
+        if not np.isfinite(y).all():
+            self._end = None
+            raise IntegrationError(self.name, "state is not finite after the step", t0, self.step,
+                                   describe_nonfinite(y))
         self._end = (t1, y.copy(), z)
 
     def _mirror(self) -> None:
