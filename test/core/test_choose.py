@@ -196,6 +196,21 @@ def test_fixed_takes_gauss4s_where_rotors_stiffen_the_scene():
     assert "stiff for rk4" in sim.integrator.reason, sim.integrator.reason
 
 
+def test_the_implicit_rung_by_chain_length():
+    """gauss4s on a chain up to IMPLICIT_MAX_BODIES (where it holds 1 kHz), gauss4 on a longer
+    one and on a system that is not a chain; the start's choice names the same method."""
+    from gyro_sim.bench.scenes import spherical_chain
+    from gyro_sim.core.integrators import choose
+
+    for n, expect in ((choose.IMPLICIT_MAX_BODIES, "gauss4s"), (choose.IMPLICIT_MAX_BODIES + 1, "gauss4")):
+        sim = Simulator(spherical_chain(n), integrator="fixed", step=STEP)
+        assert sim.integrator.implicit == expect
+        assert expect in sim.integrator.methods
+        c = choose._choice(sim.system.rhs, 0.0, sim.state, 1.0, "rk4", implicit=choose.implicit_for(sim.model))
+        assert c.method == expect  # h = 1 s: stiff for rk4 on any chain
+    assert choose.SceneFixedStep(Rotation(1.0), step=STEP).implicit == "gauss4"
+
+
 class Watched(Rotation):
     """Rotation with the watchdog of |y|^2, the invariant of the exact flow (rk4 at h w = 1
     loses 0.6 % of |y| a step; gauss4 keeps it to round-off)."""

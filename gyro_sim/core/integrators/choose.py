@@ -89,9 +89,20 @@ SPIN_RESOLVE = 0.25
 #: most substeps of one physics step
 MAX_SUBSTEPS = 64
 #: "fixed": the method of a stiff chain (symplectic: docs/STRUCTURE_PRESERVING.md); a system
-#: that is not a chain (no `model`) gets gauss4, the same method on its own state
+#: that is not a chain (no `model`), or a chain of more than IMPLICIT_MAX_BODIES, gets gauss4,
+#: the same method on the package's state
 IMPLICIT = "gauss4s"
 IMPLICIT_PLAIN = "gauss4"
+#: gauss4s's Newton-GMRES needs ~2.5x gauss4's Krylov vectors on a long swinging chain (n = 100:
+#: 81 against 37 rhs evaluations a step after 2 s; median step 1.1 ms against 0.41 ms, under
+#: load): the largest n holding 1 kHz measured ~77 against ~205 (`gyro-sim bench stability
+#: --parts cost`, session 7). Up to this many bodies gauss4s holds it with a margin.
+IMPLICIT_MAX_BODIES = 50
+
+
+def implicit_for(model) -> str:
+    """The implicit rung of "fixed" for a chain's model (None: a system that is not a chain)."""
+    return IMPLICIT if model is not None and model.n <= IMPLICIT_MAX_BODIES else IMPLICIT_PLAIN
 #: "fixed": the last resort of a call that rk4 and the implicit method both fail (adaptive,
 #: error-controlled)
 RESCUE = "dop853"
@@ -195,7 +206,8 @@ def fixed_step_choice(sim, dt: float) -> Choice:
 
     The substeps resolve the fastest body's rotation (`substeps_for`); the method is rk4 when
     the substep times the estimated largest |eigenvalue| of the rhs's Jacobian at the current
-    state (commands held) is below RK4_SAFETY x RK4_IMAG_LIMIT, else gauss4s. Call it on a
+    state (commands held) is below RK4_SAFETY x RK4_IMAG_LIMIT, else `implicit_for` the model's
+    (gauss4s up to IMPLICIT_MAX_BODIES bodies). Call it on a
     Simulator just built or reset (the node chooses at start): the rhs is held with the scene's
     own rotor spins and no commanded moments. `sim` is not advanced.
     """
@@ -204,7 +216,8 @@ def fixed_step_choice(sim, dt: float) -> Choice:
     m = sim.model
     p0 = m.torque_p0.copy() if len(m.torque_body) else None
     sim.system.hold(sim.time, p0, None, None)  # the reset state's inputs, as advance holds them
-    return _choice(sim.system.rhs, sim.time, sim.state, dt, "rk4", omega=body_rate_bound(m, sim.state))  # a chain: gauss4s
+    return _choice(sim.system.rhs, sim.time, sim.state, dt, "rk4", omega=body_rate_bound(m, sim.state),
+                   implicit=implicit_for(m))
 
 
 def fixed_step_method(sim, dt: float) -> tuple[str, str]:
@@ -240,7 +253,8 @@ class SceneFixedStep(FixedStepIntegrator):
     Attributes
     ----------
     current : the method stepping now ("rk4", `implicit` or the rescue's "dop853").
-    implicit : "gauss4s" on a chain, "gauss4" on another system.
+    implicit : "gauss4s" on a chain of at most IMPLICIT_MAX_BODIES, "gauss4" on a longer one or
+        on another system.
     substeps : substeps of one step now (1: none): the fastest body turns at most
         SPIN_RESOLVE rad in one.
     reason : one line: why (the substeps, h |lambda| of a substep against rk4's limit).
@@ -267,9 +281,10 @@ class SceneFixedStep(FixedStepIntegrator):
 
         from .dop853 import DOP853
 
-        chain = getattr(system, "model", None) is not None
-        #: the method of a stiff scene: gauss4s on a chain, gauss4 on any other system
-        self.implicit = IMPLICIT if chain else IMPLICIT_PLAIN
+        #: the method of a stiff scene: gauss4s on a chain of at most IMPLICIT_MAX_BODIES,
+        #: gauss4 on a longer one or on a system that is not a chain
+        self.implicit = implicit_for(getattr(system, "model", None))
+        chain = self.implicit == IMPLICIT
         implicit = Gauss4S(system, **options) if chain else Gauss4(system, **options)
         self.methods = {"rk4": RK4(system, **options), self.implicit: implicit,
                         RESCUE: DOP853(_Plain(system), **{**options, "max_step": self.step,
