@@ -399,7 +399,7 @@ def features_table(rows) -> str:
 # --- memory: long chains, every integrator --------------------------------------------------------
 MEMORY_SIZES = (1000, 5000)
 QUICK_MEMORY_SIZES = (300,)
-MEMORY_INTEGRATORS = ("rk4", "lie4", "gauss4", "fixed", "dop853", "radau", "auto")
+MEMORY_INTEGRATORS = ("rk4", "lie4", "gauss4", "gauss4s", "fixed", "dop853", "radau", "auto")
 QUICK_MEMORY_INTEGRATORS = ("rk4", "radau")
 MEMORY_SECONDS = 0.1
 #: wall seconds a run may take before it counts as too slow
