@@ -2,12 +2,16 @@
 Newton iteration: dense simplified Newton (Jacobians kept across steps) on small systems,
 Newton-Krylov in O(n) memory on large ones, and a bounded retake in substeps.
 
-A-stable, symplectic and conserving every quadratic invariant of the flow exactly (Hairer,
+A-stable, symmetric, and conserving every quadratic invariant of the flow exactly (Hairer,
 Lubich, Wanner, "Geometric Numerical Integration", 2nd ed., Springer 2006, sec. IV.2, Thm.
 2.1): the norms |q|^2 of the quaternion blocks (q' = 1/2 (0, w) (x) q keeps them for any w),
 so rotations stay on SO(3) without projection (`project` is still called, a no-op to
 round-off) -- provided the collocation equations are solved to round-off, which the stop test
 below asks for. For stiff (gyroscopic) scenes at the node's fixed step, where rk4 goes unstable.
+Symplectic only on a Hamiltonian system in canonical coordinates: not on the package's state
+of quaternions and joint rates (the world angular momentum is cubic there, and the double
+gyroscope's energy error grows as t^2: docs/STRUCTURE_PRESERVING.md); gauss4s
+(gauss_canonical.py) is this class stepping the chain's canonical equations, where it is.
 
 Measured (compiled, h = 1 ms, `Simulator.advance` in 10 ms calls; "before": the
 Krylov-only iteration this replaced; rhs evaluations a step are exact counts, times are CPU on
