@@ -449,6 +449,22 @@ def _velocities(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, 
 
 
 @_njit_inline
+def _spatial_inertia(k, m, h0, h1, h2, Aw, I6):
+    """I6[k] = [[A, h x], [(h x)^T, m 1]]: body k's spatial inertia about O^k (world axes) from
+    its inertia A (Aw[k]), first moment h = m c and mass m."""
+    for a in range(3):
+        for b in range(3):
+            I6[k, a, b] = Aw[k, a, b]
+            I6[k, 3 + a, 3 + b] = m if a == b else 0.0
+    I6[k, 0, 3], I6[k, 0, 4], I6[k, 0, 5] = 0.0, -h2, h1
+    I6[k, 1, 3], I6[k, 1, 4], I6[k, 1, 5] = h2, 0.0, -h0
+    I6[k, 2, 3], I6[k, 2, 4], I6[k, 2, 5] = -h1, h0, 0.0
+    for a in range(3):
+        for b in range(3):
+            I6[k, 3 + a, b] = I6[k, b, 3 + a]
+
+
+@_njit_inline
 def _bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
                  torque_A, p, L_rotor, has_gravity, gravity, lam_b, dlam_b, I6, pb):
     """Spatial inertias I6 (n, 6, 6) and body forces at zero acceleration pb (n, 6) about O^k,
@@ -476,17 +492,7 @@ def _bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque
         h0, h1, h2 = hk[k, 0], hk[k, 1], hk[k, 2]
         w0, w1, w2 = w[k, 0], w[k, 1], w[k, 2]
         v0, v1, v2 = vO[k, 0], vO[k, 1], vO[k, 2]
-        # I = [[A, h x], [(h x)^T, m 1]]
-        for a in range(3):
-            for b in range(3):
-                I6[k, a, b] = Aw[k, a, b]
-                I6[k, 3 + a, 3 + b] = m if a == b else 0.0
-        I6[k, 0, 3], I6[k, 0, 4], I6[k, 0, 5] = 0.0, -h2, h1
-        I6[k, 1, 3], I6[k, 1, 4], I6[k, 1, 5] = h2, 0.0, -h0
-        I6[k, 2, 3], I6[k, 2, 4], I6[k, 2, 5] = -h1, h0, 0.0
-        for a in range(3):
-            for b in range(3):
-                I6[k, 3 + a, b] = I6[k, b, 3 + a]
+        _spatial_inertia(k, m, h0, h1, h2, Aw, I6)
         # momentum about O^k: (A w + h x v + lambda, m v + w x h)
         ma0 = (Aw[k, 0, 0] * w0 + Aw[k, 0, 1] * w1 + Aw[k, 0, 2] * w2) + (h1 * v2 - h2 * v1)
         ma1 = (Aw[k, 1, 0] * w0 + Aw[k, 1, 1] * w1 + Aw[k, 1, 2] * w2) + (h2 * v0 - h0 * v2)
@@ -1319,6 +1325,7 @@ def workspace(model: Model) -> np.ndarray:
 # --- the stages other compiled modules build on (fast_canonical: the canonical field) ---------
 #: inlined there as here; the same dispatchers under public names
 positions_stage = _positions
+spatial_inertia = _spatial_inertia
 velocities_stage = _velocities
 joint_columns_stage = _joint_columns
 articulated_solve = _aba

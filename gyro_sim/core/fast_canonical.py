@@ -144,27 +144,16 @@ def _rates(t, z, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, 
         for a in range(6):
             pb[k, a] = 0.0
             c[k, a] = 0.0
-        m = mass[k]
-        h0, h1, h2 = hk[k, 0], hk[k, 1], hk[k, 2]
-        for a in range(3):
-            for b in range(3):
-                I6[k, a, b] = Aw[k, a, b]
-                I6[k, 3 + a, 3 + b] = m if a == b else 0.0
-        I6[k, 0, 3], I6[k, 0, 4], I6[k, 0, 5] = 0.0, -h2, h1
-        I6[k, 1, 3], I6[k, 1, 4], I6[k, 1, 5] = h2, 0.0, -h0
-        I6[k, 2, 3], I6[k, 2, 4], I6[k, 2, 5] = -h1, h0, 0.0
-        for a in range(3):
-            for b in range(3):
-                I6[k, 3 + a, b] = I6[k, b, 3 + a]
+        fast.spatial_inertia(k, mass[k], hk[k, 0], hk[k, 1], hk[k, 2], Aw, I6)
     for a in range(6):
         a_base[a] = 0.0
     fast.joint_columns_stage(is_hinge, own_col, base_type, e_w, S)
     fast.articulated_solve(is_hinge, col_start, S, I6, pb, c, prel, a_base, s_w, U, W, u, Dinv, rate,
-              Ia, pa, Dx, T, G, x)
+                           Ia, pa, Dx, T, G, x)
     for j in range(N):
         y[i_vel + j] = rate[j]
     fast.velocities_stage(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, i_vel,
-                     s_w, e_w, w, vO, c)
+                          s_w, e_w, w, vO, c)
 
 
 @_njit
