@@ -106,7 +106,6 @@ class CanonicalChain:
         self.quat_index = self.i_quat
         self.nfev = 0
         nxt = _next_spherical(m)
-        self._next_sph = nxt
         # for spherical body k (in sph order) and hinge l: the next spherical body's index in
         # sph order, -1 if none
         sph_pos = np.full(m.n, -1, dtype=int)
@@ -115,9 +114,7 @@ class CanonicalChain:
                                   dtype=int)
         self._hinge_next = np.array([sph_pos[nxt[k]] if nxt[k] >= 0 else -1 for k in m.hinge_bodies],
                                     dtype=int)
-        self._y = np.empty(m.size)
-        if len(m.torque_body):
-            self._y[m.i_kappa] = 0.0
+        self._y = np.empty(m.size)  # the coordinates of z in the package's layout (positions)
 
     # --- the package's state <-> canonical ------------------------------------------------------
     def _subtree(self, t: float, u: np.ndarray):
@@ -255,18 +252,12 @@ class CanonicalChain:
             dp[m.col_hinge] = np.einsum("ni,ni->n", de, Hk[hb]) + np.einsum("ni,ni->n", e, G[hb])
             if self.ode.hinge_tau is not None:
                 dp[m.col_hinge] += self.ode.hinge_tau  # (51)
-        # canonical momenta's rates
-        dPs = dp[m.col_sph]
-        dpi = dPs.copy()
-        has = self._sph_next >= 0
-        dpi[has] -= dPs[self._sph_next[has]]
-        dpphi = dp[m.col_hinge].copy()
+        # canonical momenta's rates: the rates of `_to_absolute`'s map, whose hinge rows carry
+        # e_l . p_rel(k'), so also - e_l' . p_rel(k')
+        dpi, dpphi, _ = self._to_absolute(dp)
         hh = self._hinge_next >= 0
         if hh.any():
-            Ps = p_rel[m.col_sph]
-            e, nx = d.e_w[hh], self._hinge_next[hh]
-            de = cross(d.w_parent[hb[hh]], e)
-            dpphi[hh] -= np.einsum("ni,ni->n", de, Ps[nx]) + np.einsum("ni,ni->n", e, dPs[nx])
+            dpphi[hh] -= np.einsum("ni,ni->n", de[hh], p_rel[m.col_sph][self._hinge_next[hh]])
         zdot = np.empty(self.size)
         if m.free:
             zdot[self.i_r0] = u[m.col_base]
