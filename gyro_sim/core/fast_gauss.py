@@ -62,6 +62,7 @@ from .gauss_kernels import (
     PAR_KAPPA,
     PAR_NEWTON_CAP,
     PAR_REFRESH_CAP,
+    PAR_REFRESH_KAPPA,
     PAR_REFRESH_RATE,
     PAR_STALL,
     PAR_STALL_RATE,
@@ -87,9 +88,10 @@ _njit = fast_loop.njit_with_dependencies(*DEPENDENCIES)
 #: start (n,), stage states
 #: Ys, rhs F and Fp (2, n); Yp, w (n,); the Krylov basis V (m + 1, 2, n), H (m + 1, m), cs, sn,
 #: coef (m,), g (m + 1,); stage Jacobians J (2, nd, nd), iteration matrix M (2 nd, 2 nd), its
-#: pivots piv (2 nd,) int64, the dense residual r (2 nd,); the predictor matrix P (2, 2)
+#: pivots piv (2 nd,) int64, the dense residual r (2 nd,); the predictor matrix P (2, 2); the
+#: step's coefficients h A (2, 2) (gauss_kernels.gauss_scaled)
 WS_FIELDS = ("Z", "Zp", "Zs", "Zb", "ys", "y0", "Ys", "F", "Fp", "Yp", "w", "V", "H", "cs", "sn", "coef", "g",
-             "J", "M", "piv", "r", "P")
+             "J", "M", "piv", "r", "P", "hA")
 
 
 def _field(t, y, out, kargs):
@@ -121,15 +123,14 @@ def _rhs(t, y, out, counts, kargs):
 
 @_njit
 def newton_dense(t, y, h, A, C, params, dstate, ws, info, counts, kargs):
-    """The dense Newton iteration of one (sub)step from the start guess in Z: Gauss4._newton_dense
-    statement for statement. Returns a STEP_ status; Z (2, size) the solution on STEP_OK."""
-    Z, Zp, Zs, Zb, ys, y0, Ys, F, Fp, Yp, w, V, H, cs, sn, coef, g, J, M, piv, r, P = ws
+    """The dense Newton iteration of one (sub)step from the start guess in Z, with the step's
+    coefficients in ws's hA (`substep` sets them): Gauss4._newton_dense statement for statement. Returns a STEP_ status; Z (2, size) the solution on STEP_OK."""
+    Z, Zp, Zs, Zb, ys, y0, Ys, F, Fp, Yp, w, V, H, cs, sn, coef, g, J, M, piv, r, P, hA = ws
     n = y.shape[0]
     tol, kappa, first_tol, diverge = params[PAR_TOL], params[PAR_DENSE_KAPPA], params[PAR_FIRST_TOL], \
         params[PAR_DIVERGE]
     cap, rate, rcap = int(params[PAR_DENSE_CAP]), params[PAR_REFRESH_RATE], int(params[PAR_REFRESH_CAP])
     stall, stall_rate, floor_factor = params[PAR_STALL], params[PAR_STALL_RATE], params[PAR_FLOOR_FACTOR]
-    hA = A * h
     tc = (t + C[0] * h, t + C[1] * h)
     gk.gauss_weights(y, tol, w)
     if abs(dstate[DST_H] - h) > H_REUSE * h:
@@ -188,7 +189,8 @@ def newton_dense(t, y, h, A, C, params, dstate, ws, info, counts, kargs):
             norm_prev = 0.0
             k = 0
             continue
-        if k > 0 and refreshes < rcap and gk.refresh_wanted(theta, norm, cap - 1 - it, kappa, rate):
+        if k > 0 and refreshes < rcap and gk.refresh_wanted(theta, norm, cap - 1 - it,
+                                                            params[PAR_REFRESH_KAPPA], rate):
             dstate[DST_REFRESH] = 1.0
         norm_prev = norm
         k += 1
@@ -197,9 +199,9 @@ def newton_dense(t, y, h, A, C, params, dstate, ws, info, counts, kargs):
 
 @_njit
 def newton_krylov(t, y, h, A, C, params, ws, info, counts, kargs):
-    """The Newton-Krylov iteration of one (sub)step from the start guess in Z:
+    """The Newton-Krylov iteration of one (sub)step from the start guess in Z, with ws's hA:
     Gauss4._newton_krylov statement for statement. Returns a STEP_ status."""
-    Z, Zp, Zs, Zb, ys, y0, Ys, F, Fp, Yp, w, V, H, cs, sn, coef, g, J, M, piv, r, P = ws
+    Z, Zp, Zs, Zb, ys, y0, Ys, F, Fp, Yp, w, V, H, cs, sn, coef, g, J, M, piv, r, P, hA = ws
     n = y.shape[0]
     m = H.shape[1]
     tol, kappa, first_tol, diverge = params[PAR_TOL], params[PAR_KAPPA], params[PAR_FIRST_TOL], \
@@ -208,7 +210,6 @@ def newton_krylov(t, y, h, A, C, params, ws, info, counts, kargs):
     newton_cap = int(params[PAR_NEWTON_CAP])
     stall, stall_rate = params[PAR_STALL], params[PAR_STALL_RATE]
     inv_eps = 1.0 / eps
-    hA = A * h
     tc = (t + C[0] * h, t + C[1] * h)
     gk.gauss_weights(y, tol, w)
     norm_prev = 0.0
@@ -254,24 +255,26 @@ def newton_krylov(t, y, h, A, C, params, ws, info, counts, kargs):
 
 @_njit
 def substep(t, y, h, A, C, D, params, dstate, ws, info, counts, i_q0, nq, kargs):
-    """One (sub)step of size h from (t, y): Gauss4._substep statement for statement. Starts
-    Newton from the previous (sub)step's collocation polynomial extrapolated (its step in
-    dstate[DST_HPRED], 0: from Z = 0); on success y += D . Z, its quaternions renormalised,
-    and Z kept as the next predictor's."""
-    Z, Zp, Zs, Zb, ys, y0, Ys, F, Fp, Yp, w, V, H, cs, sn, coef, g, J, M, piv, r, P = ws
+    """One (sub)step of size h from (t, y): Gauss4._substep statement for statement. Sets ws's
+    hA (gauss_kernels.gauss_scaled), starts Newton from the previous (sub)step's collocation
+    polynomial extrapolated (its step in dstate[DST_HPRED], 0: from Z = 0); on success
+    y += D . Z (gauss_kernels.gauss_update), its quaternions renormalised, and Z kept as the
+    next predictor's."""
+    Z, Zp, Zs, Zb, ys, y0, Ys, F, Fp, Yp, w, V, H, cs, sn, coef, g, J, M, piv, r, P, hA = ws
     hp = dstate[DST_HPRED]
     if hp > 0.0:
         gk.predictor_matrix(C, h / hp, P)
         gk.gauss_predict(Zp, P, Z)
     else:
         Z[:, :] = 0.0
+    gk.gauss_scaled(A, h, hA)
     if params[PAR_DENSE] != 0.0:
         status = newton_dense(t, y, h, A, C, params, dstate, ws, info, counts, kargs)
     else:
         status = newton_krylov(t, y, h, A, C, params, ws, info, counts, kargs)
     if status != STEP_OK:
         return status
-    gk.gauss_update(y, Z, D)
+    gk.gauss_update(y, Z, F, hA, h, D)
     Zp[:, :] = Z
     dstate[DST_HPRED] = h
     fast.normalize_quaternions(y, i_q0, nq)
@@ -294,7 +297,7 @@ def gauss_march(t0, h, nsteps, y, A, C, D, params, dstate, ws, info, counts, i_q
     params as gauss_kernels.PAR_*; ws the workspace (WS_FIELDS); kargs the arguments of
     fast.rhs_kernel after (t, y, out).
     """
-    Z, Zp, Zs, Zb, ys, y0, Ys, F, Fp, Yp, w, V, H, cs, sn, coef, g, J, M, piv, r, P = ws
+    Z, Zp, Zs, Zb, ys, y0, Ys, F, Fp, Yp, w, V, H, cs, sn, coef, g, J, M, piv, r, P, hA = ws
     max_depth = int(params[PAR_DEPTH])
     budget = int(params[PAR_BUDGET])
     end = 1 << max_depth

@@ -60,15 +60,17 @@ NEWTON_CONTINUE, NEWTON_CONVERGED, NEWTON_DIVERGING, NEWTON_NOT_FINITE, NEWTON_S
  COUNT_JACOBIAN, COUNT_LU, COUNT_RETAKEN, COUNT_MAX_STEP_RHS, COUNT_MAX_DEPTH,
  COUNT_STEPS_RETAKEN) = range(12)
 N_COUNTS = 12
-#: the parameters array (float64, 19): NEWTON_TOL, NEWTON_KAPPA, NEWTON_FIRST_TOL,
+#: the parameters array (float64, 20): NEWTON_TOL, NEWTON_KAPPA, NEWTON_FIRST_TOL,
 #: NEWTON_SLOW_RATE, GMRES_RTOL, GMRES_ATOL, the finite-difference eps of J v, NEWTON_CAP
 #: (Krylov path), NEWTON_STALL, NEWTON_STALL_RATE, DENSE_NEWTON_CAP, JACOBIAN_REFRESH_RATE,
 #: JACOBIAN_REFRESH_CAP, RETAKE_DEPTH, FLOOR_FACTOR, 1 for the dense path (0: Krylov),
-#: RETAKE_BUDGET, DENSE_KAPPA, DIVERGENCE_REFRESHES
+#: RETAKE_BUDGET, the dense path's stop (DENSE_KAPPA; gauss4s: STRUCTURE_KAPPA),
+#: DIVERGENCE_REFRESHES, the dense path's kappa in its Jacobian refresh test (DENSE_KAPPA)
 (PAR_TOL, PAR_KAPPA, PAR_FIRST_TOL, PAR_DIVERGE, PAR_GMRES_RTOL, PAR_GMRES_ATOL, PAR_FD_EPS,
  PAR_NEWTON_CAP, PAR_STALL, PAR_STALL_RATE, PAR_DENSE_CAP, PAR_REFRESH_RATE, PAR_REFRESH_CAP,
- PAR_DEPTH, PAR_FLOOR_FACTOR, PAR_DENSE, PAR_BUDGET, PAR_DENSE_KAPPA, PAR_DIV_REFRESH) = range(19)
-N_PARAMS = 19
+ PAR_DEPTH, PAR_FLOOR_FACTOR, PAR_DENSE, PAR_BUDGET, PAR_DENSE_KAPPA, PAR_DIV_REFRESH,
+ PAR_REFRESH_KAPPA) = range(20)
+N_PARAMS = 20
 #: the dense path's memory across steps (float64, 4): the step its matrix was factored for
 #: (0: none), the round-off floor measured with it (tolerance units), 1 when a new Jacobian is
 #: wanted before the next iteration, the step of the predictor's stage increments (0: none)
@@ -284,11 +286,37 @@ def newton_test(norm, norm_prev, it, kappa, first_tol, diverge, stall, stall_rat
 
 
 @_njit
-def gauss_update(y, Z, D):
-    """y (n,) += D[0] Z[0] + D[1] Z[1]: the step's result (y1 = u(t + h) of the collocation
-    polynomial, no rhs evaluation)."""
+def gauss_scaled(A, h, hA):
+    """hA (2, 2) = h A with the symplecticity condition of the 2-stage Gauss method held exactly
+    in floating point (Hairer, McLachlan, Razakarivony 2008, sec. 3): with b = (1/2, 1/2) the
+    condition b_i a_ij + b_j a_ji = b_i b_j reads a_ss = 1/4 and a_01 + a_10 = 1/2. h/4 and h/2
+    are exact (powers of two), h a_10 is rounded once, and h/2 - h a_10 is exact (Sterbenz:
+    h a_10 ~ 0.54 h lies within a factor 2 of h/2). Rounding h a_01 on its own instead leaves
+    the condition off by an ulp, and that error has a sign: it drifts the energy and the
+    quadratic invariants linearly, by ~1e-17 a step (docs/STRUCTURE_PRESERVING.md)."""
+    hA[0, 0] = A[0, 0] * h
+    hA[1, 1] = A[1, 1] * h
+    hA[1, 0] = A[1, 0] * h
+    hA[0, 1] = 0.5 * h - hA[1, 0]
+
+
+@_njit
+def gauss_update(y, Z, F, hA, h, D):
+    """y (n,) += h/2 (F[0] + F[1]) + D[0] e[0] + D[1] e[1], e_s = Z_s - sum_j hA[s, j] F_j:
+    the step's result y1 = u(t + h) of the collocation polynomial, no rhs evaluation.
+
+    F (2, n) is the rhs at the stages of the last Newton iterate, before its update; Z the
+    updated stage increments. In exact arithmetic this is y + D . Z (D = b^T A^-1: h b^T F
+    = D . hA F), but D = (-sqrt 3, sqrt 3) is irrational: rounded, it would scale every step's
+    increment by the same 1 + 5e-17, a bias that drifts the energy and the quadratic
+    invariants linearly. Here the exact h b = h/2 multiplies the increment, and the rounded D
+    only the last Newton correction e (the Newton tolerance's size)."""
+    hb = 0.5 * h
     for i in range(y.shape[0]):
-        y[i] += D[0] * Z[0, i] + D[1] * Z[1, i]
+        f0, f1 = F[0, i], F[1, i]
+        e0 = Z[0, i] - (hA[0, 0] * f0 + hA[0, 1] * f1)
+        e1 = Z[1, i] - (hA[1, 0] * f0 + hA[1, 1] * f1)
+        y[i] += hb * (f0 + f1) + (D[0] * e0 + D[1] * e1)
 
 
 # --------------------------------------------------------------------------- starting guess

@@ -5,6 +5,7 @@ their reason, the compiled and Python drivers step for step (retakes included), 
 memory on a long chain. The stiff cases (stability function, heavy tip, step moments, fast
 double gyroscope) are in test_gauss_stiff.py."""
 import tracemalloc
+from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -66,6 +67,54 @@ def test_predictor_extrapolates_the_collocation_polynomial():
     for r in (1.0, 0.5, 2.0):
         want = np.array([[u(1 + r * c) - u(1)] for c in g.C])
         np.testing.assert_allclose(g.predictor(r) @ Z, want, rtol=1e-14, atol=1e-15)
+
+
+def _symplectic_defect(hA, h):
+    """max |h b_i hA_ij + h b_j hA_ji - h^2 b_i b_j| in exact rational arithmetic (b = 1/2)."""
+    hb = Fraction(h) / 2
+    return max(abs(hb * Fraction(hA[i, j]) + hb * Fraction(hA[j, i]) - hb * hb) for i in range(2) for j in range(2))
+
+
+def test_step_coefficients_keep_the_symplecticity_condition_exactly():
+    """gauss_scaled's h A satisfies b_i a_ij + b_j a_ji = b_i b_j with no rounding at all, for
+    any h, and is h A to an ulp (the same method). Rounding the four products h a_ij on their
+    own does not: that is the bias that drifted the energy linearly (and this test sees it)."""
+    rng = np.random.default_rng(5)
+    steps = [1e-3, 2.5e-4, 1e-2, 0.1, 1.0 / 3.0] + list(10.0 ** rng.uniform(-6, 0, 200))
+    s3 = np.sqrt(3.0) / 6
+    tableau = np.array([[0.25, 0.25 - s3], [0.25 + s3, 0.25]])  # HW IV.5, Table 5.1
+    naive_defects = []
+    for h in steps:
+        hA = np.empty((2, 2))
+        gk.gauss_scaled(Gauss4.A, h, hA)
+        assert _symplectic_defect(hA, h) == 0, h
+        np.testing.assert_allclose(hA, h * tableau, rtol=0, atol=2 * np.finfo(float).eps * h)
+        naive_defects.append(_symplectic_defect(Gauss4.A * h, h))
+    assert sum(d != 0 for d in naive_defects) > len(steps) // 4
+
+
+def test_update_is_the_collocation_polynomial_at_the_step_end():
+    """gauss_update: y + h b . F + D . (Z - h A F) is y + D . Z (the collocation polynomial at
+    t + h), whatever Z; with Z the exact stage increments of x' = L x it is the Gauss step,
+    the (2, 2) Pade approximant of exp(h L)."""
+    rng = np.random.default_rng(2)
+    n, h = 4, 0.05
+    L = rng.normal(size=(n, n))
+    y0 = rng.normal(size=n)
+    hA = np.empty((2, 2))
+    gk.gauss_scaled(Gauss4.A, h, hA)
+    for Z in (rng.normal(size=(2, n)) * h, None):
+        if Z is None:  # the exact collocation: (I - hA (x) L) Z = hA (x) L y0
+            K = np.eye(2 * n) - np.kron(hA, L)
+            Z = np.linalg.solve(K, np.kron(hA, L) @ np.concatenate([y0, y0])).reshape(2, n)
+        F = np.array([L @ (y0 + Z[s]) for s in range(2)])
+        y = y0.copy()
+        gk.gauss_update(y, Z, F, hA, h, Gauss4.D)
+        np.testing.assert_allclose(y, y0 + Gauss4.D @ Z, rtol=1e-13, atol=1e-14)
+    I = np.eye(n)
+    hL = h * L
+    pade = np.linalg.solve(I - hL / 2 + hL @ hL / 12, I + hL / 2 + hL @ hL / 12)
+    np.testing.assert_allclose(y, pade @ y0, rtol=1e-13, atol=1e-14)
 
 
 class Oscillator1:

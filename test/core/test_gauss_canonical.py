@@ -15,6 +15,7 @@ from gyro_sim.core.integrators import RK4, Gauss4, IntegrationError, make_integr
 from gyro_sim.core.model import compile_model, initial_state
 from gyro_sim.core.simulator import Simulator
 from gyro_sim.core import fast
+from gyro_sim.core import gauss_kernels as gk
 from gyro_sim.core.system import ChainODE, FastChainODE, make_system
 
 from .chains import random_chain
@@ -178,7 +179,9 @@ def test_free_floating_chain_keeps_its_momenta_to_round_off():
             scale = np.abs(L0).max() + np.linalg.norm(r0) * np.linalg.norm(P0)
             worst = max(worst, np.abs(L - L0).max() / scale, np.abs(P - P0).max() / np.abs(P0).max())
         drift[name] = worst
-    assert drift["gauss4s"] <= 2e-14, drift
+    # round-off: a random walk of ~1e-16 a step, 2.5e-14 at its largest over these 1e4 steps
+    # (and 7e-14 over 3e4: it wanders, it does not grow linearly)
+    assert drift["gauss4s"] <= 5e-14, drift
     assert drift["gauss4"] >= 30 * drift["gauss4s"], drift
 
 
@@ -239,3 +242,30 @@ def test_energy_stays_bounded_on_the_fast_double_gyroscope():
     first, second = worst["gauss4s"]
     assert second <= 1e-10 and second <= 2.0 * max(first, 1e-13), worst
     assert worst["gauss4"][1] >= 100.0 * second and worst["gauss4"][1] >= 3.0 * worst["gauss4"][0], worst
+
+
+@needs_numba
+@pytest.mark.slow
+@pytest.mark.parametrize("kappa, drifts", [(None, False), (1e-5, True)])
+def test_round_off_does_not_drift_the_vertical_momentum(kappa, drifts):
+    """The heavy top spun at 1e3 rad/s (1 rad a 1 ms step), 1e5 steps: the vertical angular
+    momentum K, bilinear in gauss4s's variables and so kept exactly by the method, wanders at
+    round-off (~3e-14) instead of drifting. With the Newton stop of gauss4 (1e-5 tolerance
+    units), what the simplified iteration leaves has a sign, and K drifts linearly, ~2.5e-13
+    over the same steps (measured; with the rounded D of y + D . Z, ~5x more): the check
+    can fail. Hairer, McLachlan, Razakarivony, BIT 48 (2008)."""
+    from gyro_sim.bench.spin_sweep import heavy_top
+
+    sim = Simulator(load_scene(heavy_top(1e3)), integrator="gauss4s", step=1e-3)
+    if kappa is not None:
+        sim.integrator.inner._params[gk.PAR_DENSE_KAPPA] = kappa
+    K0 = sim.invariants()["vertical_momentum"]
+    drift = []
+    for _ in range(10):
+        sim.advance(10.0)
+        drift.append((sim.invariants()["vertical_momentum"] - K0) / abs(K0))
+    worst = max(abs(d) for d in drift)
+    if drifts:
+        assert worst > 1e-13 and abs(drift[-1]) > 4 * abs(drift[1]), drift
+    else:
+        assert worst < 1e-13, drift

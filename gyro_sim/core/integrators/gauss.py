@@ -226,6 +226,8 @@ class Gauss4(FixedStepIntegrator):
     Parameters (besides the base's)
     -------------------------------
     dense : None (default: size <= DENSE_MAX_SIZE), True or False: the Newton path.
+    kappa : the dense path's stop test (tolerance units, default DENSE_KAPPA); its Jacobian
+        refresh test keeps DENSE_KAPPA. gauss4s asks for STRUCTURE_KAPPA.
 
     Attributes (besides the base's counters; njev counts stage Jacobians, nlu factorisations)
     -----------------------------------------------------------------------------------------
@@ -261,12 +263,14 @@ class Gauss4(FixedStepIntegrator):
     C = np.array([0.5 - _S3 / 6, 0.5 + _S3 / 6])
     A = np.array([[0.25, 0.25 - _S3 / 6], [0.25 + _S3 / 6, 0.25]])
     B = np.array([0.5, 0.5])
-    #: y1 = y + D . Z: B^T A^-1 (no rhs evaluation at the stages' end)
+    #: B^T A^-1: y1 = y + D . Z (no rhs evaluation at the stages' end); computed as
+    #: y + h B . F + D . (Z - h A F) (gauss_kernels.gauss_update: the rounded D only on the last
+    #: Newton correction), with h A from gauss_kernels.gauss_scaled
     D = np.array([-_S3, _S3])
     #: extrapolate the previous step's collocation polynomial for the starting guess
     predict = True
 
-    def __init__(self, system: OdeSystem, dense: bool | None = None, **options):
+    def __init__(self, system: OdeSystem, dense: bool | None = None, kappa: float | None = None, **options):
         super().__init__(system, **options)
         n = self.n
         self.dense = bool(n <= DENSE_MAX_SIZE if dense is None else dense)
@@ -278,7 +282,8 @@ class Gauss4(FixedStepIntegrator):
               "V": np.zeros((m + 1, 2, n)), "H": np.zeros((m + 1, m)), "cs": np.zeros(m),
               "sn": np.zeros(m), "coef": np.zeros(m), "g": np.zeros(m + 1),
               "J": np.zeros((2, nd, nd)), "M": np.zeros((2 * nd, 2 * nd)),
-              "piv": np.zeros(2 * nd, dtype=np.int64), "r": np.zeros(2 * nd), "P": np.zeros((2, 2))}
+              "piv": np.zeros(2 * nd, dtype=np.int64), "r": np.zeros(2 * nd), "P": np.zeros((2, 2)),
+              "hA": np.zeros((2, 2))}
         from ..fast_gauss import WS_FIELDS  # the compiled march's workspace order (numba-free import)
 
         self._ws = tuple(ws[k] for k in WS_FIELDS)
@@ -298,8 +303,9 @@ class Gauss4(FixedStepIntegrator):
                      (gk.PAR_DENSE_CAP, DENSE_NEWTON_CAP), (gk.PAR_REFRESH_RATE, JACOBIAN_REFRESH_RATE),
                      (gk.PAR_REFRESH_CAP, JACOBIAN_REFRESH_CAP), (gk.PAR_DEPTH, RETAKE_DEPTH),
                      (gk.PAR_FLOOR_FACTOR, FLOOR_FACTOR), (gk.PAR_DENSE, float(self.dense)),
-                     (gk.PAR_BUDGET, RETAKE_BUDGET), (gk.PAR_DENSE_KAPPA, DENSE_KAPPA),
-                     (gk.PAR_DIV_REFRESH, DIVERGENCE_REFRESHES)):
+                     (gk.PAR_BUDGET, RETAKE_BUDGET),
+                     (gk.PAR_DENSE_KAPPA, DENSE_KAPPA if kappa is None else kappa),
+                     (gk.PAR_DIV_REFRESH, DIVERGENCE_REFRESHES), (gk.PAR_REFRESH_KAPPA, DENSE_KAPPA)):
             self._params[k] = v
         self._A = np.array(self.A, dtype=np.float64)
         self._C = np.array(self.C, dtype=np.float64)
@@ -459,10 +465,11 @@ class Gauss4(FixedStepIntegrator):
             gk.gauss_predict(Zp, ws["P"], Z)
         else:
             Z[:] = 0.0
+        gk.gauss_scaled(self._A, h, ws["hA"])
         status = self._newton_dense(t, y, h) if self.dense else self._newton_krylov(t, y, h)
         if status != STEP_OK:
             return status
-        gk.gauss_update(y, Z, self._D)
+        gk.gauss_update(y, Z, ws["F"], ws["hA"], h, self._D)
         Zp[:] = Z
         dst[DST_HPRED] = h
         if project:
@@ -484,7 +491,7 @@ class Gauss4(FixedStepIntegrator):
             par[gk.PAR_DIVERGE]
         cap, rate, rcap = int(par[gk.PAR_DENSE_CAP]), par[gk.PAR_REFRESH_RATE], int(par[gk.PAR_REFRESH_CAP])
         stall, stall_rate, floor_factor = par[gk.PAR_STALL], par[gk.PAR_STALL_RATE], par[gk.PAR_FLOOR_FACTOR]
-        hA = self._A * h
+        hA = ws["hA"]
         tc = (t + self._C[0] * h, t + self._C[1] * h)
         gk.gauss_weights(y, tol, w)
         if abs(dst[DST_H] - h) > H_REUSE * h:
@@ -543,7 +550,8 @@ class Gauss4(FixedStepIntegrator):
                 norm_prev = 0.0
                 k = 0
                 continue
-            if k > 0 and refreshes < rcap and gk.refresh_wanted(theta, norm, cap - 1 - it, kappa, rate):
+            if k > 0 and refreshes < rcap and gk.refresh_wanted(theta, norm, cap - 1 - it,
+                                                                par[gk.PAR_REFRESH_KAPPA], rate):
                 dst[DST_REFRESH] = 1.0
             norm_prev = norm
             k += 1
@@ -562,7 +570,7 @@ class Gauss4(FixedStepIntegrator):
         newton_cap = int(par[gk.PAR_NEWTON_CAP])
         stall, stall_rate = par[gk.PAR_STALL], par[gk.PAR_STALL_RATE]
         inv_eps = 1.0 / eps
-        hA = self._A * h
+        hA = ws["hA"]
         tc = (t + self._C[0] * h, t + self._C[1] * h)
         gk.gauss_weights(y, tol, w)
         norm_prev = 0.0

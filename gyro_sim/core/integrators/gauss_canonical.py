@@ -27,10 +27,22 @@ from .gauss import Gauss4
 if TYPE_CHECKING:
     from ..system import OdeSystem
 
+#: the dense Newton iteration's stop (tolerance units, gauss4's DENSE_KAPPA is 1e-5): in
+#: practice "iterate to the round-off floor" (the iteration stops there, NEWTON_STALLED). The
+#: simplified iteration converges linearly, so what a looser stop leaves has the sign of the
+#: next update, step after step: on the heavy top at 1e3 rad/s that drifted the energy and the
+#: vertical momentum linearly (1.1e-12 of K over 4e5 steps); at this stop both wander at
+#: round-off (3e-14), for ~1 more iteration a step (the Jacobian refreshes unchanged).
+#: Hairer, McLachlan, Razakarivony, "Achieving Brouwer's law with implicit Runge-Kutta
+#: methods", BIT 48 (2008) 231-243: iterate to round-off, coefficients that keep the
+#: symplecticity condition exactly (gauss_kernels.gauss_scaled), no rounded b^T A^-1 on the
+#: step's increment (gauss_kernels.gauss_update).
+STRUCTURE_KAPPA = 1e-9
+
 
 class Gauss4S(FixedStepIntegrator):
     """gauss4 on the canonical equations (see the module docstring): order 4, fixed step,
-    implicit, symplectic. Same options as gauss4.
+    implicit, symplectic. Same options as gauss4; its dense path stops at STRUCTURE_KAPPA.
 
     Attributes: `canonical` (the Hamiltonian system), `inner` (the gauss4 stepping it; its
     `counts` are this method's); the base's counters mirror the inner ones. The system must be
@@ -46,7 +58,8 @@ class Gauss4S(FixedStepIntegrator):
     name = "gauss4s"
     order = 4
 
-    def __init__(self, system: OdeSystem, dense: bool | None = None, **options):
+    def __init__(self, system: OdeSystem, dense: bool | None = None, kappa: float | None = STRUCTURE_KAPPA,
+                 **options):
         if getattr(system, "model", None) is None:
             raise ValueError("gauss4s integrates a chain (a system with a `model`), not a general ODE")
         super().__init__(system, **options)
@@ -56,7 +69,7 @@ class Gauss4S(FixedStepIntegrator):
             self.canonical: CanonicalChain = FastCanonicalChain(system)
         else:
             self.canonical = CanonicalChain(system)
-        self.inner = Gauss4(self.canonical, dense=dense, **options)
+        self.inner = Gauss4(self.canonical, dense=dense, kappa=kappa, **options)
         self.counts = self.inner.counts
         self._end: tuple[float, np.ndarray, np.ndarray] | None = None
 
