@@ -60,6 +60,8 @@ from .gauss_kernels import (
     PAR_GMRES_ATOL,
     PAR_GMRES_RTOL,
     PAR_KAPPA,
+    PAR_LEVEL_MAX,
+    PAR_PATIENCE,
     PAR_NEWTON_CAP,
     PAR_REFRESH_CAP,
     PAR_REFRESH_KAPPA,
@@ -287,7 +289,8 @@ def gauss_march(t0, h, nsteps, y, A, C, D, params, dstate, ws, info, counts, i_q
     t0 + k h: Gauss4._step statement for statement. A (sub)step whose Newton iteration fails is
     taken again as two halves, down to h / 2^depth (depth = params[PAR_DEPTH]), and the pieces
     coarsen again after it (gauss_kernels.retake_next), at most params[PAR_BUDGET] (sub)step
-    attempts a step; the quaternions y[i_q0 + 4 j : +4], j < nq, are renormalised after each
+    attempts a step; a step starts in pieces of h / 2^level, the level kept across steps and
+    calls (gauss_kernels.level_start, level_next); the quaternions y[i_q0 + 4 j : +4], j < nq, are renormalised after each
     (sub)step and the state checked finite after each step.
 
     Returns (steps done, status): (nsteps, STEP_OK), or (k, status) when step k failed: y is
@@ -302,13 +305,16 @@ def gauss_march(t0, h, nsteps, y, A, C, D, params, dstate, ws, info, counts, i_q
     budget = int(params[PAR_BUDGET])
     end = 1 << max_depth
     unit = h / end
+    level_max, patience = int(params[PAR_LEVEL_MAX]), params[PAR_PATIENCE]
     for k in range(nsteps):
         t = t0 + k * h
         before = counts[COUNT_RHS]
         y0[:] = y
         pos = 0
-        depth = 0
+        level = gk.level_start(h, dstate, max_depth)
+        depth = level
         attempts = 0
+        retaken = False
         status = STEP_OK
         while pos < end:
             ys[:] = y
@@ -322,9 +328,10 @@ def gauss_march(t0, h, nsteps, y, A, C, D, params, dstate, ws, info, counts, i_q
                 Zp[:, :] = Zs
                 dstate[DST_HPRED] = hs
                 counts[COUNT_RETAKEN] += 1
-                if depth == 0:
+                if not retaken:
                     counts[COUNT_STEPS_RETAKEN] += 1
-            pos, depth = gk.retake_next(status == STEP_OK, pos, depth, max_depth)
+                retaken = True
+            pos, depth = gk.retake_next(status == STEP_OK, pos, depth, max_depth, level)
             if depth > max_depth:
                 break
             counts[COUNT_MAX_DEPTH] = max(counts[COUNT_MAX_DEPTH], depth)
@@ -338,6 +345,7 @@ def gauss_march(t0, h, nsteps, y, A, C, D, params, dstate, ws, info, counts, i_q
             dstate[DST_HPRED] = 0.0
             dstate[DST_H] = 0.0
             return k, status
+        gk.level_next(level, retaken, dstate, level_max, patience)
         if not _all_finite_1d(y):
             return k, STEP_NONFINITE
     return nsteps, STEP_OK

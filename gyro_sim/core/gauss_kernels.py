@@ -65,20 +65,29 @@ N_COUNTS = 12
 #: (Krylov path), NEWTON_STALL, NEWTON_STALL_RATE, DENSE_NEWTON_CAP, JACOBIAN_REFRESH_RATE,
 #: JACOBIAN_REFRESH_CAP, RETAKE_DEPTH, FLOOR_FACTOR, 1 for the dense path (0: Krylov),
 #: RETAKE_BUDGET, the dense path's stop (DENSE_KAPPA; gauss4s: STRUCTURE_KAPPA),
-#: DIVERGENCE_REFRESHES, the dense path's kappa in its Jacobian refresh test (DENSE_KAPPA)
+#: DIVERGENCE_REFRESHES, the dense path's kappa in its Jacobian refresh test (DENSE_KAPPA),
+#: the deepest level a step may start at (LEVEL_MAX), calm steps before a coarser one is tried
+#: (LEVEL_PATIENCE)
 (PAR_TOL, PAR_KAPPA, PAR_FIRST_TOL, PAR_DIVERGE, PAR_GMRES_RTOL, PAR_GMRES_ATOL, PAR_FD_EPS,
  PAR_NEWTON_CAP, PAR_STALL, PAR_STALL_RATE, PAR_DENSE_CAP, PAR_REFRESH_RATE, PAR_REFRESH_CAP,
  PAR_DEPTH, PAR_FLOOR_FACTOR, PAR_DENSE, PAR_BUDGET, PAR_DENSE_KAPPA, PAR_DIV_REFRESH,
- PAR_REFRESH_KAPPA) = range(20)
-N_PARAMS = 20
-#: the dense path's memory across steps (float64, 4): the step its matrix was factored for
-#: (0: none), the round-off floor measured with it (tolerance units), 1 when a new Jacobian is
-#: wanted before the next iteration, the step of the predictor's stage increments (0: none)
-DST_H, DST_FLOOR, DST_REFRESH, DST_HPRED = range(4)
-N_DSTATE = 4
+ PAR_REFRESH_KAPPA, PAR_LEVEL_MAX, PAR_PATIENCE) = range(22)
+N_PARAMS = 22
+#: the memory across steps (float64, 9): the step the dense matrix was factored for (0: none),
+#: the round-off floor measured with it (tolerance units), 1 when a new Jacobian is wanted
+#: before the next iteration, the step of the predictor's stage increments (0: none); the
+#: level the next step starts at (its pieces h / 2^level: `level_next`), the steps without a
+#: retake since, the step h it refers to (0: none), the running rate of retaken steps, 1 while
+#: the level is a probe (lowered, no step finished at it yet)
+DST_H, DST_FLOOR, DST_REFRESH, DST_HPRED, DST_LEVEL, DST_CALM, DST_LEVEL_H, DST_RATE, DST_PROBE = range(9)
+N_DSTATE = 9
 #: the matrix is reused for a step within this relative difference of its own (the substeps
 #: of successive calls differ in the last bits: t1 - t0 rounded)
 H_REUSE = 1e-9
+#: the running rate of retaken steps: r += (retaken - r) LEVEL_RATE_WEIGHT a step; above
+#: LEVEL_RAISE (about 6 retaken steps in a row) the steps start a level deeper
+LEVEL_RATE_WEIGHT = 0.125
+LEVEL_RAISE = 0.5
 #: forward-difference Jacobians: the step of component j is JAC_REL_STEP max(1, |y_j|)
 JAC_REL_STEP = 1.4901161193847656e-08  # sqrt(eps)
 #: the round-off probe: each component moved by NOISE_ULPS eps (1 + |y_i|), alternating signs
@@ -497,16 +506,62 @@ def noise_floor(noise, factor, stall):
 
 
 @_njit
-def retake_next(ok, pos, depth, max_depth):
+def retake_next(ok, pos, depth, max_depth, level):
     """The dyadic retake of a step: the step is cut into pieces of h / 2^depth on the grid of
-    h / 2^max_depth (positions counted in that unit). After a (sub)step of level `depth` at
-    `pos`: on success the position moves on by its size and the level coarsens by one when the
-    new position lies on the coarser grid (back to whole steps after a hard spot); on failure
-    the same piece is taken again as halves (depth + 1). Returns (pos, depth); depth >
-    max_depth: the step fails."""
+    h / 2^max_depth (positions counted in that unit), starting at depth `level`. After a
+    (sub)step of level `depth` at `pos`: on success the position moves on by its size and the
+    level coarsens by one, down to `level`, when the new position lies on the coarser grid
+    (back to the step's level after a hard spot); on failure the same piece is taken again as
+    halves (depth + 1). Returns (pos, depth); depth > max_depth: the step fails."""
     if not ok:
         return pos, depth + 1
     pos += 1 << (max_depth - depth)
-    if depth > 0 and pos % (1 << (max_depth - depth + 1)) == 0:
+    if depth > level and pos % (1 << (max_depth - depth + 1)) == 0:
         depth -= 1
     return pos, depth
+
+
+@_njit
+def level_start(h, dstate, max_depth):
+    """The level the step of size h starts at: dstate[DST_LEVEL] when it was set for this h,
+    else 0 (whole steps); at most max_depth."""
+    if abs(dstate[DST_LEVEL_H] - h) > H_REUSE * h:
+        for i in (DST_LEVEL, DST_CALM, DST_RATE, DST_PROBE):
+            dstate[i] = 0.0
+        dstate[DST_LEVEL_H] = h
+    return min(int(dstate[DST_LEVEL]), max_depth)
+
+
+@_njit
+def level_next(level, retaken, dstate, level_max, patience):
+    """After a step that started at `level` and succeeded: the level of the next one.
+
+    When most steps need a retake (the running rate above LEVEL_RAISE), the level goes one
+    deeper (at most level_max): a step that fails whole is not tried whole again and again (a
+    failed attempt costs Newton iterations to the cap and new Jacobians; and pieces of sizes
+    chosen by the state, step after step, cost a symplectic method its bounded energy error:
+    Hairer, Lubich, Wanner VIII.1). A retake now and then leaves the level alone: there whole
+    steps are cheaper. After `patience` steps without a retake the level is lowered by one, a
+    probe (the motion may have calmed); a retake of the probe's first step takes it back at
+    once. So a steady stiff motion is taken in equal pieces, with one failed attempt per
+    `patience` steps."""
+    if retaken and dstate[DST_PROBE] != 0.0:
+        dstate[DST_LEVEL] = float(min(level + 1, level_max))
+        dstate[DST_CALM] = 0.0
+        dstate[DST_RATE] = 0.0
+        dstate[DST_PROBE] = 0.0
+        return
+    dstate[DST_PROBE] = 0.0
+    rate = dstate[DST_RATE] + ((1.0 if retaken else 0.0) - dstate[DST_RATE]) * LEVEL_RATE_WEIGHT
+    if rate > LEVEL_RAISE:
+        dstate[DST_LEVEL] = float(min(level + 1, level_max))
+        dstate[DST_CALM] = 0.0
+        dstate[DST_RATE] = 0.0
+        return
+    dstate[DST_RATE] = rate
+    calm = 0.0 if retaken else dstate[DST_CALM] + 1.0
+    if level > 0 and calm >= patience:
+        dstate[DST_LEVEL] = float(level - 1)
+        dstate[DST_PROBE] = 1.0
+        calm = 0.0
+    dstate[DST_CALM] = calm

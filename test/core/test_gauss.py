@@ -373,6 +373,34 @@ def test_fast_heavy_top_converges(spin):
 
 
 @needs_numba
+def test_a_stiff_motion_is_stepped_in_equal_pieces_and_coarser_ones_are_probed():
+    """gauss4s on the heavy top at 1e4 rad/s (10 rad a 1 ms step): no whole step converges.
+    The steps' level is kept: once most steps need a retake, the next start a level deeper
+    (pieces that converge) instead of failing whole first (which retook every step, at 1.65x
+    the evaluations), and every LEVEL_PATIENCE calm steps a coarser level is tried once (and
+    fails here, taken back at once). With level_max = 0 (gauss4's default) every step is
+    retaken. The compiled and the Python driver agree bit for bit, counts included."""
+    from gyro_sim.bench.spin_sweep import heavy_top
+
+    scene = load_scene(heavy_top(1e4))
+    out = []
+    for compiled, level_max in ((True, gauss.LEVEL_MAX), (False, gauss.LEVEL_MAX), (True, 0)):
+        sim = Simulator(scene, integrator="gauss4s", step=1e-3)
+        g = sim.integrator.inner
+        g.use_compiled = compiled
+        g._params[gk.PAR_PATIENCE] = 40
+        g._params[gk.PAR_LEVEL_MAX] = level_max
+        sim.advance(0.15)  # 150 steps: the level found, then probes after 40 calm steps
+        out.append((sim.state.copy(), g.counts.copy()))
+    (y_c, counts), (y_p, counts_p), (_, every) = out
+    assert np.array_equal(y_c, y_p) and np.array_equal(counts, counts_p)
+    # the climb (~6 steps a level, two levels) and one probe per 40 steps, of 150
+    assert counts[gk.COUNT_STEPS_RETAKEN] <= 20, counts
+    assert every[gk.COUNT_STEPS_RETAKEN] == 150, every
+    assert counts[gk.COUNT_RHS] < 0.8 * every[gk.COUNT_RHS], (counts, every)
+
+
+@needs_numba
 def test_round_off_floor_is_accepted_counted_and_the_same_on_both_drivers(monkeypatch):
     """The top at 1e4 rad/s, Krylov path with GMRES at 1e-8: some steps' updates stop
     contracting at ~10 tolerance units (a world angular-velocity component near 0 carries the

@@ -187,6 +187,18 @@ DIVERGENCE_REFRESHES = 4
 RETAKE_DEPTH = 12
 #: ... with at most this many (sub)step attempts a step
 RETAKE_BUDGET = 64
+#: where most steps need a retake, the next ones start in halves, one level deeper, down to
+#: h / 2^LEVEL_MAX (16 pieces: the budget keeps 48 attempts for retakes) ...
+LEVEL_MAX = 4
+#: ... and after this many steps without a retake a level coarser is tried (gauss_kernels.level_next).
+#: gauss4s's choice (option level_max): on the heavy top at 1e4 rad/s (10 rad a step) no whole
+#: step converges; tried whole, then in halves, then quarters, step after step, 487 rhs
+#: evaluations a step and the energy off by 5.6e-10 after 1000 s (growing: the pieces' sizes
+#: follow the state); in quarters, 295 a step (the double gyroscope: 465 against 799). gauss4
+#: keeps 0: on the package's state most of its whole steps converge there, and on the double
+#: gyroscope at 1e4 rad/s its retakes come in bursts, where halves cost it 2x (224 evaluations
+#: a step against 113, measured)
+LEVEL_PATIENCE = 100
 #: dense path: the round-off floor is this many times the measured noise of the update
 FLOOR_FACTOR = 10.0
 #: scale of the Newton iteration: w_i = NEWTON_TOL (1 + |y_i|) is the unit of its stop test
@@ -228,6 +240,9 @@ class Gauss4(FixedStepIntegrator):
     dense : None (default: size <= DENSE_MAX_SIZE), True or False: the Newton path.
     kappa : the dense path's stop test (tolerance units, default DENSE_KAPPA); its Jacobian
         refresh test keeps DENSE_KAPPA. gauss4s asks for STRUCTURE_KAPPA.
+    level_max : the deepest level (pieces of h / 2^level) the steps may start at when most
+        need a retake (gauss_kernels.level_next), at most LEVEL_MAX; 0 (default): every step
+        is tried whole first. gauss4s asks for LEVEL_MAX.
 
     Attributes (besides the base's counters; njev counts stage Jacobians, nlu factorisations)
     -----------------------------------------------------------------------------------------
@@ -270,7 +285,8 @@ class Gauss4(FixedStepIntegrator):
     #: extrapolate the previous step's collocation polynomial for the starting guess
     predict = True
 
-    def __init__(self, system: OdeSystem, dense: bool | None = None, kappa: float | None = None, **options):
+    def __init__(self, system: OdeSystem, dense: bool | None = None, kappa: float | None = None,
+                 level_max: int = 0, **options):
         super().__init__(system, **options)
         n = self.n
         self.dense = bool(n <= DENSE_MAX_SIZE if dense is None else dense)
@@ -305,7 +321,8 @@ class Gauss4(FixedStepIntegrator):
                      (gk.PAR_FLOOR_FACTOR, FLOOR_FACTOR), (gk.PAR_DENSE, float(self.dense)),
                      (gk.PAR_BUDGET, RETAKE_BUDGET),
                      (gk.PAR_DENSE_KAPPA, DENSE_KAPPA if kappa is None else kappa),
-                     (gk.PAR_DIV_REFRESH, DIVERGENCE_REFRESHES), (gk.PAR_REFRESH_KAPPA, DENSE_KAPPA)):
+                     (gk.PAR_DIV_REFRESH, DIVERGENCE_REFRESHES), (gk.PAR_REFRESH_KAPPA, DENSE_KAPPA),
+                     (gk.PAR_LEVEL_MAX, min(int(level_max), LEVEL_MAX)), (gk.PAR_PATIENCE, LEVEL_PATIENCE)):
             self._params[k] = v
         self._A = np.array(self.A, dtype=np.float64)
         self._C = np.array(self.C, dtype=np.float64)
@@ -420,9 +437,14 @@ class Gauss4(FixedStepIntegrator):
         budget = int(self._params[gk.PAR_BUDGET])
         end = 1 << max_depth
         unit = h / end
+        level_max, patience = int(self._params[gk.PAR_LEVEL_MAX]), self._params[gk.PAR_PATIENCE]
         before = counts[COUNT_RHS]
         y0[:] = y
-        pos = depth = attempts = 0
+        pos = 0
+        level = gk.level_start(h, dst, max_depth)
+        depth = level
+        attempts = 0
+        retaken = False
         status = STEP_OK
         while pos < end:
             ys[:] = y
@@ -436,9 +458,10 @@ class Gauss4(FixedStepIntegrator):
                 Zp[:] = Zs
                 dst[DST_HPRED] = hs
                 counts[COUNT_RETAKEN] += 1
-                if depth == 0:
+                if not retaken:
                     counts[COUNT_STEPS_RETAKEN] += 1
-            pos, depth = gk.retake_next(status == STEP_OK, pos, depth, max_depth)
+                retaken = True
+            pos, depth = gk.retake_next(status == STEP_OK, pos, depth, max_depth, level)
             if depth > max_depth:
                 break
             counts[COUNT_MAX_DEPTH] = max(counts[COUNT_MAX_DEPTH], depth)
@@ -452,6 +475,7 @@ class Gauss4(FixedStepIntegrator):
             dst[DST_HPRED] = 0.0
             dst[DST_H] = 0.0
             raise self._failure(status, t, h)
+        gk.level_next(level, retaken, dst, level_max, patience)
 
     def _substep(self, t: float, y: np.ndarray, h: float, project: bool) -> int:
         """One (sub)step (fast_gauss.substep). The compiled march renormalises after every

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..canonical import CanonicalChain
 from .base import FixedStepIntegrator, IntegrationError, describe_nonfinite
-from .gauss import Gauss4
+from .gauss import LEVEL_MAX, Gauss4
 
 if TYPE_CHECKING:
     from ..system import OdeSystem
@@ -42,7 +42,8 @@ STRUCTURE_KAPPA = 1e-9
 
 class Gauss4S(FixedStepIntegrator):
     """gauss4 on the canonical equations (see the module docstring): order 4, fixed step,
-    implicit, symplectic. Same options as gauss4; its dense path stops at STRUCTURE_KAPPA.
+    implicit, symplectic. Same options as gauss4; its dense path stops at STRUCTURE_KAPPA, and
+    where most steps need a retake they start in equal pieces (level_max = LEVEL_MAX).
 
     Attributes: `canonical` (the Hamiltonian system), `inner` (the gauss4 stepping it; its
     `counts` are this method's); the base's counters mirror the inner ones. The system must be
@@ -59,7 +60,7 @@ class Gauss4S(FixedStepIntegrator):
     order = 4
 
     def __init__(self, system: OdeSystem, dense: bool | None = None, kappa: float | None = STRUCTURE_KAPPA,
-                 **options):
+                 level_max: int = LEVEL_MAX, **options):
         if getattr(system, "model", None) is None:
             raise ValueError("gauss4s integrates a chain (a system with a `model`), not a general ODE")
         super().__init__(system, **options)
@@ -69,7 +70,7 @@ class Gauss4S(FixedStepIntegrator):
             self.canonical: CanonicalChain = FastCanonicalChain(system)
         else:
             self.canonical = CanonicalChain(system)
-        self.inner = Gauss4(self.canonical, dense=dense, kappa=kappa, **options)
+        self.inner = Gauss4(self.canonical, dense=dense, kappa=kappa, level_max=level_max, **options)
         self.counts = self.inner.counts
         self._end: tuple[float, np.ndarray, np.ndarray] | None = None
 
