@@ -377,9 +377,10 @@ def test_a_stiff_motion_is_stepped_in_equal_pieces_and_coarser_ones_are_probed()
     """gauss4s on the heavy top at 1e4 rad/s (10 rad a 1 ms step): no whole step converges.
     The steps' level is kept: once most steps need a retake, the next start a level deeper
     (pieces that converge) instead of failing whole first (which retook every step, at 1.65x
-    the evaluations), and every LEVEL_PATIENCE calm steps a coarser level is tried once (and
-    fails here, taken back at once). With level_max = 0 (gauss4's default) every step is
-    retaken. The compiled and the Python driver agree bit for bit, counts included."""
+    the evaluations), and after LEVEL_PATIENCE calm steps a coarser level is tried once (and
+    fails here: taken back at once, the next probe waits twice as long). With level_max = 0
+    (gauss4's default) every step is retaken. The compiled and the Python driver agree bit
+    for bit, counts included."""
     from gyro_sim.bench.spin_sweep import heavy_top
 
     scene = load_scene(heavy_top(1e4))
@@ -390,7 +391,7 @@ def test_a_stiff_motion_is_stepped_in_equal_pieces_and_coarser_ones_are_probed()
         g.use_compiled = compiled
         g._params[gk.PAR_PATIENCE] = 40
         g._params[gk.PAR_LEVEL_MAX] = level_max
-        sim.advance(0.15)  # 150 steps: the level found, then probes after 40 calm steps
+        sim.advance(0.15)  # 150 steps: the level found, then probes after 40 and 80 calm steps
         out.append((sim.state.copy(), g.counts.copy()))
     (y_c, counts), (y_p, counts_p), (_, every) = out
     assert np.array_equal(y_c, y_p) and np.array_equal(counts, counts_p)

@@ -96,7 +96,9 @@ IMPLICIT_PLAIN = "gauss4"
 #: gauss4s's Newton-GMRES needs ~2.5x gauss4's Krylov vectors on a long swinging chain (n = 100:
 #: 81 against 37 rhs evaluations a step after 2 s; median step 1.1 ms against 0.41 ms, under
 #: load): the largest n holding 1 kHz measured ~77 against ~205 (`gyro-sim bench stability
-#: --parts cost`, session 7). Up to this many bodies gauss4s holds it with a margin.
+#: --parts cost`, session 7). Up to this many bodies gauss4s holds it with a margin. The
+#: preconditioner that would give it gauss4's conditioning costs more than it saves (each
+#: Krylov vector would take ~6 field evaluations instead of 2: docs/STRUCTURE_PRESERVING.md).
 IMPLICIT_MAX_BODIES = 50
 
 

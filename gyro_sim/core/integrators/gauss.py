@@ -190,7 +190,8 @@ RETAKE_BUDGET = 64
 #: where most steps need a retake, the next ones start in halves, one level deeper, down to
 #: h / 2^LEVEL_MAX (16 pieces: the budget keeps 48 attempts for retakes) ...
 LEVEL_MAX = 4
-#: ... and after this many steps without a retake a level coarser is tried (gauss_kernels.level_next).
+#: ... and after this many steps without a retake a level coarser is tried (gauss_kernels.level_next;
+#: a failed probe doubles the wait for the next, up to 128x).
 #: gauss4s's choice (option level_max): on the heavy top at 1e4 rad/s (10 rad a step) no whole
 #: step converges; tried whole, then in halves, then quarters, step after step, 487 rhs
 #: evaluations a step and the energy off by 5.6e-10 after 1000 s (growing: the pieces' sizes
@@ -443,6 +444,7 @@ class Gauss4(FixedStepIntegrator):
         pos = 0
         level = gk.level_start(h, dst, max_depth)
         depth = level
+        floor = level
         attempts = 0
         retaken = False
         status = STEP_OK
@@ -461,7 +463,9 @@ class Gauss4(FixedStepIntegrator):
                 if not retaken:
                     counts[COUNT_STEPS_RETAKEN] += 1
                 retaken = True
-            pos, depth = gk.retake_next(status == STEP_OK, pos, depth, max_depth, level)
+            pos, depth = gk.retake_next(status == STEP_OK, pos, depth, max_depth, floor)
+            if status != STEP_OK and level_max > 0:
+                floor = depth  # levels: the rest of the step in these pieces (no coarser retry)
             if depth > max_depth:
                 break
             counts[COUNT_MAX_DEPTH] = max(counts[COUNT_MAX_DEPTH], depth)
