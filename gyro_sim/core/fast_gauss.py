@@ -313,7 +313,6 @@ def gauss_march(t0, h, nsteps, y, A, C, D, params, dstate, ws, info, counts, i_q
         pos = 0
         level = gk.level_start(h, dstate, max_depth)
         depth = level
-        floor = level
         attempts = 0
         retaken = False
         status = STEP_OK
@@ -332,9 +331,7 @@ def gauss_march(t0, h, nsteps, y, A, C, D, params, dstate, ws, info, counts, i_q
                 if not retaken:
                     counts[COUNT_STEPS_RETAKEN] += 1
                 retaken = True
-            pos, depth = gk.retake_next(status == STEP_OK, pos, depth, max_depth, floor)
-            if status != STEP_OK and level_max > 0:
-                floor = depth  # levels: the rest of the step in these pieces (no coarser retry)
+            pos, depth = gk.retake_next(status == STEP_OK, pos, depth, max_depth, level)
             if depth > max_depth:
                 break
             counts[COUNT_MAX_DEPTH] = max(counts[COUNT_MAX_DEPTH], depth)
