@@ -197,8 +197,12 @@ def _tilt(sim: Simulator) -> float:
     return float(np.arccos(np.clip(axis @ up, -1.0, 1.0)))
 
 
-class _OverBudget(Exception):
-    """The CPU budget of a run is spent (raised from a SIGPROF handler, inside `advance`)."""
+class _OverBudget(BaseException):
+    """The CPU budget of a run is spent (raised from a SIGPROF handler, inside `advance`).
+
+    A BaseException, as KeyboardInterrupt: raised asynchronously, it can land inside library
+    code whose `except Exception` would turn it into something else (numpy's `norm` made it
+    a TypeError that ended the report, session 8)."""
 
 
 @contextlib.contextmanager
