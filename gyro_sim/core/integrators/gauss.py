@@ -111,7 +111,10 @@ down to h / 2^k, ...)"), y at the step's start; never silent. Uniform halving (2
 substeps) was not enough: the heavy tip (mass ratio 1e6) whips at t = 0.0874 s, its two
 light links passing through alignment with accelerations of 4e9 rad/s^2 for microseconds
 (dop853 takes 207 steps in that millisecond), and its Newton iteration failed at 1/128 ms;
-the dyadic retake passes it at ~1 us pieces (h / 2^10) in 11 attempts.
+the dyadic retake passes it at ~1 us pieces (h / 2^10) in 11 attempts. With `level_max` > 0
+(gauss4s) the steps start at a level kept across steps (gauss_kernels.level_next): where most
+steps need a retake, the next ones start a level deeper (equal pieces), and a coarser level is
+probed after LEVEL_PATIENCE calm steps; the coarsening after a hard spot stops at that level.
 
 Cost per step, worst case (known, `worst_step_rhs`): dense, a (sub)step is at most
 DENSE_NEWTON_CAP iterations of 2 rhs evaluations and JACOBIAN_REFRESH_CAP matrices of
