@@ -124,9 +124,10 @@ def _rhs(t, y, out, counts, kargs):
 
 
 @_njit
-def newton_dense(t, y, h, A, C, params, dstate, ws, info, counts, kargs):
+def newton_dense(t, y, h, C, params, dstate, ws, info, counts, kargs):
     """The dense Newton iteration of one (sub)step from the start guess in Z, with the step's
-    coefficients in ws's hA (`substep` sets them): Gauss4._newton_dense statement for statement. Returns a STEP_ status; Z (2, size) the solution on STEP_OK."""
+    coefficients in ws's hA (`substep` sets them): Gauss4._newton_dense statement for
+    statement. Returns a STEP_ status; Z (2, size) the solution on STEP_OK."""
     Z, Zp, Zs, Zb, ys, y0, Ys, F, Fp, Yp, w, V, H, cs, sn, coef, g, J, M, piv, r, P, hA = ws
     n = y.shape[0]
     tol, kappa, first_tol, diverge = params[PAR_TOL], params[PAR_DENSE_KAPPA], params[PAR_FIRST_TOL], \
@@ -200,7 +201,7 @@ def newton_dense(t, y, h, A, C, params, dstate, ws, info, counts, kargs):
 
 
 @_njit
-def newton_krylov(t, y, h, A, C, params, ws, info, counts, kargs):
+def newton_krylov(t, y, h, C, params, ws, info, counts, kargs):
     """The Newton-Krylov iteration of one (sub)step from the start guess in Z, with ws's hA:
     Gauss4._newton_krylov statement for statement. Returns a STEP_ status."""
     Z, Zp, Zs, Zb, ys, y0, Ys, F, Fp, Yp, w, V, H, cs, sn, coef, g, J, M, piv, r, P, hA = ws
@@ -271,9 +272,9 @@ def substep(t, y, h, A, C, D, params, dstate, ws, info, counts, i_q0, nq, kargs)
         Z[:, :] = 0.0
     gk.gauss_scaled(A, h, hA)
     if params[PAR_DENSE] != 0.0:
-        status = newton_dense(t, y, h, A, C, params, dstate, ws, info, counts, kargs)
+        status = newton_dense(t, y, h, C, params, dstate, ws, info, counts, kargs)
     else:
-        status = newton_krylov(t, y, h, A, C, params, ws, info, counts, kargs)
+        status = newton_krylov(t, y, h, C, params, ws, info, counts, kargs)
     if status != STEP_OK:
         return status
     gk.gauss_update(y, Z, F, hA, h, D)
@@ -290,8 +291,8 @@ def gauss_march(t0, h, nsteps, y, A, C, D, params, dstate, ws, info, counts, i_q
     taken again as two halves, down to h / 2^depth (depth = params[PAR_DEPTH]), and the pieces
     coarsen again after it (gauss_kernels.retake_next), at most params[PAR_BUDGET] (sub)step
     attempts a step; a step starts in pieces of h / 2^level, the level kept across steps and
-    calls (gauss_kernels.level_start, level_next); the quaternions y[i_q0 + 4 j : +4], j < nq, are renormalised after each
-    (sub)step and the state checked finite after each step.
+    calls (gauss_kernels.level_start, level_next); the quaternions y[i_q0 + 4 j : +4], j < nq,
+    are renormalised after each (sub)step and the state checked finite after each step.
 
     Returns (steps done, status): (nsteps, STEP_OK), or (k, status) when step k failed: y is
     then its start (Newton failure) or its non-finite result (STEP_NONFINITE). info (3,) holds

@@ -60,7 +60,7 @@ NEWTON_CONTINUE, NEWTON_CONVERGED, NEWTON_DIVERGING, NEWTON_NOT_FINITE, NEWTON_S
  COUNT_JACOBIAN, COUNT_LU, COUNT_RETAKEN, COUNT_MAX_STEP_RHS, COUNT_MAX_DEPTH,
  COUNT_STEPS_RETAKEN) = range(12)
 N_COUNTS = 12
-#: the parameters array (float64, 20): NEWTON_TOL, NEWTON_KAPPA, NEWTON_FIRST_TOL,
+#: the parameters array (float64, 22): NEWTON_TOL, NEWTON_KAPPA, NEWTON_FIRST_TOL,
 #: NEWTON_SLOW_RATE, GMRES_RTOL, GMRES_ATOL, the finite-difference eps of J v, NEWTON_CAP
 #: (Krylov path), NEWTON_STALL, NEWTON_STALL_RATE, DENSE_NEWTON_CAP, JACOBIAN_REFRESH_RATE,
 #: JACOBIAN_REFRESH_CAP, RETAKE_DEPTH, FLOOR_FACTOR, 1 for the dense path (0: Krylov),
@@ -555,19 +555,13 @@ def level_next(level, retaken, dstate, level_max, patience):
     its round-off floor (measured on the heavy top at 1e4 rad/s: a probe every 100 steps kept
     the energy's error at ~3e-10, none at 5e-13, both bounded)."""
     wait = dstate[DST_WAIT] if dstate[DST_WAIT] > 0.0 else patience
-    if retaken and dstate[DST_PROBE] != 0.0:
-        dstate[DST_LEVEL] = float(min(level + 1, level_max))
-        dstate[DST_CALM] = 0.0
-        dstate[DST_RATE] = 0.0
-        dstate[DST_PROBE] = 0.0
-        dstate[DST_WAIT] = min(2.0 * wait, LEVEL_WAIT_CAP * patience)
-        return
-    if dstate[DST_PROBE] != 0.0:
-        wait = patience
+    probe = dstate[DST_PROBE] != 0.0
+    if probe:  # the probe failed (doubled wait) or held (the patience again)
+        wait = min(2.0 * wait, LEVEL_WAIT_CAP * patience) if retaken else patience
     dstate[DST_PROBE] = 0.0
     dstate[DST_WAIT] = wait
     rate = dstate[DST_RATE] + ((1.0 if retaken else 0.0) - dstate[DST_RATE]) * LEVEL_RATE_WEIGHT
-    if rate > LEVEL_RAISE:
+    if (retaken and probe) or rate > LEVEL_RAISE:
         dstate[DST_LEVEL] = float(min(level + 1, level_max))
         dstate[DST_CALM] = 0.0
         dstate[DST_RATE] = 0.0
