@@ -13,25 +13,25 @@ import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 
-from .io.mcap_log import DEFAULT_FLUSH_PERIOD  # noqa: E402
-from .progress import Progress  # noqa: E402  (cmd_run, cmd_bench_scaling)
+from gyro_sim.log.mcap_log import DEFAULT_FLUSH_PERIOD  # noqa: E402
+from gyro_sim.progress import Progress  # noqa: E402  (cmd_run, cmd_bench_scaling)
 
 
 def cmd_run(args) -> int:
-    from .core.invariants import conserved
-    from .core.scene_load import SceneError, load_scene
-    from .core.simulator import SimulationError, Simulator
-    from .io.mcap_log import LogError
-    from .io.messages import NonFiniteError
-    from .paths import find_scene
+    from gyro_sim.dynamics.invariants import conserved
+    from gyro_sim.scene.load import SceneError, load_scene
+    from gyro_sim.simulator import SimulationError, Simulator
+    from gyro_sim.log.mcap_log import LogError
+    from gyro_sim.msgs.messages import NonFiniteError
+    from gyro_sim.paths import find_scene
 
     try:
         scene = load_scene(find_scene(args.scene))
     except (SceneError, FileNotFoundError) as exc:
         print(f"gyro-sim run: {exc}", file=sys.stderr)
         return 2
-    if args.record:  # no silent overwrite, never the scene file itself (io/safe_paths.py)
-        from .io.safe_paths import OutputError, check_output
+    if args.record:  # no silent overwrite, never the scene file itself (gyro_sim/safe_paths.py)
+        from gyro_sim.safe_paths import OutputError, check_output
 
         try:
             check_output(args.record, inputs=[scene.path], force=args.force, what="--record")
@@ -42,7 +42,7 @@ def cmd_run(args) -> int:
     inv0 = sim.reference_invariants()
     schedule = []
     if args.commands:
-        from .io.record import read_schedule
+        from gyro_sim.log.record import read_schedule
 
         try:
             schedule = read_schedule(args.commands, sim.axis_names)
@@ -58,7 +58,7 @@ def cmd_run(args) -> int:
         if args.record:
             import signal
 
-            from .io.record import record_run
+            from gyro_sim.log.record import record_run
 
             # SIGINT / SIGTERM end the run at the next step and the log is closed cleanly
             stop = []
@@ -110,7 +110,7 @@ def cmd_run(args) -> int:
         if name not in conserved(sim.model):
             print(f"{name + ':':<26}{inv0[name]:.6g} -> {inv1[name]:.6g} (not conserved in this scene)")
     if record is not None:
-        from .io.record import print_record
+        from gyro_sim.log.record import print_record
 
         print_record(record)
     return 0
@@ -119,8 +119,8 @@ def cmd_run(args) -> int:
 def cmd_bench_scaling(args) -> int:
     import dataclasses
 
-    from .bench import scaling
-    from .bench.report import refused, write_report
+    from gyro_sim.bench import scaling
+    from gyro_sim.bench.report import refused, write_report
 
     if refused(args, "scaling"):
         return 2
@@ -174,7 +174,7 @@ Each writes <report>.md and <report>.png to --out (default out/bench)."""
 # Modules that add their own subcommands: each has `register(sub, bench)` (sub: the top-level
 # subparsers, bench: the `gyro-sim bench` subparsers) and imports heavy dependencies lazily.
 PLUGINS = (
-    "gyro_sim.io.commands",  # run --record, view, replay, recover
+    "gyro_sim.log.commands",  # run --record, view, replay, recover
     "gyro_sim.ros.commands",  # cmd (publish axis moments)
     "gyro_sim.bench.accuracy",
     "gyro_sim.bench.stability",
@@ -249,8 +249,8 @@ def _compile_first(args) -> None:
     """`run` and `replay --resimulate` build a Simulator: on a cold numba cache, say that the
     first one compiles (gyro_sim.warmup) instead of staying silent for seconds."""
     if args.cmd == "run":
-        from .core.scene_load import SceneError, load_scene
-        from .paths import find_scene
+        from gyro_sim.scene.load import SceneError, load_scene
+        from gyro_sim.paths import find_scene
 
         try:
             load_scene(find_scene(args.scene))
@@ -258,7 +258,7 @@ def _compile_first(args) -> None:
             return  # cmd_run reports it, with nothing compiled
     elif not (args.cmd == "replay" and getattr(args, "resimulate", False) and Path(args.log).is_file()):
         return
-    from .warmup import precompile
+    from gyro_sim.warmup import precompile
 
     precompile(sys.stderr, prog=f"gyro-sim {args.cmd}", integrator=getattr(args, "integrator", None) or "auto")
 

@@ -1,4 +1,4 @@
-"""The first start: compiling the numba kernels of :mod:`gyro_sim.core`, said out loud.
+"""The first start: compiling the numba kernels of :mod:`gyro_sim.dynamics`, said out loud.
 
 The kernels (the dynamics of fast.py, the outputs, and each integrator's compiled loop) are
 compiled once per installation (and after any edit of their files) and then loaded from
@@ -20,30 +20,30 @@ WARM_UP_SCENE = "hinge_chain"
 
 
 #: the modules holding numba kernels (dispatchers)
-KERNEL_MODULES = ("fast", "fast_entry", "rk_kernels", "fast_loop", "fast_outputs", "lagrange", "gauss_kernels", "fast_gauss",
-                  "fast_canonical", "dop853_kernels", "fast_dop853", "lie_kernels", "fast_lie", "radau_kernels", "fast_radau")
+KERNEL_MODULES = ("gyro_sim.dynamics.kernel", "gyro_sim.dynamics.entry", "gyro_sim.integrators.rk4.kernels", "gyro_sim.integrators.rk4.loop", "gyro_sim.dynamics.outputs", "gyro_sim.analytic.lagrange", "gyro_sim.integrators.gauss4.kernels", "gyro_sim.integrators.gauss4.loop",
+                  "gyro_sim.dynamics.canonical_kernel", "gyro_sim.integrators.dop853.kernels", "gyro_sim.integrators.dop853.loop", "gyro_sim.integrators.lie4.kernels", "gyro_sim.integrators.lie4.loop", "gyro_sim.integrators.radau.kernels", "gyro_sim.integrators.radau.loop")
 #: the compiled loops each integrator runs on the numba backend, (module, name), besides the
 #: kernels every run needs (fast.py's, the entry of one evaluation from Python, the outputs, a
 #: Lagrange chain's integrals); the cache counts as cold for an integrator when any of its
 #: kernels has no entry
-COMMON_KERNELS = (("fast_entry", "rhs_entry"), ("fast_outputs", "outputs_kernel"), ("fast_outputs", "publication_kernel"), ("lagrange", "_sums_82"),
-                  ("lagrange", "_sums_85"))
+COMMON_KERNELS = (("gyro_sim.dynamics.entry", "rhs_entry"), ("gyro_sim.dynamics.outputs", "outputs_kernel"), ("gyro_sim.dynamics.outputs", "publication_kernel"), ("gyro_sim.analytic.lagrange", "_sums_82"),
+                  ("gyro_sim.analytic.lagrange", "_sums_85"))
 LOOPS = {
-    "rk4": (("fast_loop", "erk_march"),),
-    "lie4": (("fast_lie", "lie_march"),),
-    "gauss4": (("fast_gauss", "gauss_march"),),
+    "rk4": (("gyro_sim.integrators.rk4.loop", "erk_march"),),
+    "lie4": (("gyro_sim.integrators.lie4.loop", "lie_march"),),
+    "gauss4": (("gyro_sim.integrators.gauss4.loop", "gauss_march"),),
     # gauss4s: gauss4's march over the canonical field (a second specialization of the march)
-    "gauss4s": (("fast_gauss", "gauss_march"), ("fast_canonical", "canonical_kernel"),
-                ("fast_canonical", "state_kernel")),
+    "gauss4s": (("gyro_sim.integrators.gauss4.loop", "gauss_march"), ("gyro_sim.dynamics.canonical_kernel", "canonical_kernel"),
+                ("gyro_sim.dynamics.canonical_kernel", "state_kernel")),
     # fixed: rk4, gauss4s on a stiff scene, and its rescue (dop853) through the Python driver on
     # the kernels
-    "fixed": (("fast_loop", "erk_march"), ("fast_gauss", "gauss_march"), ("fast_canonical", "canonical_kernel"),
-              ("fast_canonical", "state_kernel"), ("dop853_kernels", "dop_update")),
-    "dop853": (("fast_dop853", "dop853_advance"),),
+    "fixed": (("gyro_sim.integrators.rk4.loop", "erk_march"), ("gyro_sim.integrators.gauss4.loop", "gauss_march"), ("gyro_sim.dynamics.canonical_kernel", "canonical_kernel"),
+              ("gyro_sim.dynamics.canonical_kernel", "state_kernel"), ("gyro_sim.integrators.dop853.kernels", "dop_update")),
+    "dop853": (("gyro_sim.integrators.dop853.loop", "dop853_advance"),),
     # auto: dop853's and radau's compiled loops in their detection modes (both built with the
     # integrator: radau's is loaded, or compiled, before the first switch to it)
-    "auto": (("fast_dop853", "dop853_advance"), ("fast_radau", "radau_advance")),
-    "radau": (("fast_radau", "radau_advance"),),
+    "auto": (("gyro_sim.integrators.dop853.loop", "dop853_advance"), ("gyro_sim.integrators.radau.loop", "radau_advance")),
+    "radau": (("gyro_sim.integrators.radau.loop", "radau_advance"),),
 }
 #: the node's default
 DEFAULT_INTEGRATOR = "fixed"
@@ -59,7 +59,7 @@ def _dispatchers(module_names) -> dict:
     out = {}
     for mod in module_names:
         try:
-            m = importlib.import_module(f"gyro_sim.core.{mod}")
+            m = importlib.import_module(mod)
         except ImportError:
             continue
         out.update({f"{mod}.{name}": d for name, d in vars(m).items() if isinstance(d, Dispatcher)})
@@ -67,13 +67,13 @@ def _dispatchers(module_names) -> dict:
 
 
 def kernels() -> dict:
-    """The numba dispatchers of gyro_sim.core's compiled modules by "module.name" ({} without numba)."""
+    """The numba dispatchers of gyro_sim.dynamics's compiled modules by "module.name" ({} without numba)."""
     return _dispatchers(KERNEL_MODULES)
 
 
 def _needed(integrator: str) -> list:
     ks = kernels()
-    names = [name for name in ks if name.startswith("fast.")]
+    names = [name for name in ks if name.startswith("gyro_sim.dynamics.kernel.")]
     names += [f"{m}.{n}" for m, n in COMMON_KERNELS + LOOPS.get(integrator, ())]
     return [ks[n] for n in names if n in ks]
 
@@ -96,7 +96,7 @@ def warm_everything(integrator: str = DEFAULT_INTEGRATOR) -> None:
     """Compile (or load) every kernel a run with `integrator` may call on the numba backend:
     the dynamics, the outputs, a Lagrange chain's integrals, and the integrator's loop ("fixed":
     both of its methods)."""
-    from .core.simulator import Simulator
+    from gyro_sim.simulator import Simulator
 
     for scene in (WARM_UP_SCENE, "heavy_top"):  # heavy_top: a Lagrange chain (eqs 82, 85)
         sim = Simulator(scene, integrator=integrator if integrator in LOOPS else "rk4", backend="numba")
@@ -130,7 +130,7 @@ def precompile(stream=sys.stderr, prog: str = "gyro_sim", integrator: str = DEFA
 
         def on_end(self, ev):
             d = ev.data["dispatcher"]
-            name = f"{d.py_func.__module__.rsplit('.', 1)[-1]}.{d.py_func.__name__}"
+            name = f"{d.py_func.__module__}.{d.py_func.__name__}"
             if name in ks and name not in done:
                 done.add(name)
                 stream.write(f"  compiled {name} ({len(done)} kernels, {time.perf_counter() - t0:.1f} s)\n")

@@ -7,7 +7,7 @@ def test_core_does_not_import_rclpy():
     code = (
         "import sys, gyro_sim\n"
         "from gyro_sim import Simulator, load_scene\n"
-        "import gyro_sim.core.dynamics, gyro_sim.core.simulator, gyro_sim.core.integrators, gyro_sim.cli\n"
+        "import gyro_sim.dynamics.reference, gyro_sim.simulator, gyro_sim.integrators, gyro_sim.cli\n"
         "sim = Simulator(load_scene('config/chain_4.yaml'))\n"
         "sim.advance(0.01)\n"
         "bad = [m for m in sys.modules if m.split('.')[0] in ('rclpy', 'rosidl_runtime_py', 'std_msgs')]\n"

@@ -250,7 +250,7 @@ def test_load_scene_takes_shipped_names_from_elsewhere(tmp_path):
 
 
 def test_find_scene_refuses_missing_paths_and_takes_bare_names(tmp_path, monkeypatch):
-    from gyro_sim.core.scene_load import SceneError, load_scene
+    from gyro_sim.scene.load import SceneError, load_scene
     from gyro_sim.paths import find_scene
 
     monkeypatch.chdir(tmp_path)
@@ -306,7 +306,7 @@ def test_docs_are_not_ignored():
 
 # --- 9. small things -------------------------------------------------------------------------------
 def test_counts_are_singular_for_one():
-    from gyro_sim.io.resim import Resimulation
+    from gyro_sim.log.resim import Resimulation
     from gyro_sim.progress import plural
 
     assert plural(1, "command") == "1 command" and plural(0, "command") == "0 commands"

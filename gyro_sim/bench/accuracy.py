@@ -16,7 +16,7 @@ attitude error of any carrier (rad, the angle of R_ref^T R), the angular-velocit
 of any carrier relative to the largest reference angular velocity, and for a free base the
 position and velocity of O^1 relative to the chain's length and speed. The error of the
 invariants is the largest relative drift of those the exact motion conserves
-(`gyro_sim.core.invariants.conserved`; not the energy when moments are commanded).
+(`gyro_sim.dynamics.invariants.conserved`; not the energy when moments are commanded).
 
 Peers in the same run: scipy's solve_ivp (DOP853, Radau, LSODA) on gyro_sim's right-hand
 side, and MuJoCo (RK4, implicitfast) on the same scene built as MJCF
@@ -36,18 +36,18 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..core.integrators import make_integrator
-from ..core.invariants import conserved
-from ..core.model import Model, compile_model
-from ..core.rotations import euler_rates_to_omega, euler_to_matrix, matrix_to_quat
-from ..core.scene import Scene
-from ..core.scene_load import load_scene
-from ..core.system import make_system
-from ..core.simulator import SimulationError, Simulator
-from . import peers
-from .extreme import load_dict
-from .peers import Frames, frames_of_state
-from .report import add_force_option, refused, write_report
+from gyro_sim.integrators import make_integrator
+from gyro_sim.dynamics.invariants import conserved
+from gyro_sim.dynamics.model import Model, compile_model
+from gyro_sim.dynamics.rotations import euler_rates_to_omega, euler_to_matrix, matrix_to_quat
+from gyro_sim.scene.records import Scene
+from gyro_sim.scene.load import load_scene
+from gyro_sim.dynamics.system import make_system
+from gyro_sim.simulator import SimulationError, Simulator
+from gyro_sim.bench import peers
+from gyro_sim.bench.extreme import load_dict
+from gyro_sim.bench.peers import Frames, frames_of_state
+from gyro_sim.bench.report import add_force_option, refused, write_report
 
 #: atol = rtol * ATOL_FACTOR for every adaptive run (states are O(1) to O(100))
 ATOL_FACTOR = 1e-2
@@ -732,7 +732,7 @@ def build(quick: bool = False, keys=None, methods=METHODS, estimate: bool = True
                     estimates.append(estimate_row(s, method, rtol, samples))
     resolved = backend
     if backend == "auto":
-        from ..core.fast import available
+        from gyro_sim.dynamics.kernel import available
 
         resolved = "numba" if available() else "numpy"
     return Report(scenarios, points, summary, estimates, time.process_time() - cpu0, quick, resolved)
@@ -754,7 +754,7 @@ def to_json(report: Report) -> dict[str, Any]:
 
 # --------------------------------------------------------------------------------- CLI
 def main(args) -> int:
-    from ..progress import Progress
+    from gyro_sim.progress import Progress
 
     if refused(args, "accuracy"):
         return 2

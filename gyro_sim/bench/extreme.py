@@ -27,7 +27,7 @@ from typing import Any
 
 import yaml
 
-from ..paths import find_scene
+from gyro_sim.paths import find_scene
 
 G = 9.81  # m/s^2, the shipped scenes' gravity
 
@@ -90,8 +90,8 @@ def fast_rotor_precession(ratio: float = 1e4) -> dict[str, Any]:
     motion is exact and known (theta, psi' constant), the fast nutation is not excited: a
     stiff problem in the textbook sense, whose fast mode has zero amplitude.
     """
-    from ..core import lagrange as lg
-    from ..core.scene_load import load_scene
+    from gyro_sim.analytic import lagrange as lg
+    from gyro_sim.scene.load import load_scene
 
     sd = fast_rotor(ratio)
     chain = lg.LagrangeChain.from_scene(load_scene(sd))

@@ -141,7 +141,7 @@ class _MathShim(types.ModuleType):
 def accelerations_80(model, y: np.ndarray, t: float = 0.0) -> np.ndarray:
     """u' (N,) of `model` at (t, y) in 80 digits (inputs held at zero); needs NUMBA_DISABLE_JIT
     (spherical chains on a fixed base: hinges' sin/cos stay float64)."""
-    from ..core import fast
+    from gyro_sim.dynamics import kernel as fast
 
     if fast.numba is not None and not getattr(fast.numba.config, "DISABLE_JIT", False):
         raise RuntimeError("set NUMBA_DISABLE_JIT=1 before importing numba")
@@ -178,11 +178,11 @@ class TipRow:
 
 
 def rows(ratios=RATIOS) -> list[TipRow]:
-    from ..bench.extreme import mass_ratio_chain
-    from ..core import fast
-    from ..core.model import compile_model, initial_state
-    from ..core.scene_load import load_scene
-    from ..core.system import ChainODE, FastChainODE
+    from gyro_sim.bench.extreme import mass_ratio_chain
+    from gyro_sim.dynamics import kernel as fast
+    from gyro_sim.dynamics.model import compile_model, initial_state
+    from gyro_sim.scene.load import load_scene
+    from gyro_sim.dynamics.system import ChainODE, FastChainODE
 
     all_ratios = [*ratios, *(1.0 / r for r in ratios)]
     exact = oracle(all_ratios)
@@ -219,9 +219,9 @@ def to_json(tip_rows: list[TipRow]) -> list[dict]:
 
 
 def main(argv: list[str]) -> None:
-    from ..bench.extreme import mass_ratio_chain
-    from ..core.model import compile_model, initial_state
-    from ..core.scene_load import load_scene
+    from gyro_sim.bench.extreme import mass_ratio_chain
+    from gyro_sim.dynamics.model import compile_model, initial_state
+    from gyro_sim.scene.load import load_scene
 
     for r in map(float, argv):
         model = compile_model(load_scene(mass_ratio_chain(r)))

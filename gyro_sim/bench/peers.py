@@ -27,12 +27,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core import dynamics as dyn
-from ..core import invariants as inv
-from ..core.model import Model, compile_model, initial_state
-from ..core.rotations import matrix_to_quat
-from ..core.scene import Scene
-from ..core.system import make_system
+from gyro_sim.dynamics import reference as dyn
+from gyro_sim.dynamics import invariants as inv
+from gyro_sim.dynamics.model import Model, compile_model, initial_state
+from gyro_sim.dynamics.rotations import matrix_to_quat
+from gyro_sim.scene.records import Scene
+from gyro_sim.dynamics.system import make_system
 
 
 @dataclass(frozen=True)

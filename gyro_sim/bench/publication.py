@@ -118,8 +118,8 @@ def _env(workdir: Path) -> dict:
 
 
 def _simulator(n: int):
-    from ..core.simulator import Simulator
-    from .scenes import spherical_chain
+    from gyro_sim.simulator import Simulator
+    from gyro_sim.bench.scenes import spherical_chain
 
     sim = Simulator(spherical_chain(n, gravity=False, rotors=True), integrator="rk4", step=PHYSICS_STEP, backend="numba")
     sim.advance(PUBLISH_PERIOD)  # compiles, and leaves the reset state
@@ -127,14 +127,14 @@ def _simulator(n: int):
 
 
 def _frame(out):
-    """The node's publication buffer (gyro_sim.io.messages.Frame) once prepare_state made it."""
+    """The node's publication buffer (gyro_sim.msgs.messages.Frame) once prepare_state made it."""
     frames = getattr(out, "_frames", None)
     return next(iter(frames.values()), None) if frames else None
 
 
 def _kernel(sim, out, diag: bool) -> None:
     """The compiled outputs call of a publication alone, as prepare_state asks for it."""
-    from ..core import fast_outputs as fo
+    from gyro_sim.dynamics import outputs as fo
 
     want = getattr(fo, "WANT_BODIES", 0) | getattr(fo, "WANT_WRENCHES", 0) | (getattr(fo, "WANT_INVARIANTS", 0) if diag else 0)
     frame = _frame(out)
@@ -146,7 +146,7 @@ def _kernel(sim, out, diag: bool) -> None:
 
 def _bytes(sim, out, snap, t_ns: int, run) -> None:
     """The messages' bytes of a snapshot, as prepare_state makes them."""
-    from ..io import messages as M
+    from gyro_sim.msgs import messages as M
 
     frame = _frame(out)
     if frame is None:
@@ -160,8 +160,8 @@ def _bytes(sim, out, snap, t_ns: int, run) -> None:
 def measure_size(n: int, publications: int, node, workdir: Path, *, subscriber_env: dict | None,
                  progress=None) -> list[Row]:
     """Rows without and (subscriber_env given) with a subscriber process for chain length n."""
-    from ..ros.outputs import Outputs
-    from ..ros.recorder import LiveRecorder
+    from gyro_sim.ros.outputs import Outputs
+    from gyro_sim.ros.recorder import LiveRecorder
 
     sim = _simulator(n)
     log = workdir / f"pub_{n}.mcap"
@@ -195,7 +195,7 @@ def measure_size(n: int, publications: int, node, workdir: Path, *, subscriber_e
 
 
 def _start_subscriber(out, env: dict, workdir: Path, timeout: float = 20.0):
-    from ..io import messages as M
+    from gyro_sim.msgs import messages as M
 
     proc = subprocess.Popen([sys.executable, "-c", _SUBSCRIBER], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                             stderr=open(workdir / "subscriber.err", "w"), env=env, text=True)
@@ -216,7 +216,7 @@ def _start_subscriber(out, env: dict, workdir: Path, timeout: float = 20.0):
 
 
 def _run(sim, out, recorder, n: int, publications: int, with_sub: bool, progress) -> Row:
-    from ..io import messages as M
+    from gyro_sim.msgs import messages as M
 
     row = Row(n, with_sub, {p: [] for p in PARTS})
     clock = time.perf_counter
@@ -289,9 +289,9 @@ def isolated(n: int, repeats: int = 300) -> dict[str, float]:
     no other thread): the kernel (joint states only, and with wrenches and poses), a snapshot
     as the recording node asks for it, the bytes, and prepare_state with and without the
     diagnostics, through Outputs with stand-in publishers."""
-    from ..core import fast_outputs as fo
-    from ..io import messages as M
-    from ..ros.outputs import Outputs
+    from gyro_sim.dynamics import outputs as fo
+    from gyro_sim.msgs import messages as M
+    from gyro_sim.ros.outputs import Outputs
 
     class _Node:
         def get_fully_qualified_name(self):
@@ -362,9 +362,9 @@ def recorder_costs(n: int, publications: int = 300, workdir: str | None = None) 
     `advance` (median wall time of the 10 physics
     steps between two publications, the physics thread's own work with the recorder beside it),
     and `records`, `written` (records handed over and written)."""
-    from ..io import messages as M
-    from ..ros.outputs import Outputs
-    from ..ros.recorder import LiveRecorder
+    from gyro_sim.msgs import messages as M
+    from gyro_sim.ros.outputs import Outputs
+    from gyro_sim.ros.recorder import LiveRecorder
 
     class _Node:
         def get_fully_qualified_name(self):
@@ -418,7 +418,7 @@ def _sender_python(batch: list, t_ns: int, repeats: int = 200) -> float:
     pickling the records into one frame as its sender did."""
     import pickle
 
-    from ..ros import recorder as R
+    from gyro_sim.ros import recorder as R
 
     packer = getattr(R, "_Packer", None)
     if packer is not None:
@@ -461,7 +461,7 @@ def publish_costs(node, repeats: int = 3000) -> dict[str, float]:
     of the binding's `publish_raw` under it (rclpy's Python layer is the difference)."""
     from geometry_msgs.msg import WrenchStamped
 
-    from ..io import messages as M
+    from gyro_sim.msgs import messages as M
 
     pub = node.create_publisher(WrenchStamped, "/gyro_sim_bench/wrench_probe", 10)
     data = M.wrench_stamped(1, "probe", np.ones(3), np.ones(3))
@@ -485,7 +485,7 @@ def gil_released_by_publish(node, seconds: float = 0.5) -> dict[str, float]:
     other thread's switch interval: such a loop manages only ~1/switch-interval calls per second."""
     from geometry_msgs.msg import WrenchStamped
 
-    from ..io import messages as M
+    from gyro_sim.msgs import messages as M
 
     pub = node.create_publisher(WrenchStamped, "/gyro_sim_bench/gil_probe", 10)
     data = M.wrench_stamped(1, "probe", np.ones(3), np.ones(3))
@@ -574,7 +574,7 @@ def table(result: dict) -> str:
 
 
 def cmd_bench_publication(args) -> int:
-    from ..progress import Progress
+    from gyro_sim.progress import Progress
 
     sizes = QUICK_SIZES if args.quick else tuple(args.sizes or DEFAULT_SIZES)
     pubs = QUICK_PUBLICATIONS if args.quick else args.publications

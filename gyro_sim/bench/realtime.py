@@ -38,7 +38,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..ros.pacing import Floor
+from gyro_sim.ros.pacing import Floor
 
 DEFAULT_SIZES = (2, 10, 20, 50, 100)
 QUICK_SIZES = (2,)
@@ -86,7 +86,7 @@ def run_node(n: int, record: bool, seconds: float, workdir: Path, index: int = 0
     """One node run on spherical_chain(n); its statistics."""
     import yaml
 
-    from .scenes import spherical_chain
+    from gyro_sim.bench.scenes import spherical_chain
 
     scene = workdir / f"chain_{n}.yaml"
     scene.write_text(yaml.safe_dump(spherical_chain(n, gravity=GRAVITY), sort_keys=False))
@@ -230,8 +230,8 @@ def plot(runs: list[Run], path: str) -> None:
 
 
 def cmd_bench_realtime(args) -> int:
-    from ..progress import Progress
-    from .report import refused, write_report
+    from gyro_sim.progress import Progress
+    from gyro_sim.bench.report import refused, write_report
 
     if refused(args, "realtime"):
         return 2

@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 from typing import Any, Callable
 
-from ..io.safe_paths import OutputError, check_output
+from gyro_sim.safe_paths import OutputError, check_output
 
 #: the files of a report <name>: <out>/<name>.<suffix>
 SUFFIXES = ("md", "json", "png")

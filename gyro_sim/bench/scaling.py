@@ -5,7 +5,7 @@ spherical chain of n links with both backends (the numpy reference and the numba
 articulated-body recursion), each called from Python as the integrators call it
 (`system.rhs(t, y)`: a new array y'); beside it the compiled kernel's own time, one
 evaluation inside compiled code (:func:`kernel_time`: a compiled loop calling
-`gyro_sim.core.fast.rhs_kernel` k times, divided by k), so that the difference is the cost of
+`gyro_sim.dynamics.kernel.rhs_kernel` k times, divided by k), so that the difference is the cost of
 the call from Python; the cost of one simulated second with RK4 at 1 kHz (the node's
 real-time configuration, default backend; timed after a first, untimed run of the same
 advance, which compiles or loads the compiled loop); and, in the same run, Pinocchio's `aba`
@@ -30,13 +30,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core import fast
-from ..core.fast_loop import njit_with_dependencies
-from ..core.model import compile_model, initial_state
-from ..core.scene_load import load_scene
-from ..core.simulator import Simulator
-from ..core.system import ChainODE, make_system
-from .scenes import spherical_chain
+from gyro_sim.dynamics import kernel as fast
+from gyro_sim.integrators.rk4.loop import njit_with_dependencies
+from gyro_sim.dynamics.model import compile_model, initial_state
+from gyro_sim.scene.load import load_scene
+from gyro_sim.simulator import Simulator
+from gyro_sim.dynamics.system import ChainODE, make_system
+from gyro_sim.bench.scenes import spherical_chain
 
 DEFAULT_SIZES = (1, 2, 5, 10, 20, 50, 100)
 QUICK_SIZES = (1, 2, 5)
@@ -254,7 +254,7 @@ def fixed_step(sizes=FIXED_STEP_SIZES, seconds: float = 1.0, repeats: int = FIXE
         try:
             import mujoco
 
-            from .peers import MujocoChain
+            from gyro_sim.bench.peers import MujocoChain
         except ImportError:
             pass
         else:
@@ -407,7 +407,7 @@ MEMORY_TIMEOUT = 900.0
 _MEMORY_RUN = r"""
 import json, resource, sys, time
 from gyro_sim.bench.scenes import spherical_chain
-from gyro_sim.core.simulator import Simulator
+from gyro_sim.simulator import Simulator
 n, name, seconds = int(sys.argv[1]), sys.argv[2], float(sys.argv[3])
 before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 sim = Simulator(spherical_chain(n), integrator=name, step=1e-3, rtol=1e-8, atol=1e-10)

@@ -13,7 +13,7 @@ RK4, recording on), watched from this process:
   sampled every few seconds and the growth rate fitted over the second half (after warm-up,
   MB per hour); deadline misses and the real-time factor over the run (its stats file);
 - **kill**: `kills` runs each killed with SIGKILL at a random moment (seeded); the log is
-  recovered (gyro_sim.io.recover) and the simulated time lost is the node's last /clock seen
+  recovered (gyro_sim.log.recover) and the simulated time lost is the node's last /clock seen
   here minus the last log time recovered (promised: at most 0.25 s with the default 0.2 s flush period).
 """
 from __future__ import annotations
@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.mcap_log import DEFAULT_FLUSH_PERIOD
+from gyro_sim.log.mcap_log import DEFAULT_FLUSH_PERIOD
 
 PHYSICS_RATE = 1000.0
 PUBLISH_RATE = 100.0
@@ -49,7 +49,7 @@ SEED = 13
 FLOODER = r"""
 import sys, time, rclpy
 from std_msgs.msg import Float64MultiArray
-from gyro_sim.io.messages import axis_moments
+from gyro_sim.msgs.messages import axis_moments
 rate, seconds, values = float(sys.argv[1]), float(sys.argv[2]), [float(v) for v in sys.argv[3:]]
 rclpy.init()
 node = rclpy.create_node("gyro_sim_flood")
@@ -298,7 +298,7 @@ class Kills:
 
 
 def kills(workdir: Path, n: int = KILLS, progress=None, domain: int | None = None) -> Kills:
-    from ..io.recover import recover
+    from gyro_sim.log.recover import recover
 
     domain = _domain(2) if domain is None else domain
     rng = np.random.default_rng(SEED)
@@ -372,8 +372,8 @@ def plot(so: Soak | None, path: str) -> None:
 
 
 def cmd_bench_soak(args) -> int:
-    from ..progress import Progress
-    from .report import refused, write_report
+    from gyro_sim.progress import Progress
+    from gyro_sim.bench.report import refused, write_report
 
     if refused(args, "soak"):
         return 2

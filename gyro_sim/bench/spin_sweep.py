@@ -2,7 +2,7 @@
 
 Two scenes, each spun at SPINS rad/s and started in its *slow regular precession*, so that
 the exact motion is known (the paper's closing result, THEORY.md section 4: eq 88, with the
-general-n conditions before it; :func:`gyro_sim.core.lagrange.regular_precession_state`):
+general-n conditions before it; :func:`gyro_sim.analytic.lagrange.regular_precession_state`):
 theta_k and psi_k' = kappa stay constant, phi_k' is constant
 (:func:`gyro_sim.bench.accuracy.precession_exact` gives the state at any t):
 
@@ -26,7 +26,7 @@ node; MuJoCo RK4 and implicitfast at the same step, peers.MujocoChain) runs `ste
   about the vertical, against psi_k0 + kappa t), the largest over the run and bodies;
 - the invariants: relative energy drift (E - E0) / (T0 + |V0|) and vertical angular
   momentum drift (K - K0) / |K0| (the engine's own: MuJoCo's energy and subtree momenta),
-  their growth classified as the long-horizon item does (`stability._classify`: bounded,
+  their growth classified as the long-horizon item does (`budget.growth`: bounded,
   random walk ~ t^1/2, linear ~ t);
 - the cost (CPU s of the run), or the failure message (SimulationError, MuJoCo's
   instability warnings), or "too slow" when the run's CPU budget is spent.
@@ -40,13 +40,14 @@ from typing import Any
 
 import numpy as np
 
-from ..core import lagrange as lg
-from ..core.model import compile_model
-from ..core.scene_load import load_scene
-from ..core.simulator import SimulationError, Simulator
-from .accuracy import precession_exact
-from .extreme import load_dict
-from .peers import frames_of_state
+from gyro_sim.analytic import lagrange as lg
+from gyro_sim.dynamics.model import compile_model
+from gyro_sim.scene.load import load_scene
+from gyro_sim.simulator import SimulationError, Simulator
+from gyro_sim.bench.accuracy import precession_exact
+from gyro_sim.bench.budget import OverBudget, cpu_limit, growth
+from gyro_sim.bench.extreme import load_dict
+from gyro_sim.bench.peers import frames_of_state
 
 #: spin rates (rad/s) of the sweep, the node's step, its call length, samples per run
 SPINS = (1e2, 1e3, 1e4)
@@ -176,18 +177,13 @@ class _Exact:
 
 
 def _finish(run: SpinRun) -> None:
-    from .stability import LongRun, _classify
-
     for series, key in ((run.energy, "energy"), (run.momentum, "momentum")):
-        lr = LongRun(run.method, run.steps, STEP, list(run.t), list(series), run.cpu)
-        _classify(lr)
-        setattr(run, f"{key}_growth", lr.growth)
-        setattr(run, f"{key}_slope", lr.slope)
+        words, slope, _ = growth(run.t, series)
+        setattr(run, f"{key}_growth", words)
+        setattr(run, f"{key}_slope", slope)
 
 
 def run_gyro(key: str, spin: float, method: str, steps: int, budget: float, backend: str = "auto") -> SpinRun:
-    from .stability import _OverBudget, cpu_limit
-
     scene = load_scene(BUILDERS[key](spin))
     model = compile_model(scene)
     exact = _Exact(scene, model)
@@ -220,7 +216,7 @@ def run_gyro(key: str, spin: float, method: str, steps: int, budget: float, back
                     run.precession_error.append(p)
         except SimulationError as exc:
             run.failed = str(exc)
-        except _OverBudget:
+        except OverBudget:
             run.too_slow = f"budget {budget:g} s CPU spent at t = {sim.time:.4g} s of {steps * STEP:g} s"
     run.cpu = time.process_time() - cpu0
     if run.t:
@@ -232,9 +228,7 @@ def run_gyro(key: str, spin: float, method: str, steps: int, budget: float, back
 
 
 def run_mujoco(key: str, spin: float, label: str, steps: int, budget: float) -> SpinRun:
-    from .peers import MujocoChain, mujoco_failure, mujoco_warnings
-    from .stability import _OverBudget, cpu_limit
-
+    from gyro_sim.bench.peers import MujocoChain, mujoco_failure, mujoco_warnings
     scene = load_scene(BUILDERS[key](spin))
     model = compile_model(scene)
     exact = _Exact(scene, model)
@@ -266,7 +260,7 @@ def run_mujoco(key: str, spin: float, label: str, steps: int, budget: float) -> 
                     a, p = exact.errors(chain.time, chain.frames().R)
                     run.axis_error.append(a)
                     run.precession_error.append(p)
-        except _OverBudget:
+        except OverBudget:
             run.too_slow = f"budget {budget:g} s CPU spent at t = {chain.time:.4g} s of {steps * STEP:g} s"
     run.cpu = time.process_time() - cpu0
     if run.t:

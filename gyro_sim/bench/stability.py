@@ -30,9 +30,7 @@ against the exact regular precession (eq 88), and the heavy/light-tip accelerati
 """
 from __future__ import annotations
 
-import contextlib
 import math
-import signal
 import time
 import warnings
 from dataclasses import asdict, dataclass, field
@@ -40,16 +38,18 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..core.invariants import conserved
-from ..core.model import compile_model
-from ..core.scene_load import load_scene
-from ..core.simulator import SimulationError, Simulator
-from . import extreme as ex
-from .accuracy import (ATOL_FACTOR, chain_length, invariant_error, invariant_scales, precession_exact,
-                       state_error)
-from .peers import frames_of_state, mujoco_unsupported
-from .scenes import spherical_chain
-from .report import add_force_option, refused, write_report
+from gyro_sim.dynamics.invariants import conserved
+from gyro_sim.dynamics.model import compile_model
+from gyro_sim.scene.load import load_scene
+from gyro_sim.simulator import SimulationError, Simulator
+from gyro_sim.bench import extreme as ex
+from gyro_sim.bench.accuracy import (
+    ATOL_FACTOR, chain_length, invariant_error, invariant_scales, precession_exact, state_error,
+)
+from gyro_sim.bench.peers import frames_of_state, mujoco_unsupported
+from gyro_sim.bench.scenes import spherical_chain
+from gyro_sim.bench.budget import OverBudget, cpu_limit, growth
+from gyro_sim.bench.report import add_force_option, refused, write_report
 
 #: seconds of simulated time per `advance` call (a node publishing at 100 Hz)
 CHUNK = 0.01
@@ -159,7 +159,7 @@ def items(quick: bool = False) -> list[Item]:
 
 def _default_backend() -> str:
     """The backend "auto" resolves to: numba when it imports, else numpy."""
-    from ..core.fast import available
+    from gyro_sim.dynamics.kernel import available
 
     return "numba" if available() else "numpy"
 
@@ -197,39 +197,6 @@ def _tilt(sim: Simulator) -> float:
     return float(np.arccos(np.clip(axis @ up, -1.0, 1.0)))
 
 
-class _OverBudget(BaseException):
-    """The CPU budget of a run is spent (raised from a SIGPROF handler, inside `advance`).
-
-    A BaseException, as KeyboardInterrupt: raised asynchronously, it can land inside library
-    code whose `except Exception` would turn it into something else (numpy's `norm` made it
-    a TypeError that ended the report, session 8)."""
-
-
-@contextlib.contextmanager
-def cpu_limit(seconds: float):
-    """Raise _OverBudget in this (main) thread once `seconds` of process CPU time have passed.
-
-    A timer on CPU time (setitimer ITIMER_PROF), so that a single `advance` call that never
-    returns (an integrator grinding at a tiny step) is stopped too. Where there is no such
-    timer (Windows, other threads), nothing is armed and the caller's checks between calls
-    remain.
-    """
-    def handler(signum, frame):
-        raise _OverBudget()
-
-    try:
-        old = signal.signal(signal.SIGPROF, handler)
-        signal.setitimer(signal.ITIMER_PROF, max(seconds, 1e-3))
-    except (AttributeError, ValueError, OSError):
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_PROF, 0.0)
-        signal.signal(signal.SIGPROF, old)
-
-
 def simulate(item: Item, scene, integrator: str, settings: dict, budget: float,
              backend: str = "auto") -> tuple[Run, Simulator]:
     """One node-like run of `item` (see the module docstring); the run and the simulator."""
@@ -258,8 +225,8 @@ def simulate(item: Item, scene, integrator: str, settings: dict, budget: float,
                     if tilt is not None:
                         tilt = max(tilt, _tilt(sim))
                     if time.process_time() - cpu0 > budget and i < n - 1:
-                        raise _OverBudget()
-        except _OverBudget:
+                        raise OverBudget()
+        except OverBudget:
             pass
         if run.verdict == "" and sim.time < item.horizon * (1 - 1e-9):
             run.verdict = "too slow"
@@ -296,7 +263,7 @@ def simulate_mujoco(item: Item, scene, row: str, budget: float) -> tuple[Run, An
     :func:`simulate` does it: CHUNK-second calls, the step moments set between calls from
     `item.moments_at` on (generalised forces on the hinge and rotor joints, as the accuracy
     report's peers); the run and the chain."""
-    from .peers import MujocoChain, mujoco_failure, mujoco_warnings
+    from gyro_sim.bench.peers import MujocoChain, mujoco_failure, mujoco_warnings
 
     run = Run(item.key, row)
     n = max(1, round(item.horizon / CHUNK))
@@ -320,7 +287,7 @@ def simulate_mujoco(item: Item, scene, row: str, budget: float) -> tuple[Run, An
                         run.t_reached = i * item.horizon / n
                         run.note = f"MuJoCo {MUJOCO_ROWS[row]}: {what} (in the call from t = {run.t_reached:.3g} s)"
                         break
-        except _OverBudget:
+        except OverBudget:
             pass
     run.cpu = time.process_time() - cpu0
     if run.verdict != "fails":
@@ -462,24 +429,7 @@ def long_horizon(steps: int, integrators=("rk4", "lie4"), progress=None, backend
 
 
 def _classify(run: LongRun) -> None:
-    t, d = np.array(run.t[1:]), np.abs(np.array(run.drift[1:]))
-    if t.size < 4:
-        return
-    running = np.maximum.accumulate(d)
-    sel = t >= t[-1] / 100.0  # the last two decades
-    if sel.sum() >= 3 and np.all(running[sel] > 0):
-        run.slope = float(np.polyfit(np.log(t[sel]), np.log(running[sel]), 1)[0])
-    run.rate = float(np.polyfit(np.array(run.t), np.array(run.drift), 1)[0])
-    if math.isnan(run.slope):
-        run.growth = "n/a"
-    elif run.slope < 0.25:
-        run.growth = "bounded"
-    elif run.slope < 0.75:
-        run.growth = "random walk (~ t^1/2)"
-    elif run.slope < 1.5:
-        run.growth = "linear (~ t)"
-    else:
-        run.growth = "superlinear (faster than t^1.5: an instability)"
+    run.growth, run.slope, run.rate = growth(run.t, run.drift)
 
 
 # ------------------------------------------------------------------------------- tables
@@ -570,7 +520,7 @@ def plot(results: list[ItemResult], long_runs: list[LongRun], path: str, spin_ru
     import matplotlib.pyplot as plt
 
     if spin_runs:
-        from . import spin_sweep as ss
+        from gyro_sim.bench import spin_sweep as ss
 
         fig, axes = plt.subplots(2, 2, figsize=(14, 10), gridspec_kw={"width_ratios": [1.6, 1]})
         (ax0, ax1), bottom = axes
@@ -663,7 +613,7 @@ class Report:
         ])
 
     def _spin_section(self) -> list[str]:
-        from . import spin_sweep as ss
+        from gyro_sim.bench import spin_sweep as ss
 
         if not self.spin_runs:
             return []
@@ -691,7 +641,7 @@ class Report:
         ]
 
     def _cost_section(self) -> list[str]:
-        from . import step_cost as sc
+        from gyro_sim.bench import step_cost as sc
 
         if not self.costs:
             return []
@@ -719,7 +669,7 @@ class Report:
         ]
 
     def _tips_section(self) -> list[str]:
-        from . import heavy_tips as ht
+        from gyro_sim.bench import heavy_tips as ht
 
         if not self.tips:
             return []
@@ -762,7 +712,7 @@ def build(quick: bool = False, keys=None, integrators=None, long_steps: int | No
     spin_runs = []
     s_steps = sweep_steps if sweep_steps is not None else (10_000 if quick else 1_000_000)
     if "sweep" in parts and s_steps > 0:
-        from . import spin_sweep as ss
+        from gyro_sim.bench import spin_sweep as ss
 
         methods = ss.METHODS if mujoco else ss.GYRO_METHODS
         spin_runs = ss.sweep(s_steps, SWEEP_BUDGET[0 if quick else 1], methods=methods, backend=backend,
@@ -770,7 +720,7 @@ def build(quick: bool = False, keys=None, integrators=None, long_steps: int | No
                              if progress else None)
     tips = []
     if "tips" in parts:
-        from . import heavy_tips as ht
+        from gyro_sim.bench import heavy_tips as ht
 
         tips = ht.rows()
     costs, holding = [], {}
@@ -784,7 +734,7 @@ def build(quick: bool = False, keys=None, integrators=None, long_steps: int | No
 def step_costs(quick: bool, backend: str, progress=None):
     """The cost part: step_cost rows at its SIZES for its METHODS, and for each the largest
     n holding 1 kHz (measured by doubling n; not in quick mode)."""
-    from . import step_cost as sc
+    from gyro_sim.bench import step_cost as sc
 
     sizes, steps = (sc.QUICK_SIZES, sc.QUICK_STEPS) if quick else (sc.SIZES, sc.STEPS)
     rows, holding = [], {}
@@ -823,7 +773,7 @@ def to_json(report: Report) -> dict[str, Any]:
 
 
 def main(args) -> int:
-    from ..progress import Progress
+    from gyro_sim.progress import Progress
 
     if refused(args, "stability"):
         return 2

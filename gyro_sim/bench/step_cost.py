@@ -60,8 +60,8 @@ class CostRow:
 
 def measure(n: int, method: str, steps: int = STEPS, backend: str = "auto") -> CostRow:
     """Time `steps` calls of advance(STEP) with `method` on the n-link chain."""
-    from ..core.simulator import SimulationError, Simulator
-    from .scenes import spherical_chain
+    from gyro_sim.simulator import SimulationError, Simulator
+    from gyro_sim.bench.scenes import spherical_chain
 
     sim = Simulator(spherical_chain(n, rotors=True), integrator=method, step=STEP, backend=backend)
     sim.advance(STEP)  # compile / load the kernels, the first Jacobian
@@ -86,7 +86,7 @@ def measure(n: int, method: str, steps: int = STEPS, backend: str = "auto") -> C
                   wall / max(done, 1) * 1e6, failed=failed)
     counts = _counts(sim)
     if counts is not None:
-        from ..core import gauss_kernels as gk
+        from gyro_sim.integrators.gauss4 import kernels as gk
 
         row.max_newton = int(counts[gk.COUNT_MAX_NEWTON])
         row.max_step_rhs = int(counts[gk.COUNT_MAX_STEP_RHS])

@@ -52,10 +52,10 @@ def cmd_publish(args) -> int:
     f = profile(args)
     n = len(f(0.0))
     if args.scene:
-        from ..core.simulator import Simulator
-        from ..paths import find_scene
+        from gyro_sim.simulator import Simulator
+        from gyro_sim.paths import find_scene
 
-        from ..core.scene_load import SceneError
+        from gyro_sim.scene.load import SceneError
 
         try:  # the numpy backend: the axis names without compiling anything
             axes = Simulator(find_scene(args.scene), integrator="rk4", backend="numpy").axis_names

@@ -35,15 +35,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core.simulator import SimulationError
-from ..io import messages as M
-from ..io.resim import COMMAND_TIMEOUT_EVENT
-from .outputs import OutputsClosed
-from .pacing import (Histogram, Pacer, RateMeter, RunDelay, Samples, chunk_steps, host_steal, normal_priority,
-                     realtime_priority)
+from gyro_sim.simulator import SimulationError
+from gyro_sim.msgs import messages as M
+from gyro_sim.log.resim import COMMAND_TIMEOUT_EVENT
+from gyro_sim.ros.outputs import OutputsClosed
+from gyro_sim.ros.pacing import (
+    Histogram, Pacer, RateMeter, RunDelay, Samples, chunk_steps, host_steal, normal_priority,
+    realtime_priority,
+)
 
 #: wall seconds between diagnostics while paused or stopped (running, they go with every
-#: publication at least gyro_sim.io.messages.DIAGNOSTICS_PERIOD simulated seconds apart)
+#: publication at least gyro_sim.msgs.messages.DIAGNOSTICS_PERIOD simulated seconds apart)
 IDLE_DIAGNOSTICS_PERIOD = 1.0
 #: longest sleep while paused or stopped (s): how fast requests are served then
 IDLE_PERIOD = 0.05
@@ -138,7 +140,7 @@ class SimLoop:
 
     Parameters
     ----------
-    sim : gyro_sim.core.simulator.Simulator
+    sim : gyro_sim.simulator.Simulator
     config : gyro_sim.ros.params.NodeConfig
     outputs : gyro_sim.ros.outputs.Outputs, or an object with the same methods:
         prepare_state(t_ns, sim, diagnostics_run) -> batch, send(t_ns, batch),

@@ -33,11 +33,11 @@ except ImportError as _exc:  # the class below is then never instantiated
     Node = object
     ROS_IMPORT_ERROR = _exc
 
-from ..core.simulator import Simulator  # noqa: E402
-from ..io.messages import decode_axis_moments  # noqa: E402
-from .loop import SimLoop  # noqa: E402
-from .outputs import Outputs  # noqa: E402
-from .params import PARAMETERS, ParameterError, validate  # noqa: E402
+from gyro_sim.simulator import Simulator  # noqa: E402
+from gyro_sim.msgs.messages import decode_axis_moments  # noqa: E402
+from gyro_sim.ros.loop import SimLoop  # noqa: E402
+from gyro_sim.ros.outputs import Outputs  # noqa: E402
+from gyro_sim.ros.params import PARAMETERS, ParameterError, validate  # noqa: E402
 
 #: GIL switch interval (s) while the node runs: bounds how long the physics thread, woken at
 #: its deadline, waits for the executor thread (Python's default is 5 ms)
@@ -65,9 +65,9 @@ def descriptor(p) -> ParameterDescriptor:
 
 
 def log_params(sim, cfg) -> dict:
-    """The log's run parameters: the re-simulation contract of gyro_sim.io.record (one advance of
+    """The log's run parameters: the re-simulation contract of gyro_sim.log.record (one advance of
     1/physics_rate per step), plus the node's own parameters."""
-    from ..io.record import run_params
+    from gyro_sim.log.record import run_params
 
     own = {k: v for k, v in cfg.as_dict().items() if k not in ("publish_rate", "duration")}
     return run_params(sim, advance_dt=cfg.dt, publish_rate=cfg.publish_rate, source="gyro_sim_node",
@@ -78,17 +78,17 @@ def method_choice(sim, cfg) -> str:
     """What "fixed" steps with at the start and why, for the start line ("" for other methods)."""
     if cfg.integrator != "fixed":
         return ""
-    from ..core.integrators.choose import fixed_step_method
+    from gyro_sim.integrators.fixed import fixed_step_method
 
     return fixed_step_method(sim, cfg.dt)[1]
 
 
 def stiffness_note(sim, cfg) -> str:
     """A warning when the explicit fixed-step method runs a scene too stiff for its step
-    (gyro_sim.core.integrators.choose: h |lambda| at the initial state against RK4's limit)."""
+    (gyro_sim.integrators.fixed: h |lambda| at the initial state against RK4's limit)."""
     if cfg.integrator not in ("rk4", "lie4"):
         return ""
-    from ..core.integrators.choose import fixed_step_choice
+    from gyro_sim.integrators.fixed import fixed_step_choice
 
     c = fixed_step_choice(sim, cfg.dt)
     if c.method == "rk4" and c.substeps == 1:
@@ -115,7 +115,7 @@ class GyroSimNode(Node):
                              backend=cfg.backend)
         self.recorder = None
         if cfg.record:
-            from .recorder import LiveRecorder
+            from gyro_sim.ros.recorder import LiveRecorder
 
             self.recorder = LiveRecorder(cfg.record, scene=cfg.scene, params=log_params(self.sim, cfg),
                                          overwrite=cfg.overwrite)
@@ -215,7 +215,7 @@ def main(argv=None) -> int:
 
 
 def _main(argv, shutdown: Shutdown) -> int:
-    from .params import preflight
+    from gyro_sim.ros.params import preflight
 
     # --help, misspelt parameters and the first numba compile, before rclpy starts
     code = preflight(sys.argv if argv is None else argv)

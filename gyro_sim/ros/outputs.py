@@ -1,6 +1,6 @@
 """The node's outputs: a thin serialiser from the Simulator's snapshot to DDS (and the recorder).
 
-Message content comes from :mod:`gyro_sim.io.messages` only (the offline recorder uses the
+Message content comes from :mod:`gyro_sim.msgs.messages` only (the offline recorder uses the
 same builders), as CDR bytes: the node publishes those bytes (`Publisher.publish(bytes)`) and
 hands the same bytes to the recorder, so a log holds exactly what was on the wire. A state is
 prepared (snapshot and bytes) as soon as it is computed, ahead of its wall deadline, and sent
@@ -13,8 +13,8 @@ import importlib
 import math
 import time
 
-from ..core.simulator import SimulationError
-from ..io import messages as M
+from gyro_sim.simulator import SimulationError
+from gyro_sim.msgs import messages as M
 
 #: wall seconds between two checks whether an optional output has subscribers
 WANT_PERIOD = 0.5
@@ -111,7 +111,7 @@ class Listeners:
 
 
 class Outputs:
-    """Publishers of the node, fed with the bytes of :class:`gyro_sim.io.messages.Publication`.
+    """Publishers of the node, fed with the bytes of :class:`gyro_sim.msgs.messages.Publication`.
 
     Parameters
     ----------

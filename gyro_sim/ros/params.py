@@ -64,7 +64,7 @@ class NodeConfig:
     """Validated parameters, plus what follows from them."""
 
     scene_path: Path
-    scene: object  # gyro_sim.core.scene.Scene
+    scene: object  # gyro_sim.scene.records.Scene
     physics_rate: float
     publish_rate: float
     real_time_factor: float
@@ -110,9 +110,9 @@ def _number_problem(p: Parameter, v) -> str | None:
 def validate(values: dict) -> NodeConfig:
     """Check every parameter (missing ones take their default); raise ParameterError listing
     all problems, or return the NodeConfig with the scene loaded."""
-    from ..core.integrators import INTEGRATORS
-    from ..core.scene_load import SceneError, load_scene
-    from ..paths import find_scene
+    from gyro_sim.integrators import INTEGRATORS
+    from gyro_sim.scene.load import SceneError, load_scene
+    from gyro_sim.paths import find_scene
 
     v = {p.name: values.get(p.name, p.default) for p in PARAMETERS}
     problems = []
@@ -143,8 +143,8 @@ def validate(values: dict) -> NodeConfig:
     if "integrator" not in bad and v["integrator"] not in INTEGRATORS:
         problems.append(f"integrator: unknown {v['integrator']!r}; valid: {', '.join(INTEGRATORS)}")
     if "backend" not in bad:
-        from ..core.fast import available
-        from ..core.system import BACKENDS
+        from gyro_sim.dynamics.kernel import available
+        from gyro_sim.dynamics.system import BACKENDS
 
         if v["backend"] not in BACKENDS:
             problems.append(f"backend: unknown {v['backend']!r}; valid: {', '.join(BACKENDS)}")
@@ -162,7 +162,7 @@ def validate(values: dict) -> NodeConfig:
                 problems.append(f"scene: {exc}")
             except SceneError as exc:
                 problems.append(f"scene: {scene_path}: {exc}")
-    from ..io.safe_paths import OutputError, check_output
+    from gyro_sim.safe_paths import OutputError, check_output
 
     force = v["overwrite"] if "overwrite" not in bad else False
     for name in ("record", "stats_file"):
@@ -178,7 +178,7 @@ def validate(values: dict) -> NodeConfig:
         try:
             import mcap  # noqa: F401
 
-            from ..io import mcap_log  # noqa: F401
+            from gyro_sim.log import mcap_log  # noqa: F401
         except ImportError as exc:
             problems.append(f"record: recording needs the mcap package ({exc})")
     if problems:
@@ -368,7 +368,7 @@ def preflight(argv, stream_out=None, stream_err=None) -> int | None:
         err.write("".join(f"gyro_sim_node: {line}\n" for line in unknown))
         return 2
     if values.get("backend", "auto") != "numpy":
-        from ..warmup import precompile
+        from gyro_sim.warmup import precompile
 
         precompile(err, prog="gyro_sim_node", integrator=str(values.get("integrator", "fixed")))
     return None

@@ -1,7 +1,7 @@
 """Live recording in a separate process, so that writing takes none of the physics thread's time.
 
 Every record is (topic, type, log time, CDR bytes), the bytes exactly as published or received
-(built by :mod:`gyro_sim.io.messages`; /tf too, which the node records even where tf2_msgs is
+(built by :mod:`gyro_sim.msgs.messages`; /tf too, which the node records even where tf2_msgs is
 not installed to publish it). Log time = node time. No rclpy here.
 
 Shape (issue 11, item 4: a writer *thread* shared the interpreter, and so the GIL, with the
@@ -14,13 +14,13 @@ physics thread; then a sender thread pickling ~n records per publication still h
 - a sender thread in the node wakes every `SEND_PERIOD` (it is not woken by the puts), takes
   what is queued and writes it to a pipe with one ``os.writev`` (which releases the GIL while
   the kernel copies). A publication cut from one
-  :class:`gyro_sim.io.messages.Frame` goes as that frame's bytes block, unpickled, behind a
+  :class:`gyro_sim.msgs.messages.Frame` goes as that frame's bytes block, unpickled, behind a
   12-byte head (layout id, log time); the frame's layout (topic, type, start, stop of each
   message) goes once, pickled, the first time it is seen. Lone records (commands, events, the
   diagnostics that ride with a publication, a publication not cut from a frame) go as one
   pickled list per wake-up (so what SIGKILL can lose grows by at most `SEND_PERIOD`);
 - a child process (``python -c``, not fork: the node has DDS threads) owns the
-  :class:`~gyro_sim.io.mcap_log.LogWriter`: it opens the log (an error, e.g. an existing file, is
+  :class:`~gyro_sim.log.mcap_log.LogWriter`: it opens the log (an error, e.g. an existing file, is
   raised by the constructor here), cuts each block by its layout and writes the records in the
   order they were handed over, flushes every `flush_period` as before, and on end of input
   (close here, or the node killed, even by SIGKILL) writes the summary, reports its counts and
@@ -157,7 +157,7 @@ class _Packer:
 
 
 class LiveRecorder:
-    """Record to `path` (gyro_sim.io.mcap_log.LogWriter) from a child process.
+    """Record to `path` (gyro_sim.log.mcap_log.LogWriter) from a child process.
 
     Parameters
     ----------
@@ -231,7 +231,7 @@ class LiveRecorder:
     def raw_batch(self, t_ns: int, batch: list) -> None:
         """A publication: [(topic, type, bytes)], all at log time t_ns, kept as handed over (not
         copied: neither the list nor its bytes may change after). A
-        :class:`gyro_sim.io.messages.FrameBatch` goes to the writer as its block."""
+        :class:`gyro_sim.msgs.messages.FrameBatch` goes to the writer as its block."""
         self.queue.put((t_ns, batch))
 
     # --- the sender thread --------------------------------------------------------------------------
@@ -316,7 +316,7 @@ def _child_main() -> None:
         return
     path, scene, params, writer_options = pickle.loads(start[1])
     try:
-        from gyro_sim.io.mcap_log import LogWriter
+        from gyro_sim.log.mcap_log import LogWriter
 
         w = LogWriter(path, scene=scene, params=params, **writer_options)
     except BaseException as exc:  # noqa: BLE001 - raised in the node instead

@@ -32,7 +32,7 @@ def register(sub, bench) -> None:
 
 def find_sweep(name: str) -> Path:
     """A sweep file by path, or a shipped one by bare name (config/sweeps/<name>.yaml)."""
-    from ..paths import config_dirs
+    from gyro_sim.paths import config_dirs
 
     p = Path(name).expanduser()
     if p.is_file() or Path(name).name != name:
@@ -45,7 +45,7 @@ def find_sweep(name: str) -> Path:
 
 
 def shipped_sweeps() -> list[Path]:
-    from ..paths import config_dirs
+    from gyro_sim.paths import config_dirs
 
     dirs = [d / "sweeps" for d in config_dirs() if (d / "sweeps").is_dir()]
     return sorted(dirs[0].glob("*.yaml")) if dirs else []
@@ -68,11 +68,11 @@ def cmd_sweep(args) -> int:
 
 
 def _cmd_sweep(args) -> int:
-    from ..io.safe_paths import OutputError, check_output
-    from ..progress import Progress
-    from . import results as res
-    from .execute import ClusterError, run
-    from .spec import SweepError, load_sweep
+    from gyro_sim.safe_paths import OutputError, check_output
+    from gyro_sim.progress import Progress
+    from gyro_sim.sweep import results as res
+    from gyro_sim.sweep.execute import ClusterError, run
+    from gyro_sim.sweep.spec import SweepError, load_sweep
 
     prog = "gyro-sim sweep"
     if args.workers is not None and args.workers < 0:

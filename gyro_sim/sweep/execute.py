@@ -22,8 +22,8 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
-from .point import run_batch
-from .results import read_parts, write_part
+from gyro_sim.sweep.point import run_batch
+from gyro_sim.sweep.results import read_parts, write_part
 
 #: tasks per worker when the sweep does not fix `batch`: enough for balance, few enough to keep
 #: the per-task overhead (a few ms on a LocalCluster) out of the way

@@ -52,8 +52,8 @@ def _angle(u: np.ndarray, v: np.ndarray) -> np.ndarray:
 def run_point(scene_map: dict[str, Any], run: dict[str, Any], measures: tuple[str, ...]) -> dict[str, Any]:
     """Simulate one point; the measure columns (module docstring). Deterministic: the row
     depends only on the arguments (cpu_s aside)."""
-    from ..core.scene_load import load_scene
-    from ..core.simulator import SimulationError, Simulator
+    from gyro_sim.scene.load import load_scene
+    from gyro_sim.simulator import SimulationError, Simulator
 
     scene = load_scene(scene_map)
     sim = Simulator(scene, integrator=run["integrator"], rtol=run["rtol"], atol=run["atol"], step=run["step"],
@@ -124,8 +124,8 @@ def run_point(scene_map: dict[str, Any], run: dict[str, Any], measures: tuple[st
 
 def evaluate(sweep_payload: dict[str, Any], point) -> dict[str, Any]:
     """The full row of one point: parameters, seed, measures, verdicts, theory."""
-    from ..core.scene_load import load_scene
-    from .spec import Sweep
+    from gyro_sim.scene.load import load_scene
+    from gyro_sim.sweep.spec import Sweep
 
     sweep: Sweep = sweep_payload["sweep"]
     scene_map, run = sweep.point_scene(point)
@@ -137,7 +137,7 @@ def evaluate(sweep_payload: dict[str, Any], point) -> dict[str, Any]:
         value = row.get(v["measure"], math.nan)
         row[f"verdict.{v['name']}"] = bool(row["ok"] and value < v["below"])
     if sweep.theory is not None:
-        from .theory import FORMULAS
+        from gyro_sim.sweep.theory import FORMULAS
 
         margin = float(FORMULAS[sweep.theory["formula"]](load_scene(scene_map), run))
         row["theory_margin"] = margin

@@ -145,7 +145,7 @@ def summary(sweep, rows: list[dict], stats: dict[str, Any], check, largest_rows)
             lines.append(f"| {v['name']} | {v['measure']} < {v['below']:g} | {yes} | {len(rows) - yes} |")
         lines.append("")
     if check is not None:
-        from .theory import FORMULA_TEXT
+        from gyro_sim.sweep.theory import FORMULA_TEXT
 
         ok = "yes" if check["within_one_cell"] else "NO"
         lines += ["## Against theory", "",
@@ -204,7 +204,7 @@ def plot(sweep, rows: list[dict], png: Path, largest_rows=None) -> None:
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from .theory import slices
+    from gyro_sim.sweep.theory import slices
 
     kind = sweep.map["kind"]
     if kind == "histogram" or not rows:
@@ -302,7 +302,7 @@ def plot(sweep, rows: list[dict], png: Path, largest_rows=None) -> None:
 
 def finish(sweep, out: Path, rows: list[dict], stats: dict[str, Any]) -> dict[str, Any]:
     """results.parquet, summary.md and map.png from every row; returns the theory check."""
-    from .theory import boundary_check, largest
+    from gyro_sim.sweep.theory import boundary_check, largest
 
     table = table_of(rows)
     tmp = out / (".tmp-" + RESULTS)

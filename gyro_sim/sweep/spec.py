@@ -25,7 +25,7 @@
 
 Key paths are dotted mapping keys with list indices (``bodies[1].rotors[0].spin``,
 ``base.motion.amplitude[2]``); ``run.<option>`` varies the run itself. Every point's scene is
-loaded and validated (:func:`gyro_sim.core.scene_load.load_scene`) before anything runs.
+loaded and validated (:func:`gyro_sim.scene.load.load_scene`) before anything runs.
 """
 from __future__ import annotations
 
@@ -316,7 +316,7 @@ def _merge_quick(data: dict[str, Any], quick: Any, errors: list[str]) -> dict[st
 
 def _resolve_scene(source: Any, base_dir: Path | None, errors: list[str]):
     """(scene mapping, path or None) of `scene:`."""
-    from ..paths import find_scene
+    from gyro_sim.paths import find_scene
 
     if isinstance(source, dict):
         return copy.deepcopy(source), None
@@ -519,7 +519,7 @@ def load_sweep(source: str | os.PathLike | Mapping, *, quick: bool = False, vali
     vnames = [v["name"] for v in verdicts]
 
     # --- theory, map, batch
-    from .theory import FORMULAS
+    from gyro_sim.sweep.theory import FORMULAS
 
     theory = data.get("theory")
     if theory is not None:
@@ -578,7 +578,7 @@ def load_sweep(source: str | os.PathLike | Mapping, *, quick: bool = False, vali
 
 def check_run(run: Mapping[str, Any]) -> list[str]:
     """Problems with run options, each as ``<key>: <rule>``."""
-    from ..core.integrators import INTEGRATORS
+    from gyro_sim.integrators import INTEGRATORS
 
     errors = []
     if run.get("integrator") not in INTEGRATORS:
@@ -602,7 +602,7 @@ def check_run(run: Mapping[str, Any]) -> list[str]:
 def check_points(sweep: Sweep) -> list[str]:
     """Load every point's scene and check its run options; the first few problems, each naming
     the point, its parameter values and the key."""
-    from ..core.scene_load import SceneError, load_scene
+    from gyro_sim.scene.load import SceneError, load_scene
 
     errors: list[str] = []
     seen: dict[str, str | None] = {}

@@ -37,9 +37,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import messages as M
-from ..io.mcap_log import LogError, read_info
-from ..io.urdf import body_extent, body_radius, chain_length, quat_z_to, rotor_size
+from gyro_sim.msgs import messages as M
+from gyro_sim.log.mcap_log import LogError, read_info
+from gyro_sim.scene.urdf import body_extent, body_radius, chain_length, quat_z_to, rotor_size
 
 APP_ID = "gyro_sim"
 TIMELINE = "sim_time"
@@ -108,7 +108,7 @@ def _xyz(v) -> list[float]:
 
 def load_series(path: str | os.PathLike) -> Series:
     """Decode the topics the view needs (log time order)."""
-    from ..io.mcap_log import iter_messages
+    from gyro_sim.log.mcap_log import iter_messages
 
     s = Series()
     js_t, pos, vel, eff = [], [], [], []
@@ -330,7 +330,7 @@ def build_recording(path: str | os.PathLike, rec) -> dict:
             lines(f"plots/drift/{name}", [f"{name} drift"])
             plotted.add("plots/drift")
     if M.BALANCE_REL_KEY in s.diag and np.all(np.isfinite(s.diag[M.BALANCE_REL_KEY])):
-        # E - E(0) - W: conserved with or without commands (gyro_sim.core.snapshot)
+        # E - E(0) - W: conserved with or without commands (gyro_sim.snapshot)
         send("plots/balance/energy_balance", s.diag_t, rr.Scalars.columns(scalars=s.diag[M.BALANCE_REL_KEY]))
         lines("plots/balance/energy_balance", ["E - E0 - W"])
         plotted.add("plots/balance")

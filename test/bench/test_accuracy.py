@@ -20,8 +20,8 @@ import pytest
 
 from gyro_sim.bench import accuracy as acc
 from gyro_sim.bench import peers
-from gyro_sim.core.scene_load import load_scene
-from gyro_sim.core.simulator import Simulator
+from gyro_sim.scene.load import load_scene
+from gyro_sim.simulator import Simulator
 
 EXACT = ("heavy_top", "double_gyro_plus", "double_gyro_minus")
 #: dop853's global error at the horizon, against rtol: at most this factor (quick horizons)

@@ -1,4 +1,4 @@
-"""The "auto" integrator (gyro_sim.core.integrators.Auto): dop853 while not stiff, radau while
+"""The "auto" integrator (gyro_sim.integrators.Auto): dop853 while not stiff, radau while
 stiff, detected and reported."""
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import pytest
 
 from gyro_sim.bench import accuracy as acc
 from gyro_sim.bench import extreme as ex
-from gyro_sim.core.integrators import INTEGRATORS, IntegrationError, StiffnessWarning, make_integrator
-from gyro_sim.core.simulator import Simulator
+from gyro_sim.integrators import INTEGRATORS, IntegrationError, StiffnessWarning, make_integrator
+from gyro_sim.simulator import Simulator
 
 
 def _run(scene, rtol, horizon, chunk=None):
@@ -153,8 +153,8 @@ def test_a_recorded_auto_run_resimulates_bit_for_bit(tmp_path):
     commands, re-simulated: deviation 0."""
     pytest.importorskip("mcap")
     pytest.importorskip("numba")
-    from gyro_sim.io.record import record_run
-    from gyro_sim.io.resim import resimulate
+    from gyro_sim.log.record import record_run
+    from gyro_sim.log.resim import resimulate
 
     scene = ex.fast_rotor_precession(1e4)
     scene["bodies"][0]["rotors"][0]["actuated"] = True  # a command: the rotor's torque

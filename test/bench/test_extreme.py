@@ -10,9 +10,9 @@ import pytest
 
 from gyro_sim.bench import extreme as ex
 from gyro_sim.bench.scenes import spherical_chain
-from gyro_sim.core.system import make_system
-from gyro_sim.core.model import compile_model, initial_state
-from gyro_sim.core.scene_load import load_scene
+from gyro_sim.dynamics.system import make_system
+from gyro_sim.dynamics.model import compile_model, initial_state
+from gyro_sim.scene.load import load_scene
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"
 

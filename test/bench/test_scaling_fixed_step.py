@@ -2,7 +2,7 @@
 import pytest
 
 from gyro_sim.bench import scaling
-from gyro_sim.core import fast
+from gyro_sim.dynamics import kernel as fast
 
 pytestmark = pytest.mark.skipif(not fast.available(), reason="numba is not installed")
 

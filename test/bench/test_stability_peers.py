@@ -19,7 +19,7 @@ from gyro_sim.bench import extreme as ex
 from gyro_sim.bench import heavy_tips as ht
 from gyro_sim.bench import spin_sweep as ss
 from gyro_sim.bench import stability as st
-from gyro_sim.core.scene_load import load_scene
+from gyro_sim.scene.load import load_scene
 
 mujoco = pytest.importorskip("mujoco")
 
@@ -57,8 +57,8 @@ def test_step_moments_reach_mujoco_as_they_reach_gyro_sim():
     same step; without the moments it is off by O(1)."""
     from gyro_sim.bench.accuracy import chain_length, state_error
     from gyro_sim.bench.peers import frames_of_state
-    from gyro_sim.core.model import compile_model
-    from gyro_sim.core.simulator import Simulator
+    from gyro_sim.dynamics.model import compile_model
+    from gyro_sim.simulator import Simulator
 
     scene, moments = ex.abrupt_commands(1.0)
     item = st.Item("abrupt_small", "", lambda: scene, 0.05, 10.0, moments=tuple(moments), moments_at=0.01)
@@ -109,8 +109,8 @@ def test_spin_sweep_quick_has_a_row_per_scene_spin_and_method(stability_out):
 def test_spin_sweep_scenes_start_in_the_exact_regular_precession(build, n):
     """phi_1' is the spin asked for, psi' = kappa the slow root (|kappa| ~ m c g / (A spin)),
     and a tight dop853 run stays on the exact solution (eq 88)."""
-    from gyro_sim.core.model import compile_model
-    from gyro_sim.core.simulator import Simulator
+    from gyro_sim.dynamics.model import compile_model
+    from gyro_sim.simulator import Simulator
     from gyro_sim.bench.peers import frames_of_state
 
     sd = build(1e3)
@@ -142,9 +142,9 @@ def test_heavy_tip_table_has_both_directions_and_every_ratio(stability_out):
 
 def test_oracle_is_the_float_kernel_to_round_off_on_a_soft_chain():
     """The 80-digit oracle and the compiled kernel agree where nothing is ill-conditioned."""
-    from gyro_sim.core import fast
-    from gyro_sim.core.model import compile_model, initial_state
-    from gyro_sim.core.system import ChainODE
+    from gyro_sim.dynamics import kernel as fast
+    from gyro_sim.dynamics.model import compile_model, initial_state
+    from gyro_sim.dynamics.system import ChainODE
 
     exact = ht.oracle([1.0])[1.0]
     model = compile_model(load_scene(ex.mass_ratio_chain(1.0)))

@@ -1,7 +1,7 @@
 """The compiled kernel's equations evaluated in 80-digit decimal arithmetic (a test oracle).
 
 The oracle lives in the package (:mod:`gyro_sim.bench.heavy_tips`, which the stability report
-runs from an installed package): `NUMBA_DISABLE_JIT=1` makes gyro_sim.core.fast plain Python,
+runs from an installed package): `NUMBA_DISABLE_JIT=1` makes gyro_sim.dynamics.kernel plain Python,
 and its kernels run on 80-digit numbers from the float64 inputs converted exactly, so the
 result is the exact accelerations of those inputs to ~1e-75, whatever elimination the kernel
 uses. Hinges' sin/cos stay float64: use it on spherical chains with a fixed base.

@@ -1,9 +1,9 @@
 """The "auto" integrator's two drivers of its dop853 and radau phases give the same bits.
 
 On a system with the compiled kernel (FastChainODE), Auto runs DOP853's compiled loop in its
-detection mode (gyro_sim.core.fast_dop853.dop853_advance): h |lambda| of every accepted step,
+detection mode (gyro_sim.integrators.dop853.loop.dop853_advance): h |lambda| of every accepted step,
 the stiffness and rejection tests and the cost window inside compiled code, returning where a
-test asks for a switch; and likewise Radau's (gyro_sim.core.fast_radau.radau_advance): rho(J)
+test asks for a switch; and likewise Radau's (gyro_sim.integrators.radau.loop.radau_advance): rho(J)
 when the Jacobian is refreshed, the non-stiffness and cost tests, the cost window. On other
 systems it steps either method by its public single step and calls the same tests after each
 step: that Python loop is the reference here (the loop Auto ran on every system before the
@@ -17,12 +17,12 @@ import pytest
 
 from gyro_sim.bench import accuracy as acc
 from gyro_sim.bench import extreme as ex
-from gyro_sim.core import fast
-from gyro_sim.core.integrators import StiffnessWarning, make_integrator
-from gyro_sim.core.integrators import auto as auto_module
-from gyro_sim.core.model import compile_model, initial_state
-from gyro_sim.core.scene_load import load_scene
-from gyro_sim.core.system import FastChainODE, make_system
+from gyro_sim.dynamics import kernel as fast
+from gyro_sim.integrators import StiffnessWarning, make_integrator
+from gyro_sim.integrators import auto as auto_module
+from gyro_sim.dynamics.model import compile_model, initial_state
+from gyro_sim.scene.load import load_scene
+from gyro_sim.dynamics.system import FastChainODE, make_system
 
 pytestmark = pytest.mark.skipif(not fast.available(), reason="numba is not installed")
 
@@ -194,7 +194,7 @@ def test_numpy_backend_steps_in_python():
 def test_window_kernels_are_the_list_windows():
     """The ring buffers of dop853_kernels against the lists Auto kept before: the last
     REJECT_WINDOW attempts, the last COST_WINDOW (dt, nfev), their sums oldest first."""
-    from gyro_sim.core import dop853_kernels as dk
+    from gyro_sim.integrators.dop853 import kernels as dk
 
     rng = np.random.default_rng(1)
     counters = np.zeros(dk.COUNTERS_SIZE, dtype=np.int64)
@@ -229,7 +229,7 @@ def test_window_kernels_are_the_list_windows():
 def test_stiffness_test_is_dop853f():
     """dop853.f's counting (IASTI, NONSTI): stiff after STIFF_STEPS stiff steps, unless
     NONSTIFF_RESET non-stiff steps in a row came between."""
-    from gyro_sim.core import dop853_kernels as dk
+    from gyro_sim.integrators.dop853 import kernels as dk
 
     counters = np.zeros(dk.COUNTERS_SIZE, dtype=np.int64)
     detect = np.array([5.0, 4, 2, 0.5])
@@ -246,7 +246,7 @@ def test_stiffness_test_is_dop853f():
 def test_hlamb_is_the_norm_ratio():
     """dop_hlamb = |h| ||f1 - f12|| / ||y1 - Y12|| (to round-off: numpy's norms sum otherwise);
     no estimate when y1 = Y12."""
-    from gyro_sim.core import dop853_kernels as dk
+    from gyro_sim.integrators.dop853 import kernels as dk
 
     rng = np.random.default_rng(2)
     y1, Y12, f1, f12 = rng.normal(size=(4, 9))
@@ -261,7 +261,7 @@ def test_spectral_radius_kernel():
     may order its operations otherwise): a random matrix, a rotation-like one (+-i w, the
     gyroscopic case), a non-finite one; above EIG_MAX_SIZE the power iterations converge to
     a dominant real eigenvalue."""
-    from gyro_sim.core import radau_kernels as rk
+    from gyro_sim.integrators.radau import kernels as rk
 
     handback = np.array([2.0, 1.5, 12.0, 5.95, 50.0, 200.0])
     rng = np.random.default_rng(3)
@@ -288,8 +288,8 @@ def test_hand_back_tests_are_the_rules():
     """auto_nonstiffness_test and auto_cost_test against the rules in auto.py, written out:
     NEEDED steps in a row with h rho < NONSTIFF_HRHO; radau's measured cost above
     COST_MARGIN x dop853's (measured, else 12 rho / 5.95), once its window is full."""
-    from gyro_sim.core import dop853_kernels as dk
-    from gyro_sim.core import radau_kernels as rk
+    from gyro_sim.integrators.dop853 import kernels as dk
+    from gyro_sim.integrators.radau import kernels as rk
 
     handback = np.array([2.0, 1.5, 12.0, 5.95, 200.0, 30.0])
     easy = np.array([np.nan, 0.0, 0.0, 3.0])

@@ -1,4 +1,4 @@
-"""The node's fixed-step method (gyro_sim.core.integrators.choose): rk4 where it is stable at
+"""The node's fixed-step method (gyro_sim.integrators.fixed): rk4 where it is stable at
 the step, gauss4s (gauss4 on a system that is not a chain) where the scene is stiff, and the
 choice checked against a 1 s run."""
 import math
@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from gyro_sim.bench.extreme import load_dict
-from gyro_sim.core.integrators.choose import spectral_radius_estimate, fixed_step_method
-from gyro_sim.core.simulator import SimulationError, Simulator
+from gyro_sim.integrators.fixed import spectral_radius_estimate, fixed_step_method
+from gyro_sim.simulator import SimulationError, Simulator
 
 STEP = 1e-3  # the node's physics step
 CALL = 0.01  # the node's advance calls
@@ -60,9 +60,9 @@ def test_substeps_resolve_the_fast_heavy_top_where_rk4_fails():
     precession (eq 88, THEORY.md sec. 4) to 1e-4 rad over 1 s."""
     from gyro_sim.bench.accuracy import precession_exact
     from gyro_sim.bench.spin_sweep import heavy_top
-    from gyro_sim.core.integrators.choose import SPIN_RESOLVE, fixed_step_choice
-    from gyro_sim.core.model import compile_model
-    from gyro_sim.core.scene_load import load_scene
+    from gyro_sim.integrators.fixed import SPIN_RESOLVE, fixed_step_choice
+    from gyro_sim.dynamics.model import compile_model
+    from gyro_sim.scene.load import load_scene
 
     scene = load_scene(heavy_top(FAST_SPIN))
     c = fixed_step_choice(Simulator(scene, integrator="rk4", step=STEP), STEP)
@@ -78,7 +78,7 @@ def test_substeps_resolve_the_fast_heavy_top_where_rk4_fails():
 
 
 def test_substeps_for_keeps_its_count_within_a_factor_two():
-    from gyro_sim.core.integrators.choose import MAX_SUBSTEPS, substeps_for
+    from gyro_sim.integrators.fixed import MAX_SUBSTEPS, substeps_for
 
     assert substeps_for(1e-3, 0.0) == 1 and substeps_for(1e-3, 100.0) == 1
     assert substeps_for(1e-3, 1e3) == 4 and substeps_for(1e-3, 1e6) == MAX_SUBSTEPS
@@ -93,7 +93,7 @@ def test_substeps_for_keeps_its_count_within_a_factor_two():
 def test_body_rate_bound_bounds_every_body_rate(scene):
     """Against the angular velocities of the compiled outputs (eq 34 there), at states with
     random joint rates: the bound holds and is reached on a chain turning as one body."""
-    from gyro_sim.core.integrators.choose import body_rate_bound
+    from gyro_sim.integrators.fixed import body_rate_bound
 
     sim = Simulator(scene, integrator="rk4", step=STEP, backend="numba")
     m, rng = sim.model, np.random.default_rng(1)
@@ -116,7 +116,7 @@ def test_body_rate_bound_is_exact_on_a_spherical_chain_of_any_length(n):
     round-off, at random joint rates: it does not grow with the chain's length (the sum of
     the joints' rates did: 404 rad/s for 1000 links turning at 3 rad/s)."""
     from gyro_sim.bench.scenes import spherical_chain
-    from gyro_sim.core.integrators.choose import body_rate_bound
+    from gyro_sim.integrators.fixed import body_rate_bound
 
     sim = Simulator(spherical_chain(n, rotors=True), integrator="rk4", step=STEP, backend="numba")
     m, rng = sim.model, np.random.default_rng(n)
@@ -156,7 +156,7 @@ def test_fixed_is_rk4_bit_for_bit_on_a_soft_scene():
 
 def test_fixed_switches_when_a_command_stiffens_the_scene_and_back():
     """A rotation whose rate is the command: soft, then past rk4's limit, then soft again."""
-    from gyro_sim.core.integrators.choose import SceneFixedStep
+    from gyro_sim.integrators.fixed import SceneFixedStep
 
     sys_ = Rotation(100.0)
     sys_.inputs_version = 0
@@ -177,7 +177,7 @@ def test_fixed_switches_when_a_command_stiffens_the_scene_and_back():
 def test_fixed_takes_a_call_again_with_gauss4_when_rk4_blows_up(monkeypatch):
     """The estimate said rk4 (forced here), rk4 overflowed within the call: the call is taken
     again from its start with gauss4, which keeps |y| = 1 to round-off (h w = 5)."""
-    from gyro_sim.core.integrators import choose
+    from gyro_sim.integrators import fixed as choose
 
     monkeypatch.setattr(choose, "_choice", lambda *a, **k: choose.Choice("rk4", 1, "forced", 0.0))
     integ = choose.SceneFixedStep(Rotation(5000.0), step=STEP)
@@ -200,7 +200,7 @@ def test_the_implicit_rung_by_chain_length():
     """gauss4s on a chain up to IMPLICIT_MAX_BODIES (where it holds 1 kHz), gauss4 on a longer
     one and on a system that is not a chain; the start's choice names the same method."""
     from gyro_sim.bench.scenes import spherical_chain
-    from gyro_sim.core.integrators import choose
+    from gyro_sim.integrators import fixed as choose
 
     for n, expect in ((choose.IMPLICIT_MAX_BODIES, "gauss4s"), (choose.IMPLICIT_MAX_BODIES + 1, "gauss4")):
         sim = Simulator(spherical_chain(n), integrator="fixed", step=STEP)
@@ -220,7 +220,7 @@ class Watched(Rotation):
 
 
 def test_fixed_retakes_a_call_that_breaks_the_energy_balance_with_gauss4():
-    from gyro_sim.core.integrators.choose import SceneFixedStep
+    from gyro_sim.integrators.fixed import SceneFixedStep
 
     sys_ = Watched(1000.0)  # h |lambda| = 1: rk4 is stable here, not accurate
     integ = SceneFixedStep(sys_, step=STEP)
@@ -233,8 +233,8 @@ def test_fixed_retakes_a_call_that_breaks_the_energy_balance_with_gauss4():
 
 
 def test_fixed_rescues_a_call_both_fixed_step_methods_fail_with_dop853(monkeypatch):
-    from gyro_sim.core.integrators.base import IntegrationError
-    from gyro_sim.core.integrators.choose import RESCUE, SceneFixedStep
+    from gyro_sim.integrators.base import IntegrationError
+    from gyro_sim.integrators.fixed import RESCUE, SceneFixedStep
 
     integ = SceneFixedStep(Rotation(100.0), step=STEP)
 
@@ -317,7 +317,7 @@ def test_warm_up_runs_both_methods_and_leaves_no_trace():
 
 def test_diagnostics_say_the_method_and_its_substeps():
     from gyro_sim.bench.spin_sweep import heavy_top
-    from gyro_sim.io.messages import dynamics_values
+    from gyro_sim.msgs.messages import dynamics_values
 
     sim = Simulator(heavy_top(1e3), integrator="fixed", step=STEP)
     sim.advance(CALL)

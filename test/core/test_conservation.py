@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from gyro_sim import Simulator, load_scene
-from gyro_sim.core.invariants import conserved
+from gyro_sim.dynamics.invariants import conserved
 from gyro_sim.paths import NOT_SCENES
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from gyro_sim import Simulator, load_scene
-from gyro_sim.core import dynamics as dyn
-from gyro_sim.core.invariants import conserved
+from gyro_sim.dynamics import reference as dyn
+from gyro_sim.dynamics.invariants import conserved
 
 from .chains import random_chain
 
@@ -47,7 +47,7 @@ def _momenta(sim):
     """Total linear momentum and angular momentum about O^1 (fixed), from the state."""
     m = sim.model
     d = sim._kinematics()
-    from gyro_sim.core.dynamics import cross, lam, matvec
+    from gyro_sim.dynamics.reference import cross, lam, matvec
 
     lam_w, _ = lam(m, d, sim._p, None)
     ang = matvec(d.J, d.w) + cross(d.h, d.v_o)

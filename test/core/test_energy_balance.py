@@ -74,7 +74,7 @@ def test_work_is_moment_times_angle_and_resets():
 
 def test_scenes_without_conserved_energy_report_no_balance():
     """A moving base does work of its own: no balance is claimed there."""
-    from gyro_sim.core.invariants import conserved
+    from gyro_sim.dynamics.invariants import conserved
 
     has = {}
     for name in ("hinge_chain", "vibrating_base", "speed_rotor_top"):

@@ -1,4 +1,4 @@
-"""The numba backend (gyro_sim.core.fast, FastChainODE) against the numpy reference (ChainODE).
+"""The numba backend (gyro_sim.dynamics.kernel, FastChainODE) against the numpy reference (ChainODE).
 
 Same equations, a different algorithm (articulated-body recursion about each joint point
 instead of a composite-inertia matrix about the origin): the results must agree to
@@ -12,16 +12,12 @@ import pytest
 
 from gyro_sim import load_scene
 from gyro_sim.bench.scenes import spherical_chain
-from gyro_sim.core import dynamics as dyn
-from gyro_sim.core import fast
-from gyro_sim.core.integrators import make_integrator
-from gyro_sim.core.model import compile_model, initial_state
-from gyro_sim.core.system import (
-    BACKENDS,
-    ChainODE,
-    FastChainODE,
-    heavy_subtree_ratio,
-    make_system,
+from gyro_sim.dynamics import reference as dyn
+from gyro_sim.dynamics import kernel as fast
+from gyro_sim.integrators import make_integrator
+from gyro_sim.dynamics.model import compile_model, initial_state
+from gyro_sim.dynamics.system import (
+    BACKENDS, ChainODE, FastChainODE, heavy_subtree_ratio, make_system,
 )
 
 from .chains import random_chain
@@ -135,7 +131,7 @@ def test_twins_equal_their_numpy_homes():
     """_quat_to_matrix, _quat_rate, _rotor_angle_rate against rotations.quat_to_matrix,
     rotations.quat_rates, dynamics.torque_rotor_rates, on non-unit quaternions as integrator
     stages pass them."""
-    from gyro_sim.core.rotations import quat_rates, quat_to_matrix
+    from gyro_sim.dynamics.rotations import quat_rates, quat_to_matrix
 
     rng = np.random.default_rng(7)
     q = rng.normal(size=(50, 4))

@@ -1,4 +1,4 @@
-"""gyro_sim.core.fast.rhs_kernel allocates nothing per evaluation on the classic elimination:
+"""gyro_sim.dynamics.kernel.rhs_kernel allocates nothing per evaluation on the classic elimination:
 everything lives in the workspace `fast.workspace(model)` gives (numba's own allocation
 counters, NUMBA_NRT_STATS, in a subprocess: the switch must be set before numba imports).
 Counted inside one compiled call, so that the boxing of the arguments at the Python boundary
@@ -10,7 +10,7 @@ import sys
 
 import pytest
 
-from gyro_sim.core import fast
+from gyro_sim.dynamics import kernel as fast
 
 pytestmark = pytest.mark.skipif(not fast.available(), reason="numba is not installed")
 
@@ -21,8 +21,8 @@ import numpy as np
 from numba.core.runtime import rtsys
 from gyro_sim import load_scene
 from gyro_sim.bench.scenes import spherical_chain
-from gyro_sim.core import fast
-from gyro_sim.core.model import compile_model, initial_state
+from gyro_sim.dynamics import fast
+from gyro_sim.dynamics.model import compile_model, initial_state
 from test.core.chains import random_chain
 
 @numba.njit

@@ -1,5 +1,5 @@
-"""DOP853's compiled advance (gyro_sim.core.fast_dop853) and its Python driver (both on the
-arithmetic of gyro_sim.core.dop853_kernels) against independent references: scipy's
+"""DOP853's compiled advance (gyro_sim.integrators.dop853.loop) and its Python driver (both on the
+arithmetic of gyro_sim.integrators.dop853.kernels) against independent references: scipy's
 `scipy.integrate.DOP853` on the same right-hand side and tolerances, and each other.
 
 How close to scipy, and why:
@@ -33,14 +33,16 @@ import os
 import numpy as np
 import pytest
 
-from gyro_sim.core import dop853_kernels as dk
-from gyro_sim.core import fast, fast_dop853, fast_loop
-from gyro_sim.core.integrators import IntegrationError
-from gyro_sim.core.integrators.dop853 import DOP853
-from gyro_sim.core.model import compile_model, initial_state
-from gyro_sim.core.scene_load import load_scene
-from gyro_sim.core.simulator import Simulator
-from gyro_sim.core.system import FastChainODE
+from gyro_sim.integrators.dop853 import kernels as dk
+from gyro_sim.dynamics import kernel as fast
+from gyro_sim.integrators.dop853 import loop as fast_dop853
+from gyro_sim.integrators.rk4 import loop as fast_loop
+from gyro_sim.integrators import IntegrationError
+from gyro_sim.integrators.dop853.driver import DOP853
+from gyro_sim.dynamics.model import compile_model, initial_state
+from gyro_sim.scene.load import load_scene
+from gyro_sim.simulator import Simulator
+from gyro_sim.dynamics.system import FastChainODE
 
 from .chains import random_chain
 
@@ -318,8 +320,8 @@ def test_two_runs_are_identical():
 def test_a_recorded_dop853_run_resimulates_bit_for_bit(tmp_path):
     """A log recorded with dop853 (compiled) and commands, re-simulated: deviation 0."""
     pytest.importorskip("mcap")
-    from gyro_sim.io.record import record_run
-    from gyro_sim.io.resim import resimulate
+    from gyro_sim.log.record import record_run
+    from gyro_sim.log.resim import resimulate
 
     sim = Simulator(load_scene("hinge_chain"), integrator="dop853", backend="numba")
     schedule = [(0.0, [0.001, 0.0, 0.0]), (0.05, [0.0, 0.02, -0.01])]
@@ -389,7 +391,7 @@ def test_one_compiled_loop_per_process_and_argument_types():
 
 
 def test_controller_constants_are_the_bases():
-    from gyro_sim.core.integrators import base
+    from gyro_sim.integrators import base
 
     assert DOP853.CONTROL.tolist() == [base.SAFETY, base.MIN_FACTOR, base.MAX_FACTOR, -1.0 / 8,
                                        base.MIN_STEP_RELATIVE, base.LAST_STEP_STRETCH]

@@ -1,4 +1,4 @@
-"""FastChainODE.rhs through gyro_sim.core.fast_entry (the kernel's arrays packed in one buffer,
+"""FastChainODE.rhs through gyro_sim.dynamics.entry (the kernel's arrays packed in one buffer,
 four arguments a call) against the kernel called directly with the separate arrays of
 `fast.model_arguments` and `fast.input_arguments` (bit for bit: same kernel, same arrays) and
 against the numpy reference ChainODE.rhs (round-off), before and after holds of new inputs.
@@ -13,10 +13,10 @@ import pytest
 
 from gyro_sim import load_scene
 from gyro_sim.bench.scenes import spherical_chain
-from gyro_sim.core import dynamics as dyn
-from gyro_sim.core import fast, fast_entry
-from gyro_sim.core.model import compile_model, initial_state
-from gyro_sim.core.system import ChainODE, FastChainODE
+from gyro_sim.dynamics import reference as dyn
+from gyro_sim.dynamics import kernel as fast, entry as fast_entry
+from gyro_sim.dynamics.model import compile_model, initial_state
+from gyro_sim.dynamics.system import ChainODE, FastChainODE
 
 from .chains import random_chain
 from .test_fast import BASES, assert_rhs_equal, chain_scene, random_state
@@ -202,9 +202,9 @@ import numpy as np
 from numba.core.runtime import rtsys
 from gyro_sim import load_scene
 from gyro_sim.bench.scenes import spherical_chain
-from gyro_sim.core import dynamics as dyn
-from gyro_sim.core import fast, fast_entry
-from gyro_sim.core.model import compile_model, initial_state
+from gyro_sim.dynamics import dynamics as dyn
+from gyro_sim.dynamics import fast, fast_entry
+from gyro_sim.dynamics.model import compile_model, initial_state
 
 @numba.njit
 def repeat(m, t, y, ydot, buf):

@@ -1,4 +1,4 @@
-"""lie4's arithmetic (gyro_sim.core.lie_kernels) and its compiled march (gyro_sim.core.fast_lie)
+"""lie4's arithmetic (gyro_sim.integrators.lie4.kernels) and its compiled march (gyro_sim.integrators.lie4.loop)
 against independent references: rotations.quat_exp and quat_mul, a textbook CF4 written here
 with numpy on the same right-hand side, and the Python driver of the same method (Lie4._step)
 on the same system, bit for bit; every shipped scene the same after 0.2 s either way.
@@ -12,14 +12,16 @@ import numpy as np
 import pytest
 
 from gyro_sim import load_scene
-from gyro_sim.core import fast, fast_lie, fast_loop
-from gyro_sim.core import lie_kernels as lk
-from gyro_sim.core.integrators import IntegrationError, make_integrator
-from gyro_sim.core.integrators.lie4 import Lie4
-from gyro_sim.core.model import compile_model, initial_state
-from gyro_sim.core.rotations import quat_conj, quat_exp, quat_mul, quat_to_matrix
-from gyro_sim.core.simulator import Simulator
-from gyro_sim.core.system import ChainODE, FastChainODE
+from gyro_sim.dynamics import kernel as fast
+from gyro_sim.integrators.lie4 import loop as fast_lie
+from gyro_sim.integrators.rk4 import loop as fast_loop
+from gyro_sim.integrators.lie4 import kernels as lk
+from gyro_sim.integrators import IntegrationError, make_integrator
+from gyro_sim.integrators.lie4.driver import Lie4
+from gyro_sim.dynamics.model import compile_model, initial_state
+from gyro_sim.dynamics.rotations import quat_conj, quat_exp, quat_mul, quat_to_matrix
+from gyro_sim.simulator import Simulator
+from gyro_sim.dynamics.system import ChainODE, FastChainODE
 from gyro_sim.paths import shipped_scenes
 
 from .chains import random_chain

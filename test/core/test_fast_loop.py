@@ -1,4 +1,4 @@
-"""The compiled fixed-step loop (gyro_sim.core.fast_loop, rk_kernels) against independent
+"""The compiled fixed-step loop (gyro_sim.integrators.rk4.loop, rk_kernels) against independent
 references: a textbook RK4 written here on the same right-hand side, and the Python driver of
 the same method (RK4._step) on the same system, bit for bit."""
 import math
@@ -7,12 +7,13 @@ import numpy as np
 import pytest
 
 from gyro_sim import load_scene
-from gyro_sim.core import fast, fast_loop
-from gyro_sim.core.integrators import IntegrationError, make_integrator
-from gyro_sim.core.integrators.rk4 import RK4
-from gyro_sim.core.model import compile_model, initial_state
-from gyro_sim.core.rk_kernels import erk_stage_state, erk_update
-from gyro_sim.core.system import FastChainODE
+from gyro_sim.dynamics import kernel as fast
+from gyro_sim.integrators.rk4 import loop as fast_loop
+from gyro_sim.integrators import IntegrationError, make_integrator
+from gyro_sim.integrators.rk4.driver import RK4
+from gyro_sim.dynamics.model import compile_model, initial_state
+from gyro_sim.integrators.rk4.kernels import erk_stage_state, erk_update
+from gyro_sim.dynamics.system import FastChainODE
 
 from .chains import random_chain
 

@@ -1,4 +1,4 @@
-"""The compiled snapshot (gyro_sim.core.fast_outputs, Simulator.snapshot on the numba backend)
+"""The compiled snapshot (gyro_sim.dynamics.outputs, Simulator.snapshot on the numba backend)
 against the numpy reference's snapshot of the same state: equal to round-off."""
 import glob
 import os
@@ -6,8 +6,8 @@ import os
 import numpy as np
 import pytest
 
-from gyro_sim.core import fast
-from gyro_sim.core.simulator import Simulator
+from gyro_sim.dynamics import kernel as fast
+from gyro_sim.simulator import Simulator
 
 from .chains import random_chain
 

@@ -1,5 +1,5 @@
-"""Radau's compiled advance (gyro_sim.core.fast_radau) and its Python driver (both on the
-arithmetic of gyro_sim.core.radau_kernels) against independent references: scipy's
+"""Radau's compiled advance (gyro_sim.integrators.radau.loop) and its Python driver (both on the
+arithmetic of gyro_sim.integrators.radau.kernels) against independent references: scipy's
 `scipy.integrate.Radau` on the same right-hand side and tolerances, scipy's LAPACK LU, and
 each other.
 
@@ -43,13 +43,15 @@ import os
 import numpy as np
 import pytest
 
-from gyro_sim.core import fast, fast_loop, fast_radau
-from gyro_sim.core import radau_kernels as rk
-from gyro_sim.core.integrators import IntegrationError
-from gyro_sim.core.integrators import radau as R
-from gyro_sim.core.integrators.radau import Radau
-from gyro_sim.core.scene_load import load_scene
-from gyro_sim.core.simulator import Simulator
+from gyro_sim.dynamics import kernel as fast
+from gyro_sim.integrators.rk4 import loop as fast_loop
+from gyro_sim.integrators.radau import loop as fast_radau
+from gyro_sim.integrators.radau import kernels as rk
+from gyro_sim.integrators import IntegrationError
+from gyro_sim.integrators.radau import driver as R
+from gyro_sim.integrators.radau.driver import Radau
+from gyro_sim.scene.load import load_scene
+from gyro_sim.simulator import Simulator
 
 from .chains import random_chain
 from .test_fast_dop853 import held_system, hinge_pendulum
@@ -281,7 +283,7 @@ def test_method_constants_are_scipys():
         np.testing.assert_allclose(ours, theirs, rtol=1e-15, atol=1e-15)
     assert Radau.MU_REAL == pytest.approx(ra.MU_REAL, rel=1e-15)
     assert Radau.MU_COMPLEX == pytest.approx(ra.MU_COMPLEX, rel=1e-15)
-    from gyro_sim.core.integrators import base
+    from gyro_sim.integrators import base
 
     assert Radau.CONTROL.tolist() == [base.SAFETY, base.MIN_FACTOR, base.MAX_FACTOR, R.NEWTON_MAXITER,
                                       R.RADAU_SLOW_ITER, R.RADAU_SLOW_RATE, R.RADAU_KEEP_STEP,
@@ -448,8 +450,8 @@ def test_warm_up_compiles_and_forgets():
 def test_a_recorded_radau_run_resimulates_bit_for_bit(tmp_path):
     """A log recorded with radau (compiled) and commands, re-simulated: deviation 0."""
     pytest.importorskip("mcap")
-    from gyro_sim.io.record import record_run
-    from gyro_sim.io.resim import resimulate
+    from gyro_sim.log.record import record_run
+    from gyro_sim.log.resim import resimulate
 
     sim = Simulator(load_scene("hinge_chain"), integrator="radau", backend="numba")
     schedule = [(0.0, [0.001, 0.0, 0.0]), (0.05, [0.0, 0.02, -0.01])]
@@ -479,7 +481,7 @@ def test_python_driver_on_the_numpy_reference_agrees():
 def _detection(n, nonstiff_hrho, needed, margin=math.inf):
     """The detection arrays of radau_advance (as Auto builds them): counters, window, cost
     (dop853_kernels), handback, easy (radau_kernels), power."""
-    from gyro_sim.core import dop853_kernels as dk
+    from gyro_sim.integrators.dop853 import kernels as dk
 
     handback = np.array([nonstiff_hrho, margin, 12.0, 5.95, 200.0, 30.0])
     easy = np.array([math.nan, 1.0, 0.0, needed])
@@ -491,7 +493,7 @@ def test_detection_mode_that_never_fires_is_the_plain_loop():
     """The tests of "auto" run after every step (h rho < 0 never holds, the cost margin is
     infinite): the same steps and bits as the plain loop; rho is the final Jacobian's
     (against numpy's eigenvalues); the cost window full, radau's cost measured."""
-    from gyro_sim.core import dop853_kernels as dk
+    from gyro_sim.integrators.dop853 import kernels as dk
 
     system, y0 = held_system(stiff_hinges())
     plain, detecting = (Radau(system, rtol=1e-8, atol=1e-10) for _ in range(2))

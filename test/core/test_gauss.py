@@ -14,15 +14,15 @@ from scipy.integrate import solve_ivp
 from gyro_sim.bench.extreme import load_dict, mass_ratio_chain
 from gyro_sim.bench.scenes import spherical_chain
 from gyro_sim.bench.stability import long_horizon
-from gyro_sim.core import fast
-from gyro_sim.core import gauss_kernels as gk
-from gyro_sim.core.integrators import INTEGRATORS, IntegrationError, make_integrator
-from gyro_sim.core.integrators import gauss
-from gyro_sim.core.integrators.gauss import DENSE_NEWTON_CAP, GMRES_CAP, Gauss4
-from gyro_sim.core.model import compile_model, initial_state
-from gyro_sim.core.scene_load import load_scene
-from gyro_sim.core.simulator import SimulationError, Simulator
-from gyro_sim.core.system import FastChainODE, make_system
+from gyro_sim.dynamics import kernel as fast
+from gyro_sim.integrators.gauss4 import kernels as gk
+from gyro_sim.integrators import INTEGRATORS, IntegrationError, make_integrator
+from gyro_sim.integrators.gauss4 import driver as gauss
+from gyro_sim.integrators.gauss4.driver import DENSE_NEWTON_CAP, GMRES_CAP, Gauss4
+from gyro_sim.dynamics.model import compile_model, initial_state
+from gyro_sim.scene.load import load_scene
+from gyro_sim.simulator import SimulationError, Simulator
+from gyro_sim.dynamics.system import FastChainODE, make_system
 
 from .chains import random_chain
 

@@ -1,4 +1,4 @@
-"""gauss4s and the chain's canonical equations (gyro_sim.core.canonical).
+"""gauss4s and the chain's canonical equations (gyro_sim.dynamics.canonical).
 
 Checked against things independent of the canonical code: the package's own equations
 (ChainODE, through the chain rule of the conversion), the symmetry a Hamiltonian vector field
@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 
 from gyro_sim import load_scene
-from gyro_sim.core.canonical import CanonicalChain
-from gyro_sim.core.integrators import RK4, Gauss4, IntegrationError, make_integrator
-from gyro_sim.core.model import compile_model, initial_state
-from gyro_sim.core.simulator import Simulator
-from gyro_sim.core import fast
-from gyro_sim.core import gauss_kernels as gk
-from gyro_sim.core.system import ChainODE, FastChainODE, make_system
+from gyro_sim.dynamics.canonical import CanonicalChain
+from gyro_sim.integrators import RK4, Gauss4, IntegrationError, make_integrator
+from gyro_sim.dynamics.model import compile_model, initial_state
+from gyro_sim.simulator import Simulator
+from gyro_sim.dynamics import kernel as fast
+from gyro_sim.integrators.gauss4 import kernels as gk
+from gyro_sim.dynamics.system import ChainODE, FastChainODE, make_system
 
 from .chains import random_chain
 from .test_fast import chain_scene, hold_random
@@ -80,7 +80,7 @@ needs_numba = pytest.mark.skipif(not fast.available(), reason="numba is not inst
 def test_compiled_field_and_state_match_numpy(seed, base):
     """fast_canonical's kernels against canonical.py's numpy form, off |q| = 1 and q . p = 0
     too (the O(n) elimination against the dense solve of M)."""
-    from gyro_sim.core.fast_canonical import FastCanonicalChain
+    from gyro_sim.dynamics.canonical_kernel import FastCanonicalChain
 
     model, ode, can = _canonical(seed, base)
     fode = FastChainODE(model)

@@ -8,11 +8,11 @@ import pytest
 
 from gyro_sim.bench.extreme import abrupt_commands, mass_ratio_chain
 from gyro_sim.bench.spin_sweep import double_gyro
-from gyro_sim.core import fast
-from gyro_sim.core import gauss_kernels as gk
-from gyro_sim.core.integrators import IntegrationError
-from gyro_sim.core.integrators.gauss import Gauss4
-from gyro_sim.core.simulator import Simulator
+from gyro_sim.dynamics import kernel as fast
+from gyro_sim.integrators.gauss4 import kernels as gk
+from gyro_sim.integrators import IntegrationError
+from gyro_sim.integrators.gauss4.driver import Gauss4
+from gyro_sim.simulator import Simulator
 
 needs_numba = pytest.mark.skipif(not fast.available(), reason="numba is not installed")
 

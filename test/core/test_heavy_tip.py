@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from gyro_sim.bench.extreme import mass_ratio_chain
-from gyro_sim.core import fast
-from gyro_sim.core.model import compile_model, initial_state
-from gyro_sim.core.scene_load import load_scene
-from gyro_sim.core.system import ChainODE, FastChainODE
+from gyro_sim.dynamics import kernel as fast
+from gyro_sim.dynamics.model import compile_model, initial_state
+from gyro_sim.scene.load import load_scene
+from gyro_sim.dynamics.system import ChainODE, FastChainODE
 
 from .extended_precision import mass_ratio_accelerations
 
@@ -99,8 +99,8 @@ import numpy as np
 sys.path.insert(0, sys.argv[1])
 from extended_precision import accelerations
 from gyro_sim.bench.scenes import spherical_chain
-from gyro_sim.core.model import compile_model, initial_state
-from gyro_sim.core.scene_load import load_scene
+from gyro_sim.dynamics.model import compile_model, initial_state
+from gyro_sim.scene.load import load_scene
 model = compile_model(load_scene(spherical_chain(int(sys.argv[2]))))
 rng = np.random.default_rng(7)
 y = initial_state(model)

@@ -1,4 +1,4 @@
-"""The integrators (gyro_sim.core.integrators): tableau properties, measured convergence
+"""The integrators (gyro_sim.integrators): tableau properties, measured convergence
 orders, the rigid-body invariants, stiffness, dense output and the `advance` contract.
 
 Test systems are defined here: a linear, time-dependent ODE with an exact solution; a
@@ -13,17 +13,11 @@ import math
 import numpy as np
 import pytest
 
-from gyro_sim.core import integrators as integ
-from gyro_sim.core.integrators import (
-    DOP853,
-    INTEGRATORS,
-    RK4,
-    IntegrationError,
-    Lie4,
-    Radau,
-    make_integrator,
+from gyro_sim import integrators as integ
+from gyro_sim.integrators import (
+    DOP853, INTEGRATORS, RK4, IntegrationError, Lie4, Radau, make_integrator,
 )
-from gyro_sim.core.rotations import quat_exp, quat_mul, quat_to_matrix
+from gyro_sim.dynamics.rotations import quat_exp, quat_mul, quat_to_matrix
 
 NAMES = ("rk4", "dop853", "radau", "lie4", "gauss4")
 FIXED = ("rk4", "lie4", "gauss4")

@@ -1,4 +1,4 @@
-"""Chains of Lagrange gyroscopes (gyro_sim.core.lagrange): eqs (60)-(88) of the paper.
+"""Chains of Lagrange gyroscopes (gyro_sim.analytic.lagrange): eqs (60)-(88) of the paper.
 
 - the composed constants A^k, B^k, m^k, c^k, s^k, lambda^k (eqs 30, 31, 61-64);
 - regular precessions (eq 88 and its general-n form) in an independent engine (Pinocchio,
@@ -22,12 +22,12 @@ import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # test/: the oracles package
 
-from gyro_sim.core import lagrange as lg  # noqa: E402
-from gyro_sim.core import rotations as rot  # noqa: E402
-from gyro_sim.core.scene_load import load_scene  # noqa: E402
+from gyro_sim.analytic import lagrange as lg  # noqa: E402
+from gyro_sim.dynamics import rotations as rot  # noqa: E402
+from gyro_sim.scene.load import load_scene  # noqa: E402
 from oracles.pin_chain import PinChain  # noqa: E402
 
-from gyro_sim.core.simulator import Simulator  # noqa: E402
+from gyro_sim.simulator import Simulator  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
 CONFIG = REPO / "config"
@@ -470,7 +470,7 @@ def test_config_yaml_regenerates(fname):
     text = path.read_text(encoding="utf-8")
     expected = lg.shipped_scene_dicts()[fname]
     assert yaml.safe_load(text) == expected, (
-        f"{path} is stale: regenerate with `python -m gyro_sim.core.lagrange config`")
+        f"{path} is stale: regenerate with `python -m gyro_sim.analytic.lagrange config`")
     assert text == lg.scene_yaml(expected, lg._header(fname, lg.SHIPPED_SCENES[fname]))
     # through the loader, from_scene sees the chain the file was generated from
     scene = load_scene(str(path))

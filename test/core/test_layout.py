@@ -1,6 +1,6 @@
-"""The core's layout (issue 8, "Layout review"): its imports form no cycle, the ODE system sits
-between the simulator and the compiled kernels, and no module drives another object's private
-members (the "auto" integrator steps its inner methods through their public single step).
+"""The package's layout: its imports form no cycle, the ODE system sits between the simulator
+and the compiled kernels, and no core module drives another object's private members (the
+"auto" integrator steps its inner methods through their public single step).
 
 Read from the source with `ast`, imports inside functions included: a deferred import is still
 a dependency.
@@ -12,17 +12,20 @@ from pathlib import Path
 
 import pytest
 
-import gyro_sim.core
+import gyro_sim
 
-CORE = Path(gyro_sim.core.__file__).resolve().parent
-PACKAGE = "gyro_sim.core"
+ROOT = Path(gyro_sim.__file__).resolve().parent
+PACKAGE = "gyro_sim"
+#: the ROS-free core: scene, dynamics, closed forms, integrators and the Simulator over them
+CORE = ("gyro_sim.scene", "gyro_sim.dynamics", "gyro_sim.analytic", "gyro_sim.integrators",
+        "gyro_sim.simulator", "gyro_sim.snapshot")
 
 
 def _modules() -> dict[str, Path]:
-    """Dotted name -> file of every module of gyro_sim.core (packages by their __init__)."""
+    """Dotted name -> file of every module of gyro_sim (packages by their __init__)."""
     out = {}
-    for path in sorted(CORE.rglob("*.py")):
-        parts = path.relative_to(CORE).with_suffix("").parts
+    for path in sorted(ROOT.rglob("*.py")):
+        parts = path.relative_to(ROOT).with_suffix("").parts
         if parts[-1] == "__init__":
             parts = parts[:-1]
         out[".".join((PACKAGE, *parts))] = path
@@ -30,7 +33,7 @@ def _modules() -> dict[str, Path]:
 
 
 def import_graph() -> dict[str, set[str]]:
-    """Module -> the gyro_sim.core modules it imports (anywhere in its source)."""
+    """Module -> the gyro_sim modules it imports (anywhere in its source)."""
     modules = _modules()
     graph = {}
     for name, path in modules.items():
@@ -91,31 +94,42 @@ def test_cycle_finder_finds_cycles():
 
 def test_graph_sees_relative_and_deferred_imports():
     g = import_graph()
-    assert "gyro_sim.core.integrators.dop853" in g["gyro_sim.core.integrators.auto"]  # from .dop853
-    assert "gyro_sim.core.lie_kernels" in g["gyro_sim.core.integrators.lie4"]  # from ..lie_kernels
-    assert "gyro_sim.core.dynamics" in g["gyro_sim.core.system"]  # from . import dynamics
-    assert "gyro_sim.core.scene_load" in g["gyro_sim.core.simulator"]  # inside Simulator.__init__
+    assert "gyro_sim.integrators.dop853.driver" in g["gyro_sim.integrators.auto"]
+    assert "gyro_sim.integrators.lie4.kernels" in g["gyro_sim.integrators.lie4.driver"]
+    assert "gyro_sim.dynamics.reference" in g["gyro_sim.dynamics.system"]
+    assert "gyro_sim.scene.load" in g["gyro_sim.simulator"]  # inside Simulator.__init__
 
 
-def test_core_imports_have_no_cycle():
+def test_package_imports_have_no_cycle():
     assert find_cycle(import_graph()) is None
 
 
 def test_simulator_system_kernels_in_one_direction():
-    """simulator -> system -> fast: the kernels know neither the system nor the simulator,
-    and the integrators know the system only by its protocol (no runtime import)."""
+    """simulator -> system -> kernel: the kernels know neither the system nor the simulator,
+    and the integrators' drivers know the system only by its protocol (no runtime import);
+    only their compiled loops call the kernel."""
     g = import_graph()
-    core = PACKAGE + "."
-    assert core + "system" in g[core + "simulator"]
-    assert core + "fast" in g[core + "system"]
-    assert not g[core + "fast"] & {core + "system", core + "simulator"}
-    assert core + "fast" not in g[core + "simulator"]  # the simulator asks the system module
-    integrators = [m for m in g if m.startswith(core + "integrators")]
-    # the package, base, one module per method, choose, and gauss_canonical (gauss4 on the
-    # canonical form of the chain, gyro_sim.core.canonical: a system, not a kernel)
-    assert len(integrators) == 10
-    for m in integrators:
-        assert not g[m] & {core + "simulator", core + "fast", core + "dynamics"}, m
+    simulator, system, kernel = "gyro_sim.simulator", "gyro_sim.dynamics.system", "gyro_sim.dynamics.kernel"
+    assert system in g[simulator]
+    assert kernel in g[system]
+    assert not g[kernel] & {system, simulator}
+    assert kernel not in g[simulator]  # the simulator asks the system module
+    drivers = [m for m in g if m.startswith("gyro_sim.integrators.") and not m.endswith((".loop", ".kernels"))
+               and m != "gyro_sim.warmup"]
+    assert "gyro_sim.integrators.rk4.driver" in drivers and "gyro_sim.integrators.gauss4.gauss4s" in drivers
+    for m in drivers:
+        assert not g[m] & {simulator, kernel, "gyro_sim.dynamics.reference"}, m
+
+
+def test_core_does_not_import_the_outer_packages():
+    """The core (scene, dynamics, integrators, simulator) imports nothing of ros, log, msgs,
+    viz, sweep, bench or cli."""
+    g = import_graph()
+    outer = ("gyro_sim.ros", "gyro_sim.log", "gyro_sim.msgs", "gyro_sim.viz", "gyro_sim.sweep",
+             "gyro_sim.bench", "gyro_sim.cli")
+    for m, deps in g.items():
+        if m.startswith(CORE):
+            assert not [d for d in deps if d.startswith(outer)], m
 
 
 def _private_reads(path: Path) -> list[str]:
@@ -140,6 +154,6 @@ def test_private_read_detector_sees_them(tmp_path):
     assert _private_reads(p) == ["m.py:2: inner._K"]
 
 
-@pytest.mark.parametrize("name", sorted(_modules()))
-def test_no_module_reads_another_objects_private_members(name):
+@pytest.mark.parametrize("name", sorted(m for m in _modules() if m.startswith(CORE)))
+def test_no_core_module_reads_another_objects_private_members(name):
     assert _private_reads(_modules()[name]) == []

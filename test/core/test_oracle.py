@@ -18,8 +18,8 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # test/: the oracles package
 
-from gyro_sim.core import rotations as rot  # noqa: E402
-from gyro_sim.core.scene import Base, Body, Initial, Joint, Rotor, Scene  # noqa: E402
+from gyro_sim.dynamics import rotations as rot  # noqa: E402
+from gyro_sim.scene.records import Base, Body, Initial, Joint, Rotor, Scene  # noqa: E402
 from oracles.pin_chain import PinChain  # noqa: E402
 
 from gyro_sim import Simulator, load_scene  # noqa: E402

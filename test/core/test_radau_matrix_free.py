@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from gyro_sim.bench.scenes import spherical_chain
-from gyro_sim.core.integrators import radau as R
-from gyro_sim.core.simulator import Simulator
+from gyro_sim.integrators.radau import driver as R
+from gyro_sim.simulator import Simulator
 
 
 @pytest.mark.parametrize("scene", ["hinge_chain", "heavy_top", "stiff_fast_rotor"])

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 import yaml
 
-from gyro_sim.core.scene import Scene
-from gyro_sim.core.scene_load import SceneError, load_scene
+from gyro_sim.scene.records import Scene
+from gyro_sim.scene.load import SceneError, load_scene
 from gyro_sim.paths import NOT_SCENES
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"
@@ -641,7 +641,7 @@ def test_the_name_limit_is_within_what_ros_accepts_for_a_wrench_topic():
     rclpy = pytest.importorskip("rclpy")
     from rclpy.validate_full_topic_name import validate_full_topic_name
 
-    from gyro_sim.core.scene_load import MAX_NAME_LENGTH
+    from gyro_sim.scene.load import MAX_NAME_LENGTH
 
     validate_full_topic_name("/gyro_sim/wrench/" + "a" * MAX_NAME_LENGTH)
     with pytest.raises(rclpy.exceptions.InvalidTopicNameException):

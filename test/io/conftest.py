@@ -28,7 +28,7 @@ def gyro_sim(*args, timeout=120, **kw):
 def recorded(tmp_path_factory):
     """(path, RunRecord) of a 0.4 s hinge_chain run with commands, published at 50 Hz."""
     from gyro_sim import Simulator, load_scene
-    from gyro_sim.io.record import record_run
+    from gyro_sim.log.record import record_run
 
     path = tmp_path_factory.mktemp("log") / "run.mcap"
     sim = Simulator(load_scene(SCENE))

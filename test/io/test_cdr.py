@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gyro_sim.core.snapshot import Snapshot
-from gyro_sim.io import messages as M
-from gyro_sim.io import msgdefs
+from gyro_sim.snapshot import Snapshot
+from gyro_sim.msgs import messages as M
+from gyro_sim.msgs import msgdefs
 
 
 def encoder(msgtype):

@@ -9,8 +9,8 @@ import time
 
 import pytest
 
-from gyro_sim.io.mcap_log import LogError, iter_messages, read_info
-from gyro_sim.io.resim import MAX_RESIM_STEPS, resimulate
+from gyro_sim.log.mcap_log import LogError, iter_messages, read_info
+from gyro_sim.log.resim import MAX_RESIM_STEPS, resimulate
 
 from .conftest import gyro_sim
 from .crafted import rewrite
@@ -102,7 +102,7 @@ def test_a_joint_state_stamped_far_in_the_future_cannot_hang_resimulation(record
 
 
 def test_replay_imports_only_message_packages(monkeypatch):
-    from gyro_sim.io import replay
+    from gyro_sim.ros import replay
 
     imported = []
 

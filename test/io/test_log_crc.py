@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from gyro_sim.io.mcap_log import LogError, iter_messages, read_info
-from gyro_sim.io.recover import recover
+from gyro_sim.log.mcap_log import LogError, iter_messages, read_info
+from gyro_sim.log.recover import recover
 
 from .conftest import CHUNK, DURATION, PUBLISH_RATE, SCENE, SCHEDULE, gyro_sim, rosbags_messages
 from .crafted import chunk_offsets, flip, truncate
@@ -19,7 +19,7 @@ CRC_FIELD = 9 + 8 + 8 + 8
 def chunked(tmp_path_factory):
     """A recorded log flushed every millisecond of wall time: many chunks."""
     from gyro_sim import Simulator, load_scene
-    from gyro_sim.io.record import record_run
+    from gyro_sim.log.record import record_run
 
     path = tmp_path_factory.mktemp("chunked") / "run.mcap"
     record_run(Simulator(load_scene(SCENE)), path, duration=DURATION, chunk=CHUNK, publish_rate=PUBLISH_RATE,

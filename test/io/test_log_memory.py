@@ -1,14 +1,14 @@
 """A long recording does not grow the writer's memory by the summary's chunk indexes: with a
 chunk every 0.2 s, mcap's own ChunkIndex objects (about 1.3 kB each) would cost about 23 MB
-per hour; gyro_sim's writer packs them (gyro_sim.io.mcap_log._PackedChunkIndexes)."""
+per hour; gyro_sim's writer packs them (gyro_sim.log.mcap_log._PackedChunkIndexes)."""
 from __future__ import annotations
 
 import tracemalloc
 from pathlib import Path
 
 from gyro_sim import load_scene
-from gyro_sim.io import messages as M
-from gyro_sim.io.mcap_log import LogWriter
+from gyro_sim.msgs import messages as M
+from gyro_sim.log.mcap_log import LogWriter
 
 CHUNKS = 2000
 CHANNELS = 12

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import pytest
 
-from gyro_sim.io import messages as M
-from gyro_sim.io import msgdefs
+from gyro_sim.msgs import messages as M
+from gyro_sim.msgs import msgdefs
 
 TYPES = sorted(set(M.topic_types(["a"]).values()))
 

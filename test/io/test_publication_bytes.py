@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gyro_sim.core.snapshot import Snapshot
-from gyro_sim.io import messages as M
+from gyro_sim.snapshot import Snapshot
+from gyro_sim.msgs import messages as M
 
 
 def snapshot(rng, bodies, joints) -> Snapshot:

@@ -9,9 +9,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from gyro_sim.core import fast
-from gyro_sim.core.simulator import SimulationError, Simulator
-from gyro_sim.io import messages as M
+from gyro_sim.dynamics import kernel as fast
+from gyro_sim.simulator import SimulationError, Simulator
+from gyro_sim.msgs import messages as M
 
 BACKENDS = ["numpy"] + (["numba"] if fast.available() else [])
 #: spherical joints, hinges and an actuated torque rotor; a speed rotor; a free base with rotors;

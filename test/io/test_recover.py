@@ -10,10 +10,10 @@ import time
 
 import pytest
 
-from gyro_sim.io import messages as M
-from gyro_sim.io.mcap_log import LogError, read_info
-from gyro_sim.io.recover import recover
-from gyro_sim.io.safe_paths import OutputError
+from gyro_sim.msgs import messages as M
+from gyro_sim.log.mcap_log import LogError, read_info
+from gyro_sim.log.recover import recover
+from gyro_sim.safe_paths import OutputError
 
 from .conftest import ROOT, gyro_sim, rosbags_messages
 
@@ -24,7 +24,7 @@ KILL_AFTER = 2.0
 WRITER = f"""
 import sys
 from gyro_sim import Simulator, load_scene
-from gyro_sim.io.record import record_run
+from gyro_sim.log.record import record_run
 sim = Simulator(load_scene("config/chain_4.yaml"), integrator="rk4", step=2e-3)
 def progress(t, total):
     print(t, flush=True)

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from gyro_sim import Simulator, load_scene
-from gyro_sim.io import messages as M
-from gyro_sim.io.mcap_log import iter_messages
-from gyro_sim.io.record import record_run
+from gyro_sim.msgs import messages as M
+from gyro_sim.log.mcap_log import iter_messages
+from gyro_sim.log.record import record_run
 
 from .conftest import ROOT
 

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from gyro_sim import load_scene
-from gyro_sim.io import messages as M
-from gyro_sim.io.mcap_log import iter_messages
+from gyro_sim.msgs import messages as M
+from gyro_sim.log.mcap_log import iter_messages
 
 from .conftest import SCENE, gyro_sim
 

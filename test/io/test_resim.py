@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 
 from gyro_sim import Simulator, load_scene
-from gyro_sim.io.mcap_log import LogWriter, iter_messages, read_info
-from gyro_sim.io import messages as M
-from gyro_sim.io.record import LogRecorder, record_run, run_params
-from gyro_sim.io.resim import resimulate
+from gyro_sim.log.mcap_log import LogWriter, iter_messages, read_info
+from gyro_sim.msgs import messages as M
+from gyro_sim.log.record import LogRecorder, record_run, run_params
+from gyro_sim.log.resim import resimulate
 
 from .conftest import DURATION, PUBLISH_RATE, SCENE, SCHEDULE, gyro_sim
 

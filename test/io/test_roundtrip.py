@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from gyro_sim import Simulator, load_scene
-from gyro_sim.io import messages as M
-from gyro_sim.io.mcap_log import LogError, LogWriter, iter_messages, read_info
-from gyro_sim.io.record import LogRecorder, run_params
-from gyro_sim.io.urdf import urdf
+from gyro_sim.msgs import messages as M
+from gyro_sim.log.mcap_log import LogError, LogWriter, iter_messages, read_info
+from gyro_sim.log.record import LogRecorder, run_params
+from gyro_sim.scene.urdf import urdf
 
 from .conftest import SCENE
 
@@ -68,7 +68,7 @@ def _quat(q_wxyz) -> dict:
 
 def expected_messages(sim, t_ns: int) -> dict:
     """What each message must hold, written here from the Simulator's public API (SPEC.md),
-    independently of gyro_sim.io.messages."""
+    independently of gyro_sim.msgs.messages."""
     hdr = {"stamp": _stamp(t_ns), "frame_id": ""}
     js = sim.joint_states()
     out = {M.JOINT_STATES: {"header": hdr, "name": list(js.name), "position": list(js.position),

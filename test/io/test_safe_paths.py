@@ -7,8 +7,8 @@ import stat
 import pytest
 
 from gyro_sim import load_scene
-from gyro_sim.io.mcap_log import LogWriter, read_info
-from gyro_sim.io.safe_paths import OutputError, check_output
+from gyro_sim.log.mcap_log import LogWriter, read_info
+from gyro_sim.safe_paths import OutputError, check_output
 
 from .conftest import SCENE, gyro_sim
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from gyro_sim import load_scene
-from gyro_sim.io.urdf import quat_z_to, rpy_z_to, urdf
+from gyro_sim.scene.urdf import quat_z_to, rpy_z_to, urdf
 
 from .conftest import ROOT
 

@@ -1,6 +1,6 @@
 """A chain of gyrostats in Pinocchio: the independent engine gyro_sim is checked against.
 
-Nothing here shares code with gyro_sim's dynamics. The scene (gyro_sim.core.scene records)
+Nothing here shares code with gyro_sim's dynamics. The scene (gyro_sim.scene.records records)
 is compiled into a `pinocchio.Model` in the most literal way:
 
 - body k is a pinocchio body on the joint at O^k: spherical -> ``JointModelSpherical``
@@ -36,8 +36,8 @@ import numpy as np
 import pinocchio as pin
 from scipy.integrate import solve_ivp
 
-from gyro_sim.core import rotations as rot
-from gyro_sim.core.scene import Scene
+from gyro_sim.dynamics import rotations as rot
+from gyro_sim.scene.records import Scene
 
 RTOL = 1e-12
 ATOL = 1e-12

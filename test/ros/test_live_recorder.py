@@ -6,9 +6,9 @@ from __future__ import annotations
 import pytest
 
 from gyro_sim import Simulator, load_scene
-from gyro_sim.io import messages as M
-from gyro_sim.io.mcap_log import DEFAULT_FLUSH_PERIOD, iter_messages
-from gyro_sim.io.safe_paths import OutputError
+from gyro_sim.msgs import messages as M
+from gyro_sim.log.mcap_log import DEFAULT_FLUSH_PERIOD, iter_messages
+from gyro_sim.safe_paths import OutputError
 from gyro_sim.ros.recorder import SEND_PERIOD, WRITER_NICE, LiveRecorder
 
 

@@ -22,7 +22,7 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 from std_srvs.srv import SetBool, Trigger  # noqa: E402
 
-from gyro_sim.core.simulator import Simulator  # noqa: E402
+from gyro_sim.simulator import Simulator  # noqa: E402
 from gyro_sim.paths import find_scene  # noqa: E402
 
 from .helpers import (  # noqa: E402
@@ -323,7 +323,7 @@ def test_wrench_publishers_add_no_event_waitables_to_the_executor(tmp_path):
 
     import rclpy
 
-    from gyro_sim.io import messages as M
+    from gyro_sim.msgs import messages as M
     from gyro_sim.ros.outputs import Outputs
 
     os.environ["ROS_LOG_DIR"] = str(tmp_path)

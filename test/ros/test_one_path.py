@@ -23,8 +23,8 @@ rr = pytest.importorskip("rerun", reason="the view needs rerun-sdk (pip install 
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
-from gyro_sim.io import messages as M  # noqa: E402
-from gyro_sim.io.mcap_log import iter_messages, read_info  # noqa: E402
+from gyro_sim.msgs import messages as M  # noqa: E402
+from gyro_sim.log.mcap_log import iter_messages, read_info  # noqa: E402
 
 from .helpers import DISCOVERY_TIMEOUT, Client, NodeProcess, new_domain_id, ros_env, wait_for  # noqa: E402
 

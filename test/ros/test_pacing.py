@@ -8,7 +8,7 @@ import time
 import numpy as np
 import pytest
 
-from gyro_sim.core.simulator import Simulator
+from gyro_sim.simulator import Simulator
 from gyro_sim.paths import find_scene
 from gyro_sim.ros.loop import Request, SimLoop, check_command
 from gyro_sim.ros.pacing import Floor, Pacer, chunk_steps, realtime_priority

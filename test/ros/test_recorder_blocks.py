@@ -15,8 +15,8 @@ from pathlib import Path
 import pytest
 
 from gyro_sim import Simulator, load_scene
-from gyro_sim.io import messages as M
-from gyro_sim.io.mcap_log import iter_messages
+from gyro_sim.msgs import messages as M
+from gyro_sim.log.mcap_log import iter_messages
 from gyro_sim.ros import recorder as R
 from gyro_sim.ros.recorder import LiveRecorder
 
@@ -104,7 +104,7 @@ def test_partial_pipe_writes_are_completed():
 _KILLED = r"""
 import sys, time
 from gyro_sim import Simulator, load_scene
-from gyro_sim.io import messages as M
+from gyro_sim.log import messages as M
 from gyro_sim.ros.recorder import LiveRecorder, SEND_PERIOD
 sim = Simulator(load_scene("hinge_chain"))
 pub = M.Publication(sim.model.names)
@@ -149,7 +149,7 @@ def test_sigkill_leaves_a_complete_log(tmp_path):
 
 
 def test_an_existing_log_is_refused_in_the_node(tmp_path):
-    from gyro_sim.io.safe_paths import OutputError
+    from gyro_sim.safe_paths import OutputError
 
     path = tmp_path / "kept.mcap"
     path.write_bytes(b"keep me")

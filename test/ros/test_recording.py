@@ -80,9 +80,9 @@ def test_signal_during_recording_leaves_a_complete_log(tmp_path, sig):
         m = deserialize_message(raw, JointState)
         assert logged[stamp_ns(m)] == raw
 
-    # the log keeps the re-simulation contract (gyro_sim.io.record): the core, fed the recorded
+    # the log keeps the re-simulation contract (gyro_sim.log.record): the core, fed the recorded
     # commands and the reset, reproduces every logged joint state bit for bit
-    from gyro_sim.io import resim
+    from gyro_sim.log import resim
     r = resim.resimulate(log)
     assert r.compared > 20 and r.resets == 1 and r.commands > 0
     assert r.max_deviation == 0.0, r.report()

@@ -1,0 +1,1333 @@
+"""The chain dynamics compiled with numba: an O(n) articulated-body recursion (THEORY.md sec. 5).
+
+Kernels only. `rhs_kernel` computes what :meth:`gyro_sim.dynamics.system.ChainODE.rhs` computes
+(eqs 34-54 solved for u', the quaternion derivatives, the torque-rotor angle rates of eqs
+18-19 and 29), but in one compiled call instead of some hundred numpy calls: the numpy path
+costs ~150 us of call overhead per evaluation for any short chain, the kernel a few
+microseconds. :class:`gyro_sim.dynamics.system.FastChainODE` is the ODE system built on it
+(`model_arguments`, `input_arguments` and `workspace` give the kernel's arguments).
+
+Same equations, same velocity basis, state layout and signs as :mod:`gyro_sim.dynamics.model` and
+:mod:`gyro_sim.dynamics.reference` (world components; spherical joints move with the relative
+angular velocity in world components). Two things differ, neither visible in the results
+beyond round-off (test/core/test_fast.py):
+
+- the spatial quantities of body k are taken about its own joint point O^k (world axes)
+  instead of the world origin, so neighbouring bodies differ by the translation s^k only
+  and no quantity grows with the distance from the origin;
+- the closure rows are solved by the articulated-body algorithm (Featherstone, "Rigid Body
+  Dynamics Algorithms", Springer 2008, Table 7.1) instead of forming the composite-inertia
+  matrix M (O(n^2)) and solving with it (O(n^3)): the joints are eliminated from the tip to
+  the base, then u' is recovered from the base to the tip, O(n). A spherical joint
+  transmits no moment (eq 44), so what passes through it is a 3x3 apparent mass.
+
+The articulated inertias are kept exactly symmetric: their antisymmetric round-off grows
+geometrically along a chain in this recursion (x2.5 per link on `spherical_chain`, ~1e-5 at
+n = 20, O(1) at n = 30 before the fix), while symmetric round-off does not.
+
+Pipeline of one evaluation (`rhs_kernel`), all about O^k in world axes:
+    positions    y        -> R^k, s^k, m^k c^k, A^k (world), hinge axes e^k   (eqs 30, 50)
+    velocities   y, t     -> w^k, v(O^k), joint biases c^k = S_k' u_k         (eqs 34, 50, 53)
+    bias forces  w, v, t  -> spatial inertias, forces at u' = 0               (eqs 29, 31, 36-39, 58)
+    ABA          I, p, c  -> u'                                               (eqs 44, 51, 54)
+    y'           u', w    -> quaternion rates, phi', u', rotor angle rates    (eqs 18-19)
+
+Nothing is allocated per evaluation (test/core/test_fast_alloc.py): every intermediate lives in
+the workspace `workspace(model)` gives, viewed by `block2`/`block3`; 3-vectors, the spherical
+elimination (3 x 3 blocks of J, H, M) and the forward sweep's acceleration are scalars, so that
+LLVM keeps them in registers. Where a product meets a known zero (a cross-product matrix) it is
+left out: the remaining terms are added in the same order, so the results are bit for bit those
+of the full products.
+
+Reactions (eqs 40, 48) are outputs and stay on the numpy path (`FastChainODE.rhs(t, y,
+out=ev)` delegates to the `ChainODE` it holds).
+
+Small formulas have their numpy home elsewhere and a scalar twin here, written in the same
+operations (the kernel inlines it; test/core/test_fast.py checks the twins against their
+homes): `_quat_to_matrix` = :func:`gyro_sim.dynamics.rotations.quat_to_matrix`, `_quat_rate` =
+:func:`gyro_sim.dynamics.rotations.quat_rates`, `_rotor_angle_rate` =
+:func:`gyro_sim.dynamics.reference.torque_rotor_rates`. They stay in this file because numba's
+disk cache only notices edits of the file of the cached function, not of the functions it
+calls from other modules (numba docs, "Cache limitations").
+
+`available()` tells whether numba imports. Without numba this module still imports (its
+kernels stay plain Python, far too slow to use) and `FastChainODE` raises ImportError.
+Compilation: one signature serves every scene (model differences are array contents and
+flags), ~9 s of CPU the first time, then ~0.3 s from numba's disk cache (`cache=True`:
+`__pycache__` beside this file, a user-wide cache directory if that is not writable, or
+NUMBA_CACHE_DIR); any edit of this file invalidates the cache.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from gyro_sim.dynamics.model import Model
+
+try:
+    import numba
+    from numba.core.errors import NumbaError
+except ImportError:  # pragma: no cover - exercised only where numba is missing
+    numba = None
+
+    class NumbaError(Exception):
+        """Stands in for numba's error type where numba is missing (never raised)."""
+
+# base kinds, as the kernel sees them
+BASE_FIXED, BASE_MOVING, BASE_FREE = 0, 1, 2
+#: the largest joint: a free base's three translations with the first body's three rotations
+MAX_JOINT_DOF = 6
+#: columns of a spherical joint (a rotation about O^k)
+SPHERICAL_DOF = 3
+#: per body, floats of the workspace: R 9, s 3, m c 3, A 9, e 3, w 3, v(O) 3, c 6, I 36, p 6,
+#: D^-1 36, lambda 3, lambda' 3
+WORK_PER_BODY = 123
+#: per velocity column: S 6, U 6, U D^-1 6, u 1
+WORK_PER_COLUMN = 19
+#: per torque rotor: its spin p_i(t) (eq 29)
+WORK_PER_ROTOR = 1
+#: fixed scratch of the elimination: a 6 x 6, two 6-vectors, three 3 x 3, the base acceleration 6
+WORK_FIXED = 81
+#: `_aba` takes the square-root form (`_aba_stable`) when the classic elimination passes on to
+#: a body more than this many times its own mass (the subtree's apparent, articulated mass at
+#: the joint); below, the formed projection (`_aba_classic`) loses ~10 eps ratio^2 relative
+#: (9e-12 at 1e2: test/core/test_heavy_tip.py). Chains whose subtrees all weigh less than this
+#: many times their carriers cannot pass on more and skip the check.
+STABLE_ABA_RATIO = 100.0
+
+
+def available() -> bool:
+    """True if numba imports, i.e. `gyro_sim.dynamics.system.FastChainODE` can be built."""
+    return numba is not None
+
+
+def _njit(fn):
+    """Compiled in nopython mode and cached on disk. IEEE arithmetic (no fastmath: results
+    must equal the numpy reference to round-off); numpy's error model (x / 0 -> inf rather
+    than an exception: non-finite states are caught by the integrators and the Simulator).
+
+    Without numba's reference counting (`_nrt=False`): these kernels allocate nothing and
+    return no array, and counting every array argument and view at every call (an atomic
+    increment and decrement each) cost ~20 % of an evaluation. Only `_njit_alloc` functions
+    (the rare heavy-tip path) count. The options are given explicitly: numba lets a callee
+    inherit `nrt` and `forceinline` from its caller where they are not set.
+    """
+    if numba is None:
+        return fn
+    return numba.njit(cache=True, error_model="numpy", _nrt=False, forceinline=False)(fn)
+
+
+def _njit_inline(fn):
+    """`_njit`, always inlined by LLVM into its callers (`forceinline`): the stages of
+    `rhs_kernel` (the elimination `_aba`/`_aba_classic` included) and the small helpers. A call of a stage passed its ~100 words of array
+    structs on the stack (~15 % of an evaluation); inlined, the arrays' shapes and strides are
+    loaded once. Same operations: the results are bit for bit those of the calls."""
+    if numba is None:
+        return fn
+    return numba.njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)(fn)
+
+
+def _njit_alloc(fn):
+    """`_njit` with numba's reference counting, for the functions that allocate (the heavy-tip
+    path of `_aba`, never taken on chains without a subtree STABLE_ABA_RATIO times heavier
+    than its carrier)."""
+    if numba is None:
+        return fn
+    return numba.njit(cache=True, error_model="numpy", _nrt=True, forceinline=False)(fn)
+
+
+# --- small fixed-size helpers (inlined by LLVM) ----------------------------------------------
+@_njit_inline
+def _cross(a, b, out):
+    """out = a x b (3,); out must not alias a or b."""
+    out[0] = a[1] * b[2] - a[2] * b[1]
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
+
+
+@_njit_inline
+def _cross_add(a, b, out):
+    """out += a x b (3,); out must not alias a or b."""
+    out[0] += a[1] * b[2] - a[2] * b[1]
+    out[1] += a[2] * b[0] - a[0] * b[2]
+    out[2] += a[0] * b[1] - a[1] * b[0]
+
+
+@_njit_inline
+def _matvec(A, x, out):
+    """out = A x for A (3, 3), x (3,)."""
+    for i in range(3):
+        out[i] = A[i, 0] * x[0] + A[i, 1] * x[1] + A[i, 2] * x[2]
+
+
+@_njit_inline
+def _dot6(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] + a[4] * b[4] + a[5] * b[5]
+
+
+@_njit_inline
+def _skew(d, D):
+    """D = d x (the matrix of the cross product with d)."""
+    D[0, 0], D[0, 1], D[0, 2] = 0.0, -d[2], d[1]
+    D[1, 0], D[1, 1], D[1, 2] = d[2], 0.0, -d[0]
+    D[2, 0], D[2, 1], D[2, 2] = -d[1], d[0], 0.0
+
+
+@_njit_inline
+def _quat_to_matrix(q0, q1, q2, q3):
+    """R (3, 3) of a quaternion (w, x, y, z) as a tuple of its 9 entries, row by row, divided by
+    |q|^2 as rotations.quat_to_matrix does (a rotation even for the non-unit quaternions of
+    integrator stages)."""
+    nn = q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3
+    return ((q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3) / nn, 2.0 * (q1 * q2 - q0 * q3) / nn,
+            2.0 * (q1 * q3 + q0 * q2) / nn,
+            2.0 * (q1 * q2 + q0 * q3) / nn, (q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3) / nn,
+            2.0 * (q2 * q3 - q0 * q1) / nn,
+            2.0 * (q1 * q3 - q0 * q2) / nn, 2.0 * (q2 * q3 + q0 * q1) / nn,
+            (q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3) / nn)
+
+
+@_njit_inline
+def _quat_rate(q0, q1, q2, q3, w0, w1, w2):
+    """q' (4-tuple) = 1/2 (0, w) (x) q of a quaternion (w, x, y, z), w in world components
+    (rotations.quat_rates in the same operations)."""
+    return (-0.5 * (w0 * q1 + w1 * q2 + w2 * q3),
+            0.5 * (q0 * w0 + (w1 * q3 - w2 * q2)),
+            0.5 * (q0 * w1 + (w2 * q1 - w0 * q3)),
+            0.5 * (q0 * w2 + (w0 * q2 - w1 * q1)))
+
+
+@_njit_inline
+def _rotor_angle_rate(p, w0, w1, w2, e0, e1, e2):
+    """kappa' = p - w . e (eqs 18-19) of a rotor of spin p about the world axis e on a body
+    turning at w (dynamics.torque_rotor_rates in the same operations)."""
+    return p - (w0 * e0 + w1 * e1 + w2 * e2)
+
+
+@_njit_inline
+def _inv3_sym(J00, J01, J02, J11, J12, J22):
+    """J^-1 of a symmetric positive definite J (3, 3) from its upper triangle (adjugate): its
+    upper triangle (d00, d01, d02, d11, d12, d22), the inverse exactly symmetric."""
+    c00 = J11 * J22 - J12 * J12
+    c01 = J02 * J12 - J01 * J22
+    c02 = J01 * J12 - J02 * J11
+    c11 = J00 * J22 - J02 * J02
+    c12 = J01 * J02 - J00 * J12
+    c22 = J00 * J11 - J01 * J01
+    inv_det = 1.0 / (J00 * c00 + J01 * c01 + J02 * c02)
+    return c00 * inv_det, c01 * inv_det, c02 * inv_det, c11 * inv_det, c12 * inv_det, c22 * inv_det
+
+
+@_njit
+def _spd_inverse(D, nk):
+    """In-place inverse of the symmetric positive definite D[:nk, :nk], nk <= MAX_JOINT_DOF
+    (Gauss-Jordan; SPD needs no pivoting)."""
+    for p in range(nk):
+        piv = 1.0 / D[p, p]
+        D[p, p] = 1.0
+        for j in range(nk):
+            D[p, j] *= piv
+        for i in range(nk):
+            if i != p:
+                f = D[i, p]
+                D[i, p] = 0.0
+                for j in range(nk):
+                    D[i, j] -= f * D[p, j]
+
+
+@_njit
+def _joint_projection(S, U, D, W, j0, nk):
+    """The joint's articulated projection from U = I^A S (rows j0 .. j0+nk): D = S^T U, its
+    inverse in place, and W = U D^-1 (what both forms of the elimination need)."""
+    for a in range(nk):
+        for b in range(a, nk):
+            D[a, b] = _dot6(S[j0 + a], U[j0 + b])
+            D[b, a] = D[a, b]
+    _spd_inverse(D, nk)
+    for a in range(nk):
+        for r in range(6):
+            acc = 0.0
+            for b in range(nk):
+                acc += U[j0 + b, r] * D[b, a]
+            W[j0 + a, r] = acc
+
+
+@_njit
+def _shift_inertia(I, d, out, Dx, T, G):
+    """out += I moved from point P to Q = P - d (world axes): X^T I X, X = [[1, 0], [-d x, 1]].
+
+    With I = [[J, H], [H^T, M]] about P: H_Q = H + d x M, J_Q = J - G - G^T - (d x M) d x with
+    G = H d x, M_Q = M. Only the upper triangles are computed: out stays exactly symmetric.
+    Dx, T, G: (3, 3) scratch.
+    """
+    _skew(d, Dx)
+    for a in range(3):
+        for b in range(3):
+            T[a, b] = Dx[a, 0] * I[3, 3 + b] + Dx[a, 1] * I[4, 3 + b] + Dx[a, 2] * I[5, 3 + b]
+            G[a, b] = I[a, 3] * Dx[0, b] + I[a, 4] * Dx[1, b] + I[a, 5] * Dx[2, b]
+    for a in range(3):
+        for b in range(3):
+            HQ = I[a, 3 + b] + T[a, b]
+            out[a, 3 + b] += HQ
+            out[3 + b, a] += HQ
+        for b in range(a, 3):
+            JQ = I[a, b] - G[a, b] - G[b, a] - (T[a, 0] * Dx[0, b] + T[a, 1] * Dx[1, b] + T[a, 2] * Dx[2, b])
+            out[a, b] += JQ
+            out[3 + a, 3 + b] += I[3 + a, 3 + b]
+            if b != a:
+                out[b, a] += JQ
+                out[3 + b, 3 + a] += I[3 + a, 3 + b]
+
+
+
+@_njit_inline
+def _shift_mass(m00, m01, m02, m11, m12, m22, d0, d1, d2, IA, kp):
+    """IA[kp] += [[0, 0], [0, Ma]] moved from P to Q = P - d: the apparent mass Ma (symmetric,
+    its upper triangle) passed through a spherical joint at P. With T = d x Ma:
+    H_Q = T, J_Q = -T d x, M_Q = Ma (the products with the zeros of d x left out)."""
+    # T = d x Ma, d x = [[0, -d2, d1], [d2, 0, -d0], [-d1, d0, 0]]
+    t00 = -d2 * m01 + d1 * m02
+    t01 = -d2 * m11 + d1 * m12
+    t02 = -d2 * m12 + d1 * m22
+    t10 = d2 * m00 + -d0 * m02
+    t11 = d2 * m01 + -d0 * m12
+    t12 = d2 * m02 + -d0 * m22
+    t20 = -d1 * m00 + d0 * m01
+    t21 = -d1 * m01 + d0 * m11
+    t22 = -d1 * m02 + d0 * m12
+    # H_Q (upper right) and H_Q^T (lower left)
+    IA[kp, 0, 3] += t00
+    IA[kp, 0, 4] += t01
+    IA[kp, 0, 5] += t02
+    IA[kp, 1, 3] += t10
+    IA[kp, 1, 4] += t11
+    IA[kp, 1, 5] += t12
+    IA[kp, 2, 3] += t20
+    IA[kp, 2, 4] += t21
+    IA[kp, 2, 5] += t22
+    IA[kp, 3, 0] += t00
+    IA[kp, 4, 0] += t01
+    IA[kp, 5, 0] += t02
+    IA[kp, 3, 1] += t10
+    IA[kp, 4, 1] += t11
+    IA[kp, 5, 1] += t12
+    IA[kp, 3, 2] += t20
+    IA[kp, 4, 2] += t21
+    IA[kp, 5, 2] += t22
+    # J_Q = -T d x: column b of d x is (0, d2, -d1), (-d2, 0, d0), (d1, -d0, 0)
+    j00 = -(t01 * d2 + t02 * -d1)
+    j01 = -(t00 * -d2 + t02 * d0)
+    j02 = -(t00 * d1 + t01 * -d0)
+    j11 = -(t10 * -d2 + t12 * d0)
+    j12 = -(t10 * d1 + t11 * -d0)
+    j22 = -(t20 * d1 + t21 * -d0)
+    IA[kp, 0, 0] += j00
+    IA[kp, 0, 1] += j01
+    IA[kp, 0, 2] += j02
+    IA[kp, 1, 1] += j11
+    IA[kp, 1, 2] += j12
+    IA[kp, 2, 2] += j22
+    IA[kp, 1, 0] += j01
+    IA[kp, 2, 0] += j02
+    IA[kp, 2, 1] += j12
+    # M_Q = Ma
+    IA[kp, 3, 3] += m00
+    IA[kp, 3, 4] += m01
+    IA[kp, 3, 5] += m02
+    IA[kp, 4, 4] += m11
+    IA[kp, 4, 5] += m12
+    IA[kp, 5, 5] += m22
+    IA[kp, 4, 3] += m01
+    IA[kp, 5, 3] += m02
+    IA[kp, 5, 4] += m12
+
+
+# --- stages -----------------------------------------------------------------------------------
+@_njit_inline
+def _positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, hk, Aw, e_w):
+    """World components of each body's constants: R^k (quaternion, or eq 50 for a hinge),
+    s^k, h^k = m^k c^k, the inertia A^k about O^k (eq 30) and the hinge axis e^k."""
+    n = s.shape[0]
+    for k in range(n):
+        i = qrow[k]
+        if is_hinge[k]:
+            # (50): body k is its parent turned by phi_k about e^k: Rrel = 1 + sin K + (1 - cos) K^2,
+            # K = e x = [[0, -e2, e1], [e2, 0, -e0], [-e1, e0, 0]]; Rrel is held in R[k]
+            phi = y[i]
+            sp, cp = math.sin(phi), 1.0 - math.cos(phi)
+            e0, e1, e2 = hinge_axis[k, 0], hinge_axis[k, 1], hinge_axis[k, 2]
+            R[k, 0, 0] = 1.0 + sp * 0.0 + cp * (-e2 * e2 + e1 * -e1)
+            R[k, 0, 1] = 0.0 + sp * -e2 + cp * (e1 * e0)
+            R[k, 0, 2] = 0.0 + sp * e1 + cp * (-e2 * -e0)
+            R[k, 1, 0] = 0.0 + sp * e2 + cp * (-e0 * -e1)
+            R[k, 1, 1] = 1.0 + sp * 0.0 + cp * (e2 * -e2 + -e0 * e0)
+            R[k, 1, 2] = 0.0 + sp * -e0 + cp * (e2 * e1)
+            R[k, 2, 0] = 0.0 + sp * -e1 + cp * (e0 * e2)
+            R[k, 2, 1] = 0.0 + sp * e0 + cp * (-e1 * -e2)
+            R[k, 2, 2] = 1.0 + sp * 0.0 + cp * (-e1 * e1 + e0 * -e0)
+            if k > 0:
+                # R^k = R^{k-1} Rrel, a column at a time (Rrel's column read before it is replaced)
+                for b in range(3):
+                    x0, x1, x2 = R[k, 0, b], R[k, 1, b], R[k, 2, b]
+                    for a in range(3):
+                        R[k, a, b] = R[k - 1, a, 0] * x0 + R[k - 1, a, 1] * x1 + R[k - 1, a, 2] * x2
+            for a in range(3):
+                e_w[k, a] = R[k, a, 0] * e0 + R[k, a, 1] * e1 + R[k, a, 2] * e2
+        else:
+            (R[k, 0, 0], R[k, 0, 1], R[k, 0, 2], R[k, 1, 0], R[k, 1, 1], R[k, 1, 2],
+             R[k, 2, 0], R[k, 2, 1], R[k, 2, 2]) = _quat_to_matrix(y[i], y[i + 1], y[i + 2], y[i + 3])
+            e_w[k, 0] = 0.0
+            e_w[k, 1] = 0.0
+            e_w[k, 2] = 0.0
+        for a in range(3):
+            r0, r1, r2 = R[k, a, 0], R[k, a, 1], R[k, a, 2]
+            s_w[k, a] = r0 * s[k, 0] + r1 * s[k, 1] + r2 * s[k, 2]
+            hk[k, a] = r0 * first_moment[k, 0] + r1 * first_moment[k, 1] + r2 * first_moment[k, 2]
+        # R A R^T, exactly symmetric (see the module docstring): row a of R A, then row a of the
+        # upper triangle
+        for a in range(3):
+            r0, r1, r2 = R[k, a, 0], R[k, a, 1], R[k, a, 2]
+            k0 = r0 * inertia[k, 0, 0] + r1 * inertia[k, 1, 0] + r2 * inertia[k, 2, 0]
+            k1 = r0 * inertia[k, 0, 1] + r1 * inertia[k, 1, 1] + r2 * inertia[k, 2, 1]
+            k2 = r0 * inertia[k, 0, 2] + r1 * inertia[k, 1, 2] + r2 * inertia[k, 2, 2]
+            for b in range(a, 3):
+                Aw[k, a, b] = k0 * R[k, b, 0] + k1 * R[k, b, 1] + k2 * R[k, b, 2]
+                Aw[k, b, a] = Aw[k, a, b]
+
+
+@_njit_inline
+def _velocities(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, i_vel,
+                s_w, e_w, w, vO, c):
+    """w^k (prefix sums of the joint rates, eqs 50, 53), v(O^k) (eq 34) and the joint bias
+    accelerations c^k = S_k' u_k about O^k (dyn.bias_accelerations are their prefix sums about
+    the origin):
+
+        spherical joint (world-component axes do not turn): c = (0, v(O^k) x w_rel)
+        hinge, (e^k)' = w^{k-1} x e^k: c = (w^{k-1} x e^k phi', v(O^k) x e^k phi')
+    """
+    n = s_w.shape[0]
+    wp0, wp1, wp2 = 0.0, 0.0, 0.0  # w^{k-1}
+    for k in range(n):
+        if k == 0:
+            # v(O^1): free base (a state), moving base (a W cos(W t)) or fixed
+            if base_type == BASE_FREE:
+                for a in range(3):
+                    vO[0, a] = y[i_vel + a]
+            elif base_type == BASE_MOVING:
+                cw = base_omega * math.cos(base_omega * t)
+                for a in range(3):
+                    vO[0, a] = base_amplitude[a] * cw
+            else:
+                for a in range(3):
+                    vO[0, a] = 0.0
+        else:
+            # (34): v0^k = v0^{k-1} + w^{k-1} x s^{k-1}
+            s0, s1, s2 = s_w[k - 1, 0], s_w[k - 1, 1], s_w[k - 1, 2]
+            vO[k, 0] = (wp1 * s2 - wp2 * s1) + vO[k - 1, 0]
+            vO[k, 1] = (wp2 * s0 - wp0 * s2) + vO[k - 1, 1]
+            vO[k, 2] = (wp0 * s1 - wp1 * s0) + vO[k - 1, 2]
+        j = i_vel + own_col[k]
+        if is_hinge[k]:
+            ph = y[j]
+            # (50): e^k phi_k'
+            wr0, wr1, wr2 = e_w[k, 0] * ph, e_w[k, 1] * ph, e_w[k, 2] * ph
+            c[k, 0] = wp1 * wr2 - wp2 * wr1
+            c[k, 1] = wp2 * wr0 - wp0 * wr2
+            c[k, 2] = wp0 * wr1 - wp1 * wr0
+        else:
+            wr0, wr1, wr2 = y[j], y[j + 1], y[j + 2]
+            c[k, 0] = 0.0
+            c[k, 1] = 0.0
+            c[k, 2] = 0.0
+        wp0, wp1, wp2 = wp0 + wr0, wp1 + wr1, wp2 + wr2
+        w[k, 0], w[k, 1], w[k, 2] = wp0, wp1, wp2
+        v0, v1, v2 = vO[k, 0], vO[k, 1], vO[k, 2]
+        c[k, 3] = v1 * wr2 - v2 * wr1
+        c[k, 4] = v2 * wr0 - v0 * wr2
+        c[k, 5] = v0 * wr1 - v1 * wr0
+
+
+@_njit_inline
+def _spatial_inertia(k, m, h0, h1, h2, Aw, I6):
+    """I6[k] = [[A, h x], [(h x)^T, m 1]]: body k's spatial inertia about O^k (world axes) from
+    its inertia A (Aw[k]), first moment h = m c and mass m."""
+    for a in range(3):
+        for b in range(3):
+            I6[k, a, b] = Aw[k, a, b]
+            I6[k, 3 + a, 3 + b] = m if a == b else 0.0
+    I6[k, 0, 3], I6[k, 0, 4], I6[k, 0, 5] = 0.0, -h2, h1
+    I6[k, 1, 3], I6[k, 1, 4], I6[k, 1, 5] = h2, 0.0, -h0
+    I6[k, 2, 3], I6[k, 2, 4], I6[k, 2, 5] = -h1, h0, 0.0
+    for a in range(3):
+        for b in range(3):
+            I6[k, 3 + a, b] = I6[k, b, 3 + a]
+
+
+@_njit_inline
+def _bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
+                 torque_A, p, L_rotor, has_gravity, gravity, lam_b, dlam_b, I6, pb):
+    """Spatial inertias I6 (n, 6, 6) and body forces at zero acceleration pb (n, 6) about O^k,
+    as dyn.body_forces with acc = 0 (eqs 36-39, 58; h = m c in world components):
+
+        I = [[A, h x], [(h x)^T, m 1]],  pb = V x* (I V + (lambda, 0)) + (lambda', 0) - (h x g, m g)
+
+    lambda^k = R (lam_speed^k + sum_i A_i p_i e_i) (eq 31), lambda' = R sum_i L_i e_i (eq 29).
+    lam_b, dlam_b (n, 3): scratch.
+    """
+    n = mass.shape[0]
+    if has_lam:
+        for k in range(n):
+            for a in range(3):
+                lam_b[k, a] = lam_speed[k, a]
+                dlam_b[k, a] = 0.0
+        for i in range(torque_body.shape[0]):
+            k = torque_body[i]
+            for a in range(3):
+                lam_b[k, a] += torque_A[i] * p[i] * torque_axis[i, a]
+                dlam_b[k, a] += L_rotor[i] * torque_axis[i, a]
+    g0, g1, g2 = gravity[0], gravity[1], gravity[2]
+    for k in range(n):
+        m = mass[k]
+        h0, h1, h2 = hk[k, 0], hk[k, 1], hk[k, 2]
+        w0, w1, w2 = w[k, 0], w[k, 1], w[k, 2]
+        v0, v1, v2 = vO[k, 0], vO[k, 1], vO[k, 2]
+        _spatial_inertia(k, m, h0, h1, h2, Aw, I6)
+        # momentum about O^k: (A w + h x v + lambda, m v + w x h)
+        ma0 = (Aw[k, 0, 0] * w0 + Aw[k, 0, 1] * w1 + Aw[k, 0, 2] * w2) + (h1 * v2 - h2 * v1)
+        ma1 = (Aw[k, 1, 0] * w0 + Aw[k, 1, 1] * w1 + Aw[k, 1, 2] * w2) + (h2 * v0 - h0 * v2)
+        ma2 = (Aw[k, 2, 0] * w0 + Aw[k, 2, 1] * w1 + Aw[k, 2, 2] * w2) + (h0 * v1 - h1 * v0)
+        if has_lam:
+            l0, l1, l2 = lam_b[k, 0], lam_b[k, 1], lam_b[k, 2]
+            ma0 += R[k, 0, 0] * l0 + R[k, 0, 1] * l1 + R[k, 0, 2] * l2
+            ma1 += R[k, 1, 0] * l0 + R[k, 1, 1] * l1 + R[k, 1, 2] * l2
+            ma2 += R[k, 2, 0] * l0 + R[k, 2, 1] * l1 + R[k, 2, 2] * l2
+        ml0 = (w1 * h2 - w2 * h1) + m * v0
+        ml1 = (w2 * h0 - w0 * h2) + m * v1
+        ml2 = (w0 * h1 - w1 * h0) + m * v2
+        # V x* momentum = (w x ang + v x lin, w x lin)
+        f0 = (w1 * ma2 - w2 * ma1) + (v1 * ml2 - v2 * ml1)
+        f1 = (w2 * ma0 - w0 * ma2) + (v2 * ml0 - v0 * ml2)
+        f2 = (w0 * ma1 - w1 * ma0) + (v0 * ml1 - v1 * ml0)
+        f3 = w1 * ml2 - w2 * ml1
+        f4 = w2 * ml0 - w0 * ml2
+        f5 = w0 * ml1 - w1 * ml0
+        if has_lam:
+            l0, l1, l2 = dlam_b[k, 0], dlam_b[k, 1], dlam_b[k, 2]
+            f0 += R[k, 0, 0] * l0 + R[k, 0, 1] * l1 + R[k, 0, 2] * l2
+            f1 += R[k, 1, 0] * l0 + R[k, 1, 1] * l1 + R[k, 1, 2] * l2
+            f2 += R[k, 2, 0] * l0 + R[k, 2, 1] * l1 + R[k, 2, 2] * l2
+        if has_gravity:
+            f0 -= h1 * g2 - h2 * g1
+            f1 -= h2 * g0 - h0 * g2
+            f2 -= h0 * g1 - h1 * g0
+            f3 -= m * g0
+            f4 -= m * g1
+            f5 -= m * g2
+        pb[k, 0], pb[k, 1], pb[k, 2], pb[k, 3], pb[k, 4], pb[k, 5] = f0, f1, f2, f3, f4, f5
+
+
+@_njit_inline
+def _joint_columns(is_hinge, own_col, base_type, e_w, S):
+    """Unit motions S_j (N, 6) of the velocity columns about their body's O^k (dyn.joint_columns
+    moved there): spherical (e_i, 0), hinge (e^k, 0), free base (0, e_i)."""
+    S[:, :] = 0.0
+    if base_type == BASE_FREE:
+        for a in range(3):
+            S[a, 3 + a] = 1.0
+    for k in range(e_w.shape[0]):
+        j = own_col[k]
+        if is_hinge[k]:
+            for a in range(3):
+                S[j, a] = e_w[k, a]
+        else:
+            for a in range(3):
+                S[j + a, a] = 1.0
+
+
+@_njit
+def _chol_upper6(I, F):
+    """F (6, 6) upper triangular with F^T F = I, I (6, 6) symmetric positive semidefinite
+    (Cholesky; a pivot <= 0, a direction without inertia, leaves its row zero)."""
+    for i in range(6):
+        for j in range(6):
+            F[i, j] = 0.0
+    for i in range(6):
+        d = I[i, i]
+        for p in range(i):
+            d -= F[p, i] * F[p, i]
+        if d <= 0.0:
+            continue
+        r = math.sqrt(d)
+        F[i, i] = r
+        for j in range(i + 1, 6):
+            acc = I[i, j]
+            for p in range(i):
+                acc -= F[p, i] * F[p, j]
+            F[i, j] = acc / r
+
+
+@_njit
+def _householder_qr6(A, m, v):
+    """A[:m, :6] -> its R factor in A[:6, :6] (upper triangular; rows below set to zero):
+    Householder QR, A^T A unchanged to round-off (Golub & Van Loan, Alg. 5.2.1). v (m,): scratch."""
+    for j in range(6):
+        if j >= m:
+            break
+        nrm = 0.0
+        for i in range(j, m):
+            nrm += A[i, j] * A[i, j]
+        nrm = math.sqrt(nrm)
+        if nrm == 0.0:
+            continue
+        alpha = -nrm if A[j, j] >= 0.0 else nrm
+        vv = 0.0
+        for i in range(j, m):
+            v[i] = A[i, j]
+        v[j] -= alpha
+        for i in range(j, m):
+            vv += v[i] * v[i]
+        A[j, j] = alpha
+        for i in range(j + 1, m):
+            A[i, j] = 0.0
+        if vv == 0.0:
+            continue
+        for q in range(j + 1, 6):
+            acc = 0.0
+            for i in range(j, m):
+                acc += v[i] * A[i, q]
+            f = 2.0 * acc / vv
+            for i in range(j, m):
+                A[i, q] -= f * v[i]
+    for i in range(6, m):
+        for q in range(6):
+            A[i, q] = 0.0
+
+
+@_njit
+def _hinge_reflector(e, H):
+    """H (3, 3) symmetric orthogonal with H e = sigma e_1; returns sigma = +-1 (the Householder
+    reflector of e, v = e + sign(e_0) e_1, stable for any unit e)."""
+    sg = 1.0 if e[0] >= 0.0 else -1.0
+    v0, v1, v2 = e[0] + sg, e[1], e[2]
+    f = 2.0 / (v0 * v0 + v1 * v1 + v2 * v2)
+    v = (v0, v1, v2)
+    for a in range(3):
+        for b in range(3):
+            H[a, b] = (1.0 if a == b else 0.0) - f * v[a] * v[b]
+    return -sg
+
+
+@_njit_inline
+def _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
+                 Ia, pa, Dx, T, G, x):
+    """`_aba` as Featherstone writes it, the articulated inertias formed: I^a = I^A - U D^-1 U^T.
+    Fast, and exact to round-off while no subtree is much heavier than its carrier (see
+    STABLE_ABA_RATIO); IA leaves as the articulated inertias. Returns the largest apparent mass
+    passed on to a body over that body's own mass.
+
+    Articulated-body algorithm: u' (N,) of the closure rows S_j . F_subtree(k(j)) = tau_j
+    (eqs 44, 51, 54; Featherstone 2008, Table 7.1), about each body's O^k in world axes.
+
+    IA (n, 6, 6) and pA (n, 6) enter as the bodies' own inertias and bias forces and leave as
+    the articulated ones. c (n, 6): joint bias accelerations; a_base (6,): acceleration of the
+    base at O^1; tau (N,): generalized forces of the columns. U, W (N, 6), u (N,),
+    Dinv (n, 6, 6), Ia (6, 6), pa (6,), Dx, T, G (3, 3), x (6,): scratch. A spherical joint
+    (S = (1, 0)) is eliminated in closed form, in scalars: D = J, and only the apparent mass
+    M - H^T J^-1 H passes to the parent.
+    """
+    n = IA.shape[0]
+    worst = 0.0  # largest apparent mass passed on / the carrier's own mass
+    # backward: I^a = I^A - U D^-1 U^T, p^a = p^A + I^a c + U D^-1 u, to the parent's O^{k-1}
+    for k in range(n - 1, -1, -1):
+        j0, j1 = col_start[k], col_start[k + 1]
+        nk = j1 - j0
+        if nk == SPHERICAL_DOF and not is_hinge[k]:
+            # D^-1 = J^-1, I^A = [[J, H], [H^T, M]]
+            d00, d01, d02, d11, d12, d22 = _inv3_sym(IA[k, 0, 0], IA[k, 0, 1], IA[k, 0, 2],
+                                                     IA[k, 1, 1], IA[k, 1, 2], IA[k, 2, 2])
+            Dinv[k, 0, 0], Dinv[k, 0, 1], Dinv[k, 0, 2] = d00, d01, d02
+            Dinv[k, 1, 0], Dinv[k, 1, 1], Dinv[k, 1, 2] = d01, d11, d12
+            Dinv[k, 2, 0], Dinv[k, 2, 1], Dinv[k, 2, 2] = d02, d12, d22
+            u0 = tau[j0] - pA[k, 0]
+            u1 = tau[j0 + 1] - pA[k, 1]
+            u2 = tau[j0 + 2] - pA[k, 2]
+            u[j0], u[j0 + 1], u[j0 + 2] = u0, u1, u2
+            if k == 0:
+                continue
+            h00, h01, h02 = IA[k, 0, 3], IA[k, 0, 4], IA[k, 0, 5]
+            h10, h11, h12 = IA[k, 1, 3], IA[k, 1, 4], IA[k, 1, 5]
+            h20, h21, h22 = IA[k, 2, 3], IA[k, 2, 4], IA[k, 2, 5]
+            # G = J^-1 H
+            g00 = d00 * h00 + d01 * h10 + d02 * h20
+            g01 = d00 * h01 + d01 * h11 + d02 * h21
+            g02 = d00 * h02 + d01 * h12 + d02 * h22
+            g10 = d01 * h00 + d11 * h10 + d12 * h20
+            g11 = d01 * h01 + d11 * h11 + d12 * h21
+            g12 = d01 * h02 + d11 * h12 + d12 * h22
+            g20 = d02 * h00 + d12 * h10 + d22 * h20
+            g21 = d02 * h01 + d12 * h11 + d22 * h21
+            g22 = d02 * h02 + d12 * h12 + d22 * h22
+            # Ma = M - H^T J^-1 H (upper triangle)
+            m00 = IA[k, 3, 3] - (h00 * g00 + h10 * g10 + h20 * g20)
+            m01 = IA[k, 3, 4] - (h00 * g01 + h10 * g11 + h20 * g21)
+            m02 = IA[k, 3, 5] - (h00 * g02 + h10 * g12 + h20 * g22)
+            m11 = IA[k, 4, 4] - (h01 * g01 + h11 * g11 + h21 * g21)
+            m12 = IA[k, 4, 5] - (h01 * g02 + h11 * g12 + h21 * g22)
+            m22 = IA[k, 5, 5] - (h02 * g02 + h12 * g12 + h22 * g22)
+            # p^a = (tau, p^A_lin + Ma c_lin + (J^-1 H)^T u)
+            c3, c4, c5 = c[k, 3], c[k, 4], c[k, 5]
+            pl0 = pA[k, 3] + (m00 * c3 + m01 * c4 + m02 * c5) + (g00 * u0 + g10 * u1 + g20 * u2)
+            pl1 = pA[k, 4] + (m01 * c3 + m11 * c4 + m12 * c5) + (g01 * u0 + g11 * u1 + g21 * u2)
+            pl2 = pA[k, 5] + (m02 * c3 + m12 * c4 + m22 * c5) + (g02 * u0 + g12 * u1 + g22 * u2)
+            ratio = (m00 + m11 + m22) / (3.0 * IA[k - 1, 3, 3])
+            if ratio > worst:
+                worst = ratio
+            s0, s1, s2 = s_w[k - 1, 0], s_w[k - 1, 1], s_w[k - 1, 2]
+            _shift_mass(m00, m01, m02, m11, m12, m22, s0, s1, s2, IA, k - 1)
+            # forces to O^{k-1} = O^k - s^{k-1}: (n + s x f, f)
+            pA[k - 1, 0] = (pA[k - 1, 0] + (s1 * pl2 - s2 * pl1)) + tau[j0]
+            pA[k - 1, 1] = (pA[k - 1, 1] + (s2 * pl0 - s0 * pl2)) + tau[j0 + 1]
+            pA[k - 1, 2] = (pA[k - 1, 2] + (s0 * pl1 - s1 * pl0)) + tau[j0 + 2]
+            pA[k - 1, 3] += pl0
+            pA[k - 1, 4] += pl1
+            pA[k - 1, 5] += pl2
+        else:
+            # U = I^A S, u = tau - S^T p^A
+            for j in range(j0, j1):
+                for r in range(6):
+                    U[j, r] = (IA[k, r, 0] * S[j, 0] + IA[k, r, 1] * S[j, 1] + IA[k, r, 2] * S[j, 2]
+                               + IA[k, r, 3] * S[j, 3] + IA[k, r, 4] * S[j, 4] + IA[k, r, 5] * S[j, 5])
+                u[j] = tau[j] - (S[j, 0] * pA[k, 0] + S[j, 1] * pA[k, 1] + S[j, 2] * pA[k, 2]
+                                 + S[j, 3] * pA[k, 3] + S[j, 4] * pA[k, 4] + S[j, 5] * pA[k, 5])
+            _joint_projection(S, U, Dinv[k], W, j0, nk)
+            if k == 0:
+                continue
+            for r in range(6):
+                for q in range(r, 6):
+                    acc = IA[k, r, q]
+                    for a in range(nk):
+                        acc -= W[j0 + a, r] * U[j0 + a, q]
+                    Ia[r, q] = acc
+                    Ia[q, r] = acc
+            for r in range(6):
+                acc = pA[k, r] + (Ia[r, 0] * c[k, 0] + Ia[r, 1] * c[k, 1] + Ia[r, 2] * c[k, 2]
+                                  + Ia[r, 3] * c[k, 3] + Ia[r, 4] * c[k, 4] + Ia[r, 5] * c[k, 5])
+                for a in range(nk):
+                    acc += W[j0 + a, r] * u[j0 + a]
+                pa[r] = acc
+            ratio = (Ia[3, 3] + Ia[4, 4] + Ia[5, 5]) / (3.0 * IA[k - 1, 3, 3])
+            if ratio > worst:
+                worst = ratio
+            _shift_inertia(Ia, s_w[k - 1], IA[k - 1], Dx, T, G)
+            # forces to O^{k-1} = O^k - s^{k-1}: (n + s x f, f)
+            s0, s1, s2 = s_w[k - 1, 0], s_w[k - 1, 1], s_w[k - 1, 2]
+            pA[k - 1, 0] = (pA[k - 1, 0] + (s1 * pa[5] - s2 * pa[4])) + pa[0]
+            pA[k - 1, 1] = (pA[k - 1, 1] + (s2 * pa[3] - s0 * pa[5])) + pa[1]
+            pA[k - 1, 2] = (pA[k - 1, 2] + (s0 * pa[4] - s1 * pa[3])) + pa[2]
+            pA[k - 1, 3] += pa[3]
+            pA[k - 1, 4] += pa[4]
+            pA[k - 1, 5] += pa[5]
+    # forward: a = A^{k-1} + c^k, u'_k = D^-1 (u - U^T a), A^k = a + S u'_k
+    A0, A1, A2, A3, A4, A5 = a_base[0], a_base[1], a_base[2], a_base[3], a_base[4], a_base[5]
+    for k in range(n):
+        j0, j1 = col_start[k], col_start[k + 1]
+        nk = j1 - j0
+        if k > 0:
+            # motions from O^{k-1} to O^k: (alpha, a + alpha x s^{k-1})
+            s0, s1, s2 = s_w[k - 1, 0], s_w[k - 1, 1], s_w[k - 1, 2]
+            A3 += A1 * s2 - A2 * s1
+            A4 += A2 * s0 - A0 * s2
+            A5 += A0 * s1 - A1 * s0
+        A0 += c[k, 0]
+        A1 += c[k, 1]
+        A2 += c[k, 2]
+        A3 += c[k, 3]
+        A4 += c[k, 4]
+        A5 += c[k, 5]
+        if nk == SPHERICAL_DOF and not is_hinge[k]:
+            # U^T a = J alpha + H a_lin
+            x0 = u[j0] - (IA[k, 0, 0] * A0 + IA[k, 0, 1] * A1 + IA[k, 0, 2] * A2
+                          + IA[k, 0, 3] * A3 + IA[k, 0, 4] * A4 + IA[k, 0, 5] * A5)
+            x1 = u[j0 + 1] - (IA[k, 1, 0] * A0 + IA[k, 1, 1] * A1 + IA[k, 1, 2] * A2
+                              + IA[k, 1, 3] * A3 + IA[k, 1, 4] * A4 + IA[k, 1, 5] * A5)
+            x2 = u[j0 + 2] - (IA[k, 2, 0] * A0 + IA[k, 2, 1] * A1 + IA[k, 2, 2] * A2
+                              + IA[k, 2, 3] * A3 + IA[k, 2, 4] * A4 + IA[k, 2, 5] * A5)
+            ud0 = Dinv[k, 0, 0] * x0 + Dinv[k, 0, 1] * x1 + Dinv[k, 0, 2] * x2
+            ud1 = Dinv[k, 1, 0] * x0 + Dinv[k, 1, 1] * x1 + Dinv[k, 1, 2] * x2
+            ud2 = Dinv[k, 2, 0] * x0 + Dinv[k, 2, 1] * x1 + Dinv[k, 2, 2] * x2
+            udot[j0], udot[j0 + 1], udot[j0 + 2] = ud0, ud1, ud2
+            A0 += ud0
+            A1 += ud1
+            A2 += ud2
+        else:
+            for a in range(nk):
+                j = j0 + a
+                x[a] = u[j] - (U[j, 0] * A0 + U[j, 1] * A1 + U[j, 2] * A2
+                               + U[j, 3] * A3 + U[j, 4] * A4 + U[j, 5] * A5)
+            for a in range(nk):
+                acc = 0.0
+                for b in range(nk):
+                    acc += Dinv[k, a, b] * x[b]
+                udot[j0 + a] = acc
+            for a in range(nk):
+                j = j0 + a
+                ud = udot[j]
+                A0 += S[j, 0] * ud
+                A1 += S[j, 1] * ud
+                A2 += S[j, 2] * ud
+                A3 += S[j, 3] * ud
+                A4 += S[j, 4] * ud
+                A5 += S[j, 5] * ud
+    return worst
+
+
+@_njit_inline
+def _aba(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot, Ia, pa, Dx, T, G, x):
+    """Articulated-body algorithm: u' (N,) of the closure rows S_j . F_subtree(k(j)) = tau_j
+    (eqs 44, 51, 54; Featherstone 2008, Table 7.1), about each body's O^k in world axes.
+
+    IA (n, 6, 6) and pA (n, 6) enter as the bodies' own inertias and bias forces (both are
+    overwritten); c (n, 6): joint bias accelerations; a_base (6,): acceleration of the base at
+    O^1; tau (N,): generalized forces of the columns. U, W (N, 6), u (N,), Dinv (n, 6, 6),
+    Ia (6, 6), pa (6,), Dx, T, G (3, 3), x (6,): scratch. The elimination is `_aba_classic`
+    unless it passes on to some body more than STABLE_ABA_RATIO times that body's own mass
+    (checked only where a subtree is that much heavier than its carrier), then `_aba_stable`
+    from the bodies' own inertias again (square-root factors and one step of iterative
+    refinement; exact to ~1e-14 relative at mass ratios up to 1e7, about 2.5 x the cost).
+    """
+    n = IA.shape[0]
+    after = 0.0
+    worst = 0.0
+    for k in range(n - 1, 0, -1):
+        after += IA[k, 3, 3]  # the mass of bodies k..n
+        if after > worst * IA[k - 1, 3, 3]:
+            worst = after / IA[k - 1, 3, 3]
+    if worst <= STABLE_ABA_RATIO:  # no subtree can pass on more mass than it has
+        _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
+                     Ia, pa, Dx, T, G, x)
+        return
+    # a heavy subtree: what decides is the mass its elimination passes on (an articulated, not a
+    # rigid, inertia: a uniform chain of 1000 links passes on about a link's mass at each joint),
+    # known only once the classic elimination has run
+    _aba_heavy(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
+               Ia, pa, Dx, T, G, x)
+
+
+@_njit_alloc
+def _aba_heavy(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot, Ia, pa, Dx,
+               T, G, x):
+    """`_aba` where a subtree is more than STABLE_ABA_RATIO times heavier than its carrier:
+    `_aba_classic`, and `_aba_stable` from the bodies' own inertias again if the classic
+    elimination passed on too much (arguments as `_aba`)."""
+    IA0 = IA.copy()
+    pA0 = pA.copy()
+    if _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
+                    Ia, pa, Dx, T, G, x) > STABLE_ABA_RATIO:
+        IA[:] = IA0
+        pA[:] = pA0
+        _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot)
+
+
+@_njit_alloc
+def _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot):
+    """`_aba` for heavy subtrees on light carriers (and any other chain, at ~2.5 x the cost of
+    `_aba_classic`).
+
+    IA (n, 6, 6) and pA (n, 6) enter as the bodies' own inertias and bias forces; pA leaves
+    as the articulated bias forces (IA is not updated past the bodies' own). c (n, 6): joint
+    bias accelerations; a_base (6,): acceleration of the base at O^1; tau (N,): generalized
+    forces of the columns. U (N, 6), u (N,): scratch; W (N, 6) leaves as U D^-1 and
+    Dinv (n, 6, 6) as D^-1 of each joint.
+
+    The articulated inertias are carried as square-root factors F (IA = F^T F), never formed:
+    the projection I^a = I^A - U D^-1 U^T of a subtree far heavier (or lighter) than its
+    carrier subtracts numbers of the heavy body's size to leave the light one's (the elbow
+    mode of a heavy tip on light links), which loses digits as the mass ratio squared. Here
+    the body's own factor (Cholesky of its inertia) is stacked on its child's and reduced by a
+    Householder QR in joint-adapted axes Q = [S | N] (spherical: the identity; hinge: a
+    reflector taking e^k to the first axis): R = [[R11, R12], [0, R22]], and then
+
+        D = R11^T R11,  U D^-1 = Q [1; (R11^-1 R12)^T],  I^a = N R22^T R22 N^T
+
+    so the factor passed to the parent is R22 N^T: no subtraction at all. Then one step of
+    iterative refinement with the residual of the inverse dynamics (`_aba_resolve`) takes the
+    last ~eps x ratio off (test/core/test_heavy_tip.py). The base body's joint with a free base (six columns) is solved with its
+    articulated inertia formed, F^T F (nothing passes on from it).
+    """
+    n = IA.shape[0]
+    Ia = np.empty((6, 6))
+    pa = np.empty(6)
+    K = np.empty((6, 6))
+    St = np.zeros((12, 6))  # stacked factors: own (6 rows), child (up to 5 rows)
+    Fc = np.zeros((5, 6))  # the child's factor, moved to this body's O^k
+    v = np.empty(12)
+    H = np.empty((3, 3))
+    Ri = np.empty((3, 3))  # R11^-1
+    G = np.empty((3, 5))  # R11^-1 R12
+    z = np.empty(5)
+    nc = 0
+    pb = pA.copy()  # the bodies' own bias forces, for the residual
+    acc_body = np.empty((n, 6))  # A^k, for the residual
+    # backward: I^a = I^A - U D^-1 U^T, p^a = p^A + I^a c + U D^-1 u, to the parent's O^{k-1}
+    for k in range(n - 1, -1, -1):
+        j0, j1 = col_start[k], col_start[k + 1]
+        nk = j1 - j0
+        IAk, pAk, D = IA[k], pA[k], Dinv[k]
+        for j in range(j0, j1):
+            u[j] = tau[j] - _dot6(S[j], pAk)
+        _chol_upper6(IAk, K)
+        if nk != 1 and nk != SPHERICAL_DOF:
+            # free base and first joint (k = 0): I^A = F^T F formed, D = S^T I^A S
+            for r in range(6):
+                for q in range(r, 6):
+                    acc = 0.0
+                    for i in range(r + 1):
+                        acc += K[i, r] * K[i, q]
+                    for i in range(nc):
+                        acc += Fc[i, r] * Fc[i, q]
+                    Ia[r, q] = acc
+                    Ia[q, r] = acc
+            for j in range(j0, j1):
+                for r in range(6):
+                    U[j, r] = _dot6(Ia[r], S[j])
+            _joint_projection(S, U, D, W, j0, nk)
+            continue
+        # the stacked factor [F_own; F_child] in joint axes Q (columns 0..2 times H for a hinge)
+        sigma = 1.0
+        hinge = is_hinge[k]
+        if hinge:
+            sigma = _hinge_reflector(S[j0, :3], H)
+        for i in range(6 + nc):
+            for q in range(6):
+                St[i, q] = K[i, q] if i < 6 else Fc[i - 6, q]
+            if hinge:
+                x0, x1, x2 = St[i, 0], St[i, 1], St[i, 2]
+                for a in range(3):
+                    St[i, a] = x0 * H[0, a] + x1 * H[1, a] + x2 * H[2, a]
+        _householder_qr6(St, 6 + nc, v)
+        # D^-1 = R11^-1 R11^-T; G = R11^-1 R12
+        for a in range(nk - 1, -1, -1):
+            for b in range(nk):
+                acc = (1.0 if a == b else 0.0)
+                for i in range(a + 1, nk):
+                    acc -= St[a, i] * Ri[i, b]
+                Ri[a, b] = acc / St[a, a]
+        for a in range(nk):
+            for b in range(a, nk):
+                acc = 0.0
+                for i in range(max(a, b), nk):
+                    acc += Ri[a, i] * Ri[b, i]
+                D[a, b] = acc
+                D[b, a] = acc
+        m2 = 6 - nk
+        for a in range(nk):
+            for b in range(m2):
+                acc = 0.0
+                for i in range(a, nk):
+                    acc += Ri[a, i] * St[i, nk + b]
+                G[a, b] = acc
+        # W = U D^-1 = sigma Q [1; G^T]: column a of the joint, Q e_a = sigma S_a, Q e_{nk+b}
+        for a in range(nk):
+            j = j0 + a
+            for r in range(6):
+                W[j, r] = S[j, r]
+            for b in range(m2):
+                g = sigma * G[a, b]
+                if hinge:
+                    if b < 2:
+                        for r in range(3):
+                            W[j, r] += g * H[r, 1 + b]
+                    else:
+                        W[j, 3 + b - 2] += g
+                else:
+                    W[j, 3 + b] += g
+        if k == 0:
+            continue
+        # the factor passed on: R22 N^T, N = Q[:, nk:] ((6 - nk) rows, in world axes)
+        for b in range(m2):
+            for r in range(6):
+                Ia[b, r] = 0.0
+            for i in range(b, m2):
+                f = St[nk + b, nk + i]
+                if hinge:
+                    if i < 2:
+                        for r in range(3):
+                            Ia[b, r] += f * H[r, 1 + i]
+                    else:
+                        Ia[b, 3 + i - 2] += f
+                else:
+                    Ia[b, 3 + i] += f
+        # p^a = p^A + I^a c + U D^-1 u, I^a c = F^T (F c)
+        for r in range(6):
+            acc = pAk[r]
+            for a in range(nk):
+                acc += W[j0 + a, r] * u[j0 + a]
+            pa[r] = acc
+        for b in range(m2):
+            z[b] = _dot6(Ia[b], c[k])
+        for b in range(m2):
+            for r in range(6):
+                pa[r] += Ia[b, r] * z[b]
+        # the factor moved to O^{k-1} = O^k - s^{k-1}: rows (f_ang, f_lin) X = (f_ang + s x f_lin, f_lin)
+        d = s_w[k - 1]
+        nc = m2
+        for b in range(m2):
+            fl0, fl1, fl2 = Ia[b, 3], Ia[b, 4], Ia[b, 5]
+            Fc[b, 0] = Ia[b, 0] + (d[1] * fl2 - d[2] * fl1)
+            Fc[b, 1] = Ia[b, 1] + (d[2] * fl0 - d[0] * fl2)
+            Fc[b, 2] = Ia[b, 2] + (d[0] * fl1 - d[1] * fl0)
+            Fc[b, 3], Fc[b, 4], Fc[b, 5] = fl0, fl1, fl2
+        # forces to O^{k-1} = O^k - s^{k-1}: (n + s x f, f)
+        _cross_add(s_w[k - 1], pa[3:], pA[k - 1, :3])
+        for r in range(6):
+            pA[k - 1, r] += pa[r]
+    # forward: a = A^{k-1} + c^k, u'_k = D^-1 u - (U D^-1)^T a, A^k = a + S u'_k
+    A = np.empty(6)
+    for r in range(6):
+        A[r] = a_base[r]
+    x = np.empty(MAX_JOINT_DOF)
+    for k in range(n):
+        j0, j1 = col_start[k], col_start[k + 1]
+        nk = j1 - j0
+        D = Dinv[k]
+        if k > 0:
+            # motions from O^{k-1} to O^k: (alpha, a + alpha x s^{k-1})
+            _cross_add(A[:3], s_w[k - 1], A[3:])
+        for r in range(6):
+            A[r] += c[k, r]
+        for a in range(nk):
+            x[a] = _dot6(W[j0 + a], A)
+        for a in range(nk):
+            acc = 0.0
+            for b in range(nk):
+                acc += D[a, b] * u[j0 + b]
+            udot[j0 + a] = acc - x[a]
+        for a in range(nk):
+            for r in range(6):
+                A[r] += S[j0 + a, r] * udot[j0 + a]
+        for r in range(6):
+            acc_body[k, r] = A[r]
+    # one step of iterative refinement (Wilkinson): the residual of the closure rows by the
+    # inverse dynamics (RNEA: forces of the accelerations just found, summed from the tip), then
+    # u' += the same elimination applied to it (M du' = residual, no bias, no base motion)
+    F = pb
+    for k in range(n):
+        for r in range(6):
+            F[k, r] += _dot6(IA[k, r], acc_body[k])
+    res = np.empty(u.shape[0])
+    for k in range(n - 1, -1, -1):
+        for j in range(col_start[k], col_start[k + 1]):
+            res[j] = tau[j] - _dot6(S[j], F[k])
+        if k > 0:
+            _cross_add(s_w[k - 1], F[k, 3:], F[k - 1, :3])
+            for r in range(6):
+                F[k - 1, r] += F[k, r]
+    _aba_resolve(col_start, S, s_w, W, Dinv, res, u, F, udot)
+
+
+@_njit_alloc
+def _aba_resolve(col_start, S, s_w, W, Dinv, rhs, u, P, udot):
+    """udot += M^-1 rhs (N,) with the elimination `_aba` left in W (U D^-1) and Dinv: its two
+    sweeps with no bias and no base motion. u (N,), P (n, 6): scratch."""
+    n = P.shape[0]
+    P[:, :] = 0.0
+    pa = np.empty(6)
+    for k in range(n - 1, -1, -1):
+        j0, j1 = col_start[k], col_start[k + 1]
+        for j in range(j0, j1):
+            u[j] = rhs[j] - _dot6(S[j], P[k])
+        if k == 0:
+            continue
+        for r in range(6):
+            acc = P[k, r]
+            for j in range(j0, j1):
+                acc += W[j, r] * u[j]
+            pa[r] = acc
+        _cross_add(s_w[k - 1], pa[3:], P[k - 1, :3])
+        for r in range(6):
+            P[k - 1, r] += pa[r]
+    A = np.zeros(6)
+    for k in range(n):
+        j0, j1 = col_start[k], col_start[k + 1]
+        nk = j1 - j0
+        D = Dinv[k]
+        if k > 0:
+            _cross_add(A[:3], s_w[k - 1], A[3:])
+        for a in range(nk):
+            acc = -_dot6(W[j0 + a], A)
+            for b in range(nk):
+                acc += D[a, b] * u[j0 + b]
+            udot[j0 + a] += acc
+            for r in range(6):
+                A[r] += S[j0 + a, r] * acc
+
+
+def _view_codegen(context, builder, sig, args):
+    """Lowering of `block1/2/3`: the array value of a C-ordered view of work[o:] of the given
+    shape (its fields filled through numba's data model), borrowed: no meminfo, so nothing is
+    counted; valid while `work` is, i.e. during the call that made it."""
+    from numba.core import cgutils
+    from numba.core import types as nbt
+
+    source = context.data_model_manager[sig.args[0]]
+    view = context.data_model_manager[sig.return_type]
+    o, *dims = (context.cast(builder, v, t, nbt.intp) for v, t in zip(args[1:], sig.args[1:]))
+    itemsize = builder.extract_value(args[0], source.get_field_position("itemsize"))
+    data = builder.extract_value(args[0], source.get_field_position("data"))
+    strides = [itemsize]
+    nitems = dims[-1]
+    for d in reversed(dims[1:]):
+        strides.insert(0, builder.mul(strides[0], d))
+    for d in dims[:-1]:
+        nitems = builder.mul(nitems, d)
+    value = cgutils.get_null_value(context.get_value_type(sig.return_type))  # meminfo, parent: null
+    for name, v in (("nitems", nitems), ("itemsize", itemsize), ("data", builder.gep(data, [o])),
+                    ("shape", cgutils.pack_array(builder, dims)),
+                    ("strides", cgutils.pack_array(builder, strides))):
+        value = builder.insert_value(value, v, view.get_field_position(name))
+    return value
+
+
+if numba is not None and not numba.config.DISABLE_JIT:
+    from numba.core import types as _nbt
+    from numba.extending import intrinsic as _intrinsic
+
+    # work[o : o + n m ...] (work contiguous) as a C-ordered (n, m, ...) view. An intrinsic:
+    # numba's reshape calls a C helper (~40 ns, twenty times per evaluation) and as_strided
+    # gives a layout-"A" array (every index scaled by strides loaded at run time), both counted.
+    def _view_typing(work, nd, *ints):
+        """(signature, codegen) of the view of a vector `work` with nd axes (None: not for
+        these argument types)."""
+        if not (isinstance(work, _nbt.Array) and work.ndim == 1
+                and all(isinstance(i, _nbt.Integer) for i in ints)):
+            return None
+        return _nbt.Array(work.dtype, nd, "C")(work, *ints), _view_codegen
+
+    @_intrinsic
+    def block1(typingctx, work, o, n):
+        return _view_typing(work, 1, o, n)
+
+    @_intrinsic
+    def block2(typingctx, work, o, n, m):
+        return _view_typing(work, 2, o, n, m)
+
+    @_intrinsic
+    def block3(typingctx, work, o, n, m, q):
+        return _view_typing(work, 3, o, n, m, q)
+else:  # plain Python: without numba, or NUMBA_DISABLE_JIT (the 80-digit oracle, bench.heavy_tips)
+    def block1(work, o, n):
+        return work[o:o + n]
+
+    def block2(work, o, n, m):
+        return work[o:o + n * m].reshape(n, m)
+
+    def block3(work, o, n, m, q):
+        return work[o:o + n * m * q].reshape(n, m, q)
+
+
+@_njit_inline
+def workspace_views(work, n, N, nt):
+    """`rhs_kernel`'s workspace (`workspace`) cut into its views, the one place its layout is
+    written: R, s_w, hk, Aw, e_w, w, vO, c (the kinematics, left there by every call), I6, pb,
+    Dinv, lam_b, dlam_b, S, U, W, u, p, then the fixed scratch Ia, pa, Dx, T, G, x, a_base."""
+    o = 0
+    R = block3(work, o, n, 3, 3)
+    o += 9 * n
+    s_w = block2(work, o, n, 3)
+    o += 3 * n
+    hk = block2(work, o, n, 3)
+    o += 3 * n
+    Aw = block3(work, o, n, 3, 3)
+    o += 9 * n
+    e_w = block2(work, o, n, 3)
+    o += 3 * n
+    w = block2(work, o, n, 3)
+    o += 3 * n
+    vO = block2(work, o, n, 3)
+    o += 3 * n
+    c = block2(work, o, n, 6)
+    o += 6 * n
+    I6 = block3(work, o, n, 6, 6)
+    o += 36 * n
+    pb = block2(work, o, n, 6)
+    o += 6 * n
+    Dinv = block3(work, o, n, 6, 6)
+    o += 36 * n
+    lam_b = block2(work, o, n, 3)
+    o += 3 * n
+    dlam_b = block2(work, o, n, 3)
+    o += 3 * n
+    S = block2(work, o, N, 6)
+    o += 6 * N
+    U = block2(work, o, N, 6)
+    o += 6 * N
+    W = block2(work, o, N, 6)
+    o += 6 * N
+    u = block1(work, o, N)
+    o += N
+    p = block1(work, o, nt)
+    o += nt
+    # fixed scratch (WORK_FIXED): Ia 36, pa 6, Dx 9, T 9, G 9, x 6, a_base 6
+    Ia = block2(work, o, 6, 6)
+    pa = block1(work, o + 36, 6)
+    Dx = block2(work, o + 42, 3, 3)
+    T = block2(work, o + 51, 3, 3)
+    G = block2(work, o + 60, 3, 3)
+    x = block1(work, o + 69, 6)
+    a_base = block1(work, o + 75, 6)
+    return (R, s_w, hk, Aw, e_w, w, vO, c, I6, pb, Dinv, lam_b, dlam_b, S, U, W, u, p,
+            Ia, pa, Dx, T, G, x, a_base)
+
+
+@_njit
+def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
+                flags, base, t0, p0, pdot, L_rotor, tau):
+    """y' (size,) at (t, y) into ydot: what system.ChainODE.rhs computes.
+
+    work: float workspace of n WORK_PER_BODY + N WORK_PER_COLUMN + nt + WORK_FIXED (`workspace`);
+    nothing is allocated per call.
+    flags (int, 7): base type, has gravity, has lambda (rotors), i_r0, i_vel, i_kappa, N.
+    base (float, 7): moving-base amplitude (3), W = 2 pi f, gravity (3).
+    Held inputs: torque-rotor spins p_i = p0_i + pdot_i (t - t0) (eq 29), their torques
+    L_rotor, the generalized forces tau (N,) of the columns (hinge commands, eq 51).
+    """
+    base_type, has_gravity, has_lam = flags[0], flags[1] != 0, flags[2] != 0
+    i_r0, i_vel, i_kap, N = flags[3], flags[4], flags[5], flags[6]
+    base_amplitude, base_omega, gravity = base[0:3], base[3], base[4:7]
+    n = mass.shape[0]
+    nt = torque_body.shape[0]
+    (R, s_w, hk, Aw, e_w, w, vO, c, I6, pb, Dinv, lam_b, dlam_b, S, U, W, u, p,
+     Ia, pa, Dx, T, G, x, a_base) = workspace_views(work, n, N, nt)
+
+    # positions, velocities
+    _positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, hk, Aw, e_w)
+    _velocities(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, i_vel, s_w, e_w, w, vO, c)
+    # bias forces: p_i(t) = p_i(t0) + (L_i / A_i)(t - t0) (eq 29)
+    for i in range(nt):
+        p[i] = p0[i] + pdot[i] * (t - t0)
+    _bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
+                 torque_A, p, L_rotor, has_gravity, gravity, lam_b, dlam_b, I6, pb)
+    # ABA
+    _joint_columns(is_hinge, own_col, base_type, e_w, S)
+    for a in range(6):
+        a_base[a] = 0.0
+    if base_type == BASE_MOVING:
+        sw = -base_omega * base_omega * math.sin(base_omega * t)
+        for a in range(3):
+            a_base[3 + a] = base_amplitude[a] * sw
+    _aba(is_hinge, col_start, S, I6, pb, c, tau, a_base, s_w, U, W, u, Dinv, ydot[i_vel:i_vel + N],
+         Ia, pa, Dx, T, G, x)
+    # y'
+    if base_type == BASE_FREE:
+        for a in range(3):
+            ydot[i_r0 + a] = y[i_vel + a]
+    for k in range(n):
+        i = qrow[k]
+        if is_hinge[k]:
+            ydot[i] = y[i_vel + own_col[k]]  # phi_k'
+        else:
+            ydot[i], ydot[i + 1], ydot[i + 2], ydot[i + 3] = _quat_rate(
+                y[i], y[i + 1], y[i + 2], y[i + 3], w[k, 0], w[k, 1], w[k, 2])
+    for i in range(nt):
+        k = torque_body[i]
+        ax0, ax1, ax2 = torque_axis[i, 0], torque_axis[i, 1], torque_axis[i, 2]
+        e0 = R[k, 0, 0] * ax0 + R[k, 0, 1] * ax1 + R[k, 0, 2] * ax2
+        e1 = R[k, 1, 0] * ax0 + R[k, 1, 1] * ax1 + R[k, 1, 2] * ax2
+        e2 = R[k, 2, 0] * ax0 + R[k, 2, 1] * ax1 + R[k, 2, 2] * ax2
+        ydot[i_kap + i] = _rotor_angle_rate(p[i], w[k, 0], w[k, 1], w[k, 2], e0, e1, e2)
+
+
+@_njit
+def normalize_quaternions(y, i_q0, nq):
+    """Quaternions y[i_q0 + 4 j : i_q0 + 4 j + 4], j < nq, to unit length in place."""
+    for j in range(nq):
+        i = i_q0 + 4 * j
+        nrm = math.sqrt(y[i] * y[i] + y[i + 1] * y[i + 1] + y[i + 2] * y[i + 2] + y[i + 3] * y[i + 3])
+        for a in range(4):
+            y[i + a] /= nrm
+
+
+# --- the kernel's arguments -------------------------------------------------------------------
+def model_arguments(model: Model) -> tuple:
+    """The model as `rhs_kernel` reads it: the arguments from `is_hinge` to `base` (15 arrays).
+
+    Per body: the y index of its quaternion (spherical) or of phi_k (hinge) (`qrow`); the first
+    velocity column of its own joint (`own_col`); the range of all its columns (`col_start`,
+    n + 1; a free base's translations belong to body 0). `flags` and `base` as in `rhs_kernel`.
+    """
+    m, n = model, model.n
+    qrow = np.empty(n, dtype=np.int64)
+    qrow[m.sph_bodies] = m.i_quat[:, 0]
+    qrow[m.hinge_bodies] = m.i_phi.start + np.arange(len(m.hinge_bodies))
+    own_col = np.empty(n, dtype=np.int64)
+    own_col[m.sph_bodies] = m.col_sph[:, 0]
+    own_col[m.hinge_bodies] = m.col_hinge
+    col_start = np.searchsorted(m.col_body, np.arange(n + 1)).astype(np.int64)
+    if np.any(np.diff(col_start) > MAX_JOINT_DOF):
+        raise ValueError("a joint has more than six velocity columns")
+    base_type = {"fixed": BASE_FIXED, "moving": BASE_MOVING, "free": BASE_FREE}[m.base_type]
+    has_lam = len(m.torque_body) > 0 or m.lam_speed is not None
+    flags = np.array([base_type, m.gravity is not None, has_lam, m.i_r0.start, m.i_vel.start,
+                      m.i_kappa.start, m.N], dtype=np.int64)
+    base = np.zeros(7)
+    if m.base_amplitude is not None:
+        base[0:3] = m.base_amplitude
+    base[3] = m.base_omega
+    if m.gravity is not None:
+        base[4:7] = m.gravity
+    nt = len(m.torque_body)
+
+    def f64(a, shape):
+        return np.ascontiguousarray(np.asarray(a, dtype=np.float64).reshape(shape))
+
+    return (
+        np.ascontiguousarray(m.is_hinge, dtype=np.bool_),
+        qrow,
+        own_col,
+        col_start,
+        f64(m.hinge_axis, (n, 3)),
+        f64(m.s, (n, 3)),
+        f64(m.mass, (n,)),
+        f64(m.first_moment, (n, 3)),
+        f64(m.inertia, (n, 3, 3)),
+        f64(np.zeros((n, 3)) if m.lam_speed is None else m.lam_speed, (n, 3)),
+        np.ascontiguousarray(m.torque_body, dtype=np.int64),
+        f64(m.torque_axis, (nt, 3)),
+        f64(m.torque_A, (nt,)),
+        flags,
+        base,
+    )
+
+
+def input_arguments(model: Model, t0: float, p0, hinge_tau, L_rotor) -> tuple:
+    """The held inputs as `rhs_kernel` reads them: (t0, p0 (nt,), pdot = L / A (nt,),
+    L (nt,), tau (N,)); None stands for zeros."""
+    m = model
+    nt = len(m.torque_body)
+    p0_ = np.zeros(nt) if p0 is None else np.array(p0, dtype=np.float64).reshape(nt)
+    L = np.zeros(nt) if L_rotor is None else np.array(L_rotor, dtype=np.float64).reshape(nt)
+    pdot = L / m.torque_A if nt else np.zeros(0)
+    tau = np.zeros(m.N)
+    if hinge_tau is not None:
+        tau[m.col_hinge] = hinge_tau  # (51): e^k . L^k = L_k
+    return float(t0), p0_, pdot, L, tau
+
+
+def workspace(model: Model) -> np.ndarray:
+    """The float workspace of `rhs_kernel`: n WORK_PER_BODY + N WORK_PER_COLUMN
+    + nt WORK_PER_ROTOR + WORK_FIXED (nt torque rotors)."""
+    return np.zeros(model.n * WORK_PER_BODY + model.N * WORK_PER_COLUMN
+                    + len(model.torque_body) * WORK_PER_ROTOR + WORK_FIXED)
+
+
+# --- the stages other compiled modules build on (fast_canonical: the canonical field) ---------
+#: inlined there as here; the same dispatchers under public names
+positions_stage = _positions
+spatial_inertia = _spatial_inertia
+velocities_stage = _velocities
+joint_columns_stage = _joint_columns
+articulated_solve = _aba
+quat_rate = _quat_rate
+rotor_angle_rate = _rotor_angle_rate

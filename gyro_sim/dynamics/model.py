@@ -1,0 +1,271 @@
+"""The model: a scene compiled into the arrays the dynamics reads (THEORY.md sections 1-2).
+
+Like Pinocchio's Model, it is an immutable description; the per-evaluation workspace lives
+in :class:`gyro_sim.dynamics.reference.Data`. It holds only the terms the scene has: `gravity` is
+None without gravity, the rotor arrays are empty without rotors, `hinge_bodies` is empty in
+an all-spherical chain, and the dynamics skips every term that is absent.
+
+Generalized velocities (the unknowns of eqs (52)-(54), in a relative basis):
+    free base: v0, the velocity of O^1 (3, world frame)
+    spherical joint k: w^k - w^{k-1}, the angular velocity of body k relative to its parent
+        (3, world-frame components; the paper's absolute w^k is their prefix sum)
+    hinge k: phi_k' (eq 50)
+State vector y = [r0 (free base, 3) | quaternions of spherical bodies (4 each, w x y z, world
+from body) | hinge angles phi_k | generalized velocities | torque-rotor angles kappa_i].
+The rotor angles are quadratures for output only: nothing feeds back from them.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gyro_sim.dynamics.rotations import (
+    axis_angle_matrix, down_frame, euler_rates_to_omega, euler_to_matrix, matrix_to_quat,
+    quat_to_matrix,
+)
+from gyro_sim.scene.records import Scene
+
+
+@dataclass(frozen=True)
+class Model:
+    """Immutable arrays of a compiled scene; n bodies, ns spherical, nh hinges, N velocities."""
+
+    scene: Scene
+    names: tuple[str, ...]
+    n: int
+    is_hinge: np.ndarray  # (n,) bool
+    sph_bodies: np.ndarray  # (ns,) int, chain order
+    hinge_bodies: np.ndarray  # (nh,) int, chain order
+    hinge_axis: np.ndarray  # (n, 3) hinge axis e^k (parent frame = own frame); zero on spherical bodies
+    # gyrostat k composed with its rotors, body frame (eqs 22, 30)
+    mass: np.ndarray  # (n,) m^k
+    first_moment: np.ndarray  # (n, 3) m^k c^k
+    inertia: np.ndarray  # (n, 3, 3) A^k at O^k (eq 30)
+    s: np.ndarray  # (n, 3) s^k, zero on the last body
+    # rotors (eq 31): torque rotors carry lambda = A_i p_i e_i, speed rotors A_i kappa_i' e_i
+    torque_body: np.ndarray  # (nt,) int
+    torque_axis: np.ndarray  # (nt, 3)
+    torque_A: np.ndarray  # (nt,)
+    torque_p0: np.ndarray  # (nt,) initial absolute spins p_i
+    torque_names: tuple[str, ...]
+    speed_body: np.ndarray  # (nv,) int
+    speed_axis: np.ndarray  # (nv, 3)
+    speed_A: np.ndarray  # (nv,)
+    speed_rate: np.ndarray  # (nv,) kappa_i'
+    speed_names: tuple[str, ...]
+    lam_speed: np.ndarray | None  # (n, 3) constant speed-rotor part of lambda^k, None without
+    # actuated axes, in command order: each body's hinge, then its actuated torque rotors
+    axis_names: tuple[str, ...]
+    axis_hinge: np.ndarray  # (na,) index into hinge_bodies or -1
+    axis_rotor: np.ndarray  # (na,) index into torque rotors or -1
+    # base and gravity
+    base_type: str
+    base_position: np.ndarray
+    base_amplitude: np.ndarray | None
+    base_omega: float  # 2 pi f of a moving base
+    gravity: np.ndarray | None  # (3,) world
+    down: np.ndarray  # world_R_down of the Euler angles
+    # velocity columns: col_body[j] = body whose joint column j belongs to (free base: 0)
+    N: int
+    col_body: np.ndarray  # (N,)
+    col_upper: np.ndarray  # (N, N) bool: col_body[i] <= col_body[j]
+    col_sph: np.ndarray  # (ns, 3) column indices of spherical joints
+    col_hinge: np.ndarray  # (nh,) column indices of hinges
+    col_base: np.ndarray  # (3,) or (0,)
+    # state layout
+    size: int
+    i_r0: slice
+    i_quat: np.ndarray  # (ns, 4) indices of the quaternions in y
+    i_phi: slice
+    i_vel: slice  # the N generalized velocities
+    i_kappa: slice  # torque-rotor angles
+
+    @property
+    def free(self) -> bool:
+        return self.base_type == "free"
+
+    @property
+    def moving(self) -> bool:
+        return self.base_type == "moving"
+
+
+def _skew_sq(a: np.ndarray) -> np.ndarray:
+    """|a|^2 I - a a^T: the inertia of a unit point mass at a (the term h x (w x h), eq 30)."""
+    return (a @ a) * np.eye(3) - np.outer(a, a)
+
+
+def compile_model(scene: Scene) -> Model:
+    """Compose each gyrostat (eqs 22, 30, 31) and lay out columns and state for `scene`."""
+    bodies = scene.bodies
+    n = len(bodies)
+    is_hinge = np.array([b.joint.type == "hinge" for b in bodies], dtype=bool)
+    hinge_axis = np.zeros((n, 3))
+    mass = np.zeros(n)
+    first = np.zeros((n, 3))
+    inertia = np.zeros((n, 3, 3))
+    s = np.zeros((n, 3))
+    lam_speed = np.zeros((n, 3))
+    tb, ta, tA, tp, tn, vb, va, vA, vr, vn = ([] for _ in range(10))
+    axis_names, axis_hinge, axis_rotor = [], [], []
+    hinge_index = np.cumsum(is_hinge) - 1
+    for k, b in enumerate(bodies):
+        if is_hinge[k]:
+            hinge_axis[k] = b.joint.axis
+            axis_names.append(b.name)
+            axis_hinge.append(int(hinge_index[k]))
+            axis_rotor.append(-1)
+        mass[k] = b.mass
+        first[k] = b.mass * b.com
+        inertia[k] = b.inertia
+        if b.next_joint is not None:
+            s[k] = b.next_joint
+        for r in b.rotors:
+            e, h = r.axis, r.position
+            mass[k] += r.mass
+            first[k] += r.mass * h
+            # (30): e x (w x e) B_i + h x (w x h) m_i, for every rotor
+            inertia[k] += r.transverse_inertia * (np.eye(3) - np.outer(e, e)) + r.mass * _skew_sq(h)
+            if r.mode == "speed":
+                # (30): + A_i (w . e_i) e_i;  (31): lambda += A_i kappa_i' e_i
+                inertia[k] += r.axial_inertia * np.outer(e, e)
+                lam_speed[k] += r.axial_inertia * r.spin * e
+                vb.append(k), va.append(e), vA.append(r.axial_inertia), vr.append(r.spin), vn.append(r.name)
+            else:
+                if r.actuated:
+                    axis_names.append(r.name)
+                    axis_hinge.append(-1)
+                    axis_rotor.append(len(tb))
+                tb.append(k), ta.append(e), tA.append(r.axial_inertia), tp.append(r.spin), tn.append(r.name)
+
+    sph = np.flatnonzero(~is_hinge)
+    hin = np.flatnonzero(is_hinge)
+    free = scene.base.type == "free"
+    # velocity columns
+    col_body = []
+    if free:
+        col_body += [0, 0, 0]
+    col_sph, col_hinge = [], []
+    for k in range(n):
+        if is_hinge[k]:
+            col_hinge.append(len(col_body))
+            col_body.append(k)
+        else:
+            col_sph.append([len(col_body) + i for i in range(3)])
+            col_body += [k, k, k]
+    col_body = np.array(col_body, dtype=int)
+    N = len(col_body)
+    ns, nh, nt = len(sph), len(hin), len(tb)
+    # state layout
+    off = 0
+    i_r0 = slice(off, off + 3 * free)
+    off += 3 * free
+    i_quat = off + np.arange(4 * ns).reshape(ns, 4)
+    off += 4 * ns
+    i_phi = slice(off, off + nh)
+    off += nh
+    i_vel = slice(off, off + N)
+    off += N
+    i_kappa = slice(off, off + nt)
+    off += nt
+
+    def arr(x, shape):
+        return np.array(x, dtype=float).reshape(shape)
+
+    g = None if scene.gravity is None else np.array(scene.gravity, dtype=float)
+    nu = None if g is None or not np.any(g) else g / np.linalg.norm(g)
+    base = scene.base
+    return Model(
+        scene=scene,
+        names=tuple(b.name for b in bodies),
+        n=n,
+        is_hinge=is_hinge,
+        sph_bodies=sph,
+        hinge_bodies=hin,
+        hinge_axis=hinge_axis,
+        mass=mass,
+        first_moment=first,
+        inertia=inertia,
+        s=s,
+        torque_body=np.array(tb, dtype=int),
+        torque_axis=arr(ta, (nt, 3)),
+        torque_A=arr(tA, (nt,)),
+        torque_p0=arr(tp, (nt,)),
+        torque_names=tuple(tn),
+        speed_body=np.array(vb, dtype=int),
+        speed_axis=arr(va, (len(vb), 3)),
+        speed_A=arr(vA, (len(vb),)),
+        speed_rate=arr(vr, (len(vb),)),
+        speed_names=tuple(vn),
+        lam_speed=lam_speed if vb else None,
+        axis_names=tuple(axis_names),
+        axis_hinge=np.array(axis_hinge, dtype=int),
+        axis_rotor=np.array(axis_rotor, dtype=int),
+        base_type=base.type,
+        base_position=np.array(base.position, dtype=float),
+        base_amplitude=None if base.amplitude is None else np.array(base.amplitude, dtype=float),
+        base_omega=0.0 if base.frequency is None else 2.0 * np.pi * float(base.frequency),
+        gravity=g,
+        down=down_frame(nu),
+        N=N,
+        col_body=col_body,
+        col_upper=col_body[:, None] <= col_body[None, :],
+        col_sph=np.array(col_sph, dtype=int).reshape(ns, 3),
+        col_hinge=np.array(col_hinge, dtype=int),
+        col_base=np.arange(3) if free else np.arange(0),
+        size=off,
+        i_r0=i_r0,
+        i_quat=i_quat,
+        i_phi=i_phi,
+        i_vel=i_vel,
+        i_kappa=i_kappa,
+    )
+
+
+def initial_state(model: Model) -> np.ndarray:
+    """The state vector y (model.size,) of the scene's initial conditions."""
+    y = np.zeros(model.size)
+    bodies = model.scene.bodies
+    R_parent = np.eye(3)
+    w_parent = np.zeros(3)
+    nu_rel = np.zeros((model.n, 3))
+    q = np.zeros((len(model.sph_bodies), 4))
+    phi = np.zeros(len(model.hinge_bodies))
+    phid = np.zeros(len(model.hinge_bodies))
+    isph = ihin = 0
+    for k, b in enumerate(bodies):
+        ini = b.initial
+        if model.is_hinge[k]:
+            R = R_parent @ axis_angle_matrix(model.hinge_axis[k], ini.angle)
+            w = w_parent + (R @ model.hinge_axis[k]) * ini.rate  # (50)
+            phi[ihin], phid[ihin] = ini.angle, ini.rate
+            ihin += 1
+        else:
+            if ini.quaternion is not None:
+                qk = np.array(ini.quaternion, dtype=float)
+                qk /= np.linalg.norm(qk)
+                R = quat_to_matrix(qk)
+                wb = np.zeros(3) if ini.angular_velocity is None else np.asarray(ini.angular_velocity)
+                w = R @ wb
+            else:
+                euler = np.zeros(3) if ini.euler is None else np.asarray(ini.euler, dtype=float)
+                rates = np.zeros(3) if ini.euler_rates is None else np.asarray(ini.euler_rates, dtype=float)
+                R = euler_to_matrix(euler, model.down)
+                qk = matrix_to_quat(R)
+                w = euler_rates_to_omega(euler, rates, model.down)
+            q[isph] = qk
+            nu_rel[k] = w - w_parent
+            isph += 1
+        R_parent, w_parent = R, w
+    if model.free:
+        y[model.i_r0] = model.base_position
+    y[model.i_quat.ravel()] = q.ravel()
+    y[model.i_phi] = phi
+    vel = np.zeros(model.N)
+    if model.free:
+        v0 = model.scene.base.velocity
+        vel[model.col_base] = np.zeros(3) if v0 is None else v0
+    vel[model.col_sph.ravel()] = nu_rel[model.sph_bodies].ravel()
+    vel[model.col_hinge] = phid
+    y[model.i_vel] = vel
+    return y

@@ -1,0 +1,488 @@
+"""What one publication shows, compiled with numba: joint states, poses, wrenches, invariants.
+
+:func:`outputs_kernel` computes at one (t, y), in one compiled call over the kernels of
+:mod:`gyro_sim.dynamics.kernel` (its stages and :func:`gyro_sim.dynamics.kernel.rhs_kernel`), what
+:class:`gyro_sim.simulator.Simulator` otherwise builds from the numpy reference
+(`joint_states`, `body_states`, `wrenches`, `invariants`); :class:`gyro_sim.dynamics.system.
+FastChainODE` offers it as `outputs`. Same equations, about each joint point O^k instead of
+the world origin; the results agree to round-off (test/core/test_fast_outputs.py).
+
+Pipeline (all world components, about O^k unless said):
+    rhs_kernel      t, y          -> u', torque-rotor angle rates kappa'          (eqs 18-19, 48)
+    stages of fast  t, y          -> R^k, s^k, w^k, v(O^k), c^k, I^k, p^k         (eqs 29-39, 50)
+    accelerations   u', c         -> body accelerations (alpha, a(O^k))           (eq 34 differentiated)
+    wrenches        I a + p       -> subtree sums: R^k (eq 40), L^k about O^k (eq 48), body frame
+    poses           R, s          -> O^k, quaternions (w >= 0 for hinge bodies)
+    joint angles    R, w          -> Euler angles and rates (rotations.matrices_to_euler)
+    invariants      R, w, v       -> energy (eq 33 + potential), momenta (eq 79)
+
+One publication (:func:`publication_kernel`, Simulator.write_outputs and snapshot) allocates
+nothing: the kinematics are those fast.rhs_kernel leaves in its workspace when it runs (wrenches
+and speed rotors need its accelerations; otherwise they are computed here into the same views),
+the rest lives in a scratch vector the caller keeps (`scratch_size`), so the kernel is compiled
+without reference counting; the numbers are computed first, then put into the messages' slots
+and checked finite in plain loops.
+
+Its cache is keyed as the loops' of :mod:`gyro_sim.integrators.rk4.loop` (a digest of every file
+whose kernels it compiles in).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from pathlib import Path
+
+from gyro_sim.dynamics import kernel as fast
+from gyro_sim.dynamics.kernel import block1, block2, block3
+from gyro_sim.dynamics.kernel import (
+    _bias_forces, _cross, _cross_add, _dot6, _matvec, _positions, _velocities,
+)
+from gyro_sim.integrators.rk4.loop import cache_directory, njit_with_dependencies
+
+_FILES = (Path(fast.__file__), Path(__file__))
+_njit = njit_with_dependencies(*_FILES)
+
+
+def _njit_options(**options):
+    """A decorator: `_njit` (cached by the digest of _FILES) with numba's options `options`."""
+
+    def decorate(fn):
+        try:
+            import numba
+        except ImportError:  # pragma: no cover - exercised only where numba is missing
+            return fn
+        saved = numba.config.CACHE_DIR
+        numba.config.CACHE_DIR = str(cache_directory(_FILES))
+        try:
+            return numba.njit(cache=True, error_model="numpy", **options)(fn)
+        finally:
+            numba.config.CACHE_DIR = saved
+
+    return decorate
+
+
+#: always inlined by LLVM into its callers (numba's `forceinline`, as fast's stages): a helper
+#: called per body or per value passes no array structs and makes no view. Same operations,
+#: same results bit for bit.
+_njit_inline = _njit_options(forceinline=True)
+#: without numba's reference counting (as fast.rhs_kernel): for a kernel that allocates nothing
+#: and returns no array, where counting every array argument and view costs ~20 %
+_njit_uncounted = _njit_options(_nrt=False, forceinline=False)
+
+
+# fast.rhs_kernel's workspace as publication_kernel reads it after the kernel ran (its first
+# blocks, in its order: R 9, s_w 3, hk 3, Aw 9, e_w 3, w 3, vO 3, c 6, I6 36, pb 6, Dinv 36,
+# lam_b 3, dlam_b 3 words per body; S, U, W 6, u 1 per column; p 1 per torque rotor)
+assert fast.WORK_PER_BODY == 123 and fast.WORK_PER_COLUMN == 19 and fast.WORK_PER_ROTOR == 1, \
+    "fast.rhs_kernel's workspace changed: update publication_kernel's views of it"
+
+#: entries of `inv`, the invariants' output vector
+INV_ENERGY, INV_KINETIC, INV_POTENTIAL, INV_JACOBI, INV_VERTICAL = 0, 1, 2, 3, 4
+INV_H_O1, INV_P, INV_L_COM = slice(5, 8), slice(8, 11), slice(11, 14)
+INV_SIZE = 14
+
+
+@_njit
+def _matrix_to_quat(R, q):
+    """q (4,) of R (3, 3): Shepperd's method, unit, w >= 0 (rotations.matrix_to_quat)."""
+    tr = R[0, 0] + R[1, 1] + R[2, 2]
+    i, best = 0, tr
+    for a in range(3):
+        if R[a, a] > best:
+            i, best = a + 1, R[a, a]
+    if i == 0:
+        r = 0.5 * math.sqrt(1.0 + tr)
+        q[0], q[1], q[2], q[3] = r, (R[2, 1] - R[1, 2]) / (4 * r), (R[0, 2] - R[2, 0]) / (4 * r), \
+            (R[1, 0] - R[0, 1]) / (4 * r)
+    elif i == 1:
+        r = 0.5 * math.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
+        q[0], q[1], q[2], q[3] = (R[2, 1] - R[1, 2]) / (4 * r), r, (R[0, 1] + R[1, 0]) / (4 * r), \
+            (R[0, 2] + R[2, 0]) / (4 * r)
+    elif i == 2:
+        r = 0.5 * math.sqrt(1.0 - R[0, 0] + R[1, 1] - R[2, 2])
+        q[0], q[1], q[2], q[3] = (R[0, 2] - R[2, 0]) / (4 * r), (R[0, 1] + R[1, 0]) / (4 * r), r, \
+            (R[1, 2] + R[2, 1]) / (4 * r)
+    else:
+        r = 0.5 * math.sqrt(1.0 - R[0, 0] - R[1, 1] + R[2, 2])
+        q[0], q[1], q[2], q[3] = (R[1, 0] - R[0, 1]) / (4 * r), (R[0, 2] + R[2, 0]) / (4 * r), \
+            (R[1, 2] + R[2, 1]) / (4 * r), r
+    nrm = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    sgn = 1.0 if q[0] >= 0.0 else -1.0
+    for a in range(4):
+        q[a] = sgn * q[a] / nrm
+
+
+@_njit_inline
+def _euler(Rs, ws, k, down, singular, angs, rates):
+    """Euler angles (psi, theta, phi) and their rates of world_R_body R = Rs[k] (3, 3) turning at
+    w = ws[k] (3,) (rotations.matrices_to_euler, omegas_to_euler_rates) into angs[k], rates[k],
+    in scalars: cos and sin of psi from the entries atan2 takes them from, of theta from its
+    cosine (the same numbers to round-off). The stacks and k, not views of them: no view is
+    made per body."""
+    D00 = down[0, 0] * Rs[k, 0, 0] + down[1, 0] * Rs[k, 1, 0] + down[2, 0] * Rs[k, 2, 0]
+    D10 = down[0, 1] * Rs[k, 0, 0] + down[1, 1] * Rs[k, 1, 0] + down[2, 1] * Rs[k, 2, 0]
+    D20 = down[0, 2] * Rs[k, 0, 0] + down[1, 2] * Rs[k, 1, 0] + down[2, 2] * Rs[k, 2, 0]
+    D21 = down[0, 2] * Rs[k, 0, 1] + down[1, 2] * Rs[k, 1, 1] + down[2, 2] * Rs[k, 2, 1]
+    D02 = down[0, 0] * Rs[k, 0, 2] + down[1, 0] * Rs[k, 1, 2] + down[2, 0] * Rs[k, 2, 2]
+    D12 = down[0, 1] * Rs[k, 0, 2] + down[1, 1] * Rs[k, 1, 2] + down[2, 1] * Rs[k, 2, 2]
+    D22 = down[0, 2] * Rs[k, 0, 2] + down[1, 2] * Rs[k, 1, 2] + down[2, 2] * Rs[k, 2, 2]
+    ct = min(1.0, max(-1.0, D22))
+    theta = math.acos(ct)
+    h = math.hypot(D02, D12)
+    if h >= singular:
+        psi, phi = math.atan2(D02, -D12), math.atan2(D20, D21)
+        c, s = -D12 / h, D02 / h
+    else:
+        psi, phi = math.atan2(D10, D00), 0.0
+        h0 = math.hypot(D00, D10)
+        c, s = (D00 / h0, D10 / h0) if h0 > 0.0 else (1.0, 0.0)
+    angs[k, 0], angs[k, 1], angs[k, 2] = psi, theta, phi
+    wd0 = ws[k, 0] * down[0, 0] + ws[k, 1] * down[1, 0] + ws[k, 2] * down[2, 0]
+    wd1 = ws[k, 0] * down[0, 1] + ws[k, 1] * down[1, 1] + ws[k, 2] * down[2, 1]
+    wd2 = ws[k, 0] * down[0, 2] + ws[k, 1] * down[1, 2] + ws[k, 2] * down[2, 2]
+    st = math.sqrt((1.0 - ct) * (1.0 + ct))  # sin(theta) >= 0, theta in [0, pi]
+    dphi = (wd0 * s - wd1 * c) / st if st > singular else 0.0
+    rates[k, 0] = wd2 - dphi * ct
+    rates[k, 1] = wd0 * c + wd1 * s
+    rates[k, 2] = dphi
+
+
+def _held_t0_index() -> int:
+    """Where the held t0 sits among fast.rhs_kernel's arguments after (t, y, ydot)."""
+    import inspect
+
+    kernel = getattr(fast.rhs_kernel, "py_func", fast.rhs_kernel)
+    return list(inspect.signature(kernel).parameters).index("t0") - 3
+
+
+#: the held inputs (t0, p0, pdot, L_rotor, tau) start here in the arguments of fast.rhs_kernel
+#: after (t, y, ydot) (FastChainODE.kernel_arguments())
+HELD_T0 = _held_t0_index()
+
+
+def held_inputs(model, t0: float, p0, hinge_tau, L_rotor) -> tuple:
+    """(t0, p0, pdot, L_rotor, tau) as fast.rhs_kernel reads them (fast.input_arguments), for a
+    caller that passes the inputs of the kernel itself instead of holding them in the system."""
+    return fast.input_arguments(model, t0, p0, hinge_tau, L_rotor)
+
+
+#: bits of `want` (publication_kernel): the parts computed beyond the joint states
+WANT_WRENCHES, WANT_BODIES, WANT_INVARIANTS, WANT_EULER_ALL = 1, 2, 4, 8
+WANT_ALL = WANT_WRENCHES | WANT_BODIES | WANT_INVARIANTS | WANT_EULER_ALL
+#: joint-state entries (joint_kind): an Euler angle of a body (joint_ref = 3 k + axis), a hinge
+#: (ref: its body), a torque rotor, a speed rotor (ref: the rotor's index)
+JOINT_EULER, JOINT_HINGE, JOINT_TORQUE_ROTOR, JOINT_SPEED_ROTOR = 0, 1, 2, 3
+#: what publication_kernel returns: 0, or the first field found non-finite (Snapshot's names)
+NONFINITE_FIELDS = (None, "position", "velocity", "effort", "body_position", "body_quaternion",
+                    "wrench_force", "wrench_moment")
+
+
+@_njit_inline
+def _scatter(dst, at, src, first):
+    """src (m, q) into dst at the slots at[c, i, first + j] of every copy c (at (c, m, >= first + q))."""
+    for c in range(at.shape[0]):
+        for i in range(src.shape[0]):
+            for j in range(src.shape[1]):
+                dst[at[c, i, first + j]] = src[i, j]
+
+
+@_njit_inline
+def _finite(a):
+    """Every entry of a (m, q) finite."""
+    ok = True
+    for i in range(a.shape[0]):
+        for j in range(a.shape[1]):
+            ok &= abs(a[i, j]) < math.inf
+    return ok
+
+
+@_njit_inline
+def _finite_vector(a):
+    """Every entry of a (m,) finite."""
+    ok = True
+    for i in range(a.shape[0]):
+        ok &= abs(a[i]) < math.inf
+    return ok
+
+
+def scratch_size(n: int) -> int:
+    """The words of publication_kernel's `scratch` for n bodies."""
+    return SCRATCH_PER_BODY * n + SCRATCH_FIXED
+
+
+#: publication_kernel's scratch: I6 36, pb 6, dlam_b 3, acc 6 words per body; 3-vectors and A (6)
+SCRATCH_PER_BODY, SCRATCH_FIXED = 51, 24
+
+
+@_njit_uncounted
+def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                       first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
+                       base, t0, p0, pdot, L_rotor, tau,
+                       base_position, down, singular, speed_body, speed_axis, speed_A, speed_rate,
+                       want, joint_kind, joint_ref,
+                       R, w, vO, O, quat, euler, euler_rate, L_speed, wrench_force, wrench_moment, inv,
+                       position, velocity, effort, dst, at_joint, at_position, at_quat, at_wrench, scratch):
+    """What one publication asks for at (t, y), in one pass: the joint states always, wrenches,
+    poses and invariants when `want` says so; written into the output arrays and, for each
+    copy c, into dst at the slots at_...[c] (any flat float64 buffer: the messages' bytes).
+
+    The arguments up to `tau` are those of fast.rhs_kernel (its y' in ydot when it runs: only
+    for wrenches or speed rotors, which need the accelerations). base_position (3,), down
+    (3, 3) world_R_down of the Euler angles, singular: the Euler singularity threshold
+    (rotations.EULER_SINGULAR_SIN); speed rotors: body (nv,), axis (nv, 3), A (nv,), rate
+    (nv,). want: WANT_* bits. joint_kind, joint_ref (J,): what each joint-state entry is
+    (JOINT_*). Out: R (n, 3, 3) world_R_body, w (n, 3) angular velocities, vO (n, 3) velocities
+    of O^k, O (n, 3), quat (n, 4) world from body (WANT_BODIES), euler and euler_rate (n, 3)
+    (spherical bodies; every body with WANT_EULER_ALL), L_speed (nv,) motor torques
+    A_i (w' . e_i), wrench_force and wrench_moment (n, 3) R^k (eq 40), L^k (eq 48) in body k's
+    frame (WANT_WRENCHES), inv (INV_SIZE,) (WANT_INVARIANTS), position, velocity, effort (J,)
+    the joint states. Scatter: dst (m,) float64; at_joint (c, 3, J) slots of position, velocity,
+    effort; at_position (c, n, 3), at_quat (c, n, 4) (w, x, y, z), at_wrench (c, n, 6) (force,
+    moment); c = 0 writes none. scratch: float64 (scratch_size(n),), overwritten (this kernel
+    allocates nothing: compiled without reference counting, as fast.rhs_kernel).
+
+    Returns 0, or the index in NONFINITE_FIELDS of a field found not finite (the joint states,
+    and the poses and wrenches asked for, are all checked when written: the first field checked,
+    wrenches, then poses, then joint states, holding one).
+    """
+    base_type, has_gravity, has_lam = flags[0], flags[1] != 0, flags[2] != 0
+    i_r0, i_vel, i_kap, N = flags[3], flags[4], flags[5], flags[6]
+    amp, W, gravity = base[0:3], base[3], base[4:7]
+    n, nt, nv = mass.shape[0], torque_body.shape[0], speed_body.shape[0]
+    do_wrench = (want & WANT_WRENCHES) != 0
+    do_bodies = (want & WANT_BODIES) != 0
+    do_inv = (want & WANT_INVARIANTS) != 0
+    # the kinematics in the views fast.rhs_kernel cuts its workspace with (fast.workspace_views):
+    # the kernel leaves them there when it runs, else they are computed here into the same views
+    (R_k, s_w, hk, Aw, e_w, w_k, vO_k, c, _, _, _, lam_b, _, S, _, _, _, p,
+     _, _, _, _, _, _, _) = fast.workspace_views(work, n, N, nt)
+    if do_wrench or nv > 0:  # the accelerations: u' into ydot; the kinematics, p (29), S as above
+        fast.rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                        first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
+                        base, t0, p0, pdot, L_rotor, tau)
+    else:
+        for i in range(nt):
+            p[i] = p0[i] + pdot[i] * (t - t0)  # (29)
+        _positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R_k, s_w, hk, Aw, e_w)
+        _velocities(t, y, is_hinge, own_col, base_type, amp, W, i_vel, s_w, e_w, w_k, vO_k, c)
+    for k in range(n):  # the outputs' copies
+        for a in range(3):
+            w[k, a] = w_k[k, a]
+            vO[k, a] = vO_k[k, a]
+            for b in range(3):
+                R[k, a, b] = R_k[k, a, b]
+    q = 0
+    I6 = block3(scratch, q, n, 6, 6)
+    q += 36 * n
+    pb = block2(scratch, q, n, 6)
+    q += 6 * n
+    dlam_b = block2(scratch, q, n, 3)
+    q += 3 * n
+    acc = block2(scratch, q, n, 6)
+    q += 6 * n
+    tmp = block1(scratch, q, 3)
+    A = block1(scratch, q + 3, 6)
+    L = block1(scratch, q + 9, 3)
+    P = block1(scratch, q + 12, 3)
+    hsum = block1(scratch, q + 15, 3)
+    ang = block1(scratch, q + 18, 3)
+    lin = block1(scratch, q + 21, 3)  # q + 24 = scratch_size(n)
+    bad = 0
+    if do_wrench or nv > 0:
+        # body inertias and forces at zero acceleration (as rhs_kernel, which overwrote its own)
+        _bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
+                     torque_A, p, L_rotor, has_gravity, gravity, lam_b, dlam_b, I6, pb)
+        udot = ydot[i_vel:i_vel + N]
+        # body accelerations about O^k: A^k = A^{k-1} moved to O^k + c^k + S_k u'_k
+        for a in range(6):
+            A[a] = 0.0
+        if base_type == fast.BASE_MOVING:
+            sw = -W * W * math.sin(W * t)
+            for a in range(3):
+                A[3 + a] = amp[a] * sw
+        for k in range(n):
+            if k > 0:
+                _cross_add(A[:3], s_w[k - 1], A[3:])  # a kernel helper
+            for r in range(6):
+                A[r] += c[k, r]
+            for j in range(col_start[k], col_start[k + 1]):
+                for r in range(6):
+                    A[r] += S[j, r] * udot[j]
+            for r in range(6):
+                acc[k, r] = A[r]
+        if do_wrench:
+            # F^k = sum_{p >= k} (I a + p)^p about O^k; R^k its force (40), L^k its moment (48)
+            Fa0 = Fa1 = Fa2 = 0.0
+            Fl0 = Fl1 = Fl2 = 0.0
+            for k in range(n - 1, -1, -1):
+                if k < n - 1:  # the moment of F^{k+1} moved to O^k
+                    d0, d1, d2 = s_w[k, 0], s_w[k, 1], s_w[k, 2]
+                    Fa0 += d1 * Fl2 - d2 * Fl1
+                    Fa1 += d2 * Fl0 - d0 * Fl2
+                    Fa2 += d0 * Fl1 - d1 * Fl0
+                Fa0 += _dot6(I6[k, 0], acc[k]) + pb[k, 0]
+                Fa1 += _dot6(I6[k, 1], acc[k]) + pb[k, 1]
+                Fa2 += _dot6(I6[k, 2], acc[k]) + pb[k, 2]
+                Fl0 += _dot6(I6[k, 3], acc[k]) + pb[k, 3]
+                Fl1 += _dot6(I6[k, 4], acc[k]) + pb[k, 4]
+                Fl2 += _dot6(I6[k, 5], acc[k]) + pb[k, 5]
+                for a in range(3):
+                    wrench_force[k, a] = R[k, 0, a] * Fl0 + R[k, 1, a] * Fl1 + R[k, 2, a] * Fl2
+                    wrench_moment[k, a] = R[k, 0, a] * Fa0 + R[k, 1, a] * Fa1 + R[k, 2, a] * Fa2
+            _scatter(dst, at_wrench, wrench_force, 0)
+            _scatter(dst, at_wrench, wrench_moment, 3)
+            if not _finite(wrench_force):
+                bad = 6
+            elif not _finite(wrench_moment):
+                bad = 7
+        # speed rotors: the motor keeps kappa' constant, L_i = A_i (w' . e_i)
+        for i in range(nv):
+            k = speed_body[i]
+            _matvec(R[k], speed_axis[i], tmp)
+            L_speed[i] = speed_A[i] * (acc[k, 0] * tmp[0] + acc[k, 1] * tmp[1] + acc[k, 2] * tmp[2])
+    elif do_inv and has_lam:
+        _bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
+                     torque_A, p, L_rotor, has_gravity, gravity, lam_b, dlam_b, I6, pb)
+    # joint points
+    if do_bodies or do_inv:
+        for a in range(3):
+            if base_type == fast.BASE_FREE:
+                O[0, a] = y[i_r0 + a]
+            elif base_type == fast.BASE_MOVING:
+                O[0, a] = base_position[a] + amp[a] * math.sin(W * t)
+            else:
+                O[0, a] = base_position[a]
+        for k in range(1, n):
+            for a in range(3):
+                O[k, a] = O[k - 1, a] + s_w[k - 1, a]
+    # Euler angles (joint states of spherical joints; every body for the Lagrange integrals)
+    all_euler = (want & WANT_EULER_ALL) != 0
+    for k in range(n):
+        if all_euler or not is_hinge[k]:
+            _euler(R, w, k, down, singular, euler, euler_rate)
+    # poses
+    if do_bodies:
+        for k in range(n):
+            if is_hinge[k]:
+                _matrix_to_quat(R[k], quat[k])
+            else:
+                i = qrow[k]
+                nrm = math.sqrt(y[i] * y[i] + y[i + 1] * y[i + 1] + y[i + 2] * y[i + 2] + y[i + 3] * y[i + 3])
+                for a in range(4):
+                    quat[k, a] = y[i + a] / nrm
+        _scatter(dst, at_position, O, 0)
+        _scatter(dst, at_quat, quat, 0)
+        if bad == 0 and not _finite(O):
+            bad = 4
+        elif bad == 0 and not _finite(quat):
+            bad = 5
+    # joint states: the numbers, then into their slots, then their check (three plain loops:
+    # ~6 us less than one loop doing all three at n = 100)
+    J = joint_kind.shape[0]
+    for j in range(J):
+        kind, ref = joint_kind[j], joint_ref[j]
+        if kind == JOINT_EULER:
+            k = ref // 3
+            a = ref - 3 * k
+            position[j], velocity[j], effort[j] = euler[k, a], euler_rate[k, a], 0.0
+        elif kind == JOINT_HINGE:
+            col = own_col[ref]
+            position[j], velocity[j], effort[j] = y[qrow[ref]], y[i_vel + col], tau[col]
+        elif kind == JOINT_TORQUE_ROTOR:
+            k = torque_body[ref]
+            ax0, ax1, ax2 = torque_axis[ref, 0], torque_axis[ref, 1], torque_axis[ref, 2]
+            e0 = R[k, 0, 0] * ax0 + R[k, 0, 1] * ax1 + R[k, 0, 2] * ax2  # the axis in world (_matvec)
+            e1 = R[k, 1, 0] * ax0 + R[k, 1, 1] * ax1 + R[k, 1, 2] * ax2
+            e2 = R[k, 2, 0] * ax0 + R[k, 2, 1] * ax1 + R[k, 2, 2] * ax2
+            position[j] = y[i_kap + ref]
+            velocity[j] = p[ref] - (w[k, 0] * e0 + w[k, 1] * e1 + w[k, 2] * e2)  # (18-19)
+            effort[j] = L_rotor[ref]
+        else:
+            position[j], velocity[j], effort[j] = speed_rate[ref] * t, speed_rate[ref], L_speed[ref]
+    for c in range(at_joint.shape[0]):
+        for j in range(J):
+            dst[at_joint[c, 0, j]] = position[j]
+        for j in range(J):
+            dst[at_joint[c, 1, j]] = velocity[j]
+        for j in range(J):
+            dst[at_joint[c, 2, j]] = effort[j]
+    if bad == 0 and not _finite_vector(position):
+        bad = 1
+    elif bad == 0 and not _finite_vector(velocity):
+        bad = 2
+    elif bad == 0 and not _finite_vector(effort):
+        bad = 3
+    if not do_inv:
+        return bad
+    # invariants: momenta about O^k, then about the origin; (33) and the potential
+    T = 0.0
+    V = 0.0
+    lam_dot = 0.0
+    for a in range(3):
+        L[a] = P[a] = hsum[a] = 0.0
+    for k in range(n):
+        _matvec(Aw[k], w[k], ang)  # A w + h x v(O)
+        _cross_add(hk[k], vO[k], ang)
+        _cross(w[k], hk[k], lin)  # m v(O) + w x h
+        for a in range(3):
+            lin[a] += mass[k] * vO[k, a]
+        T += 0.5 * (w[k, 0] * ang[0] + w[k, 1] * ang[1] + w[k, 2] * ang[2]
+                    + vO[k, 0] * lin[0] + vO[k, 1] * lin[1] + vO[k, 2] * lin[2])
+        _cross_add(O[k], lin, ang)  # about the origin
+        if has_lam:
+            _matvec(R[k], lam_b[k], tmp)  # lambda^k, speed and torque rotors
+            for a in range(3):
+                ang[a] += tmp[a]
+            _matvec(R[k], lam_speed[k], tmp)
+            lam_dot += w[k, 0] * tmp[0] + w[k, 1] * tmp[1] + w[k, 2] * tmp[2]
+        for a in range(3):
+            L[a] += ang[a]
+            P[a] += lin[a]
+            hsum[a] += mass[k] * O[k, a] + hk[k, a]
+    spin2 = 0.0
+    for i in range(nv):
+        spin2 += speed_A[i] * speed_rate[i] * speed_rate[i]
+    T += lam_dot + 0.5 * spin2
+    for i in range(nt):
+        T += 0.5 * torque_A[i] * p[i] * p[i]
+    if has_gravity:
+        V = -(gravity[0] * hsum[0] + gravity[1] * hsum[1] + gravity[2] * hsum[2])
+    inv[INV_ENERGY], inv[INV_KINETIC], inv[INV_POTENTIAL] = T + V, T, V
+    inv[INV_JACOBI] = T + V - lam_dot - spin2
+    _cross(O[0], P, tmp)  # H_O1 = L - O^1 x P
+    mtot = 0.0
+    for k in range(n):
+        mtot += mass[k]
+    for a in range(3):
+        inv[5 + a] = L[a] - tmp[a]
+        inv[8 + a] = P[a]
+        hsum[a] /= mtot  # the centre of mass
+    inv[INV_VERTICAL] = -(down[0, 2] * inv[5] + down[1, 2] * inv[6] + down[2, 2] * inv[7])  # (79)
+    _cross(hsum, P, tmp)
+    for a in range(3):
+        inv[11 + a] = L[a] - tmp[a]
+    return bad
+
+
+@_njit
+def outputs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                   first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
+                   base, t0, p0, pdot, L_rotor, tau,
+                   base_position, down, singular, speed_body, speed_axis, speed_A, speed_rate,
+                   R, w, vO, O, quat, euler, euler_rate, L_speed, wrench_force, wrench_moment, inv):
+    """Every output at (t, y): :func:`publication_kernel` with everything wanted and no joint
+    states or scatter (FastChainODE.outputs); ydot holds y' (u' and the torque-rotor angle rates
+    kappa' as fast.rhs_kernel leaves them)."""
+    none = np.empty(0, dtype=np.int64)
+    nothing = np.empty(0)
+    publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                       first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
+                       base, t0, p0, pdot, L_rotor, tau,
+                       base_position, down, singular, speed_body, speed_axis, speed_A, speed_rate,
+                       WANT_ALL, none, none,
+                       R, w, vO, O, quat, euler, euler_rate, L_speed, wrench_force, wrench_moment, inv,
+                       nothing, nothing, nothing, nothing, np.empty((0, 3, 0), dtype=np.int64),
+                       np.empty((0, R.shape[0], 3), dtype=np.int64), np.empty((0, R.shape[0], 4), dtype=np.int64),
+                       np.empty((0, R.shape[0], 6), dtype=np.int64), np.empty(SCRATCH_PER_BODY * R.shape[0] + SCRATCH_FIXED))

@@ -1,0 +1,277 @@
+"""Chain dynamics: eqs (34)-(54) of the paper as a world-frame Newton-Euler recursion.
+
+Pipeline of one evaluation (MuJoCo-style stages, each filling `Data`):
+    positions   q        -> R^k, O^k, world vectors            (eqs 34, 50 for hinges)
+    velocities  q, u     -> w^k, v0^k                          (eqs 34-35, 50, 53)
+    bias        q, u, t  -> body forces at zero acceleration   (eqs 36-39, 58)
+    mass matrix q        -> M                                  (the part of (52)-(54) linear in u')
+    solve       M u' = tau - C                                 (eqs 52-54 closed: 44, 51)
+    reactions   u'       -> R^k (40), L^k (48)                 (only when asked for)
+
+All vectors are world components, spatial quantities about the world origin (angular part
+first). For body p with mass m, first moment h = m r_c about the origin and inertia J about
+the origin, the momentum of velocity (w, v_o) (v_o: velocity of the body point at the origin)
+is (J w + h x v_o + lambda, m v_o + w x h): the gyrostatic moment lambda (eq 31) is a free
+vector added to the angular momentum, as in eq (32).
+
+A subtree sum of (rate of momentum - external force) is exactly the paper's joint reaction:
+its linear part is R^k (eq 40), its moment about O^k is L^k (eq 48). The closure rows are
+then the joint kinds: spherical L^k = 0 (eq 44), hinge e^k . L^k = L_k(t) (eq 51), free base
+R^1 = 0 and L^1 = 0 (eq 54). Each row is S_j . F_subtree(k(j)) for the joint's unit motions
+S_j (a rotation about O^k, or a translation), so the rows are affine in u' and the matrix is
+the symmetric composite-inertia matrix (THEORY.md section 5).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from gyro_sim.dynamics.model import Model
+from gyro_sim.dynamics.rotations import cross, quat_to_matrix
+
+EYE3 = np.eye(3)
+
+
+def matvec(A: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Stacked matrix-vector products (n, 3, 3) x (n, 3) -> (n, 3)."""
+    return (A @ x[..., None])[..., 0]
+
+
+def rcumsum(a: np.ndarray) -> np.ndarray:
+    """Suffix sums over the chain (axis 0): out[k] = sum_{p >= k} a[p] (the sums of eq 48)."""
+    return np.cumsum(a[::-1], axis=0)[::-1]
+
+
+class Data:
+    """Workspace of one evaluation; its fields are the results of the last stage run."""
+
+    def __init__(self, model: Model):
+        n = model.n
+        self.R = np.zeros((n, 3, 3))  # world_R_body
+        self.R[:] = EYE3
+        self.O = np.zeros((n, 3))  # joint points O^k
+        # torque-rotor incidence: lambda^k = sum over rotors on k (eq 31)
+        self.rotor_incidence = np.zeros((n, len(model.torque_body)))
+        self.rotor_incidence[model.torque_body, np.arange(len(model.torque_body))] = 1.0
+        self.hinge_K = np.array([_skew(model.hinge_axis[k]) for k in model.hinge_bodies]).reshape(-1, 3, 3)
+        self.hinge_K2 = self.hinge_K @ self.hinge_K
+
+
+def _skew(a: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+
+
+def base_motion(model: Model, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Position, velocity, acceleration of a moving base O^1(t) = position + a sin(W t)."""
+    W, a = model.base_omega, model.base_amplitude
+    return (model.base_position + a * np.sin(W * t), a * W * np.cos(W * t), -a * W * W * np.sin(W * t))
+
+
+def positions(model: Model, data: Data, t: float, y: np.ndarray) -> None:
+    """R^k and O^k of every body; eq (34) summed: O^k = O^1 + sum_{l<k} s^l."""
+    R = data.R
+    if len(model.sph_bodies):
+        R[model.sph_bodies] = quat_to_matrix(y[model.i_quat])
+    if len(model.hinge_bodies):
+        phi = y[model.i_phi]
+        # (50): body k is its parent turned by phi_k about e^k
+        Rrel = EYE3 + np.sin(phi)[:, None, None] * data.hinge_K + (1.0 - np.cos(phi))[:, None, None] * data.hinge_K2
+        for i, k in enumerate(model.hinge_bodies):
+            R[k] = Rrel[i] if k == 0 else R[k - 1] @ Rrel[i]
+    if model.free:
+        O1 = y[model.i_r0]
+    elif model.moving:
+        O1 = base_motion(model, t)[0]
+    else:
+        O1 = model.base_position
+    s_w = matvec(R, model.s)
+    data.O = O1 + np.cumsum(s_w, axis=0) - s_w
+    hk = matvec(R, model.first_moment)  # m^k c^k, world components
+    data.h = model.mass[:, None] * data.O + hk  # first moments about the origin
+    data.e_w = matvec(R[model.hinge_bodies], model.hinge_axis[model.hinge_bodies])  # hinge axes
+    # inertia about the origin: J_O^k (rotated) shifted from O^k to the origin
+    A_w = R @ model.inertia @ R.transpose(0, 2, 1)
+    O = data.O
+    m = model.mass
+    OO = np.einsum("ni,nj->nij", O, O)
+    Oh = np.einsum("ni,nj->nij", O, hk)
+    dd = np.einsum("ni,ni->n", O, O)
+    dh = np.einsum("ni,ni->n", O, hk)
+    data.J = (
+        A_w
+        + m[:, None, None] * (dd[:, None, None] * EYE3 - OO)
+        + (2.0 * dh)[:, None, None] * EYE3
+        - Oh
+        - Oh.transpose(0, 2, 1)
+    )
+
+
+def velocities(model: Model, data: Data, t: float, u: np.ndarray) -> None:
+    """Angular velocities w^k (prefix sums of joint rates, eqs 50, 53) and velocities of O^k (eq 34)."""
+    n = model.n
+    wrel = np.zeros((n, 3))
+    if len(model.sph_bodies):
+        wrel[model.sph_bodies] = u[model.col_sph]
+    if len(model.hinge_bodies):
+        wrel[model.hinge_bodies] = data.e_w * u[model.col_hinge][:, None]  # (50): e^k phi_k'
+    w = np.cumsum(wrel, axis=0)
+    O = data.O
+    v_o = np.cumsum(cross(O, wrel), axis=0)  # velocity of the body point at the origin
+    if model.free:
+        v_o += u[model.col_base]
+    elif model.moving:
+        v_o += base_motion(model, t)[1]
+    data.wrel, data.w, data.v_o = wrel, w, v_o
+    data.vO = v_o + cross(w, O)  # (34): velocity of O^k
+    w_parent = np.zeros((n, 3))
+    w_parent[1:] = w[:-1]
+    data.w_parent = w_parent
+
+
+def torque_rotor_rates(model: Model, data: Data, p: np.ndarray) -> np.ndarray:
+    """kappa_i' = p_i - w^k . e_i (eqs 18-19): the angle rates (nt,) of the torque rotors
+    relative to their bodies, from their absolute spins p (nt,) and the velocities in `data`.
+
+    The numba kernel's scalar twin is `gyro_sim.dynamics.kernel._rotor_angle_rate`.
+    """
+    e_w = matvec(data.R[model.torque_body], model.torque_axis)
+    return p - np.einsum("ni,ni->n", data.w[model.torque_body], e_w)
+
+
+def lam(model: Model, data: Data, p: np.ndarray | None, L_rotor: np.ndarray | None):
+    """Gyrostatic moments lambda^k (eq 31) and their rates, world frame, or (None, None)."""
+    lam_b = model.lam_speed.copy() if model.lam_speed is not None else None
+    dlam_b = None
+    if len(model.torque_body):
+        lt = data.rotor_incidence @ ((model.torque_A * p)[:, None] * model.torque_axis)
+        lam_b = lt if lam_b is None else lam_b + lt
+        if L_rotor is not None:
+            # (29): A_i p_i' = L_i
+            dlam_b = data.rotor_incidence @ (L_rotor[:, None] * model.torque_axis)
+    if lam_b is None:
+        return None, None
+    return matvec(data.R, lam_b), (None if dlam_b is None else matvec(data.R, dlam_b))
+
+
+def body_forces(model: Model, data: Data, acc_w: np.ndarray, acc_v: np.ndarray, lam_w, dlam_w):
+    """Rate of momentum minus external force of each body, about the origin (eqs 36-39).
+
+    f = I A + V x* (I V + (lambda, 0)) + (lambda', 0) - (h x g, m g)
+    """
+    m, h, J, w, v = model.mass, data.h, data.J, data.w, data.v_o
+    mom_ang = matvec(J, w) + cross(h, v)
+    mom_lin = m[:, None] * v + cross(w, h)
+    if lam_w is not None:
+        mom_ang = mom_ang + lam_w
+    f_ang = matvec(J, acc_w) + cross(h, acc_v) + cross(w, mom_ang) + cross(v, mom_lin)
+    f_lin = m[:, None] * acc_v + cross(acc_w, h) + cross(w, mom_lin)
+    if dlam_w is not None:
+        f_ang += dlam_w
+    if model.gravity is not None:
+        f_ang -= cross(h, model.gravity[None, :])
+        f_lin -= m[:, None] * model.gravity
+    return f_ang, f_lin
+
+
+def bias_accelerations(model: Model, data: Data, t: float) -> tuple[np.ndarray, np.ndarray]:
+    """Spatial accelerations of the bodies at u' = 0: prefix sums of S_j' u_j.
+
+    Spherical joint (world-component axes a through O^k): S' u = (0, v(O^k) x w_rel).
+    Hinge: e^k' = w^{k-1} x e^k, so S' u = (w^{k-1} x e^k phi', v(O^k) x e^k phi' + O^k x (w^{k-1} x e^k) phi').
+    """
+    da = cross(data.w_parent, data.wrel)
+    da[model.sph_bodies] = 0.0  # spherical joints: world-component axes do not turn
+    dv = cross(data.vO, data.wrel) + cross(data.O, da)
+    acc_w = np.cumsum(da, axis=0)
+    acc_v = np.cumsum(dv, axis=0)
+    if model.moving:
+        acc_v += base_motion(model, t)[2]
+    return acc_w, acc_v
+
+
+def joint_columns(model: Model, data: Data) -> tuple[np.ndarray, np.ndarray]:
+    """Unit motions S_j (angular, linear-at-origin) of every velocity column, (N, 3) each."""
+    Sa = np.zeros((model.N, 3))
+    Sa[model.col_sph.ravel()] = np.tile(EYE3, (len(model.sph_bodies), 1))
+    Sa[model.col_hinge] = data.e_w
+    Sb = cross(data.O[model.col_body], Sa)
+    if model.free:
+        Sb[model.col_base] = EYE3
+    return Sa, Sb
+
+
+def mass_matrix(model: Model, data: Data, Sa: np.ndarray, Sb: np.ndarray) -> np.ndarray:
+    """M_ij = S_i . I^C_{max(k_i, k_j)} S_j with I^C_k the composite inertia of bodies k..n."""
+    JC = rcumsum(data.J)[model.col_body]
+    hC = rcumsum(data.h)[model.col_body]
+    mC = rcumsum(model.mass)[model.col_body]
+    F_ang = matvec(JC, Sa) + cross(hC, Sb)
+    F_lin = mC[:, None] * Sb + cross(Sa, hC)
+    Mfull = Sa @ F_ang.T + Sb @ F_lin.T
+    return np.where(model.col_upper, Mfull, Mfull.T)
+
+
+def project_subtree(model: Model, Sa, Sb, f_ang, f_lin) -> np.ndarray:
+    """Generalized forces S_j . sum_{p >= k(j)} f_p (the rows of eqs 52-54)."""
+    FCa = rcumsum(f_ang)[model.col_body]
+    FCl = rcumsum(f_lin)[model.col_body]
+    return np.einsum("ni,ni->n", Sa, FCa) + np.einsum("ni,ni->n", Sb, FCl)
+
+
+def reactions(model: Model, data: Data, f_ang: np.ndarray, f_lin: np.ndarray):
+    """Joint reactions on body k from body k-1 (or the base), world components.
+
+    R^k = sum_{p>=k} (m^p (v^p)' - F^p) (eq 40); L^k = moment about O^k of the same subtree
+    sums (eq 48). Returns (R, L), each (n, 3).
+    """
+    FCa = rcumsum(f_ang)
+    R = rcumsum(f_lin)
+    L = FCa - cross(data.O, R)
+    return R, L
+
+
+def accelerations_from(model: Model, data: Data, Sa, Sb, udot, acc_w0, acc_v0):
+    """Body spatial accelerations for generalized accelerations udot (bias included)."""
+    da = np.zeros((model.n, 3))
+    dv = np.zeros((model.n, 3))
+    np.add.at(da, model.col_body, Sa * udot[:, None])
+    np.add.at(dv, model.col_body, Sb * udot[:, None])
+    return acc_w0 + np.cumsum(da, axis=0), acc_v0 + np.cumsum(dv, axis=0)
+
+
+class Evaluation:
+    """What one forward evaluation leaves behind for outputs (reactions, rotor torques)."""
+
+    __slots__ = ("udot", "acc_w", "acc_v", "f_ang", "f_lin", "Sa", "Sb", "lam_w", "dlam_w")
+
+
+def forward(
+    model: Model,
+    data: Data,
+    t: float,
+    y: np.ndarray,
+    hinge_tau: np.ndarray | None,
+    p: np.ndarray | None,
+    L_rotor: np.ndarray | None,
+    out: Evaluation | None = None,
+) -> np.ndarray:
+    """Generalized accelerations u' (N,) at (t, y): the closure of eq (48), solved.
+
+    hinge_tau: commanded hinge moments L_k (eq 51), one per hinge, or None for all zero.
+    p: absolute spins of the torque rotors at t; L_rotor: their axial torques (eq 29).
+    If `out` is given, the intermediate results needed for reactions are stored in it.
+    """
+    positions(model, data, t, y)
+    velocities(model, data, t, y[model.i_vel])
+    lam_w, dlam_w = lam(model, data, p, L_rotor)
+    acc_w0, acc_v0 = bias_accelerations(model, data, t)
+    f_ang, f_lin = body_forces(model, data, acc_w0, acc_v0, lam_w, dlam_w)
+    Sa, Sb = joint_columns(model, data)
+    rhs = -project_subtree(model, Sa, Sb, f_ang, f_lin)
+    if hinge_tau is not None:
+        rhs[model.col_hinge] += hinge_tau  # (51): e^k . L^k = L_k
+    udot = np.linalg.solve(mass_matrix(model, data, Sa, Sb), rhs)
+    if out is not None:
+        out.udot, out.Sa, out.Sb, out.lam_w, out.dlam_w = udot, Sa, Sb, lam_w, dlam_w
+        out.acc_w, out.acc_v = accelerations_from(model, data, Sa, Sb, udot, acc_w0, acc_v0)
+        out.f_ang, out.f_lin = body_forces(model, data, out.acc_w, out.acc_v, lam_w, dlam_w)
+    return udot

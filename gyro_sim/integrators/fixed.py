@@ -1,0 +1,434 @@
+"""The node's fixed-step method for a scene: rk4 where it is stable at the step, gauss4s (the
+Gauss method on the chain's canonical equations: A-stable and symplectic, momenta kept to
+round-off) where the scene is stiff (issue 10, item 2); and the integrator "fixed" that makes
+this choice at the start and again as the motion changes (:class:`SceneFixedStep`, the node's
+default). On a system that is not a chain the implicit rung is gauss4, the same method on the
+system's own state. Below, "gauss4" stands for either where the two behave alike.
+
+RK4 is stable for h lambda inside its stability region, which reaches RK4_IMAG_LIMIT = 2 sqrt 2
+along the imaginary axis (gyroscopic nutation: eigenvalues +-i w) and 2.785 along the negative
+real axis (Hairer, Wanner, "Solving Ordinary Differential Equations II", 2nd ed., Springer 1996,
+sec. IV.2, Fig. 2.1). The scene's largest |lambda| is estimated at the initial state, with the
+commands held, from Krylov (Arnoldi) iterations on Jacobian-vector products of the rhs by
+forward differences: O(size) memory, at most KRYLOV_DIM + 1 rhs evaluations, and exact (up to
+the differences) when size <= KRYLOV_DIM. rk4 is chosen when h |lambda| stays below
+RK4_SAFETY x RK4_IMAG_LIMIT (the margin covers the estimate and the motion moving the
+eigenvalues); otherwise gauss4, A-stable, whose Newton iteration is the remaining limit.
+
+A body that turns fast must be resolved whatever the method: on the heavy top at 1e3 rad/s
+(1 rad a 1 ms step, h |lambda| = 0.61, inside rk4's region) rk4's energy grew x2.8 over 1e6
+steps without leaving a finite state, and gauss4 at 1e4 rad/s (10 rad a step) kept the energy
+but precessed the wrong way. So each physics step is cut into `substeps` so that no body turns
+more than SPIN_RESOLVE rad in one (`body_rate_bound`: the sum of the joints' relative rates;
+rotors excluded, their angles never enter the dynamics), at most MAX_SUBSTEPS, and the method
+is chosen for the substep. Measured over 5 s against the exact regular precession (eq 88,
+`gyro_sim.bench.spin_sweep`): the heavy top at 1e3 rad/s rk4 x4 (axis error 1.9e-5 rad, where
+rk4 at 1 ms gets 5.5e-3), at 1e4 rad/s rk4 x40 (1.9e-6; CPU 0.34 s per simulated s, n = 1);
+the double gyroscope at 1e3 rk4 x7 (2.8e-5), at 1e4 rk4 x64 (4.1e-6; 0.54 s per s).
+
+    name, reason = fixed_step_method(sim, 1e-3)   # ("rk4", "rk4: h |lambda| = 0.12 ...")
+    c = fixed_step_choice(sim, 1e-3)              # Choice("rk4", 40, "rk4 x40 substeps ...", 0.16)
+
+A scene that starts soft may stiffen: a commanded moment spins a body up, and the gyroscopic
+eigenvalues grow with the spin (and the commanded moments enter the Jacobian themselves,
+through M(q)^-1 tau). So "fixed" re-estimates h |lambda| at the start of an `advance` (with the
+commands then held) when CHECK_PERIOD of simulated time has passed since the last estimate, or,
+at most every MIN_RECHECK, when the commanded values changed or the largest generalised speed
+has moved by more than a factor SPEED_CHANGE (with RECHECK_DIM Krylov vectors: at most 11 rhs
+evaluations, against the 80 that 20 ms of rk4 at 1 kHz take); and switches: to gauss4 above the rk4 limit, back to rk4 below
+RK4_RETURN of it (hysteresis: no flapping at the boundary). A speed that grows within one call
+(a huge step moment spins a link up in milliseconds: the estimate at the command saw a chain at
+rest) can still take rk4 past its limit. So a call that fails is taken again from its start one
+rung down: rk4 -> gauss4 -> RESCUE (dop853, adaptive at RESCUE_RTOL and RESCUE_ATOL, its
+Python driver on the compiled kernels, no step longer than the physics step), which then
+stays until the next scheduled check (CHECK_PERIOD); only a call dop853 cannot take either
+(its step size collapses: a singular scene) is a simulation error. A call fails when its
+method raises (a non-finite state, Newton not converging) or when the energy watchdog, the
+`monitor` the Simulator sets where the exact motion keeps an energy (energy, or the Jacobi
+integral without commands; compiled backend), finds the call's energy error (E1 - E0 - work
+of the held moments) above ENERGY_WATCH x its length x the kinetic energy: a step that does
+not resolve the motion no longer passes silently. The heavy tip of mass ratio 1e6 is the case
+that needs every rung: when the chain straightens its light links whip (~1e8 rad/s^2 for
+~0.1 ms), rk4 fails at any step down to 16 us, gauss4's Newton iteration diverges, dop853
+takes ~150 steps through it; over 0.3 s "fixed" keeps the energy to 1.4 J where rk4 with the
+non-finite retake alone ran away to 3.6e12 J. Every decision depends only on the simulated
+states and commands, and the estimate is deterministic (a seeded start vector), so a
+re-simulation makes the same switches bit for bit.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from gyro_sim.integrators.base import EPS, FixedStepIntegrator, IntegrationError
+
+#: RK4's stability limit on the imaginary axis, |h lambda| <= 2 sqrt 2
+RK4_IMAG_LIMIT = 2.0 * math.sqrt(2.0)
+#: rk4 only below this fraction of its limit
+RK4_SAFETY = 0.5
+#: most Krylov vectors (rhs evaluations) for the eigenvalue estimate
+KRYLOV_DIM = 30
+#: relative size of the finite-difference perturbation, sqrt(machine epsilon)
+JVP_REL_STEP = math.sqrt(EPS)
+#: an Arnoldi vector below this norm (relative) ends the Krylov space early (invariant subspace)
+BREAKDOWN = 1e-12
+#: "fixed": simulated seconds between two estimates of h |lambda|
+CHECK_PERIOD = 0.1
+#: "fixed": back from gauss4 to rk4 only below this fraction of rk4's chosen limit
+RK4_RETURN = 0.5
+#: "fixed": a new estimate when the largest |generalised speed| changed by more than this factor
+SPEED_CHANGE = 1.5
+#: "fixed": estimates triggered by commands or speeds at most this often (simulated s)
+MIN_RECHECK = 0.02
+#: "fixed": Krylov vectors of the estimates after the first (the first takes KRYLOV_DIM)
+RECHECK_DIM = 10
+#: most rotation of a body in one (sub)step, rad: a faster body is stepped in substeps
+SPIN_RESOLVE = 0.25
+#: most substeps of one physics step
+MAX_SUBSTEPS = 64
+#: "fixed": the method of a stiff chain (symplectic: docs/STRUCTURE_PRESERVING.md); a system
+#: that is not a chain (no `model`), or a chain of more than IMPLICIT_MAX_BODIES, gets gauss4,
+#: the same method on the package's state
+IMPLICIT = "gauss4s"
+IMPLICIT_PLAIN = "gauss4"
+#: gauss4s's Newton-GMRES needs ~2.5x gauss4's Krylov vectors on a long swinging chain (n = 100:
+#: 81 against 37 rhs evaluations a step after 2 s; median step 1.1 ms against 0.41 ms, under
+#: load): the largest n holding 1 kHz measured ~77 against ~205 (`gyro-sim bench stability
+#: --parts cost`, session 7). Up to this many bodies gauss4s holds it with a margin. The
+#: preconditioner that would give it gauss4's conditioning costs more than it saves (each
+#: Krylov vector would take ~6 field evaluations instead of 2: docs/STRUCTURE_PRESERVING.md).
+IMPLICIT_MAX_BODIES = 50
+
+
+def implicit_for(model) -> str:
+    """The implicit rung of "fixed" for a chain's model (None: a system that is not a chain)."""
+    return IMPLICIT if model is not None and model.n <= IMPLICIT_MAX_BODIES else IMPLICIT_PLAIN
+#: "fixed": the last resort of a call that rk4 and the implicit method both fail (adaptive,
+#: error-controlled)
+RESCUE = "dop853"
+#: the rescue's tolerances (or the integrator's, when tighter): the calls it takes are the
+#: violent ones (the step moments of 1e3 x gravity on the hinge chain drift 1.5e-5 in energy
+#: at rtol 1e-8, 7.9e-8 at 1e-10, `gyro-sim bench stability --cases abrupt`)
+RESCUE_RTOL = 1e-10
+RESCUE_ATOL = 1e-12
+#: "fixed": the energy watchdog's limit on a call's energy error, relative to the kinetic
+#: energy, per simulated second of the call (1e-5 for the node's 10 ms calls; rk4 at 1 ms on the
+#: shipped scenes stays below 4.2e-7 a call, config/chain_4.yaml the highest)
+ENERGY_WATCH = 1e-3
+
+
+def spectral_radius_estimate(rhs, t: float, y: np.ndarray, dim: int = KRYLOV_DIM) -> float:
+    """Largest |eigenvalue| of d rhs / dy at (t, y), y (size,): Ritz values of `dim` Arnoldi
+    steps on forward-difference Jacobian-vector products (dim + 1 rhs calls, (dim, size) memory).
+    """
+    y = np.asarray(y, dtype=float)
+    n = y.size
+    m = min(dim, n)
+    f0 = np.array(rhs(t, y), dtype=float)  # a copy: rhs may return its workspace
+    eps = JVP_REL_STEP * max(1.0, float(np.linalg.norm(y)))
+    V = np.zeros((m + 1, n))
+    H = np.zeros((m + 1, m))
+    v = np.random.default_rng(0).standard_normal(n)  # fixed seed: the same choice every time
+    V[0] = v / np.linalg.norm(v)
+    k = m
+    for j in range(m):
+        w = (np.asarray(rhs(t, y + eps * V[j]), dtype=float) - f0) / eps  # J V[j]
+        for i in range(j + 1):  # modified Gram-Schmidt
+            H[i, j] = V[i] @ w
+            w -= H[i, j] * V[i]
+        H[j + 1, j] = np.linalg.norm(w)
+        if not np.isfinite(H[: j + 2, j]).all():
+            return math.inf
+        if H[j + 1, j] <= BREAKDOWN * max(1.0, np.abs(H[: j + 1, j]).max()):
+            k = j + 1
+            break
+        V[j + 1] = w / H[j + 1, j]
+    return float(np.abs(np.linalg.eigvals(H[:k, :k])).max())
+
+
+@dataclass(frozen=True)
+class Choice:
+    """A fixed-step method for a physics step h: `method` ("rk4", "gauss4s" or "gauss4") in `substeps`
+    equal substeps of h, why (one line), and the estimated h |lambda| of one substep."""
+
+    method: str
+    substeps: int
+    reason: str
+    h_lambda: float
+
+    @property
+    def label(self) -> str:
+        """"rk4", or "rk4 x4" for 4 substeps."""
+        return self.method if self.substeps == 1 else f"{self.method} x{self.substeps}"
+
+
+def body_rate_bound(model, y: np.ndarray) -> float:
+    """An upper bound of the largest body angular speed |w^k| (rad/s) in state y, in O(n).
+
+    w^k is the sum of the relative rates of the joints up to body k (eqs 34, 50): a spherical
+    joint's relative rate is its three velocity columns (world components, model.py), a hinge's
+    is phi_k' e^k. So the spherical part is summed as vectors (exact), the hinges' |phi'| are
+    added to its length (their axes need the rotations: the triangle inequality instead), and
+    the largest over the bodies is returned: exact on a spherical chain, where the sum of every
+    joint's rate grew with the chain's length (n = 1000 links at 3 rad/s: 404 rad/s). Rotors do
+    not count: an axisymmetric rotor's angle never enters the dynamics (eqs 18-19), only its
+    momentum does, so its spin needs no resolving; nor does a base's translation."""
+    n = model.n
+    if n == 0:
+        return 0.0
+    u = y[model.i_vel]
+    vec = np.zeros((n, 3))
+    if len(model.col_sph):
+        vec[model.sph_bodies] = u[model.col_sph]
+    hinge = np.zeros(n)
+    if len(model.col_hinge):
+        hinge[model.hinge_bodies] = np.abs(u[model.col_hinge])
+    w = np.cumsum(vec, axis=0)
+    return float((np.sqrt((w * w).sum(axis=1)) + np.cumsum(hinge)).max())
+
+
+def substeps_for(h: float, omega: float, now: int = 1) -> int:
+    """Substeps of a step h so that no body turns more than SPIN_RESOLVE rad in one of them
+    (at most MAX_SUBSTEPS), at body angular speeds up to `omega`; the count used `now` is kept
+    while it is enough and at most twice what is needed (no flapping)."""
+    if not omega > 0:
+        need = 1
+    elif not math.isfinite(omega):
+        need = MAX_SUBSTEPS
+    else:
+        need = min(MAX_SUBSTEPS, max(1, math.ceil(h * omega / SPIN_RESOLVE - 1e-9)))
+    return now if need <= now <= 2 * need else need
+
+
+def fixed_step_choice(sim, dt: float) -> Choice:
+    """The fixed-step method for the scene of `sim` (a gyro_sim.simulator.Simulator; not
+    imported: the integrators know the simulator by its attributes only) at step `dt` (s).
+
+    The substeps resolve the fastest body's rotation (`substeps_for`); the method is rk4 when
+    the substep times the estimated largest |eigenvalue| of the rhs's Jacobian at the current
+    state (commands held) is below RK4_SAFETY x RK4_IMAG_LIMIT, else `implicit_for` the model's
+    (gauss4s up to IMPLICIT_MAX_BODIES bodies). Call it on a
+    Simulator just built or reset (the node chooses at start): the rhs is held with the scene's
+    own rotor spins and no commanded moments. `sim` is not advanced.
+    """
+    if not (dt > 0 and math.isfinite(dt)):
+        raise ValueError(f"dt must be a positive finite number, got {dt!r}")
+    m = sim.model
+    p0 = m.torque_p0.copy() if len(m.torque_body) else None
+    sim.system.hold(sim.time, p0, None, None)  # the reset state's inputs, as advance holds them
+    return _choice(sim.system.rhs, sim.time, sim.state, dt, "rk4", omega=body_rate_bound(m, sim.state),
+                   implicit=implicit_for(m))
+
+
+def fixed_step_method(sim, dt: float) -> tuple[str, str]:
+    """(method, one-line reason) of :func:`fixed_step_choice`, e.g. ("rk4", "rk4: h |lambda| =
+    0.12 (stable below 1.4)") or ("rk4", "rk4 x40 substeps (a body turns 10 rad a step): ...")."""
+    c = fixed_step_choice(sim, dt)
+    return c.method, c.reason
+
+
+def _choice(rhs, t: float, y: np.ndarray, h: float, now: str, dim: int = KRYLOV_DIM, omega: float = 0.0,
+            k_now: int = 1, implicit: str = IMPLICIT) -> Choice:
+    """The Choice at (t, y) for step h, given the method used `now` (the hysteresis of
+    RK4_RETURN applies when leaving the implicit method) and its substeps `k_now`, from `dim`
+    Krylov vectors, with body angular speeds up to `omega`; `implicit` names the method of a
+    stiff scene."""
+    k = substeps_for(h, omega, k_now)
+    hl = h / k * spectral_radius_estimate(rhs, t, y, dim)
+    limit = RK4_SAFETY * RK4_IMAG_LIMIT
+    back = limit if now == "rk4" else RK4_RETURN * limit
+    sub = f" x{k} substeps (a body turns up to {h * omega:.2g} rad a step)" if k > 1 else ""
+    if hl < back:
+        return Choice("rk4", k, f"rk4{sub}: h |lambda| = {hl:.2g} (stable below {limit:.2g})", hl)
+    return Choice(implicit, k, f"{implicit}{sub}: h |lambda| = {hl:.2g}: stiff for rk4 "
+                               f"(rk4 needs below {back:.2g} at h = {h / k:.3g} s)", hl)
+
+
+class SceneFixedStep(FixedStepIntegrator):
+    """"fixed": rk4 where the scene is soft at the step, gauss4s where it is stiff (gauss4 on a
+    system that is not a chain: `implicit`), re-chosen
+    as the motion and the commands change (see the module docstring). Order 4 (both methods
+    are), fixed step, one step per physics step.
+
+    Attributes
+    ----------
+    current : the method stepping now ("rk4", `implicit` or the rescue's "dop853").
+    implicit : "gauss4s" on a chain of at most IMPLICIT_MAX_BODIES, "gauss4" on a longer one or
+        on another system.
+    substeps : substeps of one step now (1: none): the fastest body turns at most
+        SPIN_RESOLVE rad in one.
+    reason : one line: why (the substeps, h |lambda| of a substep against rk4's limit).
+    h_lambda : the last estimate of h |lambda| (h: a substep).
+    switches : the changes after the first choice, (t, from, to, reason) each (as "auto";
+        from and to are Choice labels: "rk4", "gauss4 x4").
+
+    References
+    ----------
+    .. [1] E. Hairer, G. Wanner, "Solving Ordinary Differential Equations II", 2nd ed.,
+           Springer 1996, sec. IV.2 (stability regions: RK4's along the imaginary axis).
+    .. [2] Y. Saad, "Numerical Methods for Large Eigenvalue Problems", 2nd ed., SIAM 2011,
+           ch. 6 (Arnoldi's method: the Ritz values of the estimate).
+    """
+
+    name = "fixed"
+    order = 4
+
+    def __init__(self, system, **options):
+        super().__init__(system, **options)
+        from gyro_sim.integrators.gauss4.driver import Gauss4  # here: gauss imports this package's base, not the reverse
+        from gyro_sim.integrators.gauss4.gauss4s import Gauss4S
+        from gyro_sim.integrators.rk4.driver import RK4
+
+        from gyro_sim.integrators.dop853.driver import DOP853
+
+        #: the method of a stiff scene: gauss4s on a chain of at most IMPLICIT_MAX_BODIES,
+        #: gauss4 on a longer one or on a system that is not a chain
+        self.implicit = implicit_for(getattr(system, "model", None))
+        chain = self.implicit == IMPLICIT
+        implicit = Gauss4S(system, **options) if chain else Gauss4(system, **options)
+        self.methods = {"rk4": RK4(system, **options), self.implicit: implicit,
+                        RESCUE: DOP853(_Plain(system), **{**options, "max_step": self.step,
+                                                           "rtol": min(RESCUE_RTOL, self.rtol),
+                                                           "atol": np.minimum(RESCUE_ATOL, self.atol)})}
+        self.current = ""
+        self.substeps = 1
+        self.reason = ""
+        self.h_lambda = math.nan
+        #: the energy watchdog: (t0, y0, t1, y1) -> relative energy error of a call, or None
+        self.monitor = None
+        self._hold_until = -math.inf
+        self.switches: list[tuple[float, str, str, str]] = []
+        self._next_check = -math.inf
+        self._last_check = -math.inf
+        self._check_fev = 0
+        self._inputs_seen = -1
+        self._speed_seen = 0.0
+        model = getattr(system, "model", None)
+        self._speeds = getattr(model, "i_vel", None)
+        if self._speeds is None:
+            self._speeds = self.lin_index
+        self._speeds = np.arange(self.n)[self._speeds]  # a slice or indices: indices
+        self._model = model if hasattr(model, "col_sph") else None
+        self._y0 = np.empty(self.n)
+
+    def reset(self) -> None:
+        super().reset()
+        for m in self.methods.values():
+            m.reset()
+        self._next_check = -math.inf
+        self._last_check = -math.inf
+        self._hold_until = -math.inf
+        self.current = ""
+        self.substeps = 1
+
+    def warm_up(self, t0: float, y: np.ndarray) -> None:
+        """One step of each method on a copy of y (then forgotten): every compiled path this
+        integrator may switch to is compiled (or loaded from the cache) now, not at the first
+        switch in the middle of a real-time run. Counters are kept as they were."""
+        counts = {name: (m.nfev, m.nsteps, m.njev, m.nlu, m.nrejected) for name, m in self.methods.items()}
+        try:
+            for m in self.methods.values():
+                if m.adaptive:
+                    m.advance(t0, y, t0 + self.step)
+                else:
+                    m.march(t0, y.copy(), t0 + self.step)
+        except IntegrationError:
+            pass  # a scene a method cannot step from here: it is compiled all the same
+        finally:
+            for name, m in self.methods.items():
+                m.nfev, m.nsteps, m.njev, m.nlu, m.nrejected = counts[name]
+                m.reset()
+
+    def _speed(self, y: np.ndarray) -> float:
+        return float(np.abs(y[self._speeds]).max()) if len(self._speeds) else 0.0
+
+    def _due(self, t0: float, y: np.ndarray) -> bool:
+        if t0 >= self._next_check:
+            return True
+        if t0 < self._hold_until:  # a rung down after a failure: kept until the next check
+            return False
+        if t0 < self._last_check + MIN_RECHECK:
+            return False
+        if getattr(self.system, "inputs_version", 0) != self._inputs_seen:
+            return True
+        v, seen = self._speed(y), self._speed_seen
+        return v > SPEED_CHANGE * seen or v * SPEED_CHANGE < seen
+
+    def _body_rate(self, y: np.ndarray) -> float:
+        return body_rate_bound(self._model, y) if self._model is not None else 0.0
+
+    def _label(self) -> str:
+        return Choice(self.current, self.substeps, "", 0.0).label
+
+    def _switch(self, t: float, name: str, substeps: int) -> None:
+        if (name, substeps) == (self.current, self.substeps):
+            return
+        before = self._label() if self.current else ""
+        for m in self.methods.values():
+            m.step = self.step / substeps
+        self.current, self.substeps = name, substeps
+        if before:
+            self.switches.append((t, before, self._label(), self.reason))
+            self.methods[name].reset()
+
+    def _counted_rhs(self, t: float, y: np.ndarray) -> np.ndarray:
+        self._check_fev += 1
+        return self._rhs(t, y)
+
+    def _march(self, t0: float, y: np.ndarray, t1: float) -> None:
+        if self._due(t0, y):
+            dim = RECHECK_DIM if self.current else KRYLOV_DIM
+            c = _choice(self._counted_rhs, t0, y, self.step, self.current or "rk4", dim, self._body_rate(y),
+                        self.substeps, self.implicit)
+            self.reason, self.h_lambda = c.reason, c.h_lambda
+            self._switch(t0, c.method, c.substeps)
+            self._last_check = t0
+            self._next_check = t0 + CHECK_PERIOD
+            self._inputs_seen = getattr(self.system, "inputs_version", 0)
+            self._speed_seen = self._speed(y)
+        m = self.methods[self.current]
+        self._y0[:] = y
+        try:
+            while True:
+                try:
+                    if m.adaptive:
+                        y[:] = m.advance(t0, y, t1)
+                    else:
+                        m.march(t0, y, t1)
+                    if self.monitor is not None and self.current != RESCUE:
+                        err = self.monitor(t0, self._y0, t1, y)
+                        if not abs(err) <= ENERGY_WATCH * (t1 - t0):
+                            raise IntegrationError(self.current, f"energy watchdog: {err:.2g} of the kinetic energy "
+                                                   f"in {t1 - t0:.3g} s", t0, self.step / self.substeps)
+                    break
+                except IntegrationError as e:  # the call again from its start, one rung down
+                    y[:] = self._y0
+                    if self.current == RESCUE:
+                        raise
+                    after = self.implicit if self.current == "rk4" else RESCUE
+                    what = (f"failed ({e.reason})" if self.current != "rk4" or "watchdog" in e.reason
+                            else "left a non-finite state")
+                    self.reason = f"{after}: {self._label()} {what} at t = {e.t:.6g} s"
+                    self._switch(t0, after, 1 if after == RESCUE else self.substeps)
+                    self._next_check = self._hold_until = t0 + CHECK_PERIOD
+                    m = self.methods[after]
+        finally:
+            ms = self.methods.values()
+            self.nfev = self._check_fev + sum(x.nfev for x in ms)
+            self.nsteps = sum(x.nsteps for x in ms)
+            self.njev = sum(x.njev for x in ms)
+            self.nlu = sum(x.nlu for x in ms)
+            self.last_step = m.last_step
+
+
+class _Plain:
+    """A system seen through its rhs only (no compiled march): the rescue's dop853 steps with
+    its Python driver on the compiled dop853 kernels, so that "fixed" compiles no third loop
+    for a rung most runs never take."""
+
+    def __init__(self, system):
+        self.system = system
+        self.size, self.quat_index = system.size, system.quat_index
+        self.rhs, self.project = system.rhs, system.project

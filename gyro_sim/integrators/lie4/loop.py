@@ -1,0 +1,113 @@
+"""The lie4 march compiled with numba: `nsteps` steps of the commutator-free Lie group method
+CF4 in one call.
+
+:func:`lie_march` is the Python driver :meth:`gyro_sim.integrators.lie4.driver.Lie4._step` (with
+the base's projection and finiteness check) statement for statement, calling the
+articulated-body kernel :func:`gyro_sim.dynamics.kernel.rhs_kernel` directly and the arithmetic of
+:mod:`gyro_sim.integrators.lie4.kernels` (the very functions the Python driver calls): no Python
+between two evaluations, and the same steps bit for bit (test/core/test_fast_lie.py).
+:class:`LieMarch` binds it to a :class:`gyro_sim.dynamics.system.FastChainODE` through the
+system's public `kernel_arguments()` and `quaternion_block()`; `Lie4` uses it when its system
+offers them.
+
+Caching as :mod:`gyro_sim.integrators.rk4.loop`: the march inlines fast.py and lie_kernels.py, so
+its numba cache lives in a directory keyed on all the files it compiles in
+(`fast_loop.njit_with_dependencies`): an edit of any of them starts an empty one.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from gyro_sim.dynamics import kernel as fast
+from gyro_sim.integrators.rk4 import loop as fast_loop
+from gyro_sim.integrators.lie4 import kernels as lk
+
+#: the files the march compiles in (the key of its cache directory)
+DEPENDENCIES = (Path(fast.__file__), Path(lk.__file__), Path(fast_loop.__file__), Path(__file__))
+_njit = fast_loop.njit_with_dependencies(*DEPENDENCIES)
+
+
+@_njit
+def _finite(y):
+    """True when every entry of y (size,) is finite."""
+    for i in range(y.shape[0]):
+        if not (abs(y[i]) < np.inf):
+            return False
+    return True
+
+
+@_njit
+def lie_march(t0, h, nsteps, y, ALPHA, BASE, BETA, C, Y, F, W, V, qi, li, i_q0, nq,
+              work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
+              inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base,
+              ht0, p0, pdot, L_rotor, tau):
+    """`nsteps` CF4 steps of size h from (t0, y), y (size,) in place; step k starts at
+    t0 + k h. ALPHA (stages, stages), BASE (stages,) int, BETA (3, stages) = (B, BETA1, BETA2),
+    C (stages,): the method's coefficients (lie_kernels); qi (nq, 4), li (nl,): the quaternion
+    blocks and the other components of y. Y (stages, size), F (size,), W (stages, nq, 3),
+    V (stages, nl): scratch.
+
+    After each step: quaternions y[i_q0 + 4 j : +4], j < nq, renormalised; the state checked.
+    Returns the number of steps completed with a finite state: nsteps, or k < nsteps when step
+    k left a non-finite state (y is then that state). The arguments from `work` on are those of
+    fast.rhs_kernel (`ht0` its `t0`, the start of the hold).
+    """
+    stages = C.shape[0]
+    hALPHA = ALPHA * h
+    hBETA = BETA * h
+    for k in range(nsteps):
+        t = t0 + k * h
+        lk.lie_start(y, Y)
+        fast.rhs_kernel(t, Y[0], F, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                        first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
+                        flags, base, ht0, p0, pdot, L_rotor, tau)
+        lk.lie_field(Y, F, 0, qi, li, W, V)
+        for st in range(1, stages):
+            lk.lie_stage(Y, W, V, hALPHA, st, BASE[st], qi, li)
+            fast.rhs_kernel(t + C[st] * h, Y[st], F, work, is_hinge, qrow, own_col, col_start,
+                            hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
+                            torque_axis, torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
+            lk.lie_field(Y, F, st, qi, li, W, V)
+        lk.lie_update(y, W, V, hBETA, qi, li)
+        fast.normalize_quaternions(y, i_q0, nq)
+        if not _finite(y):
+            return k
+    return nsteps
+
+
+class LieMarch:
+    """:func:`lie_march` bound to a FastChainODE `system` and a method's coefficients (the
+    kernel arguments read at every call: they change with `hold`); called through
+    `fast_loop.Direct` (the types stay the same). Counts the rhs evaluations in
+    `system.nfev`, as `march_explicit_rk` does.
+
+    qi (nq, 4), li (nl,) int64: the integrator's quaternion blocks and other components, which
+    must be the system's `quaternion_block()` (the renormalisation's blocks)."""
+
+    def __init__(self, system, qi, li, ALPHA, BASE, BETA, C):
+        self.system = system
+        i_q0, nq = system.quaternion_block()
+        if not np.array_equal(np.asarray(qi).ravel(), i_q0 + np.arange(4 * nq)):
+            raise ValueError("the quaternion blocks are not the system's quaternion_block()")
+        self._qi = np.ascontiguousarray(qi, dtype=np.int64)
+        self._li = np.ascontiguousarray(li, dtype=np.int64)
+        self._i_q0, self._nq = int(i_q0), int(nq)
+        self._ALPHA = np.array(ALPHA, dtype=np.float64)
+        self._BASE = np.array(BASE, dtype=np.int64)
+        self._BETA = np.array(BETA, dtype=np.float64)
+        self._C = np.array(C, dtype=np.float64)
+        self._F = np.empty(system.size)
+        self._march = fast_loop.Direct(lie_march)
+
+    def __call__(self, t0, y, h, nsteps, Y, W, V) -> int:
+        """Steps completed with a finite state of `nsteps` steps (see lie_march); Y (stages,
+        size), W (stages, nq, 3), V (stages, nl) float64 scratch."""
+        if y.shape != (self.system.size,) or y.dtype != np.float64 or not y.flags.c_contiguous:
+            raise ValueError(f"y must be a contiguous float64 array of shape ({self.system.size},)")
+        done = self._march(float(t0), float(h), int(nsteps), y, self._ALPHA, self._BASE,
+                           self._BETA, self._C, Y, self._F, W, V, self._qi, self._li, self._i_q0,
+                           self._nq, *self.system.kernel_arguments())
+        self.system.nfev += self._C.shape[0] * min(done + 1, nsteps)
+        return int(done)

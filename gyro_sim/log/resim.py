@@ -1,0 +1,163 @@
+"""Re-simulation of a log: rebuild the Simulator from the embedded scene and parameters, feed it
+the recorded commands at their recorded times, and compare with the logged joint states.
+
+The log must keep the contract of :mod:`gyro_sim.log.record` (fixed ``advance_dt``, log time =
+offset + simulated time, outputs before commands at a boundary, messages in causal order).
+Then, with the same integrator, the same code and the same machine, every logged joint state
+is reproduced bit for bit: deviation 0. What can make it non-zero is reported with the numbers:
+another integrator or tolerance (``--integrator``), other versions of gyro_sim / numpy / Python
+or another machine than the ones recorded in the parameters (different rounding in BLAS and
+libm), or a log whose joint states are not at step boundaries.
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+
+from gyro_sim.progress import plural
+from gyro_sim.msgs import messages as M
+from gyro_sim.log.mcap_log import LogError, iter_messages, read_info
+from gyro_sim.log.record import machine_params
+
+REQUIRED = ("integrator", "rtol", "atol", "step", "advance_dt")
+#: most steps of `advance_dt` a re-simulation may take (crafted logs: a tiny advance_dt or a
+#: message stamped far in the future would otherwise run for days)
+MAX_RESIM_STEPS = 10**8
+#: the node's event when command_timeout passes without a good command: moments back to zero
+COMMAND_TIMEOUT_EVENT = "command timeout"
+
+
+@dataclass
+class Resimulation:
+    """The outcome: the largest deviation of re-simulated from logged joint states."""
+
+    max_deviation: float = 0.0  # over position, velocity and effort of every joint
+    by_field: dict = field(default_factory=lambda: {"position": 0.0, "velocity": 0.0, "effort": 0.0})
+    worst: tuple | None = None  # (time s, joint, field)
+    compared: int = 0  # joint-state messages compared
+    off_boundary: int = 0  # joint states not at a step boundary (not compared)
+    commands: int = 0
+    rejected: int = 0  # logged commands the simulator refuses (wrong length, non-finite)
+    resets: int = 0
+    steps: int = 0
+    sim_time: float = 0.0
+    integrator: str = ""
+    notes: list = field(default_factory=list)  # why the deviation may not be 0
+
+    def report(self) -> str:
+        lines = [
+            f"re-simulated {self.sim_time:.6g} s ({plural(self.steps, 'step')} of the recorded size, "
+            f"{plural(self.commands, 'command')}, {plural(self.resets, 'reset')}) with {self.integrator}",
+            f"compared {plural(self.compared, 'joint-state message')}"
+            + (f" ({self.off_boundary} off the step boundaries, skipped)" if self.off_boundary else ""),
+            f"largest deviation: {self.max_deviation:.3e}"
+            + (f" ({self.worst[2]} of {self.worst[1]} at t = {self.worst[0]:.6g} s)" if self.worst and self.max_deviation else ""),
+            "  by field: " + ", ".join(f"{k} {v:.3e}" for k, v in self.by_field.items()),
+        ]
+        if self.max_deviation == 0.0 and self.compared:
+            lines.append("bit-for-bit identical to the log")
+        lines += [f"note: {n}" for n in self.notes]
+        return "\n".join(lines)
+
+
+def resimulate(path: str | os.PathLike, *, integrator: str | None = None, rtol: float | None = None,
+               atol: float | None = None, progress=None) -> Resimulation:
+    """Re-run the log at `path` (see the module docstring); optionally with another integrator."""
+    from gyro_sim.simulator import Simulator
+
+    info = read_info(path)
+    p = info.params
+    missing = [k for k in REQUIRED if k not in p]
+    if missing:
+        raise LogError(f"{path}: the parameters lack {', '.join(missing)}: not a re-simulable gyro_sim log")
+    _check_params(path, p)
+    scene = info.scene()
+    name = integrator or p["integrator"]
+    sim = Simulator(scene, integrator=name, rtol=p["rtol"] if rtol is None else rtol,
+                    atol=p["atol"] if atol is None else atol, step=p["step"])
+    dt = float(p["advance_dt"])
+    cmd_topic = p.get("commands_topic", M.AXIS_MOMENTS)
+    out = Resimulation(integrator=name)
+    if name != p["integrator"] or rtol is not None or atol is not None:
+        out.notes.append(f"integrator {name} (rtol {sim.integrator.rtol:g}) differs from the recorded "
+                         f"{p['integrator']} (rtol {p['rtol']:g}): the deviation is the difference of the two "
+                         "solutions' errors, not 0")
+    here = machine_params()
+    for key in ("gyro_sim_version", "numpy", "python", "machine"):
+        if key in p and p[key] != here[key]:
+            out.notes.append(f"recorded with {key} {p[key]}, re-simulated with {here[key]}: rounding may differ")
+
+    offset = 0
+    end = info.end_ns or 0
+    topics = [M.JOINT_STATES, cmd_topic, M.EVENTS]
+    # file order is causal order (record.py); log_time_order=False keeps it
+    for topic, _, t, msg in iter_messages(path, topics, log_time_order=False):
+        needed = (t - offset - M.time_ns(sim.time)) / (dt * 1e9)
+        if out.steps + needed > MAX_RESIM_STEPS:
+            raise LogError(f"{path}: a message at log time {t / 1e9:.9g} s would take the re-simulation to "
+                           f"{out.steps + needed:.3g} steps of advance_dt = {dt:g} s; the limit is "
+                           f"{MAX_RESIM_STEPS:.0e}: refused")
+        while offset + M.time_ns(sim.time) < t:
+            sim.advance(dt)
+            out.steps += 1
+            if progress is not None:
+                progress((offset + M.time_ns(sim.time)) / 1e9, end / 1e9)
+        here_ns = offset + M.time_ns(sim.time)
+        if topic == M.JOINT_STATES:
+            if here_ns != t:
+                out.off_boundary += 1
+                continue
+            _compare(out, sim.joint_states(), msg, t)
+        elif topic == cmd_topic:
+            if here_ns != t:
+                out.notes.append(f"command at t = {t / 1e9:.9g} s is not at a step boundary: applied at the next one")
+            try:
+                sim.set_axis_moments(list(msg.data))
+            except ValueError:  # the node logs rejected commands too, and refused them the same way
+                out.rejected += 1
+                continue
+            out.commands += 1
+        elif topic == M.EVENTS and msg.data == "reset":
+            sim.reset()
+            offset = t
+            out.resets += 1
+        elif topic == M.EVENTS and msg.data.startswith(COMMAND_TIMEOUT_EVENT):
+            sim.set_axis_moments([0.0] * len(sim.axis_names))
+    out.sim_time = (offset + M.time_ns(sim.time)) / 1e9
+    if out.compared == 0:
+        out.notes.append("no joint states were compared")
+    return out
+
+
+def _check_params(path, p: dict) -> None:
+    """The recorded parameters re-simulation uses, checked (LogError naming the first bad one)."""
+    from gyro_sim.integrators import INTEGRATORS
+
+    if not isinstance(p["integrator"], str) or p["integrator"] not in INTEGRATORS:
+        raise LogError(f"{path}: parameter integrator: {str(p['integrator'])[:40]!r} is not one of "
+                       f"{', '.join(INTEGRATORS)}")
+    for key in ("rtol", "atol", "step", "advance_dt"):
+        v = p[key]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0 \
+                or (v == 0 and key != "atol"):
+            raise LogError(f"{path}: parameter {key}: must be a positive finite number, got {str(v)[:40]!r}")
+    if not isinstance(p.get("commands_topic", M.AXIS_MOMENTS), str):
+        raise LogError(f"{path}: parameter commands_topic: must be a string")
+
+
+def _compare(out: Resimulation, js, logged, t_ns: int) -> None:
+    out.compared += 1
+    if list(js.name) != list(logged.name):
+        raise LogError(f"joint names differ at t = {t_ns / 1e9:g} s: log {list(logged.name)}, re-simulation {list(js.name)}")
+    for fld in ("position", "velocity", "effort"):
+        mine, theirs = getattr(js, fld), getattr(logged, fld)
+        if len(theirs) != len(mine):
+            raise LogError(f"joint {fld} lengths differ at t = {t_ns / 1e9:g} s")
+        for name, a, b in zip(js.name, mine, theirs):
+            d = abs(a - b) if math.isfinite(a) else math.inf
+            if d > out.by_field[fld]:
+                out.by_field[fld] = d
+            if d > out.max_deviation:
+                out.max_deviation = d
+                out.worst = (t_ns / 1e9, name, fld)

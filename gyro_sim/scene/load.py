@@ -1,0 +1,812 @@
+"""Scene loader: a YAML file or a mapping -> a validated, immutable :class:`Scene`.
+
+The contract is SPEC.md, "Scene files". `load_scene` checks everything before it builds a
+record, collects every problem it finds and raises one :class:`SceneError` listing them, one
+per line, each as ``<key path>: <rule>`` (``bodies[1].inertia_com: not positive definite``).
+Nothing downstream ever sees a bad scene.
+
+Conventions fixed here (beyond the SPEC's example file):
+
+- an explicit ``null`` counts as an absent key (so ``rotors:`` with nothing under it is no
+  rotors), except that a required key must hold a value;
+- YAML is read with a safe loader that refuses duplicate keys and reads ``1e-6`` as a float
+  (plain YAML 1.1 reads it as a string);
+- inertia tensors must be those of a real mass distribution: symmetric, positive definite,
+  principal moments obeying the triangle inequality, both about O^k and about the centre of
+  mass (THEORY.md section 6: about the centre of mass the transverse moment is B - m c^2);
+- names are ROS name tokens of at most ``MAX_NAME_LENGTH`` characters (they become topic
+  names ``~/wrench/<name>``), unique over bodies and rotors, and so are the joint-state names
+  they produce (``<body>_psi`` ... for spherical joints, SPEC.md "Python API");
+- crafted input is bounded: YAML at most ``MAX_YAML_DEPTH`` levels deep and ``MAX_YAML_NODES``
+  nodes (aliases counted expanded), every number finite and within the physical sanity bound
+  of its key (``BOUNDS``, stated in the error).
+"""
+from __future__ import annotations
+
+import copy
+import dataclasses
+import difflib
+import math
+import numbers
+import os
+import re
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import yaml
+
+from gyro_sim.scene.records import (
+    BASE_TYPES, JOINT_TYPES, ROTOR_MODES, Base, Body, Initial, Joint, Rotor, Scene,
+)
+
+__all__ = ["SceneError", "load_scene", "parse_yaml"]
+
+#: relative tolerance of the triangle inequality of principal moments (I1 + I2 >= I3)
+TRIANGLE_RTOL = 1e-9
+#: relative tolerance of the symmetry of a written inertia tensor
+SYMMETRY_RTOL = 1e-9
+#: smallest principal moment, relative to the largest, of a positive definite inertia
+PD_RTOL = 1e-12
+#: a ROS name token (rcl: letters, digits, underscores; not starting with a digit)
+NAME_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
+#: joint-state suffixes of a spherical joint's Euler angles (SPEC.md, "Python API")
+EULER_SUFFIXES = ("psi", "theta", "phi")
+MOTION_TYPES = ("sine",)
+#: longest body or rotor name: names become topic names ``/<node>/wrench/<name>``, and ROS
+#: refuses a topic name longer than 247 characters (rmw: 255 - 8; measured with rclpy: a
+#: name of 230 characters under ``/gyro_sim/wrench/``); 64 leaves room for namespaces
+MAX_NAME_LENGTH = 64
+#: deepest nesting of a scene file (a scene needs 6 levels) and most nodes, aliases expanded
+MAX_YAML_DEPTH = 32
+MAX_YAML_NODES = 200_000
+#: physical sanity bounds on magnitudes, by key: (largest |value|, unit). Far beyond any chain
+#: the simulator is meant for, and far below where products of them overflow.
+BOUNDS = {
+    "mass": (1e9, "kg"),
+    "axial": (1e12, "kg m^2"), "transverse": (1e12, "kg m^2"), "inertia_com": (1e12, "kg m^2"),
+    "axial_inertia": (1e12, "kg m^2"), "transverse_inertia": (1e12, "kg m^2"),
+    "com": (1e4, "m"), "next_joint": (1e4, "m"), "position": (1e4, "m"), "radius": (1e4, "m"),
+    "amplitude": (1e3, "m"), "gravity": (1e4, "m/s^2"), "frequency": (1e6, "Hz"),
+    "velocity": (1e6, "m/s"),
+    "spin": (1e7, "rad/s"), "rate": (1e7, "rad/s"), "euler_rates": (1e7, "rad/s"),
+    "angular_velocity": (1e7, "rad/s"),
+    "euler": (1e6, "rad"), "angle": (1e6, "rad"),
+}
+#: bound of any other number (unit vectors before normalisation, quaternions)
+GENERIC_BOUND = 1e15
+
+TOP_KEYS = ("name", "gravity", "base", "bodies")
+BASE_KEYS = ("type", "position", "motion", "velocity")
+BASE_TYPE_KEYS = {"fixed": ("type", "position"), "moving": ("type", "position", "motion"),
+                  "free": ("type", "position", "velocity")}
+MOTION_KEYS = ("type", "amplitude", "frequency")
+BODY_KEYS = ("name", "joint", "mass", "com", "inertia", "inertia_com", "next_joint", "rotors",
+             "initial", "visual")
+JOINT_KEYS = ("type", "axis")
+INERTIA_KEYS = ("axial", "transverse")
+VISUAL_KEYS = ("radius",)
+ROTOR_KEYS = ("name", "axis", "position", "mass", "axial_inertia", "transverse_inertia", "mode",
+              "spin", "actuated")
+EULER_KEYS = ("euler", "euler_rates")
+QUATERNION_KEYS = ("quaternion", "angular_velocity")
+HINGE_INITIAL_KEYS = ("angle", "rate")
+INITIAL_KEYS = EULER_KEYS + QUATERNION_KEYS + HINGE_INITIAL_KEYS
+
+_REQUIRED = object()  # default marker: the key must be given
+
+
+class SceneError(ValueError):
+    """A scene that cannot be loaded. `errors` lists every problem as ``<key path>: <rule>``."""
+
+    def __init__(self, errors: Sequence[str], path: str | None = None):
+        self.errors = list(errors)
+        self.path = path
+        where = f"invalid scene {path!r}" if path is not None else "invalid scene"
+        count = f"{len(self.errors)} error" + ("s" if len(self.errors) != 1 else "")
+        super().__init__(f"{where} ({count}):\n" + "\n".join("  " + e for e in self.errors))
+
+
+def load_scene(source: str | os.PathLike | Mapping) -> Scene:
+    """Load and validate a scene.
+
+    Parameters
+    ----------
+    source : str, os.PathLike or Mapping
+        A path to a YAML scene file, the name of a shipped scene (``"hinge_chain"``, found in
+        the installed package's config/ wherever the caller stands; see
+        :func:`gyro_sim.paths.find_scene`), or a mapping with the same keys (vectors as
+        sequences or numpy arrays).
+
+    Returns
+    -------
+    Scene
+        The validated scene: vectors as read-only float arrays, unit axes normalised, inertia
+        tensors about O^k; `source` is a plain deep copy of the mapping, `path` the file path
+        (None for a mapping).
+
+    Raises
+    ------
+    SceneError
+        Listing every problem found (also for a missing file or a YAML syntax error).
+    """
+    path = None
+    if isinstance(source, Mapping):
+        data: Any = source
+    elif isinstance(source, (str, os.PathLike)):
+        path = os.fspath(source)
+        if not os.path.exists(path) and os.path.basename(path) == path:
+            from gyro_sim.paths import find_scene
+
+            try:  # a bare name: a shipped scene (a path with a directory part stays a path)
+                path = os.fspath(find_scene(path))
+            except FileNotFoundError as exc:
+                raise SceneError([str(exc)], path) from None
+        data = _read_yaml(path)
+    else:
+        raise SceneError([f"scene: must be a file path or a mapping (got {_describe(source)})"])
+    checker = _Checker()
+    scene = _scene(checker, data)
+    if checker.errors:
+        raise SceneError(checker.errors, path)
+    return dataclasses.replace(scene, source=_plain(data), path=path)
+
+
+# ---------------------------------------------------------------------------------------------
+# YAML
+
+
+class _SceneYamlLoader(yaml.SafeLoader):
+    """Safe loader that refuses duplicate keys and reads ``1e-6`` as a float."""
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            if key_node.tag == "tag:yaml.org,2002:merge":
+                continue
+            key = self.construct_object(key_node, deep=True)
+            try:
+                duplicate = key in seen
+            except TypeError:  # unhashable key: the base class reports it
+                continue
+            if duplicate:
+                raise yaml.constructor.ConstructorError(
+                    "while reading a mapping", node.start_mark,
+                    f"found duplicate key {key!r}", key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
+_SceneYamlLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+    list("-+0123456789"),
+)
+
+
+def _yaml_bounds_problem(text: str) -> str | None:
+    """Why `text` is too deep or too big to load (aliases counted expanded), or None.
+
+    Walks the parser's events (the parser is iterative; the composer that builds objects is
+    recursive and would raise RecursionError on deep nesting)."""
+    stack: list[list] = []  # open collections: [anchor, nodes so far, deepest below]
+    sizes: dict[str, tuple[int, int]] = {}  # anchor -> (nodes, depth)
+    total = 0
+    for event in yaml.parse(text, Loader=_SceneYamlLoader):
+        if isinstance(event, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
+            stack.append([event.anchor, 0, 0])
+            if len(stack) > MAX_YAML_DEPTH:
+                return (f"YAML nested deeper than {MAX_YAML_DEPTH} levels (line "
+                        f"{event.start_mark.line + 1}); a scene needs about 6")
+            continue
+        if isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
+            anchor, nodes, below = stack.pop()
+            nodes, depth = nodes + 1, below + 1
+        elif isinstance(event, yaml.ScalarEvent):
+            anchor, nodes, depth = event.anchor, 1, 0
+        elif isinstance(event, yaml.AliasEvent):
+            if event.anchor not in sizes:
+                return f"YAML alias *{event.anchor} refers to its own node or an unknown anchor"
+            anchor = None
+            nodes, depth = sizes[event.anchor]
+        else:
+            continue
+        if anchor is not None:
+            sizes[anchor] = (nodes, depth)
+        total += nodes
+        if total > MAX_YAML_NODES:
+            return f"YAML holds more than {MAX_YAML_NODES} nodes (aliases expanded)"
+        if stack:
+            stack[-1][1] += nodes
+            stack[-1][2] = max(stack[-1][2], depth)
+            if len(stack) + depth > MAX_YAML_DEPTH:
+                return f"YAML nested deeper than {MAX_YAML_DEPTH} levels (aliases expanded)"
+    return None
+
+
+def parse_yaml(text: str, where: str = "scene") -> Any:
+    """YAML text -> plain data with the scene loader (safe, no duplicate keys, depth and size
+    bounded); SceneError naming `where` otherwise."""
+    try:
+        problem = _yaml_bounds_problem(text)
+        if problem is not None:
+            raise SceneError([f"{where}: {problem}"], where)
+        return yaml.load(text, Loader=_SceneYamlLoader)  # noqa: S506 (a SafeLoader)
+    except yaml.YAMLError as exc:
+        raise SceneError([f"{where}: {_yaml_message(exc)}"], where) from None
+    except RecursionError:  # a guard: the bounds above keep the composer well inside the limit
+        raise SceneError([f"{where}: YAML nested too deeply"], where) from None
+
+
+def _read_yaml(path: str) -> Any:
+    try:
+        with open(path, encoding="utf-8") as stream:
+            text = stream.read()
+    except FileNotFoundError:
+        raise SceneError([f"{path}: file not found"], path) from None
+    except IsADirectoryError:
+        raise SceneError([f"{path}: is a directory, not a scene file"], path) from None
+    except OSError as exc:
+        raise SceneError([f"{path}: cannot read ({exc.strerror or exc})"], path) from None
+    except UnicodeDecodeError as exc:
+        raise SceneError([f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})"],
+                         path) from None
+    return parse_yaml(text, path)
+
+
+def _yaml_message(exc: yaml.YAMLError) -> str:
+    if isinstance(exc, yaml.MarkedYAMLError) and exc.problem_mark is not None:
+        mark = exc.problem_mark
+        context = f" ({exc.context})" if exc.context else ""
+        return (f"YAML error at line {mark.line + 1}, column {mark.column + 1}: "
+                f"{exc.problem}{context}")
+    return f"YAML error: {exc}"
+
+
+# ---------------------------------------------------------------------------------------------
+# Generic checks: each reports into the checker and returns None on failure
+
+
+def _describe(value: Any) -> str:
+    if value is None:
+        return "null"
+    if isinstance(value, Mapping):
+        return "a mapping"
+    if isinstance(value, (list, tuple)):
+        return f"a list of {len(value)}"
+    text = repr(value)
+    if len(text) > 40:
+        text = text[:37] + "..."
+    return f"{type(value).__name__} {text}"
+
+
+def _at(path: str, key: Any) -> str:
+    token = key if isinstance(key, str) else repr(key)
+    return f"{path}.{token}" if path else token
+
+
+def _readonly(values: Any) -> np.ndarray:
+    array = np.array(values, dtype=float)
+    array.flags.writeable = False
+    return array
+
+
+def _fmt(values: np.ndarray) -> str:
+    return "[" + ", ".join(f"{v:.6g}" for v in values) + "]"
+
+
+def _plain(value: Any) -> Any:
+    """A deep copy made of dicts, lists and Python scalars (numpy values converted)."""
+    if isinstance(value, Mapping):
+        return {key: _plain(item) for key, item in value.items()}
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, (list, tuple)):
+        return [_plain(item) for item in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return copy.deepcopy(value)
+
+
+class _Checker:
+    """Collects errors; its readers return the checked value, or None after reporting."""
+
+    def __init__(self) -> None:
+        self.errors: list[str] = []
+
+    def fail(self, path: str, rule: str) -> None:
+        self.errors.append(f"{path}: {rule}")
+
+    def mapping(self, value: Any, path: str, keys: Sequence[str],
+                required: Sequence[str] = ()) -> Mapping | None:
+        """`value` as a mapping whose keys are all in `keys` and that holds `required`."""
+        if not isinstance(value, Mapping):
+            self.fail(path or "scene", f"must be a mapping (got {_describe(value)})")
+            return None
+        for key in value:
+            if not isinstance(key, str) or key not in keys:
+                hint = ""
+                if isinstance(key, str):
+                    close = difflib.get_close_matches(key, keys, n=1)
+                    hint = f" (did you mean {close[0]!r}?)" if close else ""
+                self.fail(_at(path, key), "unknown key" + hint)
+        for key in required:
+            if key not in value:
+                self.fail(_at(path, key), "required key missing")
+            elif value[key] is None:
+                self.fail(_at(path, key), "required, got null")
+        return value
+
+    def number(self, value: Any, path: str, key: str | None = None) -> float | None:
+        """A finite real number (bools and strings refused) within the bound of `key` (BOUNDS)."""
+        if isinstance(value, (bool, np.bool_)):
+            self.fail(path, f"must be a number, not a boolean (got {value})")
+            return None
+        if not isinstance(value, numbers.Real):
+            self.fail(path, f"must be a number (got {_describe(value)})")
+            return None
+        try:
+            result = float(value)
+        except OverflowError:
+            result = math.inf
+        if not math.isfinite(result):
+            self.fail(path, f"must be finite (got {result})")
+            return None
+        limit, unit = BOUNDS.get(key, (GENERIC_BOUND, ""))
+        if abs(result) > limit:
+            self.fail(path, f"magnitude must be <= {limit:g}{' ' + unit if unit else ''}, the sanity "
+                            f"bound of {key or 'a number'} (got {result:g})")
+            return None
+        return result
+
+    def scalar(self, mapping: Mapping, key: str, path: str, default: Any = _REQUIRED, *,
+               minimum: float | None = None, strict: bool = False) -> float | None:
+        """A number under `key`, optionally bounded below (> if `strict`, else >=)."""
+        value = mapping.get(key)
+        if value is None:
+            return None if default is _REQUIRED else default  # missing: reported by mapping()
+        result = self.number(value, _at(path, key), key)
+        if result is None or minimum is None:
+            return result
+        if result < minimum or (strict and result == minimum):
+            self.fail(_at(path, key), f"must be {'>' if strict else '>='} {minimum:g} "
+                                      f"(got {result!r})")
+            return None
+        return result
+
+    def vector(self, mapping: Mapping, key: str, path: str, size: int = 3,
+               default: Any = _REQUIRED) -> np.ndarray | None:
+        """A list of `size` finite numbers under `key`, as a float array."""
+        value = mapping.get(key)
+        if value is None:
+            return None if default is _REQUIRED else default
+        return self.array(value, _at(path, key), size, key)
+
+    def array(self, value: Any, path: str, size: int, key: str | None = None) -> np.ndarray | None:
+        if isinstance(value, np.ndarray):
+            value = value.tolist() if value.ndim == 1 else value
+        if not isinstance(value, (list, tuple)):
+            self.fail(path, f"must be a list of {size} numbers (got {_describe(value)})")
+            return None
+        if len(value) != size:
+            self.fail(path, f"must have {size} components (got {len(value)})")
+            return None
+        items = [self.number(item, f"{path}[{i}]", key) for i, item in enumerate(value)]
+        if any(item is None for item in items):
+            return None
+        return np.array(items, dtype=float)
+
+    def unit(self, mapping: Mapping, key: str, path: str, size: int = 3,
+             default: Any = _REQUIRED) -> np.ndarray | None:
+        """A non-zero vector under `key`, normalised."""
+        value = mapping.get(key)
+        if value is None:
+            return None if default is _REQUIRED else default
+        vector = self.array(value, _at(path, key), size)
+        if vector is None:
+            return None
+        scale = float(np.max(np.abs(vector)))
+        if scale == 0.0:
+            self.fail(_at(path, key), "zero vector")
+            return None
+        vector = vector / scale
+        return vector / np.linalg.norm(vector)
+
+    def matrix(self, value: Any, path: str, key: str | None = None) -> np.ndarray | None:
+        """A 3x3 matrix written as three rows of three numbers."""
+        if isinstance(value, np.ndarray):
+            value = value.tolist()
+        if not isinstance(value, (list, tuple)):
+            self.fail(path, f"must be a 3x3 matrix, three rows of three numbers "
+                            f"(got {_describe(value)})")
+            return None
+        if len(value) != 3:
+            self.fail(path, f"must have 3 rows (got {len(value)})")
+            return None
+        rows = [self.array(row, f"{path}[{i}]", 3, key) for i, row in enumerate(value)]
+        if any(row is None for row in rows):
+            return None
+        return np.array(rows)
+
+    def choice(self, mapping: Mapping, key: str, path: str, options: Sequence[str],
+               default: Any = _REQUIRED) -> str | None:
+        value = mapping.get(key)
+        if value is None:
+            return None if default is _REQUIRED else default
+        if not isinstance(value, str) or value not in options:
+            got = repr(value) if isinstance(value, str) else _describe(value)
+            self.fail(_at(path, key), f"must be one of {', '.join(options)} (got {got})")
+            return None
+        return value
+
+    def flag(self, mapping: Mapping, key: str, path: str, default: bool) -> bool | None:
+        value = mapping.get(key)
+        if value is None:
+            return default
+        if not isinstance(value, (bool, np.bool_)):
+            self.fail(_at(path, key), f"must be true or false (got {_describe(value)})")
+            return None
+        return bool(value)
+
+    def name(self, mapping: Mapping, key: str, path: str) -> str | None:
+        """A ROS name token: [A-Za-z][A-Za-z0-9_]*, no repeated underscores."""
+        value = mapping.get(key)
+        if value is None:
+            return None
+        if not isinstance(value, str):
+            self.fail(_at(path, key), f"must be a string (got {_describe(value)})")
+        elif not value:
+            self.fail(_at(path, key), "must not be empty")
+        elif not NAME_PATTERN.match(value):
+            shown = value if len(value) <= 40 else value[:37] + "..."
+            self.fail(_at(path, key), f"must be a ROS name token: a letter, then letters, "
+                                      f"digits or underscores (got {shown!r})")
+        elif len(value) > MAX_NAME_LENGTH:
+            self.fail(_at(path, key), f"at most {MAX_NAME_LENGTH} characters (got {len(value)}): "
+                                      f"names become topic names ~/wrench/<name>, which ROS limits")
+        elif "__" in value:
+            self.fail(_at(path, key), f"must not contain repeated underscores, reserved by "
+                                      f"ROS (got {value!r})")
+        else:
+            return value
+        return None
+
+
+def _inertia_problem(inertia: np.ndarray) -> str | None:
+    """Why a symmetric 3x3 tensor is not the inertia of a mass distribution, or None."""
+    moments = np.linalg.eigvalsh(inertia)  # ascending
+    if not moments[0] > PD_RTOL * abs(moments[-1]):
+        return f"is not positive definite (principal moments {_fmt(moments)})"
+    if moments[0] + moments[1] < moments[2] - TRIANGLE_RTOL * float(np.sum(moments)):
+        return (f"violates the triangle inequality I1 + I2 >= I3 of principal moments "
+                f"({_fmt(moments)})")
+    return None
+
+
+def _point_mass_inertia(mass: float, com: np.ndarray) -> np.ndarray:
+    """m (|c|^2 1 - c c^T): the parallel-axis term."""
+    return mass * (float(com @ com) * np.eye(3) - np.outer(com, com))
+
+
+# ---------------------------------------------------------------------------------------------
+# The scene, level by level
+
+
+def _scene(ch: _Checker, data: Any) -> Scene | None:
+    top = ch.mapping(data, "", TOP_KEYS, required=("name", "base", "bodies"))
+    if top is None:
+        return None
+    name = top.get("name")
+    if name is not None and not isinstance(name, str):
+        ch.fail("name", f"must be a string (got {_describe(name)})")
+        name = None
+    elif isinstance(name, str) and not name.strip():
+        ch.fail("name", "must not be empty")
+        name = None
+    gravity = ch.vector(top, "gravity", "", default=None)
+    base = _base(ch, top["base"]) if top.get("base") is not None else None
+    base_type = top["base"].get("type") if isinstance(top.get("base"), Mapping) else None
+    bodies = _bodies(ch, top.get("bodies"), base_type)
+    if ch.errors:
+        return None
+    return Scene(name=name, gravity=None if gravity is None else _readonly(gravity), base=base,
+                 bodies=bodies)
+
+
+def _base(ch: _Checker, value: Any) -> Base | None:
+    path = "base"
+    base = ch.mapping(value, path, BASE_KEYS, required=("type",))
+    if base is None:
+        return None
+    kind = ch.choice(base, "type", path, BASE_TYPES)
+    position = ch.vector(base, "position", path, default=np.zeros(3))
+    amplitude = frequency = velocity = None
+    if kind is not None:
+        for key in base:
+            if key in BASE_KEYS and key not in BASE_TYPE_KEYS[kind]:
+                owner = "moving" if key == "motion" else "free"
+                ch.fail(_at(path, key), f"not allowed for a {kind} base (only a {owner} base "
+                                        f"has {key})")
+    if kind is None:  # type invalid (already reported): still check the values
+        if base.get("motion") is not None:
+            _motion(ch, base["motion"], _at(path, "motion"))
+        ch.vector(base, "velocity", path, default=None)
+    elif kind == "moving":
+        if base.get("motion") is None:
+            ch.fail(_at(path, "motion"), "required for a moving base "
+                                         "({type: sine, amplitude: [x, y, z], frequency: f})")
+        else:
+            amplitude, frequency = _motion(ch, base["motion"], _at(path, "motion"))
+    elif kind == "free":
+        velocity = ch.vector(base, "velocity", path, default=np.zeros(3))
+    if kind is None or position is None:
+        return None
+    return Base(type=kind, position=_readonly(position),
+                amplitude=None if amplitude is None else _readonly(amplitude),
+                frequency=frequency,
+                velocity=None if velocity is None else _readonly(velocity))
+
+
+def _motion(ch: _Checker, value: Any, path: str) -> tuple[np.ndarray | None, float | None]:
+    motion = ch.mapping(value, path, MOTION_KEYS, required=MOTION_KEYS)
+    if motion is None:
+        return None, None
+    ch.choice(motion, "type", path, MOTION_TYPES)
+    amplitude = ch.vector(motion, "amplitude", path)
+    frequency = ch.scalar(motion, "frequency", path, minimum=0.0, strict=True)
+    return amplitude, frequency
+
+
+def _bodies(ch: _Checker, value: Any, base_type: Any) -> tuple[Body, ...] | None:
+    if value is None:
+        return None  # missing: reported with the top-level keys
+    if not isinstance(value, (list, tuple)):
+        ch.fail("bodies", f"must be a list of bodies (got {_describe(value)})")
+        return None
+    if not value:
+        ch.fail("bodies", "must not be empty (a scene has at least one body)")
+        return None
+    names: list[tuple[str, str, str]] = []  # (name, path, joint type or "rotor")
+    bodies = []
+    for index, item in enumerate(value):
+        bodies.append(_body(ch, item, f"bodies[{index}]", index == len(value) - 1, names))
+    first = value[0]
+    first_joint = first.get("joint") if isinstance(first, Mapping) else None
+    if base_type == "free" and isinstance(first_joint, Mapping) and \
+            first_joint.get("type") == "hinge":
+        ch.fail("bodies[0].joint.type", "a free base's first joint must be spherical, not a hinge")
+    _check_names(ch, names)
+    if any(body is None for body in bodies):
+        return None
+    return tuple(bodies)
+
+
+def _check_names(ch: _Checker, names: list[tuple[str, str, str]]) -> None:
+    """Body and rotor names unique, and so the joint-state names they give."""
+    seen: dict[str, str] = {}
+    for name, path, _ in names:
+        if name in seen:
+            ch.fail(path, f"duplicate name {name!r} (also at {seen[name]}); body and rotor "
+                          f"names must be unique")
+        else:
+            seen[name] = path
+    states: dict[str, tuple[str, str]] = {}
+    for name, path, kind in names:
+        outputs = [f"{name}_{s}" for s in EULER_SUFFIXES] if kind == "spherical" else [name]
+        for output in outputs:
+            other = states.setdefault(output, (name, path))
+            if other[0] != name:
+                ch.fail(path, f"joint-state name {output!r} is also produced by {other[1]} "
+                              f"(a spherical joint publishes <body>_psi, _theta, _phi)")
+
+
+def _body(ch: _Checker, value: Any, path: str, last: bool,
+          names: list[tuple[str, str, str]]) -> Body | None:
+    body = ch.mapping(value, path, BODY_KEYS, required=("name", "joint", "mass"))
+    if body is None:
+        return None
+    name = ch.name(body, "name", path)
+    joint = _joint(ch, body.get("joint"), _at(path, "joint"))
+    written = body.get("joint").get("type") if isinstance(body.get("joint"), Mapping) else None
+    joint_type = written if written in JOINT_TYPES else None  # known even if the axis is bad
+    if name is not None:
+        names.append((name, _at(path, "name"), joint_type or "?"))
+    mass = ch.scalar(body, "mass", path, minimum=0.0, strict=True)
+    com = ch.vector(body, "com", path, default=np.zeros(3))
+    inertia = _body_inertia(ch, body, path, mass, com)
+
+    next_joint = ch.vector(body, "next_joint", path, default=None)
+    if last and body.get("next_joint") is not None:
+        ch.fail(_at(path, "next_joint"), "not allowed on the last body (there is no next joint)")
+    elif not last and "next_joint" not in body:
+        ch.fail(_at(path, "next_joint"), "required on every body but the last "
+                                         "(s^k, from O^k to O^{k+1})")
+    elif not last and body["next_joint"] is None:
+        ch.fail(_at(path, "next_joint"), "required, got null")
+
+    rotors = _rotors(ch, body.get("rotors"), _at(path, "rotors"), names)
+    initial = _initial(ch, body.get("initial"), _at(path, "initial"), joint_type)
+    visual_radius = None
+    if body.get("visual") is not None:
+        visual = ch.mapping(body["visual"], _at(path, "visual"), VISUAL_KEYS)
+        if visual is not None:
+            visual_radius = ch.scalar(visual, "radius", _at(path, "visual"), default=None,
+                                      minimum=0.0, strict=True)
+    if any(v is None for v in (name, joint, mass, com, inertia, rotors, initial)):
+        return None
+    return Body(name=name, joint=joint, mass=mass, com=_readonly(com), inertia=_readonly(inertia),
+                next_joint=None if next_joint is None else _readonly(next_joint),
+                rotors=rotors, initial=initial, visual_radius=visual_radius)
+
+
+def _joint(ch: _Checker, value: Any, path: str) -> Joint | None:
+    if value is None:
+        return None  # missing: reported with the body's keys
+    joint = ch.mapping(value, path, JOINT_KEYS, required=("type",))
+    if joint is None:
+        return None
+    kind = ch.choice(joint, "type", path, JOINT_TYPES)
+    if kind == "spherical":
+        if "axis" in joint:
+            ch.fail(_at(path, "axis"), "not allowed for a spherical joint (only a hinge has an "
+                                       "axis)")
+        return Joint(type=kind)
+    if kind == "hinge":
+        if joint.get("axis") is None:
+            ch.fail(_at(path, "axis"), "required for a hinge (its axis in the parent's frame)")
+            return None
+        axis = ch.unit(joint, "axis", path)
+        return None if axis is None else Joint(type=kind, axis=_readonly(axis))
+    return None
+
+
+def _body_inertia(ch: _Checker, body: Mapping, path: str, mass: float | None,
+                  com: np.ndarray | None) -> np.ndarray | None:
+    """The carrier's inertia tensor about O^k, from either written form."""
+    has_axial = body.get("inertia") is not None
+    has_com = body.get("inertia_com") is not None
+    if has_axial and has_com:
+        ch.fail(path, "inertia and inertia_com both given; give exactly one")
+        return None
+    if not has_axial and not has_com:
+        ch.fail(_at(path, "inertia"), "required: give inertia {axial, transverse} (about O^k) "
+                                      "or inertia_com (3x3, about the centre of mass)")
+        return None
+    parallel = None if mass is None or com is None else _point_mass_inertia(mass, com)
+    if has_com:
+        where = _at(path, "inertia_com")
+        inertia_com = ch.matrix(body["inertia_com"], where, "inertia_com")
+        if inertia_com is None:
+            return None
+        scale = float(np.max(np.abs(inertia_com)))
+        asymmetry = np.abs(inertia_com - inertia_com.T)
+        if np.max(asymmetry) > SYMMETRY_RTOL * scale:
+            i, j = np.unravel_index(np.argmax(asymmetry), asymmetry.shape)
+            ch.fail(where, f"not symmetric ([{i}][{j}] = {inertia_com[i, j]:g} but "
+                           f"[{j}][{i}] = {inertia_com[j, i]:g})")
+            return None
+        inertia_com = 0.5 * (inertia_com + inertia_com.T)
+        problem = _inertia_problem(inertia_com)
+        if problem is not None:
+            ch.fail(where, problem.removeprefix("is "))
+            return None
+        # parallel axes: I_O = I_com + m (|c|^2 1 - c c^T)
+        return None if parallel is None else inertia_com + parallel
+    where = _at(path, "inertia")
+    form = ch.mapping(body["inertia"], where, INERTIA_KEYS, required=INERTIA_KEYS)
+    if form is None:
+        return None
+    axial = ch.scalar(form, "axial", where, minimum=0.0, strict=True)
+    transverse = ch.scalar(form, "transverse", where, minimum=0.0, strict=True)
+    if axial is None or transverse is None:
+        return None
+    inertia = np.diag([transverse, transverse, axial])
+    if 2.0 * transverse < axial * (1.0 - TRIANGLE_RTOL):
+        ch.fail(where, f"principal moments violate the triangle inequality: 2 transverse "
+                       f"({2.0 * transverse:g}) < axial ({axial:g})")
+        return None
+    if parallel is None:
+        return None
+    problem = _inertia_problem(inertia - parallel)
+    if problem is not None:
+        ch.fail(where, f"impossible mass distribution for this mass and com: the inertia about "
+                       f"the centre of mass, I_O - m (|c|^2 1 - c c^T), {problem}")
+        return None
+    return inertia
+
+
+def _rotors(ch: _Checker, value: Any, path: str,
+            names: list[tuple[str, str, str]]) -> tuple[Rotor, ...] | None:
+    if value is None:
+        return ()
+    if not isinstance(value, (list, tuple)):
+        ch.fail(path, f"must be a list of rotors (got {_describe(value)})")
+        return None
+    rotors = [_rotor(ch, item, f"{path}[{i}]", names) for i, item in enumerate(value)]
+    return None if any(r is None for r in rotors) else tuple(rotors)
+
+
+def _rotor(ch: _Checker, value: Any, path: str,
+           names: list[tuple[str, str, str]]) -> Rotor | None:
+    rotor = ch.mapping(value, path, ROTOR_KEYS,
+                       required=("name", "axis", "mass", "axial_inertia", "transverse_inertia",
+                                 "mode"))
+    if rotor is None:
+        return None
+    name = ch.name(rotor, "name", path)
+    if name is not None:
+        names.append((name, _at(path, "name"), "rotor"))
+    axis = ch.unit(rotor, "axis", path)
+    position = ch.vector(rotor, "position", path, default=np.zeros(3))
+    mass = ch.scalar(rotor, "mass", path, minimum=0.0)
+    axial = ch.scalar(rotor, "axial_inertia", path, minimum=0.0, strict=True)
+    transverse = ch.scalar(rotor, "transverse_inertia", path, minimum=0.0)
+    if axial is not None and transverse is not None and \
+            2.0 * transverse < axial * (1.0 - TRIANGLE_RTOL):
+        ch.fail(_at(path, "transverse_inertia"),
+                f"triangle inequality 2 B_i >= A_i of an axially symmetric rotor violated "
+                f"(2 * {transverse:g} < {axial:g})")
+        transverse = None
+    mode = ch.choice(rotor, "mode", path, ROTOR_MODES)
+    spin = ch.scalar(rotor, "spin", path, default=0.0)
+    actuated = ch.flag(rotor, "actuated", path, default=False)
+    if mode == "speed" and actuated:
+        ch.fail(_at(path, "actuated"), "a speed rotor's rate is prescribed; only torque rotors "
+                                       "take commanded torques")
+        actuated = None
+    if any(v is None for v in (name, axis, position, mass, axial, transverse, mode, spin,
+                               actuated)):
+        return None
+    return Rotor(name=name, axis=_readonly(axis), position=_readonly(position), mass=mass,
+                 axial_inertia=axial, transverse_inertia=transverse, mode=mode, spin=spin,
+                 actuated=actuated)
+
+
+def _initial(ch: _Checker, value: Any, path: str, joint_type: str | None) -> Initial | None:
+    if value is None:
+        value = {}
+    initial = ch.mapping(value, path, INITIAL_KEYS)
+    if initial is None:
+        return None
+    given = {key for key, item in initial.items() if item is not None}
+    if joint_type == "spherical":
+        for key in HINGE_INITIAL_KEYS:
+            if key in initial:
+                ch.fail(_at(path, key), "hinge-joint key, not allowed on a spherical joint "
+                                        "(give euler/euler_rates or quaternion/angular_velocity)")
+        if given & set(QUATERNION_KEYS):
+            if given & set(EULER_KEYS):
+                ch.fail(path, "mixes the Euler form (euler, euler_rates) and the quaternion form "
+                              "(quaternion, angular_velocity); give one")
+                return None
+            if "quaternion" not in given:
+                ch.fail(_at(path, "quaternion"), "required with angular_velocity "
+                                                 "(the quaternion form gives both)")
+                return None
+            quaternion = ch.unit(initial, "quaternion", path, size=4)
+            omega = ch.vector(initial, "angular_velocity", path, default=np.zeros(3))
+            if quaternion is None or omega is None:
+                return None
+            return Initial(quaternion=_readonly(quaternion), angular_velocity=_readonly(omega))
+        euler = ch.vector(initial, "euler", path, default=np.zeros(3))
+        rates = ch.vector(initial, "euler_rates", path, default=np.zeros(3))
+        if euler is None or rates is None:
+            return None
+        return Initial(euler=_readonly(euler), euler_rates=_readonly(rates))
+    if joint_type == "hinge":
+        for key in EULER_KEYS + QUATERNION_KEYS:
+            if key in initial:
+                ch.fail(_at(path, key), "spherical-joint key, not allowed on a hinge joint "
+                                        "(give angle, rate)")
+        angle = ch.scalar(initial, "angle", path, default=0.0)
+        rate = ch.scalar(initial, "rate", path, default=0.0)
+        if angle is None or rate is None:
+            return None
+        return Initial(angle=angle, rate=rate)
+    # joint type invalid (already reported): still check the values' shapes
+    for key in EULER_KEYS + ("angular_velocity",):
+        ch.vector(initial, key, path, default=None)
+    ch.vector(initial, "quaternion", path, size=4, default=None)
+    for key in HINGE_INITIAL_KEYS:
+        ch.scalar(initial, key, path, default=None)
+    return None

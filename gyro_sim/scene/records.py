@@ -1,0 +1,96 @@
+"""Scene description: the validated, immutable form of a scene file (SPEC.md, "Scene files").
+
+`load_scene` (in :mod:`gyro_sim.scene.load`) turns a YAML file or a dict into these
+records; everything downstream (model compilation, logs) reads only these records.
+All vectors are float numpy arrays of shape (3,) in the frame the SPEC names; a body's
+vectors are in its own frame (origin at its joint point O^k, z-axis = its axis).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+JOINT_TYPES = ("spherical", "hinge")
+BASE_TYPES = ("fixed", "moving", "free")
+ROTOR_MODES = ("torque", "speed")
+
+
+@dataclass(frozen=True, eq=False)
+class Rotor:
+    """A balanced, axially symmetric rotor on a carrier (THEORY.md section 1)."""
+
+    name: str
+    axis: np.ndarray  # (3,) unit vector e_i in the carrier frame
+    position: np.ndarray  # (3,) h_i: the rotor's centre from O^k, carrier frame
+    mass: float  # m_i
+    axial_inertia: float  # A_i about its own centre
+    transverse_inertia: float  # B_i about its own centre
+    mode: str  # "torque" (spin p_i integrates L_i / A_i) | "speed" (kappa_i' prescribed)
+    spin: float  # torque: initial absolute spin p_i; speed: kappa_i'
+    actuated: bool  # torque rotors only: the axial torque L_i is a commanded axis moment
+
+
+@dataclass(frozen=True, eq=False)
+class Joint:
+    """The joint at O^k between body k-1 (or the base) and body k."""
+
+    type: str  # "spherical" | "hinge"
+    axis: np.ndarray | None = None  # hinge only: (3,) unit axis in the parent's frame
+
+
+@dataclass(frozen=True, eq=False)
+class Initial:
+    """Initial state of one body's joint, as written in the scene.
+
+    Spherical joints give either Euler angles (psi, theta, phi) with their rates, or a
+    quaternion (w, x, y, z; world from body) with a body-frame angular velocity. Exactly one
+    of the two forms is set (the loader fills the Euler form with zeros when neither is
+    given). Hinge joints give `angle` and `rate`.
+    """
+
+    euler: np.ndarray | None = None  # (3,) psi, theta, phi
+    euler_rates: np.ndarray | None = None  # (3,) psi', theta', phi'
+    quaternion: np.ndarray | None = None  # (4,) unit, w first
+    angular_velocity: np.ndarray | None = None  # (3,) body frame
+    angle: float = 0.0  # hinge
+    rate: float = 0.0  # hinge
+
+
+@dataclass(frozen=True, eq=False)
+class Body:
+    """The carrier S_0^k of gyrostat k with its rotors."""
+
+    name: str
+    joint: Joint
+    mass: float  # the carrier alone
+    com: np.ndarray  # (3,) from O^k to the carrier's centre of mass
+    inertia: np.ndarray  # (3, 3) carrier inertia about O^k, body frame, symmetric
+    next_joint: np.ndarray | None  # (3,) s^k from O^k to O^{k+1}; None on the last body
+    rotors: tuple[Rotor, ...]
+    initial: Initial
+    visual_radius: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class Base:
+    """Where the chain hangs: O^1."""
+
+    type: str  # "fixed" | "moving" | "free"
+    position: np.ndarray  # (3,) O^1 in the world frame (initial position for "free")
+    amplitude: np.ndarray | None = None  # moving: O^1 = position + amplitude sin(2 pi f t)
+    frequency: float | None = None  # moving, Hz
+    velocity: np.ndarray | None = None  # free: initial velocity of O^1, world frame
+
+
+@dataclass(frozen=True, eq=False)
+class Scene:
+    """A whole validated scene. `source` is the mapping it was loaded from (for logs)."""
+
+    name: str
+    gravity: np.ndarray | None  # (3,) world frame, m/s^2; None when the file has no gravity
+    base: Base
+    bodies: tuple[Body, ...]
+    source: dict[str, Any] = field(default_factory=dict, compare=False)
+    path: str | None = None
