@@ -19,10 +19,12 @@ import os
 from pathlib import Path
 from typing import Iterable
 
+from gyro_sim.errors import GyroSimError
+
 __all__ = ["OutputError", "check_output", "check_outputs"]
 
 
-class OutputError(ValueError):
+class OutputError(GyroSimError, ValueError):
     """An output path is refused (bad input: console scripts exit with status 2)."""
 
 

@@ -8,6 +8,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from gyro_sim.errors import GyroSimError
 from gyro_sim.dynamics import reference as dyn
 from gyro_sim.dynamics import invariants as inv
 from gyro_sim.dynamics.model import compile_model, initial_state
@@ -16,7 +17,7 @@ from gyro_sim.scene.records import Scene
 from gyro_sim.snapshot import Scatter, Snapshot
 
 
-class SimulationError(RuntimeError):
+class SimulationError(GyroSimError, RuntimeError):
     """The integration failed (non-finite state, step-size collapse); the state is kept."""
 
 

@@ -31,6 +31,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from gyro_sim.errors import GyroSimError
+
 if TYPE_CHECKING:
     from gyro_sim.dynamics.system import OdeSystem
 
@@ -66,7 +68,7 @@ _H0_TINY_STEP = 1e-6
 _H0_TINY_FRACTION = 1e-3
 
 
-class IntegrationError(ArithmeticError):
+class IntegrationError(GyroSimError, ArithmeticError):
     """The integration cannot continue: the step size collapsed or the state is not finite.
 
     Attributes `method`, `reason`, `t` (start of the failing step) and `h` (its size, or

@@ -49,6 +49,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator, Mapping
 
+from gyro_sim.errors import GyroSimError
 from gyro_sim.msgs import msgdefs
 
 __all__ = ["LogError", "LogWriter", "LogInfo", "read_info", "iter_messages", "EVENTS_TOPIC", "FORMAT_VERSION"]
@@ -73,7 +74,7 @@ MIN_TIMER_WAIT = 0.005
 DEFAULT_FLUSH_PERIOD = 0.2
 
 
-class LogError(RuntimeError):
+class LogError(GyroSimError, RuntimeError):
     """A log cannot be written or read as asked (closed writer, unknown type, bad value...)."""
 
 

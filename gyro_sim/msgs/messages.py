@@ -43,6 +43,7 @@ from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
+from gyro_sim.errors import GyroSimError
 from gyro_sim.msgs.cdr import NS_PER_S, CdrWriter, Refill
 
 # --- names ---------------------------------------------------------------------------------------
@@ -112,7 +113,7 @@ def axis_moment_key(axis: str) -> str:
     return f"axis_moment_{axis}_Nm"
 
 
-class NonFiniteError(ValueError):
+class NonFiniteError(GyroSimError, ValueError):
     """A NaN or infinity in an output: refused, it must never reach a topic or a log."""
 
 

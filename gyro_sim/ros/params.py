@@ -10,13 +10,15 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+from gyro_sim.errors import GyroSimError
+
 #: largest physics rate accepted (Hz): beyond it one step is shorter than a Python call
 MAX_PHYSICS_RATE = 100_000.0
 #: relative tolerance on physics_rate / publish_rate being a whole number of steps
 RATIO_TOLERANCE = 1e-9
 
 
-class ParameterError(ValueError):
+class ParameterError(GyroSimError, ValueError):
     """One or more parameters are invalid; the message lists them all, one per line."""
 
 

@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from gyro_sim.errors import GyroSimError
 from gyro_sim.scene.records import (
     BASE_TYPES, JOINT_TYPES, ROTOR_MODES, Base, Body, Initial, Joint, Rotor, Scene,
 )
@@ -96,7 +97,7 @@ INITIAL_KEYS = EULER_KEYS + QUATERNION_KEYS + HINGE_INITIAL_KEYS
 _REQUIRED = object()  # default marker: the key must be given
 
 
-class SceneError(ValueError):
+class SceneError(GyroSimError, ValueError):
     """A scene that cannot be loaded. `errors` lists every problem as ``<key path>: <rule>``."""
 
     def __init__(self, errors: Sequence[str], path: str | None = None):

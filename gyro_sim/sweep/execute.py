@@ -22,6 +22,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
+from gyro_sim.errors import GyroSimError
 from gyro_sim.sweep.point import run_batch
 from gyro_sim.sweep.results import read_parts, write_part
 
@@ -31,7 +32,7 @@ TASKS_PER_WORKER = 4
 MAX_AUTO_BATCH = 64
 
 
-class ClusterError(RuntimeError):
+class ClusterError(GyroSimError, RuntimeError):
     """The cluster could not run the sweep (no scheduler there, batches that kept failing)."""
 
 

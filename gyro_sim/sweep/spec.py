@@ -43,6 +43,8 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 import yaml
 
+from gyro_sim.errors import GyroSimError
+
 __all__ = ["SweepError", "Sweep", "Point", "load_sweep", "set_path", "parse_path", "MEASURES", "RUN_DEFAULTS"]
 
 #: what a point can measure (the columns each adds are in gyro_sim.sweep.point)
@@ -67,7 +69,7 @@ _SEGMENT = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)((?:\[\d+\])*)")
 _INDEX = re.compile(r"\[(\d+)\]")
 
 
-class SweepError(ValueError):
+class SweepError(GyroSimError, ValueError):
     """A sweep file that cannot be run. `errors` lists every problem as ``<key path>: <rule>``."""
 
     def __init__(self, errors: Sequence[str], path: str | None = None):

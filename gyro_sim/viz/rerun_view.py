@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gyro_sim.errors import GyroSimError
 from gyro_sim.msgs import messages as M
 from gyro_sim.log.mcap_log import LogError, read_info
 from gyro_sim.scene.urdf import body_extent, body_radius, chain_length, quat_z_to, rotor_size
@@ -426,7 +427,7 @@ SCREENSHOT_TIMEOUT = 120.0
 SETTLE_SECONDS = 2.0
 
 
-class ScreenshotError(RuntimeError):
+class ScreenshotError(GyroSimError, RuntimeError):
     """The headless viewer did not start, load or paint."""
 
 
