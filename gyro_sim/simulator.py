@@ -1,4 +1,4 @@
-"""The Simulator: the stable Python API of SPEC.md over model, dynamics and integrators."""
+"""The Simulator: the stable Python API (README, "Python API") over model, dynamics and integrators."""
 from __future__ import annotations
 
 import math
@@ -52,7 +52,7 @@ class BodyState:
 
 
 class Simulator:
-    """Simulate a scene. See SPEC.md, "Python API".
+    """Simulate a scene. See the README, "Python API".
 
     Parameters
     ----------
@@ -180,7 +180,7 @@ class Simulator:
         return o["inv"].copy()
 
     def _joint_layout(self) -> None:
-        """The joint-state entries in order (SPEC.md): their names, and where each entry's
+        """The joint-state entries in order (docs/scene-format.md, "Joint states"): their names, and where each entry's
         position, velocity and effort come from in the sources of `_joint_arrays`: the Euler
         angles of every body (3 n, zero effort), the hinges, the torque rotors, the speed rotors."""
         m = self.model
@@ -208,7 +208,7 @@ class Simulator:
 
     @property
     def joint_names(self) -> tuple[str, ...]:
-        """The names of the joint-state entries in order (SPEC.md), those of every snapshot: the
+        """The names of the joint-state entries in order (docs/scene-format.md), those of every snapshot: the
         same tuple for the simulator's life."""
         return self._snapshot_names[0]
 
@@ -368,7 +368,7 @@ class Simulator:
         return euler, omegas_to_euler_rates(euler, d.w, self.model.down)
 
     def joint_states(self) -> JointStates:
-        """Euler angles of spherical joints, hinge angles, rotor angles (SPEC.md); the same
+        """Euler angles of spherical joints, hinge angles, rotor angles (docs/scene-format.md); the same
         numbers as `snapshot()` (compiled on the numba backend), which logs re-simulate against."""
         if self._compiled_outputs is not None:
             pos, vel, eff = self._joint_arrays_compiled(self._outputs_compiled())

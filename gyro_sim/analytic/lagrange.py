@@ -1,6 +1,6 @@
 """Chains of Lagrange gyroscopes: the paper's closed-form results (eqs 60-88).
 
-A *Lagrange chain* (THEORY.md section 3) is a chain of gyrostats on a fixed point O^1, joined
+A *Lagrange chain* (docs/theory.md section 3) is a chain of gyrostats on a fixed point O^1, joined
 by spherical joints, under gravity only, each gyrostat axially symmetric about its body axis
 eps^k (the body z-axis): carrier inertia at O^k diag(B0, B0, A0), centre of mass and next joint
 on the axis (eq 61), rotors on the axis with axes +-eps^k (so lambda^k is along eps^k, eq 64).
@@ -18,7 +18,7 @@ This module gives, for such a chain,
   :func:`regular_precession_state`, and the scene files built on them
   (:func:`precession_scene_dict`, :data:`SHIPPED_SCENES`).
 
-Euler angles are gyro_sim's (THEORY.md section 6, :mod:`gyro_sim.dynamics.rotations`): theta_k
+Euler angles are gyro_sim's (docs/theory.md section 6, :mod:`gyro_sim.dynamics.rotations`): theta_k
 between eps^k and the downward vertical nu, psi_k the precession about nu, phi_k the proper
 rotation; in the "down" frame (z = nu) the axis is eps^k = sin(th) u_k + cos(th) nu with the
 horizontal unit vector u_k = (sin psi_k, -cos psi_k, 0), and the line of nodes is
@@ -37,7 +37,7 @@ Transcription errors corrected here (the paper's text, seed/000_31335571ec580f22
   s^l sin(theta_l) is eps_{kl} (relative to body k), not eps_{ql}; likewise eps_{kq}
   (= eps_{qk}) in front of c^q sin(theta_q). The last row's eps_{l1} is right.
 - (87)-(88): c^3 is c^2; B_1^1, B_2^2 in (88) are B_*^1, B_*^2 of (87), and n_2^*, mu_2^*
-  are n_2, mu_2 (B_*^2 only rescales B^2). The solved form for phi_1', phi_2' (THEORY.md
+  are n_2, mu_2 (B_*^2 only rescales B^2). The solved form for phi_1', phi_2' (docs/theory.md
   section 4) is correct as printed.
 - The n = 2 integrals after (87): -2 mu_1^* cos(theta_1) and -2 mu_2 cos(theta_2) (the same
   factor 2 as in (85)); their k_* form is (82) divided by m^2 c^2 s^1 and is right.
@@ -430,7 +430,7 @@ def regular_precession_spins(chain: LagrangeChain, thetas: Sequence[float], kapp
 
     each linear in its own n_k, and phi_k' = (B^k n_k - lambda^k) / A^k - kappa cos th_k
     ((70), (63)). For n = 1: A phi' = (B - A) kappa cos th - m c g / kappa - lambda (the
-    heavy top); for n = 2 these are THEORY.md's (88):
+    heavy top); for n = 2 these are docs/theory.md's (88):
 
         A^1 phi_1' = (B^1 - A^1 + m^2 s^1 s^1 + eps21 (sin th2/sin th1) m^2 c^2 s^1) kappa cos th1
                      - (m^1 c^1 + m^2 s^1) g / kappa - lambda^1
@@ -499,7 +499,7 @@ def precession_scene_dict(name: str, bodies: Sequence[Mapping[str, Any]],
                           gravity: Sequence[float] = (0.0, 0.0, -9.81),
                           position: Sequence[float] = (0.0, 0.0, 0.0),
                           psi1: float = 0.0) -> dict[str, Any]:
-    """A scene mapping (SPEC.md "Scene files") of a Lagrange chain in regular precession.
+    """A scene mapping (docs/scene-format.md) of a Lagrange chain in regular precession.
 
     `bodies`: the body entries without `joint` and `initial` (mass, com, inertia
     {axial, transverse}, next_joint, rotors, visual; vectors on the z-axis). The result has
@@ -631,7 +631,7 @@ def _header(fname: str, args: Mapping[str, Any]) -> str:
         f"{args['name']}\n"
         f"\n"
         f"{what},\nfixed at O^1 = the world origin, started in a regular precession "
-        f"(THEORY.md section 4):\ntheta_k = {list(args['thetas'])} constant, psi_k' = kappa = "
+        f"(docs/theory.md section 4):\ntheta_k = {list(args['thetas'])} constant, psi_k' = kappa = "
         f"{args['kappa']:g} rad/s{eps}.\n"
         f"\n"
         f"GENERATED, do not edit by hand: the initial states are phi_k' of eq (88) in full "

@@ -4,7 +4,7 @@ For every reference scene (:func:`cases`), every method runs once per tolerance 
 or step (fixed) from the scene's initial state to the horizon, in one `advance` call, and
 its final state is compared with a reference:
 
-- exact, for the regular precessions (THEORY.md section 4, eq 88): theta_k and psi_k' stay
+- exact, for the regular precessions (docs/theory.md section 4, eq 88): theta_k and psi_k' stay
   constant, so psi_k = psi_k0 + kappa t, theta_k = theta_k0, phi_k = phi_k0 + phi_k' t
   (p_k = phi_k' + psi_k' cos theta_k is constant, eq 70); rotor angles kappa_i = kappa_i' t;
 - otherwise gyro_sim's dop853 at rtol REF_RTOL, whose own error is estimated by a second
@@ -117,7 +117,7 @@ def precession_exact(scene: Scene, model: Model) -> Callable[[float], np.ndarray
 
     Every body is spherical with Euler-angle initial conditions, theta_k' = 0 and psi_k' =
     kappa; then psi_k(t) = psi_k0 + kappa t, theta_k const, phi_k(t) = phi_k0 + phi_k' t,
-    w^k from the Euler rates (THEORY.md section 6), and each torque rotor turns at the
+    w^k from the Euler rates (docs/theory.md section 6), and each torque rotor turns at the
     constant kappa_i' = p_i - w^k . e_i relative to its carrier (eqs 18-19).
     """
     euler0 = np.array([b.initial.euler for b in scene.bodies], dtype=float)
@@ -407,7 +407,7 @@ def summary_rows(case: Case, points: list[Point]) -> list[dict]:
     return rows
 
 
-#: the error at which dop853 is compared with MuJoCo's RK4 (issue 11: <= 0.05x its CPU)
+#: the error at which dop853 is compared with MuJoCo's RK4 (the claim: <= 0.05x its CPU)
 PEER_TARGET = 1e-8
 
 

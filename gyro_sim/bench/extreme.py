@@ -1,12 +1,12 @@
 """Scenes of the stability report: stiff and extreme cases, built from a few parameters.
 
-Each builder returns a scene mapping (SPEC.md "Scene files", loadable by `load_scene`) and
+Each builder returns a scene mapping (docs/scene-format.md, loadable by `load_scene`) and
 says in its docstring what makes the case hard. The numbers that matter (frequency ratio,
 mass ratio, Kapitza margin) are arguments, so the report and the tests can state them and
 move them. Some cases are shipped as files too (`config/stiff_*.yaml`,
 `config/extreme_*.yaml`, written by ``python -m gyro_sim.bench.extreme config``).
 
-Cases (issue 5, "Stability: stiff and extreme cases"):
+Cases (stiff and extreme):
 
 - :func:`fast_rotor`: a top on a fast rotor, nutation >= 1e4 x precession frequency;
 - :func:`mass_ratio_chain`: a 3-body chain whose tip is 1e-6 or 1e6 times its neighbour;

@@ -3,7 +3,7 @@
 The node (gyro_sim.ros.loop) prepares one publication every 10 ms of simulated time (publish
 100 Hz, physics 1 kHz): `Outputs.prepare_state` (the compiled outputs, the snapshot, the
 message bytes) and, at its deadline, `Outputs.send` (one `Publisher.publish(bytes)` per message,
-one publisher per joint wrench topic as SPEC.md fixes, and the same bytes handed to the
+one publisher per joint wrench topic as docs/ros-interface.md gives, and the same bytes handed to the
 recorder). This bench runs exactly that code on the physics thread of this process, with a real
 rclpy node, real publishers and a real recorder (gyro_sim.ros.recorder.LiveRecorder writing an
 MCAP file from its child process), on spherical chains of gyro_sim.bench.scenes with a rotor on

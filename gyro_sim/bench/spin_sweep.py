@@ -1,7 +1,7 @@
 """The spin sweep of the stability report: fast tops at the node's 1 kHz, with MuJoCo beside.
 
 Two scenes, each spun at SPINS rad/s and started in its *slow regular precession*, so that
-the exact motion is known (the paper's closing result, THEORY.md section 4: eq 88, with the
+the exact motion is known (the paper's closing result, docs/theory.md section 4: eq 88, with the
 general-n conditions before it; :func:`gyro_sim.analytic.lagrange.regular_precession_state`):
 theta_k and psi_k' = kappa stay constant, phi_k' is constant
 (:func:`gyro_sim.bench.accuracy.precession_exact` gives the state at any t):

@@ -27,7 +27,7 @@ import numpy as np
 
 #: the node's physics step (s)
 STEP = 1e-3
-#: chain lengths of the table (issue 10) and the quick run's
+#: chain lengths of the table and the quick run's
 SIZES = (2, 10, 20, 100)
 QUICK_SIZES = (2, 10)
 #: timed steps per run (quick)

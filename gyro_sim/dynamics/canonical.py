@@ -5,7 +5,7 @@ for a Hamiltonian system in canonical coordinates (Hairer, Lubich, Wanner, "Geom
 Numerical Integration", 2nd ed., 2006, VI.4 and IV.2). The package's state (quaternions and
 joint rates, :mod:`gyro_sim.dynamics.model`) is not canonical: gauss4 on it keeps |q| but lets the
 energy of the double gyroscope grow as t^2 and the world angular momentum drift as h^4
-(docs/STRUCTURE_PRESERVING.md). This module writes the same equations (THEORY.md sections
+(docs/integrators.md). This module writes the same equations (docs/theory.md sections
 1-2, 5) in canonical pairs, and `gauss4s` (:mod:`gyro_sim.integrators.gauss4.gauss4s`)
 runs the same Gauss method on them.
 

@@ -1,4 +1,4 @@
-"""The chain dynamics compiled with numba: an O(n) articulated-body recursion (THEORY.md sec. 5).
+"""The chain dynamics compiled with numba: an O(n) articulated-body recursion (docs/theory.md sec. 5).
 
 Kernels only. `rhs_kernel` computes what :meth:`gyro_sim.dynamics.system.ChainODE.rhs` computes
 (eqs 34-54 solved for u', the quaternion derivatives, the torque-rotor angle rates of eqs

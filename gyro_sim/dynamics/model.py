@@ -1,4 +1,4 @@
-"""The model: a scene compiled into the arrays the dynamics reads (THEORY.md sections 1-2).
+"""The model: a scene compiled into the arrays the dynamics reads (docs/theory.md sections 1-2).
 
 Like Pinocchio's Model, it is an immutable description; the per-evaluation workspace lives
 in :class:`gyro_sim.dynamics.reference.Data`. It holds only the terms the scene has: `gravity` is

@@ -19,7 +19,7 @@ its linear part is R^k (eq 40), its moment about O^k is L^k (eq 48). The closure
 then the joint kinds: spherical L^k = 0 (eq 44), hinge e^k . L^k = L_k(t) (eq 51), free base
 R^1 = 0 and L^1 = 0 (eq 54). Each row is S_j . F_subtree(k(j)) for the joint's unit motions
 S_j (a rotation about O^k, or a translation), so the rows are affine in u' and the matrix is
-the symmetric composite-inertia matrix (THEORY.md section 5).
+the symmetric composite-inertia matrix (docs/theory.md section 5).
 """
 from __future__ import annotations
 

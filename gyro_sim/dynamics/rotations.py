@@ -5,7 +5,7 @@ array of shape (..., 4) gives matrices of shape (..., 3, 3). Also the home of th
 rates q' = 1/2 (0, w) (x) q (`quat_rates`) and of the row-wise cross product (`cross`).
 
 Euler angles are the paper's z-x-z angles (psi, theta, phi) relative to the "down" frame,
-whose z-axis is nu, the unit gravity direction (SPEC.md, THEORY.md section 6):
+whose z-axis is nu, the unit gravity direction (docs/scene-format.md; docs/theory.md section 6):
 
     world_R_body = world_R_down Rz(psi) Rx(theta) Rz(phi),  world_R_down e_z = nu
 
@@ -175,7 +175,7 @@ def euler_to_matrix(euler: np.ndarray, down: np.ndarray) -> np.ndarray:
 def euler_rates_to_omega(euler: np.ndarray, rates: np.ndarray, down: np.ndarray) -> np.ndarray:
     """World-frame angular velocity (3,) from Euler angles and rates.
 
-    w = psi' nu + theta' (line of nodes) + phi' eps  (THEORY.md section 6).
+    w = psi' nu + theta' (line of nodes) + phi' eps  (docs/theory.md section 6).
     """
     psi, theta, _ = euler
     dpsi, dtheta, dphi = rates

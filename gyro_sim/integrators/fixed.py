@@ -1,6 +1,6 @@
 """The node's fixed-step method for a scene: rk4 where it is stable at the step, gauss4s (the
 Gauss method on the chain's canonical equations: A-stable and symplectic, momenta kept to
-round-off) where the scene is stiff (issue 10, item 2); and the integrator "fixed" that makes
+round-off) where the scene is stiff ; and the integrator "fixed" that makes
 this choice at the start and again as the motion changes (:class:`SceneFixedStep`, the node's
 default). On a system that is not a chain the implicit rung is gauss4, the same method on the
 system's own state. Below, "gauss4" stands for either where the two behave alike.
@@ -88,7 +88,7 @@ RECHECK_DIM = 10
 SPIN_RESOLVE = 0.25
 #: most substeps of one physics step
 MAX_SUBSTEPS = 64
-#: "fixed": the method of a stiff chain (symplectic: docs/STRUCTURE_PRESERVING.md); a system
+#: "fixed": the method of a stiff chain (symplectic: docs/integrators.md); a system
 #: that is not a chain (no `model`), or a chain of more than IMPLICIT_MAX_BODIES, gets gauss4,
 #: the same method on the package's state
 IMPLICIT = "gauss4s"
@@ -96,9 +96,9 @@ IMPLICIT_PLAIN = "gauss4"
 #: gauss4s's Newton-GMRES needs ~2.5x gauss4's Krylov vectors on a long swinging chain (n = 100:
 #: 81 against 37 rhs evaluations a step after 2 s; median step 1.1 ms against 0.41 ms, under
 #: load): the largest n holding 1 kHz measured ~77 against ~205 (`gyro-sim bench stability
-#: --parts cost`, session 7). Up to this many bodies gauss4s holds it with a margin. The
+#: --parts cost`). Up to this many bodies gauss4s holds it with a margin. The
 #: preconditioner that would give it gauss4's conditioning costs more than it saves (each
-#: Krylov vector would take ~6 field evaluations instead of 2: docs/STRUCTURE_PRESERVING.md).
+#: Krylov vector would take ~6 field evaluations instead of 2: docs/integrators.md).
 IMPLICIT_MAX_BODIES = 50
 
 

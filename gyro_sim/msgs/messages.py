@@ -5,7 +5,7 @@ This module owns every topic name, type name, frame name and diagnostics key. Th
 offline recorder (:mod:`gyro_sim.log.record`) writes them to its log. Nothing else builds
 message content.
 
-Topics and frames (SPEC.md, "ROS interface"), all stamped with the log time (simulated time
+Topics and frames (docs/ros-interface.md), all stamped with the log time (simulated time
 since the start, resets included):
 
 ==================================  ===============================  ==========================

@@ -1,4 +1,4 @@
-"""Scene description: the validated, immutable form of a scene file (SPEC.md, "Scene files").
+"""Scene description: the validated, immutable form of a scene file (docs/scene-format.md).
 
 `load_scene` (in :mod:`gyro_sim.scene.load`) turns a YAML file or a dict into these
 records; everything downstream (model compilation, logs) reads only these records.
@@ -19,7 +19,7 @@ ROTOR_MODES = ("torque", "speed")
 
 @dataclass(frozen=True, eq=False)
 class Rotor:
-    """A balanced, axially symmetric rotor on a carrier (THEORY.md section 1)."""
+    """A balanced, axially symmetric rotor on a carrier (docs/theory.md section 1)."""
 
     name: str
     axis: np.ndarray  # (3,) unit vector e_i in the carrier frame

@@ -1,4 +1,4 @@
-"""Sweeps: many runs of one scene with varied parameters, on Dask (`gyro-sim sweep`, issue 12).
+"""Sweeps: many runs of one scene with varied parameters, on Dask (`gyro-sim sweep`).
 
 A sweep file (:mod:`.spec`) names a base scene, the parameters to vary by key path into the
 scene mapping (a grid, or random draws with a seed), the run (integrator, horizon, chunk) and

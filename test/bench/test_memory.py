@@ -1,5 +1,5 @@
 """`gyro-sim bench scaling --memory`: every integrator runs a long chain in memory that grows
-O(n) (issue 10, item 4). At n = 300 (2,100 states) a dense Jacobian with radau's two LU factors
+O(n). At n = 300 (2,100 states) a dense Jacobian with radau's two LU factors
 would take 8 * 2100^2 * 4 bytes = 141 MB on top of the model; the run must add far less."""
 from __future__ import annotations
 

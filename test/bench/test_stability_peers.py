@@ -1,5 +1,4 @@
-"""`gyro-sim bench stability --quick`, the parts beside the verdicts (issue 10, "what must be
-shown"):
+"""`gyro-sim bench stability --quick`, the parts beside the verdicts:
 
 - MuJoCo rows (implicitfast, RK4 at the node's 1 ms) for every case MuJoCo can express, none
   (and the reason in the report) for the others; the abrupt case's step moments reach MuJoCo

@@ -57,7 +57,7 @@ def axis_error(sim, exact) -> float:
 def test_substeps_resolve_the_fast_heavy_top_where_rk4_fails():
     """At 1e4 rad/s the top turns 10 rad in a 1 ms step: rk4 at the step goes non-finite; the
     choice steps rk4 in 40 substeps (0.25 rad each) and follows the exact slow regular
-    precession (eq 88, THEORY.md sec. 4) to 1e-4 rad over 1 s."""
+    precession (eq 88, docs/theory.md sec. 4) to 1e-4 rad over 1 s."""
     from gyro_sim.bench.accuracy import precession_exact
     from gyro_sim.bench.spin_sweep import heavy_top
     from gyro_sim.integrators.fixed import SPIN_RESOLVE, fixed_step_choice

@@ -21,7 +21,7 @@ import numpy as np
 from numba.core.runtime import rtsys
 from gyro_sim import load_scene
 from gyro_sim.bench.scenes import spherical_chain
-from gyro_sim.dynamics import fast
+from gyro_sim.dynamics import kernel as fast
 from gyro_sim.dynamics.model import compile_model, initial_state
 from test.core.chains import random_chain
 

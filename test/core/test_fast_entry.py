@@ -202,8 +202,8 @@ import numpy as np
 from numba.core.runtime import rtsys
 from gyro_sim import load_scene
 from gyro_sim.bench.scenes import spherical_chain
-from gyro_sim.dynamics import dynamics as dyn
-from gyro_sim.dynamics import fast, fast_entry
+from gyro_sim.dynamics import reference as dyn
+from gyro_sim.dynamics import kernel as fast, entry as fast_entry
 from gyro_sim.dynamics.model import compile_model, initial_state
 
 @numba.njit

@@ -225,7 +225,7 @@ def test_energy_stays_bounded_on_the_fast_double_gyroscope():
     """The double gyroscope spun at 1e3 rad/s (1 rad a 1 ms step), 2e4 steps: gauss4s's energy
     error stays at round-off level and does not grow (its largest over the second 10 s is no
     more than twice that over the first); gauss4 on the package's state grows as t^2, to ~4e-8
-    at 20 s (docs/STRUCTURE_PRESERVING.md): the check can fail."""
+    at 20 s (docs/integrators.md): the check can fail."""
     from gyro_sim.bench.spin_sweep import double_gyro
 
     scene = load_scene(double_gyro(1e3))
@@ -253,7 +253,7 @@ def test_round_off_does_not_drift_the_vertical_momentum(kappa, drifts):
     round-off (~3e-14) instead of drifting. With the Newton stop of gauss4 (1e-5 tolerance
     units), what the simplified iteration leaves has a sign, and K drifts linearly, ~2.5e-13
     over the same steps (measured; on the double gyroscope at 1e3 rad/s the rounded
-    coefficients of session 7 made it 16x more again): the check can fail. Hairer, McLachlan, Razakarivony, BIT 48 (2008)."""
+    coefficients h a_ij made it 16x more again): the check can fail. Hairer, McLachlan, Razakarivony, BIT 48 (2008)."""
     from gyro_sim.bench.spin_sweep import heavy_top
 
     sim = Simulator(load_scene(heavy_top(1e3)), integrator="gauss4s", step=1e-3)

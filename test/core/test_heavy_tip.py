@@ -1,4 +1,4 @@
-"""Heavy and light tips on the compiled path (issue 10, item 3).
+"""Heavy and light tips on the compiled path.
 
 The accelerations of `mass_ratio_chain(ratio)` (a three-body spherical chain whose tip is
 `ratio` x its neighbour) from the compiled kernel and from the numpy reference, against the

@@ -274,7 +274,7 @@ def test_spins_heavy_top_classical():
 
 @pytest.mark.parametrize("eps21", [1.0, -1.0])
 def test_spins_double_gyroscope_eq88(eps21):
-    """The general-n rows reduce to THEORY.md's (88) for n = 2."""
+    """The general-n rows reduce to docs/theory.md's (88) for n = 2."""
     ch = lg.LagrangeChain.from_scene(load_scene(PRECESSIONS["double_gyro_plus.yaml"]))
     th1, th2, kappa, g = 0.6, 0.9, -6.0, 9.81
     A1, A2, B1, B2 = *ch.A, *ch.B

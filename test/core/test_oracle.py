@@ -63,7 +63,7 @@ def _inertia_at_O(mass: float, com, inertia_com) -> np.ndarray:
 
 
 def random_chain(seed: int, base: str = "fixed", conservative: bool = False) -> dict:
-    """A random scene in the scene-file form (SPEC.md, "Scene files").
+    """A random scene in the scene-file form (docs/scene-format.md).
 
     conservative: no speed rotors (the base is then never `moving`), so that T + V is a
     first integral when no axis moment is applied.

@@ -1,5 +1,5 @@
 """Radau above DENSE_MAX states: no Jacobian formed, GMRES on Jacobian-vector products
-(issue 10, item 4: memory O(n)). Checked against the dense path on the same problems (the
+(memory O(n)). Checked against the dense path on the same problems (the
 same accepted steps, the same states to far below the tolerance) and by what it allocates."""
 from __future__ import annotations
 

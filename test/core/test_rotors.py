@@ -1,4 +1,4 @@
-"""Rotors (THEORY.md section 1): torque rotors integrate L_i / A_i (eq 29) and never couple
+"""Rotors (docs/theory.md section 1): torque rotors integrate L_i / A_i (eq 29) and never couple
 back into their own spin; a speed rotor at constant kappa_i' acts as a constant lambda."""
 import copy
 

@@ -104,7 +104,7 @@ def test_partial_pipe_writes_are_completed():
 _KILLED = r"""
 import sys, time
 from gyro_sim import Simulator, load_scene
-from gyro_sim.log import messages as M
+from gyro_sim.msgs import messages as M
 from gyro_sim.ros.recorder import LiveRecorder, SEND_PERIOD
 sim = Simulator(load_scene("hinge_chain"))
 pub = M.Publication(sim.model.names)

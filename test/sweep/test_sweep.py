@@ -1,4 +1,4 @@
-"""gyro-sim sweep (issue 12): validation, bit-for-bit parallel = serial, a killed worker,
+"""gyro-sim sweep: validation, bit-for-bit parallel = serial, a killed worker,
 --resume, Ctrl-C, and the two theory maps within one grid cell of their formulas.
 
 One LocalCluster of 2 single-threaded worker processes serves the whole module (as the

@@ -10,7 +10,7 @@ round-off) -- provided the collocation equations are solved to round-off, which 
 below asks for. For stiff (gyroscopic) scenes at the node's fixed step, where rk4 goes unstable.
 Symplectic only on a Hamiltonian system in canonical coordinates: not on the package's state
 of quaternions and joint rates (the world angular momentum is cubic there, and the double
-gyroscope's energy error grows as t^2: docs/STRUCTURE_PRESERVING.md); gauss4s
+gyroscope's energy error grows as t^2: docs/integrators.md); gauss4s
 (gauss_canonical.py) is this class stepping the chain's canonical equations, where it is.
 
 Measured (compiled, h = 1 ms, `Simulator.advance` in 10 ms calls; "before": the

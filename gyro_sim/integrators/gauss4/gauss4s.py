@@ -7,7 +7,7 @@ package's state of quaternions and joint rates. There the method is symplectic (
 Lubich, Wanner, "Geometric Numerical Integration", 2nd ed., Springer 2006, VI.4, Thm. 4.2):
 the energy error stays bounded over long times instead of growing, and every quadratic
 invariant of the canonical flow is kept to round-off: the world angular momentum (sum of the
-bodies' quasi-momenta, bilinear in (q, p); docs/STRUCTURE_PRESERVING.md), |q|^2 and q . p.
+bodies' quasi-momenta, bilinear in (q, p); docs/integrators.md), |q|^2 and q . p.
 
 The caller's state y (the package's layout) is converted to canonical z at the start of a march
 (`advance`, or "fixed"'s `march`) and back at its end; the z of the last end is kept, so a run

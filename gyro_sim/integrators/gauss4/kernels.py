@@ -307,7 +307,7 @@ def gauss_scaled(A, h, hA):
     are exact (powers of two), h a_10 is rounded once, and h/2 - h a_10 is exact (Sterbenz:
     h a_10 ~ 0.54 h lies within a factor 2 of h/2). Rounding h a_01 on its own instead leaves
     the condition off by an ulp, and that error has a sign: it drifts the energy and the
-    quadratic invariants linearly, by ~1e-17 a step (docs/STRUCTURE_PRESERVING.md)."""
+    quadratic invariants linearly, by ~1e-17 a step (docs/integrators.md)."""
     hA[0, 0] = A[0, 0] * h
     hA[1, 1] = A[1, 1] * h
     hA[1, 0] = A[1, 0] * h
