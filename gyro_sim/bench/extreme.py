@@ -20,7 +20,6 @@ Cases (stiff and extreme):
 """
 from __future__ import annotations
 
-import copy
 import math
 from pathlib import Path
 from typing import Any
@@ -274,10 +273,6 @@ def write_shipped(config_dir: str) -> list[str]:
         path.write_text(shipped_yaml(fname), encoding="utf-8")
         paths.append(str(path))
     return paths
-
-
-def scene_copy(sd: dict[str, Any]) -> dict[str, Any]:
-    return copy.deepcopy(sd)
 
 
 if __name__ == "__main__":

@@ -409,6 +409,3 @@ def to_json(runs: list[SpinRun]) -> list[dict[str, Any]]:
     return [asdict(r) for r in runs]
 
 
-def from_json(rows: list[dict[str, Any]]) -> list[SpinRun]:
-    """SpinRuns from :func:`to_json` (stability.json's "spin_sweep" runs): to redraw the tables."""
-    return [SpinRun(**r) for r in rows]

@@ -59,13 +59,13 @@ STEP_COUNT_SLACK = 1e-6
 MAX_REPORTED_COMPONENTS = 8
 
 # --- initial step selection (Hairer, Norsett, Wanner I, sec. II.4, "starting step size") -----
-_H0_NEGLIGIBLE = 1e-5  # d0 or d1 below this: the scaled state or slope is negligible
-_H0_DEFAULT = 1e-6  # h0 then
-_H0_FRACTION = 0.01  # h0 = 0.01 d0 / d1; h1 = (0.01 / max(d1, d2)) ** (1 / (order + 1))
-_H0_GROWTH = 100.0  # the initial step is at most 100 h0
-_H0_TINY_DERIVATIVES = 1e-15  # d1, d2 below this: h1 = max(1e-6, 1e-3 h0)
-_H0_TINY_STEP = 1e-6
-_H0_TINY_FRACTION = 1e-3
+H0_NEGLIGIBLE = 1e-5  # d0 or d1 below this: the scaled state or slope is negligible
+H0_DEFAULT = 1e-6  # h0 then
+H0_FRACTION = 0.01  # h0 = 0.01 d0 / d1; h1 = (0.01 / max(d1, d2)) ** (1 / (order + 1))
+H0_GROWTH = 100.0  # the initial step is at most 100 h0
+H0_TINY_DERIVATIVES = 1e-15  # d1, d2 below this: h1 = max(1e-6, 1e-3 h0)
+H0_TINY_STEP = 1e-6
+H0_TINY_FRACTION = 1e-3
 
 
 class IntegrationError(GyroSimError, ArithmeticError):
@@ -437,7 +437,7 @@ class AdaptiveIntegrator(Integrator):
             return min(span, self.max_step)
         scale = self._scale(y0)
         d0, d1 = rms(y0 / scale), rms(f0 / scale)
-        h0 = _H0_DEFAULT if d0 < _H0_NEGLIGIBLE or d1 < _H0_NEGLIGIBLE else _H0_FRACTION * d0 / d1
+        h0 = H0_DEFAULT if d0 < H0_NEGLIGIBLE or d1 < H0_NEGLIGIBLE else H0_FRACTION * d0 / d1
         h0 = min(h0, span)
         if not h0 > 0.0:  # |f0| so large against |y0| that no step is representable
             raise IntegrationError(self.name, f"no starting step: the rhs is too large (weighted norm {d1:.3g})",
@@ -446,21 +446,11 @@ class AdaptiveIntegrator(Integrator):
         d2 = rms((f1 - f0) / scale) / h0
         if not math.isfinite(d2):
             d2 = 0.0
-        if d1 <= _H0_TINY_DERIVATIVES and d2 <= _H0_TINY_DERIVATIVES:
-            h1 = max(_H0_TINY_STEP, h0 * _H0_TINY_FRACTION)
+        if d1 <= H0_TINY_DERIVATIVES and d2 <= H0_TINY_DERIVATIVES:
+            h1 = max(H0_TINY_STEP, h0 * H0_TINY_FRACTION)
         else:
-            h1 = (_H0_FRACTION / max(d1, d2)) ** (1.0 / (order + 1))
-        return min(_H0_GROWTH * h0, h1, span, self.max_step)
-
-    def _next_h(self, h: float, h_try: float, factor: float) -> float:
-        """Step-size memory after an accepted step h with `factor`; h_try was the proposal.
-
-        A step shortened only to land on t1 (h < h_try) that went well does not shrink it.
-        """
-        h_next = h * factor
-        if h < h_try and factor >= 1.0:
-            h_next = max(h_next, h_try)
-        return h_next
+            h1 = (H0_FRACTION / max(d1, d2)) ** (1.0 / (order + 1))
+        return min(H0_GROWTH * h0, h1, span, self.max_step)
 
     def _step_impl(self, t: float, y: np.ndarray, t1: float) -> float:
         """One accepted step from (t, y), at most to t1: fills `_y_new`, returns t_new."""

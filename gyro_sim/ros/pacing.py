@@ -193,10 +193,6 @@ class RateMeter:
         self._wall0, self._sim0 = now, sim_time
         return sim / wall if wall > 0 else float("nan")
 
-    def run_rtf(self) -> float:
-        return self.total_sim / self.total_wall if self.total_wall > 0 else float("nan")
-
-
 class RunDelay:
     """Seconds the calling thread has waited so far, runnable, for a CPU (Linux's
     /proc/thread-self/schedstat, its second field): the time the OS scheduler gave the CPUs to

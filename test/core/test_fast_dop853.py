@@ -399,7 +399,7 @@ def test_controller_constants_are_the_bases():
     assert DOP853.CONTROL.tolist() == [base.SAFETY, base.MIN_FACTOR, base.MAX_FACTOR, -1.0 / 8,
                                        base.MIN_STEP_RELATIVE, base.LAST_STEP_STRETCH]
     assert math.isclose(DOP853.CONTROL[3], -1.0 / (DOP853.error_estimator_order + 1))
-    assert DOP853.INITIAL.tolist() == [base._H0_NEGLIGIBLE, base._H0_DEFAULT, base._H0_FRACTION,  # noqa: SLF001
-                                       base._H0_GROWTH, base._H0_TINY_DERIVATIVES,  # noqa: SLF001
-                                       base._H0_TINY_STEP, base._H0_TINY_FRACTION]  # noqa: SLF001
+    assert DOP853.INITIAL.tolist() == [base.H0_NEGLIGIBLE, base.H0_DEFAULT, base.H0_FRACTION,
+                                       base.H0_GROWTH, base.H0_TINY_DERIVATIVES,
+                                       base.H0_TINY_STEP, base.H0_TINY_FRACTION]
     assert fast_dop853.ORDER_OF_ESTIMATOR == DOP853.error_estimator_order

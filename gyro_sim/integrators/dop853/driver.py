@@ -13,8 +13,8 @@ from gyro_sim.integrators.dop853.kernels import (
     dop_stage_state, dop_update,
 )
 from gyro_sim.integrators.base import (
-    _H0_DEFAULT, _H0_FRACTION, _H0_GROWTH, _H0_NEGLIGIBLE, _H0_TINY_DERIVATIVES, _H0_TINY_FRACTION,
-    _H0_TINY_STEP, LAST_STEP_STRETCH, MAX_FACTOR, MIN_FACTOR, MIN_STEP_RELATIVE, SAFETY,
+    H0_DEFAULT, H0_FRACTION, H0_GROWTH, H0_NEGLIGIBLE, H0_TINY_DERIVATIVES, H0_TINY_FRACTION,
+    H0_TINY_STEP, LAST_STEP_STRETCH, MAX_FACTOR, MIN_FACTOR, MIN_STEP_RELATIVE, SAFETY,
     AdaptiveIntegrator, ExplicitRungeKutta, IntegrationError, describe_nonfinite,
 )
 
@@ -288,8 +288,8 @@ class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
     CONTROL = np.array([SAFETY, MIN_FACTOR, MAX_FACTOR, -1.0 / (7 + 1), MIN_STEP_RELATIVE,
                         LAST_STEP_STRETCH])
     #: the starting step's constants (dop853_kernels.dop_initial_probe, dop_initial_step), base's
-    INITIAL = np.array([_H0_NEGLIGIBLE, _H0_DEFAULT, _H0_FRACTION, _H0_GROWTH, _H0_TINY_DERIVATIVES,
-                        _H0_TINY_STEP, _H0_TINY_FRACTION])
+    INITIAL = np.array([H0_NEGLIGIBLE, H0_DEFAULT, H0_FRACTION, H0_GROWTH, H0_TINY_DERIVATIVES,
+                        H0_TINY_STEP, H0_TINY_FRACTION])
     assert CONTROL.size == CONTROL_SIZE and INITIAL.size == INITIAL_SIZE
 
     def __init__(self, system: OdeSystem, *, stiffness_estimate: bool = False, **options):

@@ -52,7 +52,7 @@ N_DENSE = 7
 #: the controller's constants in `control`: SAFETY, MIN_FACTOR, MAX_FACTOR, the exponent
 #: -1/(q+1) (q = 7, the order of the error estimator), MIN_STEP_RELATIVE, LAST_STEP_STRETCH
 CONTROL_SIZE = 6
-#: the starting step's constants in `initial` (base.py's _H0_*): NEGLIGIBLE, DEFAULT, FRACTION,
+#: the starting step's constants in `initial` (base.py's H0_*): NEGLIGIBLE, DEFAULT, FRACTION,
 #: GROWTH, TINY_DERIVATIVES, TINY_STEP, TINY_FRACTION
 INITIAL_SIZE = 7
 

@@ -336,12 +336,6 @@ class Gauss4(FixedStepIntegrator):
         return sum(a.nbytes for a in self._ws) + self._y_end.nbytes
 
     @property
-    def round_off_floor(self) -> float:
-        """The dense path's current round-off floor of the Newton updates (tolerance units;
-        NEWTON_STALL on the Krylov path)."""
-        return float(self._dstate[DST_FLOOR]) if self.dense and self._dstate[DST_H] else NEWTON_STALL
-
-    @property
     def worst_step_rhs(self) -> int:
         """The most rhs evaluations one step can take (the known worst case): the retake
         budget times a (sub)step's most -- dense: DENSE_NEWTON_CAP iterations of 2 and

@@ -16,8 +16,8 @@ from gyro_sim.integrators.radau.kernels import (
     rad_scale, rad_stage_state, rad_transform,
 )
 from gyro_sim.integrators.base import (
-    _H0_DEFAULT, _H0_FRACTION, _H0_GROWTH, _H0_NEGLIGIBLE, _H0_TINY_DERIVATIVES, _H0_TINY_FRACTION,
-    _H0_TINY_STEP, EPS, LAST_STEP_STRETCH, MAX_FACTOR, MIN_FACTOR, MIN_STEP_RELATIVE, SAFETY,
+    H0_DEFAULT, H0_FRACTION, H0_GROWTH, H0_NEGLIGIBLE, H0_TINY_DERIVATIVES, H0_TINY_FRACTION,
+    H0_TINY_STEP, EPS, LAST_STEP_STRETCH, MAX_FACTOR, MIN_FACTOR, MIN_STEP_RELATIVE, SAFETY,
     AdaptiveIntegrator, IntegrationError, describe_nonfinite,
 )
 
@@ -158,8 +158,8 @@ class Radau(AdaptiveIntegrator):
                         RADAU_SLOW_RATE, RADAU_KEEP_STEP, RADAU_NEWTON_FAIL_FACTOR, LU_REUSE_RTOL,
                         MIN_STEP_RELATIVE, LAST_STEP_STRETCH])
     #: the starting step's constants (dop853_kernels.dop_initial_probe, dop_initial_step), base's
-    INITIAL = np.array([_H0_NEGLIGIBLE, _H0_DEFAULT, _H0_FRACTION, _H0_GROWTH, _H0_TINY_DERIVATIVES,
-                        _H0_TINY_STEP, _H0_TINY_FRACTION])
+    INITIAL = np.array([H0_NEGLIGIBLE, H0_DEFAULT, H0_FRACTION, H0_GROWTH, H0_TINY_DERIVATIVES,
+                        H0_TINY_STEP, H0_TINY_FRACTION])
     assert CONTROL.size == CONTROL_SIZE
 
     def __init__(self, system: OdeSystem, **options):

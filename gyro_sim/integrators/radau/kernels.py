@@ -450,7 +450,7 @@ def rad_control_accepted(h, h_try, h_abs_old, error_norm, error_norm_old, n_iter
     - factor = min(MAX_FACTOR, safety rad_predict_factor), 1 below RADAU_KEEP_STEP when the
       Jacobian is kept (the step and its LU factors are kept, as scipy and radau5.f);
     - the step-size memory |h| factor, but a step shortened only to land on t1 that went well
-      does not shrink it (at least h_try; AdaptiveIntegrator._next_h).
+      does not shrink it (at least h_try).
 
     Returns (recompute_jac, the step-size memory)."""
     recompute = n_iter > control[C_SLOW_ITER] and rate > control[C_SLOW_RATE]
