@@ -26,6 +26,7 @@ setup(
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", glob("config/*.yaml")),
+        ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
         ("share/" + package_name + "/config/sweeps", glob("config/sweeps/*.yaml")),
     ],
     # mcap + mcap-ros2-support: logs are written and read without ROS installed;
