@@ -10,8 +10,8 @@ ROS = ["ros-jazzy-rclpy", "ros-jazzy-common-interfaces", "ros-jazzy-rmw-fastrtps
 VIZ = ["rerun-sdk>=0.41"]
 # report plots, and the peer engines the reports compare against
 BENCH = ["matplotlib>=3.6", "mujoco>=3", "pin>=3"]
-# MJCF and URDF models read as scenes (MjSpec.from_file: MuJoCo 3.2 and later)
-MODELS = ["mujoco>=3.2"]
+# MJCF and URDF models read as scenes (MjSpec.from_file; checked with MuJoCo 4.0)
+MODELS = ["mujoco>=3.3"]
 # pin (Pinocchio): the independent engine of the cross-check tests; rosbags: an independent
 # MCAP reader for the log tests
 # gyro-sim sweep: dask[distributed] runs the points on a local or remote cluster; pyarrow writes

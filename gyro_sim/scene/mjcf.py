@@ -262,6 +262,9 @@ class _Importer:
             name = self._name(obj.mjOBJ_FLEX, f)
             self.fail(f"flex {name!r}" if name else f"flex #{f}",
                       "deformable bodies are not supported (rigid bodies only)")
+        for i in range(m.nplugin):
+            self.fail(f"plugin #{i}", "MuJoCo plugins are not supported (their forces are "
+                                      "outside the equations of motion)")
         if m.opt.density != 0.0 or m.opt.viscosity != 0.0:
             self.fail("option", "density and viscosity (fluid forces) are not supported; "
                                 "set them to 0")
