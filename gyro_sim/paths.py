@@ -57,6 +57,8 @@ def find_scene(name: str | os.PathLike) -> Path:
         for d in config_dirs():
             if (d / MODELS_DIR / p.name).is_file():
                 return d / MODELS_DIR / p.name
+        known = sorted({f.name for f in shipped_models()})
+        raise FileNotFoundError(f"model {text!r} not found (shipped models: {', '.join(known) or 'none'})")
     stem = p.name if p.suffix in (".yaml", ".yml") else p.name + ".yaml"
     for d in config_dirs():
         if (d / stem).is_file() and stem not in NOT_SCENES:

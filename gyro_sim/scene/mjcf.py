@@ -155,7 +155,7 @@ def import_model(path: str | os.PathLike, keyframe: str | None = None) -> Import
 
     Parameters
     ----------
-    path : the model file (``.xml``/``.mjcf``: MJCF, ``.urdf``: URDF)
+    path : the model file: MJCF, or URDF (a ``<robot>`` root), whatever its suffix
     keyframe : the name of the keyframe giving the initial state; None: the model's first
         keyframe, or the reference pose at rest when it has none
 
@@ -183,8 +183,20 @@ def import_model(path: str | os.PathLike, keyframe: str | None = None) -> Import
     except ValueError as exc:  # MuJoCo's parse and compile errors
         text = "; ".join(line.strip() for line in str(exc).splitlines() if line.strip())
         raise ModelError([f"{path}: MuJoCo cannot read it: {text}"], path) from None
-    kind = "URDF" if os.path.splitext(path)[1].lower() == ".urdf" else "MJCF"
-    return _Importer(mujoco, model, path, kind).run(keyframe)
+    return _Importer(mujoco, model, path, _kind(path)).run(keyframe)
+
+
+#: how much of a file's head is read to find its root element
+HEAD_BYTES = 65536
+_MARKUP = re.compile(r"<\?.*?\?>|<!--.*?-->|<!DOCTYPE[^>]*>", re.S)
+
+
+def _kind(path: str) -> str:
+    """"URDF" when the file's root element is ``<robot>`` (as MuJoCo decides), else "MJCF"."""
+    with open(path, "rb") as stream:
+        head = stream.read(HEAD_BYTES).decode("utf-8", "replace")
+    root = re.search(r"<\s*([A-Za-z_][\w.-]*)", _MARKUP.sub("", head))
+    return "URDF" if root is not None and root.group(1) == "robot" else "MJCF"
 
 
 @dataclass
@@ -391,7 +403,7 @@ class _Importer:
             g.origin = (d.xpos[g.root] if g.kind == "free" else d.xanchor[g.joint]).copy()
             g.axis = d.xaxis[g.joint].copy()
 
-    def rotor_problem(self, g: _Group, groups: dict[int, _Group]) -> str | None:
+    def rotor_problem(self, g: _Group) -> str | None:
         """Why group `g` is no rotor of its parent, or None when it is one."""
         if g.kind != "hinge":
             return f"on a {g.kind} joint"
@@ -444,7 +456,7 @@ class _Importer:
         while True:
             current = chain[-1]
             kids = [groups[c] for c in current.children]
-            problems = {c.root: self.rotor_problem(c, groups) for c in kids}
+            problems = {c.root: self.rotor_problem(c) for c in kids}
             rotors[current.root] = [c for c in kids if problems[c.root] is None]
             rest = [c for c in kids if problems[c.root] is not None]
             if len(rest) > 1:
@@ -481,7 +493,7 @@ class _Importer:
         key, key_name = self.keyframe(keyframe)
         self.raise_errors()
         state = self.initial_state(key)
-        commands = self.commands(groups, chain, rotors)
+        commands = self.commands(chain, rotors)
         self.raise_errors()
         m, mj = self.m, self.mj
         actuated = {c.axis for c in commands}
@@ -515,6 +527,10 @@ class _Importer:
                     "mode": "torque", "spin": _tidy(state["spin"][r.root]),
                     "actuated": self.kind == "URDF" or rname in actuated,
                 })
+                if state["angle"][r.root] != 0.0:
+                    self.notes.append(f"{self.joint(r.joint)}: the keyframe's angle "
+                                      f"{state['angle'][r.root]:g} not kept (a rotor's angle "
+                                      "starts at 0; a balanced rotor's angle changes nothing)")
                 element = f"{self.body(r.root)} (rotor on {self.joint(r.joint)})"
                 where[f"bodies[{k}].rotors[{i}]"] = element
                 names.append((element, rname))
@@ -581,7 +597,7 @@ class _Importer:
         mj.mj_kinematics(m, d)
         mj.mj_comPos(m, d)
         mj.mj_comVel(m, d)
-        out: dict[str, Any] = {"initial": {}, "spin": {}}
+        out: dict[str, Any] = {"initial": {}, "spin": {}, "angle": {}}
         omega: dict[int, np.ndarray] = {}
         vel = np.zeros(6)
         for b in range(1, m.nbody):
@@ -602,13 +618,13 @@ class _Importer:
                 out["initial"][b] = {"angle": _tidy(d.qpos[m.jnt_qposadr[j]]),
                                      "rate": _tidy(d.qvel[m.jnt_dofadr[j]])}
                 parent = int(m.body_weldid[m.body_parentid[b]])
-                if parent:
+                if parent:  # should this body be a rotor: its absolute spin (eqs (18)-(19))
                     axis = d.xaxis[j] / np.linalg.norm(d.xaxis[j])
                     out["spin"][b] = float(omega[parent] @ axis) + float(d.qvel[m.jnt_dofadr[j]])
+                    out["angle"][b] = float(d.qpos[m.jnt_qposadr[j]])
         return out
 
-    def commands(self, groups: dict[int, _Group], chain: list[_Group],
-                 rotors: dict[int, list[_Group]]) -> list[Command]:
+    def commands(self, chain: list[_Group], rotors: dict[int, list[_Group]]) -> list[Command]:
         """Each actuator's axis and factor (gear x gain)."""
         mj, m = self.mj, self.m
         axis_of = {}

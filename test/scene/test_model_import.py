@@ -238,11 +238,19 @@ def test_names_and_structure_follow_the_documented_rule(tmp_path):
     assert [b.name for b in urdf.bodies] == ["shoulder", "elbow"]
     assert urdf.bodies[1].rotors[0].actuated  # URDF: every revolute or continuous joint is commanded
     assert Simulator(urdf, backend="numpy").axis_names == ["shoulder", "elbow", "wheel"]
+    as_xml = import_model(write(tmp_path, "arm.xml", ARM_URDF.replace("<robot", "<!-- a URDF named .xml -->\n<robot", 1)))
+    assert as_xml.kind == "URDF" and as_xml.mapping["bodies"][1]["rotors"][0]["actuated"]
 
 
-def test_shipped_models_are_found_by_name_and_listed():
+def test_shipped_models_are_found_by_name_from_anywhere(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
     assert {p.name for p in shipped_models()} >= {"arm_flywheel.xml", "satellite_wheels.xml"}
     assert load_scene("arm_flywheel.xml").path == str(ARM)
+    with pytest.raises(SceneError, match=r"model 'robot.urdf' not found \(shipped models: arm_flywheel.xml, "):
+        load_scene("robot.urdf")
+    own = write(tmp_path, "arm_flywheel.xml", SATELLITE.read_text())  # a file here wins
+    assert load_scene("arm_flywheel.xml").path == "arm_flywheel.xml" and own.is_file()
+    assert load_scene("arm_flywheel.xml").base.type == "free"
 
 
 def test_welded_and_static_bodies(tmp_path):
@@ -266,6 +274,8 @@ def test_keyframes_choose_the_initial_state(tmp_path):
     still = load_scene(path, keyframe="still")
     assert still.bodies[1].initial.angle == 0.2 and still.bodies[1].initial.rate == 0.0
     assert still.bodies[1].rotors[0].spin == 0.0
+    turned = write(tmp_path, "turned.xml", ARM.read_text().replace("0.6  0  0.7", "0.6  1.25  0.7"))
+    assert "joint 'spin': the keyframe's angle 1.25 not kept" in " ".join(import_model(turned).notes)
     with pytest.raises(SceneError, match=r"keyframe 'nope': no such keyframe \(the model's: 'swing', 'still'\)"):
         load_scene(path, keyframe="nope")
     rest = write(tmp_path, "rest.xml", re.sub(r"<keyframe>.*</keyframe>", "", ARM.read_text(), flags=re.S))
@@ -525,12 +535,16 @@ def test_a_missing_model_file(tmp_path):
         load_scene(tmp_path / "absent.urdf")
 
 
-def test_without_mujoco_the_error_names_the_extra(monkeypatch):
+def test_without_mujoco_the_error_names_the_extra(monkeypatch, tmp_path, capsys):
     monkeypatch.setitem(sys.modules, "mujoco", None)  # import mujoco raises ImportError
     with pytest.raises(ModelError, match=r"needs mujoco, not installed; install it with: pip install 'gyro_sim\[models\]'"):
         import_model(ARM)
     with pytest.raises(SceneError, match=r"gyro_sim\[models\]"):
         load_scene(ARM)
+    assert main(["import", str(ARM), "-o", str(tmp_path / "arm.yaml")]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "pip install 'gyro_sim[models]'" in err, err
+    assert not (tmp_path / "arm.yaml").exists()
 
 
 # ----------------------------------------------------------------------------- what is left out
