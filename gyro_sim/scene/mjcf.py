@@ -100,10 +100,10 @@ class ImportedModel:
         (``bodies[1].mass: ...`` -> ``robot.xml: body 'upper': mass: ...``)."""
         keys = sorted(self.where, key=len, reverse=True)
 
-        def element(match: re.Match) -> str:
-            return self.where.get(match.group(0), match.group(0))
+        def element(match: re.Match) -> str:  # a key path named in a rule: its element only
+            return self.where[match.group(1)]
 
-        pattern = re.compile("|".join(re.escape(k) for k in keys)) if keys else None
+        pattern = re.compile("(" + "|".join(re.escape(k) for k in keys) + r")(?:\.\w+)*") if keys else None
         out = []
         for error in errors:
             key, _, rule = error.partition(": ")
@@ -241,9 +241,13 @@ class _Importer:
         name = self.body_name(b)
         return f"body {name!r}" if name else f"body #{b} (unnamed)"
 
-    def joint(self, j: int) -> str:
+    def joint(self, j: int, bare: bool = False) -> str:
+        """How a message names joint `j`; an unnamed one by its number (and its body, unless
+        `bare`: the message names the body already)."""
         name = self.joint_name(j)
-        return f"joint {name!r}" if name else f"joint #{j} (unnamed) of {self.body(self.m.jnt_bodyid[j])}"
+        if name:
+            return f"joint {name!r}"
+        return f"joint #{j}" if bare else f"joint #{j} of {self.body(self.m.jnt_bodyid[j])}"
 
     def fail(self, element: str, why: str) -> None:
         self.errors.append(f"{self.path}: {element}: {why}")
@@ -512,7 +516,7 @@ class _Importer:
             body["inertia_com"] = _mat(G.T @ g.inertia @ G)
             if k + 1 < len(chain):
                 body["next_joint"] = _vec(G.T @ (chain[k + 1].origin - g.origin))
-            element = f"{self.body(g.root)} ({g.kind} {self.joint(g.joint)})"
+            element = f"{self.body(g.root)} ({g.kind} {self.joint(g.joint, bare=True)})"
             where[f"bodies[{k}]"] = element
             names.append((element, name))
             body_rotors = []
@@ -531,7 +535,7 @@ class _Importer:
                     self.notes.append(f"{self.joint(r.joint)}: the keyframe's angle "
                                       f"{state['angle'][r.root]:g} not kept (a rotor's angle "
                                       "starts at 0; a balanced rotor's angle changes nothing)")
-                element = f"{self.body(r.root)} (rotor on {self.joint(r.joint)})"
+                element = f"{self.body(r.root)} (rotor on {self.joint(r.joint, bare=True)})"
                 where[f"bodies[{k}].rotors[{i}]"] = element
                 names.append((element, rname))
             if body_rotors:

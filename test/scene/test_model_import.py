@@ -504,6 +504,20 @@ def test_urdf_joints_gyro_sim_cannot_express_are_refused(tmp_path, joint, dynami
     assert error.startswith(f"{path}: {expected}"), error
 
 
+def test_a_scene_rule_broken_by_the_names_is_said_by_elements(tmp_path):
+    """The scene's own checks run on the model's scene; their key paths become the elements."""
+    text = bad(inner=CHILD.format(name="hand", joint="wrist", type="ball", attrs="")
+               .replace("</body>", CHILD.format(name="finger", joint="hand_psi", type="hinge",
+                                                attrs='axis="1 0 0"') + "</body>"))
+    path = write(tmp_path, "names.xml", text)
+    with pytest.raises(SceneError) as info:
+        load_scene(path)
+    (error,) = info.value.errors
+    assert error == (f"{path}: body 'finger' (hinge joint 'hand_psi'): name: joint-state name 'hand_psi' is "
+                     "also produced by body 'hand' (ball joint 'wrist') (a spherical joint publishes "
+                     "<body>_psi, _theta, _phi)")
+
+
 def test_the_refusals_come_before_anything_runs(tmp_path, capsys):
     path = write(tmp_path, "bad.xml", REFUSED["slide joint"][0])
     assert main(["run", "--scene", str(path), "--duration", "1"]) == 2
@@ -533,6 +547,16 @@ def test_a_file_mujoco_cannot_read(tmp_path, text, expected):
 def test_a_missing_model_file(tmp_path):
     with pytest.raises(SceneError, match="absent.urdf: file not found"):
         load_scene(tmp_path / "absent.urdf")
+
+
+def test_a_model_file_beyond_the_size_bound_is_refused_unread(tmp_path):
+    from gyro_sim.scene.mjcf import MAX_MODEL_BYTES
+
+    path = tmp_path / "huge.xml"
+    with open(path, "wb") as stream:
+        stream.truncate(MAX_MODEL_BYTES + 1)  # sparse: nothing is written
+    with pytest.raises(SceneError, match=f"{MAX_MODEL_BYTES + 1} bytes, more than a model file holds"):
+        load_scene(path)
 
 
 def test_without_mujoco_the_error_names_the_extra(monkeypatch, tmp_path, capsys):
