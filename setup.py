@@ -10,12 +10,14 @@ ROS = ["ros-jazzy-rclpy", "ros-jazzy-common-interfaces", "ros-jazzy-rmw-fastrtps
 VIZ = ["rerun-sdk>=0.41"]
 # report plots, and the peer engines the reports compare against
 BENCH = ["matplotlib>=3.6", "mujoco>=3", "pin>=3"]
+# MJCF and URDF models read as scenes (MjSpec.from_file; checked with MuJoCo 4.0)
+MODELS = ["mujoco>=3.3"]
 # pin (Pinocchio): the independent engine of the cross-check tests; rosbags: an independent
 # MCAP reader for the log tests
 # gyro-sim sweep: dask[distributed] runs the points on a local or remote cluster; pyarrow writes
 # the Parquet table (without pandas); matplotlib draws the map
 SWEEP = ["dask[distributed]>=2024.1", "pyarrow>=14", "matplotlib>=3.6"]
-TEST = ["pytest>=7", "rosbags>=0.9"] + ROS + VIZ + BENCH + SWEEP
+TEST = ["pytest>=7", "rosbags>=0.9"] + ROS + VIZ + BENCH + SWEEP + MODELS
 
 setup(
     name=package_name,
@@ -28,6 +30,7 @@ setup(
         ("share/" + package_name + "/config", glob("config/*.yaml")),
         ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
         ("share/" + package_name + "/config/sweeps", glob("config/sweeps/*.yaml")),
+        ("share/" + package_name + "/config/models", glob("config/models/*.xml") + glob("config/models/*.urdf")),
     ],
     # mcap + mcap-ros2-support: logs are written and read without ROS installed;
     # numba: the compiled dynamics (35x faster than numpy at n = 10: real time at 1 kHz)
@@ -39,7 +42,7 @@ setup(
         "mcap>=1.6",
         "mcap-ros2-support>=0.5",
     ],
-    extras_require={"ros": ROS, "viz": VIZ, "bench": BENCH, "sweep": SWEEP, "test": TEST},
+    extras_require={"ros": ROS, "viz": VIZ, "bench": BENCH, "sweep": SWEEP, "models": MODELS, "test": TEST},
     python_requires=">=3.10",
     zip_safe=True,
     maintainer="gyro_sim developers",

@@ -182,6 +182,7 @@ PLUGINS = (
     "gyro_sim.bench.publication",
     "gyro_sim.sweep.commands",  # sweep (many runs on Dask)
     "gyro_sim.bench.soak",
+    "gyro_sim.scene.commands",  # import (an MJCF or URDF model as a scene)
 )
 
 

@@ -37,6 +37,7 @@ import numpy as np
 import yaml
 
 from gyro_sim.errors import GyroSimError
+from gyro_sim.scene.mjcf import ModelError, import_model, is_model_path
 from gyro_sim.scene.records import (
     BASE_TYPES, JOINT_TYPES, ROTOR_MODES, Base, Body, Initial, Joint, Rotor, Scene,
 )
@@ -108,7 +109,7 @@ class SceneError(GyroSimError, ValueError):
         super().__init__(f"{where} ({count}):\n" + "\n".join("  " + e for e in self.errors))
 
 
-def load_scene(source: str | os.PathLike | Mapping) -> Scene:
+def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None) -> Scene:
     """Load and validate a scene.
 
     Parameters
@@ -117,7 +118,11 @@ def load_scene(source: str | os.PathLike | Mapping) -> Scene:
         A path to a YAML scene file, the name of a shipped scene (``"hinge_chain"``, found in
         the installed package's config/ wherever the caller stands; see
         :func:`gyro_sim.paths.find_scene`), or a mapping with the same keys (vectors as
-        sequences or numpy arrays).
+        sequences or numpy arrays). A path ending in ``.xml``, ``.mjcf`` or ``.urdf`` is an
+        MJCF or URDF model, read through MuJoCo (:mod:`gyro_sim.scene.mjcf`, docs/models.md).
+    keyframe : str, optional
+        Models only: the keyframe giving the initial state (default: the model's first, or
+        the reference pose at rest).
 
     Returns
     -------
@@ -131,7 +136,7 @@ def load_scene(source: str | os.PathLike | Mapping) -> Scene:
     SceneError
         Listing every problem found (also for a missing file or a YAML syntax error).
     """
-    path = None
+    path = model = None
     if isinstance(source, Mapping):
         data: Any = source
     elif isinstance(source, (str, os.PathLike)):
@@ -143,13 +148,23 @@ def load_scene(source: str | os.PathLike | Mapping) -> Scene:
                 path = os.fspath(find_scene(path))
             except FileNotFoundError as exc:
                 raise SceneError([str(exc)], path) from None
-        data = _read_yaml(path)
+        if is_model_path(path):  # MJCF or URDF: its scene mapping, refusals naming elements
+            try:
+                model = import_model(path, keyframe)
+            except ModelError as exc:
+                raise SceneError(exc.errors, path) from None
+            data = model.mapping
+        else:
+            data = _read_yaml(path)
     else:
         raise SceneError([f"scene: must be a file path or a mapping (got {_describe(source)})"])
+    if keyframe is not None and model is None:
+        raise SceneError([f"keyframe: only an MJCF or URDF model has keyframes (got {keyframe!r})"],
+                         path)
     checker = _Checker()
     scene = _scene(checker, data)
     if checker.errors:
-        raise SceneError(checker.errors, path)
+        raise SceneError(checker.errors if model is None else model.describe(checker.errors), path)
     return dataclasses.replace(scene, source=_plain(data), path=path)
 
 

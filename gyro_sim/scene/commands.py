@@ -1,0 +1,115 @@
+"""`gyro-sim import`: an MJCF or URDF model written as a gyro_sim scene (YAML).
+
+Registered by :func:`register` (see ``gyro_sim.cli.PLUGINS``); MuJoCo is imported when the
+command runs. The mapping is :mod:`gyro_sim.scene.mjcf` (docs/models.md).
+"""
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+EXAMPLES = """examples:
+  gyro-sim import arm_flywheel.xml -o arm_flywheel.yaml
+  gyro-sim import satellite_wheels.xml -o satellite.yaml --keyframe tumble --force
+
+MODEL is an MJCF (.xml, .mjcf) or URDF (.urdf) file, or a shipped model of config/models/ by
+its file name. The scene written loads and moves as the model does in MuJoCo (contacts aside);
+its header comment says how MuJoCo's controls map onto the axis moments."""
+
+
+def _err(msg) -> None:
+    print(f"gyro-sim import: {msg}", file=sys.stderr)
+
+
+def _write_new(path: Path, text: str, force: bool) -> None:
+    """Write `text` to `path` through a temporary file in the same directory: the file appears
+    whole or not at all, and without `force` an existing file (even one that appeared since the
+    check) is never replaced (FileExistsError)."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.resolve().parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as stream:
+            stream.write(text)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # as a file opened for writing (mkstemp makes it 0600)
+        if force:
+            os.replace(tmp, path)
+        else:
+            os.link(tmp, path)  # fails if path exists
+    finally:
+        if os.path.lexists(tmp):
+            os.unlink(tmp)
+
+
+def cmd_import(args) -> int:
+    from gyro_sim.paths import find_scene
+    from gyro_sim.safe_paths import OutputError, check_output
+    from gyro_sim.scene.load import SceneError, load_scene, parse_yaml
+    from gyro_sim.scene.mjcf import ModelError, import_model, is_model_path, scene_yaml
+
+    try:
+        model = find_scene(args.model)
+    except FileNotFoundError as exc:
+        _err(exc)
+        return 2
+    if not is_model_path(model):
+        _err(f"{args.model}: not an MJCF or URDF model (.xml, .mjcf or .urdf); a YAML scene "
+             "needs no import")
+        return 2
+    try:
+        out = check_output(args.output, inputs=[model], force=args.force, what="-o")
+    except OutputError as exc:
+        _err(exc)
+        return 2
+    try:
+        imported = import_model(model, args.keyframe)
+    except ModelError as exc:
+        for line in exc.errors:
+            _err(line)
+        return 2
+    try:
+        scene = load_scene(imported.mapping)
+    except SceneError as exc:
+        for line in imported.describe(exc.errors):
+            _err(line)
+        return 2
+    text = scene_yaml(imported)
+    if parse_yaml(text, str(out)) != imported.mapping:  # a guard: the YAML must read back exactly
+        _err(f"{out}: the YAML written would not read back as the scene; nothing written")
+        return 1
+    try:
+        _write_new(out, text, args.force)
+    except FileExistsError:
+        _err(f"-o: {out}: exists; refused to overwrite it (use --force)")
+        return 2
+    except OSError as exc:
+        _err(f"-o: {out}: cannot write ({exc.strerror or exc})")
+        return 1
+    rotors = sum(len(b.rotors) for b in scene.bodies)
+    axes = [name for b in scene.bodies  # in command order (docs/scene-format.md)
+            for name in ([b.name] if b.joint.type == "hinge" else [])
+            + [r.name for r in b.rotors if r.actuated]]
+    print(f"wrote {out}: scene '{scene.name}', {len(scene.bodies)} bodies, {rotors} rotors, "
+          f"{scene.base.type} base, commanded axes {axes}")
+    for note in imported.notes:
+        print(f"  left out: {note}")
+    return 0
+
+
+def register(sub, bench) -> None:
+    """Add `import` to the `gyro-sim` subparsers."""
+    from argparse import RawDescriptionHelpFormatter
+
+    p = sub.add_parser("import", help="write an MJCF or URDF model (MuJoCo) as a gyro_sim scene",
+                       description="Write an MJCF or URDF model as a gyro_sim scene file (YAML): "
+                                   "the chain, its rotors, gravity and the initial state of a "
+                                   "keyframe. docs/models.md gives the mapping.",
+                       epilog=EXAMPLES, formatter_class=RawDescriptionHelpFormatter)
+    p.add_argument("model", metavar="MODEL", help="the MJCF or URDF file")
+    p.add_argument("-o", "--output", required=True, metavar="SCENE.yaml", help="the scene file to write")
+    p.add_argument("--keyframe", metavar="NAME",
+                   help="the keyframe giving the initial state (default: the first; none: rest)")
+    p.add_argument("--force", action="store_true", help="replace an existing output file (never the model)")
+    p.set_defaults(fn=cmd_import)

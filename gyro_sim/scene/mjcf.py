@@ -1,0 +1,673 @@
+"""MJCF and URDF models as gyro_sim scenes: the mapping of docs/models.md.
+
+MuJoCo (the optional ``mujoco`` package, extra ``[models]``) reads the file
+(``MjSpec.from_file``: MJCF, or URDF by its ``<robot>`` root) and compiles it; everything is
+taken from the compiled ``MjModel`` and from MuJoCo's own kinematics, so a body's mass, centre
+of mass and inertia are the ones MuJoCo simulates (also when it derives them from geoms):
+
+- bodies without a joint are welded to their parent: on the world they are part of the base,
+  on a moving body they are merged into it (masses and inertias added);
+- a **rotor** is a body on a hinge, with no moving child, whose centre of mass lies on the
+  hinge axis and whose inertia is symmetric about it (both to ``ROTOR_RTOL``): it becomes a
+  torque rotor of its parent (eqs (18)-(19), (29)), actuated when a motor drives its joint
+  (every rotor of a URDF model is);
+- the other bodies form the chain: a free joint on the first is the free base (with a
+  spherical joint at O^1), ball joints are spherical joints, hinges are hinges.
+
+Frames. A body's frame in the scene has its origin at its joint point O^k (the joint's
+anchor; for a free joint the body's origin). A ball or free body's frame turns with the MuJoCo
+body frame and equals it in rotation (its quaternion is MuJoCo's ``xquat``); a hinge body's
+frame is its parent's frame at the model's reference pose (``qpos0``), turned by the hinge
+angle, as docs/scene-format.md defines it, so the hinge axis is written in the parent's frame.
+Every vector of the scene is MuJoCo's world vector at the reference pose, rotated into that
+frame.
+
+Names: a hinge and a rotor are named after their joint (so ``joint_states`` and the axis
+moments use the joint names of the file, as MuJoCo's ``qpos`` and actuators do), a ball or
+free body after its body.
+
+Everything the equations of gyro_sim cannot express (slide joints, tendons, equality
+constraints, springs, damping, armature, friction loss, servos, branching trees, ...) is
+refused with one line naming the element; contacts, joint limits and control ranges are
+ignored and listed in :attr:`ImportedModel.notes`. This module raises :class:`ModelError`;
+``gyro_sim.scene.load.load_scene`` turns it into a ``SceneError``.
+"""
+from __future__ import annotations
+
+import math
+import os
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from gyro_sim.errors import GyroSimError
+from gyro_sim.paths import MODEL_SUFFIXES
+
+__all__ = ["ModelError", "ImportedModel", "Command", "import_model", "is_model_path",
+           "scene_yaml", "MODEL_SUFFIXES", "ROTOR_RTOL"]
+
+#: a body on a hinge is a rotor when its centre of mass is off the hinge axis by at most this
+#: fraction of its radius of gyration, and its inertia about the centre of mass differs from
+#: an axially symmetric one by at most this fraction of its largest moment
+ROTOR_RTOL = 1e-9
+#: numbers are written as the shortest decimal within this fraction of their scale (a vector's
+#: or tensor's largest entry): the rounding of MuJoCo's and the frame changes' arithmetic, far
+#: below any physical effect, is not written out
+TIDY_RTOL = 32 * np.finfo(float).eps
+#: largest model file read (a robot's MJCF or URDF is kilobytes; meshes are separate files)
+MAX_MODEL_BYTES = 64 * 2**20
+#: what installs MuJoCo
+INSTALL_HINT = "pip install 'gyro_sim[models]'"
+
+
+class ModelError(GyroSimError, ValueError):
+    """A model that cannot become a scene. `errors` lists every problem, one line each, as
+    ``<file>: <element>: <why>``."""
+
+    def __init__(self, errors: Sequence[str], path: str | None = None):
+        self.errors = list(errors)
+        self.path = path
+        super().__init__("\n".join(self.errors))
+
+
+@dataclass(frozen=True)
+class Command:
+    """How a MuJoCo control maps onto a gyro_sim axis moment: moment = factor x ctrl."""
+
+    actuator: str  # the actuator's name in the model
+    axis: str  # the gyro_sim axis (hinge or rotor) it drives
+    factor: float  # gear x gain: N m per unit of ctrl
+
+
+@dataclass(frozen=True)
+class ImportedModel:
+    """A model read as a scene mapping, with what the mapping did to it."""
+
+    mapping: dict  # the scene, as docs/scene-format.md (validated by load_scene)
+    path: str  # the model file
+    kind: str  # "MJCF" or "URDF"
+    keyframe: str | None  # the keyframe the initial state comes from ("" unnamed), None: rest
+    names: tuple[tuple[str, str], ...]  # (model element, scene name), in chain order
+    commands: tuple[Command, ...]  # the model's actuators
+    notes: tuple[str, ...]  # what was left out (contacts, limits, ...), one line each
+    where: dict[str, str] = field(default_factory=dict)  # scene key path -> model element
+
+    def describe(self, errors: Sequence[str]) -> list[str]:
+        """`load_scene`'s errors on :attr:`mapping` with key paths named by model elements
+        (``bodies[1].mass: ...`` -> ``robot.xml: body 'upper': mass: ...``)."""
+        keys = sorted(self.where, key=len, reverse=True)
+
+        def element(match: re.Match) -> str:  # a key path named in a rule: its element only
+            return self.where[match.group(1)]
+
+        pattern = re.compile("(" + "|".join(re.escape(k) for k in keys) + r")(?:\.\w+)*") if keys else None
+        out = []
+        for error in errors:
+            key, _, rule = error.partition(": ")
+            head = next((k for k in keys if key == k or key.startswith(k + ".")), None)
+            if pattern is not None:
+                rule = pattern.sub(element, rule)
+            if head is None:
+                out.append(f"{self.path}: {key}: {rule}")
+            else:
+                rest = key[len(head) + 1:]
+                out.append(f"{self.path}: {self.where[head]}: " + (f"{rest}: " if rest else "") + rule)
+        return out
+
+
+def is_model_path(path: str | os.PathLike) -> bool:
+    """Whether `path` names an MJCF or URDF model (by its suffix: ``MODEL_SUFFIXES``)."""
+    return os.path.splitext(os.fspath(path))[1].lower() in MODEL_SUFFIXES
+
+
+# ----------------------------------------------------------------------------- numbers
+def _tidy(x: float, scale: float | None = None) -> float:
+    """`x` as the shortest decimal within TIDY_RTOL x `scale` (default |x|) of it."""
+    x = float(x)
+    tolerance = TIDY_RTOL * (abs(x) if scale is None else scale)
+    if abs(x) <= tolerance or not math.isfinite(x):
+        return 0.0 if abs(x) <= tolerance else x
+    for digits in range(1, 18):
+        y = float(f"{x:.{digits}g}")
+        if abs(y - x) <= tolerance:
+            return y
+    return x
+
+
+def _vec(v: np.ndarray) -> list[float]:
+    v = np.asarray(v, dtype=float).ravel()
+    scale = float(np.max(np.abs(v))) if v.size else 0.0
+    return [_tidy(x, scale) for x in v]
+
+
+def _mat(a: np.ndarray) -> list[list[float]]:
+    a = 0.5 * (a + a.T)
+    scale = float(np.max(np.abs(a)))
+    return [[_tidy(x, scale) for x in row] for row in a]
+
+
+# ----------------------------------------------------------------------------- reading
+def import_model(path: str | os.PathLike, keyframe: str | None = None) -> ImportedModel:
+    """Read an MJCF or URDF model as a scene mapping (module docstring, docs/models.md).
+
+    Parameters
+    ----------
+    path : the model file: MJCF, or URDF (a ``<robot>`` root), whatever its suffix
+    keyframe : the name of the keyframe giving the initial state; None: the model's first
+        keyframe, or the reference pose at rest when it has none
+
+    Raises
+    ------
+    ModelError
+        Listing every element that cannot be mapped (or why the file cannot be read).
+    """
+    path = os.fspath(path)
+    try:
+        import mujoco
+    except ImportError:
+        raise ModelError([f"{path}: reading an MJCF or URDF model needs mujoco, not installed; "
+                          f"install it with: {INSTALL_HINT}"], path) from None
+    if not os.path.exists(path):
+        raise ModelError([f"{path}: file not found"], path)
+    if not os.path.isfile(path):
+        raise ModelError([f"{path}: not a file"], path)
+    size = os.path.getsize(path)
+    if size > MAX_MODEL_BYTES:
+        raise ModelError([f"{path}: {size} bytes, more than a model file holds "
+                          f"(at most {MAX_MODEL_BYTES})"], path)
+    try:
+        model = mujoco.MjSpec.from_file(path).compile()
+    except ValueError as exc:  # MuJoCo's parse and compile errors
+        text = "; ".join(line.strip() for line in str(exc).splitlines() if line.strip())
+        raise ModelError([f"{path}: MuJoCo cannot read it: {text}"], path) from None
+    return _Importer(mujoco, model, path, _kind(path)).run(keyframe)
+
+
+#: how much of a file's head is read to find its root element
+HEAD_BYTES = 65536
+_MARKUP = re.compile(r"<\?.*?\?>|<!--.*?-->|<!DOCTYPE[^>]*>", re.S)
+
+
+def _kind(path: str) -> str:
+    """"URDF" when the file's root element is ``<robot>`` (as MuJoCo decides), else "MJCF"."""
+    with open(path, "rb") as stream:
+        head = stream.read(HEAD_BYTES).decode("utf-8", "replace")
+    root = re.search(r"<\s*([A-Za-z_][\w.-]*)", _MARKUP.sub("", head))
+    return "URDF" if root is not None and root.group(1) == "robot" else "MJCF"
+
+
+@dataclass
+class _Group:
+    """A moving body of the model with the bodies welded to it (one rigid body)."""
+
+    root: int  # the body carrying the joint
+    joint: int
+    kind: str  # "free" | "ball" | "hinge"
+    parent: int  # the root of the parent group (0: the world)
+    members: list[int]
+    mass: float = 0.0
+    com: np.ndarray = field(default_factory=lambda: np.zeros(3))  # world, reference pose
+    inertia: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))  # about com, world
+    origin: np.ndarray = field(default_factory=lambda: np.zeros(3))  # O^k, world
+    axis: np.ndarray = field(default_factory=lambda: np.zeros(3))  # hinge axis, world
+    children: list[int] = field(default_factory=list)
+
+
+class _Importer:
+    """One model's conversion: refusals first, then the chain, frames and initial state."""
+
+    def __init__(self, mujoco: Any, model: Any, path: str, kind: str):
+        self.mj = mujoco
+        self.m = model
+        self.path = path
+        self.kind = kind
+        self.errors: list[str] = []
+        self.notes: list[str] = []
+
+    # --- names
+    def _name(self, obj: Any, index: int) -> str:
+        return self.mj.mj_id2name(self.m, obj, index) or ""
+
+    def body_name(self, b: int) -> str:
+        return self._name(self.mj.mjtObj.mjOBJ_BODY, b)
+
+    def joint_name(self, j: int) -> str:
+        return self._name(self.mj.mjtObj.mjOBJ_JOINT, j)
+
+    def body(self, b: int) -> str:
+        name = self.body_name(b)
+        return f"body {name!r}" if name else f"body #{b} (unnamed)"
+
+    def joint(self, j: int, bare: bool = False) -> str:
+        """How a message names joint `j`; an unnamed one by its number (and its body, unless
+        `bare`: the message names the body already)."""
+        name = self.joint_name(j)
+        if name:
+            return f"joint {name!r}"
+        return f"joint #{j}" if bare else f"joint #{j} of {self.body(self.m.jnt_bodyid[j])}"
+
+    def fail(self, element: str, why: str) -> None:
+        self.errors.append(f"{self.path}: {element}: {why}")
+
+    def raise_errors(self) -> None:
+        if self.errors:
+            raise ModelError(self.errors, self.path)
+
+    # --- refusals
+    def check_elements(self) -> None:
+        mj, m = self.mj, self.m
+        obj = mj.mjtObj
+        flags = int(m.opt.disableflags)
+        dsbl = mj.mjtDisableBit
+        springs = not flags & int(dsbl.mjDSBL_SPRING)
+        dampers = not flags & int(dsbl.mjDSBL_DAMPER)
+        friction = not flags & int(dsbl.mjDSBL_FRICTIONLOSS)
+        for t in range(m.ntendon):
+            name = self._name(obj.mjOBJ_TENDON, t)
+            self.fail(f"tendon {name!r}" if name else f"tendon #{t}",
+                      "tendons are not supported (a chain of rigid bodies and rotors only)")
+        if m.neq and not flags & int(dsbl.mjDSBL_EQUALITY):
+            for e in range(m.neq):
+                name = self._name(obj.mjOBJ_EQUALITY, e)
+                self.fail(f"equality {name!r}" if name else f"equality #{e}",
+                          "equality constraints are not supported (an open chain only)")
+        for f in range(m.nflex):
+            name = self._name(obj.mjOBJ_FLEX, f)
+            self.fail(f"flex {name!r}" if name else f"flex #{f}",
+                      "deformable bodies are not supported (rigid bodies only)")
+        for i in range(m.nplugin):
+            self.fail(f"plugin #{i}", "MuJoCo plugins are not supported (their forces are "
+                                      "outside the equations of motion)")
+        if m.opt.density != 0.0 or m.opt.viscosity != 0.0:
+            self.fail("option", "density and viscosity (fluid forces) are not supported; "
+                                "set them to 0")
+        for b in range(1, m.nbody):
+            if m.body_gravcomp[b] != 0.0:
+                self.fail(self.body(b), "gravcomp (gravity compensation) is not supported")
+            if m.body_jntnum[b] > 1:
+                self.fail(self.body(b), f"{m.body_jntnum[b]} joints; one joint per body (a ball "
+                                        "joint for three rotational freedoms)")
+        for j in range(m.njnt):
+            kind = int(m.jnt_type[j])
+            dofs = range(m.jnt_dofadr[j], m.jnt_dofadr[j] + (6 if kind == 0 else 3 if kind == 1 else 1))
+            if kind == int(mj.mjtJoint.mjJNT_SLIDE):
+                self.fail(self.joint(j), "slide joints are not supported (chains of ball and "
+                                         "hinge joints only)")
+                continue
+            stiff = m.jnt_stiffness[j] != 0.0 or np.any(getattr(m, "jnt_stiffnesspoly", np.zeros((m.njnt, 1)))[j])
+            if springs and stiff:
+                self.fail(self.joint(j), "stiffness (a joint spring) is not supported")
+            damping = np.any(m.dof_damping[dofs]) or np.any(
+                getattr(m, "dof_dampingpoly", np.zeros((m.nv, 1)))[dofs])
+            if dampers and damping:
+                self.fail(self.joint(j), "damping is not supported (no joint friction in the "
+                                         "equations of motion)")
+            if np.any(m.dof_armature[dofs]):
+                self.fail(self.joint(j), "armature (a reflected rotor inertia) is not supported; "
+                                         "model the rotor as a body on a hinge: it becomes a "
+                                         "gyrostat rotor")
+            if friction and np.any(m.dof_frictionloss[dofs]):
+                self.fail(self.joint(j), "frictionloss (dry friction) is not supported")
+            if kind == int(mj.mjtJoint.mjJNT_HINGE) and m.qpos0[m.jnt_qposadr[j]] != 0.0:
+                self.fail(self.joint(j), f"ref = {m.qpos0[m.jnt_qposadr[j]]:g}: a reference angle "
+                                         "is not supported (the hinge angle is MuJoCo's qpos)")
+            if m.jnt_limited[j]:
+                low, high = m.jnt_range[j]
+                self.notes.append(f"{self.joint(j)}: limits [{low:g}, {high:g}] not enforced")
+            if m.jnt_actfrclimited[j]:
+                low, high = m.jnt_actfrcrange[j]
+                self.notes.append(f"{self.joint(j)}: actuatorfrcrange [{low:g}, {high:g}] not "
+                                  "enforced")
+        self.check_actuators()
+
+    def check_actuators(self) -> None:
+        mj, m = self.mj, self.m
+        trn_joint = (int(mj.mjtTrn.mjTRN_JOINT), int(mj.mjtTrn.mjTRN_JOINTINPARENT))
+        for a in range(m.nu):
+            name = self._name(mj.mjtObj.mjOBJ_ACTUATOR, a)
+            what = f"actuator {name!r}" if name else f"actuator #{a}"
+            trn = int(m.actuator_trntype[a])
+            if trn not in trn_joint:
+                self.fail(what, f"drives a {mj.mjtTrn(trn).name.removeprefix('mjTRN_').lower()}; "
+                                "only motors on hinge joints are supported")
+                continue
+            if int(m.actuator_dyntype[a]) != int(mj.mjtDyn.mjDYN_NONE):
+                self.fail(what, "activation dynamics are not supported (a motor only: "
+                                "force = gain x ctrl)")
+            if int(m.actuator_gaintype[a]) != int(mj.mjtGain.mjGAIN_FIXED) or \
+                    int(m.actuator_biastype[a]) != int(mj.mjtBias.mjBIAS_NONE):
+                self.fail(what, "a servo (bias or variable gain) is not supported; only motors "
+                                "(force = gain x ctrl) take commanded moments")
+            for extra in ("actuator_damping", "actuator_armature", "actuator_delay"):
+                if np.any(getattr(m, extra, np.zeros((m.nu, 1)))[a]):
+                    self.fail(what, f"{extra.removeprefix('actuator_')} is not supported")
+            j = int(m.actuator_trnid[a][0])
+            if int(m.jnt_type[j]) != int(mj.mjtJoint.mjJNT_HINGE) and \
+                    int(m.jnt_type[j]) != int(mj.mjtJoint.mjJNT_SLIDE):
+                self.fail(what, f"drives the {('free', 'ball')[int(m.jnt_type[j])]} "
+                                f"{self.joint(j)}; only hinges take a commanded moment (a "
+                                "spherical joint transmits none)")
+            if m.actuator_ctrllimited[a]:
+                low, high = m.actuator_ctrlrange[a]
+                self.notes.append(f"{what}: ctrlrange [{low:g}, {high:g}] not enforced")
+            if m.actuator_forcelimited[a]:
+                low, high = m.actuator_forcerange[a]
+                self.notes.append(f"{what}: forcerange [{low:g}, {high:g}] not enforced")
+
+    # --- structure
+    def groups(self) -> dict[int, _Group]:
+        mj, m = self.mj, self.m
+        kinds = {int(mj.mjtJoint.mjJNT_FREE): "free", int(mj.mjtJoint.mjJNT_BALL): "ball",
+                 int(mj.mjtJoint.mjJNT_HINGE): "hinge"}
+        out: dict[int, _Group] = {}
+        for b in range(1, m.nbody):
+            if m.body_weldid[b] == b:
+                j = int(m.body_jntadr[b])
+                out[b] = _Group(root=b, joint=j, kind=kinds[int(m.jnt_type[j])],
+                                parent=int(m.body_weldid[m.body_parentid[b]]), members=[])
+        static = []
+        for b in range(1, m.nbody):
+            weld = int(m.body_weldid[b])
+            if weld == 0:
+                static.append(b)
+            else:
+                out[weld].members.append(b)
+                if weld != b:
+                    self.notes.append(f"{self.body(b)}: no joint: merged into "
+                                      f"{self.body(weld)}")
+        if static:
+            self.notes.append("static bodies (no joint, part of the base): "
+                              + ", ".join(repr(self.body_name(b)) for b in static))
+        for g in out.values():
+            if g.parent:
+                out[g.parent].children.append(g.root)
+        return out
+
+    def measure(self, groups: dict[int, _Group]) -> None:
+        """Each group's mass, centre of mass, inertia and joint at the reference pose."""
+        mj, m = self.mj, self.m
+        d = mj.MjData(m)  # qpos = qpos0
+        mj.mj_kinematics(m, d)
+        self.R_ref = d.xmat.reshape(-1, 3, 3).copy()
+        self.ximat_ref = d.ximat.reshape(-1, 3, 3).copy()
+        for g in groups.values():
+            masses = np.array([m.body_mass[b] for b in g.members])
+            coms = np.array([d.xipos[b] for b in g.members])
+            g.mass = float(masses.sum())
+            g.com = masses @ coms / g.mass if g.mass > 0.0 else d.xipos[g.root].copy()
+            inertia = np.zeros((3, 3))
+            for mb, c, b in zip(masses, coms, g.members):
+                R = d.ximat[b].reshape(3, 3)
+                r = c - g.com
+                inertia += R @ np.diag(m.body_inertia[b]) @ R.T + mb * ((r @ r) * np.eye(3) - np.outer(r, r))
+            g.inertia = 0.5 * (inertia + inertia.T)
+            g.origin = (d.xpos[g.root] if g.kind == "free" else d.xanchor[g.joint]).copy()
+            g.axis = d.xaxis[g.joint].copy()
+
+    def rotor_problem(self, g: _Group) -> str | None:
+        """Why group `g` is no rotor of its parent, or None when it is one."""
+        if g.kind != "hinge":
+            return f"on a {g.kind} joint"
+        if g.children:
+            return "it carries moving bodies"
+        if g.mass <= 0.0:
+            return "massless"
+        a = g.axis / np.linalg.norm(g.axis)
+        r = g.com - g.origin
+        off = float(np.linalg.norm(r - (r @ a) * a))
+        axial = float(a @ g.inertia @ a)
+        transverse = 0.5 * (float(np.trace(g.inertia)) - axial)
+        gyration = math.sqrt(max(axial, transverse) / g.mass)
+        if off > ROTOR_RTOL * gyration:
+            return (f"its centre of mass is {off:.3g} m off the hinge axis (at most "
+                    f"{ROTOR_RTOL:g} x its radius of gyration {gyration:.3g} m)")
+        symmetric = transverse * np.eye(3) + (axial - transverse) * np.outer(a, a)
+        asymmetry = float(np.max(np.abs(g.inertia - symmetric))) / max(axial, transverse)
+        if asymmetry > ROTOR_RTOL:
+            return (f"its inertia is not symmetric about the hinge axis (relative asymmetry "
+                    f"{asymmetry:.3g}, tolerance {ROTOR_RTOL:g})")
+        return None
+
+    def rotor_moments(self, r: _Group) -> tuple[float, float]:
+        """A rotor's axial and transverse moments about its centre of mass: MuJoCo's principal
+        moments when it is one body (the one whose axis is the hinge's, the mean of the other
+        two), else those of its merged inertia."""
+        a = r.axis / np.linalg.norm(r.axis)
+        if len(r.members) == 1:
+            b = r.members[0]
+            principal = np.asarray(self.m.body_inertia[b], dtype=float)
+            along = np.abs(self.ximat_ref[b].T @ a)
+            i = int(np.argmax(along))
+            others = np.delete(principal, i)
+            return float(principal[i]), float(others.mean())
+        axial = float(a @ r.inertia @ a)
+        return axial, 0.5 * (float(np.trace(r.inertia)) - axial)
+
+    def chain(self, groups: dict[int, _Group]) -> tuple[list[_Group], dict[int, list[_Group]]]:
+        """The chain from the world outwards, and each chain body's rotors."""
+        top = [g for g in groups.values() if g.parent == 0]
+        if not top:
+            self.fail("worldbody", "no body has a joint: nothing moves")
+        elif len(top) > 1:
+            self.fail("worldbody", f"{len(top)} moving bodies hang from the world ("
+                      + ", ".join(repr(self.body_name(g.root)) for g in top)
+                      + "); one chain only (branching trees are not supported)")
+        self.raise_errors()
+        chain, rotors = [top[0]], {}
+        while True:
+            current = chain[-1]
+            kids = [groups[c] for c in current.children]
+            problems = {c.root: self.rotor_problem(c) for c in kids}
+            rotors[current.root] = [c for c in kids if problems[c.root] is None]
+            rest = [c for c in kids if problems[c.root] is not None]
+            if len(rest) > 1:
+                why = "; ".join(f"{self.body(c.root)} is no rotor: {problems[c.root]}"
+                                for c in rest if c.kind == "hinge")
+                self.fail(self.body(current.root),
+                          f"{len(rest)} moving children ("
+                          + ", ".join(repr(self.body_name(c.root)) for c in rest)
+                          + "): a chain only, branching trees are not supported"
+                          + (f" ({why})" if why else ""))
+                break
+            if not rest:
+                break
+            chain.append(rest[0])
+        for g in chain[1:]:
+            if g.kind == "free":
+                self.fail(self.joint(g.joint), "a free joint only on the chain's first body")
+        return chain, rotors
+
+    def scene_name(self, g: _Group, as_hinge: bool) -> str:
+        """The scene name of a group (module docstring): joint first for hinges and rotors."""
+        joint, body = self.joint_name(g.joint), self.body_name(g.root)
+        first = (joint, body) if as_hinge else (body, joint)
+        return next((n for n in first if n), f"joint{g.joint}" if as_hinge else f"body{g.root}")
+
+    # --- the scene
+    def run(self, keyframe: str | None) -> ImportedModel:
+        self.check_elements()
+        self.raise_errors()
+        groups = self.groups()
+        self.measure(groups)
+        chain, rotors = self.chain(groups)
+        self.raise_errors()
+        key, key_name = self.keyframe(keyframe)
+        self.raise_errors()
+        state = self.initial_state(key)
+        commands = self.commands(chain, rotors)
+        self.raise_errors()
+        m, mj = self.m, self.mj
+        actuated = {c.axis for c in commands}
+        names, where, bodies = [], {}, []
+        G_parent = np.eye(3)
+        for k, g in enumerate(chain):
+            name = self.scene_name(g, g.kind == "hinge")
+            G = self.R_ref[g.root] if g.kind in ("free", "ball") else G_parent
+            body: dict[str, Any] = {"name": name}
+            if g.kind == "hinge":
+                body["joint"] = {"type": "hinge", "axis": _vec(G_parent.T @ g.axis)}
+            else:
+                body["joint"] = {"type": "spherical"}
+            body["mass"] = _tidy(g.mass)
+            body["com"] = _vec(G.T @ (g.com - g.origin))
+            body["inertia_com"] = _mat(G.T @ g.inertia @ G)
+            if k + 1 < len(chain):
+                body["next_joint"] = _vec(G.T @ (chain[k + 1].origin - g.origin))
+            element = f"{self.body(g.root)} ({g.kind} {self.joint(g.joint, bare=True)})"
+            where[f"bodies[{k}]"] = element
+            names.append((element, name))
+            body_rotors = []
+            for i, r in enumerate(rotors[g.root]):
+                rname = self.scene_name(r, True)
+                a = r.axis / np.linalg.norm(r.axis)
+                axial, transverse = self.rotor_moments(r)
+                body_rotors.append({
+                    "name": rname, "axis": _vec(G.T @ a), "position": _vec(G.T @ (r.com - g.origin)),
+                    "mass": _tidy(r.mass), "axial_inertia": _tidy(axial),
+                    "transverse_inertia": _tidy(transverse),
+                    "mode": "torque", "spin": _tidy(state["spin"][r.root]),
+                    "actuated": self.kind == "URDF" or rname in actuated,
+                })
+                if state["angle"][r.root] != 0.0:
+                    self.notes.append(f"{self.joint(r.joint)}: the keyframe's angle "
+                                      f"{state['angle'][r.root]:g} not kept (a rotor's angle "
+                                      "starts at 0; a balanced rotor's angle changes nothing)")
+                element = f"{self.body(r.root)} (rotor on {self.joint(r.joint, bare=True)})"
+                where[f"bodies[{k}].rotors[{i}]"] = element
+                names.append((element, rname))
+            if body_rotors:
+                body["rotors"] = body_rotors
+            body["initial"] = state["initial"][g.root]
+            bodies.append(body)
+            G_parent = G
+        first = chain[0]
+        if first.kind == "free":
+            base = {"type": "free", "position": _vec(state["position"]),
+                    "velocity": _vec(state["velocity"])}
+            where["base"] = f"{self.joint(first.joint)} (the free base)"
+        else:
+            base = {"type": "fixed", "position": _vec(first.origin)}
+            where["base"] = f"{self.joint(first.joint)} (the fixed base)"
+        mapping: dict[str, Any] = {"name": self.model_name()}
+        gravity = np.asarray(m.opt.gravity, dtype=float)
+        if not int(m.opt.disableflags) & int(mj.mjtDisableBit.mjDSBL_GRAVITY) and np.any(gravity):
+            mapping["gravity"] = _vec(gravity)
+            where["gravity"] = "option gravity"
+        mapping["base"] = base
+        mapping["bodies"] = bodies
+        if m.ngeom and not int(m.opt.disableflags) & int(mj.mjtDisableBit.mjDSBL_CONTACT):
+            self.notes.insert(0, "contacts: ignored (no contacts in gyro_sim)")
+        return ImportedModel(mapping=mapping, path=self.path, kind=self.kind, keyframe=key_name,
+                             names=tuple(names), commands=tuple(commands),
+                             notes=tuple(self.notes), where=where)
+
+    def model_name(self) -> str:
+        """The scene's title: the model's name (the first of MuJoCo's names), kind and file."""
+        text = bytes(self.m.names).split(b"\0", 1)[0].decode("utf-8", "replace")
+        name = text.strip() or os.path.splitext(os.path.basename(self.path))[0]
+        return f"{name} ({self.kind} {os.path.basename(self.path)})"
+
+    def keyframe(self, keyframe: str | None) -> tuple[int | None, str | None]:
+        m, mj = self.m, self.mj
+        names = [self._name(mj.mjtObj.mjOBJ_KEY, k) for k in range(m.nkey)]
+        if keyframe is None:
+            return (0, names[0]) if m.nkey else (None, None)
+        if keyframe not in names or not keyframe:
+            known = ", ".join(repr(n) for n in names if n) or "none named"
+            self.fail(f"keyframe {keyframe!r}", f"no such keyframe (the model's: {known})")
+            return None, None
+        return names.index(keyframe), keyframe
+
+    def initial_state(self, key: int | None) -> dict:
+        """Joint states from keyframe `key` (None: rest at the reference pose), by group root:
+        ball and free bodies' quaternions and body-frame angular velocities, hinge angles and
+        rates, rotor spins p = omega . e + kappa' (eqs (18)-(19)), the free base's O^1 and its
+        velocity, from MuJoCo's kinematics."""
+        mj, m = self.mj, self.m
+        d = mj.MjData(m)
+        if key is None:
+            mj.mj_resetData(m, d)
+        else:
+            mj.mj_resetDataKeyframe(m, d, key)
+            if m.key_time[key] != 0.0:
+                self.notes.append(f"keyframe: time {m.key_time[key]:g} not kept (the scene "
+                                  "starts at t = 0)")
+            if m.nu and np.any(m.key_ctrl[key]):
+                self.notes.append("keyframe: ctrl not kept (commands are given to the "
+                                  "simulator as axis moments)")
+        mj.mj_kinematics(m, d)
+        mj.mj_comPos(m, d)
+        mj.mj_comVel(m, d)
+        out: dict[str, Any] = {"initial": {}, "spin": {}, "angle": {}}
+        omega: dict[int, np.ndarray] = {}
+        vel = np.zeros(6)
+        for b in range(1, m.nbody):
+            if m.body_weldid[b] != b:
+                continue
+            mj.mj_objectVelocity(m, d, mj.mjtObj.mjOBJ_XBODY, b, vel, 0)
+            omega[b] = vel[:3].copy()
+            j = int(m.body_jntadr[b])
+            kind = int(m.jnt_type[j])
+            R = d.xmat[b].reshape(3, 3)
+            if kind in (int(mj.mjtJoint.mjJNT_FREE), int(mj.mjtJoint.mjJNT_BALL)):
+                q = d.xquat[b] / np.linalg.norm(d.xquat[b])
+                out["initial"][b] = {"quaternion": _vec(q), "angular_velocity": _vec(R.T @ vel[:3])}
+                if kind == int(mj.mjtJoint.mjJNT_FREE):
+                    out["position"] = d.xpos[b].copy()
+                    out["velocity"] = vel[3:].copy()
+            else:
+                out["initial"][b] = {"angle": _tidy(d.qpos[m.jnt_qposadr[j]]),
+                                     "rate": _tidy(d.qvel[m.jnt_dofadr[j]])}
+                parent = int(m.body_weldid[m.body_parentid[b]])
+                if parent:  # should this body be a rotor: its absolute spin (eqs (18)-(19))
+                    axis = d.xaxis[j] / np.linalg.norm(d.xaxis[j])
+                    out["spin"][b] = float(omega[parent] @ axis) + float(d.qvel[m.jnt_dofadr[j]])
+                    out["angle"][b] = float(d.qpos[m.jnt_qposadr[j]])
+        return out
+
+    def commands(self, chain: list[_Group], rotors: dict[int, list[_Group]]) -> list[Command]:
+        """Each actuator's axis and factor (gear x gain)."""
+        mj, m = self.mj, self.m
+        axis_of = {}
+        for g in chain:
+            if g.kind == "hinge":
+                axis_of[g.joint] = self.scene_name(g, True)
+            for r in rotors[g.root]:
+                axis_of[r.joint] = self.scene_name(r, True)
+        out = []
+        for a in range(m.nu):
+            j = int(m.actuator_trnid[a][0])
+            name = self._name(mj.mjtObj.mjOBJ_ACTUATOR, a) or f"actuator{a}"
+            out.append(Command(actuator=name, axis=axis_of[j],
+                               factor=_tidy(m.actuator_gear[a][0] * m.actuator_gainprm[a][0])))
+        return out
+
+
+# ----------------------------------------------------------------------------- writing
+def scene_yaml(imported: ImportedModel) -> str:
+    """The scene of `imported` as YAML text: a comment naming the source, the names, how
+    MuJoCo's controls map onto the axis moments and what was left out, then the scene
+    (numbers as Python's repr: they read back exactly)."""
+    import yaml
+
+    source = os.path.basename(imported.path)
+    key = ("the reference pose at rest" if imported.keyframe is None
+           else f"keyframe {imported.keyframe!r}" if imported.keyframe else "the first keyframe")
+    lines = [f"# gyro_sim scene imported by gyro-sim import from {source} ({imported.kind}), "
+             f"initial state from {key}.",
+             "# Names: a hinge or rotor is named after its joint, a ball or free body after its "
+             "body (docs/models.md)."]
+    lines += [f"#   {element} -> {name}" for element, name in imported.names]
+    if imported.commands:
+        lines.append("# Commands: the axis moment is gear x gain x ctrl of the actuator:")
+        lines += [f"#   {c.actuator} -> axis {c.axis}: moment = {c.factor!r} x ctrl"
+                  for c in imported.commands]
+    if imported.notes:
+        lines.append("# Left out:")
+        lines += [f"#   {note}" for note in imported.notes]
+    body = yaml.safe_dump(imported.mapping, sort_keys=False, default_flow_style=None, width=100,
+                          allow_unicode=True)
+    return "\n".join(lines) + "\n" + body
