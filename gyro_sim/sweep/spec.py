@@ -323,7 +323,7 @@ def _resolve_scene(source: Any, base_dir: Path | None, errors: list[str]):
     if isinstance(source, dict):
         return copy.deepcopy(source), None
     if not isinstance(source, str) or not source.strip():
-        errors.append("scene: the name of a shipped scene, a path, or a scene mapping")
+        errors.append("scene: the name of a shipped scene, a path (a scene, or an MJCF or URDF model), or a scene mapping")
         return None, None
     candidates = []
     if base_dir is not None and not os.path.isabs(source):
@@ -337,6 +337,14 @@ def _resolve_scene(source: Any, base_dir: Path | None, errors: list[str]):
             path = find_scene(source)
         except FileNotFoundError as exc:
             errors.append(f"scene: {exc}")
+            return None, None
+    from gyro_sim.scene.mjcf import ModelError, import_model, is_model_path
+
+    if is_model_path(path):  # an MJCF or URDF model: its scene mapping (the model's first keyframe)
+        try:
+            return import_model(path).mapping, str(path)
+        except ModelError as exc:
+            errors.append(f"scene: {exc}".splitlines()[0])
             return None, None
     try:
         with open(path, encoding="utf-8") as f:

@@ -199,3 +199,18 @@ def test_fixed_step_map_rk4(tmp_path):
     assert done["check"]["within_one_cell"], done["check"]
     for r in done["largest"]:
         assert 0.5 < r["largest"] / r["theory_bound"] <= 1.0
+
+
+def test_a_model_file_is_a_sweep_scene(tmp_path):
+    """An MJCF model names the scene of a sweep as a YAML scene does (its first keyframe), and
+    a grid over its masses runs: each point a valid scene, its mass the grid's."""
+    sweep = load_sweep({"scene": "arm_flywheel.xml", "grid": {"bodies[0].mass": [1.0, 2.0]},
+                        "run": {"integrator": "rk4", "step": 1e-3, "horizon": 0.01, "chunk": 0.01},
+                        "measures": ["drift"]})
+    assert sweep.scene_path.endswith("arm_flywheel.xml") and len(sweep.points) == 2
+    stats = execute.run(sweep, tmp_path, workers=0)
+    rows = results.read_parts(tmp_path)
+    assert stats is not None and len(rows) == 2 and all(r["ok"] for r in rows), rows
+    bad = copy.deepcopy({"scene": "no_such_model.xml", "run": {"horizon": 0.1}})
+    with pytest.raises(SweepError, match="no_such_model.xml"):
+        load_sweep(bad)
