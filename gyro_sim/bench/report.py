@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 from typing import Any, Callable
 
-from ..io.safe_paths import OutputError, atomic_output, check_output, write_atomic
+from ..io.safe_paths import AtomicOutput, OutputError, check_output, write_atomic
 
 #: the files of a report <name>: <out>/<name>.<suffix>
 SUFFIXES = ("md", "json", "png")
@@ -64,11 +64,14 @@ def write_report(out: str | Path, name: str, markdown: str, data: Any, plot: Cal
     write_atomic(md, markdown, force=force, what="--out")
     write_atomic(js, json.dumps(data, indent=1, default=json_default), force=force, what="--out")
     written = [md, js]
+    target = AtomicOutput(png, force=force, what="--out")
     try:
-        with atomic_output(png, force=force, what="--out") as target:
-            plot(str(target.tmp))
-        written.append(png)
+        plot(str(target.tmp))
+        if target.tmp.stat().st_size:  # a plot with nothing to draw writes nothing
+            written.append(target.publish())
     except ImportError:
         print("(install matplotlib for the plot)")
+    finally:
+        target.discard()
     print("\nwrote " + ", ".join(str(w) for w in written))
     return written
