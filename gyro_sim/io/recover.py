@@ -398,7 +398,9 @@ class _Scan:
                 return None
             if _is_chunk_at(self.m, q, self.limit) and self.decodes(q):
                 self.close_skip()
-                self.skipped_record(pos, q, f"{what}: {q - pos} bytes skipped to the next intact chunk")
+                # q < pos: the record before `pos` claimed too many bytes; none are lost
+                self.skipped_record(pos, max(q, pos), f"{what}: {max(q - pos, 0)} bytes skipped to the next "
+                                                      f"intact chunk, at byte {q}")
                 return q
             q += 1
 
@@ -515,7 +517,8 @@ class _Scan:
                 out.stopped_at = self.size
                 stored = int.from_bytes(body[:4], "little") if op == OP_DATA_END and length == 4 else 0
                 if stored:  # written by writers with data CRCs on (gyro_sim's are off: 0)
-                    computed = zlib.crc32(self.m[:pos])
+                    with memoryview(self.m) as view, view[:pos] as data:  # no copy of the data section
+                        computed = zlib.crc32(data)
                     if computed != stored:
                         self.unused_damage(pos, f"data section CRC mismatch (stored {stored:#010x}, computed "
                                                 f"{computed:#010x}): a record without a CRC of its own "

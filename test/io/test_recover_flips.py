@@ -26,10 +26,18 @@ MAGIC = 8
 
 
 def records(data: bytes) -> list[tuple[int, int, int]]:
-    """(start, opcode, end) of every record between the two magics."""
+    """(start, opcode, end) of every record between the two magics of a complete file."""
+    return records_until(data[:len(data) - MAGIC])
+
+
+def records_until(data: bytes) -> list[tuple[int, int, int]]:
+    """(start, opcode, end) of every complete record after the leading magic (in a file cut
+    short, the last, cut one left out)."""
     out, pos = [], MAGIC
-    while pos < len(data) - MAGIC:
+    while pos + HEAD <= len(data):
         op, length = data[pos], int.from_bytes(data[pos + 1:pos + HEAD], "little")
+        if pos + HEAD + length > len(data):
+            break
         out.append((pos, op, pos + HEAD + length))
         pos += HEAD + length
     return out
@@ -98,11 +106,12 @@ def _region(recs, offset: int) -> tuple[int, int] | None:
 
 
 def _sweep(log: Path, tmp_path: Path, complete: bool):
+    """Flip each byte of `flip_offsets` in turn, recover, and list what breaks a promise."""
     data = log.read_bytes()
     recs = records(data) if complete else records_until(data)
     per_chunk = chunk_messages(data, recs)
     everything = set().union(*per_chunk.values())
-    originals = _attachments(tmp_path.parent / "intact.mcap") if complete else None
+    originals = _attachments(log) if complete else None
     regions = {}
     problems = []
     for offset in flip_offsets(len(data), recs):
@@ -138,24 +147,9 @@ def _sweep(log: Path, tmp_path: Path, complete: bool):
     return problems, regions
 
 
-def records_until(data: bytes) -> list[tuple[int, int, int]]:
-    """The complete records of a file cut short (the last, cut one left out)."""
-    out, pos = [], MAGIC
-    while pos + HEAD <= len(data):
-        op, length = data[pos], int.from_bytes(data[pos + 1:pos + HEAD], "little")
-        if pos + HEAD + length > len(data):
-            break
-        out.append((pos, op, pos + HEAD + length))
-        pos += HEAD + length
-    return out
-
-
 def test_every_intact_chunk_survives_a_flipped_byte_anywhere_in_a_complete_log(chunked, tmp_path):
     log, chunks, _ = chunked
-    (tmp_path / "intact.mcap").write_bytes(log.read_bytes())
-    work = tmp_path / "work"
-    work.mkdir()
-    problems, regions = _sweep(tmp_path / "intact.mcap", work, complete=True)
+    problems, regions = _sweep(log, tmp_path, complete=True)
     # every region was hit: header, metadata, attachment, chunks, message indexes, data end,
     # summary records (schemas, channels, indexes, statistics, offsets) and the footer
     assert {1, 12, 9, OP_CHUNK, OP_MESSAGE_INDEX, OP_DATA_END, 3, 4, 8, 11, 14, OP_FOOTER, "magic"} <= set(regions)
@@ -207,3 +201,27 @@ def test_a_damaged_magic_does_not_cost_the_log(chunked, tmp_path, where):
     bad.write_bytes(bytes(data))
     rec = recover(bad, tmp_path / "fixed.mcap")
     assert rec.messages == len(msgs) and rec.damaged and rec.lost == 0
+
+
+def test_with_data_crcs_a_flipped_metadata_byte_is_reported(tmp_path):
+    """MCAP's metadata has no CRC of its own; a writer with data CRCs on covers it with the
+    data section's: recover checks it."""
+    from mcap.writer import Writer
+
+    log = tmp_path / "crc.mcap"
+    with open(log, "wb") as f:
+        w = Writer(f, enable_data_crcs=True)
+        w.start(profile="ros2", library="test")
+        w.add_metadata("gyro_sim", {"params": '{"advance_dt": 0.01}'})
+        sid = w.register_schema("std_msgs/msg/String", "ros2msg", b"string data\n")
+        cid = w.register_channel("/x", "cdr", sid)
+        for i in range(10):
+            w.add_message(cid, i, b"\x00\x01\x00\x00\x02\x00\x00\x00a\x00", i, i)
+        w.finish()
+    assert not recover(log, tmp_path / "a.mcap").damaged
+    data = bytearray(log.read_bytes())
+    data[data.find(b"0.01") + 3] ^= 0x01  # 0.01 -> 0.00: still a valid number
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(data))
+    rec = recover(bad, tmp_path / "b.mcap")
+    assert rec.damaged and "data section CRC mismatch" in rec.skipped_line()
