@@ -238,7 +238,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--commands", metavar="FILE",
                    help="axis moments to apply: a YAML list of [t, [one value per axis]], or a gyro_sim log "
                         "(.mcap) whose /gyro_sim/axis_moments are replayed at their log times")
-    r.add_argument("--record", metavar="OUT.mcap", help="record an MCAP log (ROS 2 messages; view with gyro-sim view)")
+    r.add_argument("--record", metavar="OUT.mcap",
+                   help="record an MCAP log (ROS 2 messages; view with gyro-sim view). It is written as "
+                        ".OUT.<random>.partial.mcap beside OUT.mcap and renamed when closed (also on Ctrl-C "
+                        "or SIGTERM); after SIGKILL, `gyro-sim recover` reads the .partial file")
     r.add_argument("--publish-rate", type=float, default=100.0, help="messages per simulated second in the log (Hz)")
     r.add_argument("--flush-period", type=float, default=DEFAULT_FLUSH_PERIOD,
                    help="wall-clock seconds between flushes of the log (what a crash can lose)")
