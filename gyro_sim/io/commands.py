@@ -85,10 +85,16 @@ def _view(args, view, outputs) -> int:
         return 2
     if args.save:
         outputs["--save"].publish()
-        print(f"wrote {args.save}: {len(drawn['entities'])} entities, views {', '.join(drawn['views'])}")
-        print(f"open it with: rerun {args.save}")
+        try:  # done and published: a signal now does not change that
+            print(f"wrote {args.save}: {len(drawn['entities'])} entities, views {', '.join(drawn['views'])}")
+            print(f"open it with: rerun {args.save}")
+        except KeyboardInterrupt:
+            if not args.screenshot:
+                return 0
+            raise
     if args.screenshot:
-        return _screenshot(str(save), outputs["--screenshot"], args.window_size)
+        rrd = outputs["--save"].path if args.save else save  # published by now
+        return _screenshot(str(rrd), outputs["--screenshot"], args.window_size)
     return 0
 
 
@@ -108,7 +114,7 @@ def _screenshot(rrd: str, png, size: str) -> int:
     try:
         screenshot(exe, rrd, png.tmp, size)
     except (ScreenshotError, OSError) as exc:
-        _err("view", f"screenshot failed: {str(exc).splitlines()[0]}")
+        _err("view", f"screenshot failed: {(str(exc).splitlines() or [type(exc).__name__])[0]}")
         return 1
     print(f"wrote {png.publish()}")
     return 0
@@ -172,8 +178,11 @@ def cmd_recover(args) -> int:
     except (LogError, OutputError, OSError) as exc:
         _err("recover", exc)
         return 2
-    print(r.report())
-    print(f"wrote {out}")
+    try:  # done and published: a signal now does not change that
+        print(r.report())
+        print(f"wrote {out}")
+    except KeyboardInterrupt:
+        pass
     return 0
 
 

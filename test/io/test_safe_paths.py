@@ -323,3 +323,29 @@ def test_a_bad_output_path_is_exit_2_in_one_line(recorded, tmp_path, capsys, com
     assert needle in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == before  # nothing written, nothing half-made
     assert the_input.read_bytes() == (SCENE if command == "run" else log).read_bytes()
+
+
+def test_view_save_and_screenshot_publish_both_whole(recorded, tmp_path, capsys, monkeypatch):
+    """The screenshot (its viewer needs Vulkan, stood in for here) reads the .rrd under its
+    final name, and writes the picture under a temporary one until it is complete."""
+    pytest.importorskip("rerun", reason="view needs rerun-sdk")
+    from gyro_sim.cli import main
+    from gyro_sim.io import commands
+    from gyro_sim.viz import rerun_view
+
+    log, _ = recorded
+    rrd, png = tmp_path / "v.rrd", tmp_path / "v.png"
+    seen = {}
+
+    def fake_screenshot(exe, rrd_path, png_path, size):
+        seen["rrd"], seen["png"] = Path(rrd_path), Path(png_path)
+        seen["rrd size"] = Path(rrd_path).stat().st_size
+        Path(png_path).write_bytes(b"\x89PNG picture")
+        assert not png.exists()
+
+    monkeypatch.setattr(commands, "rerun_binary", lambda: "rerun")
+    monkeypatch.setattr(rerun_view, "screenshot", fake_screenshot)
+    assert main(["view", str(log), "--save", str(rrd), "--screenshot", str(png)]) == 0, capsys.readouterr().err
+    assert seen["rrd"] == rrd and seen["rrd size"] > 0 and seen["png"] != png
+    assert png.read_bytes() == b"\x89PNG picture"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["v.png", "v.rrd"]
