@@ -18,11 +18,7 @@ from gyro_sim.progress import Progress  # noqa: E402  (cmd_run, cmd_bench_scalin
 
 
 def cmd_run(args) -> int:
-    from gyro_sim.dynamics.invariants import conserved
     from gyro_sim.scene.load import SceneError, load_scene
-    from gyro_sim.simulator import SimulationError, Simulator
-    from gyro_sim.log.mcap_log import LogError
-    from gyro_sim.msgs.messages import NonFiniteError
     from gyro_sim.paths import find_scene
 
     try:
@@ -30,14 +26,29 @@ def cmd_run(args) -> int:
     except (SceneError, FileNotFoundError) as exc:
         print(f"gyro-sim run: {exc}", file=sys.stderr)
         return 2
-    if args.record:  # no silent overwrite, never the scene file itself (gyro_sim/safe_paths.py)
-        from gyro_sim.safe_paths import OutputError, check_output
+    log = None
+    if args.record:  # no silent overwrite, never the scene file itself; published when closed
+        from gyro_sim.safe_paths import AtomicOutput, OutputError
 
         try:
-            check_output(args.record, inputs=[scene.path], force=args.force, what="--record")
+            log = AtomicOutput(args.record, inputs=[scene.path], force=args.force, what="--record")
         except OutputError as exc:
             print(f"gyro-sim run: {exc}", file=sys.stderr)
             return 2
+    try:
+        return _run(args, scene, log)
+    finally:
+        if log is not None:
+            log.discard()  # nothing if published; the temporary file if the run ended otherwise
+
+
+def _run(args, scene, log) -> int:
+    """`gyro-sim run` once the scene is loaded and the log's temporary file (`log`) created."""
+    from gyro_sim.simulator import SimulationError, Simulator
+    from gyro_sim.log.mcap_log import LogError
+    from gyro_sim.msgs.messages import NonFiniteError
+    from gyro_sim.safe_paths import OutputError
+
     sim = Simulator(scene, integrator=args.integrator, rtol=args.rtol, atol=args.atol, step=args.step)
     inv0 = sim.reference_invariants()
     schedule = []
@@ -55,26 +66,30 @@ def cmd_run(args) -> int:
     wall0, cpu0 = time.perf_counter(), time.process_time()
     record = None
     try:
-        if args.record:
+        if log is not None:
             import signal
 
             from gyro_sim.log.record import record_run
 
-            # SIGINT / SIGTERM end the run at the next step and the log is closed cleanly
+            # SIGINT / SIGTERM end the run at the next step and the log is closed cleanly: a
+            # complete, well-formed log of the simulated span, published under its name
             stop = []
             handler = lambda signum, frame: stop.append(signum)  # noqa: E731
             old = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
             try:
-                record = record_run(sim, args.record, duration=args.duration, chunk=chunk, schedule=schedule,
+                record = record_run(sim, log.tmp, duration=args.duration, chunk=chunk, schedule=schedule,
                                     publish_rate=args.publish_rate, flush_period=args.flush_period,
-                                    overwrite=args.force,
+                                    overwrite=True,
                                     progress=lambda t, total: bar(t, total, f"t = {t:.3f} s"),
                                     stop=lambda: bool(stop))
             finally:
                 for sig, h in old.items():
                     signal.signal(sig, h)
+            record.path = str(log.publish())
             if record.interrupted:
-                print(f"\ngyro-sim run: interrupted at t = {sim.time:.3f} s (log closed)", file=sys.stderr)
+                print(f"\ngyro-sim run: interrupted at t = {sim.time:.3f} s of {args.duration:g}: the log up to "
+                      f"there is closed and complete in {log.path}", file=sys.stderr)
+                return 1
         else:
             pending = list(schedule)
             for i in range(steps):
@@ -83,15 +98,37 @@ def cmd_run(args) -> int:
                 sim.advance(args.duration / steps)
                 bar(i + 1, steps, f"t = {sim.time:.3f} s")
     except SimulationError as exc:
-        print(f"gyro-sim run: stopped: {exc}", file=sys.stderr)
-        if args.record:
-            print(f"gyro-sim run: the log up to t = {sim.time:.6g} s is in {args.record}", file=sys.stderr)
+        if log is None:
+            print(f"gyro-sim run: stopped: {exc}", file=sys.stderr)
+            return 1
+        try:  # the log was closed when the error left record_run: it shows the run up to the error
+            log.publish()
+        except OutputError as err:
+            print(f"gyro-sim run: stopped: {exc}; {err}", file=sys.stderr)
+            return 1
+        print(f"gyro-sim run: stopped: {exc}; the log up to t = {sim.time:.6g} s is in {log.path}", file=sys.stderr)
         return 1
+    except OutputError as exc:  # another writer published the log's name meanwhile
+        print(f"\ngyro-sim run: {exc}", file=sys.stderr)
+        return 2
     except (LogError, NonFiniteError, OSError) as exc:
         print(f"gyro-sim run: log {args.record}: {exc}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt as exc:
+        print(f"\ngyro-sim run: interrupted ({getattr(exc, 'name', 'SIGINT')}) at t = {sim.time:.3f} s of "
+              f"{args.duration:g}", file=sys.stderr)
+        return 1
+    try:  # the work is done (and the log published): a signal now does not change that
+        _report(args, scene, sim, inv0, record, wall0, cpu0)
     except KeyboardInterrupt:
-        print(f"\ngyro-sim run: interrupted at t = {sim.time:.3f} s", file=sys.stderr)
+        pass
+    return 0
+
+
+def _report(args, scene, sim, inv0, record, wall0, cpu0) -> None:
+    """The summary `gyro-sim run` prints at the end."""
+    from gyro_sim.dynamics.invariants import conserved
+
     wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
     snap = sim.snapshot(bodies=False, wrenches=False)
     inv1 = snap.invariants
@@ -113,7 +150,6 @@ def cmd_run(args) -> int:
         from gyro_sim.log.record import print_record
 
         print_record(record)
-    return 0
 
 
 def cmd_bench_scaling(args) -> int:
@@ -181,8 +217,8 @@ PLUGINS = (
     "gyro_sim.bench.realtime",
     "gyro_sim.bench.publication",
     "gyro_sim.sweep.commands",  # sweep (many runs on Dask)
-    "gyro_sim.bench.soak",
     "gyro_sim.scene.commands",  # import (an MJCF or URDF model as a scene)
+    "gyro_sim.bench.soak",
 )
 
 
@@ -203,7 +239,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--commands", metavar="FILE",
                    help="axis moments to apply: a YAML list of [t, [one value per axis]], or a gyro_sim log "
                         "(.mcap) whose /gyro_sim/axis_moments are replayed at their log times")
-    r.add_argument("--record", metavar="OUT.mcap", help="record an MCAP log (ROS 2 messages; view with gyro-sim view)")
+    r.add_argument("--record", metavar="OUT.mcap",
+                   help="record an MCAP log (ROS 2 messages; view with gyro-sim view). It is written as "
+                        ".OUT.<random>.partial.mcap beside OUT.mcap and renamed when closed (also on Ctrl-C "
+                        "or SIGTERM); after SIGKILL, `gyro-sim recover` reads the .partial file")
     r.add_argument("--publish-rate", type=float, default=100.0, help="messages per simulated second in the log (Hz)")
     r.add_argument("--flush-period", type=float, default=DEFAULT_FLUSH_PERIOD,
                    help="wall-clock seconds between flushes of the log (what a crash can lose)")
@@ -257,7 +296,15 @@ def _compile_first(args) -> None:
             load_scene(find_scene(args.scene))
         except (SceneError, FileNotFoundError):
             return  # cmd_run reports it, with nothing compiled
-    elif not (args.cmd == "replay" and getattr(args, "resimulate", False) and Path(args.log).is_file()):
+    elif args.cmd == "replay" and getattr(args, "resimulate", False) and Path(args.log).is_file():
+        from gyro_sim.log.mcap_log import LogError
+        from gyro_sim.log.resim import prepare
+
+        try:  # a damaged or crafted log is refused before anything is compiled
+            prepare(args.log, integrator=args.integrator)
+        except (LogError, OSError):
+            return  # cmd_replay reports it
+    else:
         return
     from gyro_sim.warmup import precompile
 
@@ -272,9 +319,19 @@ def main(argv=None) -> int:
         return 2
     if getattr(args, "duration", None) is not None and args.duration <= 0:
         ap.error("--duration must be > 0")
+    from gyro_sim.safe_paths import OutputError, raise_on_signals
+
     try:
-        _compile_first(args)
-        return args.fn(args)
+        with raise_on_signals():  # SIGTERM unwinds like Ctrl-C: temporary outputs are removed
+            _compile_first(args)
+            return args.fn(args)
+    except KeyboardInterrupt as exc:  # SIGINT or SIGTERM where the command does not handle it
+        print(f"\ngyro-sim {args.cmd}: interrupted ({getattr(exc, 'name', 'SIGINT')}) before finishing; "
+              "no output is left half-written under its name", file=sys.stderr)
+        return 1
+    except OutputError as exc:  # an output taken by another writer while this one worked
+        print(f"gyro-sim {args.cmd}: {exc}", file=sys.stderr)
+        return 2
     except ModuleNotFoundError as exc:
         extra = extra_for(exc.name)
         if extra is None:

@@ -1,4 +1,4 @@
-"""Output paths checked before anything runs: no silent overwrite (SPEC.md, "Contracts").
+"""Output paths checked before anything runs, and files published whole or not at all.
 
 Every file the package writes goes through :func:`check_output` first::
 
@@ -11,17 +11,47 @@ It refuses, each with one line naming the path:
   through a hard link or a symlink counts, a mere equal name is not needed), even with force;
 - a directory, an output whose directory is missing, or a directory that is not writable.
 
+Every file a ``gyro-sim`` command writes is then written through :func:`atomic_output`: to a
+temporary file in the same directory (``.<stem>.<random>.partial<suffix>``, created at once,
+so a directory where nothing can be created is refused before any work), published under its
+final name only when complete. Publication is atomic and safe against a second writer of the
+same output: without force the temporary file is hard-linked to the final name (``os.link``
+fails if that name exists, whoever created it since the check; the loser gets an
+:class:`OutputError`), with force it replaces it (``os.replace``). On an exception (SIGINT,
+SIGTERM, a fault) the temporary file is removed, so no partial file is ever left under a final
+name; only SIGKILL or a power loss can leave a ``.partial`` file behind, never the final one::
+
+    with atomic_output("out.mcap", inputs=[src], force=False) as out:
+        write_everything(out.tmp)          # published as out.mcap when the block ends normally
+
+:func:`raise_on_signals` turns SIGTERM (and SIGINT) into :class:`Interrupted`, a
+KeyboardInterrupt, so that a command unwinds the same way for both.
+
 No ROS and no third-party imports here: the node's parameter validation uses it too.
 """
 from __future__ import annotations
 
+import contextlib
+import errno
 import os
+import secrets
+import signal
+import threading
 from pathlib import Path
-from typing import Iterable
+from typing import Iterable, Iterator
 
 from gyro_sim.errors import GyroSimError
 
-__all__ = ["OutputError", "check_output", "check_outputs"]
+__all__ = ["OutputError", "check_output", "check_outputs", "AtomicOutput", "atomic_output", "write_atomic",
+           "Interrupted", "raise_on_signals", "PARTIAL"]
+
+#: the marker in a temporary output's name: ``.<stem>.<random>.partial<suffix>``
+PARTIAL = ".partial"
+#: random hex digits in a temporary output's name
+TEMP_TOKEN_BYTES = 4
+#: errors of ``os.link`` that mean "this file system has no hard links" (then a reserved name
+#: is replaced instead, still refused if another writer created the output first)
+NO_HARD_LINKS = frozenset({errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.EXDEV, errno.EMLINK, errno.ENOSYS})
 
 
 class OutputError(GyroSimError, ValueError):
@@ -76,3 +106,174 @@ def check_output(path: str | os.PathLike, *, inputs: Iterable[str | os.PathLike 
 def check_outputs(paths: Iterable[str | os.PathLike], **kw) -> list[Path]:
     """:func:`check_output` on each path (all checked before any is written)."""
     return [check_output(p, **kw) for p in paths]
+
+
+# =========================================================================================
+# Publication: a temporary file in the same directory, renamed when complete
+# =========================================================================================
+def _fsync_dir(directory: Path) -> None:
+    """Make a rename in `directory` durable where the system allows it (not on Windows)."""
+    try:
+        fd = os.open(directory, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+class AtomicOutput:
+    """One output written under a temporary name and published when complete (module docstring).
+
+    Parameters
+    ----------
+    path : the final name (checked with :func:`check_output`)
+    inputs, force, what : as for :func:`check_output`
+
+    Attributes
+    ----------
+    path : the final name
+    tmp : the temporary file to write (created empty, mode 0666 less the umask)
+    """
+
+    def __init__(self, path: str | os.PathLike, *, inputs: Iterable[str | os.PathLike | None] = (),
+                 force: bool = False, what: str = "output"):
+        self.inputs = [i for i in inputs if i is not None]
+        self.force = force
+        self.what = what
+        self.path = check_output(path, inputs=self.inputs, force=force, what=what)
+        self.published = False
+        self.tmp = self._reserve()
+
+    def _reserve(self) -> Path:
+        flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0)
+        while True:
+            tmp = self.path.with_name(f".{self.path.stem}.{secrets.token_hex(TEMP_TOKEN_BYTES)}{PARTIAL}"
+                                      f"{self.path.suffix}")
+            try:
+                os.close(os.open(tmp, flags, 0o666))
+                return tmp
+            except FileExistsError:
+                continue
+            except OSError as exc:
+                raise OutputError(f"{self.what}: {self.path}: cannot create a file in {self.path.parent} "
+                                  f"({exc.strerror or exc})") from None
+
+    def publish(self) -> Path:
+        """Give the complete temporary file its final name; return it. OutputError if the name
+        was taken meanwhile (without force) or is now an input; the temporary file is removed
+        in every case."""
+        if self.published:
+            return self.path
+        try:
+            fd = os.open(self.tmp, os.O_RDONLY)
+            try:
+                os.fsync(fd)  # the data is on disk before the name points at it
+            finally:
+                os.close(fd)
+            if self.force:
+                for src in self.inputs:
+                    if _same(self.path, Path(src).expanduser()):
+                        raise OutputError(f"{self.what}: {self.path}: is now the input {src}: refused")
+                try:
+                    os.replace(self.tmp, self.path)
+                except IsADirectoryError:
+                    raise OutputError(f"{self.what}: {self.path}: is a directory; give a file path") from None
+            else:
+                self._link_no_overwrite()
+        except OSError as exc:
+            raise OutputError(f"{self.what}: {self.path}: cannot publish ({exc.strerror or exc})") from None
+        finally:
+            self._remove_tmp()
+        self.published = True
+        _fsync_dir(self.path.parent)
+        return self.path
+
+    def _link_no_overwrite(self) -> None:
+        taken = OutputError(f"{self.what}: {self.path}: was created by another writer while this one "
+                            "worked; refused to overwrite it (use --force)")
+        try:
+            os.link(self.tmp, self.path)
+            return
+        except FileExistsError:
+            raise taken from None
+        except OSError as exc:
+            if exc.errno not in NO_HARD_LINKS:
+                raise
+        try:  # no hard links here: reserve the name exclusively, then replace it
+            os.close(os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+        except FileExistsError:
+            raise taken from None
+        os.replace(self.tmp, self.path)
+
+    def _remove_tmp(self) -> None:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(self.tmp)
+
+    def discard(self) -> None:
+        """Remove the temporary file (nothing is published)."""
+        if not self.published:
+            self._remove_tmp()
+
+    def __enter__(self) -> "AtomicOutput":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self.publish()
+        else:
+            self.discard()
+
+
+def atomic_output(path: str | os.PathLike, *, inputs: Iterable[str | os.PathLike | None] = (),
+                  force: bool = False, what: str = "output") -> AtomicOutput:
+    """An :class:`AtomicOutput`, a context manager: write ``.tmp`` inside the block; it is
+    published when the block ends normally and removed when it ends by an exception."""
+    return AtomicOutput(path, inputs=inputs, force=force, what=what)
+
+
+def write_atomic(path: str | os.PathLike, data: str | bytes, *, force: bool = False,
+                 inputs: Iterable[str | os.PathLike | None] = (), what: str = "output") -> Path:
+    """Write `data` (text as UTF-8) to `path` through :func:`atomic_output`; return the path."""
+    with atomic_output(path, inputs=inputs, force=force, what=what) as out:
+        out.tmp.write_bytes(data.encode() if isinstance(data, str) else data)
+    return out.path
+
+
+# =========================================================================================
+# Signals
+# =========================================================================================
+class Interrupted(KeyboardInterrupt):
+    """SIGINT or SIGTERM arrived while :func:`raise_on_signals` was in force."""
+
+    def __init__(self, signum: int):
+        self.signum = signum
+        super().__init__(signal.Signals(signum).name)
+
+    @property
+    def name(self) -> str:
+        return signal.Signals(self.signum).name
+
+
+@contextlib.contextmanager
+def raise_on_signals(signums: Iterable[int] = (signal.SIGINT, signal.SIGTERM)) -> Iterator[None]:
+    """Inside the block, each of `signums` raises :class:`Interrupted` in the main thread (the
+    previous handlers are restored after). Elsewhere than in the main thread it does nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        raise Interrupted(signum)
+
+    old = {}
+    try:
+        for s in signums:
+            old[s] = signal.signal(s, handler)
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)

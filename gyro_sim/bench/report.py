@@ -1,7 +1,9 @@
 """Writing a report's files: Markdown, JSON and the PNG plot (each `gyro-sim bench` command).
 
-No silent overwrite (SPEC.md, "Contracts"): existing report files are refused unless
-``--force``, checked before the benchmark starts (:func:`refused`) and again before writing.
+No silent overwrite: existing report files are refused unless ``--force``, checked before the
+benchmark starts (:func:`refused`, which also creates --out, so that a directory that cannot be
+made is said before the work) and again when each file is published. Each file is written under
+a temporary name and renamed when complete (:func:`..io.safe_paths.atomic_output`).
 """
 from __future__ import annotations
 
@@ -10,7 +12,7 @@ import sys
 from pathlib import Path
 from typing import Any, Callable
 
-from gyro_sim.safe_paths import OutputError, check_output
+from gyro_sim.safe_paths import AtomicOutput, OutputError, check_output, write_atomic
 
 #: the files of a report <name>: <out>/<name>.<suffix>
 SUFFIXES = ("md", "json", "png")
@@ -34,9 +36,18 @@ def check_report(out: str | Path, name: str, force: bool = False) -> list[Path]:
     return paths
 
 
+def _make_dir(out: str | Path) -> None:
+    try:
+        Path(out).mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"--out: {out}: cannot make the directory ({exc.strerror or exc})") from None
+
+
 def refused(args, name: str) -> bool:
     """Check the report's outputs before a bench runs: print one line and return True if refused."""
     try:
+        check_report(args.out, name, getattr(args, "force", False))
+        _make_dir(args.out)
         check_report(args.out, name, getattr(args, "force", False))
     except OutputError as exc:
         print(f"gyro-sim bench {name}: {exc}", file=sys.stderr)
@@ -49,14 +60,18 @@ def write_report(out: str | Path, name: str, markdown: str, data: Any, plot: Cal
     """Write <out>/<name>.md, .json and .png (the plot is skipped without matplotlib); print
     and return the paths written. Existing files are refused (OutputError) unless `force`."""
     md, js, png = check_report(out, name, force)
-    Path(out).mkdir(parents=True, exist_ok=True)
-    md.write_text(markdown)
-    js.write_text(json.dumps(data, indent=1, default=json_default))
+    _make_dir(out)
+    write_atomic(md, markdown, force=force, what="--out")
+    write_atomic(js, json.dumps(data, indent=1, default=json_default), force=force, what="--out")
     written = [md, js]
+    target = AtomicOutput(png, force=force, what="--out")
     try:
-        plot(str(png))
-        written.append(png)
+        plot(str(target.tmp))
+        if target.tmp.stat().st_size:  # a plot with nothing to draw writes nothing
+            written.append(target.publish())
     except ImportError:
         print("(install matplotlib for the plot)")
+    finally:
+        target.discard()
     print("\nwrote " + ", ".join(str(w) for w in written))
     return written

@@ -18,8 +18,9 @@ def _err(cmd: str, msg) -> None:
 
 
 def _exists(cmd: str, path) -> bool:
+    """Whether the input `path` is a regular file (else one line said, for exit status 2)."""
     if not Path(path).is_file():
-        _err(cmd, f"{path}: no such file")
+        _err(cmd, f"{path}: " + ("not a regular file" if os.path.exists(path) else "no such file"))
         return False
     return True
 
@@ -43,8 +44,6 @@ def rerun_binary() -> str | None:
 
 
 def cmd_view(args) -> int:
-    from gyro_sim.log.mcap_log import LogError
-
     if not _exists("view", args.log):
         return 2
     try:  # rerun_view imports rerun only when it draws: check the optional package here
@@ -54,36 +53,54 @@ def cmd_view(args) -> int:
     except ImportError as exc:
         _err("view", f"needs rerun-sdk ({exc}); install it with: pip install 'gyro_sim[viz]'")
         return 2
-    from gyro_sim.safe_paths import OutputError, check_output
+    from gyro_sim.safe_paths import AtomicOutput, OutputError
 
-    try:  # no silent overwrite, and never the log itself (SPEC.md, "Contracts")
+    outputs = {}
+    try:  # no silent overwrite, never the log itself; each written whole under a temporary name
         for opt, out in (("--save", args.save), ("--screenshot", args.screenshot)):
             if out:
-                check_output(out, inputs=[args.log], force=args.force, what=opt)
+                outputs[opt] = AtomicOutput(out, inputs=[args.log], force=args.force, what=opt)
+        return _view(args, view, outputs)
     except OutputError as exc:
         _err("view", exc)
         return 2
-    save = args.save
+    finally:
+        for out in outputs.values():
+            out.discard()  # nothing if published
+
+
+def _view(args, view, outputs) -> int:
+    from gyro_sim.log.mcap_log import LogError
+
     tmp = None
-    if args.screenshot and not save:
+    save = outputs["--save"].tmp if "--save" in outputs else None
+    if args.screenshot and save is None:
         tmp = tempfile.TemporaryDirectory()
         save = str(Path(tmp.name) / "view.rrd")
     try:
-        drawn = view(args.log, save=save, spawn=not save,
+        drawn = view(args.log, save=save, spawn=save is None,
                      play_state="paused" if (args.screenshot or args.paused) else None)
     except (LogError, OSError) as exc:  # a damaged or crafted log is bad input
         _err("view", exc)
         return 2
     if args.save:
-        print(f"wrote {args.save}: {len(drawn['entities'])} entities, views {', '.join(drawn['views'])}")
-        print(f"open it with: rerun {args.save}")
+        outputs["--save"].publish()
+        try:  # done and published: a signal now does not change that
+            print(f"wrote {args.save}: {len(drawn['entities'])} entities, views {', '.join(drawn['views'])}")
+            print(f"open it with: rerun {args.save}")
+        except KeyboardInterrupt:
+            if not args.screenshot:
+                return 0
+            raise
     if args.screenshot:
-        return _screenshot(save, args.screenshot, args.window_size)
+        rrd = outputs["--save"].path if args.save else save  # published by now
+        return _screenshot(str(rrd), outputs["--screenshot"], args.window_size)
     return 0
 
 
-def _screenshot(rrd: str, png: str, size: str) -> int:
-    """A PNG of the viewer, headless (needs Vulkan: mesa-vulkan-drivers + libvulkan1 on Linux).
+def _screenshot(rrd: str, png, size: str) -> int:
+    """A PNG of the viewer (`png`: its AtomicOutput), headless (needs Vulkan: mesa-vulkan-drivers
+    + libvulkan1 on Linux).
 
     Taken once the viewer has loaded and drawn the whole recording (rerun_view.screenshot), not
     a fixed number of frames after start as ``rerun --screenshot-to`` does.
@@ -95,11 +112,11 @@ def _screenshot(rrd: str, png: str, size: str) -> int:
     from gyro_sim.viz.rerun_view import ScreenshotError, screenshot
 
     try:
-        screenshot(exe, rrd, png, size)
+        screenshot(exe, rrd, png.tmp, size)
     except (ScreenshotError, OSError) as exc:
-        _err("view", f"screenshot failed: {exc}")
+        _err("view", f"screenshot failed: {(str(exc).splitlines() or [type(exc).__name__])[0]}")
         return 1
-    print(f"wrote {png}")
+    print(f"wrote {png.publish()}")
     return 0
 
 
@@ -153,17 +170,19 @@ def cmd_recover(args) -> int:
 
     if not _exists("recover", args.log):
         return 2
-    from gyro_sim.safe_paths import OutputError, check_output
+    from gyro_sim.safe_paths import OutputError
 
     out = args.output or str(Path(args.log).with_suffix("")) + ".recovered.mcap"
-    try:
-        check_output(out, inputs=[args.log], force=args.force)
+    try:  # written under a temporary name, published when complete (recover.py)
         r = recover(args.log, out, overwrite=args.force)
     except (LogError, OutputError, OSError) as exc:
         _err("recover", exc)
         return 2
-    print(r.report())
-    print(f"wrote {out}")
+    try:  # done and published: a signal now does not change that
+        print(r.report())
+        print(f"wrote {out}")
+    except KeyboardInterrupt:
+        pass
     return 0
 
 

@@ -504,7 +504,10 @@ def decode_chunk(chunk) -> bytes:
         if chunk.compression == "zstd":
             import zstandard
 
-            data = zstandard.ZstdDecompressor().decompressobj().decompress(bytes(chunk.data))
+            obj = zstandard.ZstdDecompressor().decompressobj()
+            data = obj.decompress(bytes(chunk.data))
+            if obj.unused_data:  # bytes after the frame: the chunk's data length is wrong
+                raise ChunkError(f"{len(obj.unused_data)} bytes after its compressed frame")
         elif chunk.compression == "lz4":
             import lz4.frame
 

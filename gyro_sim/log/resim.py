@@ -21,9 +21,15 @@ from gyro_sim.log.mcap_log import LogError, iter_messages, read_info
 from gyro_sim.log.record import machine_params
 
 REQUIRED = ("integrator", "rtol", "atol", "step", "advance_dt")
-#: most steps of `advance_dt` a re-simulation may take (crafted logs: a tiny advance_dt or a
-#: message stamped far in the future would otherwise run for days)
+#: most steps a re-simulation may take, of `advance_dt` and (fixed-step integrators) of `step`:
+#: a crafted log with a tiny advance_dt or step, or a message stamped far in the future, would
+#: otherwise run for days. Checked from the log's own parameters and span before anything runs,
+#: and against each message's time as it is read.
 MAX_RESIM_STEPS = 10**8
+#: the message type each topic re-simulation reads must carry (the commands topic is named by
+#: the parameter ``commands_topic``, default /gyro_sim/axis_moments)
+TOPIC_TYPES = {M.JOINT_STATES: "sensor_msgs/msg/JointState", M.EVENTS: "std_msgs/msg/String"}
+COMMANDS_TYPE = "std_msgs/msg/Float64MultiArray"
 #: the node's event when command_timeout passes without a good command: moments back to zero
 COMMAND_TIMEOUT_EVENT = "command timeout"
 
@@ -66,12 +72,8 @@ def resimulate(path: str | os.PathLike, *, integrator: str | None = None, rtol: 
     """Re-run the log at `path` (see the module docstring); optionally with another integrator."""
     from gyro_sim.simulator import Simulator
 
-    info = read_info(path)
+    info = prepare(path, integrator=integrator)
     p = info.params
-    missing = [k for k in REQUIRED if k not in p]
-    if missing:
-        raise LogError(f"{path}: the parameters lack {', '.join(missing)}: not a re-simulable gyro_sim log")
-    _check_params(path, p)
     scene = info.scene()
     name = integrator or p["integrator"]
     sim = Simulator(scene, integrator=name, rtol=p["rtol"] if rtol is None else rtol,
@@ -88,10 +90,54 @@ def resimulate(path: str | os.PathLike, *, integrator: str | None = None, rtol: 
         if key in p and p[key] != here[key]:
             out.notes.append(f"recorded with {key} {p[key]}, re-simulated with {here[key]}: rounding may differ")
 
-    offset = 0
     end = info.end_ns or 0
     topics = [M.JOINT_STATES, cmd_topic, M.EVENTS]
     # file order is causal order (record.py); log_time_order=False keeps it
+    _replay(path, sim, out, dt, cmd_topic, topics, end, progress)
+    if out.compared == 0:
+        out.notes.append("no joint states were compared")
+    return out
+
+
+def prepare(path: str | os.PathLike, *, integrator: str | None = None):
+    """The log's LogInfo, once everything re-simulation takes from it is checked: the
+    parameters (:func:`_check_params`), the types of the topics it reads, and the work its span
+    takes (at most MAX_RESIM_STEPS). LogError naming the first problem; nothing is simulated."""
+    from gyro_sim.integrators import INTEGRATORS, FixedStepIntegrator
+
+    info = read_info(path)
+    p = info.params
+    missing = [k for k in REQUIRED if k not in p]
+    if missing:
+        raise LogError(f"{path}: the parameters lack {', '.join(missing)}: not a re-simulable gyro_sim log")
+    _check_params(path, p)
+    cmd_topic = p.get("commands_topic", M.AXIS_MOMENTS)
+    if cmd_topic in TOPIC_TYPES:
+        raise LogError(f"{path}: parameter commands_topic: {cmd_topic} is the topic of "
+                       f"{TOPIC_TYPES[cmd_topic]}, not of the commands")
+    for topic, wanted in {**TOPIC_TYPES, cmd_topic: COMMANDS_TYPE}.items():
+        have = info.topics.get(topic)
+        if have is not None and have != wanted:
+            what = "parameter commands_topic: " if topic == cmd_topic else ""
+            raise LogError(f"{path}: {what}topic {topic[:80]} carries {have[:80]}, not {wanted}: "
+                           "not a re-simulable gyro_sim log")
+    span = (info.end_ns or 0) / 1e9
+    dt = float(p["advance_dt"])
+    name = integrator or p["integrator"]
+    work = [(span / dt, f"advance_dt = {dt:g} s")]
+    cls = INTEGRATORS.get(name)
+    if cls is not None and issubclass(cls, FixedStepIntegrator):
+        work.append((span / float(p["step"]), f"{name} steps of step = {float(p['step']):g} s"))
+    for steps, what in work:
+        if steps > MAX_RESIM_STEPS:
+            raise LogError(f"{path}: the log's {span:.6g} s at {what} would take {steps:.3g} steps; the limit "
+                           f"is {MAX_RESIM_STEPS:.0e}: refused")
+    return info
+
+
+def _replay(path, sim, out: Resimulation, dt: float, cmd_topic: str, topics, end: int, progress) -> None:
+    """Feed the log's commands, resets and timeouts to `sim`, comparing its joint states."""
+    offset = 0
     for topic, _, t, msg in iter_messages(path, topics, log_time_order=False):
         needed = (t - offset - M.time_ns(sim.time)) / (dt * 1e9)
         if out.steps + needed > MAX_RESIM_STEPS:
@@ -108,26 +154,30 @@ def resimulate(path: str | os.PathLike, *, integrator: str | None = None, rtol: 
             if here_ns != t:
                 out.off_boundary += 1
                 continue
-            _compare(out, sim.joint_states(), msg, t)
+            try:
+                _compare(out, sim.joint_states(), _fields(path, msg, topic, t, JOINT_STATE_FIELDS), t)
+            except TypeError as exc:  # fields of the wrong kind (a crafted schema)
+                raise LogError(f"{path}: {topic} at log time {t / 1e9:.9g} s: {exc}") from None
         elif topic == cmd_topic:
             if here_ns != t:
                 out.notes.append(f"command at t = {t / 1e9:.9g} s is not at a step boundary: applied at the next one")
             try:
-                sim.set_axis_moments(list(msg.data))
-            except ValueError:  # the node logs rejected commands too, and refused them the same way
+                sim.set_axis_moments(list(_fields(path, msg, topic, t, ("data",)).data))
+            except (TypeError, ValueError):  # the node logs rejected commands too, and refused them the same way
                 out.rejected += 1
                 continue
             out.commands += 1
-        elif topic == M.EVENTS and msg.data == "reset":
-            sim.reset()
-            offset = t
-            out.resets += 1
-        elif topic == M.EVENTS and msg.data.startswith(COMMAND_TIMEOUT_EVENT):
-            sim.set_axis_moments([0.0] * len(sim.axis_names))
+        elif topic == M.EVENTS:
+            event = _fields(path, msg, topic, t, ("data",)).data
+            if not isinstance(event, str):
+                raise LogError(f"{path}: {topic} at log time {t / 1e9:.9g} s: data is not a string")
+            if event == "reset":
+                sim.reset()
+                offset = t
+                out.resets += 1
+            elif event.startswith(COMMAND_TIMEOUT_EVENT):
+                sim.set_axis_moments([0.0] * len(sim.axis_names))
     out.sim_time = (offset + M.time_ns(sim.time)) / 1e9
-    if out.compared == 0:
-        out.notes.append("no joint states were compared")
-    return out
 
 
 def _check_params(path, p: dict) -> None:
@@ -144,6 +194,19 @@ def _check_params(path, p: dict) -> None:
             raise LogError(f"{path}: parameter {key}: must be a positive finite number, got {str(v)[:40]!r}")
     if not isinstance(p.get("commands_topic", M.AXIS_MOMENTS), str):
         raise LogError(f"{path}: parameter commands_topic: must be a string")
+
+
+#: the fields of a joint state re-simulation compares
+JOINT_STATE_FIELDS = ("name", "position", "velocity", "effort")
+
+
+def _fields(path, msg, topic: str, t_ns: int, names):
+    """`msg`, once it is checked to have each of `names` (a crafted schema may lack them)."""
+    for name in names:
+        if not hasattr(msg, name):
+            raise LogError(f"{path}: {topic} at log time {t_ns / 1e9:.9g} s has no field {name}: its schema "
+                           "is not that of its type")
+    return msg
 
 
 def _compare(out: Resimulation, js, logged, t_ns: int) -> None:

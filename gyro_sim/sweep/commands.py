@@ -2,6 +2,10 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import logging
+import multiprocessing
+import signal
 import sys
 from pathlib import Path
 
@@ -67,6 +71,34 @@ def cmd_sweep(args) -> int:
         return 2
 
 
+#: the name multiprocessing gives the worker processes of a local Dask cluster
+LOCAL_WORKER_NAME = "Dask Worker process"
+
+
+@contextlib.contextmanager
+def _stop_on_signals():
+    """SIGINT and SIGTERM end the sweep at once: the local cluster's worker processes are
+    killed (a busy worker takes seconds to close gracefully, and its batch is run again on
+    --resume anyway) and Dask's logging, which would report their loss, is silenced; then
+    Interrupted unwinds the driver, which keeps the finished parts."""
+    from gyro_sim.safe_paths import Interrupted, raise_on_signals
+
+    def handler(signum, frame):
+        logging.disable(logging.CRITICAL)  # the command ends now: one line, from cmd_sweep
+        for child in multiprocessing.active_children():
+            if child.name.startswith(LOCAL_WORKER_NAME):
+                child.kill()
+        raise Interrupted(signum)
+
+    with raise_on_signals():  # restores the previous handlers on the way out
+        old = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            yield
+        finally:
+            for s, h in old.items():
+                signal.signal(s, h)
+
+
 def _cmd_sweep(args) -> int:
     from gyro_sim.safe_paths import OutputError, check_output
     from gyro_sim.progress import Progress
@@ -98,24 +130,27 @@ def _cmd_sweep(args) -> int:
             raise OutputError(f"--out: {out}: holds another sweep ({old.get('sweep', {}).get('name')!r}"
                               f"{', quick' if old.get('sweep', {}).get('quick') else ''}); --resume continues "
                               "only the same sweep file and options (--force to start over)")
-        out.mkdir(parents=True, exist_ok=True)
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise OutputError(f"--out: {out}: cannot make the directory ({exc.strerror or exc})") from None
         inputs = [path, sweep.scene_path]
         for name in res.OWNED:
             check_output(out / name, inputs=inputs, force=args.force or args.resume, what="--out")
+        if args.force:
+            res.clear(out)
+        res.write_manifest(out, sweep)  # the first file written: a directory refusing it is said now
     except OutputError as exc:
         print(f"{prog}: {exc}", file=sys.stderr)
         return 2
-    out.mkdir(parents=True, exist_ok=True)
-    if args.force:
-        res.clear(out)
-    res.write_manifest(out, sweep)
     where = f"scheduler {args.scheduler}" if args.scheduler else \
         ("serially" if args.workers == 0 else f"{args.workers or 'default'} local workers")
     print(f"{prog}: {sweep.name}: {len(sweep.points)} points ({where}) -> {out}", file=sys.stderr)
     bar = Progress(f"sweep {path.stem}")
     try:
-        stats = run(sweep, out, workers=args.workers, scheduler=args.scheduler,
-                    progress=lambda done, total, extra: bar(done, total, extra))
+        with _stop_on_signals():
+            stats = run(sweep, out, workers=args.workers, scheduler=args.scheduler,
+                        progress=lambda done, total, extra: bar(done, total, extra))
     except ClusterError as exc:
         print(f"\n{prog}: {exc}; finished points are kept in {out / res.PARTS} (--resume)", file=sys.stderr)
         return 1

@@ -1,9 +1,14 @@
 """Sweep results on disk: Parquet parts as batches finish, the table, the summary and the map.
 
     DIR/sweep.json                   what was run (resume checks it is the same sweep)
-    DIR/parts/points-<i>-<j>.parquet one file per finished batch, written atomically
+    DIR/parts/points-<i>-<j>.parquet one file per finished batch
     DIR/results.parquet              every row, by point index (written at the end)
     DIR/summary.md, DIR/map.png      the Markdown summary and the map
+
+Every file is written under a temporary name and renamed when complete
+(:func:`..io.safe_paths.atomic_output`): a crash or an interruption leaves each file whole or
+absent, never half-written under its name (only a hidden ``.*.partial*`` file, which
+:func:`clear` removes and :func:`read_parts` never reads).
 
 Rows are plain dicts; the table's columns are, in order, those of the rows taken by point
 index, so the table does not depend on how the points were batched or in which order the
@@ -19,6 +24,8 @@ from typing import Any, Iterable
 
 import pyarrow as pa
 import pyarrow.parquet as pq
+
+from gyro_sim.safe_paths import PARTIAL, atomic_output, write_atomic
 
 PARTS = "parts"
 RESULTS = "results.parquet"
@@ -45,14 +52,12 @@ def table_of(rows: list[dict[str, Any]]) -> pa.Table:
 
 def write_part(out: Path, rows: list[dict[str, Any]]) -> Path:
     """One finished batch, atomically (a temporary name, then a rename): a crash leaves either
-    the whole part or none of it."""
+    the whole part or none of it (a batch run again replaces its part)."""
     d = out / PARTS
     d.mkdir(parents=True, exist_ok=True)
-    path = d / part_name([r["point"] for r in rows])
-    tmp = d / (".tmp-" + path.name)
-    pq.write_table(table_of(rows), tmp)
-    os.replace(tmp, path)
-    return path
+    with atomic_output(d / part_name([r["point"] for r in rows]), force=True, what="--out") as target:
+        pq.write_table(table_of(rows), target.tmp)
+    return target.path
 
 
 def read_parts(out: Path) -> list[dict[str, Any]]:
@@ -80,14 +85,20 @@ def clear(out: Path) -> None:
             p.unlink()
         for p in d.glob(".tmp-*"):
             p.unlink()
+        for p in d.glob(f".points-*{PARTIAL}.parquet"):
+            p.unlink()
     for name in OWNED:
         if (out / name).is_file():
             (out / name).unlink()
+        stem, suffix = os.path.splitext(name)
+        for p in out.glob(f".{stem}.*{PARTIAL}{suffix}"):
+            p.unlink()
 
 
 def write_manifest(out: Path, sweep) -> None:
-    (out / MANIFEST).write_text(json.dumps({"digest": sweep.digest(), "sweep": sweep.fingerprint(),
-                                            "source": sweep.path}, indent=1, default=repr) + "\n")
+    write_atomic(out / MANIFEST, json.dumps({"digest": sweep.digest(), "sweep": sweep.fingerprint(),
+                                             "source": sweep.path}, indent=1, default=repr) + "\n",
+                 force=True, what="--out")
 
 
 def read_manifest(out: Path) -> dict[str, Any] | None:
@@ -305,14 +316,14 @@ def finish(sweep, out: Path, rows: list[dict], stats: dict[str, Any]) -> dict[st
     from gyro_sim.sweep.theory import boundary_check, largest
 
     table = table_of(rows)
-    tmp = out / (".tmp-" + RESULTS)
-    pq.write_table(table, tmp)
-    os.replace(tmp, out / RESULTS)
+    with atomic_output(out / RESULTS, force=True, what="--out") as target:
+        pq.write_table(table, target.tmp)
     check = boundary_check(sweep, rows) if len(rows) == len(sweep.points) else None
     big = largest(sweep, rows) if sweep.map["kind"] == "largest" else None
     text = summary(sweep, rows, stats, check, big)
-    (out / SUMMARY).write_text(text + "\n")
-    plot(sweep, rows, out / MAP, big)
+    write_atomic(out / SUMMARY, text + "\n", force=True, what="--out")
+    with atomic_output(out / MAP, force=True, what="--out") as target:
+        plot(sweep, rows, target.tmp, big)
     return {"check": check, "largest": big, "summary": text}
 
 

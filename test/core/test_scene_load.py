@@ -4,7 +4,10 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
+import os
 import re
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -646,3 +649,123 @@ def test_the_name_limit_is_within_what_ros_accepts_for_a_wrench_topic():
     validate_full_topic_name("/gyro_sim/wrench/" + "a" * MAX_NAME_LENGTH)
     with pytest.raises(rclpy.exceptions.InvalidTopicNameException):
         validate_full_topic_name("/gyro_sim/wrench/" + "a" * 300)
+
+
+# --- long scenes load; hostile files are refused, quickly and in one line ----------------------
+
+#: what "quickly" means for a refusal: the bounds are checked before anything is built
+REFUSAL_SECONDS = 5.0
+
+
+def long_chain(n: int) -> dict:
+    """A chain of `n` rods on spherical joints, each with a rotor (every key a body can have)."""
+    bodies = []
+    for k in range(n):
+        body = {"name": f"link{k}", "joint": {"type": "spherical"}, "mass": 0.2, "com": [0.0, 0.0, 0.05],
+                "inertia": {"axial": 1e-4, "transverse": 7e-4},
+                "rotors": [{"name": f"rotor{k}", "axis": [0.0, 0.0, 1.0], "position": [0.0, 0.0, 0.05],
+                            "mass": 0.01, "axial_inertia": 1e-6, "transverse_inertia": 6e-7,
+                            "mode": "torque", "spin": 10.0}],
+                "initial": {"euler": [0.01 * k, 0.1, 0.0], "euler_rates": [0.0, 0.0, 1.0]}}
+        if k < n - 1:
+            body["next_joint"] = [0.0, 0.0, 0.1]
+        bodies.append(body)
+    return {"name": f"chain of {n}", "gravity": [0.0, 0.0, -9.81], "base": {"type": "fixed"}, "bodies": bodies}
+
+
+def _one_line_refusal(path, needle: str) -> None:
+    t0 = time.monotonic()
+    with pytest.raises(SceneError) as info:
+        load_scene(path)
+    assert time.monotonic() - t0 < REFUSAL_SECONDS
+    text = str(info.value)
+    assert needle in text and "\n" not in text, text
+
+
+def test_a_5000_body_chain_written_by_yaml_safe_dump_loads(tmp_path):
+    data = long_chain(5000)
+    path = tmp_path / "chain.yaml"
+    # what yaml.safe_dump writes (libyaml's emitter when there is one: the same text, faster)
+    path.write_text(yaml.dump(data, Dumper=getattr(yaml, "CSafeDumper", yaml.SafeDumper)), encoding="utf-8")
+    assert len(path.read_text().splitlines()) > 150_000  # long, and nothing hostile in it
+    scene = load_scene(path)
+    assert len(scene.bodies) == 5000 and scene.bodies[-1].name == "link4999"
+    assert_same(scene, load_scene(data), "file against mapping")
+
+
+def test_a_billion_laughs_is_refused_quickly_in_one_line(tmp_path):
+    # nine levels of nine aliases: 9^9 nodes once expanded; the file is 500 bytes
+    lines = ["a0: &a0 [x, x, x, x, x, x, x, x, x]"]
+    lines += [f"a{i}: &a{i} [" + ", ".join([f"*a{i - 1}"] * 9) + "]" for i in range(1, 10)]
+    path = tmp_path / "laughs.yaml"
+    path.write_text("\n".join(lines) + "\n")
+    _one_line_refusal(path, "aliases expand to more than")
+
+
+@pytest.mark.parametrize("text", [
+    "name: deep\nbase: {type: fixed}\nbodies: " + "[" * 100_000 + "]" * 100_000 + "\n",  # flow
+    "".join(" " * i + "- \n" for i in range(0, 2000, 2)),  # block sequences, one per line
+    "name: deep\nbodies: " + "{a: " * 40 + "1" + "}" * 40 + "\n",  # just past the bound
+])
+def test_a_deeply_nested_file_is_refused_quickly_in_one_line(tmp_path, text):
+    path = tmp_path / "deep.yaml"
+    path.write_text(text)
+    _one_line_refusal(path, "nested deeper than")
+
+
+def test_aliases_deeper_than_the_bound_once_expanded_are_refused(tmp_path):
+    inner = "{a: " * 20 + "1" + "}" * 20
+    path = tmp_path / "deep_alias.yaml"
+    path.write_text(f"x: &x {inner}\ny: " + "{b: " * 20 + "*x" + "}" * 20 + "\n")
+    _one_line_refusal(path, "nested deeper than")
+
+
+def test_a_character_device_is_refused_without_reading_it():
+    if not Path("/dev/zero").exists():
+        pytest.skip("no /dev/zero on this system")
+    _one_line_refusal("/dev/zero", "is a character device")
+
+
+def test_a_fifo_is_refused_without_waiting_for_a_writer(tmp_path):
+    if not hasattr(os, "mkfifo"):
+        pytest.skip("no FIFOs on this system")
+    fifo = tmp_path / "scene.yaml"
+    os.mkfifo(fifo)
+    outcome = []
+    done = threading.Event()
+
+    def load():
+        try:
+            load_scene(fifo)
+        except SceneError as exc:
+            outcome.append(str(exc))
+        done.set()
+
+    threading.Thread(target=load, daemon=True).start()
+    finished = done.wait(REFUSAL_SECONDS * 6)
+    if not finished:  # let the blocked open return before failing
+        os.close(os.open(fifo, os.O_WRONLY | os.O_NONBLOCK))
+    assert finished, "load_scene blocked on a FIFO"
+    assert outcome and "is a FIFO" in outcome[0] and "\n" not in outcome[0], outcome
+
+
+def test_a_file_larger_than_the_bound_is_refused_without_reading_it_all(tmp_path):
+    from gyro_sim.scene.load import MAX_SCENE_BYTES
+
+    path = tmp_path / "huge.yaml"
+    with open(path, "wb") as f:  # sparse: no disk used
+        f.truncate(MAX_SCENE_BYTES + 1)
+    _one_line_refusal(path, f"larger than {MAX_SCENE_BYTES} bytes")
+
+
+def test_an_embedded_scene_text_larger_than_the_bound_is_refused():
+    from gyro_sim.scene.load import MAX_SCENE_BYTES, parse_yaml
+
+    with pytest.raises(SceneError, match="larger than"):
+        parse_yaml("#" * (MAX_SCENE_BYTES + 1), "scene.yaml")
+
+
+def test_one_problem_is_one_line(tmp_path):
+    with pytest.raises(SceneError) as info:
+        load_scene(tmp_path / "nowhere.yaml")
+    assert "\n" not in str(info.value)

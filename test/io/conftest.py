@@ -47,3 +47,20 @@ def rosbags_messages(path) -> list[tuple[str, int]]:
             reader.deserialize(raw, con.msgtype)
             out.append((con.topic, t))
     return out
+
+
+@pytest.fixture(scope="session")
+def chunked(tmp_path_factory):
+    """(path, [(chunk start, length)], rosbags messages) of a recorded log flushed every
+    millisecond of wall time: many chunks."""
+    from gyro_sim import Simulator, load_scene
+    from gyro_sim.log.record import record_run
+
+    from .crafted import chunk_offsets
+
+    path = tmp_path_factory.mktemp("chunked") / "run.mcap"
+    record_run(Simulator(load_scene(SCENE)), path, duration=DURATION, chunk=CHUNK, publish_rate=PUBLISH_RATE,
+               schedule=SCHEDULE, flush_period=1e-3)
+    chunks = chunk_offsets(path)
+    assert len(chunks) >= 4, f"only {len(chunks)} chunks: the test needs a middle one"
+    return path, chunks, rosbags_messages(path)

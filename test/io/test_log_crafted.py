@@ -79,26 +79,76 @@ def test_a_recursive_schema_is_refused(recorded, tmp_path):
         list(iter_messages(bad))
 
 
-def test_a_tiny_advance_dt_cannot_hang_resimulation(recorded, tmp_path):
+def _nothing_simulated(monkeypatch):
+    """Make any Simulator built from here on fail the test: a refusal must come first."""
+    import gyro_sim.simulator as simulator
+
+    def refuse(*a, **kw):
+        raise AssertionError("a Simulator was built before the log was refused")
+
+    monkeypatch.setattr(simulator, "Simulator", refuse)
+
+
+@pytest.mark.parametrize("key, value, integrator", [
+    ("advance_dt", 1e-12, None),  # 4e11 steps of advance_dt over the log's 0.4 s
+    ("advance_dt", 1e-9, None),  # 4e8 steps
+    ("step", 1e-12, "rk4"),  # a fixed-step integrator takes span / step steps whatever advance_dt is
+])
+def test_a_tiny_step_is_refused_before_anything_runs(recorded, tmp_path, monkeypatch, key, value, integrator):
     log, _ = recorded
     p = _params(log)
-    p["advance_dt"] = 1e-12
+    p[key] = value
+    if integrator:
+        p["integrator"] = integrator
     bad = rewrite(log, tmp_path / "dt.mcap", params_json=json.dumps(p))
+    span = read_info(bad).end_ns / 1e9
+    assert span / value > MAX_RESIM_STEPS  # the case really is beyond the bound
+    _nothing_simulated(monkeypatch)
     t0 = time.monotonic()
     with pytest.raises(LogError, match=re.escape(f"the limit is {MAX_RESIM_STEPS:.0e}")):
         resimulate(bad)
     assert time.monotonic() - t0 < 30
+    monkeypatch.undo()
+    _refused_in_one_line(bad, "limit")
 
 
-def test_a_joint_state_stamped_far_in_the_future_cannot_hang_resimulation(recorded, tmp_path):
+def test_a_joint_state_stamped_far_in_the_future_cannot_hang_resimulation(recorded, tmp_path, monkeypatch):
     log, _ = recorded
     bad = rewrite(log, tmp_path / "future.mcap",
                   retime=lambda topic, i, t: 10**18 if (topic == "/joint_states" and i == 3) else t)
+    _nothing_simulated(monkeypatch)  # the log's own span (its statistics) already says so
     t0 = time.monotonic()
-    with pytest.raises(LogError, match=r"log time 1e\+09 s would take the re-simulation to"):
+    with pytest.raises(LogError, match=r"the log's 1e\+09 s at advance_dt = 0\.005 s would take 2e\+11 steps"):
         resimulate(bad)
     assert time.monotonic() - t0 < 30
+    monkeypatch.undo()
     _refused_in_one_line(bad, "limit")
+
+
+@pytest.mark.parametrize("topic, needle", [
+    ("/clock", "carries rosgraph_msgs/msg/Clock, not std_msgs/msg/Float64MultiArray"),
+    ("/joint_states", "is the topic of sensor_msgs/msg/JointState"),
+    ("/gyro_sim/events", "is the topic of std_msgs/msg/String"),
+    ("/robot_description", "carries std_msgs/msg/String, not std_msgs/msg/Float64MultiArray"),
+])
+def test_a_commands_topic_of_another_type_is_refused(recorded, tmp_path, monkeypatch, topic, needle):
+    log, _ = recorded
+    p = _params(log)
+    p["commands_topic"] = topic
+    bad = rewrite(log, tmp_path / "topic.mcap", params_json=json.dumps(p))
+    _nothing_simulated(monkeypatch)
+    with pytest.raises(LogError, match=re.escape(needle)):
+        resimulate(bad)
+    monkeypatch.undo()
+    _refused_in_one_line(bad, "commands_topic", needle)
+
+
+def test_a_schema_without_the_fields_of_its_type_is_refused_in_one_line(recorded, tmp_path):
+    log, _ = recorded
+    bad = rewrite(log, tmp_path / "fields.mcap", schemas={"std_msgs/msg/Float64MultiArray": "int32 other\n"})
+    with pytest.raises(LogError, match="has no field data"):
+        resimulate(bad)
+    _refused_in_one_line(bad, "has no field data")
 
 
 def test_replay_imports_only_message_packages(monkeypatch):

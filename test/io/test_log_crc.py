@@ -8,25 +8,11 @@ import pytest
 from gyro_sim.log.mcap_log import LogError, iter_messages, read_info
 from gyro_sim.log.recover import recover
 
-from .conftest import CHUNK, DURATION, PUBLISH_RATE, SCENE, SCHEDULE, gyro_sim, rosbags_messages
-from .crafted import chunk_offsets, flip, truncate
+from .conftest import gyro_sim, rosbags_messages
+from .crafted import flip, truncate
 
 #: the chunk header's fixed fields before its CRC: start time, end time, uncompressed size
 CRC_FIELD = 9 + 8 + 8 + 8
-
-
-@pytest.fixture(scope="module")
-def chunked(tmp_path_factory):
-    """A recorded log flushed every millisecond of wall time: many chunks."""
-    from gyro_sim import Simulator, load_scene
-    from gyro_sim.log.record import record_run
-
-    path = tmp_path_factory.mktemp("chunked") / "run.mcap"
-    record_run(Simulator(load_scene(SCENE)), path, duration=DURATION, chunk=CHUNK, publish_rate=PUBLISH_RATE,
-               schedule=SCHEDULE, flush_period=1e-3)
-    chunks = chunk_offsets(path)
-    assert len(chunks) >= 4, f"only {len(chunks)} chunks: the test needs a middle one"
-    return path, chunks, rosbags_messages(path)
 
 
 def _middle(chunks):
@@ -65,7 +51,7 @@ def test_recover_skips_a_damaged_chunk_and_keeps_every_intact_one_after_it(chunk
     assert set(kept) < set(msgs)
     assert max(t for _, t in kept) == max(t for _, t in msgs)  # the chunks after the damage are there
     report = rec.report()
-    assert f"at byte {start}" in report and "skipped 1 damaged chunks" in report
+    assert f"at byte {start}" in report and "skipped 1 damaged chunk " in report
     assert read_info(fixed).message_count == rec.messages  # the output verifies
 
 
@@ -79,14 +65,29 @@ def test_recover_calls_a_crc_failure_a_crc_failure(chunked, tmp_path):
     assert rec.complete and rec.messages + rec.skipped_messages == len(msgs)
 
 
-def test_recover_resynchronises_after_a_damaged_record_length(chunked, tmp_path):
+def test_recover_keeps_a_chunk_whose_record_length_is_damaged(chunked, tmp_path):
     path, chunks, msgs = chunked
     start, _ = _middle(chunks)
     bad = flip(path, tmp_path / "bad.mcap", start + 8)  # the top byte of the chunk's length
     rec = recover(bad, tmp_path / "fixed.mcap")
     kept = rosbags_messages(tmp_path / "fixed.mcap")
+    assert rec.chunks == len(chunks) and kept == msgs  # its own fields give its end; its CRC checks
+    assert f"at byte {start}: chunk's record length field damaged" in rec.report()
+
+
+def test_recover_resynchronises_after_a_damaged_record_length(chunked, tmp_path):
+    path, chunks, msgs = chunked
+    start, length = _middle(chunks)
+    data = bytearray(path.read_bytes())
+    data[start + 8] ^= 0xFF  # the chunk's length, and its data length field: its end is unknown
+    data[start + 9 + 8 + 8 + 8 + 4 + 4 + 4 + 7] ^= 0xFF
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(data))
+    rec = recover(bad, tmp_path / "fixed.mcap")
+    kept = rosbags_messages(tmp_path / "fixed.mcap")
     assert rec.chunks == len(chunks) - 1 and len(kept) == rec.messages
-    assert max(t for _, t in kept) == max(t for _, t in msgs)
+    assert max(t for _, t in kept) == max(t for _, t in msgs)  # the chunks after it are there
+    assert rec.lost == len(msgs) - len(kept) > 0
 
 
 def test_recover_of_a_log_cut_in_a_chunk_keeps_the_chunks_before(chunked, tmp_path):

@@ -3,6 +3,9 @@ from __future__ import annotations
 
 import os
 import stat
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
@@ -10,7 +13,7 @@ from gyro_sim import load_scene
 from gyro_sim.log.mcap_log import LogWriter, read_info
 from gyro_sim.safe_paths import OutputError, check_output
 
-from .conftest import SCENE, gyro_sim
+from .conftest import ROOT, SCENE, gyro_sim
 
 needs_permissions = pytest.mark.skipif(os.geteuid() == 0, reason="root ignores file permissions")
 
@@ -186,3 +189,163 @@ def test_bench_command_refuses_existing_reports_before_running(tmp_path):
     _one_line_no_traceback(r, "realtime.json: exists")
     assert (tmp_path / "realtime.json").read_text() == "[]"
     assert not (tmp_path / "realtime.md").exists()
+
+
+# --- publication: whole files only, and two writers of one output ------------------------------------
+def test_an_output_appears_only_complete(tmp_path):
+    from gyro_sim.safe_paths import PARTIAL, atomic_output
+
+    out = tmp_path / "out.bin"
+    with atomic_output(out) as target:
+        target.tmp.write_bytes(b"half")
+        assert not out.exists() and target.tmp.parent == tmp_path and PARTIAL in target.tmp.name
+        target.tmp.write_bytes(b"whole")
+    assert out.read_bytes() == b"whole" and list(tmp_path.iterdir()) == [out]
+
+
+def test_an_exception_leaves_nothing_under_the_name_nor_beside_it(tmp_path):
+    from gyro_sim.safe_paths import atomic_output
+
+    out = tmp_path / "out.bin"
+    with pytest.raises(KeyboardInterrupt):
+        with atomic_output(out) as target:
+            target.tmp.write_bytes(b"half")
+            raise KeyboardInterrupt
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_later_of_two_writers_is_refused_and_the_first_file_kept(tmp_path):
+    from gyro_sim.safe_paths import AtomicOutput
+
+    out = tmp_path / "out.bin"
+    first, second = AtomicOutput(out), AtomicOutput(out)  # both checked while the name was free
+    first.tmp.write_bytes(b"first")
+    second.tmp.write_bytes(b"second")
+    first.publish()
+    with pytest.raises(OutputError, match="was created by another writer"):
+        second.publish()
+    assert out.read_bytes() == b"first" and list(tmp_path.iterdir()) == [out]
+    forced = AtomicOutput(out, force=True)
+    forced.tmp.write_bytes(b"forced")
+    forced.publish()
+    assert out.read_bytes() == b"forced" and list(tmp_path.iterdir()) == [out]
+
+
+def test_two_recover_processes_on_one_output_one_wins_and_the_other_exits_2(recorded, tmp_path):
+    log, _ = recorded
+    out = tmp_path / "fixed.mcap"
+    cmd = [sys.executable, "-m", "gyro_sim.cli", "recover", str(log), "-o", str(out)]
+    procs = [subprocess.Popen(cmd, cwd=ROOT, env=dict(os.environ), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                              text=True) for _ in range(2)]
+    results = [(p.wait(timeout=120), p.stderr.read()) for p in procs]
+    for p in procs:
+        p.stdout.close()
+        p.stderr.close()
+    codes = sorted(code for code, _ in results)
+    # both may also have run one after the other: then the second was refused at its check
+    assert codes == [0, 2], results
+    err = next(e for code, e in results if code == 2).strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err and str(out) in err, err
+    assert read_info(out).message_count == read_info(log).message_count
+    assert [p.name for p in tmp_path.iterdir()] == ["fixed.mcap"]
+
+
+def test_a_file_system_without_hard_links_still_refuses_the_later_writer(tmp_path, monkeypatch):
+    import errno
+
+    from gyro_sim import safe_paths
+
+    def no_links(src, dst):
+        raise OSError(errno.EPERM, "Operation not permitted")
+
+    monkeypatch.setattr(safe_paths.os, "link", no_links)
+    out = tmp_path / "out.bin"
+    first, second = safe_paths.AtomicOutput(out), safe_paths.AtomicOutput(out)
+    first.tmp.write_bytes(b"first")
+    second.tmp.write_bytes(b"second")
+    first.publish()
+    with pytest.raises(OutputError, match="was created by another writer"):
+        second.publish()
+    assert out.read_bytes() == b"first"
+
+
+# --- every command: a bad output path is exit 2 and one line, before any work ---------------------
+def _outputs(tmp_path, log):
+    """(command args with {out} for the output path) of every command that writes a file."""
+    return {
+        "run": ["run", "--scene", str(SCENE), "--duration", "0.02", "--record", "{out}"],
+        "view": ["view", str(log), "--save", "{out}"],
+        "recover": ["recover", str(log), "-o", "{out}"],
+        "bench": ["bench", "realtime", "--quick", "--out", "{out}"],
+        "sweep": ["sweep", "kapitza", "--quick", "--workers", "0", "--out", "{out}"],
+    }
+
+
+BAD_OUTPUTS = {
+    "a missing directory": ("{tmp}/no/such/dir/out.x", "does not exist"),
+    "/proc": ("/proc/gyro_sim_out/out.x", ""),
+    "a directory nothing can be created in": ("/sys/gyro_sim_out.x", ""),
+    "the input itself": ("{input}", "is the input"),
+}
+
+
+#: bench and sweep write a directory of their own files (made when missing), read from no input
+DIRECTORY_WRITERS = ("bench", "sweep")
+
+
+@pytest.mark.parametrize("command, case", [
+    (command, case) for command in ("run", "view", "recover", "bench", "sweep") for case in BAD_OUTPUTS
+    if not (command in DIRECTORY_WRITERS and case in ("a missing directory", "the input itself"))])
+def test_a_bad_output_path_is_exit_2_in_one_line(recorded, tmp_path, capsys, command, case):
+    from gyro_sim.cli import main
+
+    if command == "view":
+        pytest.importorskip("rerun", reason="view needs rerun-sdk")
+    if command == "sweep":
+        pytest.importorskip("distributed", reason="sweeps need dask.distributed")
+    if case == "a directory nothing can be created in" and os.access("/sys", os.W_OK) and not Path("/sys").is_dir():
+        pytest.skip("no /sys on this system")
+    log, _ = recorded
+    src = tmp_path / "in.mcap"
+    src.write_bytes(log.read_bytes())
+    scene = tmp_path / "scene.yaml"
+    scene.write_bytes(SCENE.read_bytes())
+    args = [a.replace(str(SCENE), str(scene)) for a in _outputs(tmp_path, src)[command]]
+    path, needle = BAD_OUTPUTS[case]
+    the_input = scene if command == "run" else src
+    out = path.format(tmp=tmp_path, input=the_input)
+    before = sorted(p.name for p in tmp_path.iterdir())
+    capsys.readouterr()
+    code = main([a.replace("{out}", out) for a in args])
+    err = capsys.readouterr().err.strip()
+    assert code == 2, err
+    assert "Traceback" not in err and len(err.splitlines()) == 1 and err.startswith(f"gyro-sim {command}"), err
+    assert needle in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before  # nothing written, nothing half-made
+    assert the_input.read_bytes() == (SCENE if command == "run" else log).read_bytes()
+
+
+def test_view_save_and_screenshot_publish_both_whole(recorded, tmp_path, capsys, monkeypatch):
+    """The screenshot (its viewer needs Vulkan, stood in for here) reads the .rrd under its
+    final name, and writes the picture under a temporary one until it is complete."""
+    pytest.importorskip("rerun", reason="view needs rerun-sdk")
+    from gyro_sim.cli import main
+    from gyro_sim.log import commands
+    from gyro_sim.viz import rerun_view
+
+    log, _ = recorded
+    rrd, png = tmp_path / "v.rrd", tmp_path / "v.png"
+    seen = {}
+
+    def fake_screenshot(exe, rrd_path, png_path, size):
+        seen["rrd"], seen["png"] = Path(rrd_path), Path(png_path)
+        seen["rrd size"] = Path(rrd_path).stat().st_size
+        Path(png_path).write_bytes(b"\x89PNG picture")
+        assert not png.exists()
+
+    monkeypatch.setattr(commands, "rerun_binary", lambda: "rerun")
+    monkeypatch.setattr(rerun_view, "screenshot", fake_screenshot)
+    assert main(["view", str(log), "--save", str(rrd), "--screenshot", str(png)]) == 0, capsys.readouterr().err
+    assert seen["rrd"] == rrd and seen["rrd size"] > 0 and seen["png"] != png
+    assert png.read_bytes() == b"\x89PNG picture"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["v.png", "v.rrd"]
