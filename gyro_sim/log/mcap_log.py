@@ -8,7 +8,7 @@ One writer serves the node's live recorder and ``gyro-sim run --record``::
         w.write_raw(ch, log_time_ns, cdr_bytes)                         # bytes from the wire
         w.event(log_time_ns, "reset")                                   # on /gyro_sim/events
 
-What a file holds (SPEC.md, "Logs"):
+What a file holds (docs/logs.md):
 
 - header profile ``ros2``; one channel per topic, message encoding ``cdr``, schema encoding
   ``ros2msg`` whose data is the type's full concatenated definition (:mod:`.msgdefs`);

@@ -1,6 +1,6 @@
 """Scene loader: a YAML file or a mapping -> a validated, immutable :class:`Scene`.
 
-The contract is SPEC.md, "Scene files". `load_scene` checks everything before it builds a
+The contract is docs/scene-format.md. `load_scene` checks everything before it builds a
 record, collects every problem it finds and raises one :class:`SceneError` listing them, one
 per line, each as ``<key path>: <rule>`` (``bodies[1].inertia_com: not positive definite``).
 Nothing downstream ever sees a bad scene.
@@ -13,10 +13,10 @@ Conventions fixed here (beyond the SPEC's example file):
   (plain YAML 1.1 reads it as a string);
 - inertia tensors must be those of a real mass distribution: symmetric, positive definite,
   principal moments obeying the triangle inequality, both about O^k and about the centre of
-  mass (THEORY.md section 6: about the centre of mass the transverse moment is B - m c^2);
+  mass (docs/theory.md section 6: about the centre of mass the transverse moment is B - m c^2);
 - names are ROS name tokens of at most ``MAX_NAME_LENGTH`` characters (they become topic
   names ``~/wrench/<name>``), unique over bodies and rotors, and so are the joint-state names
-  they produce (``<body>_psi`` ... for spherical joints, SPEC.md "Python API");
+  they produce (``<body>_psi`` ... for spherical joints, docs/scene-format.md);
 - crafted input is bounded: only a regular file is read (a FIFO, ``/dev/zero`` or another
   device is refused before anything is read from it), of at most ``MAX_SCENE_BYTES``; its
   YAML at most ``MAX_YAML_DEPTH`` levels deep (aliases expanded) and at most
@@ -58,7 +58,7 @@ SYMMETRY_RTOL = 1e-9
 PD_RTOL = 1e-12
 #: a ROS name token (rcl: letters, digits, underscores; not starting with a digit)
 NAME_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
-#: joint-state suffixes of a spherical joint's Euler angles (SPEC.md, "Python API")
+#: joint-state suffixes of a spherical joint's Euler angles (docs/scene-format.md)
 EULER_SUFFIXES = ("psi", "theta", "phi")
 MOTION_TYPES = ("sine",)
 #: longest body or rotor name: names become topic names ``/<node>/wrench/<name>``, and ROS

@@ -1,4 +1,4 @@
-"""Tests of the scene loader (SPEC.md, "Scene files"): shipped scenes, round trips, and refusals."""
+"""Tests of the scene loader (docs/scene-format.md): shipped scenes, round trips, and refusals."""
 from __future__ import annotations
 
 import copy
@@ -574,7 +574,7 @@ def test_directory_is_not_a_scene(tmp_path):
         load_scene(tmp_path)
 
 
-# --- crafted input: bounded (issue 13) ------------------------------------------------------
+# --- crafted input: bounded ------------------------------------------------------------------
 
 
 def test_deeply_nested_yaml_is_refused_with_a_scene_error(tmp_path):

@@ -19,7 +19,7 @@ CHUNK = 0.005
 
 
 def gyro_sim(*args, timeout=120, **kw):
-    """Run the CLI in a subprocess (the whole environment passed on: ROS_ON_PYPI.md)."""
+    """Run the CLI in a subprocess (the whole environment passed on: the ROS wheels need theirs)."""
     return subprocess.run([sys.executable, "-m", "gyro_sim.cli", *map(str, args)], cwd=ROOT,
                           capture_output=True, text=True, timeout=timeout, env=dict(os.environ), **kw)
 

@@ -1,4 +1,4 @@
-"""Crafted logs are refused in one line (issue 13): embedded scene, parameters, schemas,
+"""Crafted logs are refused in one line: embedded scene, parameters, schemas,
 re-simulation work, and the packages `replay` imports."""
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Logs verified when read (issue 13): chunk CRCs checked by every reader, damaged logs refused
+"""Logs verified when read: chunk CRCs checked by every reader, damaged logs refused
 with the chunk's offset, and `recover` keeping every intact chunk after a damaged one."""
 from __future__ import annotations
 

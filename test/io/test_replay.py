@@ -50,7 +50,7 @@ rclpy.shutdown()
 
 
 def ros_env(tmp_path) -> dict:
-    env = dict(os.environ)  # everything (LD_LIBRARY_PATH of the ROS wheels: ROS_ON_PYPI.md)
+    env = dict(os.environ)  # everything (LD_LIBRARY_PATH of the ROS wheels)
     env["ROS_DOMAIN_ID"] = str(50 + os.getpid() % 50)  # 50..99: apart from the node tests and benches
     env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     env["ROS_LOG_DIR"] = str(tmp_path / "ros_log")

@@ -67,7 +67,7 @@ def _quat(q_wxyz) -> dict:
 
 
 def expected_messages(sim, t_ns: int) -> dict:
-    """What each message must hold, written here from the Simulator's public API (SPEC.md),
+    """What each message must hold, written here from the Simulator's public API (README),
     independently of gyro_sim.msgs.messages."""
     hdr = {"stamp": _stamp(t_ns), "frame_id": ""}
     js = sim.joint_states()
@@ -271,7 +271,7 @@ def test_flush_period_puts_the_data_in_the_file(tmp_path):
 
 
 def test_rclpy_serialized_bytes_are_stored_canonical_on_request(tmp_path):
-    """serialize_message may pad (ROS_ON_PYPI.md); canonical=True stores what rosbags accepts."""
+    """serialize_message may pad (a JointState without efforts); canonical=True stores what rosbags accepts."""
     rclpy_ser = pytest.importorskip("rclpy.serialization")
     from rosbags.highlevel import AnyReader
     from sensor_msgs.msg import JointState

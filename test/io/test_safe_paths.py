@@ -1,4 +1,4 @@
-"""No silent overwrite (issue 13): every output path is checked before anything runs."""
+"""No silent overwrite: every output path is checked before anything runs."""
 from __future__ import annotations
 
 import os

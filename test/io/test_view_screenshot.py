@@ -1,4 +1,4 @@
-"""`gyro-sim view LOG --screenshot`: the picture of a long log shows all of it (issue 8, item 4).
+"""`gyro-sim view LOG --screenshot`: the picture of a long log shows all of it.
 
 ``rerun x.rrd --screenshot-to`` takes its picture 10 frames after start, whatever has been
 loaded: with the software renderer, 2 of 5 pictures of a 30 s log had every plot empty and the

@@ -1,4 +1,4 @@
-"""The node's tests (issue 3): real DDS between processes; each module skips without rclpy."""
+"""The node's tests: real DDS between processes; each module skips without rclpy."""
 import os
 
 import pytest

@@ -63,7 +63,7 @@ def test_shipped_params_file_runs(tmp_path):
     assert "scene 'hinge chain with commanded moments" in r.stderr  # the node's log line (rclpy logs to stderr)
 
 
-# --- no silent overwrite (issue 13): record and stats_file checked at start --------------------------
+# --- no silent overwrite: record and stats_file checked at start --------------------------
 def _validate(**values):
     from gyro_sim.ros.params import validate
 
