@@ -22,7 +22,7 @@ def cmd_run(args) -> int:
     from gyro_sim.paths import find_scene
 
     try:
-        scene = load_scene(find_scene(args.scene))
+        scene = load_scene(find_scene(args.scene), keyframe=args.keyframe)
     except (SceneError, FileNotFoundError) as exc:
         print(f"gyro-sim run: {exc}", file=sys.stderr)
         return 2
@@ -229,7 +229,10 @@ def build_parser() -> argparse.ArgumentParser:
                                  epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", title="commands", metavar="COMMAND")
     r = sub.add_parser("run", help="simulate a scene offline, as fast as possible")
-    r.add_argument("--scene", required=True, help="scene file, or the name of a shipped scene (config/)")
+    r.add_argument("--scene", required=True,
+                   help="scene file, an MJCF or URDF model (docs/models.md), or the name of a shipped scene (config/)")
+    r.add_argument("--keyframe", metavar="NAME",
+                   help="models only: the keyframe of the initial state (default: the model's first)")
     r.add_argument("--duration", type=float, required=True, help="simulated seconds")
     r.add_argument("--integrator", default="auto", help="auto (dop853, switching to radau when stiff) | dop853 | radau | rk4 | lie4 | gauss4 | fixed")
     r.add_argument("--rtol", type=float, default=1e-10)
@@ -293,7 +296,7 @@ def _compile_first(args) -> None:
         from gyro_sim.paths import find_scene
 
         try:
-            load_scene(find_scene(args.scene))
+            load_scene(find_scene(args.scene), keyframe=args.keyframe)
         except (SceneError, FileNotFoundError):
             return  # cmd_run reports it, with nothing compiled
     elif args.cmd == "replay" and getattr(args, "resimulate", False) and Path(args.log).is_file():

@@ -666,3 +666,22 @@ def test_the_node_takes_a_model_as_its_scene(tmp_path):
     path = write(tmp_path, "arm.urdf", ARM_URDF)
     config = validate({"scene": str(path)})
     assert [b.name for b in config.scene.bodies] == ["shoulder", "elbow"]
+
+
+def test_run_takes_a_keyframe(tmp_path, capsys, monkeypatch):
+    """`gyro-sim run --scene MODEL --keyframe NAME` starts from that keyframe (recorded in the
+    log's embedded scene); an unknown keyframe is exit 2 naming the model's keyframes."""
+    from gyro_sim.log.mcap_log import read_info
+
+    text = ARM.read_text().replace(
+        "</keyframe>", '  <key name="still" qpos="1 0 0 0  0.2  0  1 0 0 0"/>\n  </keyframe>')
+    path = write(tmp_path, "arm.xml", text)
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", "--scene", str(path), "--keyframe", "still", "--duration", "0.01",
+                 "--integrator", "rk4", "--record", "still.mcap"]) == 0
+    info = read_info(tmp_path / "still.mcap")
+    assert load_scene(info.scene_source()).bodies[1].initial.angle == 0.2
+    capsys.readouterr()
+    assert main(["run", "--scene", str(path), "--keyframe", "nope", "--duration", "0.01"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no such keyframe" in err[0] and "'still'" in err[0], err
