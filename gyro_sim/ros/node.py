@@ -62,7 +62,14 @@ from .params import PARAMETERS, ParameterError, validate  # noqa: E402
 MEGABYTE = 1 << 20
 #: messages of the RuntimeError raised when a thread cannot be started (out of memory or of
 #: processes: Python's threading, rclpy's executor)
-THREAD_START_ERRORS = ("can't start new thread", "pthread_create failed")
+THREAD_START_ERRORS = ("can't start new thread", "pthread_create failed", "Resource temporarily unavailable")
+#: what the dynamic loader says when a shared library does not fit in the address space left
+LOAD_MEMORY_ERRORS = ("failed to map segment from shared object", "Cannot allocate memory",
+                      "cannot allocate memory")
+#: room (bytes of address space) that loading scipy's LAPACK needs (`load_lapack`): measured,
+#: a process with 96 MB of room under its limit loads it, with 40-48 MB its OpenBLAS spins
+#: forever, with less the loader refuses
+LAPACK_ROOM = 128 << 20
 
 #: GIL switch interval (s) while the node runs: bounds how long the physics thread, woken at
 #: its deadline, waits for the executor thread (Python's default is 5 ms)
@@ -319,12 +326,68 @@ class Shutdown:
                 pass
 
 
+def _address_space_room() -> int | None:
+    """Bytes of address space left under the soft RLIMIT_AS (None: no limit, or unknown)."""
+    import resource
+
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    if soft == resource.RLIM_INFINITY:
+        return None
+    try:
+        with open("/proc/self/status") as f:
+            size = next(int(line.split()[1]) * 1024 for line in f if line.startswith("VmSize:"))
+    except (OSError, StopIteration, ValueError):
+        return None
+    return soft - size
+
+
+def load_lapack() -> None:
+    """Under an address-space limit (prlimit --as), load scipy's LAPACK now, checked.
+
+    numba's compiled LAPACK calls (the radau kernels, which gyro_sim.warmup loads with every
+    kernel) load it; its OpenBLAS, when it cannot allocate its work buffers, retries forever
+    while holding the interpreter lock, so that neither a signal handler nor any thread runs
+    again: the node hung. With less than LAPACK_ROOM left, MemoryError instead. Without a limit
+    nothing is done here."""
+    room = _address_space_room()
+    if room is None or "scipy.linalg.cython_lapack" in sys.modules:
+        return
+    if room < LAPACK_ROOM:
+        raise MemoryError(f"{room >> 20} MB of address space left under the limit, scipy's LAPACK needs "
+                          f"{LAPACK_ROOM >> 20} MB to load")
+    try:
+        import scipy.linalg.cython_lapack  # noqa: F401
+    except ImportError:  # no scipy, or a library that did not fit: numba says so where it is needed
+        pass
+
+
 def resource_error(exc: BaseException) -> str | None:
-    """One line for running out of memory or of threads (None for anything else)."""
-    if isinstance(exc, MemoryError):
-        return "out of memory (MemoryError)"
-    if isinstance(exc, RuntimeError) and any(m in str(exc) for m in THREAD_START_ERRORS):
-        return f"cannot start a thread ({str(exc).splitlines()[0]}): out of memory or of processes"
+    """One line for running out of memory or of threads, whatever raised it (the exception or
+    one it was raised from); None for anything else (a bug keeps its traceback)."""
+    import errno
+
+    seen = set()
+    e: BaseException | None = exc
+    while e is not None and id(e) not in seen:
+        seen.add(id(e))
+        text = str(e).splitlines()[0] if str(e) else ""
+        if isinstance(e, MemoryError):
+            return f"out of memory (MemoryError{': ' + text if text else ''})"
+        if isinstance(e, OSError) and e.errno == errno.ENOMEM:
+            return f"out of memory ({text})"
+        if any(m in text for m in THREAD_START_ERRORS):
+            return f"cannot start a thread ({text}): out of memory or of processes"
+        if any(m in str(e) for m in LOAD_MEMORY_ERRORS):
+            return f"out of memory: a library could not be loaded ({text[:200]})"
+        e = e.__cause__ or e.__context__
+    room = _address_space_room()
+    if room is not None and isinstance(exc, (SystemError, ImportError, OSError)):
+        # what CPython and the loader raise when an allocation fails inside an import
+        import resource
+
+        limit = resource.getrlimit(resource.RLIMIT_AS)[0]
+        text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        return f"failed under the address-space limit of {limit >> 20} MB, probably out of memory ({text[:200]})"
     return None
 
 
@@ -345,6 +408,7 @@ def _main(argv, shutdown: Shutdown) -> int:
     from .params import preflight
 
     # --help, misspelt parameters and the first numba compile, before rclpy starts
+    load_lapack()
     code = preflight(sys.argv if argv is None else argv)
     if code is not None:
         return code

@@ -287,5 +287,12 @@ class Outputs:
 
     def event(self, t_ns: int, text: str, level: str = "info") -> None:
         """An event: one console line at `level` (info, warning, error) and the log."""
-        getattr(self.node.get_logger(), level)(f"t = {t_ns * 1e-9:.6f} s: {text}")
+        line, logger = f"t = {t_ns * 1e-9:.6f} s: {text}", self.node.get_logger()
+        # one call site per severity: rclpy refuses another severity from the same line
+        if level == "error":
+            logger.error(line)
+        elif level == "warning":
+            logger.warning(line)
+        else:
+            logger.info(line)
         self.record_event(t_ns, text)
