@@ -18,7 +18,8 @@ them, those it superseded (received since the previous step, never applied: coun
 superseded) just before it in the order received, so that a reader applying them in file order
 ends with the one applied; while paused or stopped by a simulation error, those already
 superseded at the current node time; those a reset discards, at the reset's time before its
-event (the reset sets the moments to zero). Rejected ones (wrong length, NaN or inf) go to the
+event (the reset sets the moments to zero); those still waiting when the loop ends, at its
+last node time. Rejected ones (wrong length, NaN or inf) go to the
 log as events "command rejected (reason)" at the node time they were received (their values
 never reach a log). When the last good command took effect
 more than `command_timeout` *simulated* seconds ago, the moments are replaced by zeros
@@ -379,6 +380,9 @@ class SimLoop:
             self.crash = traceback.format_exc()
         finally:
             try:
+                latest = self._latest  # received, never taken: logged at the end
+                if latest is not None and self._received:
+                    self._log_received(self.node_ns, latest[0])
                 if self.wall_start is not None:
                     self.wall_end, self.cpu_end = self.clock(), time.process_time()
                 self._cpu_wait[1] = self.run_delay()
@@ -604,6 +608,7 @@ class SimLoop:
             "slipped_s": self.pacer.slipped,
             "commands_accepted": self.counters.accepted,
             "commands_rejected": self.counters.rejected,
+            "commands_superseded": self.counters.superseded,
             "cpu_wait_misses": self.cpu_wait_misses,
             "physics_cpu_wait_s": self._cpu_wait[1] - self._cpu_wait[0],
             "host_steal_s": self._steal[1] - self._steal[0],

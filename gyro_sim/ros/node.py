@@ -431,12 +431,10 @@ def _main(argv, shutdown: Shutdown) -> int:
     try:
         try:
             node = GyroSimNode()
-        except ParameterError as exc:
-            print("gyro_sim_node: invalid parameters, nothing started:\n  " + str(exc).replace("\n", "\n  "),
+        except (ParameterError, OutputError) as exc:  # one line for one problem, one more line per other
+            sep = " " if "\n" not in str(exc) else "\n  "
+            print("gyro_sim_node: invalid parameters, nothing started:" + sep + str(exc).replace("\n", "\n  "),
                   file=sys.stderr)
-            return 2
-        except OutputError as exc:
-            print(f"gyro_sim_node: {exc}; nothing started", file=sys.stderr)
             return 2
         except Exception as exc:  # noqa: BLE001 - the log writer could not start (no space left...)
             from .recorder import RecordingError

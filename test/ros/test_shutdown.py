@@ -1,10 +1,13 @@
-"""Every shutdown closes the log: 30 SIGTERM and 30 SIGINT at random moments of a recording
-node (during start-up and warm-up, in the first second, during a reset, later) each leave a
-log that rosbags reads completely, and the node exits 0 with its summary.
+"""Every shutdown leaves the record path either holding a complete log or nothing: 30 SIGTERM
+and 30 SIGINT at random moments of a recording node (during start-up and warm-up, in the first
+second, during a reset, later). A signal during start-up gives the start up (exit 0, one line,
+the file created for the log removed: nothing was recorded); later, the node exits 0 with its
+summary and a log that rosbags reads completely.
 
-The node owns its signal handling (gyro_sim.ros.node.Shutdown): a signal only sets a flag,
-and the log is closed before rclpy's context goes away, so there is no race to lose. The
-moments are drawn from a seeded generator: a failure names its case and can be replayed.
+The node owns its signal handling (gyro_sim.ros.node.Shutdown): after start-up a signal only
+sets a flag, and the log is closed before rclpy's context goes away, so there is no race to
+lose. The moments are drawn from a seeded generator: a failure names its case and can be
+replayed.
 """
 from __future__ import annotations
 
@@ -77,6 +80,10 @@ def one_run(tmp: Path, domain: int, client: Client, case) -> str | None:
     what = f"case {i} ({sig.name}, {mode}, {delay:.3f} s)"
     if rc != 0:
         return f"{what}: exit {rc}\n{node.stderr[-1500:]}"
+    if f"{sig.name} during start-up: not started" in node.stderr:
+        if log.exists() or list(tmp.glob(f"{log.name}.*")):
+            return f"{what}: start given up, yet a file is left: {sorted(p.name for p in tmp.glob(log.name + '*'))}"
+        return None
     if f"log written: {log}" not in node.stdout:
         return f"{what}: no 'log written' line\n{node.stdout[-500:]}"
     try:
