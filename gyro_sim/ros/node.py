@@ -306,6 +306,12 @@ class Shutdown:
         os.write(2, f"gyro_sim_node: {name} during start-up: not started (nothing recorded)\n".encode())
         os._exit(0)
 
+    def hold_if_giving_up(self) -> None:
+        """A start being given up is ended by the thread doing it (its one line, exit 0): the
+        main thread, which the give-up may have broken (its writer killed), waits for that."""
+        if self._giving_up:
+            threading.Event().wait()
+
     def start_done(self) -> None:
         """The start-up is over: from now on a signal only sets `requested` (main thread only).
         If a signal is giving the start up at this very moment, its thread ends the process."""
@@ -394,8 +400,11 @@ def resource_error(exc: BaseException) -> str | None:
 def main(argv=None) -> int:
     shutdown = Shutdown()
     try:
-        return _main(argv, shutdown)
+        code = _main(argv, shutdown)
+        shutdown.hold_if_giving_up()
+        return code
     except BaseException as exc:  # noqa: BLE001 - only resources are said in one line; bugs keep their traceback
+        shutdown.hold_if_giving_up()
         why = resource_error(exc)
         if why is None:
             raise

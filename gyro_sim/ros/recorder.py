@@ -292,7 +292,10 @@ def _create(final: str, overwrite: bool, what: str) -> LogFile:
 
 def abandon_all() -> None:
     """`abandon` every recorder started and every log file created and not yet closed, and
-    create none after (a start given up: gyro_sim.ros.node's signal handling during start-up)."""
+    create none after (a start given up: gyro_sim.ros.node's signal handling during start-up).
+
+    For a process about to end (its caller ends it): a recorder whose start it broke does not
+    raise in its own thread, it waits for that end."""
     global _given_up
     with _REGISTRY_LOCK:
         _given_up = True
@@ -435,6 +438,8 @@ class LiveRecorder:
             self._start(scene, params, writer_options)
         except BaseException:
             self.abandon()
+            if _given_up:  # abandon_all killed the writer: the process is ending there, quietly
+                threading.Event().wait()
             raise
 
     def _start(self, scene, params: dict, writer_options: dict) -> None:

@@ -27,7 +27,8 @@ from .helpers import DISCOVERY_TIMEOUT, Client, NodeProcess, new_domain_id, wait
 
 RUNS_PER_SIGNAL = 30
 SEED = 20261123
-#: (mode, share of the runs): when the signal comes, counted from the moment the log exists
+#: (mode, share of the runs): when the signal comes, counted from the moment the log file
+#: exists (start-up: the node creates it early in its start) or the run starts (the others)
 MODES = (("start-up", 0.25), ("first second", 0.35), ("reset", 0.2), ("later", 0.2))
 WORKERS = 2
 
@@ -65,6 +66,8 @@ def one_run(tmp: Path, domain: int, client: Client, case) -> str | None:
                        f"record:={log}", name=f"run{i}")
     try:
         wait_for(lambda: log.exists() or not node.alive(), 60.0, f"case {i}: the log file")
+        if mode != "start-up":  # the others count from the run's start
+            wait_for(lambda: "physics thread:" in node.stderr or not node.alive(), 60.0, f"case {i}: the run")
         if mode == "reset":
             cli = client.node.create_client(Trigger, "/gyro_sim/reset")
             if cli.wait_for_service(timeout_sec=DISCOVERY_TIMEOUT):
