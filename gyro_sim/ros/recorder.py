@@ -55,6 +55,9 @@ What is left where
   node stops its run and exits 1 (gyro_sim.ros.node), naming the file that holds the part
   written (`file`), which ``gyro-sim recover`` reads back; the writer, when it is the one that
   failed, closes what it can (no further write, the file closed);
+- the writer stopped (SIGSTOP) when the node ends: `close` waits for it at most
+  CLOSE_TIMEOUT to take the last records and as long again to finish, then says the log is not
+  finished (`error`; the node exits 1); resumed, the writer finishes it on its own;
 - a start given up (a signal during start-up, the writer failing to start):
   :meth:`LiveRecorder.abandon` stops the writer and removes the file created for it (nothing
   was recorded), so nothing half-written is left behind.
@@ -62,7 +65,8 @@ What is left where
 Falling behind
 --------------
 The sender never blocks on the pipe (its end is non-blocking): what the pipe cannot take waits
-in the node, at most `max_backlog_bytes`. Beyond that the *oldest* publications waiting are
+in the node, at most `max_backlog_bytes` (the records' bytes plus ITEM_OVERHEAD each: measured,
+the node's resident memory then grows by about 1.2 times the bound). Beyond that the *oldest* publications waiting are
 dropped, each whole, counted in `dropped_records` and `dropped_publications`; commands and
 events (`raw`, `raw_many`) are never dropped. A writer stopped for good (SIGSTOP) thus costs
 the node a bounded amount of memory, and once it runs again the log is complete and readable,
