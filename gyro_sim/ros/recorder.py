@@ -434,6 +434,7 @@ class LiveRecorder:
         self._ended = threading.Event()  # the writer's output ended (its last reply read)
         self._sent = threading.Event()  # the sender thread is done
         self._close_deadline = float("inf")
+        self._close_timeout = CLOSE_TIMEOUT
         self._proc: subprocess.Popen | None = None
         self.log_file = log_file if log_file is not None else create_log_file(path, overwrite)
         self.file = self.log_file.path
@@ -595,9 +596,6 @@ class LiveRecorder:
                 self.max_backlog = pending_records
             if pending_bytes + out_bytes > self.max_backlog_bytes_seen:
                 self.max_backlog_bytes_seen = pending_bytes + out_bytes
-            if pending_bytes + out_bytes > self.max_backlog_bytes:
-                pending_bytes, pending_records = self._drop_oldest(pending, pending_bytes, pending_records,
-                                                                   self.max_backlog_bytes - out_bytes)
             if not out and pending:
                 items = []
                 for item, _, _ in pending:
@@ -622,11 +620,14 @@ class LiveRecorder:
                 except OSError as exc:  # the writer is gone (its input broke): the watcher says how
                     self._fail(f"the log writer process stopped reading ({exc.strerror or exc})")
                     return
+            if out and pending_bytes + out_bytes > self.max_backlog_bytes:  # the pipe is full: behind
+                pending_bytes, pending_records = self._drop_oldest(pending, pending_bytes, pending_records,
+                                                                   self.max_backlog_bytes - out_bytes)
             if closing and not out and not pending:
                 return
             if closing and time.monotonic() > self._close_deadline:
                 self.error = self.error or (f"the log writer did not take the last {pending_records} records and "
-                                            f"{out_bytes} bytes within {CLOSE_TIMEOUT:g} s")
+                                            f"{out_bytes} bytes within {self._close_timeout:g} s")
                 return
 
     def _drop_oldest(self, pending: collections.deque, size: int, records: int, room: int) -> tuple[int, int]:
@@ -653,6 +654,7 @@ class LiveRecorder:
             if self._closed:
                 return
             self._closed = True
+        self._close_timeout = timeout
         self._close_deadline = time.monotonic() + timeout
         self.queue.put(None)
         self._sent.wait(timeout + 2 * SEND_PERIOD)
