@@ -27,7 +27,14 @@ write and by a background timer), so after SIGKILL everything written before the
 process loses nothing flushed, a crash of the machine may.
 
 No silent overwrite: the file is created with mode ``"xb"`` (an existing file is refused with
-:class:`~.safe_paths.OutputError`) unless ``overwrite=True``.
+:class:`~.safe_paths.OutputError`) unless ``overwrite=True``, or the caller hands over a file
+it has opened itself (``file=``: the node's recorder creates its file before the writer starts).
+
+A write that fails (``OSError``: no space left, a file-size limit...) is raised by the call that
+made it, the background flush's included: the timer keeps the error (`failure`) and the next
+call raises it. Nothing more is written after it; `close` then finishes what it can and closes
+the file without raising again, so the part flushed before stays readable by
+:func:`gyro_sim.log.recover.recover`.
 
 Reading verifies (:func:`verify`): :func:`read_info` checks the summary's CRC and every chunk's
 CRC (and that it decompresses) before returning, and :func:`iter_messages` reads with the chunk
@@ -47,7 +54,7 @@ import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator, Mapping
+from typing import Any, BinaryIO, Iterator, Mapping
 
 from gyro_sim.errors import GyroSimError
 from gyro_sim.msgs import msgdefs
@@ -200,11 +207,15 @@ class LogWriter:
     flush_period : wall-clock seconds between flushes of the data to the file (> 0).
     robot_description : also write the scene's URDF on /robot_description at log time 0.
     overwrite : replace an existing file (default: refuse it, OutputError).
+    file : an open binary file to write to instead of creating `path` (which then only names it
+        in messages); the writer owns it from then on and closes it.
+
+    Attribute `failure`: the first OSError of a write or flush (None while all went well).
     """
 
     def __init__(self, path: str | os.PathLike, *, scene, params: dict,
                  flush_period: float = DEFAULT_FLUSH_PERIOD, robot_description: bool = True,
-                 overwrite: bool = False):
+                 overwrite: bool = False, file: BinaryIO | None = None):
         from mcap.writer import Writer
 
         if not (flush_period > 0 and math.isfinite(flush_period)):
@@ -217,12 +228,16 @@ class LogWriter:
             raise LogError(f"params must be JSON-serialisable and finite: {exc}") from exc
         from gyro_sim import __version__
 
-        try:
-            self._file = open(self.path, "wb" if overwrite else "xb")
-        except FileExistsError:
-            from gyro_sim.safe_paths import OutputError
+        if file is not None:
+            self._file = file
+        else:
+            try:
+                self._file = open(self.path, "wb" if overwrite else "xb")
+            except FileExistsError:
+                from gyro_sim.safe_paths import OutputError
 
-            raise OutputError(f"log {self.path}: exists; refused to overwrite it (overwrite=True to replace)") from None
+                raise OutputError(f"log {self.path}: exists; refused to overwrite it (overwrite=True to replace)") from None
+        self.failure: OSError | None = None
         self._chunk_indexes = _PackedChunkIndexes()
         self._writer = Writer(self._file, chunk_size=CHUNK_SIZE, compression=_compression())
         self._writer.start(profile="ros2", library=f"gyro_sim/{__version__}")
@@ -309,11 +324,17 @@ class LogWriter:
             raise LogError(f"log time must be >= 0 ns, got {log_time_ns}")
         with self._lock:
             self._check_open()
+            if self.failure is not None:
+                raise self.failure
             if ch not in self._sequence:
                 raise LogError(f"unknown channel id {ch}")
             seq = self._sequence[ch] = self._sequence[ch] + 1
-            self._writer.add_message(ch, log_time_ns, bytes(data),
-                                     log_time_ns if publish_time_ns is None else int(publish_time_ns), seq)
+            try:
+                self._writer.add_message(ch, log_time_ns, bytes(data),
+                                         log_time_ns if publish_time_ns is None else int(publish_time_ns), seq)
+            except OSError as exc:  # a full chunk written out: no space left...
+                self.failure = exc
+                raise
             self.message_count += 1
             self._dirty = True
             if time.monotonic() - self._last_flush >= self.flush_period:
@@ -378,6 +399,15 @@ class LogWriter:
             self._flush_locked()
 
     def _flush_locked(self) -> None:
+        if self.failure is not None:
+            raise self.failure
+        try:
+            self._flush_dirty()
+        except OSError as exc:
+            self.failure = exc
+            raise
+
+    def _flush_dirty(self) -> None:
         if self._dirty:
             if hasattr(self._writer, "flush"):  # mcap >= 1.6: finish the chunk, write, flush
                 self._writer.flush()
@@ -397,23 +427,37 @@ class LogWriter:
                 now = time.monotonic()
                 if now - self._last_flush >= self.flush_period:
                     # nothing pending: nothing to lose, the period starts again
-                    self._flush_locked()
+                    try:
+                        self._flush_locked()
+                    except OSError:  # kept in `failure`: the next write raises it
+                        return
                 wait = self._last_flush + self.flush_period - now
             if self._stop.wait(max(wait, MIN_TIMER_WAIT)):
                 return
 
     def close(self) -> None:
-        """Write the summary and indexes and close the file (idempotent)."""
+        """Write the summary and indexes and close the file (idempotent). After a failed write
+        (`failure`), the summary is attempted once and the file closed, without raising."""
         with self._lock:
             if self._closed:
                 return
             self._closed = True
             self._stop.set()
+            failed = self.failure is not None
             try:
                 self._chunk_indexes.unpack(self._writer)
                 self._writer.finish()
+            except OSError as exc:
+                self.failure = self.failure or exc
+                if not failed:
+                    raise
             finally:
-                self._file.close()
+                try:
+                    self._file.close()
+                except OSError as exc:  # the buffer's last bytes did not fit either
+                    self.failure = self.failure or exc
+                    if not failed:
+                        raise
         if self._timer is not threading.current_thread():
             self._timer.join(timeout=5.0)
 

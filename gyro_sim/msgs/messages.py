@@ -75,7 +75,7 @@ RUN_STATUS = "gyro_sim: run"
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
 #: keys whose values are text (states and reasons); every other value is a number
 STRING_KEYS = frozenset({"integrator", "integrator_now", "integrator_reason", "state", "reason", "backend",
-                         "last_reject_reason"})
+                         "last_reject_reason", "record"})
 #: the invariants (gyro_sim.dynamics.invariants) as diagnostics: key stem and unit
 INVARIANT_KEYS = {
     "energy": ("energy", "J"),

@@ -12,12 +12,27 @@ What runs where
   thread) and posts requests (`request`: reset, pause); nothing there touches the Simulator.
 
 Commands take effect from the next physics step: before each step the latest good command,
-if new, is set on the Simulator (zero-order hold for the step) and recorded with the log time
-of that step; commands it superseded within the step are counted, not applied. When the last good command took effect
+if new, is set on the Simulator (zero-order hold for the step). Every command received goes to
+the log: the good ones on ~/axis_moments at the log time of the step that took the latest of
+them, those it superseded (received since the previous step, never applied: counted as
+superseded) just before it in the order received, so that a reader applying them in file order
+ends with the one applied; while paused or stopped by a simulation error, those already
+superseded at the current node time; those a reset discards, at the reset's time before its
+event (the reset sets the moments to zero); those still waiting when the loop ends, at its
+last node time. Rejected ones (wrong length, NaN or inf) go to the
+log as events "command rejected (reason)" at the node time they were received (their values
+never reach a log). When the last good command took effect
 more than `command_timeout` *simulated* seconds ago, the moments are replaced by zeros
 (marked by an event). Simulated, not wall, time: the fallback then depends only on the
 command sequence and its log times, so a resimulation of the log reproduces it exactly,
 whatever the CPU load or the real-time factor was.
+
+Recording (outputs.recorder, gyro_sim.ros.recorder.LiveRecorder, when there is one) is
+watched at every wake-up: when it fails (the writer process died, a write failed) the loop
+says so once (console line and event), publishes the diagnostics with the run's ``record``
+key saying why, and ends (`record_failure`: the node exits 1); when the writer falls behind
+and publications are dropped from the log, events mark where the dropping starts and where it
+stops (events are never dropped), and the diagnostics count them.
 
 The time published ("node time") is the simulated time since the node started: after a
 reset, the Simulator restarts from the scene's initial state at its own t = 0 while node
@@ -44,6 +59,9 @@ from gyro_sim.ros.pacing import (
     realtime_priority,
 )
 
+#: wall seconds without a new publication dropped from the log after which the recorder counts
+#: as caught up (an event says so)
+RECORD_QUIET = 1.0
 #: wall seconds between diagnostics while paused or stopped (running, they go with every
 #: publication at least gyro_sim.msgs.messages.DIAGNOSTICS_PERIOD simulated seconds apart)
 IDLE_DIAGNOSTICS_PERIOD = 1.0
@@ -144,7 +162,9 @@ class SimLoop:
     config : gyro_sim.ros.params.NodeConfig
     outputs : gyro_sim.ros.outputs.Outputs, or an object with the same methods:
         prepare_state(t_ns, sim, diagnostics_run) -> batch, send(t_ns, batch),
-        publish_diagnostics(t_ns, sim, run_status), record_command(t_ns, raw), event(t_ns, text);
+        publish_diagnostics(t_ns, sim, run_status), record_commands(t_ns, [raw, ...]),
+        record_event(t_ns, text) (the log only), event(t_ns, text, level="info") (console and log),
+        and optionally `recorder` (None, or the LiveRecorder to watch);
         t_ns: node time in integer nanoseconds
     clock, sleep : injectable for tests
     run_delay : seconds the calling thread has waited for a CPU so far (pacing.RunDelay; tests
@@ -169,6 +189,12 @@ class SimLoop:
         # the latest good command: (sequence number, raw bytes, values); one slot, replaced whole
         self._latest: tuple | None = None
         self._taken_seq = 0
+        # every good command received and not yet logged: (sequence number, raw bytes), in order
+        self._received: collections.deque = collections.deque()
+        self.recorder = getattr(outputs, "recorder", None)
+        self.record_failure: str | None = None  # why recording failed (the run then ended)
+        self._drops_seen = 0  # records dropped from the log, as last seen
+        self._last_drop: float | None = None  # wall time a new drop was last seen; None: not dropping
         self.requests: collections.deque = collections.deque()
         self.step_time = Samples(window=int(2 * config.physics_rate))
         self.pub_interval = Samples(window=int(2 * config.publish_rate) + 1)
@@ -182,6 +208,7 @@ class SimLoop:
         self.paused = False
         self.failure: str | None = None
         self.crash: str | None = None  # traceback of an unexpected error that ended the loop
+        self.out_of_memory = False  # a MemoryError ended the loop
         self.finished = threading.Event()
         self._stop = threading.Event()
         self._last_cmd_step: int | None = None  # step at which the last good command took effect
@@ -213,12 +240,24 @@ class SimLoop:
         A good one replaces the latest (taken by the next physics step)."""
         reason = check_command(values, self.n_axes)
         if reason is None:
-            self.counters.accepted += 1
-            self._latest = (self.counters.accepted, raw, tuple(float(v) for v in values))
+            seq = self.counters.accepted + 1
+            self._received.append((seq, raw))  # before it is the latest: a step taking it finds it here
+            self.counters.accepted = seq
+            self._latest = (seq, raw, tuple(float(v) for v in values))
         else:
             self.counters.rejected += 1
             self.counters.last_reject_reason = reason
+            self.out.record_event(self.node_ns, f"command rejected ({reason})")
         return reason
+
+    def _log_received(self, t_ns: int, upto: int) -> None:
+        """Log, at `t_ns`, the good commands received up to sequence number `upto` not yet logged."""
+        received = self._received
+        raws = []
+        while received and received[0][0] <= upto:
+            raws.append(received.popleft()[1])
+        if raws:
+            self.out.record_commands(t_ns, raws)
 
     def request(self, kind: str, value: bool = False, timeout: float = 2.0) -> tuple[bool, str]:
         """Ask the loop for a reset or a pause change; wait until it is done."""
@@ -258,6 +297,7 @@ class SimLoop:
                 latest = self._latest  # received before the reset: not applied after it
                 if latest is not None:
                     self._taken_seq = latest[0]
+                    self._log_received(self.node_ns, latest[0])  # before the reset that zeroes them
                 self.offset_ns = self.node_ns
                 self.sim.reset()
                 self.failure = None
@@ -301,20 +341,23 @@ class SimLoop:
         self.out.event(self.node_ns, f"physics thread: {self.scheduling}")
 
     def _run(self) -> None:
-        self._schedule()
-        self.wall_start, self.cpu_start = self.clock(), time.process_time()
-        self._cpu_wait = [self.run_delay()] * 2
-        self._steal[0] = host_steal()
-        self.pacer.restart(self.node_time)
-        self.rate.mark(self.node_time)
-        self._next_idle_diag = self.clock()
         try:
+            self._schedule()
+            self.wall_start, self.cpu_start = self.clock(), time.process_time()
+            self._cpu_wait = [self.run_delay()] * 2
+            self._steal[0] = host_steal()
+            self.pacer.restart(self.node_time)
+            self.rate.mark(self.node_time)
+            self._next_idle_diag = self.clock()
             self._send(self._prepare())
             while not self._stop.is_set():
+                if self.recorder is not None and self._watch_recording():
+                    break  # recording failed: the run ends (exit status 1)
                 self._serve_requests()
                 if self.failure is not None and self.config.duration > 0:
                     break  # a bounded run that fails ends at once (exit status 1)
                 if self.paused or self.failure is not None:
+                    self._log_superseded()
                     self._idle_diagnostics()
                     self._stop.wait(IDLE_PERIOD)
                     continue
@@ -331,17 +374,53 @@ class SimLoop:
                 self._send(batch)
         except OutputsClosed:
             pass
+        except MemoryError:
+            self.out_of_memory = True
         except Exception:  # noqa: BLE001 - a bug: reported by the node's exit status
             import traceback
 
             self.crash = traceback.format_exc()
         finally:
-            self.wall_end, self.cpu_end = self.clock(), time.process_time()
-            self._cpu_wait[1] = self.run_delay()
-            self._steal[1] = host_steal()
-            if isinstance(self.run_delay, RunDelay):
-                self.run_delay.close()
-            self.finished.set()
+            try:
+                latest = self._latest  # received, never taken: logged at the end
+                if latest is not None and self._received:
+                    self._log_received(self.node_ns, latest[0])
+                if self.wall_start is not None:
+                    self.wall_end, self.cpu_end = self.clock(), time.process_time()
+                self._cpu_wait[1] = self.run_delay()
+                self._steal[1] = host_steal()
+                if isinstance(self.run_delay, RunDelay):
+                    self.run_delay.close()
+            finally:
+                self.started.set()
+                self.finished.set()
+
+    def _watch_recording(self) -> bool:
+        """Follow the recorder (module docstring); True when recording failed."""
+        rec = self.recorder
+        if rec.failure is not None:
+            self.record_failure = rec.failure
+            self.out.event(self.node_ns, f"recording failed: {rec.failure}; the run stops", level="error")
+            self._idle_diagnostics(force=True)
+            return True
+        dropped = rec.dropped_records
+        if dropped != self._drops_seen:
+            if self._last_drop is None:
+                self.out.event(self.node_ns, "log writer behind: the oldest publications waiting are dropped from "
+                                             "the log", level="warning")
+            self._drops_seen = dropped
+            self._last_drop = self.clock()
+        elif self._last_drop is not None and self.clock() - self._last_drop > RECORD_QUIET:
+            self._last_drop = None
+            self.out.event(self.node_ns, f"log writer caught up: {rec.dropped_records} records of "
+                                         f"{rec.dropped_publications} publications dropped from the log so far")
+        return False
+
+    def _log_superseded(self) -> None:
+        """Paused or stopped: log the commands already superseded (all but the latest)."""
+        latest = self._latest
+        if latest is not None and self._received and self._received[0][0] < latest[0]:
+            self._log_received(self.node_ns, latest[0] - 1)
 
     def _done(self) -> bool:
         d = self.config.duration
@@ -372,7 +451,7 @@ class SimLoop:
             seq, raw, latest = new
             self.counters.superseded += seq - self._taken_seq - 1
             self._taken_seq = seq
-            self.out.record_command(t_ns, raw)
+            self._log_received(t_ns, seq)  # the ones it superseded, then it
         if latest is not None:
             if np.any(self.sim.axis_moments != latest):
                 self.counters.moments_since = t
@@ -462,7 +541,16 @@ class SimLoop:
             values["last_reject_reason"] = c.last_reject_reason
         if self.failure:
             values["reason"] = self.failure
+        rec = self.recorder
+        if rec is not None:
+            failure = self.record_failure or rec.failure
+            values["record"] = (f"failed: {failure}" if failure else
+                                "behind: dropping the oldest publications" if self._last_drop is not None else "recording")
+            values["records_dropped"] = rec.dropped_records
+            values["publications_dropped"] = rec.dropped_publications
         values = {k: v for k, v in values.items() if isinstance(v, str) or math.isfinite(v)}
+        if rec is not None and (self.record_failure or rec.failure):
+            return self._status(M.ERROR, f"recording failed: {self.record_failure or rec.failure}", values)
         if self.failure is not None:
             return self._status(M.ERROR, f"simulation stopped: {self.failure} (call ~/reset)", values)
         if self.paused:
@@ -472,6 +560,8 @@ class SimLoop:
             warn.append(f"real-time factor {rtf:.2f} below {self.rtf:g}")
         if c.rejected:
             warn.append(f"{c.rejected} command{'s' if c.rejected != 1 else ''} rejected")
+        if rec is not None and rec.dropped_records:
+            warn.append(f"{rec.dropped_records} records dropped from the log (the writer fell behind)")
         if warn:
             return self._status(M.WARN, "; ".join(warn), values)
         return self._status(M.OK, "running", values)
@@ -520,6 +610,7 @@ class SimLoop:
             "slipped_s": self.pacer.slipped,
             "commands_accepted": self.counters.accepted,
             "commands_rejected": self.counters.rejected,
+            "commands_superseded": self.counters.superseded,
             "cpu_wait_misses": self.cpu_wait_misses,
             "physics_cpu_wait_s": self._cpu_wait[1] - self._cpu_wait[0],
             "host_steal_s": self._steal[1] - self._steal[0],

@@ -1,4 +1,4 @@
-"""Console script `gyro_sim_node`: the rclpy node `gyro_sim` and its main (SPEC.md, "ROS interface").
+"""Console script `gyro_sim_node`: the rclpy node `gyro_sim` and its main (docs/ros-interface.md).
 
     gyro_sim_node --ros-args --params-file config/params.yaml -p duration:=20.0
 
@@ -8,6 +8,25 @@ subscription, the services; everything physical happens in the physics thread
 starts (--help, misspelt parameters), starts rclpy, the node and its physics thread, spins the
 executor in this thread (commands, ~/reset, ~/pause) until the bounded run ends or
 SIGINT/SIGTERM (see `Shutdown`), then closes the log and prints a summary and where the log is.
+
+Exit status and the last line
+-----------------------------
+- 0: the run ended (its duration, a signal), the log (if any) complete: "log written: PATH (N
+  records)", N the records the file holds (read back: the same count); publications dropped
+  because the writer fell behind are counted on that line;
+- 0: a signal during start-up (see `Shutdown`): one line, nothing run, no log file left;
+- 2: bad input, nothing started: invalid parameters, a record path that exists (the check and
+  the creation are one atomic step, gyro_sim.ros.recorder.create_log_file: of two nodes started
+  on one path, one runs and the other gets this), or where no file can be created;
+- 1: a fault mid-work: a simulation error, the physics thread or executor failing, out of
+  memory (or of threads) anywhere in start-up or the run (one line; a log being written is
+  closed), or the recording failing. Recording failures (the writer process died, a write
+  failed: no space left on the device, a file-size limit) are seen at once: one console line,
+  the ``record`` key of the run's /diagnostics status, an event; the run then *stops* (rather
+  than go on with a log missing part of the run: the log's promises, every command received
+  and the re-simulation contract, would not hold), and the last line says "log incomplete:
+  FILE: why" and how ``gyro-sim recover`` reads back what was written before (never "log
+  written").
 """
 from __future__ import annotations
 
@@ -38,6 +57,19 @@ from gyro_sim.msgs.messages import decode_axis_moments  # noqa: E402
 from gyro_sim.ros.loop import SimLoop  # noqa: E402
 from gyro_sim.ros.outputs import Outputs  # noqa: E402
 from gyro_sim.ros.params import PARAMETERS, ParameterError, validate  # noqa: E402
+
+#: bytes in a megabyte (record_queue_mb)
+MEGABYTE = 1 << 20
+#: messages of the RuntimeError raised when a thread cannot be started (out of memory or of
+#: processes: Python's threading, rclpy's executor)
+THREAD_START_ERRORS = ("can't start new thread", "pthread_create failed", "Resource temporarily unavailable")
+#: what the dynamic loader says when a shared library does not fit in the address space left
+LOAD_MEMORY_ERRORS = ("failed to map segment from shared object", "Cannot allocate memory",
+                      "cannot allocate memory")
+#: room (bytes of address space) that loading scipy's LAPACK needs (`load_lapack`): measured,
+#: a process with 96 MB of room under its limit loads it, with 40-48 MB its OpenBLAS spins
+#: forever, with less the loader refuses
+LAPACK_ROOM = 128 << 20
 
 #: GIL switch interval (s) while the node runs: bounds how long the physics thread, woken at
 #: its deadline, waits for the executor thread (Python's default is 5 ms)
@@ -111,20 +143,28 @@ class GyroSimNode(Node):
         if problems:
             raise ParameterError("\n".join(problems))
         self.config = cfg = validate(values)
-        self.sim = Simulator(cfg.scene, integrator=cfg.integrator, rtol=cfg.rtol, atol=cfg.atol, step=cfg.dt,
-                             backend=cfg.backend)
         self.recorder = None
-        if cfg.record:
-            from gyro_sim.ros.recorder import LiveRecorder
+        log_file = None
+        if cfg.record:  # created now, atomically (OutputError if it exists or cannot be): nothing run yet
+            from gyro_sim.ros.recorder import create_log_file
 
-            self.recorder = LiveRecorder(cfg.record, scene=cfg.scene, params=log_params(self.sim, cfg),
-                                         overwrite=cfg.overwrite)
+            log_file = create_log_file(cfg.record, cfg.overwrite, what="record")
         try:
+            self.sim = Simulator(cfg.scene, integrator=cfg.integrator, rtol=cfg.rtol, atol=cfg.atol, step=cfg.dt,
+                                 backend=cfg.backend)
+            if log_file is not None:
+                from gyro_sim.ros.recorder import LiveRecorder
+
+                self.recorder = LiveRecorder(cfg.record, scene=cfg.scene, params=log_params(self.sim, cfg),
+                                             log_file=log_file,
+                                             max_backlog_bytes=int(cfg.record_queue_mb * MEGABYTE))
             self.outputs = Outputs(self, self.sim, cfg, self.recorder)
             self.loop = SimLoop(self.sim, cfg, self.outputs)
-        except BaseException:
-            if self.recorder is not None:  # leave a readable (empty) log
-                self.recorder.close()
+        except BaseException:  # nothing recorded yet: the file created is removed
+            if self.recorder is not None:
+                self.recorder.abandon()
+            elif log_file is not None:
+                log_file.abandon()
             raise
         self.create_subscription(Float64MultiArray, "~/axis_moments", self.on_command, 10, raw=True)
         self.create_service(Trigger, "~/reset", self.on_reset)
@@ -166,58 +206,218 @@ class GyroSimNode(Node):
         """Stop the loop, close the log; the run's statistics."""
         self.loop.stop()
         stats = self.loop.summary()
-        if self.recorder is not None:
-            self.recorder.close()
-            stats.update(record=self.recorder.path, records_written=self.recorder.written,
-                         recorder_max_backlog=self.recorder.max_backlog,
-                         recorder_thread_cpu_s=self.recorder.thread_cpu, recorder_error=self.recorder.error,
-                         recorder_sender_cpu_s=self.recorder.sender_cpu,
-                         recorder_open_cpu_s=getattr(self.recorder, "open_cpu", 0.0))
+        rec = self.recorder
+        if rec is not None:
+            rec.close()
+            stats.update(record=rec.path, record_file=rec.file, record_complete=rec.complete,
+                         record_failure=rec.failure, records_written=rec.written,
+                         records_in_file=rec.records_in_file, records_handed=rec.handed,
+                         records_dropped=rec.dropped_records, publications_dropped=rec.dropped_publications,
+                         recorder_max_backlog=rec.max_backlog, recorder_max_backlog_bytes=rec.max_backlog_bytes_seen,
+                         recorder_thread_cpu_s=rec.thread_cpu, recorder_error=rec.error,
+                         recorder_sender_cpu_s=rec.sender_cpu, recorder_open_cpu_s=rec.open_cpu)
         return stats
 
-
-class Interrupted(BaseException):
-    """A second SIGINT/SIGTERM during start-up: abandon it (what was opened is closed)."""
+    def close_log(self) -> None:
+        """Close the log if `finish` did not (an error on the way out)."""
+        if self.recorder is not None:
+            self.recorder.close()
 
 
 class Shutdown:
     """SIGINT and SIGTERM handling owned by the node, not by rclpy.
 
-    rclpy's own handlers shut the context down from inside the signal, which races with the
-    executor's wait ("failed to initialize wait set: the given context is not valid") and can
-    leave the log unclosed. Here a signal only sets `requested`; the main loop sees it within
-    one spin period, stops the physics thread, closes the log, and only then shuts rclpy down.
-    During start-up (imports, the first numba compile, the warm-up) a first signal lets the
-    start finish and then ends the run at once; a second one abandons the start.
+    During start-up (from main's first line until the physics thread is about to start: the
+    first numba compile, rclpy's start, the scene load, the recorder's start, the warm-up) a
+    signal gives the start up at once: one line ("SIGTERM during start-up: not started"), the
+    recorder's writer process killed and the log file created for it removed (nothing was
+    recorded: no file is left that could be taken for a log), exit status 0, within a
+    fraction of a second even in the middle of a compile. It is done by a thread woken by the
+    signal itself (``signal.set_wakeup_fd``), not by the Python handler, which runs only
+    between two bytecodes of the main thread (never during a long call into compiled code).
+
+    Afterwards a signal only sets `requested`: rclpy's own handlers shut the context down from
+    inside the signal, which races with the executor's wait ("failed to initialize wait set:
+    the given context is not valid") and can leave the log unclosed. Here the main loop sees
+    the flag within one spin period, stops the physics thread, closes the log, and only then
+    shuts rclpy down.
     """
 
     def __init__(self):
         self.requested = threading.Event()
         self.starting = True
         self.signal_name = ""
+        self._lock = threading.Lock()
+        self._giving_up = False
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, self._handle)
+        self._wakeup: tuple[int, int] | None = None
+        try:
+            r, w = os.pipe()
+            os.set_blocking(w, False)
+            signal.set_wakeup_fd(w, warn_on_full_buffer=False)
+            self._wakeup = (r, w)
+            threading.Thread(target=self._watch, name="gyro_sim-start-signals", daemon=True).start()
+        except (OSError, ValueError, RuntimeError):  # no watcher: the Python handler gives up the start itself
+            self._restore_wakeup()
+
+    def _restore_wakeup(self) -> None:
+        if self._wakeup is not None:
+            try:
+                signal.set_wakeup_fd(-1)
+            except ValueError:  # not the main thread
+                pass
+            for fd in self._wakeup:
+                os.close(fd)
+            self._wakeup = None
 
     def _handle(self, signum, frame) -> None:
-        if self.starting and self.requested.is_set():
-            raise Interrupted()
         self.signal_name = signal.Signals(signum).name
         self.requested.set()
+        if self.starting and self._wakeup is None:
+            self._give_up_start(signum)
+
+    def _watch(self) -> None:
+        """Woken by every signal during start-up (the wakeup fd gets its number)."""
+        r = self._wakeup[0]
+        while self.starting:
+            try:
+                data = os.read(r, 64)
+            except OSError:
+                return
+            for signum in data:
+                if signum in (signal.SIGINT, signal.SIGTERM):
+                    self._give_up_start(signum)
+
+    def _give_up_start(self, signum: int) -> None:
+        with self._lock:
+            if not self.starting or self._giving_up:
+                return
+            self._giving_up = True
+        name = signal.Signals(signum).name
+        recorder = sys.modules.get(f"{__package__}.recorder")
+        if recorder is not None:
+            recorder.abandon_all()
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        os.write(2, f"gyro_sim_node: {name} during start-up: not started (nothing recorded)\n".encode())
+        os._exit(0)
+
+    def hold_if_giving_up(self) -> None:
+        """A start being given up is ended by the thread doing it (its one line, exit 0): the
+        main thread, which the give-up may have broken (its writer killed), waits for that."""
+        if self._giving_up:
+            threading.Event().wait()
+
+    def start_done(self) -> None:
+        """The start-up is over: from now on a signal only sets `requested` (main thread only).
+        If a signal is giving the start up at this very moment, its thread ends the process."""
+        with self._lock:
+            giving_up = self._giving_up
+            if not giving_up:
+                self.starting = False
+        if giving_up:
+            threading.Event().wait()  # the watcher thread ends the process
+        if self._wakeup is not None:
+            try:
+                os.write(self._wakeup[1], b"\0")  # wake the watcher: it ends
+            except OSError:
+                pass
+            try:
+                signal.set_wakeup_fd(-1)
+            except ValueError:
+                pass
+
+
+def _address_space_room() -> int | None:
+    """Bytes of address space left under the soft RLIMIT_AS (None: no limit, or unknown)."""
+    import resource
+
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    if soft == resource.RLIM_INFINITY:
+        return None
+    try:
+        with open("/proc/self/status") as f:
+            size = next(int(line.split()[1]) * 1024 for line in f if line.startswith("VmSize:"))
+    except (OSError, StopIteration, ValueError):
+        return None
+    return soft - size
+
+
+def load_lapack() -> None:
+    """Under an address-space limit (prlimit --as), load scipy's LAPACK now, checked.
+
+    numba's compiled LAPACK calls (the radau kernels, which gyro_sim.warmup loads with every
+    kernel) load it; its OpenBLAS, when it cannot allocate its work buffers, retries forever
+    while holding the interpreter lock, so that neither a signal handler nor any thread runs
+    again: the node hung. With less than LAPACK_ROOM left, MemoryError instead. Without a limit
+    nothing is done here."""
+    room = _address_space_room()
+    if room is None or "scipy.linalg.cython_lapack" in sys.modules:
+        return
+    if room < LAPACK_ROOM:
+        raise MemoryError(f"{room >> 20} MB of address space left under the limit, scipy's LAPACK needs "
+                          f"{LAPACK_ROOM >> 20} MB to load")
+    try:
+        import scipy.linalg.cython_lapack  # noqa: F401
+    except ImportError:  # no scipy, or a library that did not fit: numba says so where it is needed
+        pass
+
+
+def resource_error(exc: BaseException) -> str | None:
+    """One line for running out of memory or of threads, whatever raised it (the exception or
+    one it was raised from); None for anything else (a bug keeps its traceback)."""
+    import errno
+
+    seen = set()
+    e: BaseException | None = exc
+    while e is not None and id(e) not in seen:
+        seen.add(id(e))
+        text = str(e).splitlines()[0] if str(e) else ""
+        if isinstance(e, MemoryError):
+            return f"out of memory (MemoryError{': ' + text if text else ''})"
+        if isinstance(e, OSError) and e.errno == errno.ENOMEM:
+            return f"out of memory ({text})"
+        if any(m in text for m in THREAD_START_ERRORS):
+            return f"cannot start a thread ({text}): out of memory or of processes"
+        if any(m in str(e) for m in LOAD_MEMORY_ERRORS):
+            return f"out of memory: a library could not be loaded ({text[:200]})"
+        e = e.__cause__ or e.__context__
+    room = _address_space_room()
+    if room is not None and isinstance(exc, (SystemError, ImportError, OSError)):
+        # what CPython and the loader raise when an allocation fails inside an import
+        import resource
+
+        limit = resource.getrlimit(resource.RLIMIT_AS)[0]
+        text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        return f"failed under the address-space limit of {limit >> 20} MB, probably out of memory ({text[:200]})"
+    return None
 
 
 def main(argv=None) -> int:
     shutdown = Shutdown()
     try:
-        return _main(argv, shutdown)
-    except Interrupted:
-        print(f"gyro_sim_node: {shutdown.signal_name} twice during start-up: not started", file=sys.stderr)
-        return 0
+        code = _main(argv, shutdown)
+        shutdown.hold_if_giving_up()
+        return code
+    except BaseException as exc:  # noqa: BLE001 - only resources are said in one line; bugs keep their traceback
+        shutdown.hold_if_giving_up()
+        why = resource_error(exc)
+        if why is None:
+            raise
+        print(f"gyro_sim_node: {why}; stopped", file=sys.stderr)
+        return 1
 
 
 def _main(argv, shutdown: Shutdown) -> int:
+    from gyro_sim.safe_paths import OutputError
     from gyro_sim.ros.params import preflight
 
     # --help, misspelt parameters and the first numba compile, before rclpy starts
+    load_lapack()
     code = preflight(sys.argv if argv is None else argv)
     if code is not None:
         return code
@@ -232,22 +432,32 @@ def _main(argv, shutdown: Shutdown) -> int:
     try:
         rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     except Exception as exc:  # noqa: BLE001 - rcl's argument errors (a missing --params-file ...)
+        if resource_error(exc) is not None:
+            raise
         print(f"gyro_sim_node: bad arguments: {exc}".splitlines()[0], file=sys.stderr)
         return 2
     node = None
     try:
         try:
             node = GyroSimNode()
-        except ParameterError as exc:
-            print("gyro_sim_node: invalid parameters, nothing started:\n  " + str(exc).replace("\n", "\n  "),
+        except (ParameterError, OutputError) as exc:  # one line for one problem, one more line per other
+            sep = " " if "\n" not in str(exc) else "\n  "
+            print("gyro_sim_node: invalid parameters, nothing started:" + sep + str(exc).replace("\n", "\n  "),
                   file=sys.stderr)
             return 2
+        except Exception as exc:  # noqa: BLE001 - the log writer could not start (no space left...)
+            from gyro_sim.ros.recorder import RecordingError
+
+            if not isinstance(exc, RecordingError):
+                raise
+            print(f"gyro_sim_node: record: the log writer could not start: {exc}; nothing started", file=sys.stderr)
+            return 1
         sys.setswitchinterval(SWITCH_INTERVAL)
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         spin_error = None
         try:
-            shutdown.starting = False
+            shutdown.start_done()
             if not shutdown.requested.is_set():
                 node.loop.start()
                 if node.loop.started.wait(STARTED_TIMEOUT):  # how the physics thread is scheduled
@@ -255,28 +465,40 @@ def _main(argv, shutdown: Shutdown) -> int:
                         or node.config.real_time_factor <= 0 else node.get_logger().warning
                     log(f"physics thread: {node.loop.scheduling}")
             while not shutdown.requested.is_set() and not node.loop.finished.is_set():
+                if node.loop.thread.ident is not None and not node.loop.thread.is_alive():
+                    break  # never without `finished`; a guard: nothing here waits on a dead thread
                 t0 = time.monotonic()
                 executor.spin_once(timeout_sec=SPIN_PERIOD)
                 busy = time.monotonic() - t0
                 if busy < 0.5 * SPIN_PERIOD:  # it ran a callback
                     time.sleep(busy * (1.0 / EXECUTOR_SHARE - 1.0))
         except Exception as exc:  # noqa: BLE001 - the log is closed below whatever happened
-            spin_error = f"{type(exc).__name__}: {exc}"
+            why = resource_error(exc)
+            spin_error = why or f"{type(exc).__name__}: {exc}"
         stats = node.finish()
         _report(node, stats, shutdown.signal_name)
-        if node.loop.crash:
+        code = 0
+        if node.loop.out_of_memory:
+            print("gyro_sim_node: the physics loop failed: out of memory (MemoryError)", file=sys.stderr)
+            code = 1
+        elif node.loop.crash:
             print(f"gyro_sim_node: the physics loop failed:\n{node.loop.crash}", file=sys.stderr)
-            return 1
+            code = 1
         if spin_error:
             print(f"gyro_sim_node: the executor failed: {spin_error}", file=sys.stderr)
-            return 1
+            code = 1
+        if node.recorder is not None and not node.recorder.complete:
+            code = 1  # said by _report
         if node.loop.failure is not None:
             print(f"gyro_sim_node: simulation error: {node.loop.failure}", file=sys.stderr)
-            return 1
-        return 0
+            code = 1
+        return code
     finally:
         if node is not None:
-            node.destroy_node()
+            try:
+                node.close_log()
+            finally:
+                node.destroy_node()
         rclpy.try_shutdown()
 
 
@@ -303,10 +525,17 @@ def _report(node, stats: dict, signal_name: str = "") -> None:
                 json.dump(stats, f, indent=1, default=str)
         except OSError as exc:
             print(f"gyro_sim_node: stats_file {cfg.stats_file}: {exc.strerror or exc}", file=sys.stderr)
-    if cfg.record:
-        print(f"gyro_sim_node: log written: {cfg.record} ({stats['records_written']} records)")
-        print(f"  view it:  rerun {cfg.record}")
-        print(f"       or:  gyro-sim view {cfg.record}")
+    rec = node.recorder
+    if rec is not None and rec.complete:
+        dropped = (f"; {rec.dropped_records} records of {rec.dropped_publications} publications dropped: the log "
+                   f"writer fell behind" if rec.dropped_records else "")
+        print(f"gyro_sim_node: log written: {rec.file} ({rec.records_in_file} records{dropped})")
+        print(f"  view it:  rerun {rec.file}")
+        print(f"       or:  gyro-sim view {rec.file}")
+    elif rec is not None:
+        sys.stdout.flush()
+        print(f"gyro_sim_node: log incomplete: {rec.file}: {rec.failure or rec.error}; what was written before "
+              f"can be read back with `gyro-sim recover {rec.file} -o fixed.mcap`", file=sys.stderr)
     sys.stdout.flush()
 
 

@@ -275,11 +275,24 @@ class Outputs:
             data = M.diagnostic_array(t_ns, [run])
         self.send(t_ns, [(M.DIAGNOSTICS, M.DIAGNOSTICS_TYPE, data)])
 
-    def record_command(self, t_ns: int, raw: bytes) -> None:
+    def record_commands(self, t_ns: int, raws: list) -> None:
+        """The commands a step took in, in the order received (the last one applied): one hand-over."""
         if self.recorder is not None:
-            self.recorder.raw(self.command_topic, M.COMMAND_TYPE, t_ns, raw)
+            self.recorder.raw_many(self.command_topic, M.COMMAND_TYPE, t_ns, raws)
 
-    def event(self, t_ns: int, text: str) -> None:
-        self.node.get_logger().info(f"t = {t_ns * 1e-9:.6f} s: {text}")
+    def record_event(self, t_ns: int, text: str) -> None:
+        """An event for the log only (e.g. each rejected command: the console says them throttled)."""
         if self.recorder is not None:
             self.recorder.raw(self.events_topic, M.STRING_TYPE, t_ns, M.string(text))
+
+    def event(self, t_ns: int, text: str, level: str = "info") -> None:
+        """An event: one console line at `level` (info, warning, error) and the log."""
+        line, logger = f"t = {t_ns * 1e-9:.6f} s: {text}", self.node.get_logger()
+        # one call site per severity: rclpy refuses another severity from the same line
+        if level == "error":
+            logger.error(line)
+        elif level == "warning":
+            logger.warning(line)
+        else:
+            logger.info(line)
+        self.record_event(t_ns, text)

@@ -16,6 +16,8 @@ from gyro_sim.errors import GyroSimError
 MAX_PHYSICS_RATE = 100_000.0
 #: relative tolerance on physics_rate / publish_rate being a whole number of steps
 RATIO_TOLERANCE = 1e-9
+#: default of record_queue_mb (MB waiting for the log writer before publications are dropped)
+RECORD_QUEUE_MB = 64.0
 
 
 class ParameterError(GyroSimError, ValueError):
@@ -55,6 +57,10 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("publish_poses", bool, True, "publish ~/poses (computed only while someone listens or records)"),
     Parameter("stats_file", str, "", "write the run's timing statistics as JSON to this file at exit; empty = none"),
     Parameter("overwrite", bool, False, "replace existing record / stats_file files (never the scene file)"),
+    Parameter("record_queue_mb", float, RECORD_QUEUE_MB,
+              "most megabytes of records waiting for the log writer; when it falls further behind, the oldest "
+              "publications waiting are dropped from the log (counted in /diagnostics), never commands or events",
+              1.0, 4096.0),
     Parameter("thread_priority", float, 50.0,
               "SCHED_FIFO priority (1-99) of the physics thread while pacing in real time, where the system allows "
               "it (as ros2_control's thread_priority); 0 = the normal scheduler", 0.0, 99.0),
@@ -82,6 +88,7 @@ class NodeConfig:
     stats_file: str
     overwrite: bool = False
     thread_priority: float = 0.0
+    record_queue_mb: float = RECORD_QUEUE_MB
 
     @property
     def dt(self) -> float:

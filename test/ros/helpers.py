@@ -46,13 +46,14 @@ def node_command(*params: str, params_file: str | None = None) -> list[str]:
 class NodeProcess:
     """The node in a subprocess, its output in files."""
 
-    def __init__(self, tmp: Path, domain_id: int, *params: str, params_file=None, name: str = "node"):
+    def __init__(self, tmp: Path, domain_id: int, *params: str, params_file=None, name: str = "node",
+                 env: dict | None = None, new_session: bool = False):
         self.out_path, self.err_path = tmp / f"{name}.out", tmp / f"{name}.err"
         (tmp / "ros_log").mkdir(exist_ok=True)
-        self.env = ros_env(domain_id, tmp / "ros_log")
+        self.env = {**ros_env(domain_id, tmp / "ros_log"), **(env or {})}
         self.proc = subprocess.Popen(
             node_command(*params, params_file=params_file), cwd=ROOT, env=self.env,
-            stdout=open(self.out_path, "w"), stderr=open(self.err_path, "w"),
+            stdout=open(self.out_path, "w"), stderr=open(self.err_path, "w"), start_new_session=new_session,
         )
 
     @property
@@ -75,6 +76,40 @@ class NodeProcess:
                 self.proc.kill()
                 self.proc.wait(5)
         return self.proc.returncode
+
+
+def children(pid: int) -> list[int]:
+    """The processes `pid` started (Linux: /proc/PID/task/*/children)."""
+    out: list[int] = []
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        try:
+            out += [int(x) for x in (task / "children").read_text().split()]
+        except OSError:  # the thread ended meanwhile
+            pass
+    return out
+
+
+def writer_of(node: "NodeProcess", timeout: float = 60.0) -> int:
+    """The pid of the node's log writer process (gyro_sim.ros.recorder's child), once it exists."""
+    def find():
+        assert node.alive(), f"the node ended before its writer started:\n{node.stderr[-2000:]}"
+        for pid in children(node.proc.pid):
+            try:
+                if b"_child_main" in Path(f"/proc/{pid}/cmdline").read_bytes():
+                    return pid
+            except OSError:
+                pass
+        return None
+
+    return wait_for(find, timeout, "the log writer process", poll=0.005)
+
+
+def rss_mb(pid: int) -> float:
+    """Resident memory of a process (MB)."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    raise AssertionError(f"no VmRSS for {pid}")
 
 
 class Client:

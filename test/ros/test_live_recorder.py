@@ -45,3 +45,56 @@ def test_the_writer_process_runs_at_a_lower_priority_than_the_node(tmp_path):
         assert rec.writer.nice == min(19, os.getpriority(os.PRIO_PROCESS, 0) + WRITER_NICE)
     finally:
         rec.close()
+
+
+def test_a_stopped_writer_drops_the_oldest_publications_never_commands(tmp_path):
+    """The writer process stopped (SIGSTOP): past max_backlog_bytes the oldest publications
+    waiting are dropped whole and counted, the commands and events never; resumed, the log holds
+    exactly what was not dropped, in the order handed over, and says how many records it holds."""
+    import os
+    import signal
+    import time
+
+    from gyro_sim.log.mcap_log import iter_messages
+    from gyro_sim.ros.recorder import SEND_PERIOD
+
+    sim = Simulator(load_scene("hinge_chain"))
+    pub = M.Publication(sim.model.names)
+    frame = pub.frame(sim.snapshot().joint_names, wrenches=True, poses=True, tf=True)
+    rec = LiveRecorder(str(tmp_path / "stall.mcap"), scene=sim.scene, params={}, max_backlog_bytes=100_000)
+    os.kill(rec._proc.pid, signal.SIGSTOP)  # noqa: SLF001
+    sent, commands = [], []
+    try:
+        for i in range(3000):  # ~3 MB of publications: the pipe (1 MB) and the bound (0.1 MB) overflow
+            sim.advance(0.001)
+            t = M.time_ns(sim.time)
+            sim.snapshot(bodies=True, wrenches=True, invariants=False, into=frame.scatter)
+            batch = frame.messages(t)
+            rec.raw_batch(t, batch)
+            sent.append((t, [(topic, bytes(data)) for topic, _, data in batch]))
+            if i % 10 == 0:
+                cmd = M.axis_moments([0.0, 1e-3 * i, 0.0])
+                rec.raw_many("/gyro_sim/axis_moments", M.COMMAND_TYPE, t, [cmd])
+                commands.append((t, cmd))
+            if i % 100 == 0:
+                time.sleep(2 * SEND_PERIOD)  # the sender takes what waits, drops, and writes what the pipe takes
+        assert rec.dropped_publications > 0 and rec.failure is None
+    finally:
+        os.kill(rec._proc.pid, signal.SIGCONT)  # noqa: SLF001
+    rec.close()
+    assert rec.complete and rec.error is None and rec.file == str(tmp_path / "stall.mcap")
+    got = [(topic, t, bytes(d)) for topic, _, t, d in iter_messages(rec.file, decode=False, log_time_order=False)]
+    assert rec.records_in_file == len(got)
+    logged_cmds = [(t, d) for topic, t, d in got if topic == "/gyro_sim/axis_moments"]
+    assert logged_cmds == commands  # every command, in order
+    js_times = [t for topic, t, _ in got if topic == M.JOINT_STATES]
+    kept = [(t, msgs) for t, msgs in sent if t in set(js_times)]
+    assert len(sent) - len(kept) == rec.dropped_publications
+    kept_times = {t for t, _ in kept}
+    dropped = [i for i, (t, _) in enumerate(sent) if t not in kept_times]
+    # the oldest waiting go first: those in the pipe before the stop stay, the newest stay, one block between
+    assert dropped == list(range(dropped[0], dropped[-1] + 1)) and 0 < dropped[0] and dropped[-1] < len(sent) - 1
+    assert sum(len(m) for t, m in sent) - sum(len(m) for t, m in kept) == rec.dropped_records
+    # what is kept is whole and in order: the records of each kept publication, as handed over
+    pubs = [(topic, t, d) for topic, t, d in got if topic not in ("/gyro_sim/axis_moments", M.ROBOT_DESCRIPTION)]
+    assert pubs == [(topic, t, d) for t, msgs in kept for topic, d in msgs]

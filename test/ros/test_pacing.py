@@ -31,6 +31,7 @@ class FakeClock:
 class Outputs:
     def __init__(self):
         self.states, self.events, self.commands, self.diags = [], [], [], []
+        self.log = []  # what would go to the log, in order: ("command" | "event", t, bytes or text)
 
     def prepare_state(self, t, sim, diagnostics_run=False):
         if diagnostics_run is not False:
@@ -43,11 +44,16 @@ class Outputs:
     def publish_diagnostics(self, t, sim, run):
         self.diags.append((t, run))
 
-    def record_command(self, t, raw):
-        self.commands.append((t, raw))
+    def record_commands(self, t, raws):
+        self.commands += [(t, raw) for raw in raws]
+        self.log += [("command", t, raw) for raw in raws]
 
-    def event(self, t, text):
+    def record_event(self, t, text):
+        self.log.append(("event", t, text))
+
+    def event(self, t, text, level="info"):
         self.events.append((t, text))
+        self.record_event(t, text)
 
 
 def make_loop(clock, step_cost=0.0, **params):
@@ -111,8 +117,12 @@ def test_loop_tracks_wall_time_and_applies_commands_at_the_next_step():
     t = np.array([s[0] for s in out.states])
     assert np.all(np.diff(t) == 20_000_000)  # ns
     assert loop.pacer.misses == 0 and abs(loop.pacer.lag(loop.node_time)) <= loop.dt
-    # the good command recorded at the step it took effect; the bad ones counted, not recorded
+    # the good command recorded at the step it took effect; the bad ones counted and logged as
+    # events with their reasons (their values never reach the log)
     assert out.commands == [(0, b"x")]
+    rejected = [text for kind, _, text in out.log if kind == "event" and text.startswith("command rejected")]
+    assert rejected == ["command rejected (expected 3 values (one per axis), got 1)",
+                        "command rejected (holds NaN or inf)"]
     assert out.states[0][2] == [0.0, 0.0, 0.0] and out.states[1][2] == [0.0, 0.05, -0.03]
     assert loop.counters.accepted == 1 and loop.counters.rejected == 2
 
@@ -199,8 +209,9 @@ def test_histogram_quantiles_in_constant_memory():
 
 
 def test_a_command_flood_keeps_only_the_latest_for_the_next_step():
-    """Bounded intake: 10,000 commands between two steps are one command applied, recorded
-    once, the rest counted as superseded; bad ones are counted, never applied."""
+    """Bounded intake: 10,000 commands between two steps are one command applied, the rest
+    counted as superseded; all of them go to the log at that step's time, in the order
+    received, the applied one last (one hand-over); bad ones are counted, never applied."""
     clock = FakeClock()
     # no timeout: on the fake clock the loop may run far past `steps >= 3` before it is stopped
     loop, out = make_loop(clock, command_timeout=1e6)
@@ -208,7 +219,7 @@ def test_a_command_flood_keeps_only_the_latest_for_the_next_step():
         assert loop.submit_command(b"%d" % i, [0.0, 1e-6 * i, 0.0]) is None
     assert loop.submit_command(b"bad", [0.0, float("nan"), 0.0]) is not None
     run_until(loop, lambda: loop.steps >= 3)
-    assert out.commands == [(0, b"9999")]
+    assert out.commands == [(0, b"%d" % i) for i in range(10_000)]
     assert loop.sim.axis_moments[1] == pytest.approx(1e-6 * 9999)
     assert loop.counters.accepted == 10_000 and loop.counters.superseded == 9_999 and loop.counters.rejected == 1
 
@@ -395,3 +406,35 @@ def test_a_fifo_thread_that_cannot_keep_up_goes_back_to_the_normal_scheduler(mon
     # demoted about FIFO_DEMOTE_AFTER of wall time after the start (node time runs at 1/3 of it)
     assert 0.2 < demoted[0][0] * 1e-9 < 0.6, demoted
     assert loop.summary()["physics_thread_priority"] == 0
+
+
+def test_commands_received_while_paused_or_before_a_reset_are_all_logged_in_causal_order():
+    """Paused: the commands already superseded are logged at the pause's node time; the latest
+    at the first step after the resume (the same node time), or when the loop ends, whichever
+    comes first, once. At a reset, the commands not yet taken are logged at its time before its
+    event (the reset zeroes the moments): a reader applying the log in file order ends with
+    what the loop applied."""
+    clock = FakeClock()
+    loop, out = make_loop(clock, command_timeout=1e6)
+    run_until(loop, lambda: loop.steps >= 5)
+    loop.requests.append(Request("pause", True))
+    run_until(loop, lambda: loop.paused)
+    t_pause = loop.node_ns
+    for i in range(3):
+        assert loop.submit_command(b"p%d" % i, [0.0, 0.01 * (i + 1), 0.0]) is None
+    run_until(loop, lambda: len(out.commands) >= 2)  # the idle loop logs the superseded two
+    assert out.commands[:2] == [(t_pause, b"p0"), (t_pause, b"p1")] and loop.node_ns == t_pause
+    loop.requests.append(Request("pause", False))
+    steps = loop.steps
+    run_until(loop, lambda: loop.steps > steps)
+    assert out.commands[2] == (t_pause, b"p2") and loop.sim.axis_moments[1] == pytest.approx(0.03)
+    loop.requests.append(Request("pause", True))
+    run_until(loop, lambda: loop.paused)
+    assert loop.submit_command(b"r0", [0.0, 0.5, 0.0]) is None
+    loop.requests.append(Request("reset"))
+    run_until(loop, lambda: any(e == "reset" for _, e in out.events))
+    t_reset = [t for t, e in out.events if e == "reset"][0]
+    order = [(kind, t, x) for kind, t, x in out.log if t == t_reset]
+    assert order[-2:] == [("command", t_reset, b"r0"), ("event", t_reset, "reset")]
+    assert np.all(loop.sim.axis_moments == 0.0)
+    assert loop.counters.accepted == 4 == len(out.commands)

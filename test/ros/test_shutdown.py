@@ -1,10 +1,13 @@
-"""Every shutdown closes the log: 30 SIGTERM and 30 SIGINT at random moments of a recording
-node (during start-up and warm-up, in the first second, during a reset, later) each leave a
-log that rosbags reads completely, and the node exits 0 with its summary.
+"""Every shutdown leaves the record path either holding a complete log or nothing: 30 SIGTERM
+and 30 SIGINT at random moments of a recording node (during start-up and warm-up, in the first
+second, during a reset, later). A signal during start-up gives the start up (exit 0, one line,
+the file created for the log removed: nothing was recorded); later, the node exits 0 with its
+summary and a log that rosbags reads completely.
 
-The node owns its signal handling (gyro_sim.ros.node.Shutdown): a signal only sets a flag,
-and the log is closed before rclpy's context goes away, so there is no race to lose. The
-moments are drawn from a seeded generator: a failure names its case and can be replayed.
+The node owns its signal handling (gyro_sim.ros.node.Shutdown): after start-up a signal only
+sets a flag, and the log is closed before rclpy's context goes away, so there is no race to
+lose. The moments are drawn from a seeded generator: a failure names its case and can be
+replayed.
 """
 from __future__ import annotations
 
@@ -24,7 +27,8 @@ from .helpers import DISCOVERY_TIMEOUT, Client, NodeProcess, new_domain_id, wait
 
 RUNS_PER_SIGNAL = 30
 SEED = 20261123
-#: (mode, share of the runs): when the signal comes, counted from the moment the log exists
+#: (mode, share of the runs): when the signal comes, counted from the moment the log file
+#: exists (start-up: the node creates it early in its start) or the run starts (the others)
 MODES = (("start-up", 0.25), ("first second", 0.35), ("reset", 0.2), ("later", 0.2))
 WORKERS = 2
 
@@ -62,6 +66,8 @@ def one_run(tmp: Path, domain: int, client: Client, case) -> str | None:
                        f"record:={log}", name=f"run{i}")
     try:
         wait_for(lambda: log.exists() or not node.alive(), 60.0, f"case {i}: the log file")
+        if mode != "start-up":  # the others count from the run's start
+            wait_for(lambda: "physics thread:" in node.stderr or not node.alive(), 60.0, f"case {i}: the run")
         if mode == "reset":
             cli = client.node.create_client(Trigger, "/gyro_sim/reset")
             if cli.wait_for_service(timeout_sec=DISCOVERY_TIMEOUT):
@@ -77,6 +83,10 @@ def one_run(tmp: Path, domain: int, client: Client, case) -> str | None:
     what = f"case {i} ({sig.name}, {mode}, {delay:.3f} s)"
     if rc != 0:
         return f"{what}: exit {rc}\n{node.stderr[-1500:]}"
+    if f"{sig.name} during start-up: not started" in node.stderr:
+        if log.exists() or list(tmp.glob(f"{log.name}.*")):
+            return f"{what}: start given up, yet a file is left: {sorted(p.name for p in tmp.glob(log.name + '*'))}"
+        return None
     if f"log written: {log}" not in node.stdout:
         return f"{what}: no 'log written' line\n{node.stdout[-500:]}"
     try:
