@@ -95,6 +95,12 @@ WORK_FIXED = 81
 #: (9e-12 at 1e2: test/core/test_heavy_tip.py). Chains whose subtrees all weigh less than this
 #: many times their carriers cannot pass on more and skip the check.
 STABLE_ABA_RATIO = 100.0
+#: flags (`model_arguments`, int64): base type, has gravity, has lambda (rotors), i_r0, i_vel,
+#: i_kappa, N, then FLAG_HEAVY: the address of the compiled heavy-subtree elimination
+#: (`heavy_elimination_address`), 0 for a model whose subtrees all weigh at most STABLE_ABA_RATIO
+#: times their carriers (the kernel never takes that path there)
+FLAG_HEAVY = 7
+FLAGS_SIZE = 8
 
 
 def available() -> bool:
@@ -783,7 +789,8 @@ def _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, D
 
 
 @_njit_inline
-def _aba(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot, Ia, pa, Dx, T, G, x):
+def _aba(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot, Ia, pa, Dx, T, G, x,
+         heavy):
     """Articulated-body algorithm: u' (N,) of the closure rows S_j . F_subtree(k(j)) = tau_j
     (eqs 44, 51, 54; Featherstone 2008, Table 7.1), about each body's O^k in world axes.
 
@@ -795,6 +802,10 @@ def _aba(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udo
     (checked only where a subtree is that much heavier than its carrier), then `_aba_stable`
     from the bodies' own inertias again (square-root factors and one step of iterative
     refinement; exact to ~1e-14 relative at mass ratios up to 1e7, about 2.5 x the cost).
+    heavy: flags[FLAG_HEAVY], where that path (`_aba_heavy`) is compiled: it is called through
+    this address, not compiled into every kernel that inlines this one (its allocations and
+    square-root form are two thirds of the kernel's compile time, and no model below
+    STABLE_ABA_RATIO ever runs it).
     """
     n = IA.shape[0]
     after = 0.0
@@ -810,8 +821,8 @@ def _aba(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udo
     # a heavy subtree: what decides is the mass its elimination passes on (an articulated, not a
     # rigid, inertia: a uniform chain of 1000 links passes on about a link's mass at each joint),
     # known only once the classic elimination has run
-    _aba_heavy(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
-               Ia, pa, Dx, T, G, x)
+    _heavy(heavy, is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
+           Ia, pa, Dx, T, G, x)
 
 
 @_njit_alloc
@@ -1126,6 +1137,132 @@ else:  # plain Python: without numba, or NUMBA_DISABLE_JIT (the 80-digit oracle,
         return work[o:o + n * m * q].reshape(n, m, q)
 
 
+# --- the heavy-subtree path, compiled apart and called through its address ---------------------
+def heavy_subtrees(mass) -> bool:
+    """True when `_aba` takes its heavy-subtree path for bodies of these masses (n,): the same
+    test in the same operations as `_aba`'s (the mass of bodies k.. against body k - 1's)."""
+    after = 0.0
+    worst = 0.0
+    for k in range(len(mass) - 1, 0, -1):
+        after += float(mass[k])
+        if after > worst * float(mass[k - 1]):
+            worst = after / float(mass[k - 1])
+    return not worst <= STABLE_ABA_RATIO
+
+
+#: `_heavy_entry`'s arguments: the addresses of `_aba_heavy`'s 20 arrays, then n and N
+HEAVY_ENTRY_ARGUMENTS = 22
+
+
+if numba is not None and not numba.config.DISABLE_JIT:
+    from llvmlite import ir as _llir
+    from numba.core import cgutils as _cgutils
+
+    @_intrinsic
+    def address_of(typingctx, a):
+        """The address (int64) of the first element of the array a (compiled code only)."""
+        if not isinstance(a, _nbt.Array):
+            return None
+
+        def codegen(context, builder, sig, args):
+            data = context.make_array(sig.args[0])(context, builder, args[0]).data
+            return builder.ptrtoint(data, context.get_value_type(_nbt.int64))
+
+        return _nbt.int64(a), codegen
+
+    @_intrinsic
+    def vector_at(typingctx, address, size, dtype):
+        """The C-contiguous vector of `size` items of `dtype` (a numpy scalar class) at `address`
+        (int64), owned elsewhere (no meminfo, nothing counted): the caller keeps it alive."""
+        if not (isinstance(address, _nbt.Integer) and isinstance(size, _nbt.Integer)
+                and isinstance(dtype, _nbt.NumberClass)):
+            return None
+        vector = _nbt.Array(dtype.dtype, 1, "C")
+
+        def codegen(context, builder, sig, args):
+            model = context.data_model_manager[vector]
+            item = context.get_constant(_nbt.intp, context.get_abi_sizeof(context.get_data_type(dtype.dtype)))
+            n = context.cast(builder, args[1], sig.args[1], _nbt.intp)
+            data = builder.inttoptr(args[0], context.get_value_type(_nbt.CPointer(dtype.dtype)))
+            value = _cgutils.get_null_value(context.get_value_type(vector))
+            for name, v in (("nitems", n), ("itemsize", item), ("data", data),
+                            ("shape", _cgutils.pack_array(builder, [n])),
+                            ("strides", _cgutils.pack_array(builder, [item]))):
+                value = builder.insert_value(value, v, model.get_field_position(name))
+            return value
+
+        return vector(address, size, dtype), codegen
+
+    @_intrinsic
+    def call_address(typingctx, address, args):
+        """Call the C function `void f(int64, ...)` at `address` with the int64s of the tuple
+        `args` (compiled code only): a call the caller's compilation does not compile in."""
+        if not (isinstance(address, _nbt.Integer) and isinstance(args, _nbt.BaseTuple)
+                and all(isinstance(a, _nbt.Integer) for a in args)):
+            return None
+
+        def codegen(context, builder, sig, llargs):
+            i64 = _llir.IntType(64)
+            fnty = _llir.FunctionType(_llir.VoidType(), [i64] * len(args))
+            fn = builder.inttoptr(llargs[0], fnty.as_pointer())
+            values = [context.cast(builder, v, t, _nbt.int64)
+                      for v, t in zip(_cgutils.unpack_tuple(builder, llargs[1], len(args)), args)]
+            builder.call(fn, values)
+            return context.get_dummy_value()
+
+        return _nbt.void(address, args), codegen
+
+    @_njit_inline
+    def _heavy(address, is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
+               Ia, pa, Dx, T, G, x):
+        """`_aba_heavy` through the address of its compiled entry (`heavy_elimination_address`).
+        Address 0 (a model built without it, `model_arguments` says why that cannot happen with
+        heavy subtrees): u' not a number, which the integrators report as a non-finite rhs."""
+        if address == 0:
+            for j in range(udot.shape[0]):
+                udot[j] = np.nan
+            return
+        call_address(address, (
+            address_of(is_hinge), address_of(col_start), address_of(S), address_of(IA), address_of(pA),
+            address_of(c), address_of(tau), address_of(a_base), address_of(s_w), address_of(U),
+            address_of(W), address_of(u), address_of(Dinv), address_of(udot), address_of(Ia),
+            address_of(pa), address_of(Dx), address_of(T), address_of(G), address_of(x),
+            IA.shape[0], S.shape[0]))
+
+    def _heavy_entry(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot, Ia, pa,
+                     Dx, T, G, x, n, N):
+        """`_aba_heavy` on the arrays at these addresses (C-contiguous, the shapes `_aba` gives
+        them for n bodies and N columns): compiled as a C function (`heavy_elimination_address`)."""
+        f = np.float64
+        _aba_heavy(vector_at(is_hinge, n, np.bool_), vector_at(col_start, n + 1, np.int64),
+                   block2(vector_at(S, 6 * N, f), 0, N, 6), block3(vector_at(IA, 36 * n, f), 0, n, 6, 6),
+                   block2(vector_at(pA, 6 * n, f), 0, n, 6), block2(vector_at(c, 6 * n, f), 0, n, 6),
+                   vector_at(tau, N, f), vector_at(a_base, 6, f), block2(vector_at(s_w, 3 * n, f), 0, n, 3),
+                   block2(vector_at(U, 6 * N, f), 0, N, 6), block2(vector_at(W, 6 * N, f), 0, N, 6),
+                   vector_at(u, N, f), block3(vector_at(Dinv, 36 * n, f), 0, n, 6, 6), vector_at(udot, N, f),
+                   block2(vector_at(Ia, 36, f), 0, 6, 6), vector_at(pa, 6, f),
+                   block2(vector_at(Dx, 9, f), 0, 3, 3), block2(vector_at(T, 9, f), 0, 3, 3),
+                   block2(vector_at(G, 9, f), 0, 3, 3), vector_at(x, 6, f))
+else:  # plain Python: the heavy path called directly
+    def _heavy(address, *arrays):
+        _aba_heavy(*arrays)
+
+_HEAVY_ENTRY = []
+
+
+def heavy_elimination_address() -> int:
+    """The address of `_aba_heavy` compiled as a C function of HEAVY_ENTRY_ARGUMENTS int64s
+    (`_heavy_entry`), compiled or loaded from numba's disk cache on the first call (~12 s of CPU
+    compiled, when no kernel needs it otherwise); 0 without numba or with NUMBA_DISABLE_JIT,
+    where `_aba` calls it directly."""
+    if numba is None or numba.config.DISABLE_JIT:
+        return 0
+    if not _HEAVY_ENTRY:
+        signature = numba.types.void(*(numba.types.int64,) * HEAVY_ENTRY_ARGUMENTS)
+        _HEAVY_ENTRY.append(numba.cfunc(signature, cache=True, error_model="numpy", _nrt=True)(_heavy_entry))
+    return _HEAVY_ENTRY[0].address
+
+
 @_njit_inline
 def workspace_views(work, n, N, nt):
     """`rhs_kernel`'s workspace (`workspace`) cut into its views, the one place its layout is
@@ -1188,7 +1325,8 @@ def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis,
 
     work: float workspace of n WORK_PER_BODY + N WORK_PER_COLUMN + nt + WORK_FIXED (`workspace`);
     nothing is allocated per call.
-    flags (int, 7): base type, has gravity, has lambda (rotors), i_r0, i_vel, i_kappa, N.
+    flags (int, FLAGS_SIZE): base type, has gravity, has lambda (rotors), i_r0, i_vel, i_kappa,
+    N, the heavy path's address (FLAG_HEAVY).
     base (float, 7): moving-base amplitude (3), W = 2 pi f, gravity (3).
     Held inputs: torque-rotor spins p_i = p0_i + pdot_i (t - t0) (eq 29), their torques
     L_rotor, the generalized forces tau (N,) of the columns (hinge commands, eq 51).
@@ -1218,7 +1356,7 @@ def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis,
         for a in range(3):
             a_base[3 + a] = base_amplitude[a] * sw
     _aba(is_hinge, col_start, S, I6, pb, c, tau, a_base, s_w, U, W, u, Dinv, ydot[i_vel:i_vel + N],
-         Ia, pa, Dx, T, G, x)
+         Ia, pa, Dx, T, G, x, flags[FLAG_HEAVY])
     # y'
     if base_type == BASE_FREE:
         for a in range(3):
@@ -1255,7 +1393,8 @@ def model_arguments(model: Model) -> tuple:
 
     Per body: the y index of its quaternion (spherical) or of phi_k (hinge) (`qrow`); the first
     velocity column of its own joint (`own_col`); the range of all its columns (`col_start`,
-    n + 1; a free base's translations belong to body 0). `flags` and `base` as in `rhs_kernel`.
+    n + 1; a free base's translations belong to body 0). `flags` and `base` as in `rhs_kernel`;
+    a model with heavy subtrees (`heavy_subtrees`) compiles (or loads) the heavy path now.
     """
     m, n = model, model.n
     qrow = np.empty(n, dtype=np.int64)
@@ -1269,8 +1408,9 @@ def model_arguments(model: Model) -> tuple:
         raise ValueError("a joint has more than six velocity columns")
     base_type = {"fixed": BASE_FIXED, "moving": BASE_MOVING, "free": BASE_FREE}[m.base_type]
     has_lam = len(m.torque_body) > 0 or m.lam_speed is not None
+    heavy = heavy_elimination_address() if heavy_subtrees(m.mass) else 0
     flags = np.array([base_type, m.gravity is not None, has_lam, m.i_r0.start, m.i_vel.start,
-                      m.i_kappa.start, m.N], dtype=np.int64)
+                      m.i_kappa.start, m.N, heavy], dtype=np.int64)
     base = np.zeros(7)
     if m.base_amplitude is not None:
         base[0:3] = m.base_amplitude

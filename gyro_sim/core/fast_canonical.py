@@ -149,7 +149,7 @@ def _rates(t, z, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, 
         a_base[a] = 0.0
     fast.joint_columns_stage(is_hinge, own_col, base_type, e_w, S)
     fast.articulated_solve(is_hinge, col_start, S, I6, pb, c, prel, a_base, s_w, U, W, u, Dinv, rate,
-                           Ia, pa, Dx, T, G, x)
+                           Ia, pa, Dx, T, G, x, flags[fast.FLAG_HEAVY])
     for j in range(N):
         y[i_vel + j] = rate[j]
     fast.velocities_stage(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, i_vel,
