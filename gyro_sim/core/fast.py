@@ -100,7 +100,10 @@ STABLE_ABA_RATIO = 100.0
 #: (`heavy_elimination_address`), 0 for a model whose subtrees all weigh at most STABLE_ABA_RATIO
 #: times their carriers (the kernel never takes that path there)
 FLAG_HEAVY = 7
-FLAGS_SIZE = 8
+#: flags[FLAG_KERNEL]: the address of `rhs_kernel` compiled as a C function (`kernel_address`),
+#: which the compiled loops call (`rhs_call`) instead of compiling the kernel into themselves
+FLAG_KERNEL = 8
+FLAGS_SIZE = 9
 
 
 def available() -> bool:
@@ -1160,8 +1163,9 @@ if numba is not None and not numba.config.DISABLE_JIT:
 
     @_intrinsic
     def address_of(typingctx, a):
-        """The address (int64) of the first element of the array a (compiled code only)."""
-        if not isinstance(a, _nbt.Array):
+        """The address (int64) of the first element of the C-contiguous array a (compiled code
+        only; another layout does not compile: the callee reads the items consecutively)."""
+        if not (isinstance(a, _nbt.Array) and a.layout == "C"):
             return None
 
         def codegen(context, builder, sig, args):
@@ -1195,18 +1199,19 @@ if numba is not None and not numba.config.DISABLE_JIT:
 
     @_intrinsic
     def call_address(typingctx, address, args):
-        """Call the C function `void f(int64, ...)` at `address` with the int64s of the tuple
-        `args` (compiled code only): a call the caller's compilation does not compile in."""
+        """Call the C function `void f(...)` at `address` with the tuple `args` (compiled code
+        only), integers passed as int64, floats as double: a call the caller's compilation does
+        not compile in."""
         if not (isinstance(address, _nbt.Integer) and isinstance(args, _nbt.BaseTuple)
-                and all(isinstance(a, _nbt.Integer) for a in args)):
+                and all(isinstance(a, (_nbt.Integer, _nbt.Float)) for a in args)):
             return None
+        kinds = [_nbt.float64 if isinstance(a, _nbt.Float) else _nbt.int64 for a in args]
 
         def codegen(context, builder, sig, llargs):
-            i64 = _llir.IntType(64)
-            fnty = _llir.FunctionType(_llir.VoidType(), [i64] * len(args))
+            fnty = _llir.FunctionType(_llir.VoidType(), [context.get_value_type(k) for k in kinds])
             fn = builder.inttoptr(llargs[0], fnty.as_pointer())
-            values = [context.cast(builder, v, t, _nbt.int64)
-                      for v, t in zip(_cgutils.unpack_tuple(builder, llargs[1], len(args)), args)]
+            values = [context.cast(builder, v, t, k)
+                      for v, t, k in zip(_cgutils.unpack_tuple(builder, llargs[1], len(args)), args, kinds)]
             builder.call(fn, values)
             return context.get_dummy_value()
 
@@ -1243,11 +1248,69 @@ if numba is not None and not numba.config.DISABLE_JIT:
                    block2(vector_at(Ia, 36, f), 0, 6, 6), vector_at(pa, 6, f),
                    block2(vector_at(Dx, 9, f), 0, 3, 3), block2(vector_at(T, 9, f), 0, 3, 3),
                    block2(vector_at(G, 9, f), 0, 3, 3), vector_at(x, 6, f))
-else:  # plain Python: the heavy path called directly
+    @_njit_inline
+    def kernel_arrays(work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
+                      inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base, p0, pdot,
+                      L_rotor, tau, nwork, n, N, nt):
+        """The kernel's arrays at these addresses (`rhs_call` passes them), C-contiguous, of the
+        shapes `workspace`, `model_arguments` and `input_arguments` give them: (work and the
+        model's 15), (p0, pdot, L_rotor, tau)."""
+        f, i = np.float64, np.int64
+        return ((vector_at(work, nwork, f), vector_at(is_hinge, n, np.bool_), vector_at(qrow, n, i),
+                 vector_at(own_col, n, i), vector_at(col_start, n + 1, i),
+                 block2(vector_at(hinge_axis, 3 * n, f), 0, n, 3), block2(vector_at(s, 3 * n, f), 0, n, 3),
+                 vector_at(mass, n, f), block2(vector_at(first_moment, 3 * n, f), 0, n, 3),
+                 block3(vector_at(inertia, 9 * n, f), 0, n, 3, 3), block2(vector_at(lam_speed, 3 * n, f), 0, n, 3),
+                 vector_at(torque_body, nt, i), block2(vector_at(torque_axis, 3 * nt, f), 0, nt, 3),
+                 vector_at(torque_A, nt, f), vector_at(flags, FLAGS_SIZE, i), vector_at(base, 7, f)),
+                (vector_at(p0, nt, f), vector_at(pdot, nt, f), vector_at(L_rotor, nt, f), vector_at(tau, N, f)))
+
+    @_njit_inline
+    def kernel_addresses(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                         first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
+                         base, t0, p0, pdot, L_rotor, tau):
+        """What the C entry of the kernel takes (`_kernel_entry`): t, the addresses of y, ydot and
+        the kernel's arrays, t0, then the sizes of y, the workspace, n, N, nt."""
+        return (t, address_of(y), address_of(ydot), address_of(work), address_of(is_hinge), address_of(qrow),
+                address_of(own_col), address_of(col_start), address_of(hinge_axis), address_of(s),
+                address_of(mass), address_of(first_moment), address_of(inertia), address_of(lam_speed),
+                address_of(torque_body), address_of(torque_axis), address_of(torque_A), address_of(flags),
+                address_of(base), address_of(p0), address_of(pdot), address_of(L_rotor), address_of(tau), t0,
+                y.shape[0], work.shape[0], mass.shape[0], tau.shape[0], torque_body.shape[0])
+
+    def _kernel_entry(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                      first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base,
+                      p0, pdot, L_rotor, tau, t0, size, nwork, n, N, nt):
+        """`rhs_kernel` on the arrays at these addresses (`kernel_arrays`): compiled as a C
+        function (`kernel_address`)."""
+        m, h = kernel_arrays(work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
+                             inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base, p0, pdot,
+                             L_rotor, tau, nwork, n, N, nt)
+        rhs_kernel(t, vector_at(y, size, np.float64), vector_at(ydot, size, np.float64), m[0], m[1], m[2], m[3],
+                   m[4], m[5], m[6], m[7], m[8], m[9], m[10], m[11], m[12], m[13], m[14], m[15], t0,
+                   h[0], h[1], h[2], h[3])
+
+    @_njit_inline
+    def rhs_call(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                 first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
+                 base, t0, p0, pdot, L_rotor, tau):
+        """`rhs_kernel` (same arguments, C-contiguous) through its compiled C function at
+        flags[FLAG_KERNEL]: for compiled loops, which then do not compile the kernel in."""
+        call_address(flags[FLAG_KERNEL], kernel_addresses(
+            t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia,
+            lam_speed, torque_body, torque_axis, torque_A, flags, base, t0, p0, pdot, L_rotor, tau))
+else:  # plain Python: the heavy path and the kernel called directly
     def _heavy(address, *arrays):
         _aba_heavy(*arrays)
 
+    def rhs_call(*arguments):
+        rhs_kernel(*arguments)
+
 _HEAVY_ENTRY = []
+_KERNEL_ENTRY = []
+#: `_kernel_entry`'s arguments: t, the addresses of y, ydot and the kernel's 21 arrays, t0, then
+#: the sizes of y, the workspace, n, N, nt
+KERNEL_ENTRY_ARGUMENTS = 30
 
 
 def heavy_elimination_address() -> int:
@@ -1261,6 +1324,19 @@ def heavy_elimination_address() -> int:
         signature = numba.types.void(*(numba.types.int64,) * HEAVY_ENTRY_ARGUMENTS)
         _HEAVY_ENTRY.append(numba.cfunc(signature, cache=True, error_model="numpy", _nrt=True)(_heavy_entry))
     return _HEAVY_ENTRY[0].address
+
+
+def kernel_address() -> int:
+    """The address of `rhs_kernel` compiled as a C function (`_kernel_entry`: t, the arrays'
+    addresses, t0, their sizes), compiled or loaded from numba's disk cache on the first call;
+    0 without numba or with NUMBA_DISABLE_JIT, where `rhs_call` calls the kernel directly."""
+    if numba is None or numba.config.DISABLE_JIT:
+        return 0
+    if not _KERNEL_ENTRY:
+        f, i = numba.types.float64, numba.types.int64
+        signature = numba.types.void(f, *(i,) * 22, f, *(i,) * 5)
+        _KERNEL_ENTRY.append(numba.cfunc(signature, cache=True, error_model="numpy", _nrt=False)(_kernel_entry))
+    return _KERNEL_ENTRY[0].address
 
 
 @_njit_inline
@@ -1410,7 +1486,7 @@ def model_arguments(model: Model) -> tuple:
     has_lam = len(m.torque_body) > 0 or m.lam_speed is not None
     heavy = heavy_elimination_address() if heavy_subtrees(m.mass) else 0
     flags = np.array([base_type, m.gravity is not None, has_lam, m.i_r0.start, m.i_vel.start,
-                      m.i_kappa.start, m.N, heavy], dtype=np.int64)
+                      m.i_kappa.start, m.N, heavy, kernel_address()], dtype=np.int64)
     base = np.zeros(7)
     if m.base_amplitude is not None:
         base[0:3] = m.base_amplitude

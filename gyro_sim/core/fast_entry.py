@@ -176,7 +176,7 @@ def rhs_entry(t, y, ydot, buf):
     # the views fast.rhs_kernel cuts its workspace with: C-ordered, uncounted
     is_hinge = fast.block1(buf.view(np.bool_), _WORD * h[H_IS_HINGE], n)
     b1, b2, b3 = fast.block1, fast.block2, fast.block3
-    fast.rhs_kernel(
+    fast.rhs_call(
         t, y, ydot, b1(buf, w0, ha - w0), is_hinge, b1(h, h[H_QROW], n), b1(h, h[H_OWN_COL], n),
         b1(h, h[H_COL_START], n + 1), b2(buf, ha, n, 3), b2(buf, h[H_S], n, 3), b1(buf, h[H_MASS], n),
         b2(buf, h[H_FIRST_MOMENT], n, 3), b3(buf, h[H_INERTIA], n, 3, 3), b2(buf, h[H_LAM_SPEED], n, 3),

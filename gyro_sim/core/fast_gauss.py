@@ -101,9 +101,9 @@ def _field(t, y, out, kargs):
     canonical one (fast_canonical.canonical_kernel: gauss4s) for a FastCanonicalChain's, which
     are longer; chosen when the march is compiled for the arguments' types."""
     if len(kargs) == fast_canonical.CHAIN_ARGUMENTS:
-        fast.rhs_kernel(t, y, out, *kargs)
+        fast.rhs_call(t, y, out, *kargs)
     else:
-        fast_canonical.canonical_kernel(t, y, out, *kargs)
+        fast_canonical.canonical_call(t, y, out, *kargs)
 
 
 if fast.numba is not None:
@@ -112,8 +112,8 @@ if fast.numba is not None:
     @overload(_field, inline="always")
     def _field_typed(t, y, out, kargs):
         if len(kargs) == fast_canonical.CHAIN_ARGUMENTS:
-            return lambda t, y, out, kargs: fast.rhs_kernel(t, y, out, *kargs)
-        return lambda t, y, out, kargs: fast_canonical.canonical_kernel(t, y, out, *kargs)
+            return lambda t, y, out, kargs: fast.rhs_call(t, y, out, *kargs)
+        return lambda t, y, out, kargs: fast_canonical.canonical_call(t, y, out, *kargs)
 
 
 @_njit

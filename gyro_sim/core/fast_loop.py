@@ -63,6 +63,23 @@ def njit_with_dependencies(*files):
     return decorate
 
 
+def cfunc_with_dependencies(signature, *files, **options):
+    """A decorator: compiled as a C function of `signature` (numba.cfunc: its `address` is what
+    compiled code calls, `gyro_sim.core.fast.call_address`), in nopython mode with numpy's error
+    model, cached on disk in :func:`cache_directory` of `files` (as `njit_with_dependencies`).
+    Compiles (or loads) when applied: apply it when the function is first needed."""
+
+    def decorate(fn):
+        saved = numba.config.CACHE_DIR
+        numba.config.CACHE_DIR = str(cache_directory(files))  # read when the cache is made
+        try:
+            return numba.cfunc(signature, cache=True, error_model="numpy", **options)(fn)
+        finally:
+            numba.config.CACHE_DIR = saved
+
+    return decorate
+
+
 class Direct:
     """A compiled kernel called without numba's per-call type dispatch: the first call goes
     through the dispatcher (compiling or loading), later calls straight to the compiled
@@ -119,12 +136,12 @@ def erk_march(t0, h, nsteps, y, A, B, C, K, ys, i_q0, nq,
     hB = B * h
     for k in range(nsteps):
         t = t0 + k * h
-        fast.rhs_kernel(t, y, K[0], work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+        fast.rhs_call(t, y, K[0], work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
                         first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
                         flags, base, ht0, p0, pdot, L_rotor, tau)
         for st in range(1, stages):
             erk_stage_state(y, K, hA, st, ys)
-            fast.rhs_kernel(t + C[st] * h, ys, K[st], work, is_hinge, qrow, own_col, col_start,
+            fast.rhs_call(t + C[st] * h, ys, K[st], work, is_hinge, qrow, own_col, col_start,
                             hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
                             torque_axis, torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
         erk_update(y, K, hB)
