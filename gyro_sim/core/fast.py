@@ -1299,6 +1299,13 @@ if numba is not None and not numba.config.DISABLE_JIT:
         call_address(flags[FLAG_KERNEL], kernel_addresses(
             t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia,
             lam_speed, torque_body, torque_axis, torque_A, flags, base, t0, p0, pdot, L_rotor, tau))
+    def _null_entry(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                    first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base,
+                    p0, pdot, L_rotor, tau, t0, size, nwork, n, N, nt):
+        """`_kernel_entry`'s signature, y' = 0: compiled as a C function (`null_kernel_address`)."""
+        v = vector_at(ydot, size, np.float64)
+        for k in range(size):
+            v[k] = 0.0
 else:  # plain Python: the heavy path and the kernel called directly
     def _heavy(address, *arrays):
         _aba_heavy(*arrays)
@@ -1308,9 +1315,17 @@ else:  # plain Python: the heavy path and the kernel called directly
 
 _HEAVY_ENTRY = []
 _KERNEL_ENTRY = []
-#: `_kernel_entry`'s arguments: t, the addresses of y, ydot and the kernel's 21 arrays, t0, then
-#: the sizes of y, the workspace, n, N, nt
-KERNEL_ENTRY_ARGUMENTS = 30
+_NULL_ENTRY = []
+#: `_kernel_entry`'s arguments after t: the addresses of y, ydot and the kernel's 20 arrays (all
+#: but t0), then t0, then the sizes of y, the workspace, n, N, nt
+KERNEL_ADDRESSES, KERNEL_SIZES = 22, 5
+
+
+def kernel_signature(*extra):
+    """The numba signature of the kernel's C function (`_kernel_entry`), `extra` argument types
+    after it (fast_canonical's field adds four)."""
+    f, i = numba.types.float64, numba.types.int64
+    return numba.types.void(f, *(i,) * KERNEL_ADDRESSES, f, *(i,) * KERNEL_SIZES, *extra)
 
 
 def heavy_elimination_address() -> int:
@@ -1333,10 +1348,22 @@ def kernel_address() -> int:
     if numba is None or numba.config.DISABLE_JIT:
         return 0
     if not _KERNEL_ENTRY:
-        f, i = numba.types.float64, numba.types.int64
-        signature = numba.types.void(f, *(i,) * 22, f, *(i,) * 5)
+        signature = kernel_signature()
         _KERNEL_ENTRY.append(numba.cfunc(signature, cache=True, error_model="numpy", _nrt=False)(_kernel_entry))
     return _KERNEL_ENTRY[0].address
+
+
+def null_kernel_address() -> int:
+    """The address of a C function of `kernel_address`'s signature that only sets y' = 0: for
+    compiling the loops and outputs without the dynamics (their code does not depend on the
+    kernel they call through flags[FLAG_KERNEL]: gyro_sim.warmup's helper builds its systems on
+    it). Never for results. 0 without numba or with NUMBA_DISABLE_JIT."""
+    if numba is None or numba.config.DISABLE_JIT:
+        return 0
+    if not _NULL_ENTRY:
+        signature = kernel_signature()
+        _NULL_ENTRY.append(numba.cfunc(signature, cache=True, error_model="numpy", _nrt=False)(_null_entry))
+    return _NULL_ENTRY[0].address
 
 
 @_njit_inline

@@ -327,8 +327,7 @@ def canonical_address() -> int:
     if fast.numba is None or fast.numba.config.DISABLE_JIT:
         return 0
     if not _CANONICAL_ENTRY:
-        f, i = fast.numba.types.float64, fast.numba.types.int64
-        signature = fast.numba.types.void(f, *(i,) * 22, f, *(i,) * 5, *(i,) * 4)
+        signature = fast.kernel_signature(*(fast.numba.types.int64,) * 4)
         _CANONICAL_ENTRY.append(fast_loop.cfunc_with_dependencies(signature, *DEPENDENCIES, _nrt=False)(
             _canonical_entry))
     return _CANONICAL_ENTRY[0].address
@@ -369,7 +368,9 @@ class FastCanonicalChain(CanonicalChain):
         zrow[m.sph_bodies, 1] = self.i_pq[:, 0]
         zrow[m.hinge_bodies, 0] = self.i_phi.start + np.arange(len(m.hinge_bodies))
         zrow[m.hinge_bodies, 1] = self.i_pphi.start + np.arange(len(m.hinge_bodies))
-        cflags = np.array([self.i_pr.start, self.i_kappa.start, m.size, canonical_address()], dtype=np.int64)
+        # cflags[CFLAG_KERNEL]: set by the first `kernel_arguments` (the C function compiled, or
+        # loaded, when a compiled march first needs it: "fixed" builds a gauss4s it may never run)
+        cflags = np.array([self.i_pr.start, self.i_kappa.start, m.size, 0], dtype=np.int64)
         self._extra = (zrow, cflags, canonical_workspace(m, self.size))
         self._field = fast_loop.Direct(canonical_kernel)
         self._state = fast_loop.Direct(state_kernel)
@@ -377,6 +378,9 @@ class FastCanonicalChain(CanonicalChain):
     def kernel_arguments(self) -> tuple:
         """`canonical_kernel`'s arguments after (t, z, out): the chain kernel's, then zrow,
         cflags, cwork. Valid until the next `hold`."""
+        cflags = self._extra[1]
+        if not cflags[CFLAG_KERNEL]:
+            cflags[CFLAG_KERNEL] = canonical_address()
         return (*self.ode.kernel_arguments(), *self._extra)
 
     def quaternion_block(self) -> tuple[int, int]:
