@@ -32,10 +32,12 @@ import time
 from pathlib import Path
 
 #: measured cold compile (CPU s) of what the first step of a run with each integrator needs,
-#: NUMBA_CACHE_DIR pointing at an empty directory, on the project's 2-core machine: this
-#: process's share (the dynamics kernel, the entry, the rk4 loop), the helper compiling the
-#: rest at the same time; wall time is longer on a busy machine
-COMPILE_SECONDS = {"fixed": 15, "gauss4s": 15, "gauss4": 15, "lie4": 15, "dop853": 15, "rk4": 15, "auto": 15, "radau": 15}
+#: NUMBA_CACHE_DIR pointing at an empty directory, on the project's 2-core machine: the longer
+#: of this process's share (the dynamics kernel, the entry, the rk4 loop: 14 s) and the
+#: helper's (the outputs: 7.5 s, and the integrator's first loop), which run at the same time;
+#: wall time is longer on a busy machine
+COMPILE_SECONDS = {"fixed": 15, "rk4": 15, "lie4": 15, "auto": 16, "dop853": 16, "radau": 24, "gauss4": 31,
+                   "gauss4s": 48}
 #: the scene compiled for: one signature serves every scene (fast.py), any small one will do
 WARM_UP_SCENE = "hinge_chain"
 #: a Lagrange chain (its integrals, eqs 82 and 85, are compiled for its snapshots)
@@ -181,12 +183,25 @@ def warm_everything(integrator: str = DEFAULT_INTEGRATOR) -> None:
 
 
 def filling() -> bool:
-    """True while the helper this process started is still compiling into the cache: a start
-    then leaves the methods it may switch to for later (the helper compiles them)."""
+    """True while a helper compiles into this cache (the one this process started, or another
+    start's: it holds the lock): a start then leaves the methods it may switch to for later
+    (the helper compiles them)."""
+    import fcntl
+
     global _helper
     if _helper is not None and _helper.poll() is not None:
         _helper = None
-    return _helper is not None
+    if _helper is not None:
+        return True
+    try:
+        with open(_lock_path(), "w") as lock:
+            try:
+                fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)  # released when closed
+            except BlockingIOError:
+                return True
+    except OSError:  # no lock file can be made there: no helper can run there either
+        return False
+    return False
 
 
 def _lock_path() -> Path:
@@ -319,7 +334,7 @@ def fill(integrator: str, out=sys.stdout) -> None:
     with open(_lock_path(), "w") as lock:
         try:
             fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
+        except BlockingIOError:  # another helper fills this cache
             out.close()
             return
         from .core import fast

@@ -119,7 +119,13 @@ def test_the_helper_says_how_to_call_it():
     assert len(r.stderr.splitlines()) == 1
 
 
-def test_no_helper_no_filling():
+def test_filling_while_a_helper_holds_the_lock():
+    """Another start's helper (it holds the cache's lock) counts: this start then leaves the
+    methods it may switch to to it."""
     from gyro_sim import warmup
 
+    assert warmup.filling() is False
+    with open(warmup._lock_path(), "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        assert warmup.filling() is True
     assert warmup.filling() is False
