@@ -53,9 +53,12 @@ calls from other modules (numba docs, "Cache limitations").
 `available()` tells whether numba imports. Without numba this module still imports (its
 kernels stay plain Python, far too slow to use) and `FastChainODE` raises ImportError.
 Compilation: one signature serves every scene (model differences are array contents and
-flags), ~9 s of CPU the first time, then ~0.3 s from numba's disk cache (`cache=True`:
+flags), ~12 s of CPU the first time, then ~0.3 s from numba's disk cache (`cache=True`:
 `__pycache__` beside this file, a user-wide cache directory if that is not writable, or
-NUMBA_CACHE_DIR); any edit of this file invalidates the cache.
+NUMBA_CACHE_DIR); any edit of this file invalidates the cache. The compiled loops of the
+other modules do not compile the kernel into themselves: they call it through its C
+function (`rhs_call`, the address in flags[FLAG_KERNEL]), and the kernel calls its rare
+heavy-subtree path through another (`_heavy`, flags[FLAG_HEAVY]), so each is compiled once.
 """
 from __future__ import annotations
 

@@ -5,7 +5,8 @@ in Python (`AdaptiveIntegrator._integrate`: `begin`, then `take_step` and `dense
 the steps with error control, accepted and rejected, the fresh rhs at the start, the FSAL
 stage, the dense output at the requested times, the renormalisation of the quaternions of
 every accepted state and output, the finite checks. It calls the articulated-body kernel
-:func:`gyro_sim.core.fast.rhs_kernel` directly and the arithmetic of
+:func:`gyro_sim.core.fast.rhs_kernel` (through its compiled C function, `fast.rhs_call`) and the
+arithmetic of
 :mod:`gyro_sim.core.dop853_kernels`, the very functions the Python driver calls between its
 rhs evaluations on other systems: the two drivers give the same bits.
 

@@ -3,7 +3,8 @@
 :func:`gauss_march` is the Python driver of :class:`gyro_sim.core.integrators.gauss.Gauss4`
 (`_step`, `_substep`, `_newton_dense`, `_newton_krylov`, with the base's projection and
 finiteness check) statement for statement, calling the articulated-body kernel
-:func:`gyro_sim.core.fast.rhs_kernel` directly and the arithmetic of
+:func:`gyro_sim.core.fast.rhs_kernel` (through its compiled C function, `fast.rhs_call`; the
+canonical field through `fast_canonical.canonical_call`) and the arithmetic of
 :mod:`gyro_sim.core.gauss_kernels` (the very functions the Python driver calls): no Python
 between two evaluations, and the same steps bit for bit (test/core/test_gauss.py).
 :class:`GaussMarch` binds it to a :class:`gyro_sim.core.system.FastChainODE` through the

@@ -3,7 +3,8 @@ CF4 in one call.
 
 :func:`lie_march` is the Python driver :meth:`gyro_sim.core.integrators.lie4.Lie4._step` (with
 the base's projection and finiteness check) statement for statement, calling the
-articulated-body kernel :func:`gyro_sim.core.fast.rhs_kernel` directly and the arithmetic of
+articulated-body kernel :func:`gyro_sim.core.fast.rhs_kernel` (through its compiled C function,
+`fast.rhs_call`) and the arithmetic of
 :mod:`gyro_sim.core.lie_kernels` (the very functions the Python driver calls): no Python
 between two evaluations, and the same steps bit for bit (test/core/test_fast_lie.py).
 :class:`LieMarch` binds it to a :class:`gyro_sim.core.system.FastChainODE` through the

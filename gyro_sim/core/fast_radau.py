@@ -8,7 +8,7 @@ simplified Newton iteration, the error estimate and step control (accepted and r
 steps), the collocation polynomial as dense output at the requested times and as the next
 Newton start, the renormalisation of the quaternions of every accepted state and output,
 the finite checks. It calls the articulated-body kernel :func:`gyro_sim.core.fast.rhs_kernel`
-directly and the arithmetic of :mod:`gyro_sim.core.radau_kernels` (the starting step that of
+(through its compiled C function, `fast.rhs_call`) and the arithmetic of :mod:`gyro_sim.core.radau_kernels` (the starting step that of
 :mod:`gyro_sim.core.dop853_kernels`), the very functions the Python driver calls between its
 rhs evaluations on other systems: the two drivers give the same bits.
 
