@@ -1251,6 +1251,7 @@ if numba is not None and not numba.config.DISABLE_JIT:
                    block2(vector_at(Ia, 36, f), 0, 6, 6), vector_at(pa, 6, f),
                    block2(vector_at(Dx, 9, f), 0, 3, 3), block2(vector_at(T, 9, f), 0, 3, 3),
                    block2(vector_at(G, 9, f), 0, 3, 3), vector_at(x, 6, f))
+
     @_njit_inline
     def kernel_arrays(work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
                       inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base, p0, pdot,
@@ -1302,6 +1303,7 @@ if numba is not None and not numba.config.DISABLE_JIT:
         call_address(flags[FLAG_KERNEL], kernel_addresses(
             t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia,
             lam_speed, torque_body, torque_axis, torque_A, flags, base, t0, p0, pdot, L_rotor, tau))
+
     def _null_entry(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
                     first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base,
                     p0, pdot, L_rotor, tau, t0, size, nwork, n, N, nt):
@@ -1315,6 +1317,7 @@ else:  # plain Python: the heavy path and the kernel called directly
 
     def rhs_call(*arguments):
         rhs_kernel(*arguments)
+
 
 _HEAVY_ENTRY = []
 _KERNEL_ENTRY = []
@@ -1333,8 +1336,8 @@ def kernel_signature(*extra):
 
 def heavy_elimination_address() -> int:
     """The address of `_aba_heavy` compiled as a C function of HEAVY_ENTRY_ARGUMENTS int64s
-    (`_heavy_entry`), compiled or loaded from numba's disk cache on the first call (~12 s of CPU
-    compiled, when no kernel needs it otherwise); 0 without numba or with NUMBA_DISABLE_JIT,
+    (`_heavy_entry`), compiled or loaded from numba's disk cache on the first call (12-19 s of
+    CPU compiled, measured: less when the kernel's stages are compiled already); 0 without numba or with NUMBA_DISABLE_JIT,
     where `_aba` calls it directly."""
     if numba is None or numba.config.DISABLE_JIT:
         return 0
@@ -1432,7 +1435,8 @@ def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis,
     work: float workspace of n WORK_PER_BODY + N WORK_PER_COLUMN + nt + WORK_FIXED (`workspace`);
     nothing is allocated per call.
     flags (int, FLAGS_SIZE): base type, has gravity, has lambda (rotors), i_r0, i_vel, i_kappa,
-    N, the heavy path's address (FLAG_HEAVY).
+    N, the heavy path's address (FLAG_HEAVY), this kernel's C function's (FLAG_KERNEL: for
+    the compiled loops, `rhs_call`).
     base (float, 7): moving-base amplitude (3), W = 2 pi f, gravity (3).
     Held inputs: torque-rotor spins p_i = p0_i + pdot_i (t - t0) (eq 29), their torques
     L_rotor, the generalized forces tau (N,) of the columns (hinge commands, eq 51).
@@ -1499,8 +1503,9 @@ def model_arguments(model: Model) -> tuple:
 
     Per body: the y index of its quaternion (spherical) or of phi_k (hinge) (`qrow`); the first
     velocity column of its own joint (`own_col`); the range of all its columns (`col_start`,
-    n + 1; a free base's translations belong to body 0). `flags` and `base` as in `rhs_kernel`;
-    a model with heavy subtrees (`heavy_subtrees`) compiles (or loads) the heavy path now.
+    n + 1; a free base's translations belong to body 0). `flags` and `base` as in `rhs_kernel`:
+    the kernel's C function is compiled (or loaded) now, and the heavy path for a model with
+    heavy subtrees (`heavy_subtrees`).
     """
     m, n = model, model.n
     qrow = np.empty(n, dtype=np.int64)
