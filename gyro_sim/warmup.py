@@ -1,52 +1,93 @@
-"""The first start: compiling the numba kernels of :mod:`gyro_sim.dynamics`, said out loud.
+"""The first start: compiling the numba kernels of :mod:`gyro_sim.dynamics`, said out loud, in two
+processes.
 
 The kernels (the dynamics of fast.py, the outputs, and each integrator's compiled loop) are
 compiled once per installation (and after any edit of their files) and then loaded from
-numba's disk cache; a start compiles only what its integrator runs. Compiling takes about ``COMPILE_SECONDS`` on the project's
-2-core machine, during which nothing else is printed; :func:`precompile` says so first and
-prints a line per kernel compiled, then later starts find the cache warm and print nothing.
+numba's disk cache. The loops call the dynamics through its compiled C function
+(`gyro_sim.dynamics.kernel.rhs_call`), so none of them compiles the dynamics again, and each can be
+compiled without it. A cold start (:func:`precompile`) therefore splits the work:
+
+- this process compiles the dynamics kernel (its C function: the longest piece), then the
+  entry of one evaluation and the rk4 loop;
+- a helper process (``python -m gyro_sim.warmup --fill INTEGRATOR``, started here) compiles at
+  the same time what else the first step needs, on a kernel that only zeroes y' (`fast.null_kernel_address`:
+  the loops and outputs do not depend on which kernel they call): the publication kernel and
+  the integrator's first loop; it says so on its stdout, which this process waits for; then,
+  at a lower priority and after this process has moved on, everything else a run with that
+  integrator may switch to ("fixed": gauss4s and the dop853 rescue; "auto": radau), a Lagrange
+  chain's integrals and the heavy-subtree path, into the same cache.
+
+Later starts load it all (~2 s). What the helper has not yet written when a run first needs it
+is compiled by that run itself: the same code either way, so the results do not depend on it
+(only the wait does). The node skips the warm-up of the methods it may switch to while the
+helper fills the cache (`filling`).
 """
 from __future__ import annotations
 
+import os
+import select
+import subprocess
 import sys
 import time
+from pathlib import Path
 
-#: measured cold compile (CPU s) of what a run with each integrator needs, NUMBA_CACHE_DIR pointing
-#: at an empty directory, on the project's 2-core machine (README; wall time is longer on a busy
-#: machine): every loop compiles the dynamics kernel into itself again, which is most of it
-COMPILE_SECONDS = {"fixed": 130, "gauss4s": 120, "gauss4": 80, "lie4": 70, "dop853": 75, "rk4": 65, "auto": 105, "radau": 95}
+#: measured cold compile (CPU s) of what the first step of a run with each integrator needs,
+#: NUMBA_CACHE_DIR pointing at an empty directory, on the project's 2-core machine: the longer
+#: of this process's share (the dynamics kernel, the entry, the rk4 loop: 14 s) and the
+#: helper's (the outputs: 7.5 s, and the integrator's first loop), which run at the same time;
+#: wall time is longer on a busy machine
+COMPILE_SECONDS = {"fixed": 15, "rk4": 15, "lie4": 15, "auto": 16, "dop853": 16, "radau": 24, "gauss4": 31,
+                   "gauss4s": 48}
 #: the scene compiled for: one signature serves every scene (fast.py), any small one will do
 WARM_UP_SCENE = "hinge_chain"
-
+#: a Lagrange chain (its integrals, eqs 82 and 85, are compiled for its snapshots)
+LAGRANGE_SCENE = "heavy_top"
+#: the helper's niceness once the first step's kernels are in the cache
+HELPER_NICE = 10
+#: the longest wait (s) for the helper's share of the first step (it is there in ~15 s)
+HELPER_WAIT = 600.0
+#: the line the helper prints when the first step's kernels are in the cache
+READY = "ready"
 
 #: the modules holding numba kernels (dispatchers)
 KERNEL_MODULES = ("gyro_sim.dynamics.kernel", "gyro_sim.dynamics.entry", "gyro_sim.integrators.rk4.kernels", "gyro_sim.integrators.rk4.loop", "gyro_sim.dynamics.outputs", "gyro_sim.analytic.lagrange", "gyro_sim.integrators.gauss4.kernels", "gyro_sim.integrators.gauss4.loop",
                   "gyro_sim.dynamics.canonical_kernel", "gyro_sim.integrators.dop853.kernels", "gyro_sim.integrators.dop853.loop", "gyro_sim.integrators.lie4.kernels", "gyro_sim.integrators.lie4.loop", "gyro_sim.integrators.radau.kernels", "gyro_sim.integrators.radau.loop")
-#: the compiled loops each integrator runs on the numba backend, (module, name), besides the
-#: kernels every run needs (fast.py's, the entry of one evaluation from Python, the outputs, a
-#: Lagrange chain's integrals); the cache counts as cold for an integrator when any of its
-#: kernels has no entry
-COMMON_KERNELS = (("gyro_sim.dynamics.entry", "rhs_entry"), ("gyro_sim.dynamics.outputs", "outputs_kernel"), ("gyro_sim.dynamics.outputs", "publication_kernel"), ("gyro_sim.analytic.lagrange", "_sums_82"),
-                  ("gyro_sim.analytic.lagrange", "_sums_85"))
-LOOPS = {
+#: the kernels compiled as C functions (numba.cfunc: no dispatcher), (module, function): the
+#: dynamics, the canonical field, the heavy-subtree path
+C_KERNEL, C_CANONICAL, C_HEAVY = ("gyro_sim.dynamics.kernel", "_kernel_entry"), ("gyro_sim.dynamics.canonical_kernel", "_canonical_entry"), ("gyro_sim.dynamics.kernel", "_heavy_entry")
+#: what every run's first step needs on the numba backend besides its integrator's first loop,
+#: (module, name): the entry of one evaluation from Python, the rk4 loop and the outputs
+#: (FastChainODE.warm_up), the publication kernel (snapshots)
+COMMON_KERNELS = (("gyro_sim.dynamics.entry", "rhs_entry"), ("gyro_sim.integrators.rk4.loop", "erk_march"), ("gyro_sim.dynamics.outputs", "publication_kernel"),
+                  C_KERNEL)
+#: the compiled loop the first step of each integrator runs ("fixed": rk4 on a soft scene, "auto": dop853)
+GAUSS4S = (("gyro_sim.integrators.gauss4.loop", "gauss_march"), ("gyro_sim.dynamics.canonical_kernel", "canonical_kernel"), ("gyro_sim.dynamics.canonical_kernel", "state_kernel"),
+           C_CANONICAL)
+FIRST_LOOPS = {
     "rk4": (("gyro_sim.integrators.rk4.loop", "erk_march"),),
     "lie4": (("gyro_sim.integrators.lie4.loop", "lie_march"),),
     "gauss4": (("gyro_sim.integrators.gauss4.loop", "gauss_march"),),
-    # gauss4s: gauss4's march over the canonical field (a second specialization of the march)
-    "gauss4s": (("gyro_sim.integrators.gauss4.loop", "gauss_march"), ("gyro_sim.dynamics.canonical_kernel", "canonical_kernel"),
-                ("gyro_sim.dynamics.canonical_kernel", "state_kernel")),
-    # fixed: rk4, gauss4s on a stiff scene, and its rescue (dop853) through the Python driver on
-    # the kernels
-    "fixed": (("gyro_sim.integrators.rk4.loop", "erk_march"), ("gyro_sim.integrators.gauss4.loop", "gauss_march"), ("gyro_sim.dynamics.canonical_kernel", "canonical_kernel"),
-              ("gyro_sim.dynamics.canonical_kernel", "state_kernel"), ("gyro_sim.integrators.dop853.kernels", "dop_update")),
+    "gauss4s": GAUSS4S,
+    "fixed": (("gyro_sim.integrators.rk4.loop", "erk_march"),),
     "dop853": (("gyro_sim.integrators.dop853.loop", "dop853_advance"),),
-    # auto: dop853's and radau's compiled loops in their detection modes (both built with the
-    # integrator: radau's is loaded, or compiled, before the first switch to it)
-    "auto": (("gyro_sim.integrators.dop853.loop", "dop853_advance"), ("gyro_sim.integrators.radau.loop", "radau_advance")),
+    "auto": (("gyro_sim.integrators.dop853.loop", "dop853_advance"),),
     "radau": (("gyro_sim.integrators.radau.loop", "radau_advance"),),
 }
+#: every compiled loop each integrator may run ("fixed": rk4, gauss4s on a stiff scene, and the
+#: rescue, dop853's Python driver on the kernels; "auto": dop853's and radau's loops)
+LOOPS = {
+    **FIRST_LOOPS,
+    "fixed": (("gyro_sim.integrators.rk4.loop", "erk_march"), *GAUSS4S, ("gyro_sim.integrators.dop853.kernels", "dop_update")),
+    "auto": (("gyro_sim.integrators.dop853.loop", "dop853_advance"), ("gyro_sim.integrators.radau.loop", "radau_advance")),
+}
+#: what any run may need beyond its integrator's loops: a Lagrange chain's integrals, the
+#: heavy-subtree path (a chain with a subtree STABLE_ABA_RATIO times heavier than its carrier)
+EXTRA_KERNELS = (("gyro_sim.analytic.lagrange", "_sums_82"), ("gyro_sim.analytic.lagrange", "_sums_85"), C_HEAVY)
 #: the node's default
 DEFAULT_INTEGRATOR = "fixed"
+
+#: the helper this process started (None: none, or it has ended)
+_helper: subprocess.Popen | None = None
 
 
 def _dispatchers(module_names) -> dict:
@@ -71,49 +112,174 @@ def kernels() -> dict:
     return _dispatchers(KERNEL_MODULES)
 
 
-def _needed(integrator: str) -> list:
+def _c_function_index(module: str, name: str) -> dict:
+    """The disk cache index of a kernel compiled as a C function (C_KERNEL...), keyed as
+    `gyro_sim.integrators.rk4.loop.cfunc_with_dependencies` keys it (its module's DEPENDENCIES, if
+    any); {} when it has no valid entry."""
+    import importlib
+
+    import numba
+    from numba.core.caching import FunctionCache
+
+    from gyro_sim.integrators.rk4 import loop as fast_loop
+
+    m = importlib.import_module(module)
+    files = getattr(m, "DEPENDENCIES", None) if module != "gyro_sim.dynamics.kernel" else None
+    saved = numba.config.CACHE_DIR
+    if files:
+        numba.config.CACHE_DIR = str(fast_loop.cache_directory(files))
+    try:
+        return FunctionCache(getattr(m, name))._cache_file._load_index()
+    finally:
+        numba.config.CACHE_DIR = saved
+
+
+def _cold(names) -> bool:
+    """True if one of these kernels, (module, name), has no valid entry in numba's cache index
+    (checked against its file's timestamp and size: an index written for another version of the
+    file reads as empty; the loops' and the C functions' indexes sit in directories keyed on
+    every file they compile in)."""
     ks = kernels()
-    names = [name for name in ks if name.startswith("gyro_sim.dynamics.kernel.")]
-    names += [f"{m}.{n}" for m, n in COMMON_KERNELS + LOOPS.get(integrator, ())]
-    return [ks[n] for n in names if n in ks]
+    try:
+        for module, name in names:
+            if (module, name) in (C_KERNEL, C_CANONICAL, C_HEAVY):
+                if not _c_function_index(module, name):
+                    return True
+            elif f"{module}.{name}" in ks and not ks[f"{module}.{name}"]._cache._cache_file._load_index():
+                return True
+        return False
+    except (AttributeError, OSError, ImportError):  # another numba layout: cannot tell, say nothing
+        return False
 
 
 def cache_is_cold(integrator: str = DEFAULT_INTEGRATOR) -> bool:
-    """True if a kernel a run with `integrator` needs has no valid entry in numba's disk cache
-    (none written yet, or its file changed since): the next start compiles. Checked: every
-    kernel of fast.py (any scene compiles all of them: one signature), the outputs, the
-    Lagrange integrals and the integrator's compiled loop (LOOPS: their cache index is keyed on
-    every file they inline)."""
-    try:
-        # numba's cache index of each kernel, checked against its file's timestamp and size
-        # (an index written for another version of the file reads as empty)
-        return any(not d._cache._cache_file._load_index() for d in _needed(integrator))
-    except (AttributeError, OSError):  # another numba layout: cannot tell, say nothing
-        return False
+    """True if a kernel the first step of a run with `integrator` needs has no valid entry in
+    numba's disk cache (none written yet, or its file changed since): the next start compiles
+    before its first step. Checked: the dynamics kernel's C function (it compiles every kernel
+    of fast.py it runs: one signature serves every scene), the entry, the rk4 loop, the
+    outputs and the integrator's first loop."""
+    return _cold(COMMON_KERNELS + FIRST_LOOPS.get(integrator, ()))
+
+
+def everything_cached(integrator: str = DEFAULT_INTEGRATOR) -> bool:
+    """True when every kernel a run with `integrator` may ever call is in the cache: its first
+    step's, every method it may switch to, a Lagrange chain's integrals, the heavy path."""
+    return not _cold(COMMON_KERNELS + LOOPS.get(integrator, ()) + EXTRA_KERNELS)
 
 
 def warm_everything(integrator: str = DEFAULT_INTEGRATOR) -> None:
     """Compile (or load) every kernel a run with `integrator` may call on the numba backend:
-    the dynamics, the outputs, a Lagrange chain's integrals, and the integrator's loop ("fixed":
-    both of its methods)."""
+    the dynamics, the outputs, a Lagrange chain's integrals, and the integrator's loops ("fixed":
+    all of its methods)."""
     from gyro_sim.simulator import Simulator
 
-    for scene in (WARM_UP_SCENE, "heavy_top"):  # heavy_top: a Lagrange chain (eqs 82, 85)
+    for scene in (WARM_UP_SCENE, LAGRANGE_SCENE):  # heavy_top: a Lagrange chain (eqs 82, 85)
         sim = Simulator(scene, integrator=integrator if integrator in LOOPS else "rk4", backend="numba")
-        sim.snapshot()
+        sim.snapshot(bodies=False, wrenches=False)
         warm = getattr(sim.integrator, "warm_up", None)
         if warm is not None:
             warm(sim.time, sim.state)
         sim.advance(0.002)
 
 
+def filling() -> bool:
+    """True while a helper compiles into this cache (the one this process started, or another
+    start's: it holds the lock): a start then leaves the methods it may switch to for later
+    (the helper compiles them)."""
+    import fcntl
+
+    global _helper
+    if _helper is not None and _helper.poll() is not None:
+        _helper = None
+    if _helper is not None:
+        return True
+    try:
+        with open(_lock_path(), "w") as lock:
+            try:
+                fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)  # released when closed
+            except BlockingIOError:
+                return True
+    except OSError:  # no lock file can be made there: no helper can run there either
+        return False
+    return False
+
+
+def _lock_path() -> Path:
+    """The helper's lock: beside the loops' cache directories (NUMBA_CACHE_DIR, or the package's
+    __pycache__, or ~/.cache/gyro_sim)."""
+    from gyro_sim.integrators.rk4 import loop as fast_loop
+
+    base = fast_loop.cache_directory(()).parent
+    base.mkdir(parents=True, exist_ok=True)
+    return base / "gyro_sim_warmup.lock"
+
+
+def _start_helper(integrator: str) -> subprocess.Popen | None:
+    """Start the helper that fills the cache for `integrator` (its stdout a pipe: READY when the
+    first step's share is there); None where it cannot start."""
+    root = str(Path(__file__).resolve().parents[1])  # the gyro_sim this process runs
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, (root, os.environ.get("PYTHONPATH")))))
+    try:
+        return subprocess.Popen([sys.executable, "-m", "gyro_sim.warmup", "--fill", integrator], env=env,
+                                stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                                text=True)
+    except OSError:
+        return None
+
+
+def _wait_ready(helper: subprocess.Popen) -> None:
+    """Wait until the helper says READY, ends, or HELPER_WAIT s pass."""
+    end = time.monotonic() + HELPER_WAIT
+    while time.monotonic() < end:
+        ready, _, _ = select.select([helper.stdout], [], [], max(0.0, end - time.monotonic()))
+        if not ready:
+            return
+        line = helper.stdout.readline()
+        if not line or line.strip() == READY:  # ended (EOF), or its share is in the cache
+            return
+
+
+def _compile_kernel() -> None:
+    """This process's share of a cold first step: the dynamics kernel (its C function), the
+    entry of one evaluation, the rk4 loop (what FastChainODE.warm_up runs besides the outputs)."""
+    import numpy as np
+
+    from gyro_sim.dynamics.model import compile_model, initial_state
+    from gyro_sim.scene.load import load_scene
+    from gyro_sim.dynamics.system import FastChainODE
+
+    system = FastChainODE(compile_model(load_scene(WARM_UP_SCENE)))  # the kernel's C function
+    y = initial_state(system.model)
+    system.rhs(0.0, y)
+    one = np.zeros((1, 1))
+    system.march_explicit_rk(one, one[0], one[0], 0.0, y, 1.0, 0)
+
+
+def _first_step(integrator: str) -> None:
+    """What the first step of a run with `integrator` compiles: a Simulator built, a snapshot,
+    an advance (the methods it may switch to left out)."""
+    from gyro_sim.simulator import Simulator
+
+    sim = Simulator(WARM_UP_SCENE, integrator=integrator if integrator in LOOPS else "rk4", backend="numba")
+    sim.snapshot(bodies=False, wrenches=False)
+    sim.advance(0.002)
+
+
 def precompile(stream=sys.stderr, prog: str = "gyro_sim", integrator: str = DEFAULT_INTEGRATOR) -> bool:
-    """If the cache is cold for a run with `integrator`, say so, compile its kernels with a
-    line per kernel, and return True; otherwise (or without numba) return False at once.
-    Compile errors are left to the backend selection of the Simulator, which falls back to
-    numpy when it may."""
+    """If the cache is cold for the first step of a run with `integrator`, say so, compile its
+    kernels with a line per kernel (the helper compiling its share at the same time), and
+    return True; otherwise (or without numba) return False at once. Where something else a
+    run may need is not cached, the helper is started to compile it in the background
+    (`filling`). Compile errors are left to the backend selection of the Simulator, which
+    falls back to numpy when it may."""
+    global _helper
     ks = kernels()
-    if not ks or not cache_is_cold(integrator):
+    if not ks:
+        return False
+    cold = cache_is_cold(integrator)
+    if (cold or not everything_cached(integrator)) and not filling():
+        _helper = _start_helper(integrator)
+    if not cold:
         return False
     from numba.core import event
 
@@ -139,8 +305,11 @@ def precompile(stream=sys.stderr, prog: str = "gyro_sim", integrator: str = DEFA
     listener = _Listener()
     event.register("numba:compile", listener)
     try:
-        try:  # compiles (or loads) every kernel a run may call
-            warm_everything(integrator)
+        try:  # this process's share, then (the helper's share loaded, or compiled here) the first step
+            _compile_kernel()
+            if _helper is not None:
+                _wait_ready(_helper)
+            _first_step(integrator)
         except Exception as exc:  # noqa: BLE001 - the real run reports (or falls back) itself
             stream.write(f"{prog}: compiling failed ({type(exc).__name__}: {exc}); the run itself will say more\n")
             return True
@@ -149,3 +318,69 @@ def precompile(stream=sys.stderr, prog: str = "gyro_sim", integrator: str = DEFA
     stream.write(f"{prog}: compiled in {time.perf_counter() - t0:.1f} s\n")
     stream.flush()
     return True
+
+
+# --- the helper ------------------------------------------------------------------------------
+def fill(integrator: str, out=sys.stdout) -> None:
+    """The helper's work (one at a time: a second helper finds the lock taken and returns): the
+    first step's kernels other than the dynamics, the entry and the rk4 loop (the outputs, the
+    integrator's first loop) on a null kernel, READY on `out`, then at a lower priority every
+    other kernel a run with `integrator` may need (`warm_everything` on the null kernel, the
+    heavy path), and last the dynamics kernel itself (loaded: this process's parent compiled
+    it, or compiled here). Failures end a step, not the helper: what it leaves out, a run
+    compiles itself."""
+    import fcntl
+
+    with open(_lock_path(), "w") as lock:
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:  # another helper fills this cache
+            out.close()
+            return
+        from gyro_sim.dynamics import kernel as fast
+        from gyro_sim.dynamics.model import compile_model, initial_state
+        from gyro_sim.scene.load import load_scene
+        from gyro_sim.integrators import make_integrator
+        from gyro_sim.dynamics.system import FastChainODE
+
+        real_kernel = fast.kernel_address
+        fast.kernel_address = fast.null_kernel_address  # model_arguments reads it when a system is built
+
+        def step(fn, *args):
+            try:
+                fn(*args)
+            except Exception:  # noqa: BLE001 - what is left out, a run compiles itself
+                pass
+
+        def share():  # on a system with no warm-up: its entry and rk4 loop are this process's parent's share
+            system = FastChainODE(compile_model(load_scene(WARM_UP_SCENE)))
+            y = initial_state(system.model)
+            if FIRST_LOOPS.get(integrator) != FIRST_LOOPS["rk4"]:
+                make_integrator(integrator, system).advance(0.0, y.copy(), 0.002)  # the first loop
+            system.outputs(0.0, y)  # the publication kernel
+
+        step(share)
+        try:
+            out.write(f"{READY}\n")
+            out.close()
+        except OSError:  # the parent has gone: go on filling the cache
+            pass
+        os.nice(HELPER_NICE)
+        step(warm_everything, integrator)
+        step(fast.heavy_elimination_address)
+        fast.kernel_address = real_kernel
+        step(fast.kernel_address)
+
+
+def main(argv=None) -> int:
+    """``python -m gyro_sim.warmup --fill INTEGRATOR``: the helper (`fill`)."""
+    args = sys.argv[1:] if argv is None else list(argv)
+    if len(args) != 2 or args[0] != "--fill" or args[1] not in LOOPS:
+        print(f"usage: python -m gyro_sim.warmup --fill {{{','.join(LOOPS)}}}", file=sys.stderr)
+        return 2
+    fill(args[1])
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -43,6 +43,11 @@ CHAIN_ARGUMENTS = 21
 #: floats of `cwork` per velocity column (p_rel, p_rel', u) and per body (pi, H, P, M, F: 3 each)
 CWORK_PER_COLUMN = 3
 CWORK_PER_BODY = 15
+#: `cflags`: i_pr, i_kappa of z, the model's size, then the address of `canonical_kernel`
+#: compiled as a C function (`canonical_address`), which gauss4's compiled march calls
+#: (`canonical_call`) instead of compiling the field into itself
+CFLAG_KERNEL = 3
+CFLAGS_SIZE = 4
 
 
 def _inline(fn):
@@ -150,7 +155,7 @@ def _rates(t, z, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, 
         a_base[a] = 0.0
     fast.joint_columns_stage(is_hinge, own_col, base_type, e_w, S)
     fast.articulated_solve(is_hinge, col_start, S, I6, pb, c, prel, a_base, s_w, U, W, u, Dinv, rate,
-                           Ia, pa, Dx, T, G, x)
+                           Ia, pa, Dx, T, G, x, flags[fast.FLAG_HEAVY])
     for j in range(N):
         y[i_vel + j] = rate[j]
     fast.velocities_stage(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, i_vel,
@@ -281,6 +286,54 @@ def canonical_kernel(t, z, zdot, work, is_hinge, qrow, own_col, col_start, hinge
         zdot[i_kap + i] = fast.rotor_angle_rate(pt, w[k, 0], w[k, 1], w[k, 2], e0, e1, e2)
 
 
+if fast.numba is not None and not fast.numba.config.DISABLE_JIT:
+    @_njit
+    def canonical_call(t, z, zdot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                       first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
+                       base, t0, p0, pdot, L_rotor, tau, zrow, cflags, cwork):
+        """`canonical_kernel` (same arguments, C-contiguous) through its C function at
+        cflags[CFLAG_KERNEL] (`canonical_address`): for compiled loops."""
+        fast.call_address(cflags[CFLAG_KERNEL], (*fast.kernel_addresses(
+            t, z, zdot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia,
+            lam_speed, torque_body, torque_axis, torque_A, flags, base, t0, p0, pdot, L_rotor, tau),
+            fast.address_of(zrow), fast.address_of(cflags), fast.address_of(cwork), cwork.shape[0]))
+else:  # plain Python: the field called directly
+    def canonical_call(*arguments):
+        canonical_kernel(*arguments)
+
+
+def _canonical_entry(t, z, zdot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                     first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base,
+                     p0, pdot, L_rotor, tau, t0, size, nwork, n, N, nt, zrow, cflags, cwork, ncwork):
+    """`canonical_kernel` on the arrays at these addresses (`fast.kernel_arrays`, then zrow (n, 2),
+    cflags, cwork): compiled as a C function (`canonical_address`)."""
+    m, h = fast.kernel_arrays(work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
+                              inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base, p0, pdot,
+                              L_rotor, tau, nwork, n, N, nt)
+    f, i = np.float64, np.int64
+    canonical_kernel(t, fast.vector_at(z, size, f), fast.vector_at(zdot, size, f), m[0], m[1], m[2], m[3],
+                     m[4], m[5], m[6], m[7], m[8], m[9], m[10], m[11], m[12], m[13], m[14], m[15], t0,
+                     h[0], h[1], h[2], h[3], fast.block2(fast.vector_at(zrow, 2 * n, i), 0, n, 2),
+                     fast.vector_at(cflags, CFLAGS_SIZE, i), fast.vector_at(cwork, ncwork, f))
+
+
+_CANONICAL_ENTRY = []
+
+
+def canonical_address() -> int:
+    """The address of `canonical_kernel` compiled as a C function (`_canonical_entry`: t, the
+    addresses of z, zdot and the chain kernel's arrays, t0, the sizes of z, the workspace, n,
+    N, nt, then the addresses of zrow, cflags, cwork and cwork's size), compiled or loaded from
+    numba's disk cache on the first call; 0 without numba or with NUMBA_DISABLE_JIT."""
+    if fast.numba is None or fast.numba.config.DISABLE_JIT:
+        return 0
+    if not _CANONICAL_ENTRY:
+        signature = fast.kernel_signature(*(fast.numba.types.int64,) * 4)
+        _CANONICAL_ENTRY.append(fast_loop.cfunc_with_dependencies(signature, *DEPENDENCIES, _nrt=False)(
+            _canonical_entry))
+    return _CANONICAL_ENTRY[0].address
+
+
 @_njit
 def state_kernel(t, z, y, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
                  first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
@@ -316,14 +369,19 @@ class FastCanonicalChain(CanonicalChain):
         zrow[m.sph_bodies, 1] = self.i_pq[:, 0]
         zrow[m.hinge_bodies, 0] = self.i_phi.start + np.arange(len(m.hinge_bodies))
         zrow[m.hinge_bodies, 1] = self.i_pphi.start + np.arange(len(m.hinge_bodies))
-        self._extra = (zrow, np.array([self.i_pr.start, self.i_kappa.start, m.size], dtype=np.int64),
-                       canonical_workspace(m, self.size))
+        # cflags[CFLAG_KERNEL]: set by the first `kernel_arguments` (the C function compiled, or
+        # loaded, when a compiled march first needs it: "fixed" builds a gauss4s it may never run)
+        cflags = np.array([self.i_pr.start, self.i_kappa.start, m.size, 0], dtype=np.int64)
+        self._extra = (zrow, cflags, canonical_workspace(m, self.size))
         self._field = fast_loop.Direct(canonical_kernel)
         self._state = fast_loop.Direct(state_kernel)
 
     def kernel_arguments(self) -> tuple:
         """`canonical_kernel`'s arguments after (t, z, out): the chain kernel's, then zrow,
         cflags, cwork. Valid until the next `hold`."""
+        cflags = self._extra[1]
+        if not cflags[CFLAG_KERNEL]:
+            cflags[CFLAG_KERNEL] = canonical_address()
         return (*self.ode.kernel_arguments(), *self._extra)
 
     def quaternion_block(self) -> tuple[int, int]:

@@ -117,7 +117,7 @@ def kernel_arguments(buf: np.ndarray) -> tuple:
             i(H_QROW, n), i(H_OWN_COL, n), i(H_COL_START, n + 1), f(H_HINGE_AXIS, n, 3),
             f(H_S, n, 3), f(H_MASS, n), f(H_FIRST_MOMENT, n, 3), f(H_INERTIA, n, 3, 3),
             f(H_LAM_SPEED, n, 3), i(H_TORQUE_BODY, nt), f(H_TORQUE_AXIS, nt, 3), f(H_TORQUE_A, nt),
-            i(H_FLAGS, 7), f(H_BASE, 7), float(buf[words[H_T0]]), f(H_P0, nt), f(H_PDOT, nt),
+            i(H_FLAGS, fast.FLAGS_SIZE), f(H_BASE, 7), float(buf[words[H_T0]]), f(H_P0, nt), f(H_PDOT, nt),
             f(H_L, nt), f(H_TAU, N))
 
 
@@ -176,12 +176,12 @@ def rhs_entry(t, y, ydot, buf):
     # the views fast.rhs_kernel cuts its workspace with: C-ordered, uncounted
     is_hinge = fast.block1(buf.view(np.bool_), _WORD * h[H_IS_HINGE], n)
     b1, b2, b3 = fast.block1, fast.block2, fast.block3
-    fast.rhs_kernel(
+    fast.rhs_call(
         t, y, ydot, b1(buf, w0, ha - w0), is_hinge, b1(h, h[H_QROW], n), b1(h, h[H_OWN_COL], n),
         b1(h, h[H_COL_START], n + 1), b2(buf, ha, n, 3), b2(buf, h[H_S], n, 3), b1(buf, h[H_MASS], n),
         b2(buf, h[H_FIRST_MOMENT], n, 3), b3(buf, h[H_INERTIA], n, 3, 3), b2(buf, h[H_LAM_SPEED], n, 3),
         b1(h, h[H_TORQUE_BODY], nt), b2(buf, h[H_TORQUE_AXIS], nt, 3), b1(buf, h[H_TORQUE_A], nt),
-        b1(h, h[H_FLAGS], 7), b1(buf, h[H_BASE], 7), buf[h[H_T0]], b1(buf, h[H_P0], nt),
+        b1(h, h[H_FLAGS], fast.FLAGS_SIZE), b1(buf, h[H_BASE], 7), buf[h[H_T0]], b1(buf, h[H_P0], nt),
         b1(buf, h[H_PDOT], nt), b1(buf, h[H_L], nt), b1(buf, h[H_TAU], N))
 
 

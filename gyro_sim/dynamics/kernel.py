@@ -53,9 +53,12 @@ calls from other modules (numba docs, "Cache limitations").
 `available()` tells whether numba imports. Without numba this module still imports (its
 kernels stay plain Python, far too slow to use) and `FastChainODE` raises ImportError.
 Compilation: one signature serves every scene (model differences are array contents and
-flags), ~9 s of CPU the first time, then ~0.3 s from numba's disk cache (`cache=True`:
+flags), ~12 s of CPU the first time, then ~0.3 s from numba's disk cache (`cache=True`:
 `__pycache__` beside this file, a user-wide cache directory if that is not writable, or
-NUMBA_CACHE_DIR); any edit of this file invalidates the cache.
+NUMBA_CACHE_DIR); any edit of this file invalidates the cache. The compiled loops of the
+other modules do not compile the kernel into themselves: they call it through its C
+function (`rhs_call`, the address in flags[FLAG_KERNEL]), and the kernel calls its rare
+heavy-subtree path through another (`_heavy`, flags[FLAG_HEAVY]), so each is compiled once.
 """
 from __future__ import annotations
 
@@ -95,6 +98,15 @@ WORK_FIXED = 81
 #: (9e-12 at 1e2: test/core/test_heavy_tip.py). Chains whose subtrees all weigh less than this
 #: many times their carriers cannot pass on more and skip the check.
 STABLE_ABA_RATIO = 100.0
+#: flags (`model_arguments`, int64): base type, has gravity, has lambda (rotors), i_r0, i_vel,
+#: i_kappa, N, then FLAG_HEAVY: the address of the compiled heavy-subtree elimination
+#: (`heavy_elimination_address`), 0 for a model whose subtrees all weigh at most STABLE_ABA_RATIO
+#: times their carriers (the kernel never takes that path there)
+FLAG_HEAVY = 7
+#: flags[FLAG_KERNEL]: the address of `rhs_kernel` compiled as a C function (`kernel_address`),
+#: which the compiled loops call (`rhs_call`) instead of compiling the kernel into themselves
+FLAG_KERNEL = 8
+FLAGS_SIZE = 9
 
 
 def available() -> bool:
@@ -783,7 +795,8 @@ def _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, D
 
 
 @_njit_inline
-def _aba(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot, Ia, pa, Dx, T, G, x):
+def _aba(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot, Ia, pa, Dx, T, G, x,
+         heavy):
     """Articulated-body algorithm: u' (N,) of the closure rows S_j . F_subtree(k(j)) = tau_j
     (eqs 44, 51, 54; Featherstone 2008, Table 7.1), about each body's O^k in world axes.
 
@@ -795,6 +808,10 @@ def _aba(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udo
     (checked only where a subtree is that much heavier than its carrier), then `_aba_stable`
     from the bodies' own inertias again (square-root factors and one step of iterative
     refinement; exact to ~1e-14 relative at mass ratios up to 1e7, about 2.5 x the cost).
+    heavy: flags[FLAG_HEAVY], where that path (`_aba_heavy`) is compiled: it is called through
+    this address, not compiled into every kernel that inlines this one (its allocations and
+    square-root form are two thirds of the kernel's compile time, and no model below
+    STABLE_ABA_RATIO ever runs it).
     """
     n = IA.shape[0]
     after = 0.0
@@ -810,8 +827,8 @@ def _aba(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udo
     # a heavy subtree: what decides is the mass its elimination passes on (an articulated, not a
     # rigid, inertia: a uniform chain of 1000 links passes on about a link's mass at each joint),
     # known only once the classic elimination has run
-    _aba_heavy(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
-               Ia, pa, Dx, T, G, x)
+    _heavy(heavy, is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
+           Ia, pa, Dx, T, G, x)
 
 
 @_njit_alloc
@@ -1126,6 +1143,235 @@ else:  # plain Python: without numba, or NUMBA_DISABLE_JIT (the 80-digit oracle,
         return work[o:o + n * m * q].reshape(n, m, q)
 
 
+# --- the heavy-subtree path, compiled apart and called through its address ---------------------
+def heavy_subtrees(mass) -> bool:
+    """True when `_aba` takes its heavy-subtree path for bodies of these masses (n,): the same
+    test in the same operations as `_aba`'s (the mass of bodies k.. against body k - 1's)."""
+    after = 0.0
+    worst = 0.0
+    for k in range(len(mass) - 1, 0, -1):
+        after += float(mass[k])
+        if after > worst * float(mass[k - 1]):
+            worst = after / float(mass[k - 1])
+    return not worst <= STABLE_ABA_RATIO
+
+
+#: `_heavy_entry`'s arguments: the addresses of `_aba_heavy`'s 20 arrays, then n and N
+HEAVY_ENTRY_ARGUMENTS = 22
+
+
+if numba is not None and not numba.config.DISABLE_JIT:
+    from llvmlite import ir as _llir
+    from numba.core import cgutils as _cgutils
+
+    @_intrinsic
+    def address_of(typingctx, a):
+        """The address (int64) of the first element of the C-contiguous array a (compiled code
+        only; another layout does not compile: the callee reads the items consecutively)."""
+        if not (isinstance(a, _nbt.Array) and a.layout == "C"):
+            return None
+
+        def codegen(context, builder, sig, args):
+            data = context.make_array(sig.args[0])(context, builder, args[0]).data
+            return builder.ptrtoint(data, context.get_value_type(_nbt.int64))
+
+        return _nbt.int64(a), codegen
+
+    @_intrinsic
+    def vector_at(typingctx, address, size, dtype):
+        """The C-contiguous vector of `size` items of `dtype` (a numpy scalar class) at `address`
+        (int64), owned elsewhere (no meminfo, nothing counted): the caller keeps it alive."""
+        if not (isinstance(address, _nbt.Integer) and isinstance(size, _nbt.Integer)
+                and isinstance(dtype, _nbt.NumberClass)):
+            return None
+        vector = _nbt.Array(dtype.dtype, 1, "C")
+
+        def codegen(context, builder, sig, args):
+            model = context.data_model_manager[vector]
+            item = context.get_constant(_nbt.intp, context.get_abi_sizeof(context.get_data_type(dtype.dtype)))
+            n = context.cast(builder, args[1], sig.args[1], _nbt.intp)
+            data = builder.inttoptr(args[0], context.get_value_type(_nbt.CPointer(dtype.dtype)))
+            value = _cgutils.get_null_value(context.get_value_type(vector))
+            for name, v in (("nitems", n), ("itemsize", item), ("data", data),
+                            ("shape", _cgutils.pack_array(builder, [n])),
+                            ("strides", _cgutils.pack_array(builder, [item]))):
+                value = builder.insert_value(value, v, model.get_field_position(name))
+            return value
+
+        return vector(address, size, dtype), codegen
+
+    @_intrinsic
+    def call_address(typingctx, address, args):
+        """Call the C function `void f(...)` at `address` with the tuple `args` (compiled code
+        only), integers passed as int64, floats as double: a call the caller's compilation does
+        not compile in."""
+        if not (isinstance(address, _nbt.Integer) and isinstance(args, _nbt.BaseTuple)
+                and all(isinstance(a, (_nbt.Integer, _nbt.Float)) for a in args)):
+            return None
+        kinds = [_nbt.float64 if isinstance(a, _nbt.Float) else _nbt.int64 for a in args]
+
+        def codegen(context, builder, sig, llargs):
+            fnty = _llir.FunctionType(_llir.VoidType(), [context.get_value_type(k) for k in kinds])
+            fn = builder.inttoptr(llargs[0], fnty.as_pointer())
+            values = [context.cast(builder, v, t, k)
+                      for v, t, k in zip(_cgutils.unpack_tuple(builder, llargs[1], len(args)), args, kinds)]
+            builder.call(fn, values)
+            return context.get_dummy_value()
+
+        return _nbt.void(address, args), codegen
+
+    @_njit_inline
+    def _heavy(address, is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
+               Ia, pa, Dx, T, G, x):
+        """`_aba_heavy` through the address of its compiled entry (`heavy_elimination_address`).
+        Address 0 (a model built without it, `model_arguments` says why that cannot happen with
+        heavy subtrees): u' not a number, which the integrators report as a non-finite rhs."""
+        if address == 0:
+            for j in range(udot.shape[0]):
+                udot[j] = np.nan
+            return
+        call_address(address, (
+            address_of(is_hinge), address_of(col_start), address_of(S), address_of(IA), address_of(pA),
+            address_of(c), address_of(tau), address_of(a_base), address_of(s_w), address_of(U),
+            address_of(W), address_of(u), address_of(Dinv), address_of(udot), address_of(Ia),
+            address_of(pa), address_of(Dx), address_of(T), address_of(G), address_of(x),
+            IA.shape[0], S.shape[0]))
+
+    def _heavy_entry(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot, Ia, pa,
+                     Dx, T, G, x, n, N):
+        """`_aba_heavy` on the arrays at these addresses (C-contiguous, the shapes `_aba` gives
+        them for n bodies and N columns): compiled as a C function (`heavy_elimination_address`)."""
+        f = np.float64
+        _aba_heavy(vector_at(is_hinge, n, np.bool_), vector_at(col_start, n + 1, np.int64),
+                   block2(vector_at(S, 6 * N, f), 0, N, 6), block3(vector_at(IA, 36 * n, f), 0, n, 6, 6),
+                   block2(vector_at(pA, 6 * n, f), 0, n, 6), block2(vector_at(c, 6 * n, f), 0, n, 6),
+                   vector_at(tau, N, f), vector_at(a_base, 6, f), block2(vector_at(s_w, 3 * n, f), 0, n, 3),
+                   block2(vector_at(U, 6 * N, f), 0, N, 6), block2(vector_at(W, 6 * N, f), 0, N, 6),
+                   vector_at(u, N, f), block3(vector_at(Dinv, 36 * n, f), 0, n, 6, 6), vector_at(udot, N, f),
+                   block2(vector_at(Ia, 36, f), 0, 6, 6), vector_at(pa, 6, f),
+                   block2(vector_at(Dx, 9, f), 0, 3, 3), block2(vector_at(T, 9, f), 0, 3, 3),
+                   block2(vector_at(G, 9, f), 0, 3, 3), vector_at(x, 6, f))
+
+    @_njit_inline
+    def kernel_arrays(work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
+                      inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base, p0, pdot,
+                      L_rotor, tau, nwork, n, N, nt):
+        """The kernel's arrays at these addresses (`rhs_call` passes them), C-contiguous, of the
+        shapes `workspace`, `model_arguments` and `input_arguments` give them: (work and the
+        model's 15), (p0, pdot, L_rotor, tau)."""
+        f, i = np.float64, np.int64
+        return ((vector_at(work, nwork, f), vector_at(is_hinge, n, np.bool_), vector_at(qrow, n, i),
+                 vector_at(own_col, n, i), vector_at(col_start, n + 1, i),
+                 block2(vector_at(hinge_axis, 3 * n, f), 0, n, 3), block2(vector_at(s, 3 * n, f), 0, n, 3),
+                 vector_at(mass, n, f), block2(vector_at(first_moment, 3 * n, f), 0, n, 3),
+                 block3(vector_at(inertia, 9 * n, f), 0, n, 3, 3), block2(vector_at(lam_speed, 3 * n, f), 0, n, 3),
+                 vector_at(torque_body, nt, i), block2(vector_at(torque_axis, 3 * nt, f), 0, nt, 3),
+                 vector_at(torque_A, nt, f), vector_at(flags, FLAGS_SIZE, i), vector_at(base, 7, f)),
+                (vector_at(p0, nt, f), vector_at(pdot, nt, f), vector_at(L_rotor, nt, f), vector_at(tau, N, f)))
+
+    @_njit_inline
+    def kernel_addresses(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                         first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
+                         base, t0, p0, pdot, L_rotor, tau):
+        """What the C entry of the kernel takes (`_kernel_entry`): t, the addresses of y, ydot and
+        the kernel's arrays, t0, then the sizes of y, the workspace, n, N, nt."""
+        return (t, address_of(y), address_of(ydot), address_of(work), address_of(is_hinge), address_of(qrow),
+                address_of(own_col), address_of(col_start), address_of(hinge_axis), address_of(s),
+                address_of(mass), address_of(first_moment), address_of(inertia), address_of(lam_speed),
+                address_of(torque_body), address_of(torque_axis), address_of(torque_A), address_of(flags),
+                address_of(base), address_of(p0), address_of(pdot), address_of(L_rotor), address_of(tau), t0,
+                y.shape[0], work.shape[0], mass.shape[0], tau.shape[0], torque_body.shape[0])
+
+    def _kernel_entry(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                      first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base,
+                      p0, pdot, L_rotor, tau, t0, size, nwork, n, N, nt):
+        """`rhs_kernel` on the arrays at these addresses (`kernel_arrays`): compiled as a C
+        function (`kernel_address`)."""
+        m, h = kernel_arrays(work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
+                             inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base, p0, pdot,
+                             L_rotor, tau, nwork, n, N, nt)
+        rhs_kernel(t, vector_at(y, size, np.float64), vector_at(ydot, size, np.float64), m[0], m[1], m[2], m[3],
+                   m[4], m[5], m[6], m[7], m[8], m[9], m[10], m[11], m[12], m[13], m[14], m[15], t0,
+                   h[0], h[1], h[2], h[3])
+
+    @_njit_inline
+    def rhs_call(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                 first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
+                 base, t0, p0, pdot, L_rotor, tau):
+        """`rhs_kernel` (same arguments, C-contiguous) through its compiled C function at
+        flags[FLAG_KERNEL]: for compiled loops, which then do not compile the kernel in."""
+        call_address(flags[FLAG_KERNEL], kernel_addresses(
+            t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia,
+            lam_speed, torque_body, torque_axis, torque_A, flags, base, t0, p0, pdot, L_rotor, tau))
+
+    def _null_entry(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+                    first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base,
+                    p0, pdot, L_rotor, tau, t0, size, nwork, n, N, nt):
+        """`_kernel_entry`'s signature, y' = 0: compiled as a C function (`null_kernel_address`)."""
+        v = vector_at(ydot, size, np.float64)
+        for k in range(size):
+            v[k] = 0.0
+else:  # plain Python: the heavy path and the kernel called directly
+    def _heavy(address, *arrays):
+        _aba_heavy(*arrays)
+
+    def rhs_call(*arguments):
+        rhs_kernel(*arguments)
+
+
+_HEAVY_ENTRY = []
+_KERNEL_ENTRY = []
+_NULL_ENTRY = []
+#: `_kernel_entry`'s arguments after t: the addresses of y, ydot and the kernel's 20 arrays (all
+#: but t0), then t0, then the sizes of y, the workspace, n, N, nt
+KERNEL_ADDRESSES, KERNEL_SIZES = 22, 5
+
+
+def kernel_signature(*extra):
+    """The numba signature of the kernel's C function (`_kernel_entry`), `extra` argument types
+    after it (fast_canonical's field adds four)."""
+    f, i = numba.types.float64, numba.types.int64
+    return numba.types.void(f, *(i,) * KERNEL_ADDRESSES, f, *(i,) * KERNEL_SIZES, *extra)
+
+
+def heavy_elimination_address() -> int:
+    """The address of `_aba_heavy` compiled as a C function of HEAVY_ENTRY_ARGUMENTS int64s
+    (`_heavy_entry`), compiled or loaded from numba's disk cache on the first call (12-19 s of
+    CPU compiled, measured: less when the kernel's stages are compiled already); 0 without numba or with NUMBA_DISABLE_JIT,
+    where `_aba` calls it directly."""
+    if numba is None or numba.config.DISABLE_JIT:
+        return 0
+    if not _HEAVY_ENTRY:
+        signature = numba.types.void(*(numba.types.int64,) * HEAVY_ENTRY_ARGUMENTS)
+        _HEAVY_ENTRY.append(numba.cfunc(signature, cache=True, error_model="numpy", _nrt=True)(_heavy_entry))
+    return _HEAVY_ENTRY[0].address
+
+
+def kernel_address() -> int:
+    """The address of `rhs_kernel` compiled as a C function (`_kernel_entry`: t, the arrays'
+    addresses, t0, their sizes), compiled or loaded from numba's disk cache on the first call;
+    0 without numba or with NUMBA_DISABLE_JIT, where `rhs_call` calls the kernel directly."""
+    if numba is None or numba.config.DISABLE_JIT:
+        return 0
+    if not _KERNEL_ENTRY:
+        signature = kernel_signature()
+        _KERNEL_ENTRY.append(numba.cfunc(signature, cache=True, error_model="numpy", _nrt=False)(_kernel_entry))
+    return _KERNEL_ENTRY[0].address
+
+
+def null_kernel_address() -> int:
+    """The address of a C function of `kernel_address`'s signature that only sets y' = 0: for
+    compiling the loops and outputs without the dynamics (their code does not depend on the
+    kernel they call through flags[FLAG_KERNEL]: gyro_sim.warmup's helper builds its systems on
+    it). Never for results. 0 without numba or with NUMBA_DISABLE_JIT."""
+    if numba is None or numba.config.DISABLE_JIT:
+        return 0
+    if not _NULL_ENTRY:
+        signature = kernel_signature()
+        _NULL_ENTRY.append(numba.cfunc(signature, cache=True, error_model="numpy", _nrt=False)(_null_entry))
+    return _NULL_ENTRY[0].address
+
+
 @_njit_inline
 def workspace_views(work, n, N, nt):
     """`rhs_kernel`'s workspace (`workspace`) cut into its views, the one place its layout is
@@ -1188,7 +1434,9 @@ def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis,
 
     work: float workspace of n WORK_PER_BODY + N WORK_PER_COLUMN + nt + WORK_FIXED (`workspace`);
     nothing is allocated per call.
-    flags (int, 7): base type, has gravity, has lambda (rotors), i_r0, i_vel, i_kappa, N.
+    flags (int, FLAGS_SIZE): base type, has gravity, has lambda (rotors), i_r0, i_vel, i_kappa,
+    N, the heavy path's address (FLAG_HEAVY), this kernel's C function's (FLAG_KERNEL: for
+    the compiled loops, `rhs_call`).
     base (float, 7): moving-base amplitude (3), W = 2 pi f, gravity (3).
     Held inputs: torque-rotor spins p_i = p0_i + pdot_i (t - t0) (eq 29), their torques
     L_rotor, the generalized forces tau (N,) of the columns (hinge commands, eq 51).
@@ -1218,7 +1466,7 @@ def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis,
         for a in range(3):
             a_base[3 + a] = base_amplitude[a] * sw
     _aba(is_hinge, col_start, S, I6, pb, c, tau, a_base, s_w, U, W, u, Dinv, ydot[i_vel:i_vel + N],
-         Ia, pa, Dx, T, G, x)
+         Ia, pa, Dx, T, G, x, flags[FLAG_HEAVY])
     # y'
     if base_type == BASE_FREE:
         for a in range(3):
@@ -1255,7 +1503,9 @@ def model_arguments(model: Model) -> tuple:
 
     Per body: the y index of its quaternion (spherical) or of phi_k (hinge) (`qrow`); the first
     velocity column of its own joint (`own_col`); the range of all its columns (`col_start`,
-    n + 1; a free base's translations belong to body 0). `flags` and `base` as in `rhs_kernel`.
+    n + 1; a free base's translations belong to body 0). `flags` and `base` as in `rhs_kernel`:
+    the kernel's C function is compiled (or loaded) now, and the heavy path for a model with
+    heavy subtrees (`heavy_subtrees`).
     """
     m, n = model, model.n
     qrow = np.empty(n, dtype=np.int64)
@@ -1269,8 +1519,9 @@ def model_arguments(model: Model) -> tuple:
         raise ValueError("a joint has more than six velocity columns")
     base_type = {"fixed": BASE_FIXED, "moving": BASE_MOVING, "free": BASE_FREE}[m.base_type]
     has_lam = len(m.torque_body) > 0 or m.lam_speed is not None
+    heavy = heavy_elimination_address() if heavy_subtrees(m.mass) else 0
     flags = np.array([base_type, m.gravity is not None, has_lam, m.i_r0.start, m.i_vel.start,
-                      m.i_kappa.start, m.N], dtype=np.int64)
+                      m.i_kappa.start, m.N, heavy, kernel_address()], dtype=np.int64)
     base = np.zeros(7)
     if m.base_amplitude is not None:
         base[0:3] = m.base_amplitude

@@ -1,10 +1,11 @@
 """What one publication shows, compiled with numba: joint states, poses, wrenches, invariants.
 
-:func:`outputs_kernel` computes at one (t, y), in one compiled call over the kernels of
-:mod:`gyro_sim.dynamics.kernel` (its stages and :func:`gyro_sim.dynamics.kernel.rhs_kernel`), what
+:func:`publication_kernel` computes at one (t, y), in one compiled call over the kernels of
+:mod:`gyro_sim.dynamics.kernel` (its stages, and :func:`gyro_sim.dynamics.kernel.rhs_kernel` through its
+compiled C function, `fast.rhs_call`), what
 :class:`gyro_sim.simulator.Simulator` otherwise builds from the numpy reference
 (`joint_states`, `body_states`, `wrenches`, `invariants`); :class:`gyro_sim.dynamics.system.
-FastChainODE` offers it as `outputs`. Same equations, about each joint point O^k instead of
+FastChainODE` offers everything it computes as `outputs`. Same equations, about each joint point O^k instead of
 the world origin; the results agree to round-off (test/core/test_fast_outputs.py).
 
 Pipeline (all world components, about O^k unless said):
@@ -29,8 +30,6 @@ whose kernels it compiles in).
 from __future__ import annotations
 
 import math
-
-import numpy as np
 
 from pathlib import Path
 
@@ -259,7 +258,7 @@ def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hin
     (R_k, s_w, hk, Aw, e_w, w_k, vO_k, c, _, _, _, lam_b, _, S, _, _, _, p,
      _, _, _, _, _, _, _) = fast.workspace_views(work, n, N, nt)
     if do_wrench or nv > 0:  # the accelerations: u' into ydot; the kinematics, p (29), S as above
-        fast.rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+        fast.rhs_call(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
                         first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
                         base, t0, p0, pdot, L_rotor, tau)
     else:
@@ -465,24 +464,3 @@ def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hin
         inv[11 + a] = L[a] - tmp[a]
     return bad
 
-
-@_njit
-def outputs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                   first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
-                   base, t0, p0, pdot, L_rotor, tau,
-                   base_position, down, singular, speed_body, speed_axis, speed_A, speed_rate,
-                   R, w, vO, O, quat, euler, euler_rate, L_speed, wrench_force, wrench_moment, inv):
-    """Every output at (t, y): :func:`publication_kernel` with everything wanted and no joint
-    states or scatter (FastChainODE.outputs); ydot holds y' (u' and the torque-rotor angle rates
-    kappa' as fast.rhs_kernel leaves them)."""
-    none = np.empty(0, dtype=np.int64)
-    nothing = np.empty(0)
-    publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                       first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
-                       base, t0, p0, pdot, L_rotor, tau,
-                       base_position, down, singular, speed_body, speed_axis, speed_A, speed_rate,
-                       WANT_ALL, none, none,
-                       R, w, vO, O, quat, euler, euler_rate, L_speed, wrench_force, wrench_moment, inv,
-                       nothing, nothing, nothing, nothing, np.empty((0, 3, 0), dtype=np.int64),
-                       np.empty((0, R.shape[0], 3), dtype=np.int64), np.empty((0, R.shape[0], 4), dtype=np.int64),
-                       np.empty((0, R.shape[0], 6), dtype=np.int64), np.empty(SCRATCH_PER_BODY * R.shape[0] + SCRATCH_FIXED))

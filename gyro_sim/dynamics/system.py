@@ -161,7 +161,15 @@ class FastChainODE:
         # march_explicit_rk: per tableau (by its A) the kernel's copies of A, B, C and the stages K
         self._tableaus: dict[int, tuple] = {}
         self._march = fast_loop.Direct(fast_loop.erk_march)  # bound once: the types stay the same
-        self._outputs = fast_loop.Direct(fast_outputs.outputs_kernel)
+        # outputs: the Simulator's publication kernel (one compiled specialization for both)
+        # with everything wanted, no joint states, no scatter
+        self._outputs = fast_loop.Direct(fast_outputs.publication_kernel)
+        nothing, none = np.empty(0), np.empty(0, dtype=np.int64)
+        n = model.n
+        self._no_publication = (
+            (none, none), (nothing, nothing, nothing, nothing, np.empty((0, 3, 0), dtype=np.int64),
+                           np.empty((0, n, 3), dtype=np.int64), np.empty((0, n, 4), dtype=np.int64),
+                           np.empty((0, n, 6), dtype=np.int64), np.empty(fast_outputs.scratch_size(n))))
         self._speed_args = (  # outputs: the model beyond the kernel's arguments
             np.ascontiguousarray(model.base_position, dtype=np.float64),
             np.ascontiguousarray(model.down, dtype=np.float64), EULER_SINGULAR_SIN,
@@ -287,7 +295,8 @@ class FastChainODE:
 
     def outputs(self, t: float, y: np.ndarray) -> dict[str, np.ndarray]:
         """Every output at (t, y) with the inputs held, in one compiled call
-        (:func:`gyro_sim.dynamics.outputs.outputs_kernel`); new arrays, by name:
+        (:func:`gyro_sim.dynamics.outputs.publication_kernel` with everything wanted, no joint
+        states: the Simulator's specialization of it); new arrays, by name:
 
         ydot (size,) y' (u' and the torque-rotor angle rates in it), R (n, 3, 3) world_R_body,
         w (n, 3) angular velocities, vO (n, 3) velocities of the joint points, O (n, 3) joint points,
@@ -305,10 +314,10 @@ class FastChainODE:
         y = np.ascontiguousarray(y, dtype=np.float64)
         if y.shape != (self.size,):
             raise ValueError(f"y must have shape ({self.size},), got {y.shape}")
-        self._outputs(float(t), y, out["ydot"], *self._args, *self._speed_args,
-                                    out["R"], out["w"], out["vO"], out["O"], out["quat"], out["euler"], out["euler_rate"],
-                                    out["L_speed"], out["wrench_force"], out["wrench_moment"],
-                                    out["inv"])
+        joints, scatter = self._no_publication
+        self._outputs(float(t), y, out["ydot"], *self._args, *self._speed_args, int(fast_outputs.WANT_ALL),
+                      *joints, out["R"], out["w"], out["vO"], out["O"], out["quat"], out["euler"], out["euler_rate"],
+                      out["L_speed"], out["wrench_force"], out["wrench_moment"], out["inv"], *scatter)
         return out
 
     def warm_up(self) -> None:

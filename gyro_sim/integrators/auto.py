@@ -159,15 +159,21 @@ class Auto(Integrator):
                        else np.zeros(0))
         self._handback_detection = (self._counters, self._window, self._cost, self._handback,
                                     self._easy, self._power)
-        if self.implicit.compiled:  # compile (or load) radau's loop now, not at the first switch
+        self.reset()
+
+    def warm_up(self, t0: float, y: np.ndarray) -> None:
+        """Compile (or load from numba's disk cache) now what a switch to radau runs, not at
+        the first switch in the middle of a real-time run: radau's compiled loop, or the
+        kernels of the hand-back tests where radau steps from Python. The state and counters
+        are left as they were."""
+        if self.implicit.compiled:
             self.implicit.load_loop()
-        elif self.explicit.compiled:  # radau's steps are tested from Python: those kernels
+        elif self.explicit.compiled:
             counters, window = np.zeros_like(self._counters), np.zeros_like(self._window)
             cost, easy = np.zeros_like(self._cost), np.zeros_like(self._easy)
             auto_measure(0.0, 0, counters, window, cost, COST_RADAU)
             auto_nonstiffness_test(0.0, easy, self._handback)
             auto_cost_test(cost, counters, window, easy, self._handback)
-        self.reset()
 
     @property
     def method(self) -> str:

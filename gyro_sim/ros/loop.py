@@ -77,9 +77,14 @@ FIFO_DEMOTE_AFTER = 1.0
 def warm_up(sim, dt: float) -> None:
     """Run every path the loop uses once (first calls pay for imports, caches, compilation),
     then put the Simulator back in its initial state."""
+    from gyro_sim.warmup import filling
+
     sim.snapshot()
     integ_warm_up = getattr(sim.integrator, "warm_up", None)
-    if integ_warm_up is not None:  # "fixed": the method it may switch to later, compiled now
+    # "fixed": the methods it may switch to later, compiled (or loaded) now; on a first start
+    # the warm-up helper compiles them into the cache instead, and a switch before it is done
+    # compiles what it needs then
+    if integ_warm_up is not None and not filling():
         integ_warm_up(sim.time, sim.state)
     sim.advance(dt)
     sim.reset()

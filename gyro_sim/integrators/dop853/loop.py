@@ -5,7 +5,8 @@ in Python (`AdaptiveIntegrator._integrate`: `begin`, then `take_step` and `dense
 the steps with error control, accepted and rejected, the fresh rhs at the start, the FSAL
 stage, the dense output at the requested times, the renormalisation of the quaternions of
 every accepted state and output, the finite checks. It calls the articulated-body kernel
-:func:`gyro_sim.dynamics.kernel.rhs_kernel` directly and the arithmetic of
+:func:`gyro_sim.dynamics.kernel.rhs_kernel` (through its compiled C function, `fast.rhs_call`) and the
+arithmetic of
 :mod:`gyro_sim.integrators.dop853.kernels`, the very functions the Python driver calls between its
 rhs evaluations on other systems: the two drivers give the same bits.
 
@@ -141,7 +142,7 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
     status[S_NONFINITE] = 0
     status[S_STATUS] = DONE
     status[S_REASON] = 0
-    fast.rhs_kernel(t0, y, f, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+    fast.rhs_call(t0, y, f, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
                     first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
                     flags, base, ht0, p0, pdot, L_rotor, tau)
     nfev += 1
@@ -151,7 +152,7 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
     elif h_mem <= 0.0:  # the starting step (AdaptiveIntegrator.begin), F[0] and F[1] as scratch
         sc, f1 = F[0], F[1]
         h0, d1 = dop_initial_probe(y, f, rtol, atol, t1 - t0, initial, sc, ys)
-        fast.rhs_kernel(t0 + h0, ys, f1, work, is_hinge, qrow, own_col, col_start, hinge_axis, s,
+        fast.rhs_call(t0 + h0, ys, f1, work, is_hinge, qrow, own_col, col_start, hinge_axis, s,
                         mass, first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
                         flags, base, ht0, p0, pdot, L_rotor, tau)
         nfev += 1
@@ -188,7 +189,7 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
             K[0, :] = f
             for st in range(1, N_STAGES):
                 dop_stage_state(y, K, A, st, h, ys)
-                fast.rhs_kernel(t + C[st] * h, ys, K[st], work, is_hinge, qrow, own_col, col_start,
+                fast.rhs_call(t + C[st] * h, ys, K[st], work, is_hinge, qrow, own_col, col_start,
                                 hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
                                 torque_axis, torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
                 nfev += 1
@@ -214,7 +215,7 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
         fast.normalize_quaternions(y_new, i_q0, nq)
         status[S_F_NEW] = 0
         if t_new < t1:
-            fast.rhs_kernel(t_new, y_new, f, work, is_hinge, qrow, own_col, col_start, hinge_axis,
+            fast.rhs_call(t_new, y_new, f, work, is_hinge, qrow, own_col, col_start, hinge_axis,
                             s, mass, first_moment, inertia, lam_speed, torque_body, torque_axis,
                             torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
             nfev += 1
@@ -246,7 +247,7 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
             k += 1
         if k > j:
             if status[S_F_NEW] == 0:
-                fast.rhs_kernel(t, y_new, f, work, is_hinge, qrow, own_col, col_start, hinge_axis,
+                fast.rhs_call(t, y_new, f, work, is_hinge, qrow, own_col, col_start, hinge_axis,
                                 s, mass, first_moment, inertia, lam_speed, torque_body,
                                 torque_axis, torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
                 nfev += 1
@@ -262,7 +263,7 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
                     held_at[H_T] = math.nan
             for st in range(N_STAGES + 1, N_EXTENDED):
                 dop_stage_state(y_old, K, A, st, last_step, ys)
-                fast.rhs_kernel(t_old + C[st] * last_step, ys, K[st], work, is_hinge, qrow, own_col,
+                fast.rhs_call(t_old + C[st] * last_step, ys, K[st], work, is_hinge, qrow, own_col,
                                 col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed,
                                 torque_body, torque_axis, torque_A, flags, base, ht0, p0, pdot,
                                 L_rotor, tau)

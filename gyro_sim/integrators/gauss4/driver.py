@@ -319,9 +319,9 @@ class Gauss4(FixedStepIntegrator):
         if has_kernel:
             from gyro_sim.integrators.gauss4 import loop as fast_gauss  # the compiled march (imports the kernel's module)
 
+            # compiled (or loaded from numba's disk cache, ~0.1 s) by the first march: the node
+            # runs one before real time (its warm-up); "fixed" builds a gauss4s it may never run
             self._compiled = fast_gauss.GaussMarch(system)
-            self._march_compiled(0.0, np.zeros(n), self.step, 0)  # compile or load it now, not
-            # in the first advance (a node's first steps): ~0.1 s from numba's disk cache
 
     def reset(self) -> None:
         """Forget the predictor and the dense path's matrix (after a reset of the state)."""

@@ -3,7 +3,8 @@
 :func:`gauss_march` is the Python driver of :class:`gyro_sim.integrators.gauss4.driver.Gauss4`
 (`_step`, `_substep`, `_newton_dense`, `_newton_krylov`, with the base's projection and
 finiteness check) statement for statement, calling the articulated-body kernel
-:func:`gyro_sim.dynamics.kernel.rhs_kernel` directly and the arithmetic of
+:func:`gyro_sim.dynamics.kernel.rhs_kernel` (through its compiled C function, `fast.rhs_call`; the
+canonical field through `fast_canonical.canonical_call`) and the arithmetic of
 :mod:`gyro_sim.integrators.gauss4.kernels` (the very functions the Python driver calls): no Python
 between two evaluations, and the same steps bit for bit (test/core/test_gauss.py).
 :class:`GaussMarch` binds it to a :class:`gyro_sim.dynamics.system.FastChainODE` through the
@@ -60,9 +61,9 @@ def _field(t, y, out, kargs):
     canonical one (fast_canonical.canonical_kernel: gauss4s) for a FastCanonicalChain's, which
     are longer; chosen when the march is compiled for the arguments' types."""
     if len(kargs) == fast_canonical.CHAIN_ARGUMENTS:
-        fast.rhs_kernel(t, y, out, *kargs)
+        fast.rhs_call(t, y, out, *kargs)
     else:
-        fast_canonical.canonical_kernel(t, y, out, *kargs)
+        fast_canonical.canonical_call(t, y, out, *kargs)
 
 
 if fast.numba is not None:
@@ -71,8 +72,8 @@ if fast.numba is not None:
     @overload(_field, inline="always")
     def _field_typed(t, y, out, kargs):
         if len(kargs) == fast_canonical.CHAIN_ARGUMENTS:
-            return lambda t, y, out, kargs: fast.rhs_kernel(t, y, out, *kargs)
-        return lambda t, y, out, kargs: fast_canonical.canonical_kernel(t, y, out, *kargs)
+            return lambda t, y, out, kargs: fast.rhs_call(t, y, out, *kargs)
+        return lambda t, y, out, kargs: fast_canonical.canonical_call(t, y, out, *kargs)
 
 
 @_njit

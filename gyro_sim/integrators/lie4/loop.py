@@ -3,7 +3,8 @@ CF4 in one call.
 
 :func:`lie_march` is the Python driver :meth:`gyro_sim.integrators.lie4.driver.Lie4._step` (with
 the base's projection and finiteness check) statement for statement, calling the
-articulated-body kernel :func:`gyro_sim.dynamics.kernel.rhs_kernel` directly and the arithmetic of
+articulated-body kernel :func:`gyro_sim.dynamics.kernel.rhs_kernel` (through its compiled C function,
+`fast.rhs_call`) and the arithmetic of
 :mod:`gyro_sim.integrators.lie4.kernels` (the very functions the Python driver calls): no Python
 between two evaluations, and the same steps bit for bit (test/core/test_fast_lie.py).
 :class:`LieMarch` binds it to a :class:`gyro_sim.dynamics.system.FastChainODE` through the
@@ -60,13 +61,13 @@ def lie_march(t0, h, nsteps, y, ALPHA, BASE, BETA, C, Y, F, W, V, qi, li, i_q0, 
     for k in range(nsteps):
         t = t0 + k * h
         lk.lie_start(y, Y)
-        fast.rhs_kernel(t, Y[0], F, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+        fast.rhs_call(t, Y[0], F, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
                         first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
                         flags, base, ht0, p0, pdot, L_rotor, tau)
         lk.lie_field(Y, F, 0, qi, li, W, V)
         for st in range(1, stages):
             lk.lie_stage(Y, W, V, hALPHA, st, BASE[st], qi, li)
-            fast.rhs_kernel(t + C[st] * h, Y[st], F, work, is_hinge, qrow, own_col, col_start,
+            fast.rhs_call(t + C[st] * h, Y[st], F, work, is_hinge, qrow, own_col, col_start,
                             hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
                             torque_axis, torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
             lk.lie_field(Y, F, st, qi, li, W, V)

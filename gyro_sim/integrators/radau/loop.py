@@ -8,7 +8,7 @@ simplified Newton iteration, the error estimate and step control (accepted and r
 steps), the collocation polynomial as dense output at the requested times and as the next
 Newton start, the renormalisation of the quaternions of every accepted state and output,
 the finite checks. It calls the articulated-body kernel :func:`gyro_sim.dynamics.kernel.rhs_kernel`
-directly and the arithmetic of :mod:`gyro_sim.integrators.radau.kernels` (the starting step that of
+(through its compiled C function, `fast.rhs_call`) and the arithmetic of :mod:`gyro_sim.integrators.radau.kernels` (the starting step that of
 :mod:`gyro_sim.integrators.dop853.kernels`), the very functions the Python driver calls between its
 rhs evaluations on other systems: the two drivers give the same bits.
 
@@ -124,7 +124,7 @@ def _fd_jacobian(t, y, f, J, fd_rel_step, fd_min_scale, delta, ys, fj,
     ys[:] = y
     for c in range(n):
         ys[c] = y[c] + delta[c]
-        fast.rhs_kernel(t, ys, fj, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+        fast.rhs_call(t, ys, fj, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
                         first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
                         flags_k, base, ht0, p0, pdot, L_rotor, tau)
         rad_fd_column(J, c, fj, f, delta[c])
@@ -203,7 +203,7 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
         Y[j, :] = y
         j += 1
     # --- begin: a fresh rhs, the starting step, is this call a continuation?
-    fast.rhs_kernel(t0, y, f, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+    fast.rhs_call(t0, y, f, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
                     first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
                     flags_k, base, ht0, p0, pdot, L_rotor, tau)
     nfev += 1
@@ -215,7 +215,7 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
             sc, f1 = F[0], F[1]
             h0, d1 = dop_initial_probe(y, f, rtol, atol, t1 - t0, initial, sc, ys)
             if h0 > 0.0:
-                fast.rhs_kernel(t0 + h0, ys, f1, work, is_hinge, qrow, own_col, col_start,
+                fast.rhs_call(t0 + h0, ys, f1, work, is_hinge, qrow, own_col, col_start,
                                 hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
                                 torque_axis, torque_A, flags_k, base, ht0, p0, pdot, L_rotor, tau)
                 nfev += 1
@@ -292,7 +292,7 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
                     n_iter = k + 1
                     for st in range(3):
                         rad_stage_state(y, Z, st, ys)
-                        fast.rhs_kernel(t + h * C[st], ys, F[st], work, is_hinge, qrow, own_col,
+                        fast.rhs_call(t + h * C[st], ys, F[st], work, is_hinge, qrow, own_col,
                                         col_start, hinge_axis, s, mass, first_moment, inertia,
                                         lam_speed, torque_body, torque_axis, torque_A, flags_k,
                                         base, ht0, p0, pdot, L_rotor, tau)
@@ -334,7 +334,7 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
             error_norm = rad_error(LU_real, piv_real, err, scale)
             if rejected and error_norm > 1.0:
                 rad_add(y, err, ys)
-                fast.rhs_kernel(t, ys, fe, work, is_hinge, qrow, own_col, col_start, hinge_axis,
+                fast.rhs_call(t, ys, fe, work, is_hinge, qrow, own_col, col_start, hinge_axis,
                                 s, mass, first_moment, inertia, lam_speed, torque_body,
                                 torque_axis, torque_A, flags_k, base, ht0, p0, pdot, L_rotor, tau)
                 nfev += 1
@@ -375,7 +375,7 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
         has_sol = True
         f_new = False
         if t_new < t1:
-            fast.rhs_kernel(t_new, y_new, f, work, is_hinge, qrow, own_col, col_start, hinge_axis,
+            fast.rhs_call(t_new, y_new, f, work, is_hinge, qrow, own_col, col_start, hinge_axis,
                             s, mass, first_moment, inertia, lam_speed, torque_body, torque_axis,
                             torque_A, flags_k, base, ht0, p0, pdot, L_rotor, tau)
             nfev += 1

@@ -2,7 +2,8 @@
 
 :func:`erk_march` takes `nsteps` equal steps of an explicit Runge-Kutta tableau (the method's
 own class attributes, e.g. :class:`gyro_sim.integrators.rk4.driver.RK4`) from (t0, y), calling
-the articulated-body kernel :func:`gyro_sim.dynamics.kernel.rhs_kernel` directly and the tableau's
+the articulated-body kernel :func:`gyro_sim.dynamics.kernel.rhs_kernel` (through its compiled C
+function, `fast.rhs_call`: the kernel is compiled once, not into each loop) and the tableau's
 arithmetic of :mod:`gyro_sim.integrators.rk4.kernels` (the very functions the Python driver of the
 method calls for other systems): no Python between two evaluations. After every step the
 quaternions are renormalised (`project`) and the state checked finite, as
@@ -12,10 +13,11 @@ quaternions are renormalised (`project`) and the state checked finite, as
 integrators dispatch to it when their system has it.
 
 Caching: numba's disk cache keys a kernel on its own file only (numba docs, "Cache
-limitations"), and these loops inline the kernels of fast.py and rk_kernels.py: cached the
-usual way, a loop would survive an edit of those files and run the old dynamics. So their
-cache lives in a directory named after a digest of all three files (:func:`cache_directory`):
-an edit of any of them starts an empty one. Compiling costs ~2.5 s once per version.
+limitations"), and these loops inline functions of fast.py and rk_kernels.py: cached the
+usual way, a loop would survive an edit of those files and run stale code. So their cache
+lives in a directory named after a digest of all three files (:func:`cache_directory`): an
+edit of any of them starts an empty one. Compiling costs ~0.6 s once per version (the kernel
+itself, its C function, ~12 s: `fast.kernel_address`).
 """
 from __future__ import annotations
 
@@ -58,6 +60,23 @@ def njit_with_dependencies(*files):
         numba.config.CACHE_DIR = str(cache_directory(files))  # read when the dispatcher is made
         try:
             return numba.njit(cache=True, error_model="numpy")(fn)
+        finally:
+            numba.config.CACHE_DIR = saved
+
+    return decorate
+
+
+def cfunc_with_dependencies(signature, *files, **options):
+    """A decorator: compiled as a C function of `signature` (numba.cfunc: its `address` is what
+    compiled code calls, `gyro_sim.dynamics.kernel.call_address`), in nopython mode with numpy's error
+    model, cached on disk in :func:`cache_directory` of `files` (as `njit_with_dependencies`).
+    Compiles (or loads) when applied: apply it when the function is first needed."""
+
+    def decorate(fn):
+        saved = numba.config.CACHE_DIR
+        numba.config.CACHE_DIR = str(cache_directory(files))  # read when the cache is made
+        try:
+            return numba.cfunc(signature, cache=True, error_model="numpy", **options)(fn)
         finally:
             numba.config.CACHE_DIR = saved
 
@@ -120,12 +139,12 @@ def erk_march(t0, h, nsteps, y, A, B, C, K, ys, i_q0, nq,
     hB = B * h
     for k in range(nsteps):
         t = t0 + k * h
-        fast.rhs_kernel(t, y, K[0], work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
+        fast.rhs_call(t, y, K[0], work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
                         first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
                         flags, base, ht0, p0, pdot, L_rotor, tau)
         for st in range(1, stages):
             erk_stage_state(y, K, hA, st, ys)
-            fast.rhs_kernel(t + C[st] * h, ys, K[st], work, is_hinge, qrow, own_col, col_start,
+            fast.rhs_call(t + C[st] * h, ys, K[st], work, is_hinge, qrow, own_col, col_start,
                             hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
                             torque_axis, torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
         erk_update(y, K, hB)
