@@ -265,9 +265,19 @@ def _first_step(integrator: str) -> None:
     sim.advance(0.002)
 
 
+#: set (not "0") in the environment: a line per kernel compiled at a first start
+VERBOSE_VARIABLE = "GYRO_SIM_VERBOSE"
+
+
+def verbose() -> bool:
+    """Whether the environment asks for a line per kernel (``GYRO_SIM_VERBOSE=1``)."""
+    return os.environ.get(VERBOSE_VARIABLE, "") not in ("", "0")
+
+
 def precompile(stream=sys.stderr, prog: str = "gyro_sim", integrator: str = DEFAULT_INTEGRATOR) -> bool:
-    """If the cache is cold for the first step of a run with `integrator`, say so, compile its
-    kernels with a line per kernel (the helper compiling its share at the same time), and
+    """If the cache is cold for the first step of a run with `integrator`, say so in one line,
+    compile its kernels (with a line per kernel where :func:`verbose`; the helper compiling
+    its share at the same time), and
     return True; otherwise (or without numba) return False at once. Where something else a
     run may need is not cached, the helper is started to compile it in the background
     (`filling`). Compile errors are left to the backend selection of the Simulator, which
@@ -299,6 +309,8 @@ def precompile(stream=sys.stderr, prog: str = "gyro_sim", integrator: str = DEFA
             name = f"{d.py_func.__module__}.{d.py_func.__name__}"
             if name in ks and name not in done:
                 done.add(name)
+                if not verbose():
+                    return
                 stream.write(f"  compiled {name} ({len(done)} kernels, {time.perf_counter() - t0:.1f} s)\n")
                 stream.flush()
 

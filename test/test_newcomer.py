@@ -210,7 +210,8 @@ def test_cold_cache_is_announced_with_progress_then_silent(tmp_path):
             "cold = cache_is_cold('rk4')\nprint('cold' if cold else 'warm')\nprecompile(integrator='rk4')\n")
     cache = tmp_path / "numba_cache"
     cache.mkdir()
-    first = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env(NUMBA_CACHE_DIR=str(cache)),
+    first = subprocess.run([sys.executable, "-c", code], cwd=ROOT,
+                           env=env(NUMBA_CACHE_DIR=str(cache), GYRO_SIM_VERBOSE="1"),
                            capture_output=True, text=True, timeout=600)
     assert first.returncode == 0, first.stderr
     assert first.stdout.strip() == "cold"

@@ -72,7 +72,8 @@ def test_a_cold_start_shares_the_work_and_the_helper_fills_the_cache(tmp_path):
     cache = tmp_path / "numba_cache"
     cache.mkdir()
     code = "from gyro_sim import warmup\nprint(warmup.precompile(integrator='fixed'))\n"
-    first = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env(NUMBA_CACHE_DIR=str(cache)),
+    first = subprocess.run([sys.executable, "-c", code], cwd=ROOT,
+                           env=env(NUMBA_CACHE_DIR=str(cache), GYRO_SIM_VERBOSE="1"),
                            capture_output=True, text=True, timeout=COLD_TIMEOUT)
     assert first.returncode == 0 and first.stdout.strip() == "True", first.stderr
     compiled = [x for x in first.stderr.splitlines() if x.startswith("  compiled ")]
