@@ -383,3 +383,26 @@ def test_scipy_lapack_under_a_tight_address_space_limit_is_refused_not_a_hang(tm
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
     r = subprocess.run([sys.executable, "-c", script], env=env, text=True, capture_output=True, timeout=PROMPT)
     assert r.stdout.startswith("refused:") and "scipy's LAPACK needs" in r.stdout, (r.stdout, r.stderr)
+
+
+def test_the_node_under_a_tight_address_space_limit_ends_in_one_line(tmp_path):
+    """prlimit --as just above what the node's imports take: it ends at once with one line and
+    exit 1 (it died with a traceback, or an abort, or hung in Fast DDS or OpenBLAS)."""
+    import resource
+
+    env = ros_env(new_domain_id(), tmp_path)
+    probe = ("import gyro_sim.ros.node\n"
+             "print(next(int(l.split()[1]) * 1024 for l in open('/proc/self/status') if l.startswith('VmSize:')))")
+    size = int(subprocess.run([sys.executable, "-c", probe], cwd=ROOT, env=env, text=True, capture_output=True,
+                              timeout=120, check=True).stdout)
+    limit = size + (64 << 20)  # room for a thread or two, not for scipy's LAPACK
+
+    def limited():
+        resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+
+    log = tmp_path / "limited.mcap"
+    r = subprocess.run(node_command(*LIGHT, "duration:=1.0", f"record:={log}"), cwd=ROOT, env=env, text=True,
+                       capture_output=True, timeout=120, preexec_fn=limited)
+    said = [line for line in r.stderr.splitlines() if line.startswith("gyro_sim_node:")]
+    assert r.returncode == 1 and len(said) == 1 and "out of memory" in said[0], r.stderr[-3000:]
+    assert "Traceback" not in r.stderr and not log.exists()
