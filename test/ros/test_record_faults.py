@@ -24,7 +24,7 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 
 from .helpers import (  # noqa: E402
     DISCOVERY_TIMEOUT, ROOT, Client, NodeProcess, children, diag_values, new_domain_id, node_command, ros_env,
-    rss_mb, wait_for, writer_of,
+    rss_mb, running, wait_for, writer_of,
 )
 
 #: the light configuration of the other node tests
@@ -277,7 +277,7 @@ def test_sigkill_of_the_node_alone_leaves_a_complete_log(tmp_path, overwrite):
         writer = writer_of(node)
         node.proc.send_signal(signal.SIGKILL)
         node.proc.wait(PROMPT)
-        wait_for(lambda: not Path(f"/proc/{writer}").exists(), 60.0, "the writer to finish")
+        wait_for(lambda: not running(writer), 60.0, "the writer to finish")
     finally:
         node.stop(signal.SIGKILL)
     n = summary_count(log)
@@ -366,7 +366,7 @@ def test_a_signal_while_the_writer_starts_kills_it_and_removes_the_file(tmp_path
             proc.kill()
     assert proc.returncode == 0 and took < 2.0, (proc.returncode, took, err)
     assert err.strip() == "gyro_sim_node: SIGTERM during start-up: not started (nothing recorded)" and not out
-    assert not log.exists() and not Path(f"/proc/{writer}").exists()
+    assert not log.exists() and not running(writer)
 
 
 def test_scipy_lapack_under_a_tight_address_space_limit_is_refused_not_a_hang(tmp_path):
