@@ -12,9 +12,10 @@ RK4, recording on), watched from this process:
 - **soak**: the node runs for `minutes`; its resident memory (/proc/<pid>/status VmRSS) is
   sampled every few seconds and the growth rate fitted over the second half (after warm-up,
   MB per hour); deadline misses and the real-time factor over the run (its stats file);
-- **kill**: `kills` runs each killed with SIGKILL at a random moment (seeded); the log is
-  recovered (gyro_sim.log.recover) and the simulated time lost is the node's last /clock seen
-  here minus the last log time recovered (promised: at most 0.25 s with the default 0.2 s flush period).
+- **kill**: `kills` runs each killed with SIGKILL at a random moment (seeded), the node alone:
+  its log writer outlives it and finishes the log (gyro_sim.ros.recorder), which is then read
+  through gyro_sim.log.recover; the simulated time lost is the node's last /clock seen here
+  minus the last log time recovered (promised: at most 0.25 s with the default 0.2 s flush period).
 """
 from __future__ import annotations
 
@@ -40,6 +41,8 @@ SOAK_MINUTES = 60.0
 KILLS = 20
 #: seconds between two memory samples of the soak
 RSS_PERIOD = 5.0
+#: longest wait (s) for the log writer of a killed node to finish the log
+WRITER_END = 30.0
 #: the killed runs live this long (wall s) before SIGKILL, uniformly
 KILL_AFTER = (1.0, 4.0)
 NODE_COMMAND = (sys.executable, "-m", "gyro_sim.ros.node")
@@ -252,6 +255,25 @@ class Soak:
     stats: dict = field(default_factory=dict)
 
 
+def _children(pid: int) -> list[int]:
+    """The processes `pid` started (Linux: /proc/PID/task/*/children): the node's log writer."""
+    out: list[int] = []
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        try:
+            out += [int(x) for x in (task / "children").read_text().split()]
+        except OSError:  # the thread ended meanwhile
+            pass
+    return out
+
+
+def _running(pid: int) -> bool:
+    """Whether process `pid` still runs (a zombie, ended and not yet reaped, does not)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return False
+
+
 def _rss_mb(pid: int) -> float:
     for line in Path(f"/proc/{pid}/status").read_text().splitlines():
         if line.startswith("VmRSS:"):
@@ -313,8 +335,11 @@ def kills(workdir: Path, n: int = KILLS, progress=None, domain: int | None = Non
                 w.wait(lambda: w.clock == w.clock or node.poll() is not None, 60.0, "the node's /clock")
                 time.sleep(rng.uniform(*KILL_AFTER))
                 last_seen = w.clock
+                writers = _children(node.pid)
                 node.send_signal(signal.SIGKILL)
                 node.wait(10)
+                # the log writer outlives the node: it finishes the log and renames it onto `log`
+                w.wait(lambda: not any(map(_running, writers)), WRITER_END, "the log writer to finish")
             finally:
                 _stop(node, signal.SIGKILL)
             r = recover(log, fixed, overwrite=True)

@@ -70,6 +70,12 @@ LOAD_MEMORY_ERRORS = ("failed to map segment from shared object", "Cannot alloca
 #: a process with 96 MB of room under its limit loads it, with 40-48 MB its OpenBLAS spins
 #: forever, with less the loader refuses
 LAPACK_ROOM = 128 << 20
+#: address space (bytes) a start needs beyond what the process has mapped when main begins
+#: (`check_address_space`). Measured (hinge chain, recording, 2 cores): ~300 MB mapped then;
+#: rclpy's node creation alone needs ~120 MB more once the kernels are loaded (with ~20 MB
+#: Fast DDS waits forever for a logging thread it could not start; with 40-100 MB it aborts or
+#: crashes); a whole start ran under limits of 1100 MB and failed (threads, libraries) at 1000 MB
+START_ROOM = 640 << 20
 
 #: GIL switch interval (s) while the node runs: bounds how long the physics thread, woken at
 #: its deadline, waits for the executor thread (Python's default is 5 ms)
@@ -347,6 +353,20 @@ def _address_space_room() -> int | None:
     return soft - size
 
 
+def check_address_space() -> None:
+    """Under an address-space limit (prlimit --as) too tight for a start, MemoryError at once.
+
+    Below it, starts failed anywhere, mostly inside compiled libraries where no Python error
+    can be raised (aborts, crashes) and twice by hanging for good with the interpreter lock
+    held (Fast DDS, OpenBLAS), where neither a signal nor any thread can end the process. With
+    START_ROOM of room, none of those was met; above it, what is still raised is said in one
+    line (`resource_error`)."""
+    room = _address_space_room()
+    if room is not None and room < START_ROOM:
+        raise MemoryError(f"the address-space limit leaves {room >> 20} MB, a start needs about "
+                          f"{START_ROOM >> 20} MB more")
+
+
 def load_lapack() -> None:
     """Under an address-space limit (prlimit --as), load scipy's LAPACK now, checked.
 
@@ -417,6 +437,7 @@ def _main(argv, shutdown: Shutdown) -> int:
     from gyro_sim.ros.params import preflight
 
     # --help, misspelt parameters and the first numba compile, before rclpy starts
+    check_address_space()
     load_lapack()
     code = preflight(sys.argv if argv is None else argv)
     if code is not None:

@@ -45,7 +45,8 @@ What is left where
 - the node killed, even by SIGKILL, its writer not: the writer sees the end of its input,
   writes what it had been handed, the summary and index, renames the ``.partial`` file
   (overwrite) and exits: a complete log at the record path, a moment after the node is gone;
-  missing is only what the node had not yet handed over (at most `SEND_PERIOD` of records);
+  missing is only what the node had not yet handed over (at most `SEND_PERIOD` of records
+  while the writer keeps up; the backlog waiting in the node too when it was behind);
 - node and writer both killed by SIGKILL (the whole process group, say): the file being
   written (the record path, or the ``.partial`` file with overwrite) stops without summary or
   index; everything flushed before (every ``flush_period``, 0.2 s by default) is read back by
@@ -66,9 +67,10 @@ Falling behind
 --------------
 The sender never blocks on the pipe (its end is non-blocking): what the pipe cannot take waits
 in the node, at most `max_backlog_bytes` (the records' bytes plus ITEM_OVERHEAD each: measured,
-the node's resident memory then grows by about 1.2 times the bound). Beyond that the *oldest* publications waiting are
-dropped, each whole, counted in `dropped_records` and `dropped_publications`; commands and
-events (`raw`, `raw_many`) are never dropped. A writer stopped for good (SIGSTOP) thus costs
+the node's resident memory then grows by about 1.2 times the bound). While the pipe is full and
+more waits than that, the *oldest* publications waiting are dropped, each whole, counted in
+`dropped_records` and `dropped_publications`; commands and events (`raw`, `raw_many`) are never
+dropped (nor bounded: a flood of commands into a stopped writer grows the node's memory). A writer stopped for good (SIGSTOP) thus costs
 the node a bounded amount of memory, and once it runs again the log is complete and readable,
 with the publications dropped missing from it.
 

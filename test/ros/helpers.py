@@ -104,6 +104,14 @@ def writer_of(node: "NodeProcess", timeout: float = 60.0) -> int:
     return wait_for(find, timeout, "the log writer process", poll=0.005)
 
 
+def running(pid: int) -> bool:
+    """Whether process `pid` still runs (a zombie, ended and not yet reaped, does not)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return False
+
+
 def rss_mb(pid: int) -> float:
     """Resident memory of a process (MB)."""
     for line in Path(f"/proc/{pid}/status").read_text().splitlines():

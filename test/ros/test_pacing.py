@@ -438,3 +438,21 @@ def test_commands_received_while_paused_or_before_a_reset_are_all_logged_in_caus
     assert order[-2:] == [("command", t_reset, b"r0"), ("event", t_reset, "reset")]
     assert np.all(loop.sim.axis_moments == 0.0)
     assert loop.counters.accepted == 4 == len(out.commands)
+
+
+def test_a_physics_thread_failing_at_its_start_still_says_it_finished():
+    """MemoryError before the loop proper (its scheduling, its first figures): `finished` is set
+    and the failure kept, so that nothing waits on a thread that is gone."""
+    clock = FakeClock()
+    loop, out = make_loop(clock)
+
+    def no_memory():
+        raise MemoryError()
+
+    loop._schedule = no_memory
+    loop.start()
+    try:
+        assert loop.finished.wait(10.0) and loop.started.is_set()
+        assert loop.out_of_memory and loop.crash is None
+    finally:
+        loop.stop()

@@ -24,7 +24,7 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 
 from .helpers import (  # noqa: E402
     DISCOVERY_TIMEOUT, ROOT, Client, NodeProcess, children, diag_values, new_domain_id, node_command, ros_env,
-    rss_mb, wait_for, writer_of,
+    rss_mb, running, wait_for, writer_of,
 )
 
 #: the light configuration of the other node tests
@@ -277,7 +277,7 @@ def test_sigkill_of_the_node_alone_leaves_a_complete_log(tmp_path, overwrite):
         writer = writer_of(node)
         node.proc.send_signal(signal.SIGKILL)
         node.proc.wait(PROMPT)
-        wait_for(lambda: not Path(f"/proc/{writer}").exists(), 60.0, "the writer to finish")
+        wait_for(lambda: not running(writer), 60.0, "the writer to finish")
     finally:
         node.stop(signal.SIGKILL)
     n = summary_count(log)
@@ -366,7 +366,7 @@ def test_a_signal_while_the_writer_starts_kills_it_and_removes_the_file(tmp_path
             proc.kill()
     assert proc.returncode == 0 and took < 2.0, (proc.returncode, took, err)
     assert err.strip() == "gyro_sim_node: SIGTERM during start-up: not started (nothing recorded)" and not out
-    assert not log.exists() and not Path(f"/proc/{writer}").exists()
+    assert not log.exists() and not running(writer)
 
 
 def test_scipy_lapack_under_a_tight_address_space_limit_is_refused_not_a_hang(tmp_path):
@@ -383,3 +383,26 @@ def test_scipy_lapack_under_a_tight_address_space_limit_is_refused_not_a_hang(tm
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
     r = subprocess.run([sys.executable, "-c", script], env=env, text=True, capture_output=True, timeout=PROMPT)
     assert r.stdout.startswith("refused:") and "scipy's LAPACK needs" in r.stdout, (r.stdout, r.stderr)
+
+
+def test_the_node_under_a_tight_address_space_limit_ends_in_one_line(tmp_path):
+    """prlimit --as just above what the node's imports take: it ends at once with one line and
+    exit 1 (it died with a traceback, or an abort, or hung in Fast DDS or OpenBLAS)."""
+    import resource
+
+    env = ros_env(new_domain_id(), tmp_path)
+    probe = ("import gyro_sim.ros.node\n"
+             "print(next(int(l.split()[1]) * 1024 for l in open('/proc/self/status') if l.startswith('VmSize:')))")
+    size = int(subprocess.run([sys.executable, "-c", probe], cwd=ROOT, env=env, text=True, capture_output=True,
+                              timeout=120, check=True).stdout)
+    limit = size + (64 << 20)  # room for a thread or two, not for scipy's LAPACK
+
+    def limited():
+        resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+
+    log = tmp_path / "limited.mcap"
+    r = subprocess.run(node_command(*LIGHT, "duration:=1.0", f"record:={log}"), cwd=ROOT, env=env, text=True,
+                       capture_output=True, timeout=120, preexec_fn=limited)
+    said = [line for line in r.stderr.splitlines() if line.startswith("gyro_sim_node:")]
+    assert r.returncode == 1 and len(said) == 1 and "out of memory" in said[0], r.stderr[-3000:]
+    assert "Traceback" not in r.stderr and not log.exists()
