@@ -122,7 +122,7 @@ def test_the_null_kernel_only_zeroes_the_rate():
 
 def test_outputs_and_publications_share_one_specialization():
     code = ("import numpy as np\nfrom gyro_sim.simulator import Simulator\n"
-            "from gyro_sim.dynamics import fast_outputs\n"
+            "from gyro_sim.dynamics import outputs as fast_outputs\n"
             "sim = Simulator('hinge_chain', integrator='rk4', backend='numba')\n"
             "sim.snapshot(); sim.system.outputs(0.0, sim.state)\n"
             "print(len(fast_outputs.publication_kernel.overloads))\n")

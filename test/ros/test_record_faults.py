@@ -174,7 +174,10 @@ def test_a_stalled_writer_costs_bounded_memory_and_the_drops_are_counted(tmp_pat
         for conn, _, raw in reader.messages(connections=conns):
             last = reader.deserialize(raw, conn.msgtype)
     values = {kv.key: kv.value for s in last.status for kv in s.values}
-    assert int(values["records_dropped"]) == dropped_records and values["record"] == "recording"
+    assert int(values["records_dropped"]) == dropped_records
+    # resumed, the writer catches up (the event above); at 1000 publications a second into a 1 MB
+    # queue it may fall behind again before the end on a busy machine: either state, never failed
+    assert values["record"] == "recording" or values["record"].startswith("behind"), values["record"]
 
 
 # --- no space left ----------------------------------------------------------------------------------
@@ -308,7 +311,8 @@ def test_a_signal_during_the_first_compile_ends_the_start_at_once(tmp_path, sign
     log = tmp_path / "never.mcap"
     cache = tmp_path / "numba_cache"
     cache.mkdir()
-    node = NodeProcess(tmp_path, new_domain_id(), *LIGHT, f"record:={log}", env={"NUMBA_CACHE_DIR": str(cache)})
+    node = NodeProcess(tmp_path, new_domain_id(), *LIGHT, f"record:={log}",
+                       env={"NUMBA_CACHE_DIR": str(cache), "GYRO_SIM_VERBOSE": "1"})
     try:
         wait_for(lambda: "  compiled " in node.stderr or not node.alive(), 120.0, "the compile under way")
         assert node.alive(), node.stderr
