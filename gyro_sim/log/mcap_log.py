@@ -461,10 +461,6 @@ class LogWriter:
         if self._timer is not threading.current_thread():
             self._timer.join(timeout=5.0)
 
-    @property
-    def closed(self) -> bool:
-        return self._closed
-
     def _check_open(self) -> None:
         if self._closed:
             raise LogError(f"log {self.path} is closed")

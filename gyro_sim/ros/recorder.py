@@ -233,10 +233,6 @@ class LogFile:
     fd: int | None
     ident: tuple[int, int]
 
-    @property
-    def record_path(self) -> str:
-        return self.target or self.path
-
     def close_fd(self) -> None:
         if self.fd is not None:
             fd, self.fd = self.fd, None

@@ -48,13 +48,6 @@ def find_sweep(name: str) -> Path:
     return p
 
 
-def shipped_sweeps() -> list[Path]:
-    from gyro_sim.paths import config_dirs
-
-    dirs = [d / "sweeps" for d in config_dirs() if (d / "sweeps").is_dir()]
-    return sorted(dirs[0].glob("*.yaml")) if dirs else []
-
-
 #: optional modules the sweep needs, all in the `sweep` extra
 SWEEP_MODULES = ("dask", "distributed", "pyarrow", "matplotlib")
 

@@ -20,7 +20,7 @@ import json
 import math
 import os
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -327,9 +327,3 @@ def finish(sweep, out: Path, rows: list[dict], stats: dict[str, Any]) -> dict[st
     return {"check": check, "largest": big, "summary": text}
 
 
-def load_rows(path: str | os.PathLike) -> list[dict[str, Any]]:
-    return pq.read_table(path).to_pylist()
-
-
-def done_points(rows: Iterable[dict]) -> set[int]:
-    return {int(r["point"]) for r in rows}
