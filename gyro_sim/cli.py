@@ -288,6 +288,10 @@ def extra_for(module: str | None) -> str | None:
     return EXTRAS.get(top)
 
 
+def _quiet(unraisable) -> None:
+    """An unraisable-exception hook that says nothing (after an interrupt was reported)."""
+
+
 def _compile_first(args) -> None:
     """`run` and `replay --resimulate` build a Simulator: on a cold numba cache, say that the
     first one compiles (gyro_sim.warmup) instead of staying silent for seconds."""
@@ -331,6 +335,9 @@ def main(argv=None) -> int:
     except KeyboardInterrupt as exc:  # SIGINT or SIGTERM where the command does not handle it
         print(f"\ngyro-sim {args.cmd}: interrupted ({getattr(exc, 'name', 'SIGINT')}) before finishing; "
               "no output is left half-written under its name", file=sys.stderr)
+        # what the interrupt cut half-way (a library object whose constructor it stopped) may
+        # fail again when collected at exit: that is not news after the line above
+        sys.unraisablehook = _quiet
         return 1
     except OutputError as exc:  # an output taken by another writer while this one worked
         print(f"gyro-sim {args.cmd}: {exc}", file=sys.stderr)

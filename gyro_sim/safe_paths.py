@@ -31,6 +31,7 @@ No ROS and no third-party imports here: the node's parameter validation uses it 
 """
 from __future__ import annotations
 
+import atexit
 import contextlib
 import errno
 import os
@@ -125,6 +126,20 @@ def _fsync_dir(directory: Path) -> None:
         os.close(fd)
 
 
+#: temporary outputs created and neither published nor removed yet (this process's)
+_UNPUBLISHED: set[Path] = set()
+
+
+@atexit.register
+def _remove_unpublished() -> None:
+    """At exit, the temporary files of outputs never published: an interrupt that landed
+    between a temporary file's creation and its ``with`` block leaves nothing behind."""
+    for tmp in list(_UNPUBLISHED):
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        _UNPUBLISHED.discard(tmp)
+
+
 class AtomicOutput:
     """One output written under a temporary name and published when complete (module docstring).
 
@@ -153,12 +168,17 @@ class AtomicOutput:
         while True:
             tmp = self.path.with_name(f".{self.path.stem}.{secrets.token_hex(TEMP_TOKEN_BYTES)}{PARTIAL}"
                                       f"{self.path.suffix}")
+            # registered before it exists: a signal landing anywhere from here to the `with`
+            # block's exit still finds it (_remove_unpublished, at exit)
+            _UNPUBLISHED.add(tmp)
             try:
                 os.close(os.open(tmp, flags, 0o666))
                 return tmp
             except FileExistsError:
+                _UNPUBLISHED.discard(tmp)
                 continue
             except OSError as exc:
+                _UNPUBLISHED.discard(tmp)
                 raise OutputError(f"{self.what}: {self.path}: cannot create a file in {self.path.parent} "
                                   f"({exc.strerror or exc})") from None
 
@@ -212,6 +232,7 @@ class AtomicOutput:
     def _remove_tmp(self) -> None:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(self.tmp)
+        _UNPUBLISHED.discard(self.tmp)
 
     def discard(self) -> None:
         """Remove the temporary file (nothing is published)."""

@@ -349,3 +349,19 @@ def test_view_save_and_screenshot_publish_both_whole(recorded, tmp_path, capsys,
     assert seen["rrd"] == rrd and seen["rrd size"] > 0 and seen["png"] != png
     assert png.read_bytes() == b"\x89PNG picture"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["v.png", "v.rrd"]
+
+
+def test_an_output_reserved_but_never_entered_is_removed_at_exit(tmp_path):
+    """An interrupt landing between a temporary file's creation and its `with` block (the
+    constructor done, __exit__ never run) leaves nothing at exit, under either name."""
+    import subprocess
+    import sys
+
+    target = tmp_path / "x.mcap"
+    code = ("from gyro_sim.safe_paths import AtomicOutput\n"
+            f"out = AtomicOutput({str(target)!r})\n"
+            "assert out.tmp.exists()\n"
+            "raise KeyboardInterrupt\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert "KeyboardInterrupt" in r.stderr and "AssertionError" not in r.stderr, r.stderr
+    assert list(tmp_path.iterdir()) == []
