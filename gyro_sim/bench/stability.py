@@ -423,13 +423,9 @@ def long_horizon(steps: int, integrators=("rk4", "lie4"), progress=None, backend
         except SimulationError as exc:
             run.failed = str(exc)
         run.cpu = time.process_time() - cpu0
-        _classify(run)
+        run.growth, run.slope, run.rate = growth(run.t, run.drift)
         out.append(run)
     return out
-
-
-def _classify(run: LongRun) -> None:
-    run.growth, run.slope, run.rate = growth(run.t, run.drift)
 
 
 # ------------------------------------------------------------------------------- tables
