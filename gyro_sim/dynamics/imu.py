@@ -140,26 +140,37 @@ class ImuNoise:
         self._index = -1
         self._last = np.zeros(6)
 
+    def _draw(self, count: int) -> np.ndarray:
+        """The noise (count, 6) of the next `count` samples, drawn in one block: the bias summed
+        sample after sample from the last one (numpy's accumulate is sequential), so that any
+        split into blocks gives the same numbers bit for bit."""
+        draws = self._generator.standard_normal((count, DRAWS_PER_SAMPLE))
+        steps = np.empty((count + 1, 6))
+        steps[0] = self._bias
+        steps[1:] = draws[:, 6:] * self.walk
+        bias = np.cumsum(steps, axis=0)[1:]
+        self._bias = bias[-1]
+        self._index += count
+        return bias + self.white * draws[:, :6]
+
     def at(self, index: int) -> np.ndarray:
         """The noise (6,) of sample `index` (gyro x y z, accelerometer x y z): the samples up to it
         are drawn in order; an index already passed gives the last one drawn again (a new copy)."""
         if self.silent or index <= self._index:
             return self._last.copy()
         while self._index < index:
-            count = min(index - self._index, DRAW_BLOCK)
-            draws = self._generator.standard_normal((count, DRAWS_PER_SAMPLE))
-            bias = self._bias + np.cumsum(draws[:, 6:] * self.walk, axis=0)
-            self._last = bias[-1] + self.white * draws[-1, :6]
-            self._bias = bias[-1]
-            self._index += count
+            self._last = self._draw(min(index - self._index, DRAW_BLOCK))[-1]
         return self._last.copy()
 
     def record(self, count: int) -> np.ndarray:
-        """The noise of the next `count` samples (count, 6), as `at` gives them one by one."""
-        out = np.empty((count, 6))
-        for i in range(count):
-            out[i] = self.at(self._index + 1)
-        return out
+        """The noise (count, 6) of the next `count` samples, the numbers `at` gives one by one."""
+        blocks = []
+        while count > 0:
+            blocks.append(self._draw(min(count, DRAW_BLOCK)))
+            count -= len(blocks[-1])
+        if blocks:
+            self._last = blocks[-1][-1]
+        return np.concatenate(blocks) if blocks else np.zeros((0, 6))
 
 
 class ImuSet:

@@ -236,7 +236,7 @@ def test_white_noise_allan_deviation_at_one_second_is_the_density():
     """Allan deviation N / sqrt(tau): at tau = 1 s (100 samples), N. Each of the K cluster
     differences is an independent normal here, so the estimated Allan variance has the relative
     standard error sqrt(2 / K), the deviation half of it; the tolerance is 5 such errors."""
-    samples = 400_000
+    samples = 1_000_000
     record = ImuNoise(N_GYRO, 0.0, N_ACCEL, 0.0, RATE, seed=11).record(samples)
     for axis, density in ((0, N_GYRO), (4, N_ACCEL)):
         for tau in (0.1, 1.0, 10.0):
@@ -250,7 +250,7 @@ def test_bias_random_walk_allan_deviation_has_slope_one_half():
     are independent (each spans two clusters' increments), so at least K / 2 of the K are:
     relative standard error of the deviation <= sqrt(2 / (K / 2)) / 2; tolerance 5 of those."""
     walk_gyro, walk_accel = 2e-4, 3e-3
-    samples = 400_000
+    samples = 1_000_000
     record = ImuNoise(0.0, walk_gyro, 0.0, walk_accel, RATE, seed=5).record(samples)
     for axis, density in ((1, walk_gyro), (5, walk_accel)):
         for tau in (1.0, 10.0, 40.0):
@@ -263,12 +263,17 @@ def test_bias_random_walk_allan_deviation_has_slope_one_half():
 
 
 def test_noise_depends_only_on_the_seed_and_the_sample():
-    one_by_one = ImuNoise(1e-3, 1e-4, 1e-2, 1e-3, RATE, seed=3).record(2000)
+    """The same numbers bit for bit whether the samples are drawn one by one, skipped over, or in
+    blocks of any size."""
+    whole = ImuNoise(1e-3, 1e-4, 1e-2, 1e-3, RATE, seed=3).record(2000)
+    one = ImuNoise(1e-3, 1e-4, 1e-2, 1e-3, RATE, seed=3)
+    assert np.array_equal(np.array([one.at(i) for i in range(2000)]), whole)
     skipping = ImuNoise(1e-3, 1e-4, 1e-2, 1e-3, RATE, seed=3)
-    assert np.array_equal(skipping.at(1999), one_by_one[1999])  # 2000 samples drawn in one block
-    assert np.array_equal(skipping.at(1999), one_by_one[1999])  # the same sample asked again
+    for i in (0, 1, 7, 500, 1999):
+        assert np.array_equal(skipping.at(i), whole[i])
+    assert np.array_equal(skipping.at(1999), whole[1999])  # the same sample asked again
     other = ImuNoise(1e-3, 1e-4, 1e-2, 1e-3, RATE, seed=4).record(10)
-    assert not np.array_equal(other, one_by_one[:10])
+    assert not np.array_equal(other, whole[:10])
 
 
 def test_a_body_at_rest_reads_the_noise_of_its_samples_and_a_reset_repeats_it():
