@@ -718,7 +718,7 @@ class Simulator:
         if self._compiled_outputs is None:
             ev = self._evaluate()
             d = self.system.data
-            a_s = ev.acc_v + np.cross(ev.acc_w, d.O)  # about O^k
+            a_s = ev.acc_v + dyn.cross(ev.acc_w, d.O)  # about O^k
             return self._imus.read(self._t, d.R, d.w, d.vO, ev.acc_w, a_s)
         from gyro_sim.dynamics.imu import compiled_accelerations
 

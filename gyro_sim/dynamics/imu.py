@@ -43,7 +43,7 @@ from typing import Sequence
 import numpy as np
 
 from gyro_sim.errors import GyroSimError
-from gyro_sim.dynamics.rotations import matrix_to_quat, quat_to_matrix
+from gyro_sim.dynamics.rotations import cross, matrix_to_quat, quat_to_matrix
 
 #: a time within this fraction of a sample of the next IMU tick counts as on it (simulated
 #: times are sums of steps: t f falls a few ulps short of a whole number)
@@ -217,7 +217,7 @@ class ImuSet:
         Rk = R[k]
         r = np.einsum("nij,nj->ni", Rk, self.position)  # P - O^k, world
         wk = w[k]
-        a_P = a_s[k] + np.cross(alpha[k], r) + np.cross(wk, vO[k]) + np.cross(wk, np.cross(wk, r))
+        a_P = a_s[k] + cross(alpha[k], r) + cross(wk, vO[k]) + cross(wk, cross(wk, r))
         world_R_imu = Rk @ self.body_R_imu
         gyro = np.einsum("nji,nj->ni", world_R_imu, wk)  # imu_R_world w
         accel = np.einsum("nji,nj->ni", world_R_imu, a_P - self.gravity)
