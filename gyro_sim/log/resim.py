@@ -1,5 +1,6 @@
 """Re-simulation of a log: rebuild the Simulator from the embedded scene and parameters, feed it
-the recorded commands at their recorded times, and compare with the logged joint states.
+the recorded commands at their recorded times, and compare with the logged joint states and
+IMU messages (sensor_msgs/Imu: the IMUs' noise depends only on their seeds and the time).
 
 The log must keep the contract of :mod:`gyro_sim.log.record` (fixed ``advance_dt``, log time =
 offset + simulated time, outputs before commands at a boundary, messages in causal order).
