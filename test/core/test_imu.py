@@ -329,3 +329,38 @@ def test_a_scene_without_imus_runs_no_imu_code(monkeypatch, tmp_path):
     assert sim.imus() == [] and sim.imu_names == ()
     record_run(sim, tmp_path / "run.mcap", duration=0.05, publish_rate=100.0)
     assert not [t for t in read_info(tmp_path / "run.mcap").topics if "/imu/" in t]
+
+
+def test_imus_reuse_the_evaluation_of_the_outputs():
+    """After a snapshot of the same state and commands the IMUs evaluate no dynamics again
+    (numba: no compiled call; numpy: no right-hand side); after a step or new commands, one."""
+    pytest.importorskip("numba")
+    sim = simulator(CHAIN, "numba")
+    sim.advance(0.1)
+    sim.snapshot()
+    calls = []
+    kernel = sim._snapshot_kernel
+    sim._snapshot_kernel = lambda *args: calls.append(1) or kernel(*args)
+    sim.imus()
+    assert calls == []
+    sim.advance(0.01)
+    sim.imus()
+    sim.imus()
+    assert calls == [1]
+    sim.set_axis_moments([0.0, 0.0])
+    sim.imus()
+    assert calls == [1, 1]
+
+    sim = simulator(CHAIN, "numpy")
+    sim.advance(0.1)
+    sim.wrenches()
+    rhs = sim.system.rhs
+    evaluations = []
+    sim.system.rhs = lambda *args, **kw: evaluations.append(1) or rhs(*args, **kw)
+    sim.imus()
+    assert evaluations == []
+    sim.advance(0.01)
+    evaluations.clear()
+    sim.imus()
+    sim.imus()
+    assert evaluations == [1]
