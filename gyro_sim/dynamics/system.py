@@ -28,6 +28,7 @@ from typing import Protocol
 import numpy as np
 
 from gyro_sim.dynamics import reference as dyn
+from gyro_sim.errors import GyroSimError
 from gyro_sim.dynamics import kernel as fast, entry as fast_entry, outputs as fast_outputs
 from gyro_sim.integrators.rk4 import loop as fast_loop
 from gyro_sim.dynamics.model import Model, initial_state
@@ -93,10 +94,13 @@ class ChainODE:
             self.inputs_version += 1
         self.t0, self.p0, self.hinge_tau, self.L_rotor = t0, p0, hinge_tau, L_rotor
 
-    def spins(self, t: float) -> np.ndarray | None:
-        """Absolute torque-rotor spins p_i(t) (eq 29 integrated over the hold)."""
+    def spins(self, t: float, y: np.ndarray | None = None) -> np.ndarray | None:
+        """Absolute torque-rotor spins p_i(t) (eq 29 integrated over the hold); in a stateful
+        model (`Model.stateful`) they are states: those of y (the held p0 without y)."""
         if self.p0 is None:
             return None
+        if self.model.stateful:
+            return self.p0 if y is None else y[self.model.i_spin]
         if self.L_rotor is None:
             return self.p0
         return self.p0 + (self.L_rotor / self.model.torque_A) * (t - self.t0)
@@ -104,7 +108,7 @@ class ChainODE:
     def rhs(self, t: float, y: np.ndarray, out: dyn.Evaluation | None = None) -> np.ndarray:
         m, d = self.model, self.data
         self.nfev += 1
-        p = self.spins(t)
+        p = self.spins(t, y)
         udot = dyn.forward(m, d, t, y, self.hinge_tau, p, self.L_rotor, out)
         u = y[m.i_vel]
         ydot = np.empty(m.size)
@@ -116,6 +120,10 @@ class ChainODE:
         ydot[m.i_vel] = udot
         if p is not None:
             ydot[m.i_kappa] = dyn.torque_rotor_rates(m, d, p)  # kappa_i' = p_i - w . e_i (eqs 18-19)
+        if m.stateful:  # (29) with the torques applied at this state; the works' powers
+            a = d.applied
+            ydot[m.i_spin] = (a.rotor_motor + a.rotor_friction) / m.torque_A
+            ydot[m.i_work] = a.power()
         return ydot
 
     def project(self, y: np.ndarray) -> None:
@@ -340,6 +348,10 @@ class FastChainODE:
 
 
 # --- backend selection ---------------------------------------------------------------------
+class BackendError(GyroSimError, ValueError):
+    """The backend asked for does not model the scene (one line naming the scene key)."""
+
+
 #: what `make_system` accepts: "auto" (numba if it works, else numpy), "numba", "numpy"
 BACKENDS = ("auto", "numba", "numpy")
 
@@ -357,12 +369,19 @@ def make_system(model: Model, backend: str = "auto") -> ChainODE | FastChainODE:
     backend: "numpy" -> ChainODE; "numba" -> FastChainODE, compiled (or loaded from the disk
     cache) now, so the first integration step does not pay for it; ImportError without numba.
     "auto" -> as "numba" if numba imports and the kernels compile, else ChainODE with a
-    warning when numba is there but failed. Heavy tips stay compiled: the kernel's
+    warning when numba is there but failed. A model with speed-dependent actuator terms
+    (`Model.stateful`: friction, max_speed) -> ChainODE under "auto", BackendError under
+    "numba". Heavy tips stay compiled: the kernel's
     elimination is exact to ~1e-14 relative at any mass ratio up to 1e7 either way
     (`gyro_sim.dynamics.kernel.STABLE_ABA_RATIO`, test/core/test_heavy_tip.py).
     """
     if backend not in BACKENDS:
         raise ValueError(f"unknown backend {backend!r}; valid: {', '.join(BACKENDS)}")
+    if model.stateful:
+        if backend == "numba":
+            raise BackendError(f"{model.actuators.terms[0]} needs backend numpy: the compiled dynamics does not "
+                               f"model speed-dependent actuator terms (friction, max_speed)")
+        return ChainODE(model)
     if backend == "numpy" or (backend == "auto" and not fast.available()):
         return ChainODE(model)
     if not fast.available():
