@@ -213,8 +213,9 @@ class FastChainODE:
         fast.normalize_quaternions in compiled loops)."""
         return self._i_q0, self._nq
 
-    def spins(self, t: float) -> np.ndarray | None:
-        """Absolute torque-rotor spins p_i(t) (eq 29 integrated over the hold)."""
+    def spins(self, t: float, y: np.ndarray | None = None) -> np.ndarray | None:
+        """Absolute torque-rotor spins p_i(t) (eq 29 integrated over the hold; a compiled model
+        is never stateful: y is not read)."""
         return self._ref.spins(t)
 
     @property
