@@ -115,7 +115,8 @@ class Simulator:
                              f"actuator terms (friction, max_speed); use one of {', '.join(STATEFUL_INTEGRATORS)}")
         self._joint_layout()
         # snapshots from compiled code when the system has it (the numba backend)
-        self._compiled_outputs = getattr(self.system, "outputs", None)
+        # (a stateful model's outputs, its applied torques, come from the numpy reference)
+        self._compiled_outputs = None if m.stateful else getattr(self.system, "outputs", None)
         self._watched = self._watched_energy()
         self._watch_last = None
         self._watch_joints = None

@@ -21,8 +21,10 @@ Three terms, after Basilisk's reaction wheels (`reactionWheelStateEffector`):
 The speed-dependent terms (friction, max_speed) make the applied torque a function of the
 state: a scene that has them carries the torque rotors' absolute spins p_i and the work of the
 applied torques in its state vector (`gyro_sim.dynamics.model`, `i_spin`, `i_work`), and
-the numpy dynamics (`gyro_sim.dynamics.reference.forward`) evaluates the torques at every
-stage. A scene without them takes the held-input path unchanged.
+the dynamics evaluates the torques at every stage: the numpy reference
+(`gyro_sim.dynamics.reference.applied_torques`) and the compiled kernel
+(`gyro_sim.dynamics.kernel._actuate`, its parameters in the workspace's tail). A scene
+without them takes the held-input path unchanged.
 """
 from __future__ import annotations
 

@@ -93,7 +93,7 @@ class Model:
     @property
     def stateful(self) -> bool:
         """Whether the applied torques depend on the state (friction, max_speed): the spins
-        and works are states (`i_spin`, `i_work`) and only the numpy dynamics models them."""
+        and works are states (`i_spin`, `i_work`)."""
         return self.actuators is not None and self.actuators.speed_dependent
 
     @property

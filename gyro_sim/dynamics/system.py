@@ -28,7 +28,6 @@ from typing import Protocol
 import numpy as np
 
 from gyro_sim.dynamics import reference as dyn
-from gyro_sim.errors import GyroSimError
 from gyro_sim.dynamics import kernel as fast, entry as fast_entry, outputs as fast_outputs
 from gyro_sim.integrators.rk4 import loop as fast_loop
 from gyro_sim.dynamics.model import Model, initial_state
@@ -214,9 +213,9 @@ class FastChainODE:
         return self._i_q0, self._nq
 
     def spins(self, t: float, y: np.ndarray | None = None) -> np.ndarray | None:
-        """Absolute torque-rotor spins p_i(t) (eq 29 integrated over the hold; a compiled model
-        is never stateful: y is not read)."""
-        return self._ref.spins(t)
+        """Absolute torque-rotor spins p_i(t) (eq 29 integrated over the hold; the states of y
+        in a stateful model)."""
+        return self._ref.spins(t, y)
 
     @property
     def hinge_tau(self) -> np.ndarray | None:
@@ -305,7 +304,8 @@ class FastChainODE:
     def outputs(self, t: float, y: np.ndarray) -> dict[str, np.ndarray]:
         """Every output at (t, y) with the inputs held, in one compiled call
         (:func:`gyro_sim.dynamics.outputs.publication_kernel` with everything wanted, no joint
-        states: the Simulator's specialization of it); new arrays, by name:
+        states: the Simulator's specialization of it); not for a stateful model (ValueError);
+        new arrays, by name:
 
         ydot (size,) y' (u' and the torque-rotor angle rates in it), R (n, 3, 3) world_R_body,
         w (n, 3) angular velocities, vO (n, 3) velocities of the joint points, O (n, 3) joint points,
@@ -314,6 +314,9 @@ class FastChainODE:
         body k's frame, inv (fast_outputs.INV_SIZE,) energy, kinetic, potential, jacobi,
         vertical momentum, H_O1 (3), P (3), L about the centre of mass (3). Not counted in nfev.
         """
+        if self.model.stateful:
+            raise ValueError("the compiled outputs hold the inputs: a model with speed-dependent actuator terms "
+                             "takes its outputs from the numpy reference, rhs(t, y, out=...)")
         m, n = self.model, self.model.n
         out = {"ydot": np.empty(self.size), "R": np.empty((n, 3, 3)), "w": np.empty((n, 3)),
                "vO": np.empty((n, 3)), "O": np.empty((n, 3)), "quat": np.empty((n, 4)),
@@ -338,7 +341,8 @@ class FastChainODE:
         self.nfev -= 1
         one = np.zeros((1, 1))  # any tableau: zero steps compile the loop for every tableau
         self.march_explicit_rk(one, one[0], one[0], self._ref.t0, y, 1.0, 0)
-        self.outputs(self._ref.t0, y)
+        if not self.model.stateful:  # a stateful model's outputs come from the numpy reference
+            self.outputs(self._ref.t0, y)
 
     def project(self, y: np.ndarray) -> None:
         """Renormalise the quaternions of y (size,) in place."""
@@ -349,10 +353,6 @@ class FastChainODE:
 
 
 # --- backend selection ---------------------------------------------------------------------
-class BackendError(GyroSimError, ValueError):
-    """The backend asked for does not model the scene (one line naming the scene key)."""
-
-
 #: what `make_system` accepts: "auto" (numba if it works, else numpy), "numba", "numpy"
 BACKENDS = ("auto", "numba", "numpy")
 
@@ -370,19 +370,12 @@ def make_system(model: Model, backend: str = "auto") -> ChainODE | FastChainODE:
     backend: "numpy" -> ChainODE; "numba" -> FastChainODE, compiled (or loaded from the disk
     cache) now, so the first integration step does not pay for it; ImportError without numba.
     "auto" -> as "numba" if numba imports and the kernels compile, else ChainODE with a
-    warning when numba is there but failed. A model with speed-dependent actuator terms
-    (`Model.stateful`: friction, max_speed) -> ChainODE under "auto", BackendError under
-    "numba". Heavy tips stay compiled: the kernel's
+    warning when numba is there but failed. Heavy tips stay compiled: the kernel's
     elimination is exact to ~1e-14 relative at any mass ratio up to 1e7 either way
     (`gyro_sim.dynamics.kernel.STABLE_ABA_RATIO`, test/core/test_heavy_tip.py).
     """
     if backend not in BACKENDS:
         raise ValueError(f"unknown backend {backend!r}; valid: {', '.join(BACKENDS)}")
-    if model.stateful:
-        if backend == "numba":
-            raise BackendError(f"{model.actuators.terms[0]} needs backend numpy: the compiled dynamics does not "
-                               f"model speed-dependent actuator terms (friction, max_speed)")
-        return ChainODE(model)
     if backend == "numpy" or (backend == "auto" and not fast.available()):
         return ChainODE(model)
     if not fast.available():
