@@ -111,7 +111,9 @@ class Simulator:
         self._conserved = inv.conserved(m)
         self._axis_max_torque = self._axis_limits()
         if m.stateful and integrator not in STATEFUL_INTEGRATORS:
-            raise ValueError(f"{m.actuators.terms[0]}: integrator {integrator!r} does not take speed-dependent "
+            from gyro_sim.dynamics.actuators import ActuatorError
+
+            raise ActuatorError(f"{m.actuators.terms[0]}: integrator {integrator!r} does not take speed-dependent "
                              f"actuator terms (friction, max_speed); use one of {', '.join(STATEFUL_INTEGRATORS)}")
         self._joint_layout()
         # snapshots from compiled code when the system has it (the numba backend)

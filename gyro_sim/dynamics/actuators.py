@@ -33,7 +33,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gyro_sim.errors import GyroSimError
 from gyro_sim.scene.records import Limits
+
+class ActuatorError(GyroSimError, ValueError):
+    """A scene's actuator terms that the method asked for does not take (one line naming the
+    scene key)."""
+
 
 #: the speed limit's cut is a linear ramp over this fraction of max_speed below it
 MAX_SPEED_BAND = 1e-3

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from gyro_sim.dynamics import kernel
+from gyro_sim.dynamics.actuators import ActuatorError
 from gyro_sim.msgs import messages
 from gyro_sim.scene.load import SceneError, load_scene
 from gyro_sim.simulator import Simulator
@@ -275,7 +276,7 @@ def test_the_compiled_kernel_integrates_the_actuators_as_the_reference(integrato
 def test_speed_dependent_terms_refuse_the_structured_integrators():
     scene = wheel_scene("held", friction={"viscous": 1e-3})
     for name in ("gauss4", "gauss4s", "lie4"):
-        with pytest.raises(ValueError, match=rf"^wheel\.friction: integrator '{name}'"):
+        with pytest.raises(ActuatorError, match=rf"^wheel\.friction: integrator '{name}'"):
             Simulator(scene, integrator=name, backend="numpy")
 
 
@@ -285,3 +286,19 @@ def test_a_scene_without_limits_keeps_the_held_spin_layout():
     assert sim.model.size == sim.model.i_kappa.stop
     assert sim.snapshot().friction_work is None
     assert messages.FRICTION_WORK_KEY not in messages.dynamics_values(sim.snapshot())
+
+
+def test_the_cli_refuses_a_method_the_actuators_do_not_take_in_one_line(tmp_path):
+    import subprocess
+    import sys
+
+    import yaml
+
+    scene = tmp_path / "wheel.yaml"
+    scene.write_text(yaml.safe_dump(wheel_scene("held", friction={"viscous": 1e-3})), encoding="utf-8")
+    run = subprocess.run([sys.executable, "-m", "gyro_sim.cli", "run", "--scene", str(scene), "--duration", "0.1",
+                          "--integrator", "gauss4"], capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert run.returncode == 2, run.stderr
+    assert run.stderr.strip().splitlines() == [
+        "gyro-sim run: wheel.friction: integrator 'gauss4' does not take speed-dependent actuator terms "
+        "(friction, max_speed); use one of auto, dop853, fixed, radau, rk4"]
