@@ -18,9 +18,9 @@ from gyro_sim.snapshot import Scatter, Snapshot
 
 
 #: the integrators that take a stateful model (speed-dependent actuator terms: the spins and
-#: works are plain states); the others integrate a structure of their own (canonical
-#: momenta, Lie groups)
-STATEFUL_INTEGRATORS = ("auto", "dop853", "fixed", "radau", "rk4")
+#: works are plain states; "fixed" then takes gauss4 as its implicit rung); the others
+#: integrate a structure of their own (canonical momenta, Lie groups)
+STATEFUL_INTEGRATORS = ("auto", "dop853", "fixed", "gauss4", "radau", "rk4")
 
 
 class SimulationError(GyroSimError, RuntimeError):
