@@ -66,6 +66,7 @@ import math
 
 import numpy as np
 
+from gyro_sim.dynamics.actuators import MAX_SPEED_BAND, STRIBECK_PEAK, STRIBECK_TANH
 from gyro_sim.dynamics.model import Model
 
 try:
@@ -106,7 +107,14 @@ FLAG_HEAVY = 7
 #: flags[FLAG_KERNEL]: the address of `rhs_kernel` compiled as a C function (`kernel_address`),
 #: which the compiled loops call (`rhs_call`) instead of compiling the kernel into themselves
 FLAG_KERNEL = 8
-FLAGS_SIZE = 9
+#: flags[FLAG_ACTUATORS]: 1 for a model with speed-dependent actuator terms (model.stateful:
+#: friction, max_speed), whose spins and works are states at flags[FLAG_I_SPIN],
+#: flags[FLAG_I_WORK] and whose parameters sit in the workspace's tail (`workspace`)
+FLAG_ACTUATORS, FLAG_I_SPIN, FLAG_I_WORK = 9, 10, 11
+FLAGS_SIZE = 12
+#: per actuated axis, floats of the workspace's tail of a stateful model: max_speed (inf: none),
+#: coulomb, viscous, static, stribeck_speed (0: no Stribeck term), stick_speed
+ACTUATOR_PARAMETERS = 6
 
 
 def available() -> bool:
@@ -215,6 +223,33 @@ def _rotor_angle_rate(p, w0, w1, w2, e0, e1, e2):
     """kappa' = p - w . e (eqs 18-19) of a rotor of spin p about the world axis e on a body
     turning at w (dynamics.torque_rotor_rates in the same operations)."""
     return p - (w0 * e0 + w1 * e1 + w2 * e2)
+
+
+@_njit_inline
+def _friction_torque(w, a, o):
+    """-F(w) at relative speed w of the axis whose ACTUATOR_PARAMETERS start at a[o]
+    (gyro_sim.dynamics.actuators.AxisLimits.friction in scalar operations)."""
+    coulomb, viscous, static, b, stick = a[o + 1], a[o + 2], a[o + 3], a[o + 4], a[o + 5]
+    scale = 1.0
+    if abs(w) < stick:
+        scale = w / stick
+        w = stick
+    if b > 0.0:
+        x = w / b
+        f = STRIBECK_PEAK * (static - coulomb) * math.exp(-0.5 * x * x) * x + coulomb * math.tanh(STRIBECK_TANH * x)
+    else:
+        f = math.copysign(coulomb, w) if w != 0.0 else 0.0
+    return -(f + viscous * w) * scale
+
+
+@_njit_inline
+def _speed_cut(torque, w, max_speed):
+    """A motor torque with the speed limit applied at relative speed w
+    (gyro_sim.dynamics.actuators.AxisLimits.cut in scalar operations)."""
+    if torque * w > 0.0 and max_speed < math.inf:
+        ramp = (max_speed - abs(w)) / (MAX_SPEED_BAND * max_speed)
+        return torque * min(max(ramp, 0.0), 1.0)
+    return torque
 
 
 @_njit_inline
@@ -1440,6 +1475,8 @@ def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis,
     base (float, 7): moving-base amplitude (3), W = 2 pi f, gravity (3).
     Held inputs: torque-rotor spins p_i = p0_i + pdot_i (t - t0) (eq 29), their torques
     L_rotor, the generalized forces tau (N,) of the columns (hinge commands, eq 51).
+    A stateful model (flags[FLAG_ACTUATORS]) reads the spins from y instead and applies the
+    commands through its actuators' speed cut and friction (`_actuate`).
     """
     base_type, has_gravity, has_lam = flags[0], flags[1] != 0, flags[2] != 0
     i_r0, i_vel, i_kap, N = flags[3], flags[4], flags[5], flags[6]
@@ -1452,11 +1489,15 @@ def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis,
     # positions, velocities
     _positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, hk, Aw, e_w)
     _velocities(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, i_vel, s_w, e_w, w, vO, c)
-    # bias forces: p_i(t) = p_i(t0) + (L_i / A_i)(t - t0) (eq 29)
-    for i in range(nt):
-        p[i] = p0[i] + pdot[i] * (t - t0)
+    L_applied, tau_applied = L_rotor, tau
+    if flags[FLAG_ACTUATORS] != 0:  # spins and works are states; the torques applied at this state
+        L_applied, tau_applied = _actuate(y, ydot, work, is_hinge, own_col, torque_body, torque_axis,
+                                          torque_A, flags, L_rotor, tau, R, w, p, n, N, nt, i_vel)
+    else:  # bias forces: p_i(t) = p_i(t0) + (L_i / A_i)(t - t0) (eq 29)
+        for i in range(nt):
+            p[i] = p0[i] + pdot[i] * (t - t0)
     _bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
-                 torque_A, p, L_rotor, has_gravity, gravity, lam_b, dlam_b, I6, pb)
+                 torque_A, p, L_applied, has_gravity, gravity, lam_b, dlam_b, I6, pb)
     # ABA
     _joint_columns(is_hinge, own_col, base_type, e_w, S)
     for a in range(6):
@@ -1465,7 +1506,7 @@ def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis,
         sw = -base_omega * base_omega * math.sin(base_omega * t)
         for a in range(3):
             a_base[3 + a] = base_amplitude[a] * sw
-    _aba(is_hinge, col_start, S, I6, pb, c, tau, a_base, s_w, U, W, u, Dinv, ydot[i_vel:i_vel + N],
+    _aba(is_hinge, col_start, S, I6, pb, c, tau_applied, a_base, s_w, U, W, u, Dinv, ydot[i_vel:i_vel + N],
          Ia, pa, Dx, T, G, x, flags[FLAG_HEAVY])
     # y'
     if base_type == BASE_FREE:
@@ -1485,6 +1526,51 @@ def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis,
         e1 = R[k, 1, 0] * ax0 + R[k, 1, 1] * ax1 + R[k, 1, 2] * ax2
         e2 = R[k, 2, 0] * ax0 + R[k, 2, 1] * ax1 + R[k, 2, 2] * ax2
         ydot[i_kap + i] = _rotor_angle_rate(p[i], w[k, 0], w[k, 1], w[k, 2], e0, e1, e2)
+
+
+@_njit_inline
+def _actuate(y, ydot, work, is_hinge, own_col, torque_body, torque_axis, torque_A, flags, L_rotor, tau,
+             R, w, p, n, N, nt, i_vel):
+    """A stateful model's applied torques (gyro_sim.dynamics.reference.applied_torques): the
+    spins p from y, the rotor torques (nt,) and generalized forces (N,) applied (views of the
+    workspace's tail), and y' of the spins (eq 29) and of the works (the motors' power,
+    friction's)."""
+    i_spin, i_work = flags[FLAG_I_SPIN], flags[FLAG_I_WORK]
+    rotor_at = n * WORK_PER_BODY + N * WORK_PER_COLUMN + nt * WORK_PER_ROTOR + WORK_FIXED
+    hinge_at = rotor_at + nt * ACTUATOR_PARAMETERS
+    L_at = hinge_at + n * ACTUATOR_PARAMETERS
+    L_applied = block1(work, L_at, nt)
+    tau_applied = block1(work, L_at + nt, N)
+    motor_power = 0.0
+    friction_power = 0.0
+    for i in range(nt):
+        p[i] = y[i_spin + i]
+        k = torque_body[i]
+        ax0, ax1, ax2 = torque_axis[i, 0], torque_axis[i, 1], torque_axis[i, 2]
+        e0 = R[k, 0, 0] * ax0 + R[k, 0, 1] * ax1 + R[k, 0, 2] * ax2
+        e1 = R[k, 1, 0] * ax0 + R[k, 1, 1] * ax1 + R[k, 1, 2] * ax2
+        e2 = R[k, 2, 0] * ax0 + R[k, 2, 1] * ax1 + R[k, 2, 2] * ax2
+        rate = _rotor_angle_rate(p[i], w[k, 0], w[k, 1], w[k, 2], e0, e1, e2)
+        o = rotor_at + i * ACTUATOR_PARAMETERS
+        motor = _speed_cut(L_rotor[i], rate, work[o])
+        friction = _friction_torque(rate, work, o)
+        L_applied[i] = motor + friction
+        ydot[i_spin + i] = (motor + friction) / torque_A[i]
+        motor_power += motor * rate
+        friction_power += friction * rate
+    for j in range(N):
+        tau_applied[j] = tau[j]
+    for k in range(n):
+        if is_hinge[k]:
+            col = own_col[k]
+            rate = y[i_vel + col]
+            friction = _friction_torque(rate, work, hinge_at + k * ACTUATOR_PARAMETERS)
+            tau_applied[col] += friction
+            motor_power += tau[col] * rate
+            friction_power += friction * rate
+    ydot[i_work] = motor_power
+    ydot[i_work + 1] = friction_power
+    return L_applied, tau_applied
 
 
 @_njit
@@ -1521,7 +1607,8 @@ def model_arguments(model: Model) -> tuple:
     has_lam = len(m.torque_body) > 0 or m.lam_speed is not None
     heavy = heavy_elimination_address() if heavy_subtrees(m.mass) else 0
     flags = np.array([base_type, m.gravity is not None, has_lam, m.i_r0.start, m.i_vel.start,
-                      m.i_kappa.start, m.N, heavy, kernel_address()], dtype=np.int64)
+                      m.i_kappa.start, m.N, heavy, kernel_address(), int(m.stateful), m.i_spin.start,
+                      m.i_work.start], dtype=np.int64)
     base = np.zeros(7)
     if m.base_amplitude is not None:
         base[0:3] = m.base_amplitude
@@ -1568,9 +1655,25 @@ def input_arguments(model: Model, t0: float, p0, hinge_tau, L_rotor) -> tuple:
 
 def workspace(model: Model) -> np.ndarray:
     """The float workspace of `rhs_kernel`: n WORK_PER_BODY + N WORK_PER_COLUMN
-    + nt WORK_PER_ROTOR + WORK_FIXED (nt torque rotors)."""
-    return np.zeros(model.n * WORK_PER_BODY + model.N * WORK_PER_COLUMN
-                    + len(model.torque_body) * WORK_PER_ROTOR + WORK_FIXED)
+    + nt WORK_PER_ROTOR + WORK_FIXED (nt torque rotors). A stateful model (`Model.stateful`)
+    appends its actuators' parameters, ACTUATOR_PARAMETERS per torque rotor then per body
+    (hinges'; zero on spherical bodies), and the scratch of the applied torques (nt + N)."""
+    m, nt = model, len(model.torque_body)
+    size = m.n * WORK_PER_BODY + m.N * WORK_PER_COLUMN + nt * WORK_PER_ROTOR + WORK_FIXED
+    if not m.stateful:
+        return np.zeros(size)
+    act = m.actuators
+    hinge = np.zeros((m.n, ACTUATOR_PARAMETERS))
+    hinge[:, 0] = np.inf
+    hinge[:, 5] = 1.0
+    hinge[m.hinge_bodies] = _axis_parameters(act.hinge)
+    return np.concatenate((np.zeros(size), _axis_parameters(act.rotor).ravel(), hinge.ravel(), np.zeros(nt + m.N)))
+
+
+def _axis_parameters(limits) -> np.ndarray:
+    """(axes, ACTUATOR_PARAMETERS) of gyro_sim.dynamics.actuators.AxisLimits."""
+    return np.stack((limits.max_speed, limits.coulomb, limits.viscous, limits.static, limits.stribeck_speed,
+                     limits.stick_speed), axis=1).reshape(-1, ACTUATOR_PARAMETERS)
 
 
 # --- the stages other compiled modules build on (fast_canonical: the canonical field) ---------

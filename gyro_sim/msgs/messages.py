@@ -91,6 +91,10 @@ INVARIANT_KEYS = {
 }
 #: work of the commands and the energy balance E - E(0) - W (gyro_sim.snapshot)
 WORK_KEY = "work_by_commands_J"
+#: scenes with actuator limits: the work of friction (<= 0, counted apart in the balance) and
+#: the commanded moments clipped to their max_torque since the reset
+FRICTION_WORK_KEY = "work_by_friction_J"
+SATURATED_KEY = "saturated_commands"
 BALANCE_KEY = "energy_balance_J"
 BALANCE_REL_KEY = "energy_balance_rel"
 DRIFT_SUFFIX = "_drift_rel"
@@ -336,6 +340,10 @@ def dynamics_values(snap) -> dict[str, float | str]:
         out[drift_key(name)] = d
     if snap.work is not None:
         out[WORK_KEY] = snap.work
+    if snap.friction_work is not None:
+        out[FRICTION_WORK_KEY] = snap.friction_work
+    if snap.saturated_commands is not None:
+        out[SATURATED_KEY] = float(snap.saturated_commands)
     if snap.energy_balance is not None:
         out[BALANCE_KEY] = snap.energy_balance
         out[BALANCE_REL_KEY] = snap.energy_balance / snap.energy_scale
