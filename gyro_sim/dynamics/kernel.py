@@ -159,7 +159,7 @@ def _njit_alloc(fn):
 
 # --- small fixed-size helpers (inlined by LLVM) ----------------------------------------------
 @_njit_inline
-def _cross(a, b, out):
+def vec_cross(a, b, out):
     """out = a x b (3,); out must not alias a or b."""
     out[0] = a[1] * b[2] - a[2] * b[1]
     out[1] = a[2] * b[0] - a[0] * b[2]
@@ -167,7 +167,7 @@ def _cross(a, b, out):
 
 
 @_njit_inline
-def _cross_add(a, b, out):
+def vec_cross_add(a, b, out):
     """out += a x b (3,); out must not alias a or b."""
     out[0] += a[1] * b[2] - a[2] * b[1]
     out[1] += a[2] * b[0] - a[0] * b[2]
@@ -175,14 +175,14 @@ def _cross_add(a, b, out):
 
 
 @_njit_inline
-def _matvec(A, x, out):
+def mat_vec(A, x, out):
     """out = A x for A (3, 3), x (3,)."""
     for i in range(3):
         out[i] = A[i, 0] * x[0] + A[i, 1] * x[1] + A[i, 2] * x[2]
 
 
 @_njit_inline
-def _dot6(a, b):
+def dot6(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] + a[4] * b[4] + a[5] * b[5]
 
 
@@ -289,7 +289,7 @@ def _joint_projection(S, U, D, W, j0, nk):
     inverse in place, and W = U D^-1 (what both forms of the elimination need)."""
     for a in range(nk):
         for b in range(a, nk):
-            D[a, b] = _dot6(S[j0 + a], U[j0 + b])
+            D[a, b] = dot6(S[j0 + a], U[j0 + b])
             D[b, a] = D[a, b]
     _spd_inverse(D, nk)
     for a in range(nk):
@@ -392,7 +392,7 @@ def _shift_mass(m00, m01, m02, m11, m12, m22, d0, d1, d2, IA, kp):
 
 # --- stages -----------------------------------------------------------------------------------
 @_njit_inline
-def _positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, hk, Aw, e_w):
+def body_positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, hk, Aw, e_w):
     """World components of each body's constants: R^k (quaternion, or eq 50 for a hinge),
     s^k, h^k = m^k c^k, the inertia A^k about O^k (eq 30) and the hinge axis e^k."""
     n = s.shape[0]
@@ -444,7 +444,7 @@ def _positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, 
 
 
 @_njit_inline
-def _velocities(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, i_vel,
+def body_velocities(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, i_vel,
                 s_w, e_w, w, vO, c):
     """w^k (prefix sums of the joint rates, eqs 50, 53), v(O^k) (eq 34) and the joint bias
     accelerations c^k = S_k' u_k about O^k (dyn.bias_accelerations are their prefix sums about
@@ -512,7 +512,7 @@ def _spatial_inertia(k, m, h0, h1, h2, Aw, I6):
 
 
 @_njit_inline
-def _bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
+def bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
                  torque_A, p, L_rotor, has_gravity, gravity, lam_b, dlam_b, I6, pb):
     """Spatial inertias I6 (n, 6, 6) and body forces at zero acceleration pb (n, 6) about O^k,
     as dyn.body_forces with acc = 0 (eqs 36-39, 58; h = m c in world components):
@@ -927,7 +927,7 @@ def _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Di
         nk = j1 - j0
         IAk, pAk, D = IA[k], pA[k], Dinv[k]
         for j in range(j0, j1):
-            u[j] = tau[j] - _dot6(S[j], pAk)
+            u[j] = tau[j] - dot6(S[j], pAk)
         _chol_upper6(IAk, K)
         if nk != 1 and nk != SPHERICAL_DOF:
             # free base and first joint (k = 0): I^A = F^T F formed, D = S^T I^A S
@@ -942,7 +942,7 @@ def _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Di
                     Ia[q, r] = acc
             for j in range(j0, j1):
                 for r in range(6):
-                    U[j, r] = _dot6(Ia[r], S[j])
+                    U[j, r] = dot6(Ia[r], S[j])
             _joint_projection(S, U, D, W, j0, nk)
             continue
         # the stacked factor [F_own; F_child] in joint axes Q (columns 0..2 times H for a hinge)
@@ -1017,7 +1017,7 @@ def _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Di
                 acc += W[j0 + a, r] * u[j0 + a]
             pa[r] = acc
         for b in range(m2):
-            z[b] = _dot6(Ia[b], c[k])
+            z[b] = dot6(Ia[b], c[k])
         for b in range(m2):
             for r in range(6):
                 pa[r] += Ia[b, r] * z[b]
@@ -1031,7 +1031,7 @@ def _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Di
             Fc[b, 2] = Ia[b, 2] + (d[0] * fl1 - d[1] * fl0)
             Fc[b, 3], Fc[b, 4], Fc[b, 5] = fl0, fl1, fl2
         # forces to O^{k-1} = O^k - s^{k-1}: (n + s x f, f)
-        _cross_add(s_w[k - 1], pa[3:], pA[k - 1, :3])
+        vec_cross_add(s_w[k - 1], pa[3:], pA[k - 1, :3])
         for r in range(6):
             pA[k - 1, r] += pa[r]
     # forward: a = A^{k-1} + c^k, u'_k = D^-1 u - (U D^-1)^T a, A^k = a + S u'_k
@@ -1045,11 +1045,11 @@ def _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Di
         D = Dinv[k]
         if k > 0:
             # motions from O^{k-1} to O^k: (alpha, a + alpha x s^{k-1})
-            _cross_add(A[:3], s_w[k - 1], A[3:])
+            vec_cross_add(A[:3], s_w[k - 1], A[3:])
         for r in range(6):
             A[r] += c[k, r]
         for a in range(nk):
-            x[a] = _dot6(W[j0 + a], A)
+            x[a] = dot6(W[j0 + a], A)
         for a in range(nk):
             acc = 0.0
             for b in range(nk):
@@ -1066,13 +1066,13 @@ def _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Di
     F = pb
     for k in range(n):
         for r in range(6):
-            F[k, r] += _dot6(IA[k, r], acc_body[k])
+            F[k, r] += dot6(IA[k, r], acc_body[k])
     res = np.empty(u.shape[0])
     for k in range(n - 1, -1, -1):
         for j in range(col_start[k], col_start[k + 1]):
-            res[j] = tau[j] - _dot6(S[j], F[k])
+            res[j] = tau[j] - dot6(S[j], F[k])
         if k > 0:
-            _cross_add(s_w[k - 1], F[k, 3:], F[k - 1, :3])
+            vec_cross_add(s_w[k - 1], F[k, 3:], F[k - 1, :3])
             for r in range(6):
                 F[k - 1, r] += F[k, r]
     _aba_resolve(col_start, S, s_w, W, Dinv, res, u, F, udot)
@@ -1088,7 +1088,7 @@ def _aba_resolve(col_start, S, s_w, W, Dinv, rhs, u, P, udot):
     for k in range(n - 1, -1, -1):
         j0, j1 = col_start[k], col_start[k + 1]
         for j in range(j0, j1):
-            u[j] = rhs[j] - _dot6(S[j], P[k])
+            u[j] = rhs[j] - dot6(S[j], P[k])
         if k == 0:
             continue
         for r in range(6):
@@ -1096,7 +1096,7 @@ def _aba_resolve(col_start, S, s_w, W, Dinv, rhs, u, P, udot):
             for j in range(j0, j1):
                 acc += W[j, r] * u[j]
             pa[r] = acc
-        _cross_add(s_w[k - 1], pa[3:], P[k - 1, :3])
+        vec_cross_add(s_w[k - 1], pa[3:], P[k - 1, :3])
         for r in range(6):
             P[k - 1, r] += pa[r]
     A = np.zeros(6)
@@ -1105,9 +1105,9 @@ def _aba_resolve(col_start, S, s_w, W, Dinv, rhs, u, P, udot):
         nk = j1 - j0
         D = Dinv[k]
         if k > 0:
-            _cross_add(A[:3], s_w[k - 1], A[3:])
+            vec_cross_add(A[:3], s_w[k - 1], A[3:])
         for a in range(nk):
-            acc = -_dot6(W[j0 + a], A)
+            acc = -dot6(W[j0 + a], A)
             for b in range(nk):
                 acc += D[a, b] * u[j0 + b]
             udot[j0 + a] += acc
@@ -1487,8 +1487,8 @@ def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis,
      Ia, pa, Dx, T, G, x, a_base) = workspace_views(work, n, N, nt)
 
     # positions, velocities
-    _positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, hk, Aw, e_w)
-    _velocities(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, i_vel, s_w, e_w, w, vO, c)
+    body_positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, hk, Aw, e_w)
+    body_velocities(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, i_vel, s_w, e_w, w, vO, c)
     L_applied, tau_applied = L_rotor, tau
     if flags[FLAG_ACTUATORS] != 0:  # spins and works are states; the torques applied at this state
         L_applied, tau_applied = _actuate(y, ydot, work, is_hinge, own_col, torque_body, torque_axis,
@@ -1496,7 +1496,7 @@ def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis,
     else:  # bias forces: p_i(t) = p_i(t0) + (L_i / A_i)(t - t0) (eq 29)
         for i in range(nt):
             p[i] = p0[i] + pdot[i] * (t - t0)
-    _bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
+    bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
                  torque_A, p, L_applied, has_gravity, gravity, lam_b, dlam_b, I6, pb)
     # ABA
     _joint_columns(is_hinge, own_col, base_type, e_w, S)
@@ -1678,9 +1678,9 @@ def _axis_parameters(limits) -> np.ndarray:
 
 # --- the stages other compiled modules build on (fast_canonical: the canonical field) ---------
 #: inlined there as here; the same dispatchers under public names
-positions_stage = _positions
+positions_stage = body_positions
 spatial_inertia = _spatial_inertia
-velocities_stage = _velocities
+velocities_stage = body_velocities
 joint_columns_stage = _joint_columns
 articulated_solve = _aba
 quat_rate = _quat_rate
