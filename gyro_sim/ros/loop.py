@@ -310,6 +310,9 @@ class SimLoop:
                 self._publications = 0
                 self.counters.moments_since = self.node_time
                 self.out.event(self.node_ns, "reset")
+                republish = getattr(self.out, "publish_robot_description", None)
+                if republish is not None:  # the robot is back at its initial pose: said to late joiners too
+                    republish()
                 self.pacer.restart(self.node_time)
                 self.rate.mark(self.node_time)
                 req.message = f"reset to the initial state at node time {self.node_time:.6f} s"
@@ -569,6 +572,8 @@ class SimLoop:
             warn.append(f"{rec.dropped_records} records dropped from the log (the writer fell behind)")
         if warn:
             return self._status(M.WARN, "; ".join(warn), values)
+        if not math.isfinite(rtf):  # nothing simulated since the start or the reset: no rate to state
+            return self._status(M.OK, "starting" if self.steps == 0 else "running", values)
         return self._status(M.OK, "running", values)
 
     def _status(self, level: int, message: str, values: dict) -> M.Status:

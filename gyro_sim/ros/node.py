@@ -55,7 +55,7 @@ except ImportError as _exc:  # the class below is then never instantiated
 from gyro_sim.simulator import Simulator  # noqa: E402
 from gyro_sim.msgs.messages import decode_axis_moments  # noqa: E402
 from gyro_sim.ros.loop import SimLoop  # noqa: E402
-from gyro_sim.ros.outputs import Outputs  # noqa: E402
+from gyro_sim.ros.outputs import Outputs, node_topics  # noqa: E402
 from gyro_sim.ros.params import PARAMETERS, ParameterError, validate  # noqa: E402
 
 #: bytes in a megabyte (record_queue_mb)
@@ -102,14 +102,18 @@ def descriptor(p) -> ParameterDescriptor:
     return d
 
 
-def log_params(sim, cfg) -> dict:
+def log_params(sim, cfg, topics=None) -> dict:
     """The log's run parameters: the re-simulation contract of gyro_sim.log.record (one advance of
-    1/physics_rate per step), plus the node's own parameters."""
+    1/physics_rate per step), plus the node's own parameters and names (`topics`: its
+    gyro_sim.msgs.messages.TopicNames; default the root namespace's)."""
     from gyro_sim.log.record import run_params
+    from gyro_sim.msgs.messages import ROOT_TOPICS
 
+    topics = topics or ROOT_TOPICS
     own = {k: v for k, v in cfg.as_dict().items() if k not in ("publish_rate", "duration")}
     return run_params(sim, advance_dt=cfg.dt, publish_rate=cfg.publish_rate, source="gyro_sim_node",
-                      duration=cfg.duration or None, **own)
+                      duration=cfg.duration or None, commands_topic=topics.axis_moments,
+                      namespace=topics.namespace, node=topics.node, **own)
 
 
 def method_choice(sim, cfg) -> str:
@@ -149,6 +153,7 @@ class GyroSimNode(Node):
         if problems:
             raise ParameterError("\n".join(problems))
         self.config = cfg = validate(values)
+        self.topics = topics = node_topics(self)
         self.recorder = None
         log_file = None
         if cfg.record:  # created now, atomically (OutputError if it exists or cannot be): nothing run yet
@@ -161,11 +166,12 @@ class GyroSimNode(Node):
             if log_file is not None:
                 from gyro_sim.ros.recorder import LiveRecorder
 
-                self.recorder = LiveRecorder(cfg.record, scene=cfg.scene, params=log_params(self.sim, cfg),
-                                             log_file=log_file,
+                self.recorder = LiveRecorder(cfg.record, scene=cfg.scene, params=log_params(self.sim, cfg, topics),
+                                             log_file=log_file, topics=topics,
                                              max_backlog_bytes=int(cfg.record_queue_mb * MEGABYTE))
             self.outputs = Outputs(self, self.sim, cfg, self.recorder)
             self.loop = SimLoop(self.sim, cfg, self.outputs)
+            self.outputs.publish_robot_description()
         except BaseException:  # nothing recorded yet: the file created is removed
             if self.recorder is not None:
                 self.recorder.abandon()
