@@ -170,7 +170,12 @@ class GyroSimNode(Node):
                                              log_file=log_file, topics=topics,
                                              max_backlog_bytes=int(cfg.record_queue_mb * MEGABYTE))
             self.outputs = Outputs(self, self.sim, cfg, self.recorder)
-            self.loop = SimLoop(self.sim, cfg, self.outputs)
+            demo = None
+            if cfg.demo and self.sim.axis_names:
+                from gyro_sim.ros.demo import Demo
+
+                demo = Demo.for_scene(self.sim, cfg.dt)
+            self.loop = SimLoop(self.sim, cfg, self.outputs, demo=demo)
             self.outputs.publish_robot_description()
         except BaseException:  # nothing recorded yet: the file created is removed
             if self.recorder is not None:
@@ -190,6 +195,10 @@ class GyroSimNode(Node):
             f"real-time factor {cfg.real_time_factor:g}, {self.loop.per_chunk} steps per wake-up"
             + (f"; recording to {cfg.record}" if cfg.record else "")
         )
+        if demo is not None:
+            self.get_logger().info(demo.describe(self.sim.axis_names))
+        elif cfg.demo:
+            self.get_logger().warning("demo: the scene has no actuated axes, nothing to drive")
         self.stiffness_note = stiffness_note(self.sim, cfg)
         if self.stiffness_note:
             self.get_logger().warning(self.stiffness_note)
