@@ -183,6 +183,14 @@ class TopicNames:
     def wrench(self, joint: str) -> str:
         return wrench_topic(joint, self.node)
 
+    def status_name(self, root_name: str) -> str:
+        """A DiagnosticStatus name (DYNAMICS_STATUS, RUN_STATUS) for this node: as it is in the
+        root namespace, else with the node's namespace before it ("robot1/gyro_sim: run"), so
+        that the statuses of two robots on the global /diagnostics are told apart."""
+        if self.node == NAMESPACE:
+            return root_name
+        return self.node.lstrip("/") + root_name[len(NODE_NAME):]
+
     tf: ClassVar[str] = TF
     clock: ClassVar[str] = CLOCK
     diagnostics: ClassVar[str] = DIAGNOSTICS
@@ -480,9 +488,10 @@ def diagnostic_array(t_ns: int, statuses: Sequence[Status]) -> bytes:
     return bytes(w)
 
 
-def diagnostics(snap, t_ns: int, hardware_id: str, run: Status | None = None) -> bytes:
-    """The /diagnostics message of a snapshot (and the run's figures, when given)."""
-    statuses = [Status(DYNAMICS_STATUS, dynamics_values(snap), hardware_id=hardware_id)]
+def diagnostics(snap, t_ns: int, hardware_id: str, run: Status | None = None, name: str = DYNAMICS_STATUS) -> bytes:
+    """The /diagnostics message of a snapshot (and the run's figures, when given); `name`: the
+    dynamics status's name (TopicNames.status_name)."""
+    statuses = [Status(name, dynamics_values(snap), hardware_id=hardware_id)]
     if run is not None:
         statuses.append(run)
     return diagnostic_array(t_ns, statuses)
@@ -520,6 +529,7 @@ class Publication:
         self.wrench_topics = tuple(topics.wrench(b) for b in self.body_names)
         self.poses_topic = topics.poses
         self.hardware_id = hardware_id
+        self.dynamics_status = topics.status_name(DYNAMICS_STATUS)
         # the messages of fixed layout, written once and refilled (same bytes as the builders)
         n = len(self.body_names)
         zeros = np.zeros((n, 7))
@@ -562,7 +572,8 @@ class Publication:
             if tf:
                 out.append((TF, TF_TYPE, self._tf.fill(t_ns, xyzw)[0]))
         if diagnostics_run is not False:
-            out.append((DIAGNOSTICS, DIAGNOSTICS_TYPE, diagnostics(snap, t_ns, self.hardware_id, diagnostics_run or None)))
+            out.append((DIAGNOSTICS, DIAGNOSTICS_TYPE, diagnostics(snap, t_ns, self.hardware_id, diagnostics_run or None,
+                                                                   self.dynamics_status)))
         return out
 
 

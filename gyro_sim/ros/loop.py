@@ -608,7 +608,9 @@ class SimLoop:
         return self._status(M.OK, "running", values)
 
     def _status(self, level: int, message: str, values: dict) -> M.Status:
-        return M.Status(M.RUN_STATUS, values, level=level, message=message, hardware_id=self.sim.scene.name)
+        topics = getattr(self.out, "topics", M.ROOT_TOPICS)
+        return M.Status(topics.status_name(M.RUN_STATUS), values, level=level, message=message,
+                        hardware_id=self.sim.scene.name)
 
     @property
     def nominal_publish_interval(self) -> float:

@@ -235,7 +235,8 @@ class Outputs:
             # the diagnostics refuse any number they would write that is not finite, and they write
             # every scalar and invariant the snapshot's check looks at (~30 us saved): it names the field
             try:
-                data = M.diagnostics(snap, t_ns, self.publication.hardware_id, diagnostics_run or None)
+                data = M.diagnostics(snap, t_ns, self.publication.hardware_id, diagnostics_run or None,
+                                     self.publication.dynamics_status)
             except M.NonFiniteError as exc:
                 raise SimulationError(f"t = {sim.time:.6g} s: non-finite {snap.nonfinite() or exc} (not published)") from exc
             out.append((M.DIAGNOSTICS, M.DIAGNOSTICS_TYPE, data))
@@ -299,7 +300,7 @@ class Outputs:
         """Diagnostics alone (paused, stopped): the dynamics of the state kept, and the run."""
         try:
             snap = sim.snapshot(bodies=False, wrenches=False, invariants=True)
-            data = M.diagnostics(snap, t_ns, self.publication.hardware_id, run)
+            data = M.diagnostics(snap, t_ns, self.publication.hardware_id, run, self.publication.dynamics_status)
         except M.NonFiniteError:  # a failed state: the run's status alone says why
             data = M.diagnostic_array(t_ns, [run])
         self.send(t_ns, [(M.DIAGNOSTICS, M.DIAGNOSTICS_TYPE, data)])

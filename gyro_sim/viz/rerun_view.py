@@ -111,7 +111,7 @@ def load_series(path: str | os.PathLike) -> Series:
     """Decode the topics the view needs (log time order)."""
     from gyro_sim.log.mcap_log import iter_messages, log_topic_names
 
-    names = log_topic_names(path)  # a namespaced node's log too
+    topics = log_topic_names(path)  # a namespaced node's log too
     s = Series()
     js_t, pos, vel, eff = [], [], [], []
     tf_t, tf_p, tf_q, tf_names = [], [], [], None
@@ -120,7 +120,7 @@ def load_series(path: str | os.PathLike) -> Series:
     dg_t, dg = [], []
     for topic, _, t_ns, msg in iter_messages(path):
         t = t_ns / 1e9
-        if topic == names.joint_states:
+        if topic == topics.joint_states:
             if not s.joint_names:
                 s.joint_names = list(msg.name)
             if list(msg.name) != s.joint_names:
@@ -138,12 +138,12 @@ def load_series(path: str | os.PathLike) -> Series:
             tf_t.append(t)
             tf_p.append([_xyz(tr.transform.translation) for tr in msg.transforms])
             tf_q.append([_xyz(tr.transform.rotation) + [tr.transform.rotation.w] for tr in msg.transforms])
-        elif topic == names.poses:
+        elif topic == topics.poses:
             pa_t.append(t)
             pa_p.append([_xyz(p.position) for p in msg.poses])
             pa_q.append([_xyz(p.orientation) + [p.orientation.w] for p in msg.poses])
-        elif topic.startswith(names.wrench_prefix):
-            j = topic[len(names.wrench_prefix):]
+        elif topic.startswith(topics.wrench_prefix):
+            j = topic[len(topics.wrench_prefix):]
             wr.setdefault(j, ([], [], []))
             wr[j][0].append(t)
             wr[j][1].append(_xyz(msg.wrench.force))
@@ -151,7 +151,7 @@ def load_series(path: str | os.PathLike) -> Series:
         elif topic == M.DIAGNOSTICS:
             dg_t.append(t)
             dg.append(M.diagnostic_numbers(msg))
-        elif topic == names.events:
+        elif topic == topics.events:
             s.events.append((t, msg.data))
     s.joint_t = np.array(js_t)
     n = len(s.joint_names)
