@@ -26,8 +26,10 @@ ASKS_PER_PUBLICATION = 4
 
 
 def node_topics(node) -> M.TopicNames:
-    """The topic names of `node` as rclpy resolves them (its namespace, its fully qualified name)."""
-    return M.TopicNames(namespace=node.get_namespace(), node=node.get_fully_qualified_name())
+    """The topic names of `node` from its fully qualified name as rclpy resolves it
+    (``<namespace>/<name>``: the namespace is what comes before the name)."""
+    fqn = node.get_fully_qualified_name()
+    return M.TopicNames(namespace=fqn.rsplit("/", 1)[0] or "/", node=fqn)
 
 
 def _qos_profile(qos: M.Qos):
