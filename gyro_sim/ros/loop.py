@@ -563,7 +563,7 @@ class SimLoop:
             "step_time_p99_us": p99 * 1e6,
             "publish_jitter_p50_us": j50 * 1e6,
             "publish_jitter_p99_us": j99 * 1e6,
-            "sim_lag_max_ms": max(self.lag.window, default=0.0) * 1e3,
+            "sim_lag_max_ms": max(self.lag.window, default=math.nan) * 1e3,  # none before the first publication
             "deadline_misses": self.pacer.misses,
             "slipped_s": self.pacer.slipped,
             "steps_per_wakeup": self.per_chunk,

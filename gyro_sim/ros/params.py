@@ -365,11 +365,13 @@ def help_text() -> str:
     widths = [max(len(r[c]) for r in rows) for c in range(4)]
     head = ("usage: gyro_sim_node [-h] [--ros-args [--params-file FILE] [-p NAME:=VALUE ...]]\n\n"
             "The gyro_sim node: simulates a chain of gyrostats in real time, takes axis moments on\n"
-            "~/axis_moments, publishes /joint_states, /clock, ~/wrench/<joint>, ~/poses, /diagnostics,\n"
-            "optionally records an MCAP log. A later -p wins over --params-file; an unknown name or an\n"
-            "invalid value stops the node at start (exit 2).\n\n"
+            "~/axis_moments, publishes joint_states, robot_description, /clock, /tf, ~/wrench/<joint>,\n"
+            "~/poses, /diagnostics (-r __ns:=/robot1 puts joint_states, robot_description and ~/ under\n"
+            "/robot1), optionally records an MCAP log. A later -p wins over --params-file; an unknown\n"
+            "name or an invalid value stops the node at start (exit 2).\n\n"
             "example:\n"
-            "  gyro_sim_node --ros-args --params-file config/params.yaml -p record:=live.mcap -p duration:=20.0\n\n"
+            "  gyro_sim_node --ros-args --params-file config/params.yaml -p record:=live.mcap -p duration:=20.0\n"
+            "  gyro_sim_node --ros-args --params-file config/params.yaml -p demo:=true -p record:=auto\n\n"
             "parameters (name, type, default, range, meaning):\n")
     lines = ["  " + "  ".join(r[c].ljust(widths[c]) for c in range(4)) + "  " + r[4] for r in rows]
     return head + "\n".join(line.rstrip() for line in lines) + "\n"

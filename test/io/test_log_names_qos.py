@@ -88,3 +88,13 @@ def test_log_topic_names_of_a_namespaced_node():
     assert names.events == "/robot1/gyro_sim/events" and names.joint_states == "/robot1/joint_states"
     assert names.status_name(M.RUN_STATUS) == "robot1/gyro_sim: run"
     assert M.ROOT_TOPICS.status_name(M.RUN_STATUS) == M.RUN_STATUS
+
+
+def test_replay_offers_the_robot_description_transient_local(recorded):
+    from gyro_sim.ros.replay import recorded_durability
+
+    path, _ = recorded
+    durability = {t: recorded_durability(c.metadata) for t, c in _channels(path).items()}
+    assert durability.pop("/robot_description") == "transient_local"
+    assert set(durability.values()) == {"volatile"}
+    assert recorded_durability({}) == "" and recorded_durability({"offered_qos_profiles": "[: not yaml"}) == ""
