@@ -21,6 +21,7 @@ pytest.importorskip("rclpy", reason="the ROS 2 node needs rclpy (pip install '.[
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64MultiArray, String  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
 
 from .helpers import DISCOVERY_TIMEOUT, ROOT, Client, NodeProcess, new_domain_id, wait_for  # noqa: E402
 
@@ -80,6 +81,13 @@ def robots(module_tmp):
         out["root_states"] = len(client.messages("/joint_states"))
         out["efforts"] = {ns: efforts(client, f"{ns}/joint_states") for ns in nodes}
         out["description"] = client.messages("/robot1/robot_description")[0][1].data
+        # a reset puts the robot back at its initial pose: the description is published again
+        client.subscribe("/robot2/robot_description", String, depth=late)
+        wait_for(lambda: client.messages("/robot2/robot_description"), DISCOVERY_TIMEOUT, "robot2's description")
+        assert client.call(Trigger, "/robot2/gyro_sim/reset", Trigger.Request()).success
+        wait_for(lambda: len(client.messages("/robot2/robot_description")) >= 2, DISCOVERY_TIMEOUT,
+                 "robot2's description again after its reset")
+        out["descriptions_2"] = [m.data for _, m in client.messages("/robot2/robot_description")]
     finally:
         client.close()
         codes = {ns: node.stop() for ns, node in nodes.items()}
@@ -109,6 +117,7 @@ def test_a_late_subscriber_gets_the_robot_description(robots):
     from gyro_sim.scene.urdf import urdf
 
     assert robots["description"] == urdf(load_scene(find_scene(SCENE)))
+    assert robots["descriptions_2"] == [robots["description"]] * 2  # at start, and after the reset
     logged = [m.data for _, _, _, m in iter_messages(robots["logs"]["/robot1"], ["/robot1/robot_description"])]
     assert logged == [robots["description"]]
 
