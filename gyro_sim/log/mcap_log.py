@@ -11,7 +11,9 @@ One writer serves the node's live recorder and ``gyro-sim run --record``::
 What a file holds (docs/logs.md):
 
 - header profile ``ros2``; one channel per topic, message encoding ``cdr``, schema encoding
-  ``ros2msg`` whose data is the type's full concatenated definition (:mod:`.msgdefs`);
+  ``ros2msg`` whose data is the type's full concatenated definition (:mod:`.msgdefs`), and the
+  channel metadata ``offered_qos_profiles`` that rosbag2 writes: the QoS the node's publisher
+  of that topic offers (gyro_sim.msgs.messages.topic_qos);
 - the scene, as YAML, in the attachment ``scene.yaml`` (media type ``application/yaml``), and
   the run parameters as JSON in the metadata record ``gyro_sim`` (key ``params``), both at the
   start of the file so that a log cut short still replays on its own;

@@ -6,7 +6,11 @@ offline recorder (:mod:`gyro_sim.log.record`) writes them to its log. Nothing el
 message content.
 
 Topics and frames (docs/ros-interface.md), all stamped with the log time (simulated time
-since the start, resets included):
+since the start, resets included). The names below are those of a node in the root namespace
+and of offline logs; a node in a namespace (:class:`TopicNames`) has ``joint_states`` and
+``robot_description`` under its namespace and ``/gyro_sim/...`` under its fully qualified
+name (``/robot1/joint_states``, ``/robot1/gyro_sim/poses``), /tf, /clock and /diagnostics
+global:
 
 ==================================  ===============================  ==========================
 topic                               type                             frame_id
@@ -19,7 +23,7 @@ topic                               type                             frame_id
 /diagnostics                        diagnostic_msgs/msg/DiagnosticArray
 /gyro_sim/axis_moments              std_msgs/msg/Float64MultiArray   (the commands)
 /gyro_sim/events                    std_msgs/msg/String              (markers: "reset", ...)
-/robot_description                  std_msgs/msg/String              (logs only: the URDF, t = 0)
+/robot_description                  std_msgs/msg/String              (the URDF; transient local)
 ==================================  ===============================  ==========================
 
 A wrench is R^k (eq 40) and L^k (eq 48) at O^k in body k's own frame. A pose or transform is
