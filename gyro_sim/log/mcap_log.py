@@ -735,9 +735,13 @@ def iter_messages(path: str | os.PathLike, topics=None, *, decode: bool = True,
 def log_topic_names(path: str | os.PathLike, topics=None) -> "M.TopicNames":
     """The topic names of the node that wrote the log at `path` (`topics`: its channels' names,
     read from the log when not given): those of its namespace for a namespaced node's log
-    (gyro_sim.msgs.messages.log_topic_names). LogError for a log that mixes two robots."""
+    (gyro_sim.msgs.messages.log_topic_names), with the node's frame_prefix. LogError for a log
+    that mixes two robots."""
+    info = read_info(path)
+    prefix = info.params.get("frame_prefix", "")
     try:
-        return M.log_topic_names(read_info(path).topics if topics is None else topics, str(path))
+        return M.log_topic_names(info.topics if topics is None else topics, str(path),
+                                 prefix if isinstance(prefix, str) else "")
     except M.NamespaceError as exc:
         raise LogError(str(exc)) from None
 

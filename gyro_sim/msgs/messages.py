@@ -152,10 +152,14 @@ class TopicNames:
     ----------
     namespace : the node's namespace, "/" (root) or "/robot1"
     node : the node's fully qualified name ("/gyro_sim", "/robot1/gyro_sim")
+    frame_prefix : put before every body's frame name (the /tf child frames and the wrenches'
+        frame_id; "world" stays as it is), as robot_state_publisher's parameter of that name:
+        two robots on one /tf then have frames of their own ("robot1/arm1")
     """
 
     namespace: str = "/"
     node: str = NAMESPACE
+    frame_prefix: str = ""
 
     def _relative(self, name: str) -> str:
         return f"{self.namespace.rstrip('/')}/{name}"
@@ -204,7 +208,7 @@ class TopicNames:
 ROOT_TOPICS = TopicNames()
 
 
-def log_topic_names(topics: Iterable[str], where: str = "log") -> TopicNames:
+def log_topic_names(topics: Iterable[str], where: str = "log", frame_prefix: str = "") -> TopicNames:
     """The TopicNames of the node that wrote a log with these channels: its namespace is the one
     of its ``.../joint_states`` channel, its node name that of ``.../events`` or
     ``.../axis_moments`` under it (else ``<namespace>/gyro_sim``). A log with no joint states is
@@ -220,7 +224,7 @@ def log_topic_names(topics: Iterable[str], where: str = "log") -> TopicNames:
                     if t.endswith(("/events", "/axis_moments")) and t.startswith(base + "/")
                     and t.count("/") == base.count("/") + 2})
     node = nodes[0] if len(nodes) == 1 else f"{base}/{NODE_NAME}"
-    return TopicNames(namespace=ns, node=node)
+    return TopicNames(namespace=ns, node=node, frame_prefix=frame_prefix)
 
 
 # --- quality of service ---------------------------------------------------------------------------
@@ -529,6 +533,8 @@ class Publication:
                  topics: TopicNames | None = None):
         self.body_names = tuple(body_names)
         self.topics = topics = topics or TopicNames(node=namespace)
+        #: the bodies' frame names in /tf and the wrenches (frame_prefix + body name)
+        self.frame_names = tuple(topics.frame_prefix + b for b in self.body_names)
         self.joint_states_topic = topics.joint_states
         self.wrench_topics = tuple(topics.wrench(b) for b in self.body_names)
         self.poses_topic = topics.poses
@@ -537,9 +543,9 @@ class Publication:
         # the messages of fixed layout, written once and refilled (same bytes as the builders)
         n = len(self.body_names)
         zeros = np.zeros((n, 7))
-        self._wrenches = Refill([_wrench_stamped(CdrWriter(record=True), 0, b, zeros[0, :6]) for b in self.body_names])
+        self._wrenches = Refill([_wrench_stamped(CdrWriter(record=True), 0, b, zeros[0, :6]) for b in self.frame_names])
         self._poses = Refill([_pose_array(CdrWriter(record=True), zeros, 0)])
-        self._tf = Refill([_tf_message(CdrWriter(record=True), self.body_names, zeros, 0)])
+        self._tf = Refill([_tf_message(CdrWriter(record=True), self.frame_names, zeros, 0)])
         self._joints: tuple[tuple[str, ...], Refill] | None = None
 
     def frame(self, joint_names: Sequence[str], *, wrenches: bool, poses: bool, tf: bool) -> "Frame":
@@ -607,11 +613,11 @@ class Frame:
         msgs.append((CLOCK, CLOCK_TYPE, w))
         if wrenches:
             msgs += [(topic, WRENCH_TYPE, _wrench_stamped(CdrWriter(record=True), 0, b, z7[0, :6]))
-                     for topic, b in zip(publication.wrench_topics, body_names)]
+                     for topic, b in zip(publication.wrench_topics, publication.frame_names)]
         if poses:
             msgs.append((publication.poses_topic, POSE_ARRAY_TYPE, _pose_array(CdrWriter(record=True), z7, 0)))
         if tf:
-            msgs.append((TF, TF_TYPE, _tf_message(CdrWriter(record=True), body_names, z7, 0)))
+            msgs.append((TF, TF_TYPE, _tf_message(CdrWriter(record=True), publication.frame_names, z7, 0)))
         starts, at = [], 0
         for _, _, m in msgs:
             starts.append(at)

@@ -35,6 +35,7 @@ import os
 # One BLAS thread: the chain's matrices are small and a threaded BLAS fights the loop (cli.py).
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
+import dataclasses  # noqa: E402
 import json  # noqa: E402
 import signal  # noqa: E402
 import sys  # noqa: E402
@@ -153,7 +154,7 @@ class GyroSimNode(Node):
         if problems:
             raise ParameterError("\n".join(problems))
         self.config = cfg = validate(values)
-        self.topics = topics = node_topics(self)
+        self.topics = topics = dataclasses.replace(node_topics(self), frame_prefix=cfg.frame_prefix)
         self.recorder = None
         log_file = None
         if cfg.record:  # created now, atomically (OutputError if it exists or cannot be): nothing run yet
@@ -169,7 +170,7 @@ class GyroSimNode(Node):
                 self.recorder = LiveRecorder(cfg.record, scene=cfg.scene, params=log_params(self.sim, cfg, topics),
                                              log_file=log_file, topics=topics,
                                              max_backlog_bytes=int(cfg.record_queue_mb * MEGABYTE))
-            self.outputs = Outputs(self, self.sim, cfg, self.recorder)
+            self.outputs = Outputs(self, self.sim, cfg, self.recorder, topics=topics)
             demo = None
             if cfg.demo and self.sim.axis_names:
                 from gyro_sim.ros.demo import Demo

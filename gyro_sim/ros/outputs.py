@@ -140,6 +140,7 @@ class Outputs:
     recorder : gyro_sim.ros.recorder.LiveRecorder or None
     qos : depth of the publishers' queues
     clock : time.monotonic, injectable for tests (when to ask the subscriber counts again)
+    topics : the node's names (default: from the node, no frame prefix)
 
     The optional outputs (joint wrenches, poses, /tf) are computed when someone subscribes to
     them or the node records, and published only to topics someone subscribes to (`Listeners`):
@@ -148,9 +149,10 @@ class Outputs:
     subscriber gets them from the next ask of its topic (at most WANT_PERIOD later, as before).
     """
 
-    def __init__(self, node, sim, config, recorder=None, qos: int = M.PUBLISHER_DEPTH, clock=time.monotonic):
+    def __init__(self, node, sim, config, recorder=None, qos: int = M.PUBLISHER_DEPTH, clock=time.monotonic,
+                 topics: M.TopicNames | None = None):
         self.node, self.recorder = node, recorder
-        self.topics = topics = node_topics(node)
+        self.topics = topics = topics or node_topics(node)
         self.publication = M.Publication(sim.model.names, topics=topics, hardware_id=sim.scene.name)
         self.command_topic = topics.axis_moments
         self.events_topic = topics.events

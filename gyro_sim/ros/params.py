@@ -7,6 +7,7 @@ parameter that is wrong and why, before anything is created or published.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -62,6 +63,9 @@ PARAMETERS: tuple[Parameter, ...] = (
               "most megabytes of records waiting for the log writer; when it falls further behind, the oldest "
               "publications waiting are dropped from the log (counted in /diagnostics), never commands or events",
               1.0, 4096.0),
+    Parameter("frame_prefix", str, "",
+              "put before every body's frame in /tf and the wrenches' frame_id (as robot_state_publisher's), "
+              "e.g. robot1/ for a second robot on one /tf; world stays world"),
     Parameter("demo", bool, False,
               "drive every actuated axis with built-in sines scaled to the scene (recorded as commands are) "
               "until a command arrives on ~/axis_moments"),
@@ -94,6 +98,7 @@ class NodeConfig:
     thread_priority: float = 0.0
     record_queue_mb: float = RECORD_QUEUE_MB
     demo: bool = False
+    frame_prefix: str = ""
 
     @property
     def dt(self) -> float:
@@ -109,6 +114,8 @@ class NodeConfig:
         return {p.name: getattr(self, p.name) if p.name != "scene" else str(self.scene_path) for p in PARAMETERS}
 
 
+#: a frame_prefix: tf frame names do not start with "/" (tf2)
+FRAME_PREFIX = re.compile(r"(?:[A-Za-z0-9_][A-Za-z0-9_/]*)?")
 #: the value of `record` that names the log after the start's date and time
 RECORD_AUTO = "auto"
 #: what {time} in `record` becomes (the start's local date and time, to the second)
@@ -198,6 +205,9 @@ def validate(values: dict) -> NodeConfig:
 
     if "record" not in bad:
         v["record"] = record_path(v["record"])
+    if "frame_prefix" not in bad and not FRAME_PREFIX.fullmatch(v["frame_prefix"]):
+        problems.append(f"frame_prefix: letters, digits, _ and / not at the start (a tf frame name's start), "
+                        f"got {v['frame_prefix']!r}")
     force = v["overwrite"] if "overwrite" not in bad else False
     for name in ("record", "stats_file"):
         if name not in bad and v[name]:

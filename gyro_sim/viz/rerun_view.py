@@ -130,7 +130,7 @@ def load_series(path: str | os.PathLike) -> Series:
             vel.append(list(msg.velocity))
             eff.append(list(msg.effort) or [0.0] * len(s.joint_names))
         elif topic == M.TF:
-            names = [tr.child_frame_id for tr in msg.transforms]
+            names = [tr.child_frame_id.removeprefix(topics.frame_prefix) for tr in msg.transforms]
             if tf_names is None:
                 tf_names = names
             if names != tf_names:

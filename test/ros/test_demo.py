@@ -1,4 +1,5 @@
-"""The demo's amplitudes and the log names `record` takes (no rclpy needed)."""
+"""The demo's amplitudes, the log names `record` takes and the frame prefixes the node accepts
+(no rclpy needed)."""
 from __future__ import annotations
 
 import math
@@ -66,3 +67,10 @@ def test_a_time_named_log_that_exists_is_still_refused(tmp_path, monkeypatch):
     assert existing.read_bytes() == b"kept"
     cfg = validate({"scene": "hinge_chain", "record": str(tmp_path / "other_{time}.mcap")})
     assert cfg.record == str(tmp_path / "other_20261126_170405.mcap")
+
+
+@pytest.mark.parametrize("prefix", ["/robot1/", "robot 1/", "robot1\n"])
+def test_a_frame_prefix_that_is_no_frame_name_start_is_refused(prefix):
+    with pytest.raises(ParameterError, match="frame_prefix"):
+        validate({"scene": "hinge_chain", "frame_prefix": prefix})
+    assert validate({"scene": "hinge_chain", "frame_prefix": "robot1/"}).frame_prefix == "robot1/"

@@ -48,7 +48,8 @@ def robots(module_tmp):
         client.subscribe(f"{ns}/joint_states", JointState, depth=1000)
     logs = {ns: module_tmp / f"{ns.strip('/')}_{{time}}.mcap" for ns in ("/robot1", "/robot2")}
     nodes = {
-        "/robot1": NodeProcess(module_tmp, domain, *PARAMS, "demo:=true", f"record:={logs['/robot1']}",
+        "/robot1": NodeProcess(module_tmp, domain, *PARAMS, "demo:=true", "frame_prefix:=robot1/",
+                               f"record:={logs['/robot1']}",
                                name="robot1", remaps=("__ns:=/robot1",)),
         "/robot2": NodeProcess(module_tmp, domain, *PARAMS, f"record:={logs['/robot2']}", name="robot2",
                                remaps=("__ns:=/robot2",)),
@@ -202,3 +203,19 @@ def test_diagnostics_status_names_say_the_robot(robots):
     for ns, log in robots["logs"].items():
         _, _, _, first = next(iter_messages(log, ["/diagnostics"]))
         assert {s.name for s in first.status} == {f"{ns.strip('/')}/gyro_sim: dynamics", f"{ns.strip('/')}/gyro_sim: run"}
+
+
+def test_the_frame_prefix_names_the_bodies_frames(robots):
+    """robot1 runs with frame_prefix robot1/ (as robot_state_publisher's), robot2 without."""
+    from gyro_sim.log.mcap_log import iter_messages
+    from gyro_sim.viz.rerun_view import load_series
+
+    bodies = ["arm1", "arm2", "arm3", "arm4"]
+    for ns, prefix in (("/robot1", "robot1/"), ("/robot2", "")):
+        log = robots["logs"][ns]
+        _, _, _, tf = next(iter_messages(log, ["/tf"]))
+        assert [t.child_frame_id for t in tf.transforms] == [prefix + b for b in bodies]
+        assert {t.header.frame_id for t in tf.transforms} == {"world"}
+        _, _, _, wrench = next(iter_messages(log, [f"{ns}/gyro_sim/wrench/arm2"]))
+        assert wrench.header.frame_id == prefix + "arm2"
+        assert load_series(log).pose_names == bodies  # the viewer finds the bodies either way
