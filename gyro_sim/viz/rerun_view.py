@@ -109,8 +109,9 @@ def _xyz(v) -> list[float]:
 
 def load_series(path: str | os.PathLike) -> Series:
     """Decode the topics the view needs (log time order)."""
-    from gyro_sim.log.mcap_log import iter_messages
+    from gyro_sim.log.mcap_log import iter_messages, log_topic_names
 
+    topics = log_topic_names(path)  # a namespaced node's log too
     s = Series()
     js_t, pos, vel, eff = [], [], [], []
     tf_t, tf_p, tf_q, tf_names = [], [], [], None
@@ -119,7 +120,7 @@ def load_series(path: str | os.PathLike) -> Series:
     dg_t, dg = [], []
     for topic, _, t_ns, msg in iter_messages(path):
         t = t_ns / 1e9
-        if topic == M.JOINT_STATES:
+        if topic == topics.joint_states:
             if not s.joint_names:
                 s.joint_names = list(msg.name)
             if list(msg.name) != s.joint_names:
@@ -129,7 +130,7 @@ def load_series(path: str | os.PathLike) -> Series:
             vel.append(list(msg.velocity))
             eff.append(list(msg.effort) or [0.0] * len(s.joint_names))
         elif topic == M.TF:
-            names = [tr.child_frame_id for tr in msg.transforms]
+            names = [tr.child_frame_id.removeprefix(topics.frame_prefix) for tr in msg.transforms]
             if tf_names is None:
                 tf_names = names
             if names != tf_names:
@@ -137,12 +138,12 @@ def load_series(path: str | os.PathLike) -> Series:
             tf_t.append(t)
             tf_p.append([_xyz(tr.transform.translation) for tr in msg.transforms])
             tf_q.append([_xyz(tr.transform.rotation) + [tr.transform.rotation.w] for tr in msg.transforms])
-        elif topic == M.POSES:
+        elif topic == topics.poses:
             pa_t.append(t)
             pa_p.append([_xyz(p.position) for p in msg.poses])
             pa_q.append([_xyz(p.orientation) + [p.orientation.w] for p in msg.poses])
-        elif topic.startswith(M.WRENCH_PREFIX):
-            j = topic[len(M.WRENCH_PREFIX):]
+        elif topic.startswith(topics.wrench_prefix):
+            j = topic[len(topics.wrench_prefix):]
             wr.setdefault(j, ([], [], []))
             wr[j][0].append(t)
             wr[j][1].append(_xyz(msg.wrench.force))
@@ -150,7 +151,7 @@ def load_series(path: str | os.PathLike) -> Series:
         elif topic == M.DIAGNOSTICS:
             dg_t.append(t)
             dg.append(M.diagnostic_numbers(msg))
-        elif topic == M.EVENTS:
+        elif topic == topics.events:
             s.events.append((t, msg.data))
     s.joint_t = np.array(js_t)
     n = len(s.joint_names)
