@@ -191,7 +191,7 @@ class Outputs:
                 raise ParameterError(problem)
             sim.set_imu_default_rate(config.publish_rate)
             self.imu_ticks = ImuTicks(sim.imu_rates)
-            self.imu_topics = tuple(M.imu_topic(name, ns) for name in sim.imu_names)
+            self.imu_topics = tuple(M.imu_topic(name, topics.node) for name in sim.imu_names)
             for topic in self.imu_topics:
                 publisher(topic, M.IMU_TYPE)
         #: the publication's buffers by the parts asked (wrenches, poses, tf), once the joint
