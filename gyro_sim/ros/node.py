@@ -449,6 +449,7 @@ def main(argv=None) -> int:
 
 
 def _main(argv, shutdown: Shutdown) -> int:
+    from gyro_sim.dynamics.actuators import ActuatorError
     from gyro_sim.safe_paths import OutputError
     from gyro_sim.ros.params import preflight
 
@@ -477,7 +478,7 @@ def _main(argv, shutdown: Shutdown) -> int:
     try:
         try:
             node = GyroSimNode()
-        except (ParameterError, OutputError) as exc:  # one line for one problem, one more line per other
+        except (ParameterError, OutputError, ActuatorError) as exc:  # one line for one problem, one more per other
             sep = " " if "\n" not in str(exc) else "\n  "
             print("gyro_sim_node: invalid parameters, nothing started:" + sep + str(exc).replace("\n", "\n  "),
                   file=sys.stderr)
