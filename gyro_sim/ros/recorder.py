@@ -411,8 +411,9 @@ class LiveRecorder:
     file, the writer's own /robot_description included), `written` (records written of those
     handed over), `max_backlog` (most records waiting here at once), `max_backlog_bytes_seen`,
     `backlog_bytes` (bytes waiting here after the sender's last period), `thread_cpu` (CPU
-    seconds of the writer process, of which `open_cpu` to start and open the log), `sender_cpu` (CPU seconds of the sender thread here), `error` (records left out, or
-    why the log is not complete). `writer.flush_period`: the writer's flush period, as the child
+    seconds of the writer process, of which `open_cpu` to start and open the log), `sender_cpu`
+    (CPU seconds of the sender thread here), `error` (records left out, or why the log is not
+    complete). `writer.flush_period`: the writer's flush period, as the child
     reports it; `writer.nice`: the writer process's niceness (WRITER_NICE above the node's
     where the system allows).
     """
