@@ -15,6 +15,7 @@ lost. Ctrl-C cancels what is pending and keeps what is written.
 from __future__ import annotations
 
 import dataclasses
+import io
 import logging
 import math
 import os
@@ -55,13 +56,39 @@ def default_workers() -> int:
     return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
 
 
+def integrators_of(sweep, points) -> list[str]:
+    """The integrators `points` run on the numba backend (backend "numba" or "auto"), sorted."""
+    out = set()
+    for p in points:
+        run = dict(sweep.run)
+        run.update({k.removeprefix("run."): v for k, v in p.params.items() if k.startswith("run.")})
+        if run.get("backend") != "numpy":
+            out.add(run["integrator"])
+    return sorted(out)
+
+
+def compile_for_workers(sweep, points, stream=None) -> None:
+    """Compile (or load) in this process, before a LocalCluster's workers start, what the first
+    step of each of `points`' integrators needs on the numba backend: every worker then loads
+    it from numba's disk cache (the same cache: the workers inherit this environment) instead
+    of compiling it again, each on its own. No helper process is started (it would take a
+    core from the workers). A cold cache is said in one line on `stream` (None: nothing)."""
+    from gyro_sim.warmup import precompile
+
+    sink = stream if stream is not None else io.StringIO()
+    for integrator in integrators_of(sweep, points):
+        precompile(sink, prog="gyro-sim sweep", integrator=integrator, helper=False)
+
+
 def run(sweep, out: Path, *, workers: int | None = None, scheduler: str | None = None,
         progress: Callable[[int, int, str], None] | None = None,
-        on_batch: Callable[[Any, list[dict]], None] | None = None) -> dict[str, Any]:
+        on_batch: Callable[[Any, list[dict]], None] | None = None, stream=None) -> dict[str, Any]:
     """Run the points of `sweep` that DIR/parts does not hold yet.
 
     Returns {"ran", "skipped", "wall", "where", "interrupted"}. Raises ClusterError.
     `on_batch(client, rows)` is called after each part is written (client None when serial).
+    On a LocalCluster, the kernels are compiled here first (`compile_for_workers`; a cold
+    cache said on `stream`).
     """
     done = {int(r["point"]) for r in read_parts(out)}
     todo = [p for p in sweep.points if p.index not in done]
@@ -93,6 +120,8 @@ def run(sweep, out: Path, *, workers: int | None = None, scheduler: str | None =
             for b in batches(todo, batch_size(sweep, len(todo), 1)):
                 finished(run_batch(pay, b))
         else:
+            if scheduler is None:
+                compile_for_workers(sweep, todo, stream)
             _run_dask(sweep, todo, workers, scheduler, finished, stats)
     except KeyboardInterrupt:
         stats["interrupted"] = True
