@@ -1,0 +1,54 @@
+"""A sweep on a LocalCluster compiles its integrators' kernels in the calling process before the
+workers start (each then loads them from the disk cache); serial runs and remote clusters do
+not (the run compiles where it runs)."""
+from __future__ import annotations
+
+import pytest
+
+from gyro_sim.sweep import execute
+from gyro_sim.sweep.spec import load_sweep
+
+#: two integrators, each on both backends: four points
+GRID = {"name": "integrators", "scene": "hinge_chain",
+        "grid": {"run.integrator": ["rk4", "dop853"], "run.backend": ["numpy", "numba"]},
+        "run": {"horizon": 0.01, "chunk": 0.01}, "measures": ["final_state"]}
+
+
+def test_the_integrators_run_on_numba_are_those_compiled():
+    sweep = load_sweep(GRID)
+    assert execute.integrators_of(sweep, sweep.points) == ["dop853", "rk4"]
+    numpy_only = [p for p in sweep.points if p.params["run.backend"] == "numpy"]
+    assert execute.integrators_of(sweep, numpy_only) == []
+    fixed = load_sweep({**GRID, "grid": {"run.horizon": [0.01]}, "run": {"integrator": "radau", "horizon": 0.01}})
+    assert execute.integrators_of(fixed, fixed.points) == ["radau"]
+
+
+@pytest.mark.parametrize("workers, scheduler, compiles", [(2, None, True), (0, None, False),
+                                                          (None, "tcp://127.0.0.1:1", False)])
+def test_only_a_local_cluster_is_compiled_for_first(tmp_path, monkeypatch, workers, scheduler, compiles):
+    sweep = load_sweep({**GRID, "grid": {"run.integrator": ["rk4"]}})
+    events = []
+    monkeypatch.setattr(execute, "compile_for_workers", lambda sw, points, stream=None: events.append(
+        ("compile", execute.integrators_of(sw, points))))
+    monkeypatch.setattr(execute, "_run_dask", lambda *a: events.append(("cluster", None)))
+    monkeypatch.setattr(execute, "run_batch", lambda pay, b: events.append(("serial", None)) or [])
+    monkeypatch.setattr(execute, "write_part", lambda out, rows: None)
+    execute.run(sweep, tmp_path, workers=workers, scheduler=scheduler)
+    if compiles:
+        assert events == [("compile", ["rk4"]), ("cluster", None)]
+    else:
+        assert ("compile", ["rk4"]) not in events and events
+
+
+def test_each_integrator_is_compiled_once_without_a_helper(monkeypatch):
+    """No helper process takes a core from the workers; each integrator is asked for once."""
+    import io
+
+    from gyro_sim import warmup
+
+    calls = []
+    monkeypatch.setattr(warmup, "precompile", lambda stream, prog, integrator, helper=True: calls.append(
+        (prog, integrator, helper)) or False)
+    sweep = load_sweep(GRID)
+    execute.compile_for_workers(sweep, sweep.points, io.StringIO())
+    assert calls == [("gyro-sim sweep", "dop853", False), ("gyro-sim sweep", "rk4", False)]
