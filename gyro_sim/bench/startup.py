@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import json
 import os
+import select
 import shutil
 import signal
 import subprocess
@@ -50,6 +51,8 @@ STOP_TIMEOUT = 15.0
 RUN_SCENE, RUN_DURATION = "hinge_chain", 2.0
 #: the node's first message
 TOPIC = "/joint_states"
+#: how often (s) a waiting measurement checks that the measured process still runs
+POLL = 0.2
 #: the private ROS domain: this base plus the process id modulo DOMAIN_SPAN (0-232 are valid)
 DOMAIN_BASE, DOMAIN_SPAN = 120, 100
 
@@ -227,26 +230,34 @@ def first_message(python: str, node_cmd: list[str], env: dict, topic: str = TOPI
                   timeout: float = CASE_TIMEOUT) -> Timing:
     """Start a subscriber to `topic` (and wait until it is subscribed), then `node_cmd`: the wall
     seconds from the node's start to the first message received, and the node's CPU seconds
-    then. The node is stopped afterwards (SIGINT, then SIGKILL)."""
+    then. The node is stopped afterwards (SIGINT, then SIGKILL). StartupError if the node ends
+    or says nothing on `topic` within `timeout` s."""
     sub = subprocess.Popen([python, "-c", SUBSCRIBER, str(timeout), topic], env=env, stdout=subprocess.PIPE,
                            stderr=subprocess.DEVNULL, text=True, start_new_session=True)
     node = None
-    try:
-        if _read_line(sub, "the subscriber") != "ready":
-            raise StartupError("the subscriber did not start")
-        t0 = time.monotonic()
-        node = subprocess.Popen(node_cmd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL, start_new_session=True)
-        line = _read_line(sub, "the subscriber")
-        cpu = process_cpu(node.pid) if node.poll() is None else float("nan")
-        if not line.startswith("first "):
-            raise StartupError(f"no {topic} message within {timeout:.0f} s (node exit {node.poll()})")
-        return Timing(float(line.split()[1]) - t0, cpu)
-    finally:
-        for p in (node, sub):
-            if p is not None:
-                stop(p)
-        sub.stdout.close()
+    with tempfile.TemporaryFile("w+") as node_err:
+        try:
+            if _read_line(sub, "the subscriber") != "ready":
+                raise StartupError("the subscriber did not start")
+            t0 = time.monotonic()
+            node = subprocess.Popen(node_cmd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                    stderr=node_err, start_new_session=True)
+            while not select.select([sub.stdout], [], [], POLL)[0]:
+                if node.poll() is not None:
+                    node_err.seek(0)
+                    said = node_err.read().strip().splitlines()
+                    raise StartupError(f"{Path(node_cmd[0]).name} ended (exit {node.returncode}) before its "
+                                       f"first {topic}: {said[-1] if said else ''}")
+            line = _read_line(sub, "the subscriber")
+            cpu = process_cpu(node.pid) if node.poll() is None else float("nan")
+            if not line.startswith("first "):
+                raise StartupError(f"no {topic} message within {timeout:g} s")
+            return Timing(float(line.split()[1]) - t0, cpu)
+        finally:
+            for p in (node, sub):
+                if p is not None:
+                    stop(p)
+            sub.stdout.close()
 
 
 def timed_run(cmd: list[str], env: dict, timeout: float = CASE_TIMEOUT) -> Timing:

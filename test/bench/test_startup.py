@@ -132,6 +132,15 @@ def test_a_node_that_never_publishes_is_an_error(tmp_path):
                               timeout=3.0)
 
 
+def test_a_node_that_ends_before_publishing_is_an_error_with_its_last_line(tmp_path):
+    pytest.importorskip("rclpy")
+    env = dict(os.environ, ROS_DOMAIN_ID=str(startup.DOMAIN_BASE + os.getpid() % startup.DOMAIN_SPAN),
+               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_LOG_DIR=str(tmp_path))
+    with pytest.raises(startup.StartupError, match=r"ended \(exit 2\) before its first /joint_states: no scene"):
+        startup.first_message(sys.executable, [sys.executable, "-c", "import sys; print('no scene', file=sys.stderr); sys.exit(2)"], env,
+                              timeout=TIMEOUT)
+
+
 def test_the_table_shows_every_figure_with_the_machine():
     results = {"node": {"cold": {"wall": 18.25, "cpu": 15.5, "extra": {}}, "warm": {"wall": 1.21, "cpu": 0.9, "extra": {}}},
                "worker": {"cold": {"wall": 4.0, "cpu": 2.5, "extra": {"sweep_wall": 21.0, "client_cpu": 16.0}},
