@@ -45,6 +45,8 @@ COPY_IGNORE = (".git", "__pycache__", "build", "dist", "*.egg-info", ".venv", ".
 CASE_TIMEOUT = 900.0
 #: the longest wait for the install (s)
 INSTALL_TIMEOUT = 3600.0
+#: the least time (s) between two progress lines of the install
+PROGRESS_PERIOD = 5.0
 #: how long a stopped process may take to exit after SIGINT before it is killed (s)
 STOP_TIMEOUT = 15.0
 #: the scene and duration of the offline run
@@ -165,12 +167,24 @@ def install(venv: Path, source: Path, say, extras: str = EXTRAS) -> None:
         env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV", "PIP_USER")}
         with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
                               cwd=tmp) as pip:
-            tail = []
+            tail: list[str] = []
+            collected, said = 0, t0
             for line in pip.stdout:
                 line = line.rstrip()
                 tail = (tail + [line])[-5:]
-                if line.startswith(("Collecting", "Building wheel", "Installing collected", "Successfully installed")):
-                    say(f"  [{time.monotonic() - t0:5.0f} s] {line[:150]}")
+                if line.startswith("Collecting"):
+                    collected += 1
+                    if time.monotonic() - said < PROGRESS_PERIOD:
+                        continue
+                    line = f"{collected} packages collected"
+                elif line.startswith("Installing collected packages"):
+                    line = f"installing {line.count(',') + 1} packages"
+                elif line.startswith("Successfully installed"):
+                    line = f"installed {len(line.split()) - 2} packages"
+                elif not line.startswith("Building wheel"):
+                    continue
+                said = time.monotonic()
+                say(f"  [{said - t0:5.0f} s] {line[:120]}")
             if pip.wait() != 0:
                 raise StartupError("pip install failed: " + " | ".join(tail))
 
@@ -277,6 +291,7 @@ def timed_run(cmd: list[str], env: dict, timeout: float = CASE_TIMEOUT) -> Timin
             time.sleep(0.02)
         wall = time.monotonic() - t0
         proc.returncode = os.waitstatus_to_exitcode(status)
+        end_group(proc.pid)  # what it left running would hold its stderr open
         err = proc.stderr.read().decode(errors="replace").strip().splitlines()
         if proc.returncode != 0:
             raise StartupError(f"{Path(cmd[0]).name} exited {proc.returncode}: {err[-1] if err else ''}")
