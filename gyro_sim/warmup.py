@@ -39,8 +39,8 @@ from pathlib import Path
 
 #: measured cold compile (CPU s) of what the first step of a run with each integrator needs,
 #: NUMBA_CACHE_DIR pointing at an empty directory, on the project's 2-core machine: the longer
-#: of this process's share (the dynamics kernel, the entry, the rk4 loop: 14 s) and the
-#: helper's (the outputs: 7.5 s, and the integrator's first loop), which run at the same time;
+#: of this process's share (the dynamics kernel and its entry: 14 s) and the helper's (the rk4
+#: loop, the outputs: 7.5 s, and the integrator's first loop), which run at the same time;
 #: wall time is longer on a busy machine
 COMPILE_SECONDS = {"fixed": 15, "rk4": 15, "lie4": 15, "auto": 16, "dop853": 16, "radau": 24, "gauss4": 31,
                    "gauss4s": 48}
