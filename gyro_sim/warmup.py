@@ -229,12 +229,15 @@ def _start_helper(integrator: str, background: bool = False) -> subprocess.Popen
     """Start the helper that fills the cache for `integrator` (its stdout a pipe: READY when the
     first step's share is there; `background`: at a lower priority from its start, when this
     process needs nothing from it); None where it cannot start."""
-    root = str(Path(__file__).resolve().parents[1])  # the gyro_sim this process runs
+    # the gyro_sim this process runs, also as the working directory: `-m` puts the working
+    # directory first on sys.path, and a start from a source tree of another version must not
+    # fill the cache for that tree's kernels
+    root = str(Path(__file__).resolve().parents[1])
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, (root, os.environ.get("PYTHONPATH")))),
                **{PARENT_VARIABLE: str(os.getpid())})
     try:
         return subprocess.Popen([sys.executable, "-m", "gyro_sim.warmup", "--fill", integrator,
-                                 *(["--background"] if background else [])], env=env,
+                                 *(["--background"] if background else [])], env=env, cwd=root,
                                 stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
                                 text=True)
     except OSError:

@@ -213,3 +213,32 @@ def test_filling_while_a_helper_holds_the_lock():
         fcntl.flock(lock, fcntl.LOCK_EX)
         assert warmup.filling() is True
     assert warmup.filling() is False
+
+
+def test_the_helper_runs_the_gyro_sim_of_its_parent_wherever_it_starts(tmp_path):
+    """Started from a directory holding another gyro_sim (a source tree of another version),
+    the helper still runs the one its parent runs: it fills the cache for the kernels the parent
+    loads."""
+    other = tmp_path / "checkout" / "gyro_sim"
+    other.mkdir(parents=True)
+    (other / "__init__.py").write_text("")
+    marker = tmp_path / "the_other_ran"
+    (other / "warmup.py").write_text(f"open({str(marker)!r}, 'w').close()\nprint('ready', flush=True)\n")
+    cache = tmp_path / "numba_cache"
+    cache.mkdir()
+    with open(cache / "gyro_sim_warmup.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # the helper waits for it: it compiles nothing here
+        parent = subprocess.Popen([sys.executable, "-P", "-c", PARENT_CODE, "rk4"], cwd=other.parent,
+                                  env=env(NUMBA_CACHE_DIR=str(cache)), stdin=subprocess.PIPE,
+                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            int(parent.stdout.readline())
+            assert parent.stdout.readline().strip() == "ready"
+            parent.stdin.close()
+            assert parent.wait(HELPER_TIMEOUT) == 0, parent.stderr.read()
+        finally:
+            if parent.poll() is None:
+                parent.kill()
+            parent.stdout.close()
+            parent.stderr.close()
+    assert not marker.exists(), "the helper ran the gyro_sim of its working directory"

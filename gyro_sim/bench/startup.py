@@ -241,13 +241,13 @@ def _read_line(proc: subprocess.Popen, what: str) -> str:
 
 
 def first_message(python: str, node_cmd: list[str], env: dict, topic: str = TOPIC,
-                  timeout: float = CASE_TIMEOUT) -> Timing:
+                  timeout: float = CASE_TIMEOUT, cwd: Path | None = None) -> Timing:
     """Start a subscriber to `topic` (and wait until it is subscribed), then `node_cmd`: the wall
     seconds from the node's start to the first message received, and the node's CPU seconds
     then. The node is stopped afterwards (SIGINT, then SIGKILL). StartupError if the node ends
     or says nothing on `topic` within `timeout` s."""
     sub = subprocess.Popen([python, "-c", SUBSCRIBER, str(timeout), topic], env=env, stdout=subprocess.PIPE,
-                           stderr=subprocess.DEVNULL, text=True, start_new_session=True)
+                           stderr=subprocess.DEVNULL, text=True, start_new_session=True, cwd=cwd)
     node = None
     with tempfile.TemporaryFile("w+") as node_err:
         try:
@@ -255,7 +255,7 @@ def first_message(python: str, node_cmd: list[str], env: dict, topic: str = TOPI
                 raise StartupError("the subscriber did not start")
             t0 = time.monotonic()
             node = subprocess.Popen(node_cmd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                    stderr=node_err, start_new_session=True)
+                                    stderr=node_err, start_new_session=True, cwd=cwd)
             while not select.select([sub.stdout], [], [], POLL)[0]:
                 if node.poll() is not None:
                     node_err.seek(0)
@@ -274,12 +274,12 @@ def first_message(python: str, node_cmd: list[str], env: dict, topic: str = TOPI
             sub.stdout.close()
 
 
-def timed_run(cmd: list[str], env: dict, timeout: float = CASE_TIMEOUT) -> Timing:
+def timed_run(cmd: list[str], env: dict, timeout: float = CASE_TIMEOUT, cwd: Path | None = None) -> Timing:
     """Run `cmd` to its end: wall seconds and its CPU seconds (its own and its waited-for
     children's, from wait4). StartupError if it fails or outlasts `timeout`."""
     t0 = time.monotonic()
     proc = subprocess.Popen(cmd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, start_new_session=True)
+                            stderr=subprocess.PIPE, start_new_session=True, cwd=cwd)
     end = t0 + timeout
     try:
         while True:
@@ -304,12 +304,13 @@ def timed_run(cmd: list[str], env: dict, timeout: float = CASE_TIMEOUT) -> Timin
 
 
 def worker_first_point(python: str, env: dict, scene: str = RUN_SCENE, horizon: float = 0.1,
-                       timeout: float = CASE_TIMEOUT) -> Timing:
+                       timeout: float = CASE_TIMEOUT, cwd: Path | None = None) -> Timing:
     """A one-point sweep on a LocalCluster of one worker: the worker's wall seconds from its
     process start to its first point and its CPU seconds (extra: the sweep's wall from its call,
     the calling process's CPU)."""
     proc = subprocess.Popen([python, "-c", SWEEP, scene, repr(horizon)], env=env, stdin=subprocess.DEVNULL,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            cwd=cwd)
     try:
         out, err = proc.communicate(timeout=timeout)
     except subprocess.TimeoutExpired:
@@ -331,7 +332,8 @@ CASES = (("node", f"`gyro_sim_node` (default scene), to the first {TOPIC}"),
 
 
 def measure(venv: Path, parts, say, timeout: float = CASE_TIMEOUT) -> dict:
-    """Every case of `parts` cold (a new empty cache) then warm (the same cache again)."""
+    """Every case of `parts` cold (a new empty cache) then warm (the same cache again), each run
+    from a scratch directory (not a source tree, whose gyro_sim `python -m` would find first)."""
     python = str(python_of(venv))
     results: dict[str, dict] = {}
     with tempfile.TemporaryDirectory(prefix="gyro_sim_startup_") as tmp:
@@ -345,12 +347,13 @@ def measure(venv: Path, parts, say, timeout: float = CASE_TIMEOUT) -> dict:
             for temp in ("cold", "warm"):
                 say(f"{key}, {temp} ...")
                 if key == "node":
-                    t = first_message(python, [str(script_of(venv, "gyro_sim_node"))], env, timeout=timeout)
+                    t = first_message(python, [str(script_of(venv, "gyro_sim_node"))], env, timeout=timeout,
+                                      cwd=scratch)
                 elif key == "run":
                     t = timed_run([str(script_of(venv, "gyro-sim")), "run", "--scene", RUN_SCENE, "--duration",
-                                   str(RUN_DURATION)], env, timeout=timeout)
+                                   str(RUN_DURATION)], env, timeout=timeout, cwd=scratch)
                 else:
-                    t = worker_first_point(python, env, timeout=timeout)
+                    t = worker_first_point(python, env, timeout=timeout, cwd=scratch)
                 say(f"{key}, {temp}: {t.wall:.1f} s, CPU {t.cpu:.1f} s")
                 results.setdefault(key, {})[temp] = asdict(t)
     return results
