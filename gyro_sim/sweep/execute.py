@@ -56,28 +56,53 @@ def default_workers() -> int:
     return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
 
 
-def integrators_of(sweep, points) -> list[str]:
-    """The integrators `points` run on the numba backend (backend "numba" or "auto"), sorted."""
-    out = set()
+def first_points(sweep, points) -> dict[str, Any]:
+    """The first of `points` run with each integrator on the numba backend (backend "numba" or
+    "auto"), by integrator, sorted."""
+    out: dict[str, Any] = {}
     for p in points:
         run = dict(sweep.run)
         run.update({k.removeprefix("run."): v for k, v in p.params.items() if k.startswith("run.")})
         if run.get("backend") != "numpy":
-            out.add(run["integrator"])
-    return sorted(out)
+            out.setdefault(run["integrator"], p)
+    return dict(sorted(out.items()))
+
+
+def integrators_of(sweep, points) -> list[str]:
+    """The integrators `points` run on the numba backend, sorted."""
+    return list(first_points(sweep, points))
 
 
 def compile_for_workers(sweep, points, stream=None) -> None:
     """Compile (or load) in this process, before a LocalCluster's workers start, what the first
-    step of each of `points`' integrators needs on the numba backend: every worker then loads
-    it from numba's disk cache (the same cache: the workers inherit this environment) instead
-    of compiling it again, each on its own. No helper process is started (it would take a
-    core from the workers). A cold cache is said in one line on `stream` (None: nothing)."""
+    step of each of `points`' integrators needs on the numba backend, then what the scene of
+    its first point needs besides (a Lagrange chain's integrals, the heavy-subtree path: a
+    Simulator built on it, a snapshot): every worker then loads it from numba's disk cache (the
+    same cache: the workers inherit this environment) instead of compiling it again, each on
+    its own. No helper process is started (it would take a core from the workers). A cold
+    cache is said in one line on `stream` (None: nothing); what fails here is left to the
+    points, which report it."""
     from gyro_sim.warmup import precompile
 
     sink = stream if stream is not None else io.StringIO()
-    for integrator in integrators_of(sweep, points):
+    for integrator, point in first_points(sweep, points).items():
         precompile(sink, prog="gyro-sim sweep", integrator=integrator, helper=False)
+        prepare_scene(sweep, point)
+
+
+def prepare_scene(sweep, point) -> None:
+    """A Simulator on `point`'s scene with its run options and a snapshot (what every point
+    takes first): compiles what that scene needs beyond the integrator's first step."""
+    from gyro_sim.scene.load import load_scene
+    from gyro_sim.simulator import Simulator
+
+    scene_map, run = sweep.point_scene(point)
+    try:
+        sim = Simulator(load_scene(scene_map), integrator=run["integrator"], rtol=run["rtol"], atol=run["atol"],
+                        step=run["step"], backend=run["backend"])
+        sim.snapshot(bodies=False, wrenches=False)
+    except Exception:  # noqa: BLE001 - the point itself reports what fails here
+        pass
 
 
 def run(sweep, out: Path, *, workers: int | None = None, scheduler: str | None = None,

@@ -41,7 +41,8 @@ def test_only_a_local_cluster_is_compiled_for_first(tmp_path, monkeypatch, worke
 
 
 def test_each_integrator_is_compiled_once_without_a_helper(monkeypatch):
-    """No helper process takes a core from the workers; each integrator is asked for once."""
+    """No helper process takes a core from the workers; each integrator is asked for once, then
+    the scene of its first point on numba."""
     import io
 
     from gyro_sim import warmup
@@ -49,6 +50,20 @@ def test_each_integrator_is_compiled_once_without_a_helper(monkeypatch):
     calls = []
     monkeypatch.setattr(warmup, "precompile", lambda stream, prog, integrator, helper=True: calls.append(
         (prog, integrator, helper)) or False)
+    monkeypatch.setattr(execute, "prepare_scene", lambda sw, point: calls.append(
+        point.params["run.integrator"]))
     sweep = load_sweep(GRID)
     execute.compile_for_workers(sweep, sweep.points, io.StringIO())
-    assert calls == [("gyro-sim sweep", "dop853", False), ("gyro-sim sweep", "rk4", False)]
+    assert calls == [("gyro-sim sweep", "dop853", False), "dop853", ("gyro-sim sweep", "rk4", False), "rk4"]
+
+
+def test_a_scene_that_fails_to_prepare_is_left_to_its_point(monkeypatch):
+    """What fails while preparing (here: the Simulator) is not raised: the point reports it."""
+    import gyro_sim.simulator
+
+    def broken(*a, **k):
+        raise gyro_sim.simulator.SimulationError("no way")
+
+    monkeypatch.setattr(gyro_sim.simulator, "Simulator", broken)
+    sweep = load_sweep(GRID)
+    execute.prepare_scene(sweep, sweep.points[0])
