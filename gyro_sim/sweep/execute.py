@@ -79,14 +79,14 @@ def compile_for_workers(sweep, points, stream=None) -> None:
     its first point needs besides (a Lagrange chain's integrals, the heavy-subtree path: a
     Simulator built on it, a snapshot): every worker then loads it from numba's disk cache (the
     same cache: the workers inherit this environment) instead of compiling it again, each on
-    its own. No helper process is started (it would take a core from the workers). A cold
-    cache is said in one line on `stream` (None: nothing); what fails here is left to the
-    points, which report it."""
+    its own. The warm-up helper (gyro_sim.warmup) shares the first step's compile before the
+    workers start, then goes on niced, leaving the CPU to them. A cold cache is said in one
+    line on `stream` (None: nothing); what fails here is left to the points, which report it."""
     from gyro_sim.warmup import precompile
 
     sink = stream if stream is not None else io.StringIO()
     for integrator, point in first_points(sweep, points).items():
-        precompile(sink, prog="gyro-sim sweep", integrator=integrator, helper=False)
+        precompile(sink, prog="gyro-sim sweep", integrator=integrator)
         prepare_scene(sweep, point)
 
 

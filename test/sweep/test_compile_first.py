@@ -1,6 +1,6 @@
-"""A sweep on a LocalCluster compiles its integrators' kernels in the calling process before the
-workers start (each then loads them from the disk cache); serial runs and remote clusters do
-not (the run compiles where it runs)."""
+"""A sweep on a LocalCluster compiles its integrators' kernels in the calling process (and its
+warm-up helper) before the workers start (each then loads them from the disk cache); serial
+runs and remote clusters do not (the run compiles where it runs)."""
 from __future__ import annotations
 
 import pytest
@@ -40,9 +40,8 @@ def test_only_a_local_cluster_is_compiled_for_first(tmp_path, monkeypatch, worke
         assert ("compile", ["rk4"]) not in events and events
 
 
-def test_each_integrator_is_compiled_once_without_a_helper(monkeypatch):
-    """No helper process takes a core from the workers; each integrator is asked for once, then
-    the scene of its first point on numba."""
+def test_each_integrator_is_compiled_once_then_its_first_scene(monkeypatch):
+    """Each integrator is asked for once, then the scene of its first point on numba."""
     import io
 
     from gyro_sim import warmup
@@ -54,7 +53,7 @@ def test_each_integrator_is_compiled_once_without_a_helper(monkeypatch):
         point.params["run.integrator"]))
     sweep = load_sweep(GRID)
     execute.compile_for_workers(sweep, sweep.points, io.StringIO())
-    assert calls == [("gyro-sim sweep", "dop853", False), "dop853", ("gyro-sim sweep", "rk4", False), "rk4"]
+    assert calls == [("gyro-sim sweep", "dop853", True), "dop853", ("gyro-sim sweep", "rk4", True), "rk4"]
 
 
 def test_a_scene_that_fails_to_prepare_is_left_to_its_point(monkeypatch):
