@@ -442,9 +442,15 @@ def cmd_bench_startup(args) -> int:
             shutil.rmtree(made, ignore_errors=True)
     print(table(results, before, after, command, date.today().isoformat()))
     if args.json:
-        Path(args.json).write_text(json.dumps({"date": date.today().isoformat(), "command": command,
-                                               "machine": {"before": before, "after": after},
-                                               "results": results}, indent=1))
+        from gyro_sim.safe_paths import OutputError, write_atomic
+
+        try:
+            write_atomic(args.json, json.dumps({"date": date.today().isoformat(), "command": command,
+                                                "machine": {"before": before, "after": after},
+                                                "results": results}, indent=1), force=args.force, what="--json")
+        except (OutputError, OSError) as exc:
+            print(f"{prog}: {exc}", file=sys.stderr)
+            return 1
     return 0
 
 

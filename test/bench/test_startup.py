@@ -166,3 +166,24 @@ def test_a_process_stopped_with_sigint_is_gone():
     proc = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"], start_new_session=True)
     startup.stop(proc)
     assert proc.returncode is not None
+
+
+def test_the_command_prints_the_table_and_writes_the_json(tmp_path, monkeypatch, capsys):
+    """The command's flow on a venv already there, with the measurement replaced by known
+    figures: the table printed, the same figures in --json, exit 0."""
+    import json
+
+    venv = tmp_path / "venv"
+    (venv / "bin").mkdir(parents=True)
+    (venv / "bin" / "python").write_text("")
+    figures = {"run": {"cold": {"wall": 17.5, "cpu": 14.25, "extra": {}}, "warm": {"wall": 1.5, "cpu": 1.0, "extra": {}}}}
+    asked = []
+    monkeypatch.setattr(startup, "measure", lambda v, parts, say, timeout: asked.append((v, parts)) or figures)
+    out = tmp_path / "startup.json"
+    assert main(["bench", "startup", "--venv", str(venv), "--parts", "run", "--json", str(out)]) == 0
+    assert asked == [(venv, ["run"])]
+    printed = capsys.readouterr().out
+    assert "| `gyro-sim run --scene hinge_chain --duration 2`, to its end | 17.5 | 14.2 | 1.5 | 1.0 |" in printed
+    data = json.loads(out.read_text())
+    assert data["results"] == figures and data["command"] == f"gyro-sim bench startup --venv {venv} --parts run"
+    assert main(["bench", "startup", "--venv", str(venv), "--json", str(out)]) == 2  # kept without --force
