@@ -232,6 +232,7 @@ PLUGINS = (
     "gyro_sim.sweep.commands",  # sweep (many runs on Dask)
     "gyro_sim.scene.commands",  # import (an MJCF or URDF model as a scene)
     "gyro_sim.bench.soak",
+    "gyro_sim.bench.startup",
 )
 
 

@@ -8,19 +8,25 @@ numba's disk cache. The loops call the dynamics through its compiled C function
 compiled without it. A cold start (:func:`precompile`) therefore splits the work:
 
 - this process compiles the dynamics kernel (its C function: the longest piece), then the
-  entry of one evaluation and the rk4 loop;
+  entry of one evaluation (it reuses the kernel's stages compiled here);
 - a helper process (``python -m gyro_sim.warmup --fill INTEGRATOR``, started here) compiles at
   the same time what else the first step needs, on a kernel that only zeroes y' (`fast.null_kernel_address`:
-  the loops and outputs do not depend on which kernel they call): the publication kernel and
-  the integrator's first loop; it says so on its stdout, which this process waits for; then,
-  at a lower priority and after this process has moved on, everything else a run with that
-  integrator may switch to ("fixed": gauss4s and the dop853 rescue; "auto": radau), a Lagrange
-  chain's integrals and the heavy-subtree path, into the same cache.
+  the loops and outputs do not depend on which kernel they call): the rk4 loop, the publication
+  kernel and the integrator's first loop; it says so on its stdout, which this process waits
+  for; then, at a lower priority (niced: it leaves the CPU to this process and to anything
+  else), everything else a run with that integrator may switch to ("fixed": gauss4s and the
+  dop853 rescue; "auto": radau), a Lagrange chain's integrals and the heavy-subtree path,
+  into the same cache.
 
-Later starts load it all (~2 s). What the helper has not yet written when a run first needs it
-is compiled by that run itself: the same code either way, so the results do not depend on it
-(only the wait does). The node skips the warm-up of the methods it may switch to while the
-helper fills the cache (`filling`).
+Later starts load it all (~2 s); where the cache still lacks something they may switch to, the
+helper starts niced from the beginning (``--background``). What the helper has not yet written
+when a run first needs it is compiled by that run itself: the same code either way, so the
+results do not depend on it (only the wait does). The node skips the warm-up of the methods it
+may switch to while the helper fills the cache (`filling`).
+
+The helper never outlives the process that started it (it checks every PARENT_POLL s and
+ends), and one helper at a time fills a cache: a second one waits for the lock, niced, and
+then compiles only what the first left out.
 """
 from __future__ import annotations
 
@@ -33,8 +39,8 @@ from pathlib import Path
 
 #: measured cold compile (CPU s) of what the first step of a run with each integrator needs,
 #: NUMBA_CACHE_DIR pointing at an empty directory, on the project's 2-core machine: the longer
-#: of this process's share (the dynamics kernel, the entry, the rk4 loop: 14 s) and the
-#: helper's (the outputs: 7.5 s, and the integrator's first loop), which run at the same time;
+#: of this process's share (the dynamics kernel and its entry: 14 s) and the helper's (the rk4
+#: loop, the outputs: 7.5 s, and the integrator's first loop), which run at the same time;
 #: wall time is longer on a busy machine
 COMPILE_SECONDS = {"fixed": 15, "rk4": 15, "lie4": 15, "auto": 16, "dop853": 16, "radau": 24, "gauss4": 31,
                    "gauss4s": 48}
@@ -48,6 +54,11 @@ HELPER_NICE = 10
 HELPER_WAIT = 600.0
 #: the line the helper prints when the first step's kernels are in the cache
 READY = "ready"
+#: how often (s) the helper checks that its parent still runs
+PARENT_POLL = 0.2
+#: the environment variable that gives the helper its parent's pid (it may have ended already
+#: when the helper starts watching it)
+PARENT_VARIABLE = "GYRO_SIM_WARMUP_PARENT"
 
 #: the modules holding numba kernels (dispatchers)
 KERNEL_MODULES = ("gyro_sim.dynamics.kernel", "gyro_sim.dynamics.entry", "gyro_sim.integrators.rk4.kernels", "gyro_sim.integrators.rk4.loop", "gyro_sim.dynamics.outputs", "gyro_sim.analytic.lagrange", "gyro_sim.integrators.gauss4.kernels", "gyro_sim.integrators.gauss4.loop",
@@ -214,13 +225,19 @@ def _lock_path() -> Path:
     return base / "gyro_sim_warmup.lock"
 
 
-def _start_helper(integrator: str) -> subprocess.Popen | None:
+def _start_helper(integrator: str, background: bool = False) -> subprocess.Popen | None:
     """Start the helper that fills the cache for `integrator` (its stdout a pipe: READY when the
-    first step's share is there); None where it cannot start."""
-    root = str(Path(__file__).resolve().parents[1])  # the gyro_sim this process runs
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, (root, os.environ.get("PYTHONPATH")))))
+    first step's share is there; `background`: at a lower priority from its start, when this
+    process needs nothing from it); None where it cannot start."""
+    # the gyro_sim this process runs, also as the working directory: `-m` puts the working
+    # directory first on sys.path, and a start from a source tree of another version must not
+    # fill the cache for that tree's kernels
+    root = str(Path(__file__).resolve().parents[1])
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, (root, os.environ.get("PYTHONPATH")))),
+               **{PARENT_VARIABLE: str(os.getpid())})
     try:
-        return subprocess.Popen([sys.executable, "-m", "gyro_sim.warmup", "--fill", integrator], env=env,
+        return subprocess.Popen([sys.executable, "-m", "gyro_sim.warmup", "--fill", integrator,
+                                 *(["--background"] if background else [])], env=env, cwd=root,
                                 stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
                                 text=True)
     except OSError:
@@ -240,19 +257,15 @@ def _wait_ready(helper: subprocess.Popen) -> None:
 
 
 def _compile_kernel() -> None:
-    """This process's share of a cold first step: the dynamics kernel (its C function), the
-    entry of one evaluation, the rk4 loop (what FastChainODE.warm_up runs besides the outputs)."""
-    import numpy as np
-
+    """This process's share of a cold first step: the dynamics kernel (its C function) and the
+    entry of one evaluation (which compiles the kernel's stages into itself: they are in memory
+    here)."""
     from gyro_sim.dynamics.model import compile_model, initial_state
     from gyro_sim.scene.load import load_scene
     from gyro_sim.dynamics.system import FastChainODE
 
     system = FastChainODE(compile_model(load_scene(WARM_UP_SCENE)))  # the kernel's C function
-    y = initial_state(system.model)
-    system.rhs(0.0, y)
-    one = np.zeros((1, 1))
-    system.march_explicit_rk(one, one[0], one[0], 0.0, y, 1.0, 0)
+    system.rhs(0.0, initial_state(system.model))
 
 
 def _first_step(integrator: str) -> None:
@@ -274,21 +287,22 @@ def verbose() -> bool:
     return os.environ.get(VERBOSE_VARIABLE, "") not in ("", "0")
 
 
-def precompile(stream=sys.stderr, prog: str = "gyro_sim", integrator: str = DEFAULT_INTEGRATOR) -> bool:
+def precompile(stream=sys.stderr, prog: str = "gyro_sim", integrator: str = DEFAULT_INTEGRATOR,
+               helper: bool = True) -> bool:
     """If the cache is cold for the first step of a run with `integrator`, say so in one line,
     compile its kernels (with a line per kernel where :func:`verbose`; the helper compiling
     its share at the same time), and
     return True; otherwise (or without numba) return False at once. Where something else a
-    run may need is not cached, the helper is started to compile it in the background
-    (`filling`). Compile errors are left to the backend selection of the Simulator, which
-    falls back to numpy when it may."""
+    run may need is not cached and `helper`, the helper is started to compile it in the
+    background (`filling`); it ends with this process. Compile errors are left to the backend
+    selection of the Simulator, which falls back to numpy when it may."""
     global _helper
     ks = kernels()
     if not ks:
         return False
     cold = cache_is_cold(integrator)
-    if (cold or not everything_cached(integrator)) and not filling():
-        _helper = _start_helper(integrator)
+    if helper and (cold or not everything_cached(integrator)) and not filling():
+        _helper = _start_helper(integrator, background=not cold)
     if not cold:
         return False
     from numba.core import event
@@ -333,22 +347,38 @@ def precompile(stream=sys.stderr, prog: str = "gyro_sim", integrator: str = DEFA
 
 
 # --- the helper ------------------------------------------------------------------------------
-def fill(integrator: str, out=sys.stdout) -> None:
-    """The helper's work (one at a time: a second helper finds the lock taken and returns): the
-    first step's kernels other than the dynamics, the entry and the rk4 loop (the outputs, the
-    integrator's first loop) on a null kernel, READY on `out`, then at a lower priority every
-    other kernel a run with `integrator` may need (`warm_everything` on the null kernel, the
-    heavy path), and last the dynamics kernel itself (loaded: this process's parent compiled
-    it, or compiled here). Failures end a step, not the helper: what it leaves out, a run
-    compiles itself."""
+def fill(integrator: str, out=sys.stdout, parent: int | None = None, background: bool = False) -> None:
+    """The helper's work (one at a time per cache), for as long as its parent (`parent`, default
+    the process that started it) lives: the first step's kernels other than the dynamics and
+    the entry (the rk4 loop, the outputs, the integrator's first loop) on a null kernel, READY on
+    `out`, then at a lower priority every other kernel a run with `integrator` may need
+    (`warm_everything` on the null kernel, the heavy path), and last the dynamics kernel itself
+    (loaded: this process's parent compiled it, or compiled here). Failures end a step, not the
+    helper: what it leaves out, a run compiles itself. With `background` (the parent's first
+    step is in the cache), all of it at the lower priority.
+
+    A second helper on the same cache finds the lock taken: it says READY at once (its parent
+    compiles the first step itself), waits at a lower priority for the lock, and then compiles
+    only what the first one left out (it ended with its parent). numba writes each cache file
+    under a temporary name and renames it: a helper ended at any moment leaves no torn entry."""
     import fcntl
 
+    _end_with(os.getppid() if parent is None else parent)
+    if background:
+        os.nice(HELPER_NICE)
     with open(_lock_path(), "w") as lock:
+        said = False
         try:
             fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:  # another helper fills this cache
-            out.close()
-            return
+        except BlockingIOError:  # another helper fills this cache: wait for it, then fill the rest
+            said = _say_ready(out)
+            if not background:
+                os.nice(HELPER_NICE)
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            if everything_cached(integrator):
+                return
+        import numpy as np
+
         from gyro_sim.dynamics import kernel as fast
         from gyro_sim.dynamics.model import compile_model, initial_state
         from gyro_sim.scene.load import load_scene
@@ -364,33 +394,58 @@ def fill(integrator: str, out=sys.stdout) -> None:
             except Exception:  # noqa: BLE001 - what is left out, a run compiles itself
                 pass
 
-        def share():  # on a system with no warm-up: its entry and rk4 loop are this process's parent's share
+        def share():  # on a system with no warm-up: its entry is this process's parent's share
             system = FastChainODE(compile_model(load_scene(WARM_UP_SCENE)))
             y = initial_state(system.model)
+            one = np.zeros((1, 1))  # the rk4 loop (FastChainODE.warm_up runs it): zero steps
+            system.march_explicit_rk(one, one[0], one[0], 0.0, y, 1.0, 0)
             if FIRST_LOOPS.get(integrator) != FIRST_LOOPS["rk4"]:
                 make_integrator(integrator, system).advance(0.0, y.copy(), 0.002)  # the first loop
             system.outputs(0.0, y)  # the publication kernel
 
-        step(share)
-        try:
-            out.write(f"{READY}\n")
-            out.close()
-        except OSError:  # the parent has gone: go on filling the cache
-            pass
-        os.nice(HELPER_NICE)
+        if not said:
+            step(share)
+            _say_ready(out)
+            if not background:
+                os.nice(HELPER_NICE)
         step(warm_everything, integrator)
         step(fast.heavy_elimination_address)
         fast.kernel_address = real_kernel
         step(fast.kernel_address)
 
 
+def _say_ready(out) -> bool:
+    """READY on `out` (the parent's pipe), closed after; True."""
+    try:
+        out.write(f"{READY}\n")
+        out.close()
+    except OSError:  # the parent has gone: _end_with ends this process
+        pass
+    return True
+
+
+def _end_with(parent: int) -> None:
+    """End this process (at once: os._exit) when `parent` ends, checked every PARENT_POLL s
+    from a daemon thread: a helper never outlives the start that needs it."""
+    import threading
+
+    def watch():
+        while os.getppid() == parent:
+            time.sleep(PARENT_POLL)
+        os._exit(0)
+
+    threading.Thread(target=watch, name="gyro_sim-warmup-parent", daemon=True).start()
+
+
 def main(argv=None) -> int:
-    """``python -m gyro_sim.warmup --fill INTEGRATOR``: the helper (`fill`)."""
+    """``python -m gyro_sim.warmup --fill INTEGRATOR [--background]``: the helper (`fill`)."""
     args = sys.argv[1:] if argv is None else list(argv)
-    if len(args) != 2 or args[0] != "--fill" or args[1] not in LOOPS:
-        print(f"usage: python -m gyro_sim.warmup --fill {{{','.join(LOOPS)}}}", file=sys.stderr)
+    background = args[2:] == ["--background"]
+    if len(args) != 2 + background or args[0] != "--fill" or args[1] not in LOOPS:
+        print(f"usage: python -m gyro_sim.warmup --fill {{{','.join(LOOPS)}}} [--background]", file=sys.stderr)
         return 2
-    fill(args[1])
+    parent = os.environ.get(PARENT_VARIABLE, "")
+    fill(args[1], parent=int(parent) if parent.isdigit() else None, background=background)
     return 0
 
 

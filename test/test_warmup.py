@@ -71,7 +71,8 @@ def wait_for_helper(lock: Path, timeout: float) -> None:
 def test_a_cold_start_shares_the_work_and_the_helper_fills_the_cache(tmp_path):
     cache = tmp_path / "numba_cache"
     cache.mkdir()
-    code = "from gyro_sim import warmup\nprint(warmup.precompile(integrator='fixed'))\n"
+    # the helper ends with its parent: this one waits for it
+    code = "from gyro_sim import warmup\nprint(warmup.precompile(integrator='fixed'))\nwarmup._helper.wait()\n"
     first = subprocess.run([sys.executable, "-c", code], cwd=ROOT,
                            env=env(NUMBA_CACHE_DIR=str(cache), GYRO_SIM_VERBOSE="1"),
                            capture_output=True, text=True, timeout=COLD_TIMEOUT)
@@ -79,7 +80,7 @@ def test_a_cold_start_shares_the_work_and_the_helper_fills_the_cache(tmp_path):
     compiled = [x for x in first.stderr.splitlines() if x.startswith("  compiled ")]
     assert any("dynamics.kernel.rhs_kernel" in x for x in compiled), first.stderr
     # the helper's share: compiled there, loaded here
-    assert not any("publication_kernel" in x for x in compiled), first.stderr
+    assert not any("publication_kernel" in x or "erk_march" in x for x in compiled), first.stderr
     wait_for_helper(cache / "gyro_sim_warmup.lock", HELPER_TIMEOUT)
     check = subprocess.run([sys.executable, "-c", "from gyro_sim import warmup\n"
                             "print(warmup.cache_is_cold('fixed'), warmup.everything_cached('fixed'))"],
@@ -101,16 +102,98 @@ def test_a_cold_start_shares_the_work_and_the_helper_fills_the_cache(tmp_path):
         assert np.array_equal(np.load(out / f"{integrator}.npy"), sim.state), integrator
 
 
-def test_a_second_helper_leaves_at_once(tmp_path):
-    """One helper at a time per cache: with the lock taken, `--fill` returns and compiles nothing."""
+#: a parent that starts a helper on its cache, prints the helper's pid, and ends when its stdin closes
+PARENT_CODE = """
+import sys
+from gyro_sim import warmup
+helper = warmup._start_helper(sys.argv[1])
+print(helper.pid, flush=True)
+print(helper.stdout.readline().strip(), flush=True)
+sys.stdin.read()
+"""
+
+
+#: a helper ends this soon after its parent (it checks every PARENT_POLL s; filling the whole
+#: cache takes minutes of CPU)
+ENDS_WITHIN = 60.0
+
+
+def locked(path: Path) -> bool:
+    """Whether a process holds the lock at `path`."""
+    if not path.exists():
+        return False
+    with open(path, "a") as f:
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            return True
+    return False
+
+
+def alive(pid: int) -> bool:
+    """Whether the process runs (a zombie left for its new parent to reap has ended)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+def test_a_second_helper_waits_for_the_lock_and_ends_with_its_parent(tmp_path):
+    """With the cache's lock taken (another helper fills it), a helper says READY at once (its
+    parent compiles itself), compiles nothing while it waits, and ends when its parent ends."""
     cache = tmp_path / "numba_cache"
     cache.mkdir()
     with open(cache / "gyro_sim_warmup.lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
-        r = subprocess.run([sys.executable, "-m", "gyro_sim.warmup", "--fill", "rk4"], cwd=ROOT,
-                           env=env(NUMBA_CACHE_DIR=str(cache)), capture_output=True, text=True, timeout=600)
-    assert r.returncode == 0 and r.stdout == "", (r.stdout, r.stderr)
-    assert not list(cache.rglob("*.nbi")), "the second helper compiled"
+        parent = subprocess.Popen([sys.executable, "-c", PARENT_CODE, "rk4"], cwd=ROOT,
+                                  env=env(NUMBA_CACHE_DIR=str(cache)), stdin=subprocess.PIPE,
+                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            helper = int(parent.stdout.readline())
+            assert parent.stdout.readline().strip() == "ready"
+            assert alive(helper)
+            parent.stdin.close()
+            assert parent.wait(HELPER_TIMEOUT) == 0, parent.stderr.read()
+            end = time.monotonic() + HELPER_TIMEOUT
+            while alive(helper) and time.monotonic() < end:
+                time.sleep(0.05)
+            assert not alive(helper), "the helper outlived its parent"
+        finally:
+            if parent.poll() is None:
+                parent.kill()
+            parent.stdout.close()
+            parent.stderr.close()
+    assert not list(cache.rglob("*.nbi")), "the second helper compiled while the first held the lock"
+
+
+def test_a_helper_ends_with_its_parent_while_it_compiles(tmp_path):
+    """A helper filling a cold cache ends soon after the process that started it ends (it does
+    not go on compiling for a minute on a machine the start has left)."""
+    cache = tmp_path / "numba_cache"
+    cache.mkdir()
+    parent = subprocess.Popen([sys.executable, "-c", "import sys\nfrom gyro_sim import warmup\n"
+                               "print(warmup._start_helper('fixed').pid, flush=True)\nsys.stdin.read()\n"],
+                              cwd=ROOT, env=env(NUMBA_CACHE_DIR=str(cache)), stdin=subprocess.PIPE,
+                              stdout=subprocess.PIPE, text=True)
+    try:
+        helper = int(parent.stdout.readline())
+        end = time.monotonic() + HELPER_TIMEOUT
+        while not locked(cache / "gyro_sim_warmup.lock") and time.monotonic() < end:  # it has begun
+            time.sleep(0.05)
+        assert alive(helper)
+        parent.stdin.close()
+        assert parent.wait(HELPER_TIMEOUT) == 0
+        end = time.monotonic() + ENDS_WITHIN
+        while alive(helper) and time.monotonic() < end:
+            time.sleep(0.05)
+        assert not alive(helper), f"the helper still compiles {ENDS_WITHIN} s after its parent ended"
+    finally:
+        if parent.poll() is None:
+            parent.kill()
+        parent.stdout.close()
+    with open(cache / "gyro_sim_warmup.lock", "w") as lock:  # released: no helper holds it
+        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
 
 
 def test_the_helper_says_how_to_call_it():
@@ -130,3 +213,32 @@ def test_filling_while_a_helper_holds_the_lock():
         fcntl.flock(lock, fcntl.LOCK_EX)
         assert warmup.filling() is True
     assert warmup.filling() is False
+
+
+def test_the_helper_runs_the_gyro_sim_of_its_parent_wherever_it_starts(tmp_path):
+    """Started from a directory holding another gyro_sim (a source tree of another version),
+    the helper still runs the one its parent runs: it fills the cache for the kernels the parent
+    loads."""
+    other = tmp_path / "checkout" / "gyro_sim"
+    other.mkdir(parents=True)
+    (other / "__init__.py").write_text("")
+    marker = tmp_path / "the_other_ran"
+    (other / "warmup.py").write_text(f"open({str(marker)!r}, 'w').close()\nprint('ready', flush=True)\n")
+    cache = tmp_path / "numba_cache"
+    cache.mkdir()
+    with open(cache / "gyro_sim_warmup.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # the helper waits for it: it compiles nothing here
+        parent = subprocess.Popen([sys.executable, "-P", "-c", PARENT_CODE, "rk4"], cwd=other.parent,
+                                  env=env(NUMBA_CACHE_DIR=str(cache)), stdin=subprocess.PIPE,
+                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            int(parent.stdout.readline())
+            assert parent.stdout.readline().strip() == "ready"
+            parent.stdin.close()
+            assert parent.wait(HELPER_TIMEOUT) == 0, parent.stderr.read()
+        finally:
+            if parent.poll() is None:
+                parent.kill()
+            parent.stdout.close()
+            parent.stderr.close()
+    assert not marker.exists(), "the helper ran the gyro_sim of its working directory"

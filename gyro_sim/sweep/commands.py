@@ -143,7 +143,7 @@ def _cmd_sweep(args) -> int:
     try:
         with _stop_on_signals():
             stats = run(sweep, out, workers=args.workers, scheduler=args.scheduler,
-                        progress=lambda done, total, extra: bar(done, total, extra))
+                        progress=lambda done, total, extra: bar(done, total, extra), stream=sys.stderr)
     except ClusterError as exc:
         print(f"\n{prog}: {exc}; finished points are kept in {out / res.PARTS} (--resume)", file=sys.stderr)
         return 1

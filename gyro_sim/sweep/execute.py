@@ -15,6 +15,7 @@ lost. Ctrl-C cancels what is pending and keeps what is written.
 from __future__ import annotations
 
 import dataclasses
+import io
 import logging
 import math
 import os
@@ -55,13 +56,64 @@ def default_workers() -> int:
     return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
 
 
+def first_points(sweep, points) -> dict[str, Any]:
+    """The first of `points` run with each integrator on the numba backend (backend "numba" or
+    "auto"), by integrator, sorted."""
+    out: dict[str, Any] = {}
+    for p in points:
+        run = dict(sweep.run)
+        run.update({k.removeprefix("run."): v for k, v in p.params.items() if k.startswith("run.")})
+        if run.get("backend") != "numpy":
+            out.setdefault(run["integrator"], p)
+    return dict(sorted(out.items()))
+
+
+def integrators_of(sweep, points) -> list[str]:
+    """The integrators `points` run on the numba backend, sorted."""
+    return list(first_points(sweep, points))
+
+
+def compile_for_workers(sweep, points, stream=None) -> None:
+    """Compile (or load) in this process, before a LocalCluster's workers start, what the first
+    step of each of `points`' integrators needs on the numba backend, then what the scene of
+    its first point needs besides (a Lagrange chain's integrals, the heavy-subtree path: a
+    Simulator built on it, a snapshot): every worker then loads it from numba's disk cache (the
+    same cache: the workers inherit this environment) instead of compiling it again, each on
+    its own. The warm-up helper (gyro_sim.warmup) shares the first step's compile before the
+    workers start, then goes on niced, leaving the CPU to them. A cold cache is said in one
+    line on `stream` (None: nothing); what fails here is left to the points, which report it."""
+    from gyro_sim.warmup import precompile
+
+    sink = stream if stream is not None else io.StringIO()
+    for integrator, point in first_points(sweep, points).items():
+        precompile(sink, prog="gyro-sim sweep", integrator=integrator)
+        prepare_scene(sweep, point)
+
+
+def prepare_scene(sweep, point) -> None:
+    """A Simulator on `point`'s scene with its run options and a snapshot (what every point
+    takes first): compiles what that scene needs beyond the integrator's first step."""
+    from gyro_sim.scene.load import load_scene
+    from gyro_sim.simulator import Simulator
+
+    scene_map, run = sweep.point_scene(point)
+    try:
+        sim = Simulator(load_scene(scene_map), integrator=run["integrator"], rtol=run["rtol"], atol=run["atol"],
+                        step=run["step"], backend=run["backend"])
+        sim.snapshot(bodies=False, wrenches=False)
+    except Exception:  # noqa: BLE001 - the point itself reports what fails here
+        pass
+
+
 def run(sweep, out: Path, *, workers: int | None = None, scheduler: str | None = None,
         progress: Callable[[int, int, str], None] | None = None,
-        on_batch: Callable[[Any, list[dict]], None] | None = None) -> dict[str, Any]:
+        on_batch: Callable[[Any, list[dict]], None] | None = None, stream=None) -> dict[str, Any]:
     """Run the points of `sweep` that DIR/parts does not hold yet.
 
     Returns {"ran", "skipped", "wall", "where", "interrupted"}. Raises ClusterError.
     `on_batch(client, rows)` is called after each part is written (client None when serial).
+    On a LocalCluster, the kernels are compiled here first (`compile_for_workers`; a cold
+    cache said on `stream`).
     """
     done = {int(r["point"]) for r in read_parts(out)}
     todo = [p for p in sweep.points if p.index not in done]
@@ -93,6 +145,8 @@ def run(sweep, out: Path, *, workers: int | None = None, scheduler: str | None =
             for b in batches(todo, batch_size(sweep, len(todo), 1)):
                 finished(run_batch(pay, b))
         else:
+            if scheduler is None:
+                compile_for_workers(sweep, todo, stream)
             _run_dask(sweep, todo, workers, scheduler, finished, stats)
     except KeyboardInterrupt:
         stats["interrupted"] = True

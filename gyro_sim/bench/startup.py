@@ -1,0 +1,468 @@
+"""`gyro-sim bench startup`: how long a fresh installation takes to its first output, cold
+(an empty numba cache: every kernel compiled) and warm (the same cache, a second start).
+
+    gyro-sim bench startup [--source DIR] [--keep-venv DIR | --venv DIR] [--json FILE]
+
+The package is installed from a source tree (default: the one this gyro_sim runs from) into a
+new virtual environment, as a user installs it: ``python -m venv`` and ``pip install
+".[ros,sweep]"`` (not editable; pip's download cache is used). In that environment, with
+NUMBA_CACHE_DIR pointing to a new empty directory for each cold case:
+
+- the node: ``gyro_sim_node`` on the default scene, from its process start to the first
+  /joint_states message a subscriber (a separate process, started and subscribed beforehand,
+  on a private ROS_DOMAIN_ID) receives; with the node's CPU time to that moment;
+- ``gyro-sim run --scene hinge_chain --duration 2``, to its end, with its CPU time;
+- a one-point sweep on a LocalCluster of one worker: the worker's wall time from its process
+  start to its first point written, and its CPU time (its start included); and the sweep's,
+  from its call to the first point.
+
+Each cold case is followed by a warm one on the same cache. The table is printed with the
+date, the command, the machine's core count and load average (1 min) before and after.
+"""
+from __future__ import annotations
+
+import json
+import os
+import select
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass, field
+from datetime import date
+from pathlib import Path
+
+#: the extras installed: the node needs [ros], the sweep case [sweep]
+EXTRAS = "ros,sweep"
+#: the files that make a directory a gyro_sim source tree
+SOURCE_MARKERS = ("setup.py", "package.xml", "gyro_sim/__init__.py")
+#: what is not copied from the source tree before installing (build products, caches, VCS)
+COPY_IGNORE = (".git", "__pycache__", "build", "dist", "*.egg-info", ".venv", ".ci-venv", "out", ".pytest_cache",
+               "*.mcap", "*.rrd")
+#: the longest wait for one case (s): a cold compile on a busy 2-core machine takes minutes
+CASE_TIMEOUT = 900.0
+#: the longest wait for the install (s)
+INSTALL_TIMEOUT = 3600.0
+#: the least time (s) between two progress lines of the install
+PROGRESS_PERIOD = 5.0
+#: how long a stopped process may take to exit after SIGINT before it is killed (s)
+STOP_TIMEOUT = 15.0
+#: the scene and duration of the offline run
+RUN_SCENE, RUN_DURATION = "hinge_chain", 2.0
+#: the node's first message
+TOPIC = "/joint_states"
+#: how often (s) a waiting measurement checks that the measured process still runs
+POLL = 0.2
+#: the private ROS domain: this base plus the process id modulo DOMAIN_SPAN (0-232 are valid)
+DOMAIN_BASE, DOMAIN_SPAN = 120, 100
+
+#: the subscriber, run with the measured environment's Python: "ready" once subscribed, then
+#: "first <time.monotonic()>" at the first message (or "none" after argv[1] s)
+SUBSCRIBER = r"""
+import sys, time
+import rclpy
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import JointState
+
+rclpy.init()
+node = Node("gyro_sim_startup_probe")
+got = []
+node.create_subscription(JointState, sys.argv[2], lambda m: got.append(time.monotonic()), qos_profile_sensor_data)
+print("ready", flush=True)
+end = time.monotonic() + float(sys.argv[1])
+while not got and time.monotonic() < end:
+    rclpy.spin_once(node, timeout_sec=0.05)
+print(f"first {got[0]!r}" if got else "none", flush=True)
+node.destroy_node()
+rclpy.try_shutdown()
+"""
+
+#: a one-point sweep on a LocalCluster of one worker, run with the measured environment's
+#: Python; prints one JSON line at the first point written
+SWEEP = r"""
+import json, os, sys, tempfile, time
+from pathlib import Path
+
+t0, c0 = time.perf_counter(), time.process_time()
+
+
+def worker_times():
+    tick = os.sysconf("SC_CLK_TCK")
+    with open("/proc/self/stat") as f:
+        start = int(f.read().rsplit(")", 1)[1].split()[19]) / tick
+    with open("/proc/uptime") as f:
+        uptime = float(f.read().split()[0])
+    return uptime - start, time.process_time()
+
+
+from gyro_sim.sweep import execute
+from gyro_sim.sweep.spec import load_sweep
+
+sweep = load_sweep({"name": "startup", "scene": sys.argv[1], "grid": {"run.horizon": [float(sys.argv[2])]},
+                    "run": {"horizon": float(sys.argv[2])}, "measures": ["final_state"]})
+first = {}
+
+
+def on_batch(client, rows):
+    if not first:
+        first["sweep_wall"] = time.perf_counter() - t0
+        first["client_cpu"] = time.process_time() - c0
+        (wall, cpu), = client.run(worker_times).values()
+        first["worker_wall"], first["worker_cpu"] = wall, cpu
+
+
+with tempfile.TemporaryDirectory() as out:
+    execute.run(sweep, Path(out), workers=1, on_batch=on_batch)
+print(json.dumps(first), flush=True)
+"""
+
+
+class StartupError(RuntimeError):
+    """A case could not be measured (the install failed, a process never answered)."""
+
+
+@dataclass
+class Timing:
+    """Wall and CPU seconds of one case (CPU: the measured process's own)."""
+
+    wall: float
+    cpu: float
+    extra: dict = field(default_factory=dict)
+
+
+def source_tree(path: str | os.PathLike | None) -> Path | None:
+    """The gyro_sim source tree at `path` (default: the one this gyro_sim runs from), or None if
+    it is not one (an installed package has no setup.py beside it)."""
+    root = Path(path) if path is not None else Path(__file__).resolve().parents[2]
+    return root.resolve() if all((root / m).is_file() for m in SOURCE_MARKERS) else None
+
+
+def python_of(venv: Path) -> Path:
+    return venv / "bin" / "python"
+
+
+def script_of(venv: Path, name: str) -> Path:
+    """A console script of the installed package (pip puts them in bin/)."""
+    for where in (venv / "bin" / name, venv / "lib" / "gyro_sim" / name):
+        if where.is_file():
+            return where
+    raise StartupError(f"{name} is not installed in {venv}")
+
+
+def install(venv: Path, source: Path, say, extras: str = EXTRAS) -> None:
+    """A new venv at `venv` with the package from `source` installed (not editable): a copy of
+    the tree is installed, so nothing is written into it. Progress lines go to `say`."""
+    with tempfile.TemporaryDirectory(prefix="gyro_sim_src_") as tmp:
+        copy = Path(tmp) / "src"
+        shutil.copytree(source, copy, ignore=shutil.ignore_patterns(*COPY_IGNORE))
+        say(f"creating the venv {venv}")
+        subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=INSTALL_TIMEOUT,
+                       stdout=subprocess.DEVNULL)
+        cmd = [str(python_of(venv)), "-m", "pip", "install", "--progress-bar", "off", f"{copy}[{extras}]"]
+        say(f"pip install \".[{extras}]\" (a few minutes the first time)")
+        t0 = time.monotonic()
+        env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV", "PIP_USER")}
+        with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
+                              cwd=tmp) as pip:
+            tail: list[str] = []
+            collected, said = 0, t0
+            for line in pip.stdout:
+                line = line.rstrip()
+                tail = (tail + [line])[-5:]
+                if line.startswith("Collecting"):
+                    collected += 1
+                    if time.monotonic() - said < PROGRESS_PERIOD:
+                        continue
+                    line = f"{collected} packages collected"
+                elif line.startswith("Installing collected packages"):
+                    line = f"installing {line.count(',') + 1} packages"
+                elif line.startswith("Successfully installed"):
+                    line = f"installed {len(line.split()) - 2} packages"
+                elif not line.startswith("Building wheel"):
+                    continue
+                said = time.monotonic()
+                say(f"  [{said - t0:5.0f} s] {line[:120]}")
+            if pip.wait() != 0:
+                raise StartupError("pip install failed: " + " | ".join(tail))
+
+
+def child_env(venv: Path, cache: Path, scratch: Path) -> dict:
+    """The environment of the measured processes: the venv's, a private ROS domain, the numba
+    cache `cache`, nothing of this process's PYTHONPATH."""
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("PYTHONPATH", "NUMBA_CACHE_DIR", "NUMBA_DISABLE_JIT", "GYRO_SIM_VERBOSE")}
+    env.update(VIRTUAL_ENV=str(venv), PATH=os.pathsep.join((str(venv / "bin"), env.get("PATH", ""))),
+               AMENT_PREFIX_PATH=str(venv), NUMBA_CACHE_DIR=str(cache), ROS_LOG_DIR=str(scratch / "roslog"),
+               ROS_DOMAIN_ID=str(DOMAIN_BASE + os.getpid() % DOMAIN_SPAN), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    return env
+
+
+def process_cpu(pid: int) -> float:
+    """CPU seconds (user + system) a running process has used so far (Linux /proc)."""
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def end_group(pgid: int) -> None:
+    """SIGKILL whatever is left of a process group (a measured process's helpers): the next
+    case runs on a machine without them."""
+    try:
+        os.killpg(pgid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):
+        pass
+
+
+def stop(proc: subprocess.Popen) -> None:
+    """SIGINT to the process's group (it runs in its own session), SIGKILL if it lingers; then
+    the rest of its group ended."""
+    for sig in (signal.SIGINT, signal.SIGKILL):
+        if proc.poll() is not None:
+            break
+        try:
+            os.killpg(proc.pid, sig)
+        except ProcessLookupError:
+            break
+        try:
+            proc.wait(STOP_TIMEOUT)
+        except subprocess.TimeoutExpired:
+            continue
+    end_group(proc.pid)
+
+
+def _read_line(proc: subprocess.Popen, what: str) -> str:
+    line = proc.stdout.readline()
+    if not line:
+        raise StartupError(f"{what} ended without a word (exit {proc.wait()})")
+    return line.strip()
+
+
+def first_message(python: str, node_cmd: list[str], env: dict, topic: str = TOPIC,
+                  timeout: float = CASE_TIMEOUT, cwd: Path | None = None) -> Timing:
+    """Start a subscriber to `topic` (and wait until it is subscribed), then `node_cmd`: the wall
+    seconds from the node's start to the first message received, and the node's CPU seconds
+    then. The node is stopped afterwards (SIGINT, then SIGKILL). StartupError if the node ends
+    or says nothing on `topic` within `timeout` s."""
+    sub = subprocess.Popen([python, "-c", SUBSCRIBER, str(timeout), topic], env=env, stdout=subprocess.PIPE,
+                           stderr=subprocess.DEVNULL, text=True, start_new_session=True, cwd=cwd)
+    node = None
+    with tempfile.TemporaryFile("w+") as node_err:
+        try:
+            if _read_line(sub, "the subscriber") != "ready":
+                raise StartupError("the subscriber did not start")
+            t0 = time.monotonic()
+            node = subprocess.Popen(node_cmd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                    stderr=node_err, start_new_session=True, cwd=cwd)
+            while not select.select([sub.stdout], [], [], POLL)[0]:
+                if node.poll() is not None:
+                    node_err.seek(0)
+                    said = node_err.read().strip().splitlines()
+                    raise StartupError(f"{Path(node_cmd[0]).name} ended (exit {node.returncode}) before its "
+                                       f"first {topic}: {said[-1] if said else ''}")
+            line = _read_line(sub, "the subscriber")
+            cpu = process_cpu(node.pid) if node.poll() is None else float("nan")
+            if not line.startswith("first "):
+                raise StartupError(f"no {topic} message within {timeout:g} s")
+            return Timing(float(line.split()[1]) - t0, cpu)
+        finally:
+            for p in (node, sub):
+                if p is not None:
+                    stop(p)
+            sub.stdout.close()
+
+
+def timed_run(cmd: list[str], env: dict, timeout: float = CASE_TIMEOUT, cwd: Path | None = None) -> Timing:
+    """Run `cmd` to its end: wall seconds and its CPU seconds (its own and its waited-for
+    children's, from wait4). StartupError if it fails or outlasts `timeout`."""
+    t0 = time.monotonic()
+    proc = subprocess.Popen(cmd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, start_new_session=True, cwd=cwd)
+    end = t0 + timeout
+    try:
+        while True:
+            pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
+            if pid:
+                break
+            if time.monotonic() > end:
+                raise StartupError(f"{Path(cmd[0]).name} did not end within {timeout:.0f} s")
+            time.sleep(0.02)
+        wall = time.monotonic() - t0
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        end_group(proc.pid)  # what it left running would hold its stderr open
+        err = proc.stderr.read().decode(errors="replace").strip().splitlines()
+        if proc.returncode != 0:
+            raise StartupError(f"{Path(cmd[0]).name} exited {proc.returncode}: {err[-1] if err else ''}")
+        return Timing(wall, usage.ru_utime + usage.ru_stime)
+    finally:
+        if proc.returncode is None:
+            stop(proc)
+        end_group(proc.pid)
+        proc.stderr.close()
+
+
+def worker_first_point(python: str, env: dict, scene: str = RUN_SCENE, horizon: float = 0.1,
+                       timeout: float = CASE_TIMEOUT, cwd: Path | None = None) -> Timing:
+    """A one-point sweep on a LocalCluster of one worker: the worker's wall seconds from its
+    process start to its first point and its CPU seconds (extra: the sweep's wall from its call,
+    the calling process's CPU)."""
+    proc = subprocess.Popen([python, "-c", SWEEP, scene, repr(horizon)], env=env, stdin=subprocess.DEVNULL,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            cwd=cwd)
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        raise StartupError(f"the sweep did not end within {timeout:.0f} s") from None
+    finally:
+        stop(proc)  # the cluster's processes with it (its session)
+    lines = out.strip().splitlines()
+    if proc.returncode != 0 or not lines:
+        err = err.strip().splitlines()
+        raise StartupError(f"the sweep failed (exit {proc.returncode}): {err[-1] if err else ''}")
+    d = json.loads(lines[-1])
+    return Timing(d["worker_wall"], d["worker_cpu"], {"sweep_wall": d["sweep_wall"], "client_cpu": d["client_cpu"]})
+
+
+#: the cases, in the order they run: (key, label)
+CASES = (("node", f"`gyro_sim_node` (default scene), to the first {TOPIC}"),
+         ("run", f"`gyro-sim run --scene {RUN_SCENE} --duration {RUN_DURATION:g}`, to its end"),
+         ("worker", "a Dask worker's first sweep point (dop853), from the worker's start"))
+
+
+def measure(venv: Path, parts, say, timeout: float = CASE_TIMEOUT) -> dict:
+    """Every case of `parts` cold (a new empty cache) then warm (the same cache again), each run
+    from a scratch directory (not a source tree, whose gyro_sim `python -m` would find first)."""
+    python = str(python_of(venv))
+    results: dict[str, dict] = {}
+    with tempfile.TemporaryDirectory(prefix="gyro_sim_startup_") as tmp:
+        scratch = Path(tmp)
+        for key, label in CASES:
+            if key not in parts:
+                continue
+            cache = scratch / f"cache_{key}"
+            cache.mkdir()
+            env = child_env(venv, cache, scratch)
+            for temp in ("cold", "warm"):
+                say(f"{key}, {temp} ...")
+                if key == "node":
+                    t = first_message(python, [str(script_of(venv, "gyro_sim_node"))], env, timeout=timeout,
+                                      cwd=scratch)
+                elif key == "run":
+                    t = timed_run([str(script_of(venv, "gyro-sim")), "run", "--scene", RUN_SCENE, "--duration",
+                                   str(RUN_DURATION)], env, timeout=timeout, cwd=scratch)
+                else:
+                    t = worker_first_point(python, env, timeout=timeout, cwd=scratch)
+                say(f"{key}, {temp}: {t.wall:.1f} s, CPU {t.cpu:.1f} s")
+                results.setdefault(key, {})[temp] = asdict(t)
+    return results
+
+
+def machine() -> dict:
+    """Core count and the 1-minute load average now."""
+    return {"cores": os.cpu_count(), "load": round(os.getloadavg()[0], 2)}
+
+
+def table(results: dict, before: dict, after: dict, command: str, day: str) -> str:
+    """The Markdown table of `results` (measure's), with the date, command and machine."""
+    lines = [f"{day}, `{command}`; {before['cores']} cores, load average {before['load']:.2f} at the start, "
+             f"{after['load']:.2f} at the end.", "",
+             "| case | cold: wall (s) | cold: CPU (s) | warm: wall (s) | warm: CPU (s) |",
+             "|---|---:|---:|---:|---:|"]
+    for key, label in CASES:
+        if key in results:
+            c, w = results[key]["cold"], results[key]["warm"]
+            lines.append(f"| {label} | {c['wall']:.1f} | {c['cpu']:.1f} | {w['wall']:.1f} | {w['cpu']:.1f} |")
+    if "worker" in results:
+        c = results["worker"]["cold"]["extra"]
+        lines += ["", f"The one-point sweep, from its call to its first point: {c['sweep_wall']:.1f} s cold "
+                      f"(the calling process: {c['client_cpu']:.1f} s CPU, its compile for the workers included)."]
+    return "\n".join(lines)
+
+
+def command_of(args) -> str:
+    """The command line that reproduces `args` (for the table)."""
+    words = ["gyro-sim", "bench", "startup"]
+    for option in ("source", "keep_venv", "venv"):
+        if getattr(args, option):
+            words += [f"--{option.replace('_', '-')}", str(getattr(args, option))]
+    if list(args.parts) != [k for k, _ in CASES]:
+        words += ["--parts", *args.parts]
+    return " ".join(words)
+
+
+def cmd_bench_startup(args) -> int:
+    prog = "gyro-sim bench startup"
+
+    def say(line: str) -> None:
+        print(f"{prog}: {line}", file=sys.stderr, flush=True)
+
+    if args.json and Path(args.json).exists() and not args.force:
+        print(f"{prog}: {args.json} exists; --force replaces it", file=sys.stderr)
+        return 2
+    made: Path | None = None  # a venv this command creates (removed unless kept and complete)
+    keep = False
+    if args.venv:
+        venv = Path(args.venv)
+        if not python_of(venv).is_file():
+            print(f"{prog}: {venv} is not a virtual environment (no bin/python)", file=sys.stderr)
+            return 2
+    else:
+        source = source_tree(args.source)
+        if source is None:
+            where = args.source or Path(__file__).resolve().parents[2]
+            print(f"{prog}: {where} is not a gyro_sim source tree (no setup.py, package.xml, gyro_sim/); "
+                  "give one with --source", file=sys.stderr)
+            return 2
+        if args.keep_venv:
+            venv = Path(args.keep_venv)
+            if venv.exists() and any(venv.iterdir()):
+                print(f"{prog}: {venv} exists and is not empty; reuse it with --venv", file=sys.stderr)
+                return 2
+        else:
+            venv = Path(tempfile.mkdtemp(prefix="gyro_sim_venv_"))
+        made = venv
+    command = command_of(args)
+    try:
+        if made is not None:
+            install(made, source, say)
+            keep = bool(args.keep_venv)
+        before = machine()
+        results = measure(venv, args.parts, say, timeout=args.timeout)
+        after = machine()
+    except StartupError as exc:
+        print(f"{prog}: {exc}", file=sys.stderr)
+        return 1
+    except (OSError, subprocess.SubprocessError) as exc:
+        print(f"{prog}: {type(exc).__name__}: {exc}".splitlines()[0], file=sys.stderr)
+        return 1
+    finally:
+        if made is not None and not keep:
+            shutil.rmtree(made, ignore_errors=True)
+    print(table(results, before, after, command, date.today().isoformat()))
+    if args.json:
+        from gyro_sim.safe_paths import OutputError, write_atomic
+
+        try:
+            write_atomic(args.json, json.dumps({"date": date.today().isoformat(), "command": command,
+                                                "machine": {"before": before, "after": after},
+                                                "results": results}, indent=1), force=args.force, what="--json")
+        except (OutputError, OSError) as exc:
+            print(f"{prog}: {exc}", file=sys.stderr)
+            return 1
+    return 0
+
+
+def register(sub, bench) -> None:
+    """Add `gyro-sim bench startup`."""
+    s = bench.add_parser("startup", help="time to the first output of a fresh install, cold and warm (minutes)")
+    s.add_argument("--source", help="the gyro_sim source tree to install (default: the one this gyro_sim runs from)")
+    where = s.add_mutually_exclusive_group()
+    where.add_argument("--keep-venv", metavar="DIR", help="install into DIR (new or empty) and keep it")
+    where.add_argument("--venv", metavar="DIR", help="measure in this installed venv (no install)")
+    s.add_argument("--parts", nargs="+", default=[k for k, _ in CASES], choices=[k for k, _ in CASES])
+    s.add_argument("--timeout", type=float, default=CASE_TIMEOUT, help="longest wait for one case (s)")
+    s.add_argument("--json", metavar="FILE", help="also write the figures to FILE")
+    s.add_argument("--force", action="store_true", help="replace an existing --json FILE")
+    s.set_defaults(fn=cmd_bench_startup)
