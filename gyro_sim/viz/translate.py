@@ -278,17 +278,20 @@ class Translator:
         self._pose(t, names, pos, quat)
 
     def _poses(self, t: float, msg) -> None:
-        if self.from_tf or self.chain is None or len(msg.poses) != len(self.chain.bodies):
+        if self.from_tf:
             return  # /tf names the frames: a PoseArray only without it, in the chain's order
-        pos = np.array([_xyz(p.position) for p in msg.poses])
-        quat = np.array([_xyz(p.orientation) + [float(p.orientation.w)] for p in msg.poses])
-        self._pose(t, self.chain.body_names, pos, quat)
+        pos = np.array([_xyz(p.position) for p in msg.poses]).reshape(-1, 3)
+        quat = np.array([_xyz(p.orientation) + [float(p.orientation.w)] for p in msg.poses]).reshape(-1, 4)
+        if self.chain is not None and len(msg.poses) == len(self.chain.bodies):
+            self._pose(t, self.chain.body_names, pos, quat)
+        elif self.chain is None:  # no names yet: the links through the joint points, no frames
+            self._pose(t, [], pos, quat)
 
     def _pose(self, t: float, names: list[str], pos: np.ndarray, quat: np.ndarray) -> None:
-        if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(quat))) or not names:
+        if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(quat))) or not len(pos):
             return
         self._time(t)
-        self.pose_names = names
+        self.pose_names = names or None
         self.last_pose = (pos, quat)
         lo, hi = pos.min(axis=0), pos.max(axis=0)
         self.bbox = [lo, hi] if self.bbox is None else [np.minimum(self.bbox[0], lo), np.maximum(self.bbox[1], hi)]

@@ -1,0 +1,283 @@
+"""`gyro-sim view --live`: a running gyro_sim node drawn in rerun as it runs.
+
+A process of its own (the node stays as it is): an rclpy node subscribes to the gyro_sim
+node's topics under a namespace and feeds every message to the translator of the log view
+(gyro_sim.viz.translate), which sends the same entities and plots to rerun a few times a
+second (:data:`FLUSH_PERIOD`).
+
+- The chain's shapes come from ``<ns>/robot_description`` (reliable, transient local: the
+  last description is received whenever the viewer starts); until then the viewer says
+  "waiting for <ns>/robot_description" once and draws what /tf or the poses give.
+- A reset (the "reset" event and a new description) is followed; so is a node that stops and
+  starts again (one line each; the viewer keeps waiting). A restarted node counts its
+  simulated time from 0 again: the view's ``sim_time`` goes on from where it was (the event
+  "node restarted at ..." marks the place), so the plots do not draw over each other.
+- SIGINT or SIGTERM end it with exit 0, the .rrd of ``--save`` complete.
+- At the end one line gives how far the drawn messages were behind the node (LagStats).
+"""
+from __future__ import annotations
+
+import math
+import signal
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+
+from gyro_sim.msgs import messages as M
+from gyro_sim.viz.translate import Translator
+
+#: wall seconds between two sends to rerun (what the picture lags at most behind a message)
+FLUSH_PERIOD = 0.1
+#: wall seconds between two looks for new wrench topics and for the node's presence
+GRAPH_PERIOD = 1.0
+#: the plots of the live view show this many simulated seconds before the time cursor
+LIVE_WINDOW = 30.0
+#: wall seconds at least between two updates of the layout (new plots, wider y ranges)
+BLUEPRINT_PERIOD = 2.0
+#: a node whose time goes back by more than this (s) has restarted
+RESTART_BACKSTEP = 0.5
+#: queue depth of the subscriptions
+DEPTH = 50
+SPIN_TIMEOUT = 0.05
+
+
+@dataclass
+class LagStats:
+    """How far the drawn messages are behind the node (at real_time_factor 1).
+
+    For each joint state: its receipt (wall clock) minus its stamp (simulated time), less the
+    smallest such difference of the node's run: the delay beyond that of the quickest
+    message (which is the node's own publication and transport time, not the viewer's).
+    """
+
+    runs: list = field(default_factory=lambda: [[]])  # one list per node run (a restart: a new one)
+    #: wall seconds from the receipt of the oldest message of a send to the send
+    delays: list = field(default_factory=list)
+
+    def line(self) -> str:
+        def stats(values):
+            s = sorted(values)
+            return (f"median {1e3 * s[len(s) // 2]:.1f} ms, 95th percentile "
+                    f"{1e3 * s[int(0.95 * (len(s) - 1))]:.1f} ms, max {1e3 * s[-1]:.1f} ms")
+
+        behind = [x - min(run) for run in self.runs if run for x in run]
+        clock = f"received behind the quickest message {stats(behind)}" if behind else "no joint state received"
+        sent = f"; received to sent to rerun {stats(self.delays)} (wall time)" if self.delays else ""
+        return f"lag: {clock}{sent}"
+
+
+def _topic(ns: str, name: str) -> str:
+    return f"{ns}/{name}" if ns else f"/{name}"
+
+
+def _say(line: str) -> None:
+    print(f"gyro-sim view --live: {line}", file=sys.stderr, flush=True)
+
+
+class LiveView:
+    """The subscriptions and the translator (callbacks and flushes in one executor thread)."""
+
+    def __init__(self, node, rec, namespace: str, publish_blueprint):
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+        self.node, self.rec, self.ns = node, rec, namespace
+        self.publish_blueprint = publish_blueprint
+        self.tr = Translator(rec, source=f"live: `{namespace or '/'}`")
+        self.offset = 0.0  # added to the node's time after a restart
+        self.last_stamp = None  # the newest stamp of the node's run (its own time, s)
+        self.lag = LagStats()
+        self.wrench_subs: dict[str, object] = {}
+        self.node_seen = False
+        self.node_present = False
+        self.description = False
+        self.received = 0
+        self._gone = False  # the node went away since its last joint state
+        self._oldest = None  # when the oldest message not yet sent was received
+        self._bp_sent = None
+        self._bp_at = -math.inf
+        msgs = _message_classes()
+        self.prefix = _topic(namespace, "gyro_sim")
+        plan = [
+            ("joint_states", M.JOINT_STATES, "JointState"),
+            ("gyro_sim/poses", M.POSES, "PoseArray"),
+            ("gyro_sim/events", M.EVENTS, "String"),
+        ]
+        for rel, key, cls in plan:
+            self._sub(msgs[cls], _topic(namespace, rel), key)
+        for topic, key, cls in ((M.TF, M.TF, "TFMessage"), (M.DIAGNOSTICS, M.DIAGNOSTICS, "DiagnosticArray")):
+            if msgs.get(cls) is not None:  # tf2_msgs is not on PyPI: poses then
+                self._sub(msgs[cls], topic, key)
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.description_topic = _topic(namespace, "robot_description")
+        node.create_subscription(msgs["String"], self.description_topic, self._on_description, latched)
+        self.wrench_cls = msgs["WrenchStamped"]
+        node.create_timer(FLUSH_PERIOD, self.flush)
+        node.create_timer(GRAPH_PERIOD, self.look)
+        _say(f"waiting for {self.description_topic} (the chain is drawn from the poses meanwhile)")
+        self.look()
+
+    # --- input ---------------------------------------------------------------------------------------
+    def _sub(self, cls, topic: str, key: str):
+        return self.node.create_subscription(cls, topic, lambda msg: self._on(key, msg), DEPTH)
+
+    def _on(self, key: str, msg, suffix: str = "") -> None:
+        header = getattr(msg, "header", None)
+        t = (M.stamp_ns(header.stamp) / 1e9) if header is not None else None
+        if t is not None:
+            restarted = self._gone and t + self.offset < self.tr.last_t  # a new run, seen go and come back
+            restarted = self.last_stamp is not None and (t < self.last_stamp - RESTART_BACKSTEP or restarted)
+            if restarted:
+                self.offset = self.tr.last_t + FLUSH_PERIOD
+                self.tr.message(M.EVENTS, self.offset, _Text(f"node restarted at sim_time {self.offset:.3f} s"))
+                _say(f"the node restarted: its time 0 is drawn at sim_time {self.offset:.3f} s")
+                self.lag.runs.append([])
+            self.last_stamp = t if self.last_stamp is None or restarted else max(self.last_stamp, t)
+            self._gone = False
+            if key == M.JOINT_STATES:
+                self.lag.runs[-1].append(time.monotonic() - t)
+        if t is None:
+            t = self.tr.last_t
+        else:
+            t += self.offset
+        self.received += 1
+        if self._oldest is None:
+            self._oldest = time.monotonic()
+        self.tr.message(key + suffix, t, msg)
+
+    def _on_description(self, msg) -> None:
+        before = self.tr.chain
+        self._on(M.ROBOT_DESCRIPTION, msg)
+        if self.tr.notes:
+            for line in self.tr.notes:
+                _say(line)
+            self.tr.notes.clear()
+        if self.tr.chain is not None and self.tr.chain is not before:
+            _say(f"robot description received: {len(self.tr.chain.bodies)} bodies")
+            self.description = True
+
+    def look(self) -> None:
+        """Subscribe to new wrench topics; say when the node goes away or comes back."""
+        wrench = f"{self.prefix}/wrench/"
+        for topic, _types in self.node.get_topic_names_and_types():
+            if topic.startswith(wrench) and topic not in self.wrench_subs:
+                joint = topic[len(wrench):]
+                self.wrench_subs[topic] = self.node.create_subscription(
+                    self.wrench_cls, topic, lambda msg, j=joint: self._on(M.WRENCH_PREFIX, msg, j), DEPTH)
+        present = self.node.count_publishers(_topic(self.ns, "joint_states")) > 0
+        if present and not self.node_present:
+            _say("the node is back: following it" if self.node_seen else "receiving from the node")
+        elif self.node_present and not present:
+            _say("the node stopped: waiting for it to start again (Ctrl-C to end)")
+            self._gone = True
+        self.node_seen |= present
+        self.node_present = present
+
+    # --- output --------------------------------------------------------------------------------------
+    def flush(self) -> None:
+        from gyro_sim.viz.rerun_view import drawn
+
+        self.tr.flush()
+        if self._oldest is not None:
+            self.lag.delays.append(time.monotonic() - self._oldest)
+            self._oldest = None
+        got = drawn(self.tr)
+        now = time.monotonic()
+        key = (tuple(got["views"]), tuple(sorted((k, _rounded(v)) for k, v in got["ranges"].items())),
+               got["eye"] is not None)
+        if key != self._bp_sent and now - self._bp_at >= BLUEPRINT_PERIOD:
+            self.publish_blueprint(got)
+            self._bp_sent, self._bp_at = key, now
+
+
+class _Text:
+    """A std_msgs/String made here (an event of the viewer's own)."""
+
+    def __init__(self, data: str):
+        self.data = data
+
+
+def _rounded(r):
+    if r is None:
+        return None
+    from gyro_sim.viz.rerun_view import y_range
+
+    return y_range(r[0], r[1], 1)
+
+
+def _message_classes() -> dict:
+    import importlib
+
+    out = {}
+    for pkg, name in (("sensor_msgs", "JointState"), ("geometry_msgs", "PoseArray"), ("geometry_msgs", "WrenchStamped"),
+                      ("std_msgs", "String"), ("tf2_msgs", "TFMessage"),
+                      ("diagnostic_msgs", "DiagnosticArray")):
+        try:
+            out[name] = getattr(importlib.import_module(f"{pkg}.msg"), name)
+        except ImportError:
+            if name in ("TFMessage", "DiagnosticArray"):
+                out[name] = None
+            else:
+                raise
+    return out
+
+
+def run(namespace: str = "", *, mode: str = "spawn", save: str | None = None, seconds: float | None = None,
+        domain_id: int | None = None, out=print) -> int:
+    """Follow the node until `seconds` have passed (None: until SIGINT/SIGTERM); 0 when done.
+
+    `mode`: "spawn" (a viewer window), "serve" (rerun's gRPC server and web viewer; the URL
+    is printed), "save" (to the .rrd file `save`, complete when this returns).
+    """
+    import rclpy
+    import rerun as rr
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    from gyro_sim.viz.rerun_view import APP_ID, blueprint
+
+    namespace = namespace.rstrip("/")
+    if namespace and not namespace.startswith("/"):
+        namespace = "/" + namespace
+    stop = threading.Event()
+    previous = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
+    context = rclpy.Context()
+    rec = rr.RecordingStream(APP_ID, recording_id=f"gyro_sim:live:{namespace or '/'}:{time.time_ns()}")
+    live = None
+    try:
+        rclpy.init(context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
+        node = rclpy.create_node("gyro_sim_view", context=context)
+
+        def bp(got=None):
+            got = got or {"views": ["world"], "scene": "", "eye": None, "ranges": {}, "series": {}}
+            return blueprint(got["views"], got["scene"], eye=got["eye"], play_state="following",
+                             window=LIVE_WINDOW, ranges=got["ranges"], series=got["series"])
+
+        if mode == "save":
+            rec.save(save, default_blueprint=bp())
+        elif mode == "serve":
+            uri = rec.serve_grpc(default_blueprint=bp())
+            rr.serve_web_viewer(open_browser=False, connect_to=uri)
+            out(f"serving: open http://localhost:9090/?url={uri.replace('+', '%2B').replace(':', '%3A').replace('/', '%2F')}"
+                f" in a browser (or: rerun {uri})")
+        else:
+            rec.spawn(default_blueprint=bp())
+
+        live = LiveView(node, rec, namespace, lambda got: rec.send_blueprint(bp(got), make_active=True))
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        end = None if seconds is None else time.monotonic() + seconds
+        while not stop.is_set() and (end is None or time.monotonic() < end):
+            executor.spin_once(timeout_sec=SPIN_TIMEOUT)
+        live.flush()
+        executor.shutdown(timeout_sec=1.0)
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+        rec.flush()
+        if mode == "save":
+            rec.disconnect()  # the file's footer written: complete
+        for s, h in previous.items():
+            signal.signal(s, h)
+    _say(f"{live.received} messages drawn; {live.lag.line()}")
+    return 0
