@@ -37,6 +37,8 @@ LIVE_WINDOW = 30.0
 BLUEPRINT_PERIOD = 2.0
 #: a node whose time goes back by more than this (s) has restarted
 RESTART_BACKSTEP = 0.5
+#: the live camera frames this many chain lengths about O^1 (the chain reaches one)
+EYE_SPAN = 1.5
 #: queue depth of the subscriptions
 DEPTH = 50
 SPIN_TIMEOUT = 0.05
@@ -92,6 +94,7 @@ class LiveView:
         self.node_present = False
         self.description = False
         self.received = 0
+        self.eye = None
         self._gone = False  # the node went away since its last joint state
         self._oldest = None  # when the oldest message not yet sent was received
         self._bp_sent = None
@@ -182,9 +185,13 @@ class LiveView:
             self.lag.delays.append(time.monotonic() - self._oldest)
             self._oldest = None
         got = drawn(self.tr)
+        if self.tr.chain is not None and self.tr.last_pose is not None:
+            if self.eye is None:  # the chain reaches at most its length from O^1: a camera for all
+                self.eye = _eye(self.tr.last_pose[0][0], self.tr.chain.length)
+            got["eye"] = self.eye
         now = time.monotonic()
         key = (tuple(got["views"]), tuple(sorted((k, _rounded(v)) for k, v in got["ranges"].items())),
-               got["eye"] is not None)
+               got["eye"] is not None, _filling(got.get("t_range")))
         if key != self._bp_sent and now - self._bp_at >= BLUEPRINT_PERIOD:
             self.publish_blueprint(got)
             self._bp_sent, self._bp_at = key, now
@@ -195,6 +202,20 @@ class _Text:
 
     def __init__(self, data: str):
         self.data = data
+
+
+def _eye(base, length: float):
+    """(position, target) of a camera that sees a chain of `length` about O^1 at `base`."""
+    from gyro_sim.viz.translate import EYE_DIRECTION, EYE_DISTANCE
+
+    return base + EYE_DIRECTION * EYE_DISTANCE * EYE_SPAN * length, base
+
+
+def _filling(t_range) -> float | None:
+    """The first time of the plots while they fill their window (None once they scroll)."""
+    if t_range is None or t_range[1] - t_range[0] >= LIVE_WINDOW:
+        return None
+    return t_range[0]
 
 
 def _rounded(r):
@@ -251,7 +272,8 @@ def run(namespace: str = "", *, mode: str = "spawn", save: str | None = None, se
         def bp(got=None):
             got = got or {"views": ["world"], "scene": "", "eye": None, "ranges": {}, "series": {}}
             return blueprint(got["views"], got["scene"], eye=got["eye"], play_state="following",
-                             window=LIVE_WINDOW, ranges=got["ranges"], series=got["series"])
+                             window=LIVE_WINDOW, t_range=got.get("t_range"), ranges=got["ranges"],
+                             series=got["series"])
 
         if mode == "save":
             rec.save(save, default_blueprint=bp())

@@ -23,7 +23,7 @@ import numpy as np
 from gyro_sim.errors import GyroSimError
 from gyro_sim.log.mcap_log import LogError, read_info
 from gyro_sim.viz.chain import from_scene
-from gyro_sim.viz.translate import PALETTE, TIMELINE, TITLES, PLOT_EXTRA, Translator  # noqa: F401 (PALETTE: tests)
+from gyro_sim.viz.translate import PALETTE, PLOT_EXTRA, TIMELINE, Translator, title  # noqa: F401 (PALETTE: tests)
 
 APP_ID = "gyro_sim"
 
@@ -36,10 +36,10 @@ Y_PAD_FRACTION = 0.03
 MIN_SPAN_FRACTION = 0.2
 MIN_SPAN = 1.0
 #: at most this many steps of the y axis's tick spacing between its ends
-MAX_STEPS = 4
+MAX_STEPS = 6
 #: the legend (top left) takes about this fraction of a plot's height per series: the y range
 #: is extended upwards by as much, so that the legend sits above the data
-LEGEND_ROW_FRACTION = 0.09
+LEGEND_ROW_FRACTION = 0.12
 #: the plots are laid out in this many columns; the 3D view and the plots share the width so
 PLOT_COLUMNS = 2
 COLUMN_SHARES = [1, 1]
@@ -81,12 +81,15 @@ def y_range(lo: float, hi: float, series: int) -> tuple[float, float]:
     if not span > 0:
         span = MIN_SPAN_FRACTION * abs(hi) or MIN_SPAN
         lo, hi = lo - span / 2, hi + span / 2
-    legend = min(LEGEND_ROW_FRACTION * series, 0.6)
-    top = hi + span * legend / (1 - legend)
-    step = 10.0 ** math.floor(math.log10(top - lo))
-    while math.ceil(top / step) - math.floor(lo / step) > MAX_STEPS:
+    free = 1.0 - min(LEGEND_ROW_FRACTION * series, 0.6)  # the part of the height below the legend
+    step = 10.0 ** math.floor(math.log10(span))
+    while True:
+        bottom, top = math.floor(lo / step) * step, math.ceil(hi / step) * step
+        while hi - bottom > free * (top - bottom):
+            top += step
+        if (top - bottom) / step <= MAX_STEPS + 1e-9:
+            break
         step *= 10.0
-    bottom, top = math.floor(lo / step) * step, math.ceil(top / step) * step
     pad = Y_PAD_FRACTION * (top - bottom)
     return bottom - pad, top + pad
 
@@ -99,14 +102,19 @@ def blueprint(views: list[str], scene_name: str = "", *, eye=None, play_state: s
     `eye`: (position, look_target) of the 3D camera, world frame (None: rerun's default).
     `t_range`: (first, last) time of the log (s): the plots' time axis, with room after the
     last time for its tick label; `window` (s) instead: the plots show the last `window`
-    seconds before the time cursor (live). `ranges`: plot -> (min, max) of its values, and
+    seconds before the time cursor (live), or the first `window` seconds from the first time
+    while the data spans less. `ranges`: plot -> (min, max) of its values, and
     `series`: plot -> names of its series: the y axis then fits the data and its legend.
     """
     import rerun as rr
     import rerun.blueprint as rrb
 
     axis_x = None
-    if window is not None:
+    if window is not None and t_range is not None and t_range[1] - t_range[0] < window:
+        axis_x = rrb.TimeAxis(view_range=rr.encodings.TimeRange(  # filling from the left
+            start=rrb.TimeRangeBoundary.absolute(seconds=t_range[0]),
+            end=rrb.TimeRangeBoundary.absolute(seconds=t_range[0] + (1 + TIME_PAD_FRACTION) * window)))
+    elif window is not None:
         axis_x = rrb.TimeAxis(view_range=rr.encodings.TimeRange(
             start=rrb.TimeRangeBoundary.cursor_relative(seconds=-window),
             end=rrb.TimeRangeBoundary.cursor_relative(seconds=TIME_PAD_FRACTION * window)))
@@ -117,14 +125,14 @@ def blueprint(views: list[str], scene_name: str = "", *, eye=None, play_state: s
             end=rrb.TimeRangeBoundary.absolute(seconds=t_range[1] + pad)))
     plots = []
     for v in views:
-        if v not in TITLES:
+        if title(v) is None:
             continue
         axis_y = None
         r = (ranges or {}).get(v)
         if r is not None and all(math.isfinite(x) for x in r):
             axis_y = rrb.ScalarAxis(range=y_range(r[0], r[1], len((series or {}).get(v, [])) or 1))
         contents = [f"+ /{v}/**"] + [f"+ /{x}/**" for x in PLOT_EXTRA.get(v, [])]
-        plots.append(rrb.TimeSeriesView(origin="/", contents=contents, name=TITLES[v], axis_x=axis_x, axis_y=axis_y,
+        plots.append(rrb.TimeSeriesView(origin="/", contents=contents, name=title(v), axis_x=axis_x, axis_y=axis_y,
                                         plot_legend=rrb.PlotLegend(corner="LeftTop", visible=True)))
     eye_controls = None
     if eye is not None:

@@ -16,7 +16,7 @@ Entities (timeline ``sim_time``, a duration: simulated seconds):
 - ``world/links`` (the polyline through O^1 ... O^n and the tip), ``world/base`` (O^1),
   ``world/angular_momentum`` (about O^1, from /diagnostics), ``world/gravity``;
 - ``world/legend``: the scene's name and the arrows' scales;
-- plots: ``plots/euler/<body>``, ``plots/hinge/<body>``, ``plots/rotor_rate/<rotor>``,
+- plots: ``plots/euler/<body>`` (psi, theta, phi; psi and phi unwrapped), ``plots/hinge/<body>``, ``plots/rotor_rate/<rotor>``,
   ``plots/axis_moments/<axis>`` (the commands in force), ``plots/drift/<invariant>`` and
   ``plots/balance/energy_balance`` (log10 of the relative drift of the conserved integrals
   and of E - E0 - W: one readable axis for values from 1e-16 to 1); ``events``.
@@ -52,9 +52,9 @@ GRAVITY_LENGTH_FRACTION = 0.3
 GRAVITY_OFFSET_FRACTION = 0.4
 #: drifts at or below this (relative) are drawn at its log10: the floor of double precision
 DRIFT_FLOOR = 1e-16
-#: at most this many bodies get an Euler-angle plot, and at most this many series share a
+#: at most this many bodies get an Euler-angle plot of their own (the first and the last), and at most this many series share a
 #: plot of hinges, rotors or axes (the first ones and the last): more lines are not readable
-EULER_PLOT_BODIES = 3
+EULER_PLOT_BODIES = 2
 MAX_SERIES = 6
 
 #: colours of the series of a plot, in turn (Okabe-Ito, distinguishable in colour-blind vision)
@@ -76,7 +76,6 @@ COLORS = {
 
 #: the plots in the order the view shows them, with their titles
 TITLES = {
-    "plots/euler": "Euler angles (rad)",
     "plots/hinge": "hinge angles (rad)",
     "plots/rotor_rate": "rotor rates (rad/s)",
     "plots/axis_moments": "commands (N m)",
@@ -138,7 +137,7 @@ class Translator:
         self.source = source
         self.axis_names = list(axis_names)
         self.entities: set[str] = set()
-        self.plots: list[str] = []  # views with data, in TITLES order when asked
+        self.plots: list[str] = []  # views with data (plots/euler/<body> and TITLES)
         self.series: dict[str, list[str]] = {}  # plot -> names of its series, in order
         self.ranges: dict[str, list[float]] = {}  # plot -> [min, max] of its values
         self.t_range: list[float] | None = None
@@ -324,7 +323,7 @@ class Translator:
         for b in _pick(spherical, EULER_PLOT_BODIES):
             values = pos[[idx[f"{b}_{a}"] for a in EULER]]
             values = self._unwrapped(f"euler/{b}", values, (0, 2))
-            self._scalars(f"plots/euler/{b}", "plots/euler", [f"{b} {a}" for a in EULER], t, values)
+            self._scalars(f"plots/euler/{b}", f"plots/euler/{b}", [f"{b} {a}" for a in EULER], t, values)
         hinges = [b for b in bodies if b in idx and b not in spherical]
         for b in _pick(hinges, MAX_SERIES):
             self._scalars(f"plots/hinge/{b}", "plots/hinge", [b], t, [pos[idx[b]]])
@@ -468,7 +467,8 @@ class Translator:
 
     def views(self) -> list[str]:
         """The plots with data, in the view's order."""
-        return [p for p in TITLES if p in self.plots]
+        euler = [p for p in self.plots if p.startswith("plots/euler/")]
+        return euler + [p for p in TITLES if p in self.plots]
 
     def eye(self):
         """(position, target) of a camera looking at the motion so far, or None."""
@@ -485,6 +485,13 @@ EYE_DISTANCE = 1.6
 
 
 _NOT_CONSERVED_UNDER_COMMANDS = frozenset({M.drift_key("energy"), M.drift_key("jacobi")})
+
+
+def title(plot: str) -> str | None:
+    """The title of a plot of :meth:`Translator.views` (None: not a plot)."""
+    if plot.startswith("plots/euler/"):
+        return f"Euler angles of {plot[len('plots/euler/'):]} (rad)"
+    return TITLES.get(plot)
 
 
 def _log10(value: float) -> float:

@@ -136,7 +136,12 @@ def test_save_for_seconds_holds_the_moving_chain_and_the_commanded_plots(tmp_pat
         assert n.alive(), n.stderr
         cmd = Commander(client)
         rrd = tmp_path / "live.rrd"
-        live = Live(tmp_path, env, "--save", rrd, "--seconds", 5)
+        live = Live(tmp_path, env, "--save", rrd, "--seconds", 6)
+        live.says("receiving from the node")
+        from std_srvs.srv import Trigger
+
+        assert client.call(Trigger, "/gyro_sim/reset", Trigger.Request()).success
+        publishes_events = client.node.count_publishers("/gyro_sim/events") > 0
         assert live.wait() == 0, live.stderr
         cmd.close()
     finally:
@@ -165,6 +170,12 @@ def test_save_for_seconds_holds_the_moving_chain_and_the_commanded_plots(tmp_pat
     arm4 = np.array(column(got["/plots/axis_moments/arm4"], "Scalars:scalars"), float).ravel()
     assert np.sum(np.isclose(arm3, COMMAND[1])) > 50 and np.sum(np.isclose(arm4, COMMAND[2])) > 50
     assert "lag:" in live.stderr
+    # the reset is marked where it happened, and the view goes on after it
+    if publishes_events:  # a node that publishes its events (not only records them)
+        events = column(got["/events"], "TextLog:text")
+        assert any("reset" in str(e) for e in events), events
+    assert "node restarted" not in live.stderr  # a reset keeps the node's time going
+    assert np.all(np.diff(times(got["/plots/euler/arm1"])) > 0)
 
 
 def test_follows_a_node_that_stops_and_starts_again_and_ends_on_sigint(tmp_path, domain):
@@ -229,3 +240,39 @@ def test_bad_combinations_are_refused_in_one_line(args, tmp_path):
     r = subprocess.run([sys.executable, "-m", "gyro_sim.cli", "view", *args], cwd=ROOT, env=dict(os.environ),
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+def test_a_new_robot_description_replaces_the_shapes(tmp_path):
+    """A reset to another scene publishes another description: its bodies are drawn, the old
+    ones' shapes cleared."""
+    import rerun as rr
+
+    from gyro_sim import load_scene
+    from gyro_sim.msgs import messages as M
+    from gyro_sim.paths import find_scene
+    from gyro_sim.scene.urdf import urdf
+    from gyro_sim.viz.translate import Translator
+
+    class Text:
+        def __init__(self, data):
+            self.data = data
+
+    rrd = tmp_path / "two.rrd"
+    rec = rr.RecordingStream("gyro_sim_test", recording_id="two")
+    rec.save(str(rrd))
+    tr = Translator(rec)
+    first, second = load_scene(find_scene(SCENE)), load_scene(find_scene("chain_4"))
+    tr.message(M.ROBOT_DESCRIPTION, 0.0, Text(urdf(first)))
+    tr.message(M.ROBOT_DESCRIPTION, 1.0, Text(urdf(second)))
+    tr.message(M.ROBOT_DESCRIPTION, 2.0, Text("<robot><oops"))
+    tr.flush()
+    rec.flush()
+    rec.disconnect()
+    assert [b.name for b in tr.chain.bodies] == [b.name for b in second.bodies]
+    assert len(tr.notes) == 1 and "not XML" in tr.notes[0]
+    got = chunks(rrd)
+    for b in second.bodies:
+        assert f"/world/{b.name}/body" in got
+    gone = {b.name for b in first.bodies} - {b.name for b in second.bodies}
+    for name in gone:  # cleared: its last static value is a Clear
+        assert any("Clear" in str(bt.schema.names) for bt in got[f"/world/{name}/body"]), name
