@@ -7,7 +7,6 @@ create `view`): the log becomes optional, and `view --live` follows a running no
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
 
 def _err(msg) -> int:

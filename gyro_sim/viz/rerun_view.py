@@ -23,7 +23,7 @@ import numpy as np
 from gyro_sim.errors import GyroSimError
 from gyro_sim.log.mcap_log import LogError, read_info
 from gyro_sim.viz.chain import from_scene
-from gyro_sim.viz.translate import PALETTE, PLOT_EXTRA, TIMELINE, Translator, title  # noqa: F401 (PALETTE: tests)
+from gyro_sim.viz.translate import PLOT_EXTRA, TIMELINE, Translator, title
 
 APP_ID = "gyro_sim"
 

@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gyro_sim.msgs import messages as M
+from gyro_sim.scene.urdf import quat_z_to
 from gyro_sim.viz.chain import Chain, ChainError, from_urdf
 
 TIMELINE = "sim_time"
@@ -209,15 +210,11 @@ class Translator:
             self.rec.log(ent, rr.TransformAxes3D(AXES_FRACTION * length), static=True)
             n = float(np.linalg.norm(b.extent))
             if n > 0:
-                from gyro_sim.scene.urdf import quat_z_to
-
                 self._static(f"{ent}/body", rr.Capsules3D(lengths=[n], radii=[b.radius], quaternions=[quat_z_to(b.extent)],
                                                            colors=[COLORS["body"]]))
             else:
                 self._static(f"{ent}/body", rr.Ellipsoids3D(half_sizes=[[b.radius] * 3], colors=[COLORS["body"]]))
             for i, r in enumerate(b.rotors):
-                from gyro_sim.scene.urdf import quat_z_to
-
                 rent = f"{ent}/{r.name or f'rotor{i + 1}'}"
                 self._static(rent, rr.Transform3D(translation=r.position, quaternion=quat_z_to(r.axis)))
                 self._static(f"{rent}/spin/disc", rr.Cylinders3D(lengths=[r.thickness], radii=[r.radius],
