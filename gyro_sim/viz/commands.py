@@ -30,6 +30,8 @@ def register(sub, bench) -> None:
     v.add_argument("--serve", action="store_true",
                    help="--live on a machine without a display: serve rerun's web viewer and print the URL to open")
     v.add_argument("--seconds", type=float, metavar="S", help="--live: stop after S wall-clock seconds")
+    v.add_argument("--grpc-port", type=int, default=9876, help="--serve: port of rerun's gRPC server")
+    v.add_argument("--web-port", type=int, default=9090, help="--serve: port of the web viewer")
     log_view = v.get_default("fn")
     v.set_defaults(fn=lambda args: cmd_view(args, log_view))
 
@@ -62,7 +64,12 @@ def cmd_view(args, log_view) -> int:
     try:
         if args.save:
             output = AtomicOutput(args.save, force=args.force, what="--save")
-        code = live.run(args.namespace, mode=mode, save=output.tmp if output else None, seconds=args.seconds)
+        try:
+            code = live.run(args.namespace, mode=mode, save=output.tmp if output else None, seconds=args.seconds,
+                            grpc_port=args.grpc_port, web_port=args.web_port)
+        except live.LiveError as exc:
+            print(f"gyro-sim view: {exc}", file=sys.stderr)
+            return 2 if "in use" in str(exc) else 1
         if output is not None:
             print(f"wrote {output.publish()}; open it with: rerun {args.save}")
         return code

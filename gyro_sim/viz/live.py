@@ -19,11 +19,14 @@ from __future__ import annotations
 
 import math
 import signal
+import socket
 import sys
 import threading
 import time
 from dataclasses import dataclass, field
+from urllib.parse import quote
 
+from gyro_sim.errors import GyroSimError
 from gyro_sim.msgs import messages as M
 from gyro_sim.viz.translate import Translator
 
@@ -39,6 +42,9 @@ BLUEPRINT_PERIOD = 2.0
 RESTART_BACKSTEP = 0.5
 #: the live camera frames this many chain lengths about O^1 (the chain reaches one)
 EYE_SPAN = 1.5
+#: rerun's default ports: its gRPC server and its web viewer
+GRPC_PORT = 9876
+WEB_PORT = 9090
 #: queue depth of the subscriptions
 DEPTH = 50
 SPIN_TIMEOUT = 0.05
@@ -243,13 +249,32 @@ def _message_classes() -> dict:
     return out
 
 
+class LiveError(GyroSimError, RuntimeError):
+    """The viewer could not be reached or served (a port in use, no viewer to spawn)."""
+
+
+def port_free(port: int) -> bool:
+    """Whether a server can listen on `port` (all interfaces, as rerun's servers do)."""
+    with socket.socket() as s:
+        try:
+            s.bind(("0.0.0.0", port))
+        except OSError:
+            return False
+    return True
+
+
 def run(namespace: str = "", *, mode: str = "spawn", save: str | None = None, seconds: float | None = None,
-        domain_id: int | None = None, out=print) -> int:
+        domain_id: int | None = None, grpc_port: int = GRPC_PORT, web_port: int = WEB_PORT, out=print) -> int:
     """Follow the node until `seconds` have passed (None: until SIGINT/SIGTERM); 0 when done.
 
-    `mode`: "spawn" (a viewer window), "serve" (rerun's gRPC server and web viewer; the URL
-    is printed), "save" (to the .rrd file `save`, complete when this returns).
+    `mode`: "spawn" (a viewer window), "serve" (rerun's gRPC server on `grpc_port` and web
+    viewer on `web_port`; the URL is printed), "save" (to the .rrd file `save`, complete
+    when this returns). Raises LiveError when the viewer cannot be started or served.
     """
+    if mode == "serve":
+        for port, what in ((grpc_port, "--grpc-port"), (web_port, "--web-port")):
+            if not port_free(port):
+                raise LiveError(f"port {port} is in use (another viewer serving?): choose another with {what}")
     import rclpy
     import rerun as rr
     from rclpy.executors import SingleThreadedExecutor
@@ -275,15 +300,18 @@ def run(namespace: str = "", *, mode: str = "spawn", save: str | None = None, se
                              window=LIVE_WINDOW, t_range=got.get("t_range"), ranges=got["ranges"],
                              series=got["series"])
 
-        if mode == "save":
-            rec.save(save, default_blueprint=bp())
-        elif mode == "serve":
-            uri = rec.serve_grpc(default_blueprint=bp())
-            rr.serve_web_viewer(open_browser=False, connect_to=uri)
-            out(f"serving: open http://localhost:9090/?url={uri.replace('+', '%2B').replace(':', '%3A').replace('/', '%2F')}"
-                f" in a browser (or: rerun {uri})")
-        else:
-            rec.spawn(default_blueprint=bp())
+        try:
+            if mode == "save":
+                rec.save(save, default_blueprint=bp())
+            elif mode == "serve":
+                uri = rec.serve_grpc(grpc_port=grpc_port, default_blueprint=bp())
+                rr.serve_web_viewer(web_port=web_port, open_browser=False, connect_to=uri)
+                out(f"serving: open http://localhost:{web_port}/?url={quote(uri, safe='')} in a browser "
+                    f"(or: rerun {uri})")
+            else:
+                rec.spawn(default_blueprint=bp())
+        except (RuntimeError, OSError) as exc:
+            raise LiveError(f"the viewer could not be started ({mode}): {str(exc).splitlines()[0] if str(exc) else exc}") from None
 
         live = LiveView(node, rec, namespace, lambda got: rec.send_blueprint(bp(got), make_active=True))
         executor = SingleThreadedExecutor(context=context)
@@ -296,10 +324,14 @@ def run(namespace: str = "", *, mode: str = "spawn", save: str | None = None, se
         node.destroy_node()
     finally:
         rclpy.try_shutdown(context=context)
-        rec.flush()
-        if mode == "save":
-            rec.disconnect()  # the file's footer written: complete
+        try:
+            rec.flush()
+            if mode == "save":
+                rec.disconnect()  # the file's footer written: complete
+        except RuntimeError:  # a sink that never started: its error is the one reported
+            pass
         for s, h in previous.items():
             signal.signal(s, h)
-    _say(f"{live.received} messages drawn; {live.lag.line()}")
+    if live is not None:
+        _say(f"{live.received} messages drawn; {live.lag.line()}")
     return 0

@@ -123,15 +123,17 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m gyro_sim.viz.measure_live", description=__doc__.split("\n\n")[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=[10, 100])
     ap.add_argument("--seconds", type=float, default=10.0, help="simulated seconds per run")
+    ap.add_argument("--rtf", type=float, nargs="+", default=[1.0, 0.0],
+                    help="the node's real_time_factor values (0: as fast as possible)")
     args = ap.parse_args(argv)
     domain = 150 + os.getpid() % 40
     print("| n | real_time_factor | viewer | achieved RTF | node CPU share | viewer CPU (s) | drawn | lag |")
     print("|---|---|---|---|---|---|---|---|")
     for n in args.sizes:
-        for rtf in (1.0, 0.0):
+        for rtf in args.rtf:
             for viewer in (False, True):
                 r = run_once(n, args.seconds, rtf, viewer, domain)
-                print(f"| {n} | {'max' if rtf == 0 else rtf:g} | {'yes' if viewer else 'no'} | {r['rtf']:.2f} | "
+                print(f"| {n} | {'max' if rtf == 0 else f'{rtf:g}'} | {'yes' if viewer else 'no'} | {r['rtf']:.2f} | "
                       f"{r['node_cpu_share']:.2f} | {r.get('viewer_cpu_s', float('nan')):.1f} | {r.get('drawn', '')} | "
                       f"{r.get('lag', '')} |", flush=True)
     return 0

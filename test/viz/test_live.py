@@ -276,3 +276,17 @@ def test_a_new_robot_description_replaces_the_shapes(tmp_path):
     gone = {b.name for b in first.bodies} - {b.name for b in second.bodies}
     for name in gone:  # cleared: its last static value is a Clear
         assert any("Clear" in str(bt.schema.names) for bt in got[f"/world/{name}/body"]), name
+
+
+def test_serve_on_a_port_in_use_is_refused_in_one_line(tmp_path):
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("0.0.0.0", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        r = subprocess.run([sys.executable, "-m", "gyro_sim.cli", "view", "--live", "--serve", "--seconds", "1",
+                            "--grpc-port", str(port)], cwd=ROOT, env=dict(os.environ), capture_output=True,
+                           text=True, timeout=120)
+    assert r.returncode == 2, r.stderr
+    assert f"port {port} is in use" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
