@@ -49,6 +49,13 @@ def _run(args, scene, log) -> int:
     from gyro_sim.msgs.messages import NonFiniteError
     from gyro_sim.safe_paths import OutputError
 
+    if log is not None and scene.imus:  # the log samples the IMUs at its publications
+        from gyro_sim.dynamics.imu import check_rates
+
+        problem = check_rates(scene, args.publish_rate)
+        if problem is not None:
+            print(f"gyro-sim run: {problem}", file=sys.stderr)
+            return 2
     sim = Simulator(scene, integrator=args.integrator, rtol=args.rtol, atol=args.atol, step=args.step)
     inv0 = sim.reference_invariants()
     schedule = []

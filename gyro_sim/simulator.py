@@ -51,6 +51,11 @@ class BodyState:
     velocity: np.ndarray  # velocity of O^k, world
 
 
+#: the rate of a scene's IMUs that give none, until `Simulator.set_imu_default_rate` (Hz): the
+#: publish rate of the node's and of `gyro-sim run`'s defaults
+DEFAULT_IMU_RATE = 100.0
+
+
 class Simulator:
     """Simulate a scene. See the README, "Python API".
 
@@ -111,6 +116,13 @@ class Simulator:
         self._watch_joints = None
         if self._watched is not None and getattr(self.integrator, "monitor", False) is None:
             self.integrator.monitor = self._energy_error  # "fixed": its energy watchdog
+        self._imus = None  # the IMUs (gyro_sim.dynamics.imu.ImuSet), when the scene has some
+        self._acc_ok = False  # the compiled scratch holds the accelerations of the current state
+        if scene.imus:
+            from gyro_sim.dynamics.imu import ImuSet
+
+            self._imus = ImuSet(scene, {b.name: k for k, b in enumerate(scene.bodies)}, scene.gravity,
+                                DEFAULT_IMU_RATE)
         self.reset()
 
     def _watched_energy(self) -> int | None:
@@ -236,10 +248,13 @@ class Simulator:
         self._moments = np.zeros(len(m.axis_names))
         self._cache = None
         self._kin_ok = False
+        self._acc_ok = False
         self._watch_last = None
         self.integrator.reset()
         self._work = 0.0
         self._reference = None  # invariants of the reset state (taken by the first advance or snapshot)
+        if self._imus is not None:
+            self._imus.reset()
 
     @property
     def time(self) -> float:
@@ -274,6 +289,7 @@ class Simulator:
             raise ValueError("axis moments must be finite")
         self._moments = v.copy()
         self._cache = None  # reactions and efforts depend on the commands
+        self._acc_ok = False
 
     def _inputs(self):
         m, v = self.model, self._moments
@@ -294,6 +310,7 @@ class Simulator:
             raise ValueError(f"dt must be a positive finite number, got {dt!r}")
         if self._reference is None:  # the drifts' reference is the reset state: keep it before moving
             self._reference = self.invariants()
+        self._acc_ok = False  # the energy watchdog's calls overwrite the compiled scratch
         hinge_tau, L_rotor = self._inputs()
         self.system.hold(self._t, self._p, hinge_tau, L_rotor)
         try:
@@ -312,6 +329,7 @@ class Simulator:
         self._y = y
         self._cache = None
         self._kin_ok = False
+        self._acc_ok = False
 
     # --- outputs (computed on request only) ------------------------------------------------
     def _evaluate(self) -> dyn.Evaluation:
@@ -564,9 +582,14 @@ class Simulator:
             y = self._y = np.ascontiguousarray(y, dtype=np.float64)
         head, middle, tail = self._snapshot_arguments
         t = float(self._t)
-        return self._snapshot_kernel(t, y, *head, t, *self._held_now(), *middle, want, *tail, pos, vel, eff,
-                                     into.dst, into.joint, into.position, into.quaternion, into.wrench,
-                                     self._snapshot_scratch["scratch"])
+        bad = self._snapshot_kernel(t, y, *head, t, *self._held_now(), *middle, want, *tail, pos, vel, eff,
+                                    into.dst, into.joint, into.position, into.quaternion, into.wrench,
+                                    self._snapshot_scratch["scratch"])
+        if self._imus is not None:  # the IMUs read the accelerations this call left, if it made them
+            from gyro_sim.dynamics.outputs import WANT_WRENCHES
+
+            self._acc_ok = bool(want & WANT_WRENCHES or len(self.model.speed_body))
+        return bad
 
     def _outputs_compiled(self, want: int | None = None, into: Scatter | None = None, fresh: bool = True) -> dict:
         """The outputs of the current state from one compiled call
@@ -665,3 +688,46 @@ class Simulator:
         hl = getattr(integ, "h_lambda", None)
         return {"method": integ.current, "method_reason": integ.reason, "substeps": getattr(integ, "substeps", None),
                 "h_lambda": hl if hl is not None and math.isfinite(hl) else None}
+
+    # --- IMUs ---------------------------------------------------------------------------------
+    @property
+    def imu_names(self) -> tuple[str, ...]:
+        """The scene's IMUs, in scene order (empty without IMUs)."""
+        return () if self._imus is None else self._imus.names
+
+    @property
+    def imu_rates(self) -> tuple[float, ...]:
+        """Each IMU's rate (Hz): the scene's, else the default (`set_imu_default_rate`)."""
+        return () if self._imus is None else self._imus.rates
+
+    def set_imu_default_rate(self, rate: float) -> None:
+        """The rate of the IMUs whose scene gives none (Hz; the node and `gyro-sim run` set their
+        publish rate); their noise generators start again."""
+        if self._imus is not None:
+            self._imus.set_default_rate(self.scene, float(rate))
+
+    def imus(self):
+        """What each IMU of the scene reads now (gyro_sim.dynamics.imu.ImuReading, scene order; []
+        without IMUs): gyro, accelerometer (specific force) and orientation, with the scene's
+        noise of the sample the current time falls in (sample floor(t rate)). From the
+        accelerations of one dynamics evaluation at the current state and commands (on the numba
+        backend those a publication with wrenches left, when it was of this state); both backends
+        agree to round-off."""
+        if self._imus is None:
+            return []
+        if self._compiled_outputs is None:
+            ev = self._evaluate()
+            d = self.system.data
+            a_s = ev.acc_v + dyn.cross(ev.acc_w, d.O)  # about O^k
+            return self._imus.read(self._t, d.R, d.w, d.vO, ev.acc_w, a_s)
+        from gyro_sim.dynamics.imu import compiled_accelerations
+
+        if getattr(self, "_snapshot_kernel", None) is None:
+            self._snapshot_setup()
+        if not self._acc_ok:
+            from gyro_sim.dynamics.outputs import WANT_WRENCHES
+
+            self._compiled_call(WANT_WRENCHES, self._snapshot_nowhere, *self._snapshot_joints)
+        o = self._snapshot_scratch
+        alpha, a_s = compiled_accelerations(o["scratch"], self.model.n)
+        return self._imus.read(self._t, o["R"], o["w"], o["vO"], alpha, a_s)

@@ -50,6 +50,7 @@ SCENE_SECTIONS = {
     "`bodies[k].rotors[i]`": ("ROTOR_KEYS", "bodies[0].rotors[0]"),
     "`bodies[k].initial`": ("INITIAL_KEYS", "bodies[0].initial"),
     "`bodies[k].visual`": ("VISUAL_KEYS", "bodies[0].visual"),
+    "`imus[j]`": ("IMU_KEYS", "imus[0]"),
 }
 #: a key no level accepts
 UNKNOWN_KEY = "not_a_scene_key"
@@ -95,6 +96,7 @@ def valid_scene() -> dict:
             "initial": {"euler": [0.0, 0.5, 0.0]},
             "visual": {"radius": 0.02},
         }],
+        "imus": [{"name": "imu", "body": "top"}],
     }
 
 

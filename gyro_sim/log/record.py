@@ -93,6 +93,11 @@ class LogRecorder:
         self.period_ns = M.time_ns(diagnostics_period)
         self._next_diag_ns = 0
         sim.reference_invariants()  # the drifts' reference: the state now
+        self.imu_ticks = None  # when the publications sample the IMUs (scenes with IMUs only)
+        if sim.imu_names:
+            from gyro_sim.dynamics.imu import ImuTicks
+
+            self.imu_ticks = ImuTicks(sim.imu_rates)
 
     def now_ns(self) -> int:
         return self.offset_ns + M.time_ns(self.sim.time)
@@ -114,7 +119,17 @@ class LogRecorder:
                 self._next_diag_ns += self.period_ns
         for topic, msgtype, data in self.publication.messages(snap, t, diagnostics_run=run if diag else False):
             self._write(topic, msgtype, t, data)
+        if self.imu_ticks is not None:
+            self._publish_imus(t)
         return snap
+
+    def _publish_imus(self, t_ns: int) -> None:
+        """The IMUs whose sample starts now (from the accelerations the snapshot just computed)."""
+        due = self.imu_ticks.due(self.sim.time)
+        if due:
+            readings = self.sim.imus()
+            for topic, msgtype, data in M.imu_messages([readings[j] for j in due], t_ns):
+                self._write(topic, msgtype, t_ns, data)
 
     def command(self, values: Sequence[float]) -> None:
         """The command taking effect for the next step (log it, then call set_axis_moments)."""
@@ -211,6 +226,13 @@ def record_run(sim, path, *, duration: float, chunk: float = 0.01, publish_rate:
 
     if not (duration > 0 and chunk > 0 and publish_rate > 0):
         raise ValueError("duration, chunk and publish_rate must be > 0")
+    if sim.imu_names:  # the IMUs are sampled at publications: at the publish rate or a divisor of it
+        from gyro_sim.dynamics.imu import ImuRateError, check_rates
+
+        problem = check_rates(sim.scene, publish_rate)
+        if problem is not None:
+            raise ImuRateError(problem)
+        sim.set_imu_default_rate(publish_rate)
     n_axes = len(sim.axis_names)
     sched = _schedule(schedule, n_axes)
     steps = max(1, int(round(duration / min(chunk, duration, 1.0 / publish_rate))))

@@ -1,5 +1,6 @@
 """Re-simulation of a log: rebuild the Simulator from the embedded scene and parameters, feed it
-the recorded commands at their recorded times, and compare with the logged joint states.
+the recorded commands at their recorded times, and compare with the logged joint states and
+IMU messages (sensor_msgs/Imu: the IMUs' noise depends only on their seeds and the time).
 
 The log must keep the contract of :mod:`gyro_sim.log.record` (fixed ``advance_dt``, log time =
 offset + simulated time, outputs before commands at a boundary, messages in causal order).
@@ -42,6 +43,7 @@ class Resimulation:
     by_field: dict = field(default_factory=lambda: {"position": 0.0, "velocity": 0.0, "effort": 0.0})
     worst: tuple | None = None  # (time s, joint, field)
     compared: int = 0  # joint-state messages compared
+    imu_compared: int = 0  # IMU messages compared (their fields in by_field as imu_...)
     off_boundary: int = 0  # joint states not at a step boundary (not compared)
     commands: int = 0
     rejected: int = 0  # logged commands the simulator refuses (wrong length, non-finite)
@@ -56,6 +58,7 @@ class Resimulation:
             f"re-simulated {self.sim_time:.6g} s ({plural(self.steps, 'step')} of the recorded size, "
             f"{plural(self.commands, 'command')}, {plural(self.resets, 'reset')}) with {self.integrator}",
             f"compared {plural(self.compared, 'joint-state message')}"
+            + (f" and {plural(self.imu_compared, 'IMU message')}" if self.imu_compared else "")
             + (f" ({self.off_boundary} off the step boundaries, skipped)" if self.off_boundary else ""),
             f"largest deviation: {self.max_deviation:.3e}"
             + (f" ({self.worst[2]} of {self.worst[1]} at t = {self.worst[0]:.6g} s)" if self.worst and self.max_deviation else ""),
@@ -92,6 +95,9 @@ def resimulate(path: str | os.PathLike, *, integrator: str | None = None, rtol: 
 
     end = info.end_ns or 0
     topics = [M.JOINT_STATES, cmd_topic, M.EVENTS]
+    if sim.imu_names:  # the IMUs sampled as the log's publications did
+        sim.set_imu_default_rate(float(p.get("publish_rate", 100.0)))
+        topics += [topic for topic, msgtype in info.topics.items() if msgtype == M.IMU_TYPE]
     # file order is causal order (record.py); log_time_order=False keeps it
     _replay(path, sim, out, dt, cmd_topic, topics, end, progress)
     if out.compared == 0:
@@ -138,7 +144,8 @@ def prepare(path: str | os.PathLike, *, integrator: str | None = None):
 def _replay(path, sim, out: Resimulation, dt: float, cmd_topic: str, topics, end: int, progress) -> None:
     """Feed the log's commands, resets and timeouts to `sim`, comparing its joint states."""
     offset = 0
-    for topic, _, t, msg in iter_messages(path, topics, log_time_order=False):
+    imus = None  # (log time, {name: reading}) of the IMU messages at one time
+    for topic, msgtype, t, msg in iter_messages(path, topics, log_time_order=False):
         needed = (t - offset - M.time_ns(sim.time)) / (dt * 1e9)
         if out.steps + needed > MAX_RESIM_STEPS:
             raise LogError(f"{path}: a message at log time {t / 1e9:.9g} s would take the re-simulation to "
@@ -158,6 +165,13 @@ def _replay(path, sim, out: Resimulation, dt: float, cmd_topic: str, topics, end
                 _compare(out, sim.joint_states(), _fields(path, msg, topic, t, JOINT_STATE_FIELDS), t)
             except TypeError as exc:  # fields of the wrong kind (a crafted schema)
                 raise LogError(f"{path}: {topic} at log time {t / 1e9:.9g} s: {exc}") from None
+        elif msgtype == M.IMU_TYPE and topic not in (cmd_topic, M.EVENTS):
+            if here_ns != t:
+                out.off_boundary += 1
+                continue
+            if imus is None or imus[0] != t:
+                imus = (t, {r.name: r for r in sim.imus()})
+            _compare_imu(path, out, imus[1], msg, topic, t)
         elif topic == cmd_topic:
             if here_ns != t:
                 out.notes.append(f"command at t = {t / 1e9:.9g} s is not at a step boundary: applied at the next one")
@@ -224,3 +238,33 @@ def _compare(out: Resimulation, js, logged, t_ns: int) -> None:
             if d > out.max_deviation:
                 out.max_deviation = d
                 out.worst = (t_ns / 1e9, name, fld)
+
+
+def _compare_imu(path, out: Resimulation, readings: dict, logged, topic: str, t_ns: int) -> None:
+    """One logged sensor_msgs/Imu against the re-simulated reading of the IMU it names."""
+    try:
+        name = logged.header.frame_id
+        fields = {"imu_orientation": ([logged.orientation.x, logged.orientation.y, logged.orientation.z,
+                                       logged.orientation.w], "orientation"),
+                  "imu_angular_velocity": ([getattr(logged.angular_velocity, a) for a in "xyz"], "angular_velocity"),
+                  "imu_linear_acceleration": ([getattr(logged.linear_acceleration, a) for a in "xyz"],
+                                              "linear_acceleration")}
+    except AttributeError as exc:
+        raise LogError(f"{path}: {topic} at log time {t_ns / 1e9:.9g} s: {exc}: its schema is not that of "
+                       f"{M.IMU_TYPE}") from None
+    reading = readings.get(name)
+    if reading is None:
+        raise LogError(f"{path}: {topic} at log time {t_ns / 1e9:.9g} s: the scene has no IMU {str(name)[:64]!r}")
+    out.imu_compared += 1
+    for key, (theirs, attr) in fields.items():
+        mine = getattr(reading, attr)
+        if attr == "orientation":
+            mine = [mine[1], mine[2], mine[3], mine[0]]
+        out.by_field.setdefault(key, 0.0)
+        for a, b in zip(mine, theirs):
+            d = abs(a - b) if math.isfinite(a) and math.isfinite(b) else math.inf
+            if d > out.by_field[key]:
+                out.by_field[key] = d
+            if d > out.max_deviation:
+                out.max_deviation = d
+                out.worst = (t_ns / 1e9, name, key)

@@ -280,6 +280,39 @@ def string(text: str) -> bytes:
     return bytes(w)
 
 
+# --- IMUs ------------------------------------------------------------------------------------------
+#: sensor_msgs/Imu of each IMU of a scene (gyro_sim.dynamics.imu), frame_id the IMU's name
+IMU_TYPE = "sensor_msgs/msg/Imu"
+IMU_PREFIX = NAMESPACE + "/imu/"
+
+
+def imu_topic(name: str, namespace: str = NAMESPACE) -> str:
+    """The topic ``~/imu/<name>`` of an IMU."""
+    return f"{namespace}/imu/{topic_token(name)}"
+
+
+def imu(reading, t_ns: int) -> bytes:
+    """sensor_msgs/Imu of one IMU reading (gyro_sim.dynamics.imu.ImuReading), frame_id its name:
+    orientation (x, y, z, w) of the IMU frame in the world, covariance 0 (exact: no noise model);
+    angular velocity and linear acceleration (specific force) in the IMU frame, covariances
+    diagonal with the white noise's per-sample variance (0 for a noise-free IMU)."""
+    q = _finite(reading.orientation, f"imu {reading.name}.orientation")
+    gyro = _finite(reading.angular_velocity, f"imu {reading.name}.angular_velocity")
+    accel = _finite(reading.linear_acceleration, f"imu {reading.name}.linear_acceleration")
+    variances = _finite([reading.angular_velocity_variance, reading.linear_acceleration_variance],
+                        f"imu {reading.name}.covariance")
+    w = CdrWriter()
+    w.header(t_ns, reading.name)
+    w.f64_block(np.concatenate((q[1:], q[:1], np.zeros(9), gyro, np.eye(3).ravel() * variances[0], accel,
+                                np.eye(3).ravel() * variances[1])))
+    return bytes(w)
+
+
+def imu_messages(readings, t_ns: int, namespace: str = NAMESPACE) -> list[tuple[str, str, bytes]]:
+    """[(topic, type, bytes)] of IMU readings."""
+    return [(imu_topic(r.name, namespace), IMU_TYPE, imu(r, t_ns)) for r in readings]
+
+
 # --- diagnostics -------------------------------------------------------------------------------------
 def dynamics_values(snap) -> dict[str, float | str]:
     """The key-values of the ``gyro_sim: dynamics`` status of a snapshot."""

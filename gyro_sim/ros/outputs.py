@@ -157,6 +157,19 @@ class Outputs:
         kinds[self.publication.poses_topic] = "poses"
         kinds[M.TF] = "tf"
         self.listeners = Listeners(self.pubs, kinds, clock=clock)
+        self.imu_ticks, self.imu_topics = None, ()
+        if sim.imu_names:  # sampled at publications: each IMU's rate must divide the publish rate
+            from gyro_sim.dynamics.imu import ImuTicks, check_rates
+            from gyro_sim.ros.params import ParameterError
+
+            problem = check_rates(sim.scene, config.publish_rate)
+            if problem is not None:
+                raise ParameterError(problem)
+            sim.set_imu_default_rate(config.publish_rate)
+            self.imu_ticks = ImuTicks(sim.imu_rates)
+            self.imu_topics = tuple(M.imu_topic(name, ns) for name in sim.imu_names)
+            for topic in self.imu_topics:
+                publisher(topic, M.IMU_TYPE)
         #: the publication's buffers by the parts asked (wrenches, poses, tf), once the joint
         #: names are known (from the first snapshot)
         self._frames: dict[tuple[bool, bool, bool], M.Frame] = {}
@@ -171,6 +184,24 @@ class Outputs:
         """The state's messages: [(topic, type, bytes)]. `diagnostics_run`: False for none, else the
         run's status (or None) to go with the dynamics' one. Raises SimulationError rather than
         let a non-finite value out."""
+        if self.imu_ticks is None:
+            return self._prepare_state(t_ns, sim, diagnostics_run)
+        due = self.imu_ticks.due(sim.time)
+        out = self._prepare_state(t_ns, sim, diagnostics_run, accelerations=bool(due))
+        if due:  # the IMUs whose sample starts now, from the accelerations the outputs just computed
+            readings = sim.imus()
+            try:
+                messages = [(self.imu_topics[j], M.IMU_TYPE, M.imu(readings[j], t_ns)) for j in due]
+            except M.NonFiniteError as exc:
+                raise SimulationError(f"t = {sim.time:.6g} s: {exc} (not published)") from exc
+            for item in messages:
+                out.append(item)
+        return out
+
+    def _prepare_state(self, t_ns: int, sim, diagnostics_run: M.Status | None | bool = False,
+                       accelerations: bool = False) -> list:
+        """`prepare_state` without the IMUs; `accelerations`: have the compiled outputs compute the
+        bodies' accelerations (those of the wrenches) for the IMUs."""
         listeners = self.listeners
         listeners.refresh()
         recording = self.recorder is not None
@@ -187,7 +218,7 @@ class Outputs:
             names = sim.joint_names
             if diagnostics_run is False and (names is frame.joint_names or names == frame.joint_names):
                 # no diagnostics: the numbers into the frame and their check, no snapshot
-                bad = sim.write_outputs(frame.scatter, bodies=poses or tf, wrenches=wrenches)
+                bad = sim.write_outputs(frame.scatter, bodies=poses or tf, wrenches=wrenches or accelerations)
                 if bad is not None:
                     raise SimulationError(f"t = {sim.time:.6g} s: non-finite {bad} (not published)")
                 return frame.messages(t_ns)

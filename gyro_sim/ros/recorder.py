@@ -292,6 +292,16 @@ def _create(final: str, overwrite: bool, what: str) -> LogFile:
     return LogFile(written, target, fd, (st.st_dev, st.st_ino))
 
 
+def _kill(proc: subprocess.Popen) -> None:
+    """Kill a writer process and wait at most EXIT_TIMEOUT for its end."""
+    if proc.poll() is None:
+        try:
+            proc.kill()
+            proc.wait(EXIT_TIMEOUT)
+        except (OSError, subprocess.TimeoutExpired):
+            pass
+
+
 def abandon_all() -> None:
     """`abandon` every recorder started and every log file created and not yet closed, and
     create none after (a start given up: gyro_sim.ros.node's signal handling during start-up).
@@ -427,7 +437,9 @@ class LiveRecorder:
         self.complete = False
         self._closed = False
         self._abandoned = False
-        self._lock = threading.Lock()
+        # guards `_abandoned` and `_proc` together: `abandon` (from any thread, or a signal
+        # handler in this one) either sees the writer process or stops it being started
+        self._lock = threading.RLock()
         self._result: tuple | None = None
         self._ended = threading.Event()  # the writer's output ended (its last reply read)
         self._sent = threading.Event()  # the sender thread is done
@@ -450,10 +462,16 @@ class LiveRecorder:
         root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
         env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
         fd = self.log_file.fd
-        self._proc = subprocess.Popen(
-            [sys.executable, "-c", "from gyro_sim.ros.recorder import _child_main; _child_main()"],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env, close_fds=True, pass_fds=(fd,),
-        )
+        with self._lock:
+            if self._abandoned:
+                raise RecordingError(f"log {self.path}: abandoned before the log writer process started")
+            self._proc = subprocess.Popen(
+                [sys.executable, "-c", "from gyro_sim.ros.recorder import _child_main; _child_main()"],
+                stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env, close_fds=True, pass_fds=(fd,),
+            )
+        if self._abandoned:  # by a signal handler of this thread while it started the writer
+            _kill(self._proc)
+            raise RecordingError(f"log {self.path}: abandoned while the log writer process started")
         self.log_file.close_fd()  # the writer has its own
         try:
             fcntl.fcntl(self._proc.stdin.fileno(), fcntl.F_SETPIPE_SZ, PIPE_SIZE)
@@ -491,14 +509,10 @@ class LiveRecorder:
             if self._abandoned:
                 return
             self._abandoned = self._closed = True
+            proc = self._proc
         self.failure = self.failure or "abandoned"
-        proc = self._proc
-        if proc is not None and proc.poll() is None:
-            try:
-                proc.kill()
-                proc.wait(EXIT_TIMEOUT)
-            except (OSError, subprocess.TimeoutExpired):
-                pass
+        if proc is not None:
+            _kill(proc)
         self.log_file.abandon()
         _OPEN.discard(self)
 

@@ -45,7 +45,7 @@ import yaml
 from gyro_sim.errors import GyroSimError
 from gyro_sim.scene.mjcf import ModelError, import_model, is_model_path
 from gyro_sim.scene.records import (
-    BASE_TYPES, JOINT_TYPES, ROTOR_MODES, Base, Body, Initial, Joint, Rotor, Scene,
+    BASE_TYPES, JOINT_TYPES, ROTOR_MODES, Base, Body, Imu, Initial, Joint, Rotor, Scene,
 )
 
 __all__ = ["SceneError", "load_scene", "parse_yaml"]
@@ -84,11 +84,13 @@ BOUNDS = {
     "spin": (1e7, "rad/s"), "rate": (1e7, "rad/s"), "euler_rates": (1e7, "rad/s"),
     "angular_velocity": (1e7, "rad/s"),
     "euler": (1e6, "rad"), "angle": (1e6, "rad"),
+    "gyro_noise_density": (1e3, "rad/s/sqrt(Hz)"), "gyro_bias_instability": (1e3, "rad/s^2/sqrt(Hz)"),
+    "accel_noise_density": (1e4, "m/s^2/sqrt(Hz)"), "accel_bias_instability": (1e4, "m/s^3/sqrt(Hz)"),
 }
 #: bound of any other number (unit vectors before normalisation, quaternions)
 GENERIC_BOUND = 1e15
 
-TOP_KEYS = ("name", "gravity", "base", "bodies")
+TOP_KEYS = ("name", "gravity", "base", "bodies", "imus")
 BASE_KEYS = ("type", "position", "motion", "velocity")
 BASE_TYPE_KEYS = {"fixed": ("type", "position"), "moving": ("type", "position", "motion"),
                   "free": ("type", "position", "velocity")}
@@ -104,6 +106,12 @@ EULER_KEYS = ("euler", "euler_rates")
 QUATERNION_KEYS = ("quaternion", "angular_velocity")
 HINGE_INITIAL_KEYS = ("angle", "rate")
 INITIAL_KEYS = EULER_KEYS + QUATERNION_KEYS + HINGE_INITIAL_KEYS
+IMU_NOISE_KEYS = ("gyro_noise_density", "gyro_bias_instability", "accel_noise_density",
+                  "accel_bias_instability")
+IMU_KEYS = ("name", "body", "position", "orientation", "rate", "seed") + IMU_NOISE_KEYS
+#: largest seed of an IMU's random generator (numpy's PCG64 takes any non-negative integer;
+#: 64 bits keep it exact in every log's YAML and JSON)
+MAX_IMU_SEED = 2**64 - 1
 
 _REQUIRED = object()  # default marker: the key must be given
 
@@ -591,10 +599,11 @@ def _scene(ch: _Checker, data: Any) -> Scene | None:
     base = _base(ch, top["base"]) if top.get("base") is not None else None
     base_type = top["base"].get("type") if isinstance(top.get("base"), Mapping) else None
     bodies = _bodies(ch, top.get("bodies"), base_type)
+    imus = _imus(ch, top.get("imus"), top.get("bodies"))
     if ch.errors:
         return None
     return Scene(name=name, gravity=None if gravity is None else _readonly(gravity), base=base,
-                 bodies=bodies)
+                 bodies=bodies, imus=imus)
 
 
 def _base(ch: _Checker, value: Any) -> Base | None:
@@ -894,3 +903,66 @@ def _initial(ch: _Checker, value: Any, path: str, joint_type: str | None) -> Ini
     for key in HINGE_INITIAL_KEYS:
         ch.scalar(initial, key, path, default=None)
     return None
+
+
+def _imus(ch: _Checker, value: Any, bodies: Any) -> tuple[Imu, ...] | None:
+    """The IMUs: names unique and not a body's (an IMU's name is its frame), each on a body."""
+    if value is None:
+        return ()
+    if not isinstance(value, (list, tuple)):
+        ch.fail("imus", f"must be a list of IMUs (got {_describe(value)})")
+        return None
+    body_names = [b.get("name") for b in bodies if isinstance(b, Mapping)] \
+        if isinstance(bodies, (list, tuple)) else []
+    seen: dict[str, str] = {}
+    imus = []
+    for index, item in enumerate(value):
+        path = f"imus[{index}]"
+        imu = _imu(ch, item, path, body_names)
+        imus.append(imu)
+        name = item.get("name") if isinstance(item, Mapping) else None
+        if not isinstance(name, str):
+            continue
+        where = _at(path, "name")
+        if name in seen:
+            ch.fail(where, f"duplicate name {name!r} (also at {seen[name]}); IMU names must be unique")
+        elif name in body_names:
+            ch.fail(where, f"{name!r} is a body's name; an IMU's name is its frame_id and must "
+                           f"differ from the bodies' frames")
+        seen.setdefault(name, where)
+    return None if any(imu is None for imu in imus) else tuple(imus)
+
+
+def _imu(ch: _Checker, value: Any, path: str, body_names: list) -> Imu | None:
+    imu = ch.mapping(value, path, IMU_KEYS, required=("name", "body"))
+    if imu is None:
+        return None
+    name = ch.name(imu, "name", path)
+    body = imu.get("body")
+    if body is not None and (not isinstance(body, str) or body not in body_names):
+        known = ", ".join(str(b) for b in body_names if isinstance(b, str))
+        got = repr(body) if isinstance(body, str) else _describe(body)
+        ch.fail(_at(path, "body"), f"no body named {got} (bodies: {known})")
+        body = None
+    position = ch.vector(imu, "position", path, default=np.zeros(3))
+    orientation = ch.unit(imu, "orientation", path, size=4, default=np.array([1.0, 0.0, 0.0, 0.0]))
+    rate = None
+    if imu.get("rate") is not None:  # Hz: the bound of a frequency, not that of the joint `rate`
+        rate = ch.number(imu["rate"], _at(path, "rate"), "frequency")
+        if rate is not None and rate <= 0.0:
+            ch.fail(_at(path, "rate"), f"must be > 0 (got {rate!r})")
+            rate = None
+        elif rate is None:
+            return None
+    noise = {key: ch.scalar(imu, key, path, default=0.0, minimum=0.0) for key in IMU_NOISE_KEYS}
+    seed = imu.get("seed", 0)
+    if seed is None:
+        seed = 0
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, numbers.Integral) \
+            or not 0 <= seed <= MAX_IMU_SEED:
+        ch.fail(_at(path, "seed"), f"must be an integer from 0 to 2^64 - 1 (got {_describe(seed)})")
+        seed = None
+    if any(v is None for v in (name, body, position, orientation, seed, *noise.values())):
+        return None
+    return Imu(name=name, body=body, position=_readonly(position), orientation=_readonly(orientation),
+               rate=rate, seed=int(seed), **noise)

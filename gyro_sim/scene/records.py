@@ -85,6 +85,26 @@ class Base:
 
 
 @dataclass(frozen=True, eq=False)
+class Imu:
+    """An inertial measurement unit fixed to a body (docs/scene-format.md, `imus`).
+
+    Noise densities are those of the continuous-time model (white noise and bias random walk,
+    :mod:`gyro_sim.dynamics.imu`); zero means none.
+    """
+
+    name: str
+    body: str  # the name of the body it is fixed to
+    position: np.ndarray  # (3,) the IMU's point from O^k, body frame
+    orientation: np.ndarray  # (4,) unit, w first: the rotation body from IMU (body_R_imu)
+    rate: float | None  # samples per simulated second (Hz); None: the publish rate
+    gyro_noise_density: float  # rad/s/sqrt(Hz)
+    gyro_bias_instability: float  # rad/s^2/sqrt(Hz): density of the gyro bias random walk
+    accel_noise_density: float  # m/s^2/sqrt(Hz)
+    accel_bias_instability: float  # m/s^3/sqrt(Hz): density of the accelerometer bias random walk
+    seed: int  # of the IMU's own random generator
+
+
+@dataclass(frozen=True, eq=False)
 class Scene:
     """A whole validated scene. `source` is the mapping it was loaded from (for logs)."""
 
@@ -94,3 +114,4 @@ class Scene:
     bodies: tuple[Body, ...]
     source: dict[str, Any] = field(default_factory=dict, compare=False)
     path: str | None = None
+    imus: tuple[Imu, ...] = ()

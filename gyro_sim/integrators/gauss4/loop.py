@@ -307,18 +307,9 @@ def gauss_march(t0, h, nsteps, y, A, C, D, params, dstate, ws, info, counts, i_q
             dstate[DST_H] = 0.0
             return k, status
         gk.level_next(level, retaken, dstate, level_max, patience)
-        if not _all_finite_1d(y):
+        if not fast_loop.finite(y):
             return k, STEP_NONFINITE
     return nsteps, STEP_OK
-
-
-@_njit
-def _all_finite_1d(y):
-    """True when every entry of y (size,) is finite."""
-    for i in range(y.shape[0]):
-        if not (abs(y[i]) < np.inf):
-            return False
-    return True
 
 
 class GaussMarch:

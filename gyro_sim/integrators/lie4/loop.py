@@ -31,15 +31,6 @@ _njit = fast_loop.njit_with_dependencies(*DEPENDENCIES)
 
 
 @_njit
-def _finite(y):
-    """True when every entry of y (size,) is finite."""
-    for i in range(y.shape[0]):
-        if not (abs(y[i]) < np.inf):
-            return False
-    return True
-
-
-@_njit
 def lie_march(t0, h, nsteps, y, ALPHA, BASE, BETA, C, Y, F, W, V, qi, li, i_q0, nq,
               work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
               inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base,
@@ -73,7 +64,7 @@ def lie_march(t0, h, nsteps, y, ALPHA, BASE, BETA, C, Y, F, W, V, qi, li, i_q0, 
             lk.lie_field(Y, F, st, qi, li, W, V)
         lk.lie_update(y, W, V, hBETA, qi, li)
         fast.normalize_quaternions(y, i_q0, nq)
-        if not _finite(y):
+        if not fast_loop.finite(y):
             return k
     return nsteps
 

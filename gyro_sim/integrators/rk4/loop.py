@@ -114,7 +114,8 @@ _njit = njit_with_dependencies(*DEPENDENCIES)
 
 
 @_njit
-def _finite(y):
+def finite(y):
+    """True when every entry of y (size,) is finite (the loops' test of a new state)."""
     for i in range(y.shape[0]):
         if not (abs(y[i]) < float("inf")):
             return False
@@ -149,6 +150,6 @@ def erk_march(t0, h, nsteps, y, A, B, C, K, ys, i_q0, nq,
                             torque_axis, torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
         erk_update(y, K, hB)
         fast.normalize_quaternions(y, i_q0, nq)
-        if not _finite(y):
+        if not finite(y):
             return k
     return nsteps
