@@ -95,7 +95,7 @@ class LiveView:
         self.offset = 0.0  # added to the node's time after a restart
         self.last_stamp = None  # the newest stamp of the node's run (its own time, s)
         self.lag = LagStats()
-        self.wrench_subs: dict[str, object] = {}
+        self.found: dict[str, object] = {}  # subscriptions to the topics found
         self.node_seen = False
         self.node_present = False
         self.description = False
@@ -120,7 +120,9 @@ class LiveView:
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.description_topic = _topic(namespace, "robot_description")
         node.create_subscription(msgs["String"], self.description_topic, self._on_description, latched)
-        self.wrench_cls = msgs["WrenchStamped"]
+        # topics found as they appear: one per joint, one per IMU (prefix -> translator key, type)
+        self.per_topic = {f"{self.prefix}/wrench/": (M.WRENCH_PREFIX, msgs["WrenchStamped"]),
+                          f"{self.prefix}/imu/": (M.IMU_PREFIX, msgs["Imu"])}
         node.create_timer(FLUSH_PERIOD, self.flush)
         node.create_timer(GRAPH_PERIOD, self.look)
         _say(f"waiting for {self.description_topic} (the chain is drawn from the poses meanwhile)")
@@ -166,13 +168,13 @@ class LiveView:
             self.description = True
 
     def look(self) -> None:
-        """Subscribe to new wrench topics; say when the node goes away or comes back."""
-        wrench = f"{self.prefix}/wrench/"
+        """Subscribe to new wrench and IMU topics; say when the node goes away or comes back."""
         for topic, _types in self.node.get_topic_names_and_types():
-            if topic.startswith(wrench) and topic not in self.wrench_subs:
-                joint = topic[len(wrench):]
-                self.wrench_subs[topic] = self.node.create_subscription(
-                    self.wrench_cls, topic, lambda msg, j=joint: self._on(M.WRENCH_PREFIX, msg, j), DEPTH)
+            for prefix, (key, cls) in self.per_topic.items():
+                if topic.startswith(prefix) and topic not in self.found:
+                    name = topic[len(prefix):]
+                    self.found[topic] = self.node.create_subscription(
+                        cls, topic, lambda msg, k=key, j=name: self._on(k, msg, j), DEPTH)
         present = self.node.count_publishers(_topic(self.ns, "joint_states")) > 0
         if present and not self.node_present:
             _say("the node is back: following it" if self.node_seen else "receiving from the node")
@@ -236,7 +238,7 @@ def _message_classes() -> dict:
     import importlib
 
     out = {}
-    for pkg, name in (("sensor_msgs", "JointState"), ("geometry_msgs", "PoseArray"), ("geometry_msgs", "WrenchStamped"),
+    for pkg, name in (("sensor_msgs", "JointState"), ("geometry_msgs", "PoseArray"), ("geometry_msgs", "WrenchStamped"), ("sensor_msgs", "Imu"),
                       ("std_msgs", "String"), ("tf2_msgs", "TFMessage"),
                       ("diagnostic_msgs", "DiagnosticArray")):
         try:

@@ -19,7 +19,9 @@ Entities (timeline ``sim_time``, a duration: simulated seconds):
 - plots: ``plots/euler/<body>`` (psi, theta, phi; psi and phi unwrapped), ``plots/hinge/<body>``, ``plots/rotor_rate/<rotor>``,
   ``plots/axis_moments/<axis>`` (the commands in force), ``plots/drift/<invariant>`` and
   ``plots/balance/energy_balance`` (log10 of the relative drift of the conserved integrals
-  and of E - E0 - W: one readable axis for values from 1e-16 to 1); ``events``.
+  and of E - E0 - W: one readable axis for values from 1e-16 to 1),
+  ``plots/imu/<imu>/gyro`` and ``plots/imu/<imu>/accel`` (an IMU's angular velocity and
+  specific force in its frame); ``events``.
 
 Arrows are scaled so that the largest value so far is :data:`ARROW_FRACTION` of the chain's
 length (a log: the largest of the log).
@@ -56,6 +58,8 @@ DRIFT_FLOOR = 1e-16
 #: at most this many bodies get an Euler-angle plot of their own (the first and the last), and at most this many series share a
 #: plot of hinges, rotors or axes (the first ones and the last): more lines are not readable
 EULER_PLOT_BODIES = 2
+#: at most this many IMUs get their plots (angular velocity, specific force)
+IMU_PLOTS = 2
 MAX_SERIES = 6
 
 #: colours of the series of a plot, in turn (Okabe-Ito, distinguishable in colour-blind vision)
@@ -128,7 +132,7 @@ class Translator:
 
     HANDLERS = {M.JOINT_STATES: "_joint_states", M.TF: "_tf", M.POSES: "_poses", M.DIAGNOSTICS: "_diagnostics",
                 M.EVENTS: "_event", M.ROBOT_DESCRIPTION: "_robot_description"}
-    PREFIX_HANDLERS = {M.WRENCH_PREFIX: "_wrench"}
+    PREFIX_HANDLERS = {M.WRENCH_PREFIX: "_wrench", M.IMU_PREFIX: "_imu"}
 
     def __init__(self, rec, chain: Chain | None = None, *, axis_names=(), source: str = ""):
         import rerun as rr
@@ -154,6 +158,7 @@ class Translator:
         self._unwrap: dict[str, np.ndarray] = {}
         self._buf: dict[str, _Columns] = {}
         self._warned: set[str] = set()
+        self._imus: list[str] = []  # the IMUs plotted, in the order they came
         self._lines: dict[str, tuple] = {}  # plot entity -> (plot, names, colours) of its series
         self.notes: list[str] = []  # one line per problem met (bad description, ...)
         self._static("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP)
@@ -373,6 +378,19 @@ class Translator:
         self._rows(f"world/{joint}/wrench/force", "arrow:force").add(t, vectors=F)
         self._rows(f"world/{joint}/wrench/moment", "arrow:moment").add(t, vectors=L)
 
+    # --- IMUs -------------------------------------------------------------------------------------------
+    def _imu(self, t: float, msg, name: str) -> None:
+        gyro, accel = _xyz(msg.angular_velocity), _xyz(msg.linear_acceleration)
+        if not np.all(np.isfinite(gyro + accel)):
+            return
+        if name not in self._imus:
+            if len(self._imus) >= IMU_PLOTS:
+                return
+            self._imus.append(name)
+        self._time(t)
+        self._scalars(f"plots/imu/{name}/gyro", f"plots/imu/{name}/gyro", [f"{name} w{a}" for a in "xyz"], t, gyro)
+        self._scalars(f"plots/imu/{name}/accel", f"plots/imu/{name}/accel", [f"{name} f{a}" for a in "xyz"], t, accel)
+
     # --- diagnostics -----------------------------------------------------------------------------------
     def _diagnostics(self, t: float, msg) -> None:
         d = {k: v for k, v in M.diagnostic_numbers(msg).items() if math.isfinite(v)}
@@ -465,7 +483,8 @@ class Translator:
     def views(self) -> list[str]:
         """The plots with data, in the view's order."""
         euler = [p for p in self.plots if p.startswith("plots/euler/")]
-        return euler + [p for p in TITLES if p in self.plots]
+        imus = [p for p in self.plots if p.startswith("plots/imu/")]
+        return euler + [p for p in TITLES if p in self.plots] + imus
 
     def eye(self):
         """(position, target) of a camera looking at the motion so far, or None."""
@@ -488,6 +507,9 @@ def title(plot: str) -> str | None:
     """The title of a plot of :meth:`Translator.views` (None: not a plot)."""
     if plot.startswith("plots/euler/"):
         return f"Euler angles of {plot[len('plots/euler/'):]} (rad)"
+    if plot.startswith("plots/imu/"):
+        name, kind = plot[len("plots/imu/"):].rsplit("/", 1)
+        return f"IMU {name}: " + ("angular velocity (rad/s)" if kind == "gyro" else "specific force (m/s^2)")
     return TITLES.get(plot)
 
 
