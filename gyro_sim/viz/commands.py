@@ -30,6 +30,8 @@ def register(sub, bench) -> None:
     v.add_argument("--serve", action="store_true",
                    help="--live on a machine without a display: serve rerun's web viewer and print the URL to open")
     v.add_argument("--seconds", type=float, metavar="S", help="--live: stop after S wall-clock seconds")
+    v.add_argument("--rate", type=float, default=30.0, metavar="HZ",
+                   help="--live: messages drawn per topic and second at most (default 30; 0: every one)")
     v.add_argument("--grpc-port", type=int, default=9876, help="--serve: port of rerun's gRPC server")
     v.add_argument("--web-port", type=int, default=9090, help="--serve: port of the web viewer")
     log_view = v.get_default("fn")
@@ -51,6 +53,8 @@ def cmd_view(args, log_view) -> int:
         return _err("--serve or --save, not both")
     if args.seconds is not None and not args.seconds > 0:
         return _err("--seconds must be > 0")
+    if not args.rate >= 0:
+        return _err("--rate must be >= 0")
     try:
         import rclpy  # noqa: F401
         import rerun  # noqa: F401
@@ -66,7 +70,7 @@ def cmd_view(args, log_view) -> int:
             output = AtomicOutput(args.save, force=args.force, what="--save")
         try:
             code = live.run(args.namespace, mode=mode, save=output.tmp if output else None, seconds=args.seconds,
-                            grpc_port=args.grpc_port, web_port=args.web_port)
+                            grpc_port=args.grpc_port, web_port=args.web_port, rate=args.rate)
         except live.LiveError as exc:
             print(f"gyro-sim view: {exc}", file=sys.stderr)
             return 2 if "in use" in str(exc) else 1

@@ -30,6 +30,9 @@ from gyro_sim.errors import GyroSimError
 from gyro_sim.msgs import messages as M
 from gyro_sim.viz.translate import Translator
 
+#: messages drawn per topic and wall second at most (the node publishes 100 by default; a
+#: chain of n bodies has n wrench topics): what keeps the viewer's CPU bounded
+DRAW_RATE = 30.0
 #: wall seconds between two sends to rerun (what the picture lags at most behind a message)
 FLUSH_PERIOD = 0.1
 #: wall seconds between two looks for new wrench topics and for the node's presence
@@ -86,7 +89,7 @@ def _say(line: str) -> None:
 class LiveView:
     """The subscriptions and the translator (callbacks and flushes in one executor thread)."""
 
-    def __init__(self, node, rec, namespace: str, publish_blueprint):
+    def __init__(self, node, rec, namespace: str, publish_blueprint, rate: float = DRAW_RATE):
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
         self.node, self.rec, self.ns = node, rec, namespace
@@ -100,6 +103,9 @@ class LiveView:
         self.node_present = False
         self.description = False
         self.received = 0
+        self.skipped = 0  # messages left out by the rate limit
+        self.min_gap = 1.0 / rate if rate > 0 else 0.0
+        self._drawn_at: dict[str, float] = {}
         self.eye = None
         self._gone = False  # the node went away since its last joint state
         self._oldest = None  # when the oldest message not yet sent was received
@@ -134,6 +140,13 @@ class LiveView:
 
     def _on(self, key: str, msg, suffix: str = "") -> None:
         header = getattr(msg, "header", None)
+        if header is not None and self.min_gap > 0:  # thinned per topic: at most `rate` a wall second
+            now = time.monotonic()
+            topic = key + suffix
+            if now - self._drawn_at.get(topic, -math.inf) < self.min_gap:
+                self.skipped += 1
+                return
+            self._drawn_at[topic] = now
         t = (M.stamp_ns(header.stamp) / 1e9) if header is not None else None
         if t is not None:
             restarted = self._gone and t + self.offset < self.tr.last_t  # a new run, seen go and come back
@@ -266,12 +279,14 @@ def port_free(port: int) -> bool:
 
 
 def run(namespace: str = "", *, mode: str = "spawn", save: str | None = None, seconds: float | None = None,
-        domain_id: int | None = None, grpc_port: int = GRPC_PORT, web_port: int = WEB_PORT, out=print) -> int:
+        domain_id: int | None = None, grpc_port: int = GRPC_PORT, web_port: int = WEB_PORT,
+        rate: float = DRAW_RATE, out=print) -> int:
     """Follow the node until `seconds` have passed (None: until SIGINT/SIGTERM); 0 when done.
 
     `mode`: "spawn" (a viewer window), "serve" (rerun's gRPC server on `grpc_port` and web
     viewer on `web_port`; the URL is printed), "save" (to the .rrd file `save`, complete
-    when this returns). Raises LiveError when the viewer cannot be started or served.
+    when this returns). `rate`: messages drawn per topic and wall second at most (0: all).
+    Raises LiveError when the viewer cannot be started or served.
     """
     if mode == "serve":
         for port, what in ((grpc_port, "--grpc-port"), (web_port, "--web-port")):
@@ -315,7 +330,7 @@ def run(namespace: str = "", *, mode: str = "spawn", save: str | None = None, se
         except (RuntimeError, OSError) as exc:
             raise LiveError(f"the viewer could not be started ({mode}): {str(exc).splitlines()[0] if str(exc) else exc}") from None
 
-        live = LiveView(node, rec, namespace, lambda got: rec.send_blueprint(bp(got), make_active=True))
+        live = LiveView(node, rec, namespace, lambda got: rec.send_blueprint(bp(got), make_active=True), rate)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         end = None if seconds is None else time.monotonic() + seconds
@@ -335,5 +350,5 @@ def run(namespace: str = "", *, mode: str = "spawn", save: str | None = None, se
         for s, h in previous.items():
             signal.signal(s, h)
     if live is not None:
-        _say(f"{live.received} messages drawn; {live.lag.line()}")
+        _say(f"{live.received} messages drawn ({live.skipped} left out by --rate); {live.lag.line()}")
     return 0

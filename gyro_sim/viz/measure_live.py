@@ -98,7 +98,7 @@ def run_once(n: int, seconds: float, rtf: float, viewer: bool, domain: int) -> d
             desc.send_signal(signal.SIGINT)
             desc.wait(30)
             text = err.read_text()
-            m = re.search(r"(\d+) messages drawn; (lag: .*)", text)
+            m = re.search(r"(\d+) messages drawn .*?; (lag: .*)", text)
             row.update(viewer_cpu_s=usage.ru_utime + usage.ru_stime, viewer_exit=live.returncode,
                        drawn=int(m.group(1)) if m else None, lag=m.group(2) if m else text[-300:])
         return row
