@@ -33,6 +33,8 @@ from gyro_sim.viz.translate import Translator
 #: messages drawn per topic and wall second at most (the node publishes 100 by default; a
 #: chain of n bodies has n wrench topics): what keeps the viewer's CPU bounded
 DRAW_RATE = 30.0
+#: the joint wrenches of at most this many bodies are drawn (one topic each)
+MAX_WRENCH_BODIES = 12
 #: wall seconds between two sends to rerun (what the picture lags at most behind a message)
 FLUSH_PERIOD = 0.1
 #: wall seconds between two looks for new wrench topics and for the node's presence
@@ -99,6 +101,7 @@ class LiveView:
         self.last_stamp = None  # the newest stamp of the node's run (its own time, s)
         self.lag = LagStats()
         self.found: dict[str, object] = {}  # subscriptions to the topics found
+        self._said_wrenches = False
         self.node_seen = False
         self.node_present = False
         self.description = False
@@ -135,18 +138,32 @@ class LiveView:
         self.look()
 
     # --- input ---------------------------------------------------------------------------------------
-    def _sub(self, cls, topic: str, key: str):
-        return self.node.create_subscription(cls, topic, lambda msg: self._on(key, msg), DEPTH)
+    def _sub(self, cls, topic: str, key: str, suffix: str = ""):
+        """A subscription to `topic`; stamped messages arrive as bytes and are decoded only
+        when drawn (the rate limit first: decoding a long chain's poses is most of the cost)."""
+        if not hasattr(cls, "header"):
+            return self.node.create_subscription(cls, topic, lambda msg: self._on(key, msg, suffix), DEPTH)
+        from rclpy.serialization import deserialize_message
+
+        def on_bytes(data: bytes) -> None:
+            if self._gate(key + suffix):
+                self._on(key, deserialize_message(data, cls), suffix)
+
+        return self.node.create_subscription(cls, topic, on_bytes, DEPTH, raw=True)
+
+    def _gate(self, topic: str) -> bool:
+        """Whether a message of `topic` is drawn: at most `rate` a wall second per topic."""
+        if self.min_gap <= 0:
+            return True
+        now = time.monotonic()
+        if now - self._drawn_at.get(topic, -math.inf) < self.min_gap:
+            self.skipped += 1
+            return False
+        self._drawn_at[topic] = now
+        return True
 
     def _on(self, key: str, msg, suffix: str = "") -> None:
         header = getattr(msg, "header", None)
-        if header is not None and self.min_gap > 0:  # thinned per topic: at most `rate` a wall second
-            now = time.monotonic()
-            topic = key + suffix
-            if now - self._drawn_at.get(topic, -math.inf) < self.min_gap:
-                self.skipped += 1
-                return
-            self._drawn_at[topic] = now
         t = (M.stamp_ns(header.stamp) / 1e9) if header is not None else None
         if t is not None:
             restarted = self._gone and t + self.offset < self.tr.last_t  # a new run, seen go and come back
@@ -179,15 +196,18 @@ class LiveView:
         if self.tr.chain is not None and self.tr.chain is not before:
             _say(f"robot description received: {len(self.tr.chain.bodies)} bodies")
             self.description = True
+            self.look()  # its wrench topics now
 
     def look(self) -> None:
         """Subscribe to new wrench and IMU topics; say when the node goes away or comes back."""
+        wanted = self._wanted_wrenches()
         for topic, _types in self.node.get_topic_names_and_types():
             for prefix, (key, cls) in self.per_topic.items():
                 if topic.startswith(prefix) and topic not in self.found:
                     name = topic[len(prefix):]
-                    self.found[topic] = self.node.create_subscription(
-                        cls, topic, lambda msg, k=key, j=name: self._on(k, msg, j), DEPTH)
+                    if key == M.WRENCH_PREFIX and name not in wanted:
+                        continue
+                    self.found[topic] = self._sub(cls, topic, key, name)
         present = self.node.count_publishers(_topic(self.ns, "joint_states")) > 0
         if present and not self.node_present:
             _say("the node is back: following it" if self.node_seen else "receiving from the node")
@@ -196,6 +216,23 @@ class LiveView:
             self._gone = True
         self.node_seen |= present
         self.node_present = present
+
+    def _wanted_wrenches(self) -> set[str]:
+        """The bodies whose wrenches are drawn: all of them up to MAX_WRENCH_BODIES, else that
+        many spread evenly along the chain, first and last included (each is a topic at the
+        publish rate: a long chain's would take the viewer's CPU); none before the chain is
+        known (the arrows are drawn in the body frames it names)."""
+        chain = self.tr.chain
+        if chain is None:
+            return set()
+        names = [M.topic_token(b) for b in chain.body_names]
+        if len(names) <= MAX_WRENCH_BODIES:
+            return set(names)
+        picked = {names[round(i * (len(names) - 1) / (MAX_WRENCH_BODIES - 1))] for i in range(MAX_WRENCH_BODIES)}
+        if not self._said_wrenches:
+            _say(f"drawing the joint wrenches of {len(picked)} of the {len(names)} bodies, spread along the chain")
+            self._said_wrenches = True
+        return picked
 
     # --- output --------------------------------------------------------------------------------------
     def flush(self) -> None:

@@ -6,7 +6,8 @@ For each chain size n (a spherical chain with a rotor on every body, gyro_sim.be
 the node runs `seconds` of simulated time twice at real_time_factor 1 (the node's CPU share
 and achieved real-time factor from its stats_file) and twice as fast as it can
 (real_time_factor 0: the achieved factor is its throughput), each time without and with a
-live viewer saving to a temporary .rrd (its CPU share, messages drawn and lag line). Each
+live viewer saving to a temporary .rrd (its CPU share while the node runs, messages drawn,
+its lag line). Linux only (/proc). Each
 run uses its own ROS_DOMAIN_ID. Prints a Markdown table.
 """
 from __future__ import annotations
@@ -61,6 +62,12 @@ def _wait_line(path: Path, text: str, proc, timeout: float) -> None:
         time.sleep(0.05)
 
 
+def _cpu(pid: int) -> float:
+    """CPU seconds (user + system) of a running process so far."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def run_once(n: int, seconds: float, rtf: float, viewer: bool, domain: int) -> dict:
     """One node run; its stats and, with a viewer, the viewer's CPU and lag."""
     with tempfile.TemporaryDirectory() as d:
@@ -79,6 +86,7 @@ def run_once(n: int, seconds: float, rtf: float, viewer: bool, domain: int) -> d
             live = subprocess.Popen([sys.executable, "-m", "gyro_sim.cli", "view", "--live", "--save", str(tmp / "l.rrd")],
                                     env=env, stdout=subprocess.DEVNULL, stderr=open(err, "w"))
             _wait_line(err, "robot description received", live, VIEWER_START)
+        cpu0, t0 = (_cpu(live.pid), time.monotonic()) if live is not None else (0.0, 0.0)
         node = subprocess.Popen([sys.executable, "-m", "gyro_sim.ros.node", "--ros-args", "-p", f"scene:={scene}",
                                  "-p", f"duration:={seconds}", "-p", f"real_time_factor:={rtf}",
                                  "-p", f"stats_file:={stats}"], env=env,
@@ -88,18 +96,18 @@ def run_once(n: int, seconds: float, rtf: float, viewer: bool, domain: int) -> d
         finally:
             if node.poll() is None:
                 node.kill()
+        share = (_cpu(live.pid) - cpu0) / (time.monotonic() - t0) if live is not None else None
         out = json.loads(stats.read_text())
         row = {"n": n, "rtf_target": rtf, "viewer": viewer, "rtf": out["real_time_factor_achieved"],
                "node_cpu_share": out["cpu_share"]}
         if live is not None:
             live.send_signal(signal.SIGINT)
-            _, status, usage = os.wait4(live.pid, 0)
-            live.returncode = os.waitstatus_to_exitcode(status)
+            live.wait(60)
             desc.send_signal(signal.SIGINT)
             desc.wait(30)
             text = err.read_text()
             m = re.search(r"(\d+) messages drawn .*?; (lag: .*)", text)
-            row.update(viewer_cpu_s=usage.ru_utime + usage.ru_stime, viewer_exit=live.returncode,
+            row.update(viewer_cpu_share=share, viewer_exit=live.returncode,
                        drawn=int(m.group(1)) if m else None, lag=m.group(2) if m else text[-300:])
         return row
 
@@ -127,14 +135,14 @@ def main(argv=None) -> int:
                     help="the node's real_time_factor values (0: as fast as possible)")
     args = ap.parse_args(argv)
     domain = 150 + os.getpid() % 40
-    print("| n | real_time_factor | viewer | achieved RTF | node CPU share | viewer CPU (s) | drawn | lag |")
+    print("| n | real_time_factor | viewer | achieved RTF | node CPU share | viewer CPU share | drawn | lag |")
     print("|---|---|---|---|---|---|---|---|")
     for n in args.sizes:
         for rtf in args.rtf:
             for viewer in (False, True):
                 r = run_once(n, args.seconds, rtf, viewer, domain)
                 print(f"| {n} | {'max' if rtf == 0 else f'{rtf:g}'} | {'yes' if viewer else 'no'} | {r['rtf']:.2f} | "
-                      f"{r['node_cpu_share']:.2f} | {r.get('viewer_cpu_s', float('nan')):.1f} | {r.get('drawn', '')} | "
+                      f"{r['node_cpu_share']:.2f} | {r['viewer_cpu_share'] if viewer else float('nan'):.2f} | {r.get('drawn', '')} | "
                       f"{r.get('lag', '')} |", flush=True)
     return 0
 
