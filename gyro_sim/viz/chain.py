@@ -56,6 +56,16 @@ class Chain:
     def body_names(self) -> list[str]:
         return [b.name for b in self.bodies]
 
+    def key(self) -> tuple:
+        """What is drawn of the chain, comparable (two descriptions of one scene: equal)."""
+        def v(a) -> tuple:
+            return tuple(float(x) for x in np.ravel(a))
+
+        return (self.name, self.length, None if self.gravity is None else v(self.gravity), v(self.base),
+                tuple((b.name, v(b.extent), b.radius,
+                       tuple((r.name, v(r.position), v(r.axis), r.radius, r.thickness) for r in b.rotors))
+                      for b in self.bodies))
+
 
 def from_scene(scene) -> Chain:
     """The chain of a loaded scene (gyro_sim.scene)."""

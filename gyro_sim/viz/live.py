@@ -47,6 +47,10 @@ BLUEPRINT_PERIOD = 2.0
 RESTART_BACKSTEP = 0.5
 #: the live camera frames this many chain lengths about O^1 (the chain reaches one)
 EYE_SPAN = 1.5
+#: wall seconds without a message (and no publisher in the graph) after which the node has stopped
+SILENCE = 1.0
+#: wall seconds between two renewals of the subscriptions while a listed node stays silent
+RESUBSCRIBE_PERIOD = 3.0
 #: rerun's default ports: its gRPC server and its web viewer
 GRPC_PORT = 9876
 WEB_PORT = 9090
@@ -100,10 +104,13 @@ class LiveView:
         self.offset = 0.0  # added to the node's time after a restart
         self.last_stamp = None  # the newest stamp of the node's run (its own time, s)
         self.lag = LagStats()
+        self._subs: dict[str, tuple] = {}  # topic -> (type, key, suffix, subscription)
+        self._resubscribed = -math.inf
         self.found: dict[str, object] = {}  # subscriptions to the topics found
         self._said_wrenches = False
-        self.node_seen = False
-        self.node_present = False
+        self._receiving = False
+        self._last_message = -math.inf  # wall time of the newest stamped message
+        self._bad: set[str] = set()  # topics whose messages could not be drawn (said once)
         self.description = False
         self.received = 0
         self.skipped = 0  # messages left out by the rate limit
@@ -139,6 +146,18 @@ class LiveView:
 
     # --- input ---------------------------------------------------------------------------------------
     def _sub(self, cls, topic: str, key: str, suffix: str = ""):
+        sub = self._make_sub(cls, topic, key, suffix)
+        self._subs[topic] = (cls, key, suffix, sub)
+        return sub
+
+    def resubscribe(self) -> None:
+        """Every subscription made again (a new run's publishers are matched afresh)."""
+        for topic, (cls, key, suffix, sub) in list(self._subs.items()):
+            self.node.destroy_subscription(sub)
+            self._subs[topic] = (cls, key, suffix, self._make_sub(cls, topic, key, suffix))
+        self._resubscribed = time.monotonic()
+
+    def _make_sub(self, cls, topic: str, key: str, suffix: str = ""):
         """A subscription to `topic`; stamped messages arrive as bytes and are decoded only
         when drawn (the rate limit first: decoding a long chain's poses is most of the cost)."""
         if not hasattr(cls, "header"):
@@ -166,6 +185,8 @@ class LiveView:
         header = getattr(msg, "header", None)
         t = (M.stamp_ns(header.stamp) / 1e9) if header is not None else None
         if t is not None:
+            if self._gone:
+                _say("the node is back: following it")
             restarted = self._gone and t + self.offset < self.tr.last_t  # a new run, seen go and come back
             restarted = self.last_stamp is not None and (t < self.last_stamp - RESTART_BACKSTEP or restarted)
             if restarted:
@@ -182,9 +203,19 @@ class LiveView:
         else:
             t += self.offset
         self.received += 1
+        if header is not None:  # the node's own (a description may be another's)
+            self._last_message = time.monotonic()
+            if not self._receiving:
+                self._receiving = True
+                _say("receiving from the node")
         if self._oldest is None:
             self._oldest = time.monotonic()
-        self.tr.message(key + suffix, t, msg)
+        try:
+            self.tr.message(key + suffix, t, msg)
+        except (ValueError, TypeError, AttributeError, IndexError, KeyError) as exc:  # not one of gyro_sim's
+            if key + suffix not in self._bad:
+                self._bad.add(key + suffix)
+                _say(f"messages of {key + suffix} not drawn: {type(exc).__name__}: {str(exc)[:200]}")
 
     def _on_description(self, msg) -> None:
         before = self.tr.chain
@@ -208,14 +239,18 @@ class LiveView:
                     if key == M.WRENCH_PREFIX and name not in wanted:
                         continue
                     self.found[topic] = self._sub(cls, topic, key, name)
-        present = self.node.count_publishers(_topic(self.ns, "joint_states")) > 0
-        if present and not self.node_present:
-            _say("the node is back: following it" if self.node_seen else "receiving from the node")
-        elif self.node_present and not present:
+        # gone: silent for SILENCE s and no longer in the graph (the graph alone lags behind
+        # or ahead of the messages; a paused node is silent but still there)
+        now = time.monotonic()
+        silent = now - self._last_message > SILENCE
+        listed = self.node.count_publishers(_topic(self.ns, "joint_states")) > 0
+        if self._receiving and not self._gone and silent and not listed:
             _say("the node stopped: waiting for it to start again (Ctrl-C to end)")
             self._gone = True
-        self.node_seen |= present
-        self.node_present = present
+        elif self._gone and listed and now - self._resubscribed > RESUBSCRIBE_PERIOD:
+            # a node in the graph again whose messages do not come: its publishers matched
+            # afresh (DDS can keep a stopped node's endpoints for a while)
+            self.resubscribe()
 
     def _wanted_wrenches(self) -> set[str]:
         """The bodies whose wrenches are drawn: all of them up to MAX_WRENCH_BODIES, else that

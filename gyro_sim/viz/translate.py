@@ -201,7 +201,7 @@ class Translator:
         rr = self.rr
         old = self.chain
         if old is not None:
-            if old == chain:
+            if old.key() == chain.key():
                 return
             for b in old.bodies:  # shapes of the old chain, not its frames (they are data)
                 self.rec.log(f"world/{b.name}/body", rr.Clear(recursive=True), static=True)

@@ -7,6 +7,7 @@ it itself.
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -155,20 +156,22 @@ def test_save_for_seconds_holds_the_moving_chain_and_the_commanded_plots(tmp_pat
     scene = load_scene(find_scene(SCENE))
     for b in scene.bodies:
         t = times(got[f"/world/{b.name}"])
-        assert t.size > 50 and np.all(np.diff(t) > 0), f"{b.name}: {t.size} poses"
+        assert t.size > 40 and np.all(np.diff(t) > 0), f"{b.name}: {t.size} poses"
         trans = np.array([v[0] if isinstance(v[0], list) else v for v in column(got[f"/world/{b.name}"], "Transform3D:translation")])
         assert len(trans) == t.size
         assert column(got[f"/world/{b.name}/body"], "Capsules3D:lengths")
     # the chain moves: the last body's origin is not where it started
     last = np.array(column(got[f"/world/{scene.bodies[-1].name}"], "Transform3D:translation"), float).reshape(-1, 3)
     assert np.linalg.norm(last[-1] - last[0]) > 1e-6
-    # the plots grow during the capture (rows over more than 4 simulated seconds at 100 Hz)
+    # the plots grow during the capture, at most --rate (30 by default) rows a second of the
+    # node's 100 publications (real_time_factor 1: wall and simulated seconds alike)
     euler_t = times(got["/plots/euler/arm1"])
-    assert euler_t.size > 100 and euler_t[-1] - euler_t[0] > 3.0
+    assert euler_t.size > 40 and euler_t[-1] - euler_t[0] > 3.0
+    assert np.median(np.diff(euler_t)) >= 0.9 / 30
     # the commands the test held are drawn as held
     arm3 = np.array(column(got["/plots/axis_moments/arm3"], "Scalars:scalars"), float).ravel()
     arm4 = np.array(column(got["/plots/axis_moments/arm4"], "Scalars:scalars"), float).ravel()
-    assert np.sum(np.isclose(arm3, COMMAND[1])) > 50 and np.sum(np.isclose(arm4, COMMAND[2])) > 50
+    assert np.sum(np.isclose(arm3, COMMAND[1])) > 30 and np.sum(np.isclose(arm4, COMMAND[2])) > 30
     assert "lag:" in live.stderr
     # the reset is marked where it happened, and the view goes on after it
     if publishes_events:  # a node that publishes its events (not only records them)
@@ -182,7 +185,7 @@ def test_follows_a_node_that_stops_and_starts_again_and_ends_on_sigint(tmp_path,
     d, env, client = domain
     describe(client)
     rrd = tmp_path / "live.rrd"
-    live = Live(tmp_path, env, "--save", rrd)
+    live = Live(tmp_path, env, "--save", rrd, "--rate", 0)  # every message drawn
     live.says("waiting for /robot_description")
     n1 = node(tmp_path, d, "node1")
     try:
@@ -198,19 +201,23 @@ def test_follows_a_node_that_stops_and_starts_again_and_ends_on_sigint(tmp_path,
     live.says("the node stopped: waiting for it to start again")
     n2 = node(tmp_path, d, "node2")
     try:
-        live.says("the node is back: following it", START_TIMEOUT)
-        live.says("the node restarted")
+        live.says("the node restarted", START_TIMEOUT)  # the view has a message of the second run
     finally:
         n2.stop()
     live.proc.send_signal(signal.SIGINT)
     assert live.wait() == 0, live.stderr
     assert "Traceback" not in live.stderr
     got = chunks(rrd)
-    t = times(got["/world/arm1"])
-    # the second run is drawn after the first on sim_time, not over it
-    assert t.size > 20 and np.all(np.diff(t) > 0)
-    events = column(got["/events"], "TextLog:text")
-    assert any("node restarted" in str(e) for e in events), events
+    events = [str(e) for e in column(got["/events"], "TextLog:text")]
+    marks = [float(re.search(r"node restarted at sim_time ([0-9.]+) s", e).group(1)) for e in events
+             if "node restarted" in e]
+    assert len(marks) == 1, events
+    # the second run is drawn after the first on sim_time, not over it: every series goes
+    # forward, the first run's before the mark, the second's from it
+    stamped = [times(b) for e, b in got.items() if e.startswith("/plots/") or e.startswith("/world/arm")]
+    assert all(np.all(np.diff(t) > 0) for t in stamped if t.size > 1)
+    every = np.concatenate([t for t in stamped if t.size])
+    assert np.any(every < marks[0]) and np.any(every >= marks[0])
 
 
 def test_sigterm_ends_with_exit_0_and_a_readable_file(tmp_path, domain):
@@ -263,6 +270,9 @@ def test_a_new_robot_description_replaces_the_shapes(tmp_path):
     tr = Translator(rec)
     first, second = load_scene(find_scene(SCENE)), load_scene(find_scene("chain_4"))
     tr.message(M.ROBOT_DESCRIPTION, 0.0, Text(urdf(first)))
+    drawn = tr.chain
+    tr.message(M.ROBOT_DESCRIPTION, 0.5, Text(urdf(first)))  # again (a late joiner's copy): kept
+    assert tr.chain is drawn
     tr.message(M.ROBOT_DESCRIPTION, 1.0, Text(urdf(second)))
     tr.message(M.ROBOT_DESCRIPTION, 2.0, Text("<robot><oops"))
     tr.flush()
