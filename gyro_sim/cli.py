@@ -56,7 +56,13 @@ def _run(args, scene, log) -> int:
         if problem is not None:
             print(f"gyro-sim run: {problem}", file=sys.stderr)
             return 2
-    sim = Simulator(scene, integrator=args.integrator, rtol=args.rtol, atol=args.atol, step=args.step)
+    from gyro_sim.dynamics.actuators import ActuatorError
+
+    try:
+        sim = Simulator(scene, integrator=args.integrator, rtol=args.rtol, atol=args.atol, step=args.step)
+    except ActuatorError as exc:  # the scene's actuators and the method asked for do not go together
+        print(f"gyro-sim run: {exc}", file=sys.stderr)
+        return 2
     inv0 = sim.reference_invariants()
     schedule = []
     if args.commands:

@@ -17,6 +17,12 @@ from gyro_sim.scene.records import Scene
 from gyro_sim.snapshot import Scatter, Snapshot
 
 
+#: the integrators that take a stateful model (speed-dependent actuator terms: the spins and
+#: works are plain states; "fixed" then takes gauss4 as its implicit rung); the others
+#: integrate a structure of their own (canonical momenta, Lie groups)
+STATEFUL_INTEGRATORS = ("auto", "dop853", "fixed", "gauss4", "radau", "rk4")
+
+
 class SimulationError(GyroSimError, RuntimeError):
     """The integration failed (non-finite state, step-size collapse); the state is kept."""
 
@@ -108,9 +114,16 @@ class Simulator:
         self._axis_angle = np.array([i_phi[h] if h >= 0 else i_kappa[r]
                                      for h, r in zip(m.axis_hinge, m.axis_rotor)], dtype=int)
         self._conserved = inv.conserved(m)
+        self._axis_max_torque = self._axis_limits()
+        if m.stateful and integrator not in STATEFUL_INTEGRATORS:
+            from gyro_sim.dynamics.actuators import ActuatorError
+
+            raise ActuatorError(f"{m.actuators.terms[0]}: integrator {integrator!r} does not take speed-dependent "
+                             f"actuator terms (friction, max_speed); use one of {', '.join(STATEFUL_INTEGRATORS)}")
         self._joint_layout()
         # snapshots from compiled code when the system has it (the numba backend)
-        self._compiled_outputs = getattr(self.system, "outputs", None)
+        # (a stateful model's outputs, its applied torques, come from the numpy reference)
+        self._compiled_outputs = None if m.stateful else getattr(self.system, "outputs", None)
         self._watched = self._watched_energy()
         self._watch_last = None
         self._watch_joints = None
@@ -124,6 +137,20 @@ class Simulator:
             self._imus = ImuSet(scene, {b.name: k for k, b in enumerate(scene.bodies)}, scene.gravity,
                                 DEFAULT_IMU_RATE)
         self.reset()
+
+    def _axis_limits(self) -> np.ndarray | None:
+        """max_torque of every actuated axis (na,), +inf where none; None when no axis has one."""
+        act, m = self.model.actuators, self.model
+        if act is None or not (act.rotor.saturates or act.hinge.saturates):
+            return None
+        return np.array([act.hinge.max_torque[h] if h >= 0 else act.rotor.max_torque[r]
+                         for h, r in zip(m.axis_hinge, m.axis_rotor)])
+
+    def _inputs_moments(self) -> np.ndarray:
+        """The commanded axis moments saturated to their max_torque (na,)."""
+        if self._axis_max_torque is None:
+            return self._moments
+        return np.clip(self._moments, -self._axis_max_torque, self._axis_max_torque)
 
     def _watched_energy(self) -> int | None:
         """The index in the compiled invariants of the energy the exact motion keeps ("energy",
@@ -144,10 +171,16 @@ class Simulator:
         arbitrary, and a step that does not resolve the motion errs in proportion to the motion.
         Called by the "fixed" integrator after each call."""
         moving = len(self._axis_angle) and np.any(self._moments)
+        if self.model.stateful:  # the applied torques' work is a state: the motors', friction's
+            moving = True
         if self._watched is None or (moving and "energy" not in self._conserved):
             return 0.0
-        i = self._axis_angle
-        work = float(self._moments @ (y1[i] - y0[i])) if moving else 0.0
+        if self.model.stateful:
+            w = self.model.i_work
+            work = float(np.sum(y1[w] - y0[w]))
+        else:
+            i = self._axis_angle
+            work = float(self._inputs_moments() @ (y1[i] - y0[i])) if moving else 0.0
         from gyro_sim.dynamics.outputs import INV_KINETIC
 
         last = self._watch_last  # the previous call's end is usually this one's start
@@ -172,7 +205,7 @@ class Simulator:
                 d = self._watch_data = dyn.Data(self.model)
             dyn.positions(self.model, d, t, y)
             dyn.velocities(self.model, d, t, y[self.model.i_vel])
-            v = inv.invariants(self.model, d, self.system.spins(t), t)
+            v = inv.invariants(self.model, d, self.system.spins(t, y), t)
             out = np.zeros(fo.INV_SIZE)
             out[fo.INV_ENERGY], out[fo.INV_KINETIC], out[fo.INV_POTENTIAL] = v["energy"], v["kinetic"], v["potential"]
             out[fo.INV_JACOBI] = v.get("jacobi", 0.0)
@@ -246,6 +279,7 @@ class Simulator:
         self._y = initial_state(m)
         self._p = m.torque_p0.copy() if len(m.torque_body) else None
         self._moments = np.zeros(len(m.axis_names))
+        self._saturated = 0  # commanded values clipped to their max_torque since the reset
         self._cache = None
         self._kin_ok = False
         self._acc_ok = False
@@ -287,12 +321,16 @@ class Simulator:
             raise ValueError(f"expected {len(self.model.axis_names)} axis moments {self.axis_names}, got {v.size}")
         if not np.all(np.isfinite(v)):
             raise ValueError("axis moments must be finite")
+        if self._axis_max_torque is not None:
+            self._saturated += int(np.count_nonzero(np.abs(v) > self._axis_max_torque))
         self._moments = v.copy()
         self._cache = None  # reactions and efforts depend on the commands
         self._acc_ok = False
 
     def _inputs(self):
-        m, v = self.model, self._moments
+        """The held inputs (hinge moments (nh,), rotor torques (nt,), or None) from the commanded
+        axis moments, saturated to the axes' max_torque."""
+        m, v = self.model, self._inputs_moments()
         hinge_tau = L_rotor = None
         if len(v):
             hinge_tau = np.zeros(len(m.hinge_bodies))
@@ -321,10 +359,12 @@ class Simulator:
         if not np.all(np.isfinite(y)):
             self.integrator.reset()
             raise SimulationError(f"t = {self._t:.6g} s: the state became non-finite; state kept at t = {self._t:.6g} s")
-        if len(self._axis_angle) and np.any(self._moments):
+        if self.model.stateful:  # the works are states, integrated with the motion
+            self._work = float(y[self.model.i_work][0])
+        elif len(self._axis_angle) and np.any(self._moments):
             i = self._axis_angle
-            self._work += float(self._moments @ (y[i] - self._y[i]))
-        self._p = self.system.spins(self._t + dt)
+            self._work += float(self._inputs_moments() @ (y[i] - self._y[i]))
+        self._p = self.system.spins(self._t + dt, y)
         self._t += dt
         self._y = y
         self._cache = None
@@ -406,6 +446,10 @@ class Simulator:
         if len(m.speed_body):  # the motor keeps kappa_i' constant: L_i = A_i (w' . e_i)
             e_v = dyn.matvec(d.R[m.speed_body], m.speed_axis)
             L_v = m.speed_A * np.einsum("ni,ni->n", ev.acc_w[m.speed_body], e_v)
+        if m.stateful:  # the torques applied at this state: motors after saturation and cut, friction
+            self._evaluate()
+            a = self.system.data.applied
+            hinge_tau, L_rotor = a.hinge_motor + a.hinge_friction, a.rotor_motor + a.rotor_friction
         return self._joint_arrays(euler, rates, kdot_t, L_v, hinge_tau, L_rotor)
 
     def wrenches(self) -> list[Wrench]:
@@ -453,8 +497,23 @@ class Simulator:
     @property
     def work(self) -> float:
         """Work done by the commanded axis moments since the last reset (J): the sum over
-        `advance` calls of moment * change of the axis angle (exact under the zero-order hold)."""
+        `advance` calls of moment * change of the axis angle (exact under the zero-order hold),
+        the moments saturated to their max_torque. With speed-dependent actuator terms
+        (friction, max_speed) the integral of the motors' power, a state integrated with the
+        motion."""
         return self._work
+
+    @property
+    def friction_work(self) -> float:
+        """Work done by friction since the last reset (J, <= 0: the energy dissipated), the
+        integral of friction torque x relative speed; 0 without friction."""
+        return float(self._y[self.model.i_work][1]) if self.model.stateful else 0.0
+
+    @property
+    def saturated_commands(self) -> int:
+        """Commanded axis moments clipped to their max_torque since the last reset (each value
+        of `set_axis_moments` beyond its axis's limit counts once)."""
+        return self._saturated
 
     @property
     def backend(self) -> str:
@@ -668,8 +727,10 @@ class Simulator:
         kw = {"invariants": now,
               "drift": {name: inv.relative_drift(name, ref, now[name]) for name in self._conserved},
               "work": self._work}
+        if self.model.actuators is not None:
+            kw["friction_work"], kw["saturated_commands"] = self.friction_work, self._saturated
         if "energy" in self._conserved:
-            kw["energy_balance"] = now["energy"] - ref["energy"] - self._work
+            kw["energy_balance"] = now["energy"] - ref["energy"] - self._work - self.friction_work
             kw["energy_scale"] = inv.drift_scale("energy", ref)
         return kw
 

@@ -17,6 +17,8 @@ Simulator sums it in `work`. Then
 
 is conserved with or without commands wherever the energy is conserved without them
 (fixed base, no speed rotors): the drift a user wants to watch on a commanded chain.
+With actuator friction (docs/scene-format.md) its work W_f <= 0 (the energy dissipated) is
+integrated with the motion and counted apart: energy_balance = E(t) - E(0) - W(t) - W_f(t).
 """
 from __future__ import annotations
 
@@ -57,6 +59,8 @@ class Snapshot:
     method_reason: str | None = None  # why that one (one line)
     substeps: int | None = None  # its substeps of one physics step (a fast-turning body is resolved)
     h_lambda: float | None = None  # the chooser's last estimate of h |lambda| (step x largest |eigenvalue|)
+    friction_work: float | None = None  # work of actuator friction since reset (J, <= 0); scenes with limits
+    saturated_commands: int | None = None  # commanded moments clipped to max_torque since reset
     #: the compiled outputs found every number of the arrays they computed (joint states, poses,
     #: wrenches) finite as they wrote them: `nonfinite` need not look at those again
     arrays_checked: bool = field(default=False, repr=False, compare=False)
@@ -70,7 +74,7 @@ class Snapshot:
             v = getattr(self, name)
             if v is not None and v.size and not np.all(np.isfinite(v)):
                 return name
-        for name in ("time", "error_estimate", "work", "energy_balance", "h_lambda"):
+        for name in ("time", "error_estimate", "work", "energy_balance", "h_lambda", "friction_work"):
             v = getattr(self, name)
             if v is not None and not math.isfinite(v):
                 return name

@@ -1,40 +1,38 @@
-"""Start the gyro_sim node with its parameters file, and optionally a demo command publisher.
+"""Start the gyro_sim node with its parameters file.
 
     ros2 launch gyro_sim gyro_sim.launch.py
     ros2 launch gyro_sim gyro_sim.launch.py namespace:=robot1 scene:=heavy_top record:=run.mcap
-    ros2 launch gyro_sim gyro_sim.launch.py demo:=true      # the hinges driven by `gyro-sim cmd`
+    ros2 launch gyro_sim gyro_sim.launch.py demo:=true      # the node drives its own axes
 
 Arguments: `params_file` (default: the installed config/params.yaml), `namespace` (default
-none), `scene` and `record` (override the parameters file when not empty), `demo` (true:
-also run `gyro-sim cmd` with a sine on every axis of the hinge chain, on this node's
-~/axis_moments).
+none: the node's topics then are /joint_states, /robot_description, /gyro_sim/...; with
+robot1, /robot1/joint_states, /robot1/robot_description, /robot1/gyro_sim/...), `scene` and
+`record` (override the parameters file when not empty), `demo` (true: the node's `demo`
+parameter, built-in sines on every axis of any scene until a command arrives).
 """
 import os
 
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, ExecuteProcess, OpaqueFunction
-from launch.conditions import IfCondition
+from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-#: the demo's command profile: a sine on each of the hinge chain's three axes (N m, Hz)
-DEMO_PROFILE = ["sine", "--amplitude", "0.002", "0.05", "0.03", "--frequency", "0.5"]
+#: launch argument values read as true (as launch's IfCondition reads them)
+TRUE_VALUES = ("true", "1")
 
 
-def _node_and_demo(context):
+def _node(context):
     namespace = LaunchConfiguration("namespace").perform(context).strip("/")
     overrides = {}
     for name in ("scene", "record"):
         value = LaunchConfiguration(name).perform(context)
         if value:
             overrides[name] = value
-    node = Node(package="gyro_sim", executable="gyro_sim_node", name="gyro_sim", namespace=namespace or None,
-                parameters=[LaunchConfiguration("params_file"), overrides], output="screen")
-    topic = "/".join(["", *([namespace] if namespace else []), "gyro_sim", "axis_moments"])
-    demo = ExecuteProcess(cmd=["gyro-sim", "cmd", "--topic", topic, *DEMO_PROFILE], output="screen",
-                          condition=IfCondition(LaunchConfiguration("demo")))
-    return [node, demo]
+    if LaunchConfiguration("demo").perform(context).strip().lower() in TRUE_VALUES:
+        overrides["demo"] = True
+    return [Node(package="gyro_sim", executable="gyro_sim_node", name="gyro_sim", namespace=namespace or None,
+                 parameters=[LaunchConfiguration("params_file"), overrides], output="screen")]
 
 
 def generate_launch_description():
@@ -45,6 +43,7 @@ def generate_launch_description():
         DeclareLaunchArgument("namespace", default_value="", description="the node's namespace"),
         DeclareLaunchArgument("scene", default_value="", description="a scene file or a shipped scene's name"),
         DeclareLaunchArgument("record", default_value="", description="an MCAP log to record"),
-        DeclareLaunchArgument("demo", default_value="false", description="true: drive the hinges with gyro-sim cmd"),
-        OpaqueFunction(function=_node_and_demo),
+        DeclareLaunchArgument("demo", default_value="false",
+                              description="true: the node drives its axes with built-in sines until commanded"),
+        OpaqueFunction(function=_node),
     ])

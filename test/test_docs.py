@@ -48,6 +48,7 @@ SCENE_SECTIONS = {
     "`bodies[k].joint`": ("JOINT_KEYS", "bodies[0].joint"),
     "`bodies[k].inertia`": ("INERTIA_KEYS", "bodies[0].inertia"),
     "`bodies[k].rotors[i]`": ("ROTOR_KEYS", "bodies[0].rotors[0]"),
+    "`friction`": ("FRICTION_KEYS", "bodies[0].rotors[0].friction"),
     "`bodies[k].initial`": ("INITIAL_KEYS", "bodies[0].initial"),
     "`bodies[k].visual`": ("VISUAL_KEYS", "bodies[0].visual"),
     "`imus[j]`": ("IMU_KEYS", "imus[0]"),
@@ -92,7 +93,7 @@ def valid_scene() -> dict:
             "com": [0.0, 0.0, 0.1],
             "inertia": {"axial": 0.004, "transverse": 0.015},
             "rotors": [{"name": "wheel", "axis": [0.0, 0.0, 1.0], "mass": 0.1, "axial_inertia": 1e-4,
-                        "transverse_inertia": 1e-4, "mode": "torque"}],
+                        "transverse_inertia": 1e-4, "mode": "torque", "friction": {"viscous": 1e-6}}],
             "initial": {"euler": [0.0, 0.5, 0.0]},
             "visual": {"radius": 0.02},
         }],
@@ -349,7 +350,8 @@ def test_ros_interface_documents_every_parameter():
 def test_ros_interface_documents_every_diagnostics_key():
     messages = importlib.import_module("gyro_sim.msgs.messages")
     text = ROS_INTERFACE.read_text(encoding="utf-8")
-    keys = set(messages.STRING_KEYS) | {messages.WORK_KEY, messages.BALANCE_KEY, messages.BALANCE_REL_KEY,
+    keys = set(messages.STRING_KEYS) | {messages.WORK_KEY, messages.FRICTION_WORK_KEY, messages.SATURATED_KEY,
+                                        messages.BALANCE_KEY, messages.BALANCE_REL_KEY,
                                         messages.ERROR_ESTIMATE_KEY, messages.SIM_TIME_KEY,
                                         "<invariant>" + messages.DRIFT_SUFFIX, messages.axis_moment_key("<axis>")}
     missing = sorted(k for k in keys if f"`{k}`" not in text)

@@ -66,6 +66,7 @@ import math
 
 import numpy as np
 
+from gyro_sim.dynamics.actuators import MAX_SPEED_BAND, STRIBECK_PEAK, STRIBECK_TANH
 from gyro_sim.dynamics.model import Model
 
 try:
@@ -106,7 +107,14 @@ FLAG_HEAVY = 7
 #: flags[FLAG_KERNEL]: the address of `rhs_kernel` compiled as a C function (`kernel_address`),
 #: which the compiled loops call (`rhs_call`) instead of compiling the kernel into themselves
 FLAG_KERNEL = 8
-FLAGS_SIZE = 9
+#: flags[FLAG_ACTUATORS]: 1 for a model with speed-dependent actuator terms (model.stateful:
+#: friction, max_speed), whose spins and works are states at flags[FLAG_I_SPIN],
+#: flags[FLAG_I_WORK] and whose parameters sit in the workspace's tail (`workspace`)
+FLAG_ACTUATORS, FLAG_I_SPIN, FLAG_I_WORK = 9, 10, 11
+FLAGS_SIZE = 12
+#: per actuated axis, floats of the workspace's tail of a stateful model: max_speed (inf: none),
+#: coulomb, viscous, static, stribeck_speed (0: no Stribeck term), stick_speed
+ACTUATOR_PARAMETERS = 6
 
 
 def available() -> bool:
@@ -151,7 +159,7 @@ def _njit_alloc(fn):
 
 # --- small fixed-size helpers (inlined by LLVM) ----------------------------------------------
 @_njit_inline
-def _cross(a, b, out):
+def vec_cross(a, b, out):
     """out = a x b (3,); out must not alias a or b."""
     out[0] = a[1] * b[2] - a[2] * b[1]
     out[1] = a[2] * b[0] - a[0] * b[2]
@@ -159,7 +167,7 @@ def _cross(a, b, out):
 
 
 @_njit_inline
-def _cross_add(a, b, out):
+def vec_cross_add(a, b, out):
     """out += a x b (3,); out must not alias a or b."""
     out[0] += a[1] * b[2] - a[2] * b[1]
     out[1] += a[2] * b[0] - a[0] * b[2]
@@ -167,14 +175,14 @@ def _cross_add(a, b, out):
 
 
 @_njit_inline
-def _matvec(A, x, out):
+def mat_vec(A, x, out):
     """out = A x for A (3, 3), x (3,)."""
     for i in range(3):
         out[i] = A[i, 0] * x[0] + A[i, 1] * x[1] + A[i, 2] * x[2]
 
 
 @_njit_inline
-def _dot6(a, b):
+def dot6(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] + a[4] * b[4] + a[5] * b[5]
 
 
@@ -218,6 +226,33 @@ def _rotor_angle_rate(p, w0, w1, w2, e0, e1, e2):
 
 
 @_njit_inline
+def _friction_torque(w, a, o):
+    """-F(w) at relative speed w of the axis whose ACTUATOR_PARAMETERS start at a[o]
+    (gyro_sim.dynamics.actuators.AxisLimits.friction in scalar operations)."""
+    coulomb, viscous, static, b, stick = a[o + 1], a[o + 2], a[o + 3], a[o + 4], a[o + 5]
+    scale = 1.0
+    if abs(w) < stick:
+        scale = w / stick
+        w = stick
+    if b > 0.0:
+        x = w / b
+        f = STRIBECK_PEAK * (static - coulomb) * math.exp(-0.5 * x * x) * x + coulomb * math.tanh(STRIBECK_TANH * x)
+    else:
+        f = math.copysign(coulomb, w) if w != 0.0 else 0.0
+    return -(f + viscous * w) * scale
+
+
+@_njit_inline
+def _speed_cut(torque, w, max_speed):
+    """A motor torque with the speed limit applied at relative speed w
+    (gyro_sim.dynamics.actuators.AxisLimits.cut in scalar operations)."""
+    if torque * w > 0.0 and max_speed < math.inf:
+        ramp = (max_speed - abs(w)) / (MAX_SPEED_BAND * max_speed)
+        return torque * min(max(ramp, 0.0), 1.0)
+    return torque
+
+
+@_njit_inline
 def _inv3_sym(J00, J01, J02, J11, J12, J22):
     """J^-1 of a symmetric positive definite J (3, 3) from its upper triangle (adjugate): its
     upper triangle (d00, d01, d02, d11, d12, d22), the inverse exactly symmetric."""
@@ -254,7 +289,7 @@ def _joint_projection(S, U, D, W, j0, nk):
     inverse in place, and W = U D^-1 (what both forms of the elimination need)."""
     for a in range(nk):
         for b in range(a, nk):
-            D[a, b] = _dot6(S[j0 + a], U[j0 + b])
+            D[a, b] = dot6(S[j0 + a], U[j0 + b])
             D[b, a] = D[a, b]
     _spd_inverse(D, nk)
     for a in range(nk):
@@ -357,7 +392,7 @@ def _shift_mass(m00, m01, m02, m11, m12, m22, d0, d1, d2, IA, kp):
 
 # --- stages -----------------------------------------------------------------------------------
 @_njit_inline
-def _positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, hk, Aw, e_w):
+def body_positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, hk, Aw, e_w):
     """World components of each body's constants: R^k (quaternion, or eq 50 for a hinge),
     s^k, h^k = m^k c^k, the inertia A^k about O^k (eq 30) and the hinge axis e^k."""
     n = s.shape[0]
@@ -409,7 +444,7 @@ def _positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, 
 
 
 @_njit_inline
-def _velocities(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, i_vel,
+def body_velocities(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, i_vel,
                 s_w, e_w, w, vO, c):
     """w^k (prefix sums of the joint rates, eqs 50, 53), v(O^k) (eq 34) and the joint bias
     accelerations c^k = S_k' u_k about O^k (dyn.bias_accelerations are their prefix sums about
@@ -477,7 +512,7 @@ def _spatial_inertia(k, m, h0, h1, h2, Aw, I6):
 
 
 @_njit_inline
-def _bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
+def bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
                  torque_A, p, L_rotor, has_gravity, gravity, lam_b, dlam_b, I6, pb):
     """Spatial inertias I6 (n, 6, 6) and body forces at zero acceleration pb (n, 6) about O^k,
     as dyn.body_forces with acc = 0 (eqs 36-39, 58; h = m c in world components):
@@ -892,7 +927,7 @@ def _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Di
         nk = j1 - j0
         IAk, pAk, D = IA[k], pA[k], Dinv[k]
         for j in range(j0, j1):
-            u[j] = tau[j] - _dot6(S[j], pAk)
+            u[j] = tau[j] - dot6(S[j], pAk)
         _chol_upper6(IAk, K)
         if nk != 1 and nk != SPHERICAL_DOF:
             # free base and first joint (k = 0): I^A = F^T F formed, D = S^T I^A S
@@ -907,7 +942,7 @@ def _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Di
                     Ia[q, r] = acc
             for j in range(j0, j1):
                 for r in range(6):
-                    U[j, r] = _dot6(Ia[r], S[j])
+                    U[j, r] = dot6(Ia[r], S[j])
             _joint_projection(S, U, D, W, j0, nk)
             continue
         # the stacked factor [F_own; F_child] in joint axes Q (columns 0..2 times H for a hinge)
@@ -982,7 +1017,7 @@ def _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Di
                 acc += W[j0 + a, r] * u[j0 + a]
             pa[r] = acc
         for b in range(m2):
-            z[b] = _dot6(Ia[b], c[k])
+            z[b] = dot6(Ia[b], c[k])
         for b in range(m2):
             for r in range(6):
                 pa[r] += Ia[b, r] * z[b]
@@ -996,7 +1031,7 @@ def _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Di
             Fc[b, 2] = Ia[b, 2] + (d[0] * fl1 - d[1] * fl0)
             Fc[b, 3], Fc[b, 4], Fc[b, 5] = fl0, fl1, fl2
         # forces to O^{k-1} = O^k - s^{k-1}: (n + s x f, f)
-        _cross_add(s_w[k - 1], pa[3:], pA[k - 1, :3])
+        vec_cross_add(s_w[k - 1], pa[3:], pA[k - 1, :3])
         for r in range(6):
             pA[k - 1, r] += pa[r]
     # forward: a = A^{k-1} + c^k, u'_k = D^-1 u - (U D^-1)^T a, A^k = a + S u'_k
@@ -1010,11 +1045,11 @@ def _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Di
         D = Dinv[k]
         if k > 0:
             # motions from O^{k-1} to O^k: (alpha, a + alpha x s^{k-1})
-            _cross_add(A[:3], s_w[k - 1], A[3:])
+            vec_cross_add(A[:3], s_w[k - 1], A[3:])
         for r in range(6):
             A[r] += c[k, r]
         for a in range(nk):
-            x[a] = _dot6(W[j0 + a], A)
+            x[a] = dot6(W[j0 + a], A)
         for a in range(nk):
             acc = 0.0
             for b in range(nk):
@@ -1031,13 +1066,13 @@ def _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Di
     F = pb
     for k in range(n):
         for r in range(6):
-            F[k, r] += _dot6(IA[k, r], acc_body[k])
+            F[k, r] += dot6(IA[k, r], acc_body[k])
     res = np.empty(u.shape[0])
     for k in range(n - 1, -1, -1):
         for j in range(col_start[k], col_start[k + 1]):
-            res[j] = tau[j] - _dot6(S[j], F[k])
+            res[j] = tau[j] - dot6(S[j], F[k])
         if k > 0:
-            _cross_add(s_w[k - 1], F[k, 3:], F[k - 1, :3])
+            vec_cross_add(s_w[k - 1], F[k, 3:], F[k - 1, :3])
             for r in range(6):
                 F[k - 1, r] += F[k, r]
     _aba_resolve(col_start, S, s_w, W, Dinv, res, u, F, udot)
@@ -1053,7 +1088,7 @@ def _aba_resolve(col_start, S, s_w, W, Dinv, rhs, u, P, udot):
     for k in range(n - 1, -1, -1):
         j0, j1 = col_start[k], col_start[k + 1]
         for j in range(j0, j1):
-            u[j] = rhs[j] - _dot6(S[j], P[k])
+            u[j] = rhs[j] - dot6(S[j], P[k])
         if k == 0:
             continue
         for r in range(6):
@@ -1061,7 +1096,7 @@ def _aba_resolve(col_start, S, s_w, W, Dinv, rhs, u, P, udot):
             for j in range(j0, j1):
                 acc += W[j, r] * u[j]
             pa[r] = acc
-        _cross_add(s_w[k - 1], pa[3:], P[k - 1, :3])
+        vec_cross_add(s_w[k - 1], pa[3:], P[k - 1, :3])
         for r in range(6):
             P[k - 1, r] += pa[r]
     A = np.zeros(6)
@@ -1070,9 +1105,9 @@ def _aba_resolve(col_start, S, s_w, W, Dinv, rhs, u, P, udot):
         nk = j1 - j0
         D = Dinv[k]
         if k > 0:
-            _cross_add(A[:3], s_w[k - 1], A[3:])
+            vec_cross_add(A[:3], s_w[k - 1], A[3:])
         for a in range(nk):
-            acc = -_dot6(W[j0 + a], A)
+            acc = -dot6(W[j0 + a], A)
             for b in range(nk):
                 acc += D[a, b] * u[j0 + b]
             udot[j0 + a] += acc
@@ -1440,6 +1475,8 @@ def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis,
     base (float, 7): moving-base amplitude (3), W = 2 pi f, gravity (3).
     Held inputs: torque-rotor spins p_i = p0_i + pdot_i (t - t0) (eq 29), their torques
     L_rotor, the generalized forces tau (N,) of the columns (hinge commands, eq 51).
+    A stateful model (flags[FLAG_ACTUATORS]) reads the spins from y instead and applies the
+    commands through its actuators' speed cut and friction (`_actuate`).
     """
     base_type, has_gravity, has_lam = flags[0], flags[1] != 0, flags[2] != 0
     i_r0, i_vel, i_kap, N = flags[3], flags[4], flags[5], flags[6]
@@ -1450,13 +1487,17 @@ def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis,
      Ia, pa, Dx, T, G, x, a_base) = workspace_views(work, n, N, nt)
 
     # positions, velocities
-    _positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, hk, Aw, e_w)
-    _velocities(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, i_vel, s_w, e_w, w, vO, c)
-    # bias forces: p_i(t) = p_i(t0) + (L_i / A_i)(t - t0) (eq 29)
-    for i in range(nt):
-        p[i] = p0[i] + pdot[i] * (t - t0)
-    _bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
-                 torque_A, p, L_rotor, has_gravity, gravity, lam_b, dlam_b, I6, pb)
+    body_positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, hk, Aw, e_w)
+    body_velocities(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, i_vel, s_w, e_w, w, vO, c)
+    L_applied, tau_applied = L_rotor, tau
+    if flags[FLAG_ACTUATORS] != 0:  # spins and works are states; the torques applied at this state
+        L_applied, tau_applied = _actuate(y, ydot, work, is_hinge, own_col, torque_body, torque_axis,
+                                          torque_A, flags, L_rotor, tau, R, w, p, n, N, nt, i_vel)
+    else:  # bias forces: p_i(t) = p_i(t0) + (L_i / A_i)(t - t0) (eq 29)
+        for i in range(nt):
+            p[i] = p0[i] + pdot[i] * (t - t0)
+    bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
+                 torque_A, p, L_applied, has_gravity, gravity, lam_b, dlam_b, I6, pb)
     # ABA
     _joint_columns(is_hinge, own_col, base_type, e_w, S)
     for a in range(6):
@@ -1465,7 +1506,7 @@ def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis,
         sw = -base_omega * base_omega * math.sin(base_omega * t)
         for a in range(3):
             a_base[3 + a] = base_amplitude[a] * sw
-    _aba(is_hinge, col_start, S, I6, pb, c, tau, a_base, s_w, U, W, u, Dinv, ydot[i_vel:i_vel + N],
+    _aba(is_hinge, col_start, S, I6, pb, c, tau_applied, a_base, s_w, U, W, u, Dinv, ydot[i_vel:i_vel + N],
          Ia, pa, Dx, T, G, x, flags[FLAG_HEAVY])
     # y'
     if base_type == BASE_FREE:
@@ -1485,6 +1526,51 @@ def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis,
         e1 = R[k, 1, 0] * ax0 + R[k, 1, 1] * ax1 + R[k, 1, 2] * ax2
         e2 = R[k, 2, 0] * ax0 + R[k, 2, 1] * ax1 + R[k, 2, 2] * ax2
         ydot[i_kap + i] = _rotor_angle_rate(p[i], w[k, 0], w[k, 1], w[k, 2], e0, e1, e2)
+
+
+@_njit_inline
+def _actuate(y, ydot, work, is_hinge, own_col, torque_body, torque_axis, torque_A, flags, L_rotor, tau,
+             R, w, p, n, N, nt, i_vel):
+    """A stateful model's applied torques (gyro_sim.dynamics.reference.applied_torques): the
+    spins p from y, the rotor torques (nt,) and generalized forces (N,) applied (views of the
+    workspace's tail), and y' of the spins (eq 29) and of the works (the motors' power,
+    friction's)."""
+    i_spin, i_work = flags[FLAG_I_SPIN], flags[FLAG_I_WORK]
+    rotor_at = n * WORK_PER_BODY + N * WORK_PER_COLUMN + nt * WORK_PER_ROTOR + WORK_FIXED
+    hinge_at = rotor_at + nt * ACTUATOR_PARAMETERS
+    L_at = hinge_at + n * ACTUATOR_PARAMETERS
+    L_applied = block1(work, L_at, nt)
+    tau_applied = block1(work, L_at + nt, N)
+    motor_power = 0.0
+    friction_power = 0.0
+    for i in range(nt):
+        p[i] = y[i_spin + i]
+        k = torque_body[i]
+        ax0, ax1, ax2 = torque_axis[i, 0], torque_axis[i, 1], torque_axis[i, 2]
+        e0 = R[k, 0, 0] * ax0 + R[k, 0, 1] * ax1 + R[k, 0, 2] * ax2
+        e1 = R[k, 1, 0] * ax0 + R[k, 1, 1] * ax1 + R[k, 1, 2] * ax2
+        e2 = R[k, 2, 0] * ax0 + R[k, 2, 1] * ax1 + R[k, 2, 2] * ax2
+        rate = _rotor_angle_rate(p[i], w[k, 0], w[k, 1], w[k, 2], e0, e1, e2)
+        o = rotor_at + i * ACTUATOR_PARAMETERS
+        motor = _speed_cut(L_rotor[i], rate, work[o])
+        friction = _friction_torque(rate, work, o)
+        L_applied[i] = motor + friction
+        ydot[i_spin + i] = (motor + friction) / torque_A[i]
+        motor_power += motor * rate
+        friction_power += friction * rate
+    for j in range(N):
+        tau_applied[j] = tau[j]
+    for k in range(n):
+        if is_hinge[k]:
+            col = own_col[k]
+            rate = y[i_vel + col]
+            friction = _friction_torque(rate, work, hinge_at + k * ACTUATOR_PARAMETERS)
+            tau_applied[col] += friction
+            motor_power += tau[col] * rate
+            friction_power += friction * rate
+    ydot[i_work] = motor_power
+    ydot[i_work + 1] = friction_power
+    return L_applied, tau_applied
 
 
 @_njit
@@ -1521,7 +1607,8 @@ def model_arguments(model: Model) -> tuple:
     has_lam = len(m.torque_body) > 0 or m.lam_speed is not None
     heavy = heavy_elimination_address() if heavy_subtrees(m.mass) else 0
     flags = np.array([base_type, m.gravity is not None, has_lam, m.i_r0.start, m.i_vel.start,
-                      m.i_kappa.start, m.N, heavy, kernel_address()], dtype=np.int64)
+                      m.i_kappa.start, m.N, heavy, kernel_address(), int(m.stateful), m.i_spin.start,
+                      m.i_work.start], dtype=np.int64)
     base = np.zeros(7)
     if m.base_amplitude is not None:
         base[0:3] = m.base_amplitude
@@ -1568,16 +1655,32 @@ def input_arguments(model: Model, t0: float, p0, hinge_tau, L_rotor) -> tuple:
 
 def workspace(model: Model) -> np.ndarray:
     """The float workspace of `rhs_kernel`: n WORK_PER_BODY + N WORK_PER_COLUMN
-    + nt WORK_PER_ROTOR + WORK_FIXED (nt torque rotors)."""
-    return np.zeros(model.n * WORK_PER_BODY + model.N * WORK_PER_COLUMN
-                    + len(model.torque_body) * WORK_PER_ROTOR + WORK_FIXED)
+    + nt WORK_PER_ROTOR + WORK_FIXED (nt torque rotors). A stateful model (`Model.stateful`)
+    appends its actuators' parameters, ACTUATOR_PARAMETERS per torque rotor then per body
+    (hinges'; zero on spherical bodies), and the scratch of the applied torques (nt + N)."""
+    m, nt = model, len(model.torque_body)
+    size = m.n * WORK_PER_BODY + m.N * WORK_PER_COLUMN + nt * WORK_PER_ROTOR + WORK_FIXED
+    if not m.stateful:
+        return np.zeros(size)
+    act = m.actuators
+    hinge = np.zeros((m.n, ACTUATOR_PARAMETERS))
+    hinge[:, 0] = np.inf
+    hinge[:, 5] = 1.0
+    hinge[m.hinge_bodies] = _axis_parameters(act.hinge)
+    return np.concatenate((np.zeros(size), _axis_parameters(act.rotor).ravel(), hinge.ravel(), np.zeros(nt + m.N)))
+
+
+def _axis_parameters(limits) -> np.ndarray:
+    """(axes, ACTUATOR_PARAMETERS) of gyro_sim.dynamics.actuators.AxisLimits."""
+    return np.stack((limits.max_speed, limits.coulomb, limits.viscous, limits.static, limits.stribeck_speed,
+                     limits.stick_speed), axis=1).reshape(-1, ACTUATOR_PARAMETERS)
 
 
 # --- the stages other compiled modules build on (fast_canonical: the canonical field) ---------
 #: inlined there as here; the same dispatchers under public names
-positions_stage = _positions
+positions_stage = body_positions
 spatial_inertia = _spatial_inertia
-velocities_stage = _velocities
+velocities_stage = body_velocities
 joint_columns_stage = _joint_columns
 articulated_solve = _aba
 quat_rate = _quat_rate

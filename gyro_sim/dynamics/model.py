@@ -13,10 +13,14 @@ Generalized velocities (the unknowns of eqs (52)-(54), in a relative basis):
 State vector y = [r0 (free base, 3) | quaternions of spherical bodies (4 each, w x y z, world
 from body) | hinge angles phi_k | generalized velocities | torque-rotor angles kappa_i].
 The rotor angles are quadratures for output only: nothing feeds back from them.
+A scene with speed-dependent actuator terms (friction, max_speed: gyro_sim.dynamics.actuators)
+appends [absolute spins p_i of the torque rotors | work of the motors | work of friction]:
+its applied torques depend on the state, so the spins are integrated with it (eq 29,
+A_i p_i' = L_i) and so are the works (quadratures of the applied torques' power).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -24,6 +28,7 @@ from gyro_sim.dynamics.rotations import (
     axis_angle_matrix, down_frame, euler_rates_to_omega, euler_to_matrix, matrix_to_quat,
     quat_to_matrix,
 )
+from gyro_sim.dynamics.actuators import Actuators, AxisLimits
 from gyro_sim.scene.records import Scene
 
 
@@ -80,6 +85,16 @@ class Model:
     i_phi: slice
     i_vel: slice  # the N generalized velocities
     i_kappa: slice  # torque-rotor angles
+    # actuator limits and friction (None without any); the states of speed-dependent terms
+    actuators: Actuators | None = None
+    i_spin: slice = field(default_factory=lambda: slice(0, 0))  # absolute spins p_i of the torque rotors
+    i_work: slice = field(default_factory=lambda: slice(0, 0))  # work of the motors, of friction (J)
+
+    @property
+    def stateful(self) -> bool:
+        """Whether the applied torques depend on the state (friction, max_speed): the spins
+        and works are states (`i_spin`, `i_work`)."""
+        return self.actuators is not None and self.actuators.speed_dependent
 
     @property
     def free(self) -> bool:
@@ -168,6 +183,13 @@ def compile_model(scene: Scene) -> Model:
     off += N
     i_kappa = slice(off, off + nt)
     off += nt
+    actuators = _actuators(scene)
+    i_spin = i_work = slice(off, off)
+    if actuators is not None and actuators.speed_dependent:
+        i_spin = slice(off, off + nt)
+        off += nt
+        i_work = slice(off, off + WORK_STATES)
+        off += WORK_STATES
 
     def arr(x, shape):
         return np.array(x, dtype=float).reshape(shape)
@@ -219,7 +241,33 @@ def compile_model(scene: Scene) -> Model:
         i_phi=i_phi,
         i_vel=i_vel,
         i_kappa=i_kappa,
+        actuators=actuators,
+        i_spin=i_spin,
+        i_work=i_work,
     )
+
+
+#: the work states of a stateful model: the motors', friction's
+WORK_STATES = 2
+
+
+def _actuators(scene: Scene) -> Actuators | None:
+    """The limits of the torque rotors and hinges (model order), None when no axis has any."""
+    rotor, hinge, terms = [], [], []
+    for b in scene.bodies:
+        if b.joint.type == "hinge":
+            hinge.append(b.joint.limits)
+            if b.joint.limits is not None and b.joint.limits.friction is not None:
+                terms.append(f"{b.name}.friction")
+        for r in b.rotors:
+            if r.mode != "speed":
+                rotor.append(r.limits)
+                for key in ("friction", "max_speed"):
+                    if r.limits is not None and getattr(r.limits, key) is not None:
+                        terms.append(f"{r.name}.{key}")
+    if all(lim is None for lim in rotor + hinge):
+        return None
+    return Actuators(AxisLimits.of(rotor), AxisLimits.of(hinge), tuple(terms))
 
 
 def initial_state(model: Model) -> np.ndarray:
@@ -268,4 +316,6 @@ def initial_state(model: Model) -> np.ndarray:
     vel[model.col_sph.ravel()] = nu_rel[model.sph_bodies].ravel()
     vel[model.col_hinge] = phid
     y[model.i_vel] = vel
+    if model.stateful:
+        y[model.i_spin] = model.torque_p0  # the works start at zero
     return y

@@ -36,7 +36,7 @@ from pathlib import Path
 from gyro_sim.dynamics import kernel as fast
 from gyro_sim.dynamics.kernel import block1, block2, block3
 from gyro_sim.dynamics.kernel import (
-    _bias_forces, _cross, _cross_add, _dot6, _matvec, _positions, _velocities,
+    bias_forces, vec_cross, vec_cross_add, dot6, mat_vec, body_positions, body_velocities,
 )
 from gyro_sim.integrators.rk4.loop import cache_directory, njit_with_dependencies
 
@@ -264,8 +264,8 @@ def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hin
     else:
         for i in range(nt):
             p[i] = p0[i] + pdot[i] * (t - t0)  # (29)
-        _positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R_k, s_w, hk, Aw, e_w)
-        _velocities(t, y, is_hinge, own_col, base_type, amp, W, i_vel, s_w, e_w, w_k, vO_k, c)
+        body_positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R_k, s_w, hk, Aw, e_w)
+        body_velocities(t, y, is_hinge, own_col, base_type, amp, W, i_vel, s_w, e_w, w_k, vO_k, c)
     for k in range(n):  # the outputs' copies
         for a in range(3):
             w[k, a] = w_k[k, a]
@@ -291,7 +291,7 @@ def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hin
     bad = 0
     if do_wrench or nv > 0:
         # body inertias and forces at zero acceleration (as rhs_kernel, which overwrote its own)
-        _bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
+        bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
                      torque_A, p, L_rotor, has_gravity, gravity, lam_b, dlam_b, I6, pb)
         udot = ydot[i_vel:i_vel + N]
         # body accelerations about O^k: A^k = A^{k-1} moved to O^k + c^k + S_k u'_k
@@ -303,7 +303,7 @@ def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hin
                 A[3 + a] = amp[a] * sw
         for k in range(n):
             if k > 0:
-                _cross_add(A[:3], s_w[k - 1], A[3:])  # a kernel helper
+                vec_cross_add(A[:3], s_w[k - 1], A[3:])  # a kernel helper
             for r in range(6):
                 A[r] += c[k, r]
             for j in range(col_start[k], col_start[k + 1]):
@@ -321,12 +321,12 @@ def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hin
                     Fa0 += d1 * Fl2 - d2 * Fl1
                     Fa1 += d2 * Fl0 - d0 * Fl2
                     Fa2 += d0 * Fl1 - d1 * Fl0
-                Fa0 += _dot6(I6[k, 0], acc[k]) + pb[k, 0]
-                Fa1 += _dot6(I6[k, 1], acc[k]) + pb[k, 1]
-                Fa2 += _dot6(I6[k, 2], acc[k]) + pb[k, 2]
-                Fl0 += _dot6(I6[k, 3], acc[k]) + pb[k, 3]
-                Fl1 += _dot6(I6[k, 4], acc[k]) + pb[k, 4]
-                Fl2 += _dot6(I6[k, 5], acc[k]) + pb[k, 5]
+                Fa0 += dot6(I6[k, 0], acc[k]) + pb[k, 0]
+                Fa1 += dot6(I6[k, 1], acc[k]) + pb[k, 1]
+                Fa2 += dot6(I6[k, 2], acc[k]) + pb[k, 2]
+                Fl0 += dot6(I6[k, 3], acc[k]) + pb[k, 3]
+                Fl1 += dot6(I6[k, 4], acc[k]) + pb[k, 4]
+                Fl2 += dot6(I6[k, 5], acc[k]) + pb[k, 5]
                 for a in range(3):
                     wrench_force[k, a] = R[k, 0, a] * Fl0 + R[k, 1, a] * Fl1 + R[k, 2, a] * Fl2
                     wrench_moment[k, a] = R[k, 0, a] * Fa0 + R[k, 1, a] * Fa1 + R[k, 2, a] * Fa2
@@ -339,10 +339,10 @@ def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hin
         # speed rotors: the motor keeps kappa' constant, L_i = A_i (w' . e_i)
         for i in range(nv):
             k = speed_body[i]
-            _matvec(R[k], speed_axis[i], tmp)
+            mat_vec(R[k], speed_axis[i], tmp)
             L_speed[i] = speed_A[i] * (acc[k, 0] * tmp[0] + acc[k, 1] * tmp[1] + acc[k, 2] * tmp[2])
     elif do_inv and has_lam:
-        _bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
+        bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
                      torque_A, p, L_rotor, has_gravity, gravity, lam_b, dlam_b, I6, pb)
     # joint points
     if do_bodies or do_inv:
@@ -392,7 +392,7 @@ def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hin
         elif kind == JOINT_TORQUE_ROTOR:
             k = torque_body[ref]
             ax0, ax1, ax2 = torque_axis[ref, 0], torque_axis[ref, 1], torque_axis[ref, 2]
-            e0 = R[k, 0, 0] * ax0 + R[k, 0, 1] * ax1 + R[k, 0, 2] * ax2  # the axis in world (_matvec)
+            e0 = R[k, 0, 0] * ax0 + R[k, 0, 1] * ax1 + R[k, 0, 2] * ax2  # the axis in world (mat_vec)
             e1 = R[k, 1, 0] * ax0 + R[k, 1, 1] * ax1 + R[k, 1, 2] * ax2
             e2 = R[k, 2, 0] * ax0 + R[k, 2, 1] * ax1 + R[k, 2, 2] * ax2
             position[j] = y[i_kap + ref]
@@ -422,19 +422,19 @@ def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hin
     for a in range(3):
         L[a] = P[a] = hsum[a] = 0.0
     for k in range(n):
-        _matvec(Aw[k], w[k], ang)  # A w + h x v(O)
-        _cross_add(hk[k], vO[k], ang)
-        _cross(w[k], hk[k], lin)  # m v(O) + w x h
+        mat_vec(Aw[k], w[k], ang)  # A w + h x v(O)
+        vec_cross_add(hk[k], vO[k], ang)
+        vec_cross(w[k], hk[k], lin)  # m v(O) + w x h
         for a in range(3):
             lin[a] += mass[k] * vO[k, a]
         T += 0.5 * (w[k, 0] * ang[0] + w[k, 1] * ang[1] + w[k, 2] * ang[2]
                     + vO[k, 0] * lin[0] + vO[k, 1] * lin[1] + vO[k, 2] * lin[2])
-        _cross_add(O[k], lin, ang)  # about the origin
+        vec_cross_add(O[k], lin, ang)  # about the origin
         if has_lam:
-            _matvec(R[k], lam_b[k], tmp)  # lambda^k, speed and torque rotors
+            mat_vec(R[k], lam_b[k], tmp)  # lambda^k, speed and torque rotors
             for a in range(3):
                 ang[a] += tmp[a]
-            _matvec(R[k], lam_speed[k], tmp)
+            mat_vec(R[k], lam_speed[k], tmp)
             lam_dot += w[k, 0] * tmp[0] + w[k, 1] * tmp[1] + w[k, 2] * tmp[2]
         for a in range(3):
             L[a] += ang[a]
@@ -450,7 +450,7 @@ def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hin
         V = -(gravity[0] * hsum[0] + gravity[1] * hsum[1] + gravity[2] * hsum[2])
     inv[INV_ENERGY], inv[INV_KINETIC], inv[INV_POTENTIAL] = T + V, T, V
     inv[INV_JACOBI] = T + V - lam_dot - spin2
-    _cross(O[0], P, tmp)  # H_O1 = L - O^1 x P
+    vec_cross(O[0], P, tmp)  # H_O1 = L - O^1 x P
     mtot = 0.0
     for k in range(n):
         mtot += mass[k]
@@ -459,7 +459,7 @@ def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hin
         inv[8 + a] = P[a]
         hsum[a] /= mtot  # the centre of mass
     inv[INV_VERTICAL] = -(down[0, 2] * inv[5] + down[1, 2] * inv[6] + down[2, 2] * inv[7])  # (79)
-    _cross(hsum, P, tmp)
+    vec_cross(hsum, P, tmp)
     for a in range(3):
         inv[11 + a] = L[a] - tmp[a]
     return bad

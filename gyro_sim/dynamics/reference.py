@@ -238,6 +238,38 @@ def accelerations_from(model: Model, data: Data, Sa, Sb, udot, acc_w0, acc_v0):
     return acc_w0 + np.cumsum(da, axis=0), acc_v0 + np.cumsum(dv, axis=0)
 
 
+class Applied:
+    """The torques applied at one state of a stateful model (gyro_sim.dynamics.actuators): the
+    motors' (commands after saturation and the speed cut) and friction's, on the torque rotors
+    (nt,) and the hinges (nh,), with the relative speeds they were evaluated at."""
+
+    __slots__ = ("rotor_motor", "rotor_friction", "rotor_speed", "hinge_motor", "hinge_friction", "hinge_speed")
+
+    def power(self) -> tuple[float, float]:
+        """The power of the motors and of friction (W): torque times relative speed."""
+        motor = float(self.rotor_motor @ self.rotor_speed + self.hinge_motor @ self.hinge_speed)
+        friction = float(self.rotor_friction @ self.rotor_speed + self.hinge_friction @ self.hinge_speed)
+        return motor, friction
+
+
+def applied_torques(model: Model, data: Data, y: np.ndarray, p: np.ndarray | None,
+                    hinge_tau: np.ndarray | None, L_rotor: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+    """The hinge moments (nh,) and rotor torques (nt,) or None applied at state y of a stateful
+    model, from the (saturated) commands (None: zero) and the relative speeds: kappa_i' of the
+    rotors (eqs 18-19, from the spins p and the velocities in `data`), phi_k' of the hinges.
+    Leaves the parts in `data.applied` (:class:`Applied`)."""
+    act = model.actuators
+    nt, nh = len(model.torque_body), len(model.hinge_bodies)
+    a = data.applied = Applied()
+    a.rotor_speed = torque_rotor_rates(model, data, p) if nt else np.zeros(0)
+    a.hinge_speed = y[model.i_vel][model.col_hinge]
+    a.rotor_motor = act.rotor.cut(np.zeros(nt) if L_rotor is None else L_rotor, a.rotor_speed)
+    a.rotor_friction = act.rotor.friction(a.rotor_speed)
+    a.hinge_motor = np.zeros(nh) if hinge_tau is None else hinge_tau
+    a.hinge_friction = act.hinge.friction(a.hinge_speed)
+    return a.hinge_motor + a.hinge_friction, (a.rotor_motor + a.rotor_friction if nt else None)
+
+
 class Evaluation:
     """What one forward evaluation leaves behind for outputs (reactions, rotor torques)."""
 
@@ -262,6 +294,8 @@ def forward(
     """
     positions(model, data, t, y)
     velocities(model, data, t, y[model.i_vel])
+    if model.stateful:  # the torques applied at this state: motors after the cut, and friction
+        hinge_tau, L_rotor = applied_torques(model, data, y, p, hinge_tau, L_rotor)
     lam_w, dlam_w = lam(model, data, p, L_rotor)
     acc_w0, acc_v0 = bias_accelerations(model, data, t)
     f_ang, f_lin = body_forces(model, data, acc_w0, acc_v0, lam_w, dlam_w)

@@ -93,10 +93,13 @@ class ChainODE:
             self.inputs_version += 1
         self.t0, self.p0, self.hinge_tau, self.L_rotor = t0, p0, hinge_tau, L_rotor
 
-    def spins(self, t: float) -> np.ndarray | None:
-        """Absolute torque-rotor spins p_i(t) (eq 29 integrated over the hold)."""
+    def spins(self, t: float, y: np.ndarray | None = None) -> np.ndarray | None:
+        """Absolute torque-rotor spins p_i(t) (eq 29 integrated over the hold); in a stateful
+        model (`Model.stateful`) they are states: those of y (the held p0 without y)."""
         if self.p0 is None:
             return None
+        if self.model.stateful:
+            return self.p0 if y is None else y[self.model.i_spin]
         if self.L_rotor is None:
             return self.p0
         return self.p0 + (self.L_rotor / self.model.torque_A) * (t - self.t0)
@@ -104,7 +107,7 @@ class ChainODE:
     def rhs(self, t: float, y: np.ndarray, out: dyn.Evaluation | None = None) -> np.ndarray:
         m, d = self.model, self.data
         self.nfev += 1
-        p = self.spins(t)
+        p = self.spins(t, y)
         udot = dyn.forward(m, d, t, y, self.hinge_tau, p, self.L_rotor, out)
         u = y[m.i_vel]
         ydot = np.empty(m.size)
@@ -116,6 +119,10 @@ class ChainODE:
         ydot[m.i_vel] = udot
         if p is not None:
             ydot[m.i_kappa] = dyn.torque_rotor_rates(m, d, p)  # kappa_i' = p_i - w . e_i (eqs 18-19)
+        if m.stateful:  # (29) with the torques applied at this state; the works' powers
+            a = d.applied
+            ydot[m.i_spin] = (a.rotor_motor + a.rotor_friction) / m.torque_A
+            ydot[m.i_work] = a.power()
         return ydot
 
     def project(self, y: np.ndarray) -> None:
@@ -205,9 +212,10 @@ class FastChainODE:
         fast.normalize_quaternions in compiled loops)."""
         return self._i_q0, self._nq
 
-    def spins(self, t: float) -> np.ndarray | None:
-        """Absolute torque-rotor spins p_i(t) (eq 29 integrated over the hold)."""
-        return self._ref.spins(t)
+    def spins(self, t: float, y: np.ndarray | None = None) -> np.ndarray | None:
+        """Absolute torque-rotor spins p_i(t) (eq 29 integrated over the hold; the states of y
+        in a stateful model)."""
+        return self._ref.spins(t, y)
 
     @property
     def hinge_tau(self) -> np.ndarray | None:
@@ -296,7 +304,8 @@ class FastChainODE:
     def outputs(self, t: float, y: np.ndarray) -> dict[str, np.ndarray]:
         """Every output at (t, y) with the inputs held, in one compiled call
         (:func:`gyro_sim.dynamics.outputs.publication_kernel` with everything wanted, no joint
-        states: the Simulator's specialization of it); new arrays, by name:
+        states: the Simulator's specialization of it); not for a stateful model (ValueError);
+        new arrays, by name:
 
         ydot (size,) y' (u' and the torque-rotor angle rates in it), R (n, 3, 3) world_R_body,
         w (n, 3) angular velocities, vO (n, 3) velocities of the joint points, O (n, 3) joint points,
@@ -305,6 +314,9 @@ class FastChainODE:
         body k's frame, inv (fast_outputs.INV_SIZE,) energy, kinetic, potential, jacobi,
         vertical momentum, H_O1 (3), P (3), L about the centre of mass (3). Not counted in nfev.
         """
+        if self.model.stateful:
+            raise ValueError("the compiled outputs hold the inputs: a model with speed-dependent actuator terms "
+                             "takes its outputs from the numpy reference, rhs(t, y, out=...)")
         m, n = self.model, self.model.n
         out = {"ydot": np.empty(self.size), "R": np.empty((n, 3, 3)), "w": np.empty((n, 3)),
                "vO": np.empty((n, 3)), "O": np.empty((n, 3)), "quat": np.empty((n, 4)),
@@ -329,7 +341,8 @@ class FastChainODE:
         self.nfev -= 1
         one = np.zeros((1, 1))  # any tableau: zero steps compile the loop for every tableau
         self.march_explicit_rk(one, one[0], one[0], self._ref.t0, y, 1.0, 0)
-        self.outputs(self._ref.t0, y)
+        if not self.model.stateful:  # a stateful model's outputs come from the numpy reference
+            self.outputs(self._ref.t0, y)
 
     def project(self, y: np.ndarray) -> None:
         """Renormalise the quaternions of y (size,) in place."""

@@ -11,7 +11,9 @@ One writer serves the node's live recorder and ``gyro-sim run --record``::
 What a file holds (docs/logs.md):
 
 - header profile ``ros2``; one channel per topic, message encoding ``cdr``, schema encoding
-  ``ros2msg`` whose data is the type's full concatenated definition (:mod:`.msgdefs`);
+  ``ros2msg`` whose data is the type's full concatenated definition (:mod:`.msgdefs`), and the
+  channel metadata ``offered_qos_profiles`` that rosbag2 writes: the QoS the node's publisher
+  of that topic offers (gyro_sim.msgs.messages.topic_qos);
 - the scene, as YAML, in the attachment ``scene.yaml`` (media type ``application/yaml``), and
   the run parameters as JSON in the metadata record ``gyro_sim`` (key ``params``), both at the
   start of the file so that a log cut short still replays on its own;
@@ -57,6 +59,7 @@ from pathlib import Path
 from typing import Any, BinaryIO, Iterator, Mapping
 
 from gyro_sim.errors import GyroSimError
+from gyro_sim.msgs import messages as M
 from gyro_sim.msgs import msgdefs
 
 __all__ = ["LogError", "LogWriter", "LogInfo", "read_info", "iter_messages", "EVENTS_TOPIC", "FORMAT_VERSION"]
@@ -209,18 +212,21 @@ class LogWriter:
     overwrite : replace an existing file (default: refuse it, OutputError).
     file : an open binary file to write to instead of creating `path` (which then only names it
         in messages); the writer owns it from then on and closes it.
+    topics : the topic names of the node whose log this is (its robot description and events;
+        default: the root namespace's /robot_description and /gyro_sim/events).
 
     Attribute `failure`: the first OSError of a write or flush (None while all went well).
     """
 
     def __init__(self, path: str | os.PathLike, *, scene, params: dict,
                  flush_period: float = DEFAULT_FLUSH_PERIOD, robot_description: bool = True,
-                 overwrite: bool = False, file: BinaryIO | None = None):
+                 overwrite: bool = False, file: BinaryIO | None = None, topics: "M.TopicNames" = M.ROOT_TOPICS):
         from mcap.writer import Writer
 
         if not (flush_period > 0 and math.isfinite(flush_period)):
             raise LogError(f"flush_period must be a positive number of seconds, got {flush_period!r}")
         self.path = Path(path)
+        self.topic_names = topics
         self.flush_period = float(flush_period)
         try:
             params_json = json.dumps(_plain(params), allow_nan=False)
@@ -265,7 +271,7 @@ class LogWriter:
         if robot_description:
             from gyro_sim.scene.urdf import urdf
 
-            ch = self.add_channel(ROBOT_DESCRIPTION_TOPIC, "std_msgs/msg/String")
+            ch = self.add_channel(topics.robot_description, "std_msgs/msg/String")
             self.write(ch, 0, {"data": urdf(scene)}, check_finite=False)
 
     # --- channels ------------------------------------------------------------------------------
@@ -290,7 +296,10 @@ class LogWriter:
                     raise LogError(str(exc)) from exc
                 sid = self._writer.register_schema(msgtype, "ros2msg", text.encode())
                 self._schemas[msgtype] = sid
-            cid = self._writer.register_channel(topic, "cdr", sid, dict(metadata or {}))
+            meta = dict(metadata or {})
+            if M.QOS_METADATA_KEY not in meta:  # what rosbag2 writes: the publisher's QoS, for playback
+                meta[M.QOS_METADATA_KEY] = M.topic_qos(topic).yaml()
+            cid = self._writer.register_channel(topic, "cdr", sid, meta)
             self._channels[topic] = (cid, msgtype)
             self._sequence[cid] = 0
             return cid
@@ -360,8 +369,8 @@ class LogWriter:
         self.write_raw(ch, log_time_ns, data, publish_time_ns)
 
     def event(self, log_time_ns: int, text: str) -> None:
-        """A marker (e.g. "reset") on /gyro_sim/events (std_msgs/msg/String)."""
-        ch = self.add_channel(EVENTS_TOPIC, "std_msgs/msg/String")
+        """A marker (e.g. "reset") on /gyro_sim/events (std_msgs/msg/String; ``~/events`` of `topics`)."""
+        ch = self.add_channel(self.topic_names.events, "std_msgs/msg/String")
         self.write(ch, log_time_ns, {"data": str(text)})
 
     def _canonical(self, ch: int, data: bytes) -> bytes:
@@ -721,6 +730,20 @@ def iter_messages(path: str | os.PathLike, topics=None, *, decode: bool = True,
         verify(path)  # names the damaged chunk's offset if there is one
         raise LogError(f"{path}: cannot read the messages (after {topic or 'the start'}): "
                        f"{type(exc).__name__}: {str(exc)[:200]}") from None
+
+
+def log_topic_names(path: str | os.PathLike, topics=None) -> "M.TopicNames":
+    """The topic names of the node that wrote the log at `path` (`topics`: its channels' names,
+    read from the log when not given): those of its namespace for a namespaced node's log
+    (gyro_sim.msgs.messages.log_topic_names), with the node's frame_prefix. LogError for a log
+    that mixes two robots."""
+    info = read_info(path)
+    prefix = info.params.get("frame_prefix", "")
+    try:
+        return M.log_topic_names(info.topics if topics is None else topics, str(path),
+                                 prefix if isinstance(prefix, str) else "")
+    except M.NamespaceError as exc:
+        raise LogError(str(exc)) from None
 
 
 def describe(path: str | os.PathLike) -> str:

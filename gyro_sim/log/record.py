@@ -165,17 +165,19 @@ class RunRecord:
 
 def read_schedule(path, axis_names: Sequence[str]) -> list[tuple[float, list[float]]]:
     """A command schedule from a file: YAML (a list of ``[t, [values]]``) or a gyro_sim log
-    (``.mcap``: its /gyro_sim/axis_moments at their log times, resets not followed).
+    (``.mcap``: its ~/axis_moments, /gyro_sim/axis_moments of a node in the root namespace, at
+    their log times, resets not followed).
     Raises ValueError naming the problem."""
     from pathlib import Path
 
     p = Path(path)
     if p.suffix == ".mcap":
-        from gyro_sim.log.mcap_log import iter_messages
+        from gyro_sim.log.mcap_log import iter_messages, read_info
 
-        raw = [(t_ns * 1e-9, list(msg.data)) for _, _, t_ns, msg in iter_messages(p, [M.AXIS_MOMENTS])]
+        topic = M.log_topic_names(read_info(p).topics, str(p)).axis_moments  # a namespaced node's log too
+        raw = [(t_ns * 1e-9, list(msg.data)) for _, _, t_ns, msg in iter_messages(p, [topic])]
         if not raw:
-            raise ValueError(f"no {M.AXIS_MOMENTS} in the log")
+            raise ValueError(f"no {topic} in the log")
     else:
         import yaml
 

@@ -82,7 +82,8 @@ def resimulate(path: str | os.PathLike, *, integrator: str | None = None, rtol: 
     sim = Simulator(scene, integrator=name, rtol=p["rtol"] if rtol is None else rtol,
                     atol=p["atol"] if atol is None else atol, step=p["step"])
     dt = float(p["advance_dt"])
-    cmd_topic = p.get("commands_topic", M.AXIS_MOMENTS)
+    names = log_names(path, info)
+    cmd_topic = p.get("commands_topic", names.axis_moments)
     out = Resimulation(integrator=name)
     if name != p["integrator"] or rtol is not None or atol is not None:
         out.notes.append(f"integrator {name} (rtol {sim.integrator.rtol:g}) differs from the recorded "
@@ -94,15 +95,24 @@ def resimulate(path: str | os.PathLike, *, integrator: str | None = None, rtol: 
             out.notes.append(f"recorded with {key} {p[key]}, re-simulated with {here[key]}: rounding may differ")
 
     end = info.end_ns or 0
-    topics = [M.JOINT_STATES, cmd_topic, M.EVENTS]
+    topics = [names.joint_states, cmd_topic, names.events]
     if sim.imu_names:  # the IMUs sampled as the log's publications did
         sim.set_imu_default_rate(float(p.get("publish_rate", 100.0)))
         topics += [topic for topic, msgtype in info.topics.items() if msgtype == M.IMU_TYPE]
     # file order is causal order (record.py); log_time_order=False keeps it
-    _replay(path, sim, out, dt, cmd_topic, topics, end, progress)
+    _replay(path, sim, out, dt, cmd_topic, topics, end, progress, names)
     if out.compared == 0:
         out.notes.append("no joint states were compared")
     return out
+
+
+def log_names(path, info) -> M.TopicNames:
+    """The topic names of the node that wrote the log (its namespace: gyro_sim.msgs.messages.
+    log_topic_names); LogError for a log that mixes two robots."""
+    try:
+        return M.log_topic_names(info.topics, str(path))
+    except M.NamespaceError as exc:
+        raise LogError(str(exc)) from None
 
 
 def prepare(path: str | os.PathLike, *, integrator: str | None = None):
@@ -117,11 +127,13 @@ def prepare(path: str | os.PathLike, *, integrator: str | None = None):
     if missing:
         raise LogError(f"{path}: the parameters lack {', '.join(missing)}: not a re-simulable gyro_sim log")
     _check_params(path, p)
-    cmd_topic = p.get("commands_topic", M.AXIS_MOMENTS)
-    if cmd_topic in TOPIC_TYPES:
+    names = log_names(path, info)
+    cmd_topic = p.get("commands_topic", names.axis_moments)
+    types = {names.joint_states: TOPIC_TYPES[M.JOINT_STATES], names.events: TOPIC_TYPES[M.EVENTS]}
+    if cmd_topic in types:
         raise LogError(f"{path}: parameter commands_topic: {cmd_topic} is the topic of "
-                       f"{TOPIC_TYPES[cmd_topic]}, not of the commands")
-    for topic, wanted in {**TOPIC_TYPES, cmd_topic: COMMANDS_TYPE}.items():
+                       f"{types[cmd_topic]}, not of the commands")
+    for topic, wanted in {**types, cmd_topic: COMMANDS_TYPE}.items():
         have = info.topics.get(topic)
         if have is not None and have != wanted:
             what = "parameter commands_topic: " if topic == cmd_topic else ""
@@ -141,7 +153,8 @@ def prepare(path: str | os.PathLike, *, integrator: str | None = None):
     return info
 
 
-def _replay(path, sim, out: Resimulation, dt: float, cmd_topic: str, topics, end: int, progress) -> None:
+def _replay(path, sim, out: Resimulation, dt: float, cmd_topic: str, topics, end: int, progress,
+            names: M.TopicNames = M.ROOT_TOPICS) -> None:
     """Feed the log's commands, resets and timeouts to `sim`, comparing its joint states."""
     offset = 0
     imus = None  # (log time, {name: reading}) of the IMU messages at one time
@@ -157,7 +170,7 @@ def _replay(path, sim, out: Resimulation, dt: float, cmd_topic: str, topics, end
             if progress is not None:
                 progress((offset + M.time_ns(sim.time)) / 1e9, end / 1e9)
         here_ns = offset + M.time_ns(sim.time)
-        if topic == M.JOINT_STATES:
+        if topic == names.joint_states:
             if here_ns != t:
                 out.off_boundary += 1
                 continue
@@ -165,7 +178,7 @@ def _replay(path, sim, out: Resimulation, dt: float, cmd_topic: str, topics, end
                 _compare(out, sim.joint_states(), _fields(path, msg, topic, t, JOINT_STATE_FIELDS), t)
             except TypeError as exc:  # fields of the wrong kind (a crafted schema)
                 raise LogError(f"{path}: {topic} at log time {t / 1e9:.9g} s: {exc}") from None
-        elif msgtype == M.IMU_TYPE and topic not in (cmd_topic, M.EVENTS):
+        elif msgtype == M.IMU_TYPE and topic not in (cmd_topic, names.events):
             if here_ns != t:
                 out.off_boundary += 1
                 continue
@@ -181,7 +194,7 @@ def _replay(path, sim, out: Resimulation, dt: float, cmd_topic: str, topics, end
                 out.rejected += 1
                 continue
             out.commands += 1
-        elif topic == M.EVENTS:
+        elif topic == names.events:
             event = _fields(path, msg, topic, t, ("data",)).data
             if not isinstance(event, str):
                 raise LogError(f"{path}: {topic} at log time {t / 1e9:.9g} s: data is not a string")

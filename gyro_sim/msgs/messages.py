@@ -6,7 +6,11 @@ offline recorder (:mod:`gyro_sim.log.record`) writes them to its log. Nothing el
 message content.
 
 Topics and frames (docs/ros-interface.md), all stamped with the log time (simulated time
-since the start, resets included):
+since the start, resets included). The names below are those of a node in the root namespace
+and of offline logs; a node in a namespace (:class:`TopicNames`) has ``joint_states`` and
+``robot_description`` under its namespace and ``/gyro_sim/...`` under its fully qualified
+name (``/robot1/joint_states``, ``/robot1/gyro_sim/poses``), /tf, /clock and /diagnostics
+global:
 
 ==================================  ===============================  ==========================
 topic                               type                             frame_id
@@ -19,7 +23,7 @@ topic                               type                             frame_id
 /diagnostics                        diagnostic_msgs/msg/DiagnosticArray
 /gyro_sim/axis_moments              std_msgs/msg/Float64MultiArray   (the commands)
 /gyro_sim/events                    std_msgs/msg/String              (markers: "reset", ...)
-/robot_description                  std_msgs/msg/String              (logs only: the URDF, t = 0)
+/robot_description                  std_msgs/msg/String              (the URDF; transient local)
 ==================================  ===============================  ==========================
 
 A wrench is R^k (eq 40) and L^k (eq 48) at O^k in body k's own frame. A pose or transform is
@@ -39,7 +43,7 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass
-from typing import Iterable, Mapping, Sequence
+from typing import ClassVar, Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -91,6 +95,10 @@ INVARIANT_KEYS = {
 }
 #: work of the commands and the energy balance E - E(0) - W (gyro_sim.snapshot)
 WORK_KEY = "work_by_commands_J"
+#: scenes with actuator limits: the work of friction (<= 0, counted apart in the balance) and
+#: the commanded moments clipped to their max_torque since the reset
+FRICTION_WORK_KEY = "work_by_friction_J"
+SATURATED_KEY = "saturated_commands"
 BALANCE_KEY = "energy_balance_J"
 BALANCE_REL_KEY = "energy_balance_rel"
 DRIFT_SUFFIX = "_drift_rel"
@@ -125,6 +133,146 @@ def topic_token(name: str) -> str:
 
 def wrench_topic(joint: str, namespace: str = NAMESPACE) -> str:
     return f"{namespace}/wrench/{topic_token(joint)}"
+
+
+class NamespaceError(GyroSimError, ValueError):
+    """A log whose channels are not those of one node (two robots' topics mixed in one file)."""
+
+
+#: node name of gyro_sim_node (its private topics ``~/x`` are ``<namespace>/gyro_sim/x``)
+NODE_NAME = "gyro_sim"
+
+
+@dataclass(frozen=True)
+class TopicNames:
+    """The fully qualified topic names of one gyro_sim node (docs/ros-interface.md).
+
+    ``joint_states`` and ``robot_description`` are relative to the node's namespace (as
+    robot_state_publisher's), ``~/x`` topics are under the node's fully qualified name,
+    /tf, /clock and /diagnostics are global (tf2 listeners, simulated time and diagnostic
+    aggregators read them there; a status names its node).
+
+    Parameters
+    ----------
+    namespace : the node's namespace, "/" (root) or "/robot1"
+    node : the node's fully qualified name ("/gyro_sim", "/robot1/gyro_sim")
+    frame_prefix : put before every body's frame name (the /tf child frames and the wrenches'
+        frame_id; "world" stays as it is), as robot_state_publisher's parameter of that name:
+        two robots on one /tf then have frames of their own ("robot1/arm1")
+    """
+
+    namespace: str = "/"
+    node: str = NAMESPACE
+    frame_prefix: str = ""
+
+    def _relative(self, name: str) -> str:
+        return f"{self.namespace.rstrip('/')}/{name}"
+
+    @property
+    def joint_states(self) -> str:
+        return self._relative("joint_states")
+
+    @property
+    def robot_description(self) -> str:
+        return self._relative("robot_description")
+
+    @property
+    def axis_moments(self) -> str:
+        return f"{self.node}/axis_moments"
+
+    @property
+    def events(self) -> str:
+        return f"{self.node}/events"
+
+    @property
+    def poses(self) -> str:
+        return f"{self.node}/poses"
+
+    @property
+    def wrench_prefix(self) -> str:
+        return f"{self.node}/wrench/"
+
+    def wrench(self, joint: str) -> str:
+        return wrench_topic(joint, self.node)
+
+    def status_name(self, root_name: str) -> str:
+        """A DiagnosticStatus name (DYNAMICS_STATUS, RUN_STATUS) for this node: as it is in the
+        root namespace, else with the node's namespace before it ("robot1/gyro_sim: run"), so
+        that the statuses of two robots on the global /diagnostics are told apart."""
+        if self.node == NAMESPACE:
+            return root_name
+        return self.node.lstrip("/") + root_name[len(NODE_NAME):]
+
+    tf: ClassVar[str] = TF
+    clock: ClassVar[str] = CLOCK
+    diagnostics: ClassVar[str] = DIAGNOSTICS
+
+
+#: the topics of a node in the root namespace (and of offline logs)
+ROOT_TOPICS = TopicNames()
+
+
+def log_topic_names(topics: Iterable[str], where: str = "log", frame_prefix: str = "") -> TopicNames:
+    """The TopicNames of the node that wrote a log with these channels: its namespace is the one
+    of its ``.../joint_states`` channel, its node name that of ``.../events`` or
+    ``.../axis_moments`` under it (else ``<namespace>/gyro_sim``). A log with no joint states is
+    read as root. NamespaceError when joint states of more than one namespace are in it."""
+    topics = list(topics)
+    spaces = sorted({t[:-len("/joint_states")] or "/" for t in topics if t.endswith("/joint_states")})
+    if len(spaces) > 1:
+        raise NamespaceError(f"{where}: joint states of {len(spaces)} namespaces ({', '.join(spaces[:4])}): "
+                             "a log of one robot is read, not a mix; record each robot to its own file")
+    ns = spaces[0] if spaces else "/"
+    base = ns.rstrip("/")
+    nodes = sorted({t.rsplit("/", 1)[0] for t in topics
+                    if t.endswith(("/events", "/axis_moments")) and t.startswith(base + "/")
+                    and t.count("/") == base.count("/") + 2})
+    node = nodes[0] if len(nodes) == 1 else f"{base}/{NODE_NAME}"
+    return TopicNames(namespace=ns, node=node, frame_prefix=frame_prefix)
+
+
+# --- quality of service ---------------------------------------------------------------------------
+#: depth of the node's publishers (keep last)
+PUBLISHER_DEPTH = 10
+#: an infinite duration as the ROS graph reports it for a publisher without deadline, lifespan or
+#: liveliness lease (RMW_DURATION_INFINITE: what rosbag2 records for them)
+INFINITE_DURATION = {"sec": 9223372036, "nsec": 854775807}
+#: metadata key of an MCAP channel holding its publisher's QoS (rosbag2_storage_mcap)
+QOS_METADATA_KEY = "offered_qos_profiles"
+
+
+@dataclass(frozen=True)
+class Qos:
+    """The QoS a gyro_sim publisher offers (keep last `depth`; policy names as rmw spells them)."""
+
+    reliability: str = "reliable"
+    durability: str = "volatile"
+    depth: int = PUBLISHER_DEPTH
+
+    def as_dict(self) -> dict:
+        """The profile as rosbag2 serialises it (metadata version 9: policy names, not numbers)."""
+        return {"history": "keep_last", "depth": self.depth, "reliability": self.reliability,
+                "durability": self.durability, "deadline": dict(INFINITE_DURATION),
+                "lifespan": dict(INFINITE_DURATION), "liveliness": "automatic",
+                "liveliness_lease_duration": dict(INFINITE_DURATION), "avoid_ros_namespace_conventions": False}
+
+    def yaml(self) -> str:
+        """``offered_qos_profiles`` of a channel: a YAML list with this one profile."""
+        import yaml
+
+        return yaml.safe_dump([self.as_dict()], sort_keys=False)
+
+
+#: every topic of the node but the robot description
+PUBLISHER_QOS = Qos()
+#: /robot_description: reliable, transient local, depth 1 (robot_state_publisher's): a late
+#: subscriber asking for transient local gets the last one
+LATCHED_QOS = Qos(durability="transient_local", depth=1)
+
+
+def topic_qos(topic: str) -> Qos:
+    """The QoS the node publishes `topic` with (and a log records for it)."""
+    return LATCHED_QOS if topic.rsplit("/", 1)[-1] == "robot_description" else PUBLISHER_QOS
 
 
 def topic_types(joints: Iterable[str], namespace: str = NAMESPACE) -> dict[str, str]:
@@ -336,6 +484,10 @@ def dynamics_values(snap) -> dict[str, float | str]:
         out[drift_key(name)] = d
     if snap.work is not None:
         out[WORK_KEY] = snap.work
+    if snap.friction_work is not None:
+        out[FRICTION_WORK_KEY] = snap.friction_work
+    if snap.saturated_commands is not None:
+        out[SATURATED_KEY] = float(snap.saturated_commands)
     if snap.energy_balance is not None:
         out[BALANCE_KEY] = snap.energy_balance
         out[BALANCE_REL_KEY] = snap.energy_balance / snap.energy_scale
@@ -385,9 +537,10 @@ def diagnostic_array(t_ns: int, statuses: Sequence[Status]) -> bytes:
     return bytes(w)
 
 
-def diagnostics(snap, t_ns: int, hardware_id: str, run: Status | None = None) -> bytes:
-    """The /diagnostics message of a snapshot (and the run's figures, when given)."""
-    statuses = [Status(DYNAMICS_STATUS, dynamics_values(snap), hardware_id=hardware_id)]
+def diagnostics(snap, t_ns: int, hardware_id: str, run: Status | None = None, name: str = DYNAMICS_STATUS) -> bytes:
+    """The /diagnostics message of a snapshot (and the run's figures, when given); `name`: the
+    dynamics status's name (TopicNames.status_name)."""
+    statuses = [Status(name, dynamics_values(snap), hardware_id=hardware_id)]
     if run is not None:
         statuses.append(run)
     return diagnostic_array(t_ns, statuses)
@@ -412,21 +565,28 @@ class Publication:
     Parameters
     ----------
     body_names : the scene's bodies (the wrench topics)
-    namespace : the node's fully qualified name (topics ``~/x``)
+    namespace : the node's fully qualified name (topics ``~/x``), when `topics` is not given
     hardware_id : the scene's name (diagnostics)
+    topics : the node's topic names (default: those of a node named `namespace` in the root namespace)
     """
 
-    def __init__(self, body_names: Sequence[str], *, namespace: str = NAMESPACE, hardware_id: str = ""):
+    def __init__(self, body_names: Sequence[str], *, namespace: str = NAMESPACE, hardware_id: str = "",
+                 topics: TopicNames | None = None):
         self.body_names = tuple(body_names)
-        self.wrench_topics = tuple(wrench_topic(b, namespace) for b in self.body_names)
-        self.poses_topic = f"{namespace}/poses"
+        self.topics = topics = topics or TopicNames(node=namespace)
+        #: the bodies' frame names in /tf and the wrenches (frame_prefix + body name)
+        self.frame_names = tuple(topics.frame_prefix + b for b in self.body_names)
+        self.joint_states_topic = topics.joint_states
+        self.wrench_topics = tuple(topics.wrench(b) for b in self.body_names)
+        self.poses_topic = topics.poses
         self.hardware_id = hardware_id
+        self.dynamics_status = topics.status_name(DYNAMICS_STATUS)
         # the messages of fixed layout, written once and refilled (same bytes as the builders)
         n = len(self.body_names)
         zeros = np.zeros((n, 7))
-        self._wrenches = Refill([_wrench_stamped(CdrWriter(record=True), 0, b, zeros[0, :6]) for b in self.body_names])
+        self._wrenches = Refill([_wrench_stamped(CdrWriter(record=True), 0, b, zeros[0, :6]) for b in self.frame_names])
         self._poses = Refill([_pose_array(CdrWriter(record=True), zeros, 0)])
-        self._tf = Refill([_tf_message(CdrWriter(record=True), self.body_names, zeros, 0)])
+        self._tf = Refill([_tf_message(CdrWriter(record=True), self.frame_names, zeros, 0)])
         self._joints: tuple[tuple[str, ...], Refill] | None = None
 
     def frame(self, joint_names: Sequence[str], *, wrenches: bool, poses: bool, tf: bool) -> "Frame":
@@ -449,7 +609,7 @@ class Publication:
         if not np.all(np.isfinite(js)):
             joint_state(snap, t_ns)  # raises, naming the field
         (data,) = self._joint_refill(tuple(snap.joint_names)).fill(t_ns, js)
-        out = [(JOINT_STATES, JOINT_STATE_TYPE, data), (CLOCK, CLOCK_TYPE, clock(t_ns))]
+        out = [(self.joint_states_topic, JOINT_STATE_TYPE, data), (CLOCK, CLOCK_TYPE, clock(t_ns))]
         if snap.wrench_force is not None:
             wr = np.concatenate((snap.wrench_force, snap.wrench_moment), axis=1)
             if not np.all(np.isfinite(wr)):
@@ -463,7 +623,8 @@ class Publication:
             if tf:
                 out.append((TF, TF_TYPE, self._tf.fill(t_ns, xyzw)[0]))
         if diagnostics_run is not False:
-            out.append((DIAGNOSTICS, DIAGNOSTICS_TYPE, diagnostics(snap, t_ns, self.hardware_id, diagnostics_run or None)))
+            out.append((DIAGNOSTICS, DIAGNOSTICS_TYPE, diagnostics(snap, t_ns, self.hardware_id, diagnostics_run or None,
+                                                                   self.dynamics_status)))
         return out
 
 
@@ -486,17 +647,18 @@ class Frame:
         body_names = publication.body_names
         n, J = len(body_names), len(joint_names)
         z, z7 = np.zeros(J), np.zeros((n, 7))
-        msgs = [(JOINT_STATES, JOINT_STATE_TYPE, _joint_state(CdrWriter(record=True), joint_names, z, z, z, 0))]
+        msgs = [(publication.joint_states_topic, JOINT_STATE_TYPE,
+                 _joint_state(CdrWriter(record=True), joint_names, z, z, z, 0))]
         w = CdrWriter(record=True)
         w.time(0)
         msgs.append((CLOCK, CLOCK_TYPE, w))
         if wrenches:
             msgs += [(topic, WRENCH_TYPE, _wrench_stamped(CdrWriter(record=True), 0, b, z7[0, :6]))
-                     for topic, b in zip(publication.wrench_topics, body_names)]
+                     for topic, b in zip(publication.wrench_topics, publication.frame_names)]
         if poses:
             msgs.append((publication.poses_topic, POSE_ARRAY_TYPE, _pose_array(CdrWriter(record=True), z7, 0)))
         if tf:
-            msgs.append((TF, TF_TYPE, _tf_message(CdrWriter(record=True), body_names, z7, 0)))
+            msgs.append((TF, TF_TYPE, _tf_message(CdrWriter(record=True), publication.frame_names, z7, 0)))
         starts, at = [], 0
         for _, _, m in msgs:
             starts.append(at)

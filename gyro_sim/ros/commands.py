@@ -5,6 +5,7 @@
     gyro-sim cmd --seconds 10 sine --amplitude 0.002 0.05 0 --frequency 0.5
     gyro-sim cmd sine --amplitude 0.002 0.05 0 --frequency 0.5 --seconds 10   # options go on either side
     gyro-sim cmd --scene hinge_chain constant 0 0.05 0    # checks the count, prints the axis names
+    gyro-sim cmd --namespace /robot1 constant 0 0.05 0    # the node started with -r __ns:=/robot1
 
 Values are N m, one per axis (with --scene, a single value stands for every axis). Commands are sent
 at --rate Hz (keep it above 1 / command_timeout of the node) from the moment the node's
@@ -23,6 +24,14 @@ import numpy as np
 
 DEFAULT_TOPIC = "/gyro_sim/axis_moments"
 DISCOVERY_TIMEOUT = 15.0
+
+
+def command_topic(namespace: str) -> str:
+    """~/axis_moments of gyro_sim_node started in `namespace` ("/", "robot1" or "/robot1")."""
+    from gyro_sim.msgs.messages import NODE_NAME, TopicNames
+
+    ns = "/" + namespace.strip("/")
+    return TopicNames(namespace=ns, node=f"{ns.rstrip('/')}/{NODE_NAME}").axis_moments
 
 
 def profile(args):
@@ -75,11 +84,19 @@ def cmd_publish(args) -> int:
     try:
         import rclpy
         from rclpy.executors import ExternalShutdownException
+        from rclpy.validate_full_topic_name import validate_full_topic_name
         from std_msgs.msg import Float64MultiArray
     except ImportError as exc:
         print(f"gyro-sim cmd: needs rclpy ({exc}); install it with: pip install 'gyro_sim[ros]'", file=sys.stderr)
         return 2
 
+    topic = args.topic or command_topic(args.namespace)
+    try:
+        validate_full_topic_name(topic)
+    except Exception as exc:  # noqa: BLE001 - rclpy's InvalidTopicNameException and kin
+        print(f"gyro-sim cmd: {topic!r} is not a valid topic name ({str(exc).splitlines()[0]})", file=sys.stderr)
+        return 2
+    args.topic = topic
     rclpy.init()
     node = rclpy.create_node("gyro_sim_cmd")
     pub = node.create_publisher(Float64MultiArray, args.topic, 10)
@@ -147,7 +164,11 @@ def _common_options(parser, suppress) -> None:
     def default(value):
         return suppress if suppress is not None else value
 
-    parser.add_argument("--topic", default=default(DEFAULT_TOPIC), help="topic of the node's commands")
+    parser.add_argument("--namespace", default=default("/"),
+                        help="namespace of the node (as its --ros-args -r __ns:=/robot1); default: the root")
+    parser.add_argument("--topic", default=default(None),
+                        help=f"topic of the node's commands (default: ~/axis_moments of the node, {DEFAULT_TOPIC} "
+                             "in the root namespace)")
     parser.add_argument("--rate", type=float, default=default(50.0), help="messages per second (default 50)")
     parser.add_argument("--seconds", type=float, default=default(0.0), help="seconds to publish; 0 = until Ctrl-C")
     parser.add_argument("--scene", default=default(None), help="check the number of values against this scene's axes")

@@ -53,6 +53,7 @@ import numpy as np
 from gyro_sim.simulator import SimulationError
 from gyro_sim.msgs import messages as M
 from gyro_sim.log.resim import COMMAND_TIMEOUT_EVENT
+from gyro_sim.ros.demo import DEMO_RATE
 from gyro_sim.ros.outputs import OutputsClosed
 from gyro_sim.ros.pacing import (
     Histogram, Pacer, RateMeter, RunDelay, Samples, chunk_steps, host_steal, normal_priority,
@@ -178,8 +179,15 @@ class SimLoop:
         deadline check (the OS gave the CPUs to others: diagnostics of a miss, not a change to it)
     """
 
-    def __init__(self, sim, config, outputs, clock=time.monotonic, sleep=time.sleep, run_delay=None):
+    def __init__(self, sim, config, outputs, clock=time.monotonic, sleep=time.sleep, run_delay=None, demo=None):
         self.sim, self.config, self.out = sim, config, outputs
+        #: the built-in demo commands (gyro_sim.ros.demo.Demo) while no command came from outside
+        self.demo = demo
+        self._demo_period_ns = M.time_ns(min(1.0 / DEMO_RATE, 0.5 * config.command_timeout))
+        self._next_demo_ns = 0
+        self._demo_stopped = False  # a command from outside arrived: the demo is over
+        self._demo_stop_said = False
+        self._submit_lock = threading.Lock()  # a demo command never lands after one from outside
         self.clock = clock
         self.dt = config.dt
         self.rtf = config.real_time_factor
@@ -242,8 +250,14 @@ class SimLoop:
     # --- from other threads ----------------------------------------------------------------------
     def submit_command(self, raw: bytes, values) -> str | None:
         """A command received (raw CDR bytes and its values); returns why it is refused, if it is.
-        A good one replaces the latest (taken by the next physics step)."""
-        reason = check_command(values, self.n_axes)
+        A good one replaces the latest (taken by the next physics step) and ends the demo."""
+        with self._submit_lock:
+            reason = check_command(values, self.n_axes)
+            if reason is None:
+                self._demo_stopped = True
+            return self._submit(raw, values, reason)
+
+    def _submit(self, raw: bytes, values, reason: str | None) -> str | None:
         if reason is None:
             seq = self.counters.accepted + 1
             self._received.append((seq, raw))  # before it is the latest: a step taking it finds it here
@@ -310,6 +324,9 @@ class SimLoop:
                 self._publications = 0
                 self.counters.moments_since = self.node_time
                 self.out.event(self.node_ns, "reset")
+                republish = getattr(self.out, "publish_robot_description", None)
+                if republish is not None:  # the robot is back at its initial pose: said to late joiners too
+                    republish()
                 self.pacer.restart(self.node_time)
                 self.rate.mark(self.node_time)
                 req.message = f"reset to the initial state at node time {self.node_time:.6f} s"
@@ -447,9 +464,26 @@ class SimLoop:
             for _ in range(n):
                 self.step_time.add(per_step)
 
+    def _demo_command(self, t_ns: int) -> None:
+        """The demo's command for node time t_ns, through the command path, when one is due."""
+        if self._demo_stopped:
+            if not self._demo_stop_said:
+                self._demo_stop_said = True
+                self.out.event(t_ns, "demo stopped: a command arrived")
+            return
+        if t_ns < self._next_demo_ns:
+            return
+        self._next_demo_ns = t_ns + self._demo_period_ns
+        values = self.demo.moments(t_ns * 1e-9)
+        with self._submit_lock:
+            if not self._demo_stopped:
+                self._submit(M.axis_moments(values), values, None)
+
     def _take_commands(self) -> None:
         t_ns = self.node_ns
         t = t_ns * 1e-9
+        if self.demo is not None:
+            self._demo_command(t_ns)
         new = self._latest
         latest = None
         if new is not None and new[0] != self._taken_seq:
@@ -529,7 +563,7 @@ class SimLoop:
             "step_time_p99_us": p99 * 1e6,
             "publish_jitter_p50_us": j50 * 1e6,
             "publish_jitter_p99_us": j99 * 1e6,
-            "sim_lag_max_ms": max(self.lag.window, default=0.0) * 1e3,
+            "sim_lag_max_ms": max(self.lag.window, default=math.nan) * 1e3,  # none before the first publication
             "deadline_misses": self.pacer.misses,
             "slipped_s": self.pacer.slipped,
             "steps_per_wakeup": self.per_chunk,
@@ -569,10 +603,14 @@ class SimLoop:
             warn.append(f"{rec.dropped_records} records dropped from the log (the writer fell behind)")
         if warn:
             return self._status(M.WARN, "; ".join(warn), values)
+        if not math.isfinite(rtf):  # nothing simulated since the start or the reset: no rate to state
+            return self._status(M.OK, "starting" if self.steps == 0 else "running", values)
         return self._status(M.OK, "running", values)
 
     def _status(self, level: int, message: str, values: dict) -> M.Status:
-        return M.Status(M.RUN_STATUS, values, level=level, message=message, hardware_id=self.sim.scene.name)
+        topics = getattr(self.out, "topics", M.ROOT_TOPICS)
+        return M.Status(topics.status_name(M.RUN_STATUS), values, level=level, message=message,
+                        hardware_id=self.sim.scene.name)
 
     @property
     def nominal_publish_interval(self) -> float:

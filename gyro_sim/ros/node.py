@@ -35,6 +35,7 @@ import os
 # One BLAS thread: the chain's matrices are small and a threaded BLAS fights the loop (cli.py).
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
+import dataclasses  # noqa: E402
 import json  # noqa: E402
 import signal  # noqa: E402
 import sys  # noqa: E402
@@ -55,7 +56,7 @@ except ImportError as _exc:  # the class below is then never instantiated
 from gyro_sim.simulator import Simulator  # noqa: E402
 from gyro_sim.msgs.messages import decode_axis_moments  # noqa: E402
 from gyro_sim.ros.loop import SimLoop  # noqa: E402
-from gyro_sim.ros.outputs import Outputs  # noqa: E402
+from gyro_sim.ros.outputs import Outputs, node_topics  # noqa: E402
 from gyro_sim.ros.params import PARAMETERS, ParameterError, validate  # noqa: E402
 
 #: bytes in a megabyte (record_queue_mb)
@@ -102,14 +103,18 @@ def descriptor(p) -> ParameterDescriptor:
     return d
 
 
-def log_params(sim, cfg) -> dict:
+def log_params(sim, cfg, topics=None) -> dict:
     """The log's run parameters: the re-simulation contract of gyro_sim.log.record (one advance of
-    1/physics_rate per step), plus the node's own parameters."""
+    1/physics_rate per step), plus the node's own parameters and names (`topics`: its
+    gyro_sim.msgs.messages.TopicNames; default the root namespace's)."""
     from gyro_sim.log.record import run_params
+    from gyro_sim.msgs.messages import ROOT_TOPICS
 
+    topics = topics or ROOT_TOPICS
     own = {k: v for k, v in cfg.as_dict().items() if k not in ("publish_rate", "duration")}
     return run_params(sim, advance_dt=cfg.dt, publish_rate=cfg.publish_rate, source="gyro_sim_node",
-                      duration=cfg.duration or None, **own)
+                      duration=cfg.duration or None, commands_topic=topics.axis_moments,
+                      namespace=topics.namespace, node=topics.node, **own)
 
 
 def method_choice(sim, cfg) -> str:
@@ -149,6 +154,7 @@ class GyroSimNode(Node):
         if problems:
             raise ParameterError("\n".join(problems))
         self.config = cfg = validate(values)
+        self.topics = topics = dataclasses.replace(node_topics(self), frame_prefix=cfg.frame_prefix)
         self.recorder = None
         log_file = None
         if cfg.record:  # created now, atomically (OutputError if it exists or cannot be): nothing run yet
@@ -161,11 +167,17 @@ class GyroSimNode(Node):
             if log_file is not None:
                 from gyro_sim.ros.recorder import LiveRecorder
 
-                self.recorder = LiveRecorder(cfg.record, scene=cfg.scene, params=log_params(self.sim, cfg),
-                                             log_file=log_file,
+                self.recorder = LiveRecorder(cfg.record, scene=cfg.scene, params=log_params(self.sim, cfg, topics),
+                                             log_file=log_file, topics=topics,
                                              max_backlog_bytes=int(cfg.record_queue_mb * MEGABYTE))
-            self.outputs = Outputs(self, self.sim, cfg, self.recorder)
-            self.loop = SimLoop(self.sim, cfg, self.outputs)
+            self.outputs = Outputs(self, self.sim, cfg, self.recorder, topics=topics)
+            demo = None
+            if cfg.demo and self.sim.axis_names:
+                from gyro_sim.ros.demo import Demo
+
+                demo = Demo.for_scene(self.sim, cfg.dt)
+            self.loop = SimLoop(self.sim, cfg, self.outputs, demo=demo)
+            self.outputs.publish_robot_description()
         except BaseException:  # nothing recorded yet: the file created is removed
             if self.recorder is not None:
                 self.recorder.abandon()
@@ -184,6 +196,10 @@ class GyroSimNode(Node):
             f"real-time factor {cfg.real_time_factor:g}, {self.loop.per_chunk} steps per wake-up"
             + (f"; recording to {cfg.record}" if cfg.record else "")
         )
+        if demo is not None:
+            self.get_logger().info(demo.describe(self.sim.axis_names))
+        elif cfg.demo:
+            self.get_logger().warning("demo: the scene has no actuated axes, nothing to drive")
         self.stiffness_note = stiffness_note(self.sim, cfg)
         if self.stiffness_note:
             self.get_logger().warning(self.stiffness_note)
@@ -433,6 +449,7 @@ def main(argv=None) -> int:
 
 
 def _main(argv, shutdown: Shutdown) -> int:
+    from gyro_sim.dynamics.actuators import ActuatorError
     from gyro_sim.safe_paths import OutputError
     from gyro_sim.ros.params import preflight
 
@@ -461,7 +478,7 @@ def _main(argv, shutdown: Shutdown) -> int:
     try:
         try:
             node = GyroSimNode()
-        except (ParameterError, OutputError) as exc:  # one line for one problem, one more line per other
+        except (ParameterError, OutputError, ActuatorError) as exc:  # one line for one problem, one more per other
             sep = " " if "\n" not in str(exc) else "\n  "
             print("gyro_sim_node: invalid parameters, nothing started:" + sep + str(exc).replace("\n", "\n  "),
                   file=sys.stderr)

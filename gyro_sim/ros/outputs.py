@@ -15,6 +15,7 @@ import time
 
 from gyro_sim.simulator import SimulationError
 from gyro_sim.msgs import messages as M
+from gyro_sim.scene.urdf import urdf
 
 #: wall seconds between two checks whether an optional output has subscribers
 WANT_PERIOD = 0.5
@@ -22,6 +23,24 @@ WANT_PERIOD = 0.5
 #: is an rcl call of ~2-3 us; the 100 wrench topics of n = 100 asked at once would cost the
 #: physics thread ~300 us in one publication
 ASKS_PER_PUBLICATION = 4
+
+
+def node_topics(node) -> M.TopicNames:
+    """The topic names of `node` from its fully qualified name as rclpy resolves it
+    (``<namespace>/<name>``: the namespace is what comes before the name)."""
+    fqn = node.get_fully_qualified_name()
+    return M.TopicNames(namespace=fqn.rsplit("/", 1)[0] or "/", node=fqn)
+
+
+def _qos_profile(qos: M.Qos):
+    """The rclpy QoSProfile of a gyro_sim Qos."""
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=qos.depth,
+                      reliability=ReliabilityPolicy.RELIABLE if qos.reliability == "reliable"
+                      else ReliabilityPolicy.BEST_EFFORT,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL if qos.durability == "transient_local"
+                      else DurabilityPolicy.VOLATILE)
 
 
 class OutputsClosed(Exception):
@@ -121,6 +140,7 @@ class Outputs:
     recorder : gyro_sim.ros.recorder.LiveRecorder or None
     qos : depth of the publishers' queues
     clock : time.monotonic, injectable for tests (when to ask the subscriber counts again)
+    topics : the node's names (default: from the node, no frame prefix)
 
     The optional outputs (joint wrenches, poses, /tf) are computed when someone subscribes to
     them or the node records, and published only to topics someone subscribes to (`Listeners`):
@@ -129,13 +149,17 @@ class Outputs:
     subscriber gets them from the next ask of its topic (at most WANT_PERIOD later, as before).
     """
 
-    def __init__(self, node, sim, config, recorder=None, qos: int = 10, clock=time.monotonic):
+    def __init__(self, node, sim, config, recorder=None, qos: int = M.PUBLISHER_DEPTH, clock=time.monotonic,
+                 topics: M.TopicNames | None = None):
         self.node, self.recorder = node, recorder
-        ns = node.get_fully_qualified_name()
-        self.publication = M.Publication(sim.model.names, namespace=ns, hardware_id=sim.scene.name)
-        self.command_topic = f"{ns}/axis_moments"
-        self.events_topic = f"{ns}/events"
+        self.topics = topics = topics or node_topics(node)
+        self.publication = M.Publication(sim.model.names, topics=topics, hardware_id=sim.scene.name)
+        self.command_topic = topics.axis_moments
+        self.events_topic = topics.events
         self.pubs: dict[str, object] = {}
+        self.robot_description = urdf(sim.scene)
+        self._description_pub = node.create_publisher(message_class(M.STRING_TYPE), topics.robot_description,
+                                                      _qos_profile(M.LATCHED_QOS))
 
         def publisher(topic, msgtype, events: bool = True):
             cls = message_class(msgtype)
@@ -143,7 +167,7 @@ class Outputs:
                 extra = {} if events else {"event_callbacks": _no_event_callbacks()}
                 self.pubs[topic] = node.create_publisher(cls, topic, qos, **extra)
 
-        publisher(M.JOINT_STATES, M.JOINT_STATE_TYPE)
+        publisher(topics.joint_states, M.JOINT_STATE_TYPE)
         publisher(M.CLOCK, M.CLOCK_TYPE)
         publisher(M.DIAGNOSTICS, M.DIAGNOSTICS_TYPE)
         publisher(M.TF, M.TF_TYPE)  # only where tf2_msgs is installed (an apt ROS); always recorded
@@ -167,7 +191,7 @@ class Outputs:
                 raise ParameterError(problem)
             sim.set_imu_default_rate(config.publish_rate)
             self.imu_ticks = ImuTicks(sim.imu_rates)
-            self.imu_topics = tuple(M.imu_topic(name, ns) for name in sim.imu_names)
+            self.imu_topics = tuple(M.imu_topic(name, topics.node) for name in sim.imu_names)
             for topic in self.imu_topics:
                 publisher(topic, M.IMU_TYPE)
         #: the publication's buffers by the parts asked (wrenches, poses, tf), once the joint
@@ -178,6 +202,15 @@ class Outputs:
         #: (layout, listeners' version, ((publish call, start, stop), ...)): what `publish` does
         #: with a FrameBatch of that layout while nobody starts or stops listening
         self._plan: tuple | None = None
+
+    def publish_robot_description(self) -> None:
+        """The URDF on ``robot_description`` (transient local: a later subscriber gets it too). Not
+        recorded here: the log has it from its writer, at log time 0."""
+        msg = message_class(M.STRING_TYPE)(data=self.robot_description)
+        try:
+            self._description_pub.publish(msg)
+        except Exception as exc:  # the context went away (shutdown under way)
+            raise OutputsClosed(str(exc)) from exc
 
     # --- called by the physics loop -------------------------------------------------------------
     def prepare_state(self, t_ns: int, sim, diagnostics_run: M.Status | None | bool = False) -> list:
@@ -237,7 +270,8 @@ class Outputs:
             # the diagnostics refuse any number they would write that is not finite, and they write
             # every scalar and invariant the snapshot's check looks at (~30 us saved): it names the field
             try:
-                data = M.diagnostics(snap, t_ns, self.publication.hardware_id, diagnostics_run or None)
+                data = M.diagnostics(snap, t_ns, self.publication.hardware_id, diagnostics_run or None,
+                                     self.publication.dynamics_status)
             except M.NonFiniteError as exc:
                 raise SimulationError(f"t = {sim.time:.6g} s: non-finite {snap.nonfinite() or exc} (not published)") from exc
             out.append((M.DIAGNOSTICS, M.DIAGNOSTICS_TYPE, data))
@@ -301,7 +335,7 @@ class Outputs:
         """Diagnostics alone (paused, stopped): the dynamics of the state kept, and the run."""
         try:
             snap = sim.snapshot(bodies=False, wrenches=False, invariants=True)
-            data = M.diagnostics(snap, t_ns, self.publication.hardware_id, run)
+            data = M.diagnostics(snap, t_ns, self.publication.hardware_id, run, self.publication.dynamics_status)
         except M.NonFiniteError:  # a failed state: the run's status alone says why
             data = M.diagnostic_array(t_ns, [run])
         self.send(t_ns, [(M.DIAGNOSTICS, M.DIAGNOSTICS_TYPE, data)])

@@ -185,13 +185,14 @@ class RateMeter:
         self._wall0, self._sim0 = self.clock(), sim_time
 
     def window_rtf(self, sim_time: float) -> float:
-        """Achieved factor since the last mark; marks now."""
+        """Achieved factor since the last mark; marks now. NaN (not measured) when no simulated
+        time passed since the mark (the start, a reset): a factor needs an interval behind it."""
         now = self.clock()
         wall, sim = now - self._wall0, sim_time - self._sim0
         self.total_sim += sim
         self.total_wall += wall
         self._wall0, self._sim0 = now, sim_time
-        return sim / wall if wall > 0 else float("nan")
+        return sim / wall if wall > 0 and sim > 0 else float("nan")
 
 class RunDelay:
     """Seconds the calling thread has waited so far, runnable, for a CPU (Linux's

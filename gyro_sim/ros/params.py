@@ -7,6 +7,7 @@ parameter that is wrong and why, before anything is created or published.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -49,7 +50,8 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("backend", str, "auto", "dynamics: auto (numba-compiled when numba is installed, else numpy) | numba | numpy"),
     Parameter("rtol", float, 1e-8, "relative tolerance of adaptive integrators", 1e-14, 1.0),
     Parameter("atol", float, 1e-10, "absolute tolerance of adaptive integrators", 0.0, 1.0),
-    Parameter("record", str, "", "MCAP file to record every published message and command to; empty = no recording"),
+    Parameter("record", str, "", "MCAP file to record every published message and command to; empty = no recording; "
+              "auto = gyro_sim_YYYYmmdd_HHMMSS.mcap here; {time} in a name = the start's date and time"),
     Parameter("command_timeout", float, 0.5,
               "simulated seconds without a good command after which the axis moments fall back to zero", 1e-3, 1e9),
     Parameter("duration", float, 0.0, "simulated seconds to run, then exit; 0 = until shut down", 0.0, 1e9),
@@ -61,6 +63,12 @@ PARAMETERS: tuple[Parameter, ...] = (
               "most megabytes of records waiting for the log writer; when it falls further behind, the oldest "
               "publications waiting are dropped from the log (counted in /diagnostics), never commands or events",
               1.0, 4096.0),
+    Parameter("frame_prefix", str, "",
+              "put before every body's frame in /tf and the wrenches' frame_id (as robot_state_publisher's), "
+              "e.g. robot1/ for a second robot on one /tf; world stays world"),
+    Parameter("demo", bool, False,
+              "drive every actuated axis with built-in sines scaled to the scene (recorded as commands are) "
+              "until a command arrives on ~/axis_moments"),
     Parameter("thread_priority", float, 50.0,
               "SCHED_FIFO priority (1-99) of the physics thread while pacing in real time, where the system allows "
               "it (as ros2_control's thread_priority); 0 = the normal scheduler", 0.0, 99.0),
@@ -89,6 +97,8 @@ class NodeConfig:
     overwrite: bool = False
     thread_priority: float = 0.0
     record_queue_mb: float = RECORD_QUEUE_MB
+    demo: bool = False
+    frame_prefix: str = ""
 
     @property
     def dt(self) -> float:
@@ -102,6 +112,26 @@ class NodeConfig:
     def as_dict(self) -> dict:
         """The parameters as given (for the log's metadata)."""
         return {p.name: getattr(self, p.name) if p.name != "scene" else str(self.scene_path) for p in PARAMETERS}
+
+
+#: a frame_prefix: tf frame names do not start with "/" (tf2)
+FRAME_PREFIX = re.compile(r"(?:[A-Za-z0-9_][A-Za-z0-9_/]*)?")
+#: the value of `record` that names the log after the start's date and time
+RECORD_AUTO = "auto"
+#: what {time} in `record` becomes (the start's local date and time, to the second)
+TIME_FORMAT = "%Y%m%d_%H%M%S"
+
+
+def record_path(text: str, now: float | None = None) -> str:
+    """The log file `record` names: "auto" is ``gyro_sim_{time}.mcap``; ``{time}`` is the
+    date and time `now` (default: now) as YYYYmmdd_HHMMSS; any other text as it is."""
+    import time
+
+    if text == RECORD_AUTO:
+        text = "gyro_sim_{time}.mcap"
+    if "{time}" in text:
+        text = text.replace("{time}", time.strftime(TIME_FORMAT, time.localtime(now)))
+    return text
 
 
 def _number_problem(p: Parameter, v) -> str | None:
@@ -173,6 +203,11 @@ def validate(values: dict) -> NodeConfig:
                 problems.append(f"scene: {scene_path}: {exc}")
     from gyro_sim.safe_paths import OutputError, check_output
 
+    if "record" not in bad:
+        v["record"] = record_path(v["record"])
+    if "frame_prefix" not in bad and not FRAME_PREFIX.fullmatch(v["frame_prefix"]):
+        problems.append(f"frame_prefix: letters, digits, _ and / not at the start (a tf frame name's start), "
+                        f"got {v['frame_prefix']!r}")
     force = v["overwrite"] if "overwrite" not in bad else False
     for name in ("record", "stats_file"):
         if name not in bad and v[name]:
@@ -340,11 +375,13 @@ def help_text() -> str:
     widths = [max(len(r[c]) for r in rows) for c in range(4)]
     head = ("usage: gyro_sim_node [-h] [--ros-args [--params-file FILE] [-p NAME:=VALUE ...]]\n\n"
             "The gyro_sim node: simulates a chain of gyrostats in real time, takes axis moments on\n"
-            "~/axis_moments, publishes /joint_states, /clock, ~/wrench/<joint>, ~/poses, /diagnostics,\n"
-            "optionally records an MCAP log. A later -p wins over --params-file; an unknown name or an\n"
-            "invalid value stops the node at start (exit 2).\n\n"
+            "~/axis_moments, publishes joint_states, robot_description, /clock, /tf, ~/wrench/<joint>,\n"
+            "~/poses, /diagnostics (-r __ns:=/robot1 puts joint_states, robot_description and ~/ under\n"
+            "/robot1), optionally records an MCAP log. A later -p wins over --params-file; an unknown\n"
+            "name or an invalid value stops the node at start (exit 2).\n\n"
             "example:\n"
-            "  gyro_sim_node --ros-args --params-file config/params.yaml -p record:=live.mcap -p duration:=20.0\n\n"
+            "  gyro_sim_node --ros-args --params-file config/params.yaml -p record:=live.mcap -p duration:=20.0\n"
+            "  gyro_sim_node --ros-args --params-file config/params.yaml -p demo:=true -p record:=auto\n\n"
             "parameters (name, type, default, range, meaning):\n")
     lines = ["  " + "  ".join(r[c].ljust(widths[c]) for c in range(4)) + "  " + r[4] for r in rows]
     return head + "\n".join(line.rstrip() for line in lines) + "\n"

@@ -410,9 +410,10 @@ class LiveRecorder:
     file written, for ``gyro-sim recover``), `records_in_file` (every record of the finished
     file, the writer's own /robot_description included), `written` (records written of those
     handed over), `max_backlog` (most records waiting here at once), `max_backlog_bytes_seen`,
-    `thread_cpu` (CPU seconds of the writer process, of which `open_cpu` to start and open the
-    log), `sender_cpu` (CPU seconds of the sender thread here), `error` (records left out, or
-    why the log is not complete). `writer.flush_period`: the writer's flush period, as the child
+    `backlog_bytes` (bytes waiting here after the sender's last period), `thread_cpu` (CPU
+    seconds of the writer process, of which `open_cpu` to start and open the log), `sender_cpu`
+    (CPU seconds of the sender thread here), `error` (records left out, or why the log is not
+    complete). `writer.flush_period`: the writer's flush period, as the child
     reports it; `writer.nice`: the writer process's niceness (WRITER_NICE above the node's
     where the system allows).
     """
@@ -429,6 +430,7 @@ class LiveRecorder:
         self.dropped_publications = 0
         self.max_backlog = 0
         self.max_backlog_bytes_seen = 0
+        self.backlog_bytes = 0  # bytes waiting here for the pipe after the sender's last period
         self.thread_cpu = 0.0  # CPU seconds spent by the writer process
         self.sender_cpu = 0.0  # CPU seconds spent by the sender thread in this process
         self.open_cpu = 0.0
@@ -635,6 +637,7 @@ class LiveRecorder:
             if out and pending_bytes + out_bytes > self.max_backlog_bytes:  # the pipe is full: behind
                 pending_bytes, pending_records = self._drop_oldest(pending, pending_bytes, pending_records,
                                                                    self.max_backlog_bytes - out_bytes)
+            self.backlog_bytes = pending_bytes + out_bytes
             if closing and not out and not pending:
                 return
             if closing and time.monotonic() > self._close_deadline:

@@ -2,7 +2,8 @@
 ``ros2 bag play``, which pip-installed ROS does not have).
 
 The stored CDR bytes are published as they are (``Publisher.publish(bytes)``), each on its
-topic with the type named by its schema; /clock is one of the logged topics, so subscribers
+topic with the type named by its schema (transient local where the channel's
+``offered_qos_profiles`` says so: the robot description); /clock is one of the logged topics, so subscribers
 using simulated time follow the replay. Message i goes out at wall time
 ``start + (log_time_i - log_time_0) / rate``. Types whose Python package is not installed
 are skipped with a note (tf2_msgs is not on PyPI, so /tf is skipped unless ROS is installed
@@ -75,6 +76,22 @@ def message_class(msgtype: str):
     return getattr(importlib.import_module(f"{pkg}.msg"), name)
 
 
+def recorded_durability(metadata) -> str:
+    """The durability of the first profile of a channel's ``offered_qos_profiles`` ("" when the
+    channel has none or it does not parse): a transient-local topic (the robot description) is
+    replayed transient local, so that a subscriber started later still gets it."""
+    import yaml
+
+    text = (metadata or {}).get("offered_qos_profiles", "")
+    try:
+        profiles = yaml.safe_load(text) if text else None
+    except yaml.YAMLError:
+        return ""
+    if isinstance(profiles, list) and profiles and isinstance(profiles[0], dict):
+        return str(profiles[0].get("durability", ""))
+    return ""
+
+
 def replay(path: str | os.PathLike, *, rate: float = 1.0, loop: bool = False, topics=None,
            wait_for_subscribers: float = 0.0, node_name: str = "gyro_sim_replay",
            should_stop=None) -> ReplayStats:
@@ -97,6 +114,7 @@ def replay(path: str | os.PathLike, *, rate: float = 1.0, loop: bool = False, to
     summary = verify(path)  # CRCs checked; LogError naming the damaged chunk
     wanted = set(topics) if topics else None
     classes = {}
+    latched = {ch.topic for ch in summary.channels.values() if recorded_durability(ch.metadata) == "transient_local"}
     for ch in summary.channels.values():
         if wanted is not None and ch.topic not in wanted:
             continue
@@ -121,7 +139,11 @@ def replay(path: str | os.PathLike, *, rate: float = 1.0, loop: bool = False, to
         rclpy.init()
     node = rclpy.create_node(node_name)
     try:
-        pubs = {t: node.create_publisher(cls, t, QOS_DEPTH) for t, cls in classes.items()}
+        from rclpy.qos import DurabilityPolicy, QoSProfile
+
+        pubs = {t: node.create_publisher(cls, t, QoSProfile(depth=QOS_DEPTH, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+                                         if t in latched else QOS_DEPTH)
+                for t, cls in classes.items()}
         if wait_for_subscribers > 0:
             deadline = time.monotonic() + wait_for_subscribers
             while time.monotonic() < deadline and not all(p.get_subscription_count() > 0 for p in pubs.values()):

@@ -45,7 +45,8 @@ import yaml
 from gyro_sim.errors import GyroSimError
 from gyro_sim.scene.mjcf import ModelError, import_model, is_model_path
 from gyro_sim.scene.records import (
-    BASE_TYPES, JOINT_TYPES, ROTOR_MODES, Base, Body, Imu, Initial, Joint, Rotor, Scene,
+    BASE_TYPES, DEFAULT_STICK_SPEED, JOINT_TYPES, ROTOR_MODES, Base, Body, Friction, Imu, Initial, Joint,
+    Limits, Rotor, Scene,
 )
 
 __all__ = ["SceneError", "load_scene", "parse_yaml"]
@@ -86,6 +87,9 @@ BOUNDS = {
     "euler": (1e6, "rad"), "angle": (1e6, "rad"),
     "gyro_noise_density": (1e3, "rad/s/sqrt(Hz)"), "gyro_bias_instability": (1e3, "rad/s^2/sqrt(Hz)"),
     "accel_noise_density": (1e4, "m/s^2/sqrt(Hz)"), "accel_bias_instability": (1e4, "m/s^3/sqrt(Hz)"),
+    "max_torque": (1e9, "N m"), "max_speed": (1e7, "rad/s"), "coulomb": (1e9, "N m"),
+    "viscous": (1e9, "N m s/rad"), "static": (1e9, "N m"), "stribeck_speed": (1e7, "rad/s"),
+    "stick_speed": (1e7, "rad/s"),
 }
 #: bound of any other number (unit vectors before normalisation, quaternions)
 GENERIC_BOUND = 1e15
@@ -97,11 +101,15 @@ BASE_TYPE_KEYS = {"fixed": ("type", "position"), "moving": ("type", "position", 
 MOTION_KEYS = ("type", "amplitude", "frequency")
 BODY_KEYS = ("name", "joint", "mass", "com", "inertia", "inertia_com", "next_joint", "rotors",
              "initial", "visual")
-JOINT_KEYS = ("type", "axis")
+JOINT_KEYS = ("type", "axis", "max_torque", "friction")
+#: a hinge's limits (JOINT_KEYS) and a torque rotor's (ROTOR_KEYS)
+HINGE_LIMIT_KEYS = ("max_torque", "friction")
+ROTOR_LIMIT_KEYS = ("max_torque", "max_speed", "friction")
+FRICTION_KEYS = ("coulomb", "viscous", "static", "stribeck_speed", "stick_speed")
 INERTIA_KEYS = ("axial", "transverse")
 VISUAL_KEYS = ("radius",)
 ROTOR_KEYS = ("name", "axis", "position", "mass", "axial_inertia", "transverse_inertia", "mode",
-              "spin", "actuated")
+              "spin", "actuated") + ROTOR_LIMIT_KEYS
 EULER_KEYS = ("euler", "euler_rates")
 QUATERNION_KEYS = ("quaternion", "angular_velocity")
 HINGE_INITIAL_KEYS = ("angle", "rate")
@@ -743,14 +751,63 @@ def _joint(ch: _Checker, value: Any, path: str) -> Joint | None:
         if "axis" in joint:
             ch.fail(_at(path, "axis"), "not allowed for a spherical joint (only a hinge has an "
                                        "axis)")
+        for key in HINGE_LIMIT_KEYS:
+            if joint.get(key) is not None:
+                ch.fail(_at(path, key), "not allowed for a spherical joint (only a hinge carries "
+                                        "a commanded moment)")
         return Joint(type=kind)
     if kind == "hinge":
+        limits = _limits(ch, joint, path, HINGE_LIMIT_KEYS)
         if joint.get("axis") is None:
             ch.fail(_at(path, "axis"), "required for a hinge (its axis in the parent's frame)")
             return None
         axis = ch.unit(joint, "axis", path)
-        return None if axis is None else Joint(type=kind, axis=_readonly(axis))
+        if axis is None or limits is False:
+            return None
+        return Joint(type=kind, axis=_readonly(axis), limits=limits)
     return None
+
+
+def _limits(ch: _Checker, mapping: Mapping, path: str, keys: Sequence[str]) -> Limits | None | bool:
+    """The limits and friction of an actuated axis under `keys` of `mapping`: a Limits, None
+    when none is written, False after reporting a problem."""
+    if all(mapping.get(key) is None for key in keys):
+        return None
+    bad = len(ch.errors)
+    max_torque = ch.scalar(mapping, "max_torque", path, default=None, minimum=0.0)
+    max_speed = ch.scalar(mapping, "max_speed", path, default=None, minimum=0.0, strict=True) \
+        if "max_speed" in keys else None
+    friction = _friction(ch, mapping.get("friction"), _at(path, "friction"))
+    if len(ch.errors) > bad:
+        return False
+    return Limits(max_torque=max_torque, max_speed=max_speed, friction=friction)
+
+
+def _friction(ch: _Checker, value: Any, path: str) -> Friction | None:
+    """A friction mapping (FRICTION_KEYS), or None (absent, or reported)."""
+    if value is None:
+        return None
+    friction = ch.mapping(value, path, FRICTION_KEYS)
+    if friction is None:
+        return None
+    coulomb = ch.scalar(friction, "coulomb", path, default=0.0, minimum=0.0)
+    viscous = ch.scalar(friction, "viscous", path, default=0.0, minimum=0.0)
+    static = ch.scalar(friction, "static", path, default=None, minimum=0.0)
+    stribeck = ch.scalar(friction, "stribeck_speed", path, default=None, minimum=0.0, strict=True)
+    stick = ch.scalar(friction, "stick_speed", path, default=DEFAULT_STICK_SPEED, minimum=0.0, strict=True)
+    if (friction.get("static") is None) != (friction.get("stribeck_speed") is None):
+        given, missing = ("static", "stribeck_speed") if friction.get("static") is not None \
+            else ("stribeck_speed", "static")
+        ch.fail(_at(path, missing), f"required with {given} (the Stribeck term needs both)")
+        return None
+    if static is not None and coulomb is not None and static < coulomb:
+        ch.fail(_at(path, "static"), f"must be >= coulomb ({coulomb:g}), the friction at speed "
+                                     f"(got {static:g})")
+        return None
+    if any(v is None for v in (coulomb, viscous, stick)):
+        return None
+    return Friction(coulomb=coulomb, viscous=viscous, static=static, stribeck_speed=stribeck,
+                    stick_speed=stick)
 
 
 def _body_inertia(ch: _Checker, body: Mapping, path: str, mass: float | None,
@@ -847,12 +904,21 @@ def _rotor(ch: _Checker, value: Any, path: str,
         ch.fail(_at(path, "actuated"), "a speed rotor's rate is prescribed; only torque rotors "
                                        "take commanded torques")
         actuated = None
-    if any(v is None for v in (name, axis, position, mass, axial, transverse, mode, spin,
-                               actuated)):
+    limits = None
+    if mode == "speed":
+        for key in ROTOR_LIMIT_KEYS:
+            if rotor.get(key) is not None:
+                ch.fail(_at(path, key), "a speed rotor's rate is prescribed; limits and friction "
+                                        "belong to torque rotors")
+                limits = False
+    else:
+        limits = _limits(ch, rotor, path, ROTOR_LIMIT_KEYS)
+    if limits is False or any(v is None for v in (name, axis, position, mass, axial, transverse,
+                                                  mode, spin, actuated)):
         return None
     return Rotor(name=name, axis=_readonly(axis), position=_readonly(position), mass=mass,
                  axial_inertia=axial, transverse_inertia=transverse, mode=mode, spin=spin,
-                 actuated=actuated)
+                 actuated=actuated, limits=limits)
 
 
 def _initial(ch: _Checker, value: Any, path: str, joint_type: str | None) -> Initial | None:

@@ -17,6 +17,43 @@ BASE_TYPES = ("fixed", "moving", "free")
 ROTOR_MODES = ("torque", "speed")
 
 
+#: default speed (rad/s) below which Coulomb friction is linear in the speed (Basilisk's
+#: omegaLimitCycle): friction is then a continuous function of the speed
+DEFAULT_STICK_SPEED = 1e-4
+
+
+@dataclass(frozen=True, eq=False)
+class Friction:
+    """Friction of a torque rotor's bearing or of a hinge, as a function of the relative speed
+    w (rad/s) of the axis (docs/scene-format.md, "Actuator limits and friction").
+
+    F(w) = sqrt(2 e) (static - coulomb) exp(-(w / b)^2 / 2) w / (b sqrt 2)
+           + coulomb tanh(10 w / b) + viscous w                    (b = stribeck_speed given)
+    F(w) = coulomb sgn(w) + viscous w                              (otherwise)
+    and F(w) = F(stick_speed) w / stick_speed for |w| < stick_speed; the torque is -F(w).
+    """
+
+    coulomb: float = 0.0  # N m
+    viscous: float = 0.0  # N m s/rad
+    static: float | None = None  # N m, peak of the Stribeck term (with stribeck_speed)
+    stribeck_speed: float | None = None  # rad/s
+    stick_speed: float = DEFAULT_STICK_SPEED  # rad/s
+
+
+@dataclass(frozen=True, eq=False)
+class Limits:
+    """Limits and friction of an actuated axis (a torque rotor or a hinge); None: no limit."""
+
+    max_torque: float | None = None  # N m: a command is saturated to +-max_torque
+    max_speed: float | None = None  # rad/s, rotors: a torque driving |kappa_i'| past it is cut
+    friction: Friction | None = None
+
+    @property
+    def speed_dependent(self) -> bool:
+        """Whether the applied torque depends on the axis's speed (friction, max_speed)."""
+        return self.friction is not None or self.max_speed is not None
+
+
 @dataclass(frozen=True, eq=False)
 class Rotor:
     """A balanced, axially symmetric rotor on a carrier (docs/theory.md section 1)."""
@@ -30,6 +67,7 @@ class Rotor:
     mode: str  # "torque" (spin p_i integrates L_i / A_i) | "speed" (kappa_i' prescribed)
     spin: float  # torque: initial absolute spin p_i; speed: kappa_i'
     actuated: bool  # torque rotors only: the axial torque L_i is a commanded axis moment
+    limits: Limits | None = None  # torque rotors only
 
 
 @dataclass(frozen=True, eq=False)
@@ -38,6 +76,7 @@ class Joint:
 
     type: str  # "spherical" | "hinge"
     axis: np.ndarray | None = None  # hinge only: (3,) unit axis in the parent's frame
+    limits: Limits | None = None  # hinge only (max_torque, friction)
 
 
 @dataclass(frozen=True, eq=False)

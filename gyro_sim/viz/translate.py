@@ -134,12 +134,13 @@ class Translator:
                 M.EVENTS: "_event", M.ROBOT_DESCRIPTION: "_robot_description"}
     PREFIX_HANDLERS = {M.WRENCH_PREFIX: "_wrench", M.IMU_PREFIX: "_imu"}
 
-    def __init__(self, rec, chain: Chain | None = None, *, axis_names=(), source: str = ""):
+    def __init__(self, rec, chain: Chain | None = None, *, axis_names=(), source: str = "", frame_prefix: str = ""):
         import rerun as rr
 
         self.rr, self.rec = rr, rec
         self.chain: Chain | None = None
         self.source = source
+        self.frame_prefix = frame_prefix
         self.axis_names = list(axis_names)
         self.entities: set[str] = set()
         self.plots: list[str] = []  # views with data (plots/euler/<body> and TITLES)
@@ -272,11 +273,19 @@ class Translator:
 
     # --- poses ------------------------------------------------------------------------------------
     def _tf(self, t: float, msg) -> None:
-        names = [tr.child_frame_id for tr in msg.transforms]
+        names = [self._body(tr.child_frame_id) for tr in msg.transforms]
         pos = np.array([_xyz(tr.transform.translation) for tr in msg.transforms])
         quat = np.array([_xyz(tr.transform.rotation) + [float(tr.transform.rotation.w)] for tr in msg.transforms])
         self.from_tf = True
         self._pose(t, names, pos, quat)
+
+    def _body(self, frame: str) -> str:
+        """The body of a /tf child frame: the node's frame_prefix taken off (a live view does not
+        know it: what comes before the last "/" of a frame that is not a body's name)."""
+        frame = frame.removeprefix(self.frame_prefix) if self.frame_prefix else frame
+        if "/" in frame and (self.chain is None or frame not in self.chain.body_names):
+            frame = frame.rsplit("/", 1)[1]
+        return frame
 
     def _poses(self, t: float, msg) -> None:
         if self.from_tf:
@@ -498,6 +507,19 @@ class Translator:
 #: the 3D camera looks at the centre of the motion from this direction, this many spans away
 EYE_DIRECTION = np.array([1.0, -1.2, 0.6]) / np.linalg.norm([1.0, -1.2, 0.6])
 EYE_DISTANCE = 1.6
+
+
+def canonical(topic: str, names) -> str:
+    """The translator's name of a node's topic (`names`: its gyro_sim.msgs.messages.TopicNames):
+    those of a node at the root, which :attr:`Translator.HANDLERS` know."""
+    exact = {names.joint_states: M.JOINT_STATES, names.robot_description: M.ROBOT_DESCRIPTION,
+             names.events: M.EVENTS, names.poses: M.POSES}
+    if topic in exact:
+        return exact[topic]
+    for prefix, root in ((names.wrench_prefix, M.WRENCH_PREFIX), (f"{names.node}/imu/", M.IMU_PREFIX)):
+        if topic.startswith(prefix):
+            return root + topic[len(prefix):]
+    return topic
 
 
 _NOT_CONSERVED_UNDER_COMMANDS = frozenset({M.drift_key("energy"), M.drift_key("jacobi")})

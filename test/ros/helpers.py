@@ -33,13 +33,15 @@ def ros_env(domain_id: int, log_dir: Path) -> dict:
     return env
 
 
-def node_command(*params: str, params_file: str | None = None) -> list[str]:
-    """`python -m gyro_sim.ros.node --ros-args [--params-file F] -p a:=b ...`"""
+def node_command(*params: str, params_file: str | None = None, remaps: tuple[str, ...] = ()) -> list[str]:
+    """`python -m gyro_sim.ros.node --ros-args [--params-file F] -p a:=b ... [-r from:=to ...]`"""
     cmd = [sys.executable, "-m", "gyro_sim.ros.node", "--ros-args"]
     if params_file:
         cmd += ["--params-file", str(params_file)]
     for p in params:
         cmd += ["-p", p]
+    for r in remaps:
+        cmd += ["-r", r]
     return cmd
 
 
@@ -47,12 +49,12 @@ class NodeProcess:
     """The node in a subprocess, its output in files."""
 
     def __init__(self, tmp: Path, domain_id: int, *params: str, params_file=None, name: str = "node",
-                 env: dict | None = None, new_session: bool = False):
+                 env: dict | None = None, new_session: bool = False, remaps: tuple[str, ...] = ()):
         self.out_path, self.err_path = tmp / f"{name}.out", tmp / f"{name}.err"
         (tmp / "ros_log").mkdir(exist_ok=True)
         self.env = {**ros_env(domain_id, tmp / "ros_log"), **(env or {})}
         self.proc = subprocess.Popen(
-            node_command(*params, params_file=params_file), cwd=ROOT, env=self.env,
+            node_command(*params, params_file=params_file, remaps=remaps), cwd=ROOT, env=self.env,
             stdout=open(self.out_path, "w"), stderr=open(self.err_path, "w"), start_new_session=new_session,
         )
 

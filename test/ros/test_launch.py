@@ -2,7 +2,7 @@
 
 `launch` and `launch_ros` are not on PyPI: where they are importable (an apt or colcon ROS),
 the file is loaded by them; everywhere, it is run against small stand-ins of their classes
-that record what it builds, so the node, its parameters and the demo publisher are checked.
+that record what it builds, so the node and its parameters are checked.
 """
 from __future__ import annotations
 
@@ -48,14 +48,14 @@ def _stand_ins(share: Path) -> dict[str, types.ModuleType]:
 
 
 def _built(monkeypatch, **arguments):
-    """(declared defaults, node, demo) of the launch file run with `arguments` over its defaults."""
+    """(declared defaults, node) of the launch file run with `arguments` over its defaults."""
     for name, mod in _stand_ins(ROOT).items():
         monkeypatch.setitem(sys.modules, name, mod)
     description = runpy.run_path(str(LAUNCH_FILE))["generate_launch_description"]()
     declared = {a.args[0]: a.kwargs["default_value"] for a in description if type(a).__name__ == "DeclareLaunchArgument"}
     (opaque,) = [a for a in description if type(a).__name__ == "OpaqueFunction"]
-    node, demo = opaque.kwargs["function"]({**declared, **arguments})
-    return declared, node, demo
+    (node,) = opaque.kwargs["function"]({**declared, **arguments})
+    return declared, node
 
 
 def test_setup_installs_the_launch_file():
@@ -65,7 +65,7 @@ def test_setup_installs_the_launch_file():
 
 
 def test_the_node_is_the_console_script_with_the_shipped_parameters(monkeypatch):
-    declared, node, demo = _built(monkeypatch)
+    declared, node = _built(monkeypatch)
     assert node.kwargs["package"] == "gyro_sim" and node.kwargs["name"] == "gyro_sim"
     assert "gyro_sim_node = gyro_sim.ros.node:main" in (ROOT / "setup.py").read_text()
     assert node.kwargs["executable"] == "gyro_sim_node"
@@ -73,28 +73,18 @@ def test_the_node_is_the_console_script_with_the_shipped_parameters(monkeypatch)
     params_file, overrides = node.kwargs["parameters"]
     assert params_file.name == "params_file" and overrides == {}  # empty arguments override nothing
     assert node.kwargs["namespace"] is None
-    assert demo.kwargs["condition"].args[0].name == "demo" and declared["demo"] == "false"
+    assert declared["demo"] == "false"
 
 
-def test_namespace_scene_record_and_the_demo_topic(monkeypatch):
-    _, node, demo = _built(monkeypatch, namespace="/robot1", scene="heavy_top", record="run.mcap", demo="true")
+def test_namespace_scene_record_and_demo(monkeypatch):
+    from gyro_sim.ros.params import PARAMETERS
+
+    _, node = _built(monkeypatch, namespace="/robot1", scene="heavy_top", record="run.mcap", demo="true")
     assert node.kwargs["namespace"] == "robot1"
-    assert node.kwargs["parameters"][1] == {"scene": "heavy_top", "record": "run.mcap"}
-    cmd = demo.kwargs["cmd"]
-    assert cmd[:4] == ["gyro-sim", "cmd", "--topic", "/robot1/gyro_sim/axis_moments"]
-    from gyro_sim.cli import build_parser
-
-    build_parser().parse_args(cmd[1:])  # the demo's command line parses as `gyro-sim cmd`
-
-
-def test_the_demo_drives_every_axis_of_the_default_scene(monkeypatch):
-    _, _, demo = _built(monkeypatch)
-    cmd = demo.kwargs["cmd"]
-    amplitudes = cmd[cmd.index("--amplitude") + 1: cmd.index("--frequency")]
-    from gyro_sim.simulator import Simulator
-
-    assert cmd[3] == "/gyro_sim/axis_moments"
-    assert len(amplitudes) == len(Simulator("hinge_chain", backend="numpy").axis_names)
+    overrides = node.kwargs["parameters"][1]
+    assert overrides == {"scene": "heavy_top", "record": "run.mcap", "demo": True}
+    kinds = {p.name: p.kind for p in PARAMETERS}
+    assert all(isinstance(v, kinds[k]) for k, v in overrides.items())  # each is a node parameter of its type
 
 
 @pytest.mark.skipif(importlib.util.find_spec("launch_ros") is None,

@@ -1,8 +1,7 @@
 """`gyro-sim view --live` against a real gyro_sim node over DDS (private ROS_DOMAIN_ID).
 
-The node's URDF on robot_description comes from a stand-in publisher in the test process
-(reliable, transient local, as a robot_state_publisher does) where the node does not publish
-it itself.
+The node publishes its URDF on robot_description (reliable, transient local); where no node
+runs, a stand-in publisher in the test process gives it as a robot_state_publisher would.
 """
 from __future__ import annotations
 
@@ -130,7 +129,6 @@ def node(tmp_path, d, name="node"):
 
 def test_save_for_seconds_holds_the_moving_chain_and_the_commanded_plots(tmp_path, domain):
     d, env, client = domain
-    describe(client)
     n = node(tmp_path, d)
     try:
         wait_for(lambda: client.node.count_publishers("/joint_states") > 0 or not n.alive(), START_TIMEOUT, "the node")
@@ -183,7 +181,6 @@ def test_save_for_seconds_holds_the_moving_chain_and_the_commanded_plots(tmp_pat
 
 def test_follows_a_node_that_stops_and_starts_again_and_ends_on_sigint(tmp_path, domain):
     d, env, client = domain
-    describe(client)
     rrd = tmp_path / "live.rrd"
     live = Live(tmp_path, env, "--save", rrd, "--rate", 0)  # every message drawn
     live.says("waiting for /robot_description")

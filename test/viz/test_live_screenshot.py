@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from test.io.test_view_screenshot import PLOTS, RERUN, VULKAN, Image, inspect  # noqa: F401
-from test.viz.test_live import START_TIMEOUT, Commander, Live, describe, node, wait_for
+from test.viz.test_live import START_TIMEOUT, Commander, Live, node, wait_for
 from test.viz.test_live import domain  # noqa: F401 (fixture)
 
 pytestmark = [
@@ -26,7 +26,6 @@ def test_screenshot_of_a_live_capture_shows_every_plot_and_the_chain(tmp_path, d
     from gyro_sim.viz.rerun_view import screenshot
 
     d, env, client = domain
-    describe(client)
     n = node(tmp_path, d)
     try:
         wait_for(lambda: client.node.count_publishers("/joint_states") > 0 or not n.alive(), START_TIMEOUT, "the node")
