@@ -47,13 +47,6 @@ def _scene(n: int, tmp: Path) -> Path:
     return path
 
 
-def _describe(scene: Path) -> str:
-    from gyro_sim import load_scene
-    from gyro_sim.scene.urdf import urdf
-
-    return urdf(load_scene(scene))
-
-
 def _wait_line(path: Path, text: str, proc, timeout: float) -> None:
     end = time.monotonic() + timeout
     while text not in path.read_text():
@@ -76,16 +69,12 @@ def run_once(n: int, seconds: float, rtf: float, viewer: bool, domain: int) -> d
         env = _env(domain, tmp)
         scene = _scene(n, tmp)
         stats = tmp / "stats.json"
-        desc = None
         live = None
-        if viewer:  # the description as a robot_state_publisher would give it, and the viewer
-            (tmp / "urdf.xml").write_text(_describe(scene))
-            desc = subprocess.Popen([sys.executable, "-c", _PUBLISH_DESCRIPTION, str(tmp / "urdf.xml")], env=env,
-                                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        if viewer:  # the node publishes its description: the viewer waits for it
             err = tmp / "live.err"
             live = subprocess.Popen([sys.executable, "-m", "gyro_sim.cli", "view", "--live", "--save", str(tmp / "l.rrd")],
                                     env=env, stdout=subprocess.DEVNULL, stderr=open(err, "w"))
-            _wait_line(err, "robot description received", live, VIEWER_START)
+            _wait_line(err, "waiting for", live, VIEWER_START)
         cpu0, t0 = (_cpu(live.pid), time.monotonic()) if live is not None else (0.0, 0.0)
         node = subprocess.Popen([sys.executable, "-m", "gyro_sim.ros.node", "--ros-args", "-p", f"scene:={scene}",
                                  "-p", f"duration:={seconds}", "-p", f"real_time_factor:={rtf}",
@@ -103,8 +92,6 @@ def run_once(n: int, seconds: float, rtf: float, viewer: bool, domain: int) -> d
         if live is not None:
             live.send_signal(signal.SIGINT)
             live.wait(60)
-            desc.send_signal(signal.SIGINT)
-            desc.wait(30)
             text = err.read_text()
             m = re.search(r"(\d+) messages drawn .*?; (lag: .*)", text)
             row.update(viewer_cpu_share=share, viewer_exit=live.returncode,
@@ -112,19 +99,6 @@ def run_once(n: int, seconds: float, rtf: float, viewer: bool, domain: int) -> d
         return row
 
 
-_PUBLISH_DESCRIPTION = """
-import sys, rclpy
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from std_msgs.msg import String
-rclpy.init()
-node = rclpy.create_node("description")
-qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-node.create_publisher(String, "/robot_description", qos).publish(String(data=open(sys.argv[1]).read()))
-try:
-    rclpy.spin(node)
-except KeyboardInterrupt:
-    pass
-"""
 
 
 def main(argv=None) -> int:

@@ -265,7 +265,7 @@ def screenshot(exe: str, rrd: str | os.PathLike, png: str | os.PathLike, size: s
 
             (end,) = wait(loaded, f"while loading {rrd}")
             client.set_time(TIMELINE, duration=np.timedelta64(int(end), "ns"), play_state="paused")
-            frames, previous, first = 0, None, None
+            frames, previous, first, previous_at = 0, None, None, 0.0
             while True:
                 image = client.take_screenshot()
                 frames += 1
