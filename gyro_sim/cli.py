@@ -224,6 +224,7 @@ Each writes <report>.md and <report>.png to --out (default out/bench)."""
 # subparsers, bench: the `gyro-sim bench` subparsers) and imports heavy dependencies lazily.
 PLUGINS = (
     "gyro_sim.log.commands",  # run --record, view, replay, recover
+    "gyro_sim.viz.commands",  # view --live (after the log commands, which create view)
     "gyro_sim.ros.commands",  # cmd (publish axis moments)
     "gyro_sim.bench.accuracy",
     "gyro_sim.bench.stability",

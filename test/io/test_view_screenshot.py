@@ -33,7 +33,10 @@ pytestmark = [
 #: the plots' series colours (rerun_view.PALETTE, the first six)
 PALETTE = [(0, 114, 178), (230, 159, 0), (0, 158, 115), (204, 121, 167), (86, 180, 233), (213, 94, 0)]
 BODY = (70, 130, 180)
-PLOTS = ["euler", "hinge", "rotor_rate", "axis_moments", "drift", "balance"]
+#: the plots of hinge_chain, in the grid's order (two columns, left to right, top to bottom)
+PLOTS = ["euler arm1", "euler arm2", "hinge", "rotor_rate", "axis_moments", "drift"]
+#: the plots' grid takes the right half of the picture, in this many rows and columns
+GRID_ROWS, GRID_COLUMNS = 3, 2
 
 
 def _near(a, color, tol):
@@ -41,21 +44,22 @@ def _near(a, color, tol):
 
 
 def inspect(png):
-    """Per plot (top to bottom): (palette pixels, rightmost one as a fraction of the plot's
+    """Per plot (grid order): (palette pixels, rightmost one as a fraction of the plot's
     width); and the chain's bodies in the 3D view: (pixels, mean height as a fraction of the view)."""
     a = np.asarray(Image.open(png).convert("RGB")).astype(int)
     h, w, _ = a.shape
-    right = a[int(0.05 * h):int(0.96 * h), int(0.62 * w):]
+    right = a[int(0.05 * h):int(0.96 * h), int(0.5 * w):]
     lines = np.zeros(right.shape[:2], bool)
     for c in PALETTE:
         lines |= _near(right, c, 60)
     plots = []
-    for band in np.array_split(lines, len(PLOTS), axis=0):
-        xs = np.nonzero(band)[1]
-        plots.append((int(band.sum()), float(xs.max()) / band.shape[1] if xs.size else 0.0))
-    view = a[int(0.05 * h):int(0.96 * h), :int(0.58 * w)]
+    for band in np.array_split(lines, GRID_ROWS, axis=0):
+        for cell in np.array_split(band, GRID_COLUMNS, axis=1):
+            xs = np.nonzero(cell)[1]
+            plots.append((int(cell.sum()), float(xs.max()) / cell.shape[1] if xs.size else 0.0))
+    view = a[int(0.05 * h):int(0.96 * h), :int(0.48 * w)]
     ys = np.nonzero(_near(view, BODY, 60))[0]
-    return plots, (ys.size, float(ys.mean()) / view.shape[0] if ys.size else 1.0)
+    return plots[:len(PLOTS)], (ys.size, float(ys.mean()) / view.shape[0] if ys.size else 1.0)
 
 
 def _headless_viewers() -> set[int]:
