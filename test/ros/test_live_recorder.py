@@ -68,14 +68,20 @@ def test_a_stopped_writer_drops_the_oldest_publications_never_commands(tmp_path)
     rec = LiveRecorder(str(tmp_path / "stall.mcap"), scene=sim.scene, params={}, max_backlog_bytes=100_000)
     os.kill(rec._proc.pid, signal.SIGSTOP)  # noqa: SLF001
     sent, commands = [], []
+
+    def publish() -> int:
+        """One step and its publication handed over (kept in `sent`); its log time."""
+        sim.advance(0.001)
+        t = M.time_ns(sim.time)
+        sim.snapshot(bodies=True, wrenches=True, invariants=False, into=frame.scatter)
+        batch = frame.messages(t)
+        rec.raw_batch(t, batch)
+        sent.append((t, [(topic, bytes(data)) for topic, _, data in batch]))
+        return t
+
     try:
         for i in range(3000):  # ~3 MB of publications: the pipe (1 MB) and the bound (0.1 MB) overflow
-            sim.advance(0.001)
-            t = M.time_ns(sim.time)
-            sim.snapshot(bodies=True, wrenches=True, invariants=False, into=frame.scatter)
-            batch = frame.messages(t)
-            rec.raw_batch(t, batch)
-            sent.append((t, [(topic, bytes(data)) for topic, _, data in batch]))
+            t = publish()
             if i % 10 == 0:
                 cmd = M.axis_moments([0.0, 1e-3 * i, 0.0])
                 rec.raw_many("/gyro_sim/axis_moments", M.COMMAND_TYPE, t, [cmd])
@@ -91,12 +97,7 @@ def test_a_stopped_writer_drops_the_oldest_publications_never_commands(tmp_path)
         time.sleep(SEND_PERIOD)
     assert rec.backlog_bytes == 0, "the writer did not catch up in 60 s"
     for _ in range(AFTER_RESUME):
-        sim.advance(0.001)
-        t = M.time_ns(sim.time)
-        sim.snapshot(bodies=True, wrenches=True, invariants=False, into=frame.scatter)
-        batch = frame.messages(t)
-        rec.raw_batch(t, batch)
-        sent.append((t, [(topic, bytes(data)) for topic, _, data in batch]))
+        publish()
     rec.close()
     assert rec.complete and rec.error is None and rec.file == str(tmp_path / "stall.mcap")
     got = [(topic, t, bytes(d)) for topic, _, t, d in iter_messages(rec.file, decode=False, log_time_order=False)]
