@@ -88,7 +88,9 @@ class LogError(GyroSimError, RuntimeError):
     """A log cannot be written or read as asked (closed writer, unknown type, bad value...)."""
 
 
-def _compression():
+def compression():
+    """The chunk compression every gyro_sim log is written with: zstd, else lz4, else none
+    (by the compression library installed)."""
     from mcap.writer import CompressionType
 
     try:
@@ -245,7 +247,7 @@ class LogWriter:
                 raise OutputError(f"log {self.path}: exists; refused to overwrite it (overwrite=True to replace)") from None
         self.failure: OSError | None = None
         self._chunk_indexes = _PackedChunkIndexes()
-        self._writer = Writer(self._file, chunk_size=CHUNK_SIZE, compression=_compression())
+        self._writer = Writer(self._file, chunk_size=CHUNK_SIZE, compression=compression())
         self._writer.start(profile="ros2", library=f"gyro_sim/{__version__}")
         self._writer.add_metadata(
             METADATA_NAME,

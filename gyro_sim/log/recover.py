@@ -299,10 +299,10 @@ class _Scan:
     def __init__(self, m, out: Recovery, g):
         from mcap.writer import Writer
 
-        from gyro_sim.log.mcap_log import CHUNK_SIZE, _compression
+        from gyro_sim.log.mcap_log import CHUNK_SIZE, compression
 
         self.m, self.out, self.size = m, out, out.size
-        self.writer = Writer(g, chunk_size=CHUNK_SIZE, compression=_compression())
+        self.writer = Writer(g, chunk_size=CHUNK_SIZE, compression=compression())
         self.started = False
         self.new_schema: dict[int, int] = {}
         self.new_channel: dict[int, int] = {}

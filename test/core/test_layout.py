@@ -157,3 +157,23 @@ def test_private_read_detector_sees_them(tmp_path):
 @pytest.mark.parametrize("name", sorted(m for m in _modules() if m.startswith(CORE)))
 def test_no_core_module_reads_another_objects_private_members(name):
     assert _private_reads(_modules()[name]) == []
+
+
+def _private_imports(path: Path) -> list[str]:
+    """`from gyro_sim.x import _name` in the file at `path`: a private name taken across modules."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == PACKAGE:
+            found += [f"{path.name}:{node.lineno}: {node.module}.{a.name}" for a in node.names
+                      if a.name.startswith("_") and not a.name.startswith("__")]
+    return found
+
+
+def test_private_import_detector_sees_them(tmp_path):
+    p = tmp_path / "m.py"
+    p.write_text("from gyro_sim.log.mcap_log import CHUNK_SIZE, _plain\nfrom os import _exit\n")
+    assert _private_imports(p) == ["m.py:1: gyro_sim.log.mcap_log._plain"]
+
+
+def test_no_module_imports_a_private_name_of_another():
+    assert [f for path in _modules().values() for f in _private_imports(path)] == []
