@@ -38,9 +38,9 @@ call raises it. Nothing more is written after it; `close` then finishes what it 
 the file without raising again, so the part flushed before stays readable by
 :func:`gyro_sim.log.recover.recover`.
 
-Reading verifies (:func:`verify`): :func:`read_info` checks the summary's CRC and every chunk's
-CRC (and that it decompresses) before returning, and :func:`iter_messages` reads with the chunk
-CRCs checked; a damaged log is refused with a :class:`LogError` naming the chunk's byte offset
+Reading verifies (:func:`verify`): :class:`LogReader` (and :func:`read_info`) checks the
+summary's CRC and every chunk's CRC (and that it decompresses) on opening, and its `messages`
+(and :func:`iter_messages`) read with the chunk CRCs checked; a damaged log is refused with a :class:`LogError` naming the chunk's byte offset
 and ``gyro-sim recover``.
 
 The writer is thread-safe (one lock around the MCAP writer).
@@ -48,7 +48,6 @@ The writer is thread-safe (one lock around the MCAP writer).
 from __future__ import annotations
 
 import array
-import io
 import json
 import math
 import os
@@ -62,7 +61,8 @@ from gyro_sim.errors import GyroSimError
 from gyro_sim.msgs import messages as M
 from gyro_sim.msgs import msgdefs
 
-__all__ = ["LogError", "LogWriter", "LogInfo", "read_info", "iter_messages", "EVENTS_TOPIC", "FORMAT_VERSION"]
+__all__ = ["LogError", "LogWriter", "LogReader", "LogInfo", "read_info", "iter_messages", "EVENTS_TOPIC",
+           "FORMAT_VERSION"]
 
 #: version of the layout described above (metadata key ``format``)
 FORMAT_VERSION = 1
@@ -516,6 +516,18 @@ class LogInfo:
         except SceneError as exc:
             raise LogError(f"the embedded scene does not load: {'; '.join(exc.errors)}") from None
 
+    def topic_names(self, path: str | os.PathLike = "", topics=None) -> "M.TopicNames":
+        """The topic names of the node that wrote the log (`topics`: channel names, default the
+        log's): those of its namespace for a namespaced node's log
+        (gyro_sim.msgs.messages.log_topic_names), with its frame_prefix. LogError for a log that
+        mixes two robots (naming `path`)."""
+        prefix = self.params.get("frame_prefix", "")
+        try:
+            return M.log_topic_names(self.topics if topics is None else topics, str(path),
+                                     prefix if isinstance(prefix, str) else "")
+        except M.NamespaceError as exc:
+            raise LogError(str(exc)) from None
+
     def scene(self):
         """The embedded scene, validated (LogError if it is missing or does not load)."""
         from gyro_sim.scene.load import SceneError, load_scene
@@ -602,6 +614,12 @@ def verify(path: str | os.PathLike):
     """Check a log before reading it: summary present and its CRC, then every chunk's CRC (and
     that it decompresses). Return the mcap ``Summary``; raise LogError naming the first
     damaged chunk's byte offset, or OSError if the file cannot be opened."""
+    with _open(path) as f:
+        return _verify(f, path)
+
+
+def _verify(f: BinaryIO, path):
+    """`verify` of the log open as `f` (read from its start; the position is left anywhere)."""
     import io as _io
     import zlib
 
@@ -609,89 +627,127 @@ def verify(path: str | os.PathLike):
     from mcap.reader import make_reader
     from mcap.records import Chunk
 
-    with _open(path) as f:
-        size = os.fstat(f.fileno()).st_size
+    f.seek(0)
+    size = os.fstat(f.fileno()).st_size
+    try:
+        summary = make_reader(f, validate_crcs=True).get_summary()
+    except Exception as exc:  # noqa: BLE001 - mcap raises many kinds on a damaged file
+        raise LogError(f"{path}: not a readable MCAP log, no summary ({type(exc).__name__}: {exc}); "
+                       f"if the run was killed, run `gyro-sim recover {path} -o fixed.mcap`") from None
+    if summary is None:
+        raise LogError(f"{path}: no summary (cut short? run `gyro-sim recover {path} -o fixed.mcap`)")
+    f.seek(size - MAGIC_BYTES - FOOTER_BYTES)
+    footer = f.read(FOOTER_BYTES)
+    summary_start = int.from_bytes(footer[9:17], "little")
+    summary_crc = int.from_bytes(footer[25:29], "little")
+    if footer[0] != OP_FOOTER or summary_start > size:
+        raise _damaged(path, f"footer at byte {size - MAGIC_BYTES - FOOTER_BYTES}", "not a footer record")
+    if summary_crc and summary_start:
+        f.seek(summary_start)
+        crc = zlib.crc32(f.read(size - MAGIC_BYTES - 4 - summary_start))
+        if crc != summary_crc:
+            raise _damaged(path, f"summary section at byte {summary_start}",
+                           f"CRC mismatch (stored {summary_crc:#010x}, computed {crc:#010x})")
+    for index in sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
+        off = index.chunk_start_offset
         try:
-            summary = make_reader(f, validate_crcs=True).get_summary()
-        except Exception as exc:  # noqa: BLE001 - mcap raises many kinds on a damaged file
-            raise LogError(f"{path}: not a readable MCAP log, no summary ({type(exc).__name__}: {exc}); "
-                           f"if the run was killed, run `gyro-sim recover {path} -o fixed.mcap`") from None
-        if summary is None:
-            raise LogError(f"{path}: no summary (cut short? run `gyro-sim recover {path} -o fixed.mcap`)")
-        f.seek(size - MAGIC_BYTES - FOOTER_BYTES)
-        footer = f.read(FOOTER_BYTES)
-        summary_start = int.from_bytes(footer[9:17], "little")
-        summary_crc = int.from_bytes(footer[25:29], "little")
-        if footer[0] != OP_FOOTER or summary_start > size:
-            raise _damaged(path, f"footer at byte {size - MAGIC_BYTES - FOOTER_BYTES}", "not a footer record")
-        if summary_crc and summary_start:
-            f.seek(summary_start)
-            crc = zlib.crc32(f.read(size - MAGIC_BYTES - 4 - summary_start))
-            if crc != summary_crc:
-                raise _damaged(path, f"summary section at byte {summary_start}",
-                               f"CRC mismatch (stored {summary_crc:#010x}, computed {crc:#010x})")
-        for index in sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
-            off = index.chunk_start_offset
-            try:
-                f.seek(off)
-                head = f.read(9)
-                if len(head) < 9 or head[0] != OP_CHUNK:
-                    raise ChunkError("no chunk record there")
-                length = int.from_bytes(head[1:], "little")
-                if length > size - off:
-                    raise ChunkError(f"record length {length} runs past the end of the file")
-                chunk = Chunk.read(ReadDataStream(_io.BytesIO(f.read(length))))
-                chunk_records(chunk, decode_chunk(chunk))
-            except ChunkError as exc:
-                raise _damaged(path, f"chunk at byte {off}", str(exc)) from None
-            except Exception as exc:  # noqa: BLE001 - a damaged header fails in the record parser
-                raise _damaged(path, f"chunk at byte {off}", f"unreadable ({type(exc).__name__}: {exc})") from None
+            f.seek(off)
+            head = f.read(9)
+            if len(head) < 9 or head[0] != OP_CHUNK:
+                raise ChunkError("no chunk record there")
+            length = int.from_bytes(head[1:], "little")
+            if length > size - off:
+                raise ChunkError(f"record length {length} runs past the end of the file")
+            chunk = Chunk.read(ReadDataStream(_io.BytesIO(f.read(length))))
+            chunk_records(chunk, decode_chunk(chunk))
+        except ChunkError as exc:
+            raise _damaged(path, f"chunk at byte {off}", str(exc)) from None
+        except Exception as exc:  # noqa: BLE001 - a damaged header fails in the record parser
+            raise _damaged(path, f"chunk at byte {off}", f"unreadable ({type(exc).__name__}: {exc})") from None
     return summary
+
+
+class LogReader:
+    """A gyro_sim log open for reading: the file opened once and verified on entry (:func:`verify`:
+    the summary's and every chunk's CRC), then its parameters, scene and topics (`info`) and its
+    messages, as often as asked::
+
+        with LogReader("run.mcap") as log:
+            log.info.params["integrator"], log.info.topics, log.info.scene()
+            for topic, msgtype, t_ns, msg in log.messages(["/joint_states"]):
+                ...
+
+    LogError on entry for a damaged, cut-short or crafted log (naming the damaged chunk's byte
+    offset and ``gyro-sim recover``); OSError if the file cannot be opened.
+    """
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = path
+        self.info: LogInfo | None = None
+        self._f: BinaryIO | None = None
+
+    def __enter__(self) -> "LogReader":
+        self._f = _open(self.path)
+        try:
+            summary = _verify(self._f, self.path)
+            self.info = _read_info(self._f, self.path, summary)
+        except (LogError, OSError):
+            self._f.close()
+            raise
+        except Exception as exc:  # noqa: BLE001 - mcap raises many kinds on a damaged file
+            self._f.close()
+            raise LogError(f"{self.path}: not a readable gyro_sim log ({type(exc).__name__}: {exc}); "
+                           f"if it is damaged, run `gyro-sim recover {self.path} -o fixed.mcap`") from None
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._f.close()
+
+    def messages(self, topics=None, *, decode: bool = True,
+                 log_time_order: bool = True) -> Iterator[tuple[str, str, int, Any]]:
+        """The log's messages, as :func:`iter_messages` gives them (one iteration at a time)."""
+        return _messages(self._f, self.path, topics, decode, log_time_order)
+
+    def topic_names(self) -> "M.TopicNames":
+        """The topic names of the node that wrote the log (:meth:`LogInfo.topic_names`)."""
+        return self.info.topic_names(self.path)
 
 
 def read_info(path: str | os.PathLike) -> LogInfo:
     """Parameters, scene, topics and span of a log, after :func:`verify` (every CRC checked).
 
     LogError for a damaged, cut-short or crafted log; OSError if it cannot be opened."""
-    summary = verify(path)
-    try:
-        return _read_info(path, summary)
-    except LogError:
-        raise
-    except OSError:
-        raise
-    except Exception as exc:  # noqa: BLE001 - mcap raises many kinds on a damaged file
-        raise LogError(f"{path}: not a readable gyro_sim log ({type(exc).__name__}: {exc}); "
-                       f"if it is damaged, run `gyro-sim recover {path} -o fixed.mcap`") from None
+    with LogReader(path) as log:
+        return log.info
 
 
-def _read_info(path, summary) -> LogInfo:
+def _read_info(f: BinaryIO, path, summary) -> LogInfo:
     from mcap.reader import make_reader
 
-    with _open(path) as f:
-        reader = make_reader(f, validate_crcs=True)
-        params: dict = {}
-        meta: dict = {}
-        for m in reader.iter_metadata():
-            if m.name == METADATA_NAME:
-                meta = dict(m.metadata)
-                try:
-                    params = json.loads(meta.get("params", "{}"))
-                except ValueError as exc:
-                    raise LogError(f"{path}: metadata {METADATA_NAME}/params is not JSON ({exc})") from None
-                if not isinstance(params, dict):
-                    raise LogError(f"{path}: metadata {METADATA_NAME}/params must be a JSON object, "
-                                   f"got {type(params).__name__}")
-        scene = None
-        for a in reader.iter_attachments():
-            if a.name == SCENE_ATTACHMENT:
-                try:
-                    scene = bytes(a.data).decode()
-                except UnicodeDecodeError as exc:
-                    raise LogError(f"{path}: the embedded scene is not UTF-8 text ({exc.reason})") from None
-        topics = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()
-                  if c.schema_id in summary.schemas}
-        st = summary.statistics
+    f.seek(0)
+    reader = make_reader(f, validate_crcs=True)
+    params: dict = {}
+    meta: dict = {}
+    for m in reader.iter_metadata():
+        if m.name == METADATA_NAME:
+            meta = dict(m.metadata)
+            try:
+                params = json.loads(meta.get("params", "{}"))
+            except ValueError as exc:
+                raise LogError(f"{path}: metadata {METADATA_NAME}/params is not JSON ({exc})") from None
+            if not isinstance(params, dict):
+                raise LogError(f"{path}: metadata {METADATA_NAME}/params must be a JSON object, "
+                               f"got {type(params).__name__}")
+    scene = None
+    for a in reader.iter_attachments():
+        if a.name == SCENE_ATTACHMENT:
+            try:
+                scene = bytes(a.data).decode()
+            except UnicodeDecodeError as exc:
+                raise LogError(f"{path}: the embedded scene is not UTF-8 text ({exc.reason})") from None
+    topics = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()
+              if c.schema_id in summary.schemas}
+    st = summary.statistics
     return LogInfo(params, scene, meta, topics,
                    st.message_count if st else None,
                    st.message_start_time if st else None, st.message_end_time if st else None)
@@ -706,6 +762,11 @@ def iter_messages(path: str | os.PathLike, topics=None, *, decode: bool = True,
     attributes) or, with ``decode=False``, the CDR bytes. Chunk CRCs are checked as chunks are
     read: a damaged chunk, or a message its schema cannot decode, raises LogError.
     """
+    with _open(path) as f:
+        yield from _messages(f, path, topics, decode, log_time_order)
+
+
+def _messages(f: BinaryIO, path, topics, decode: bool, log_time_order: bool):
     from mcap.reader import make_reader
 
     factories = []
@@ -715,21 +776,21 @@ def iter_messages(path: str | os.PathLike, topics=None, *, decode: bool = True,
         factories = [DecoderFactory()]
     topic = None
     try:
-        with _open(path) as f:
-            reader = make_reader(f, validate_crcs=True, decoder_factories=factories)
-            if decode:
-                it = reader.iter_decoded_messages(topics=topics, log_time_order=log_time_order)
-                for schema, channel, message, msg in it:
-                    topic = channel.topic
-                    yield channel.topic, schema.name, message.log_time, msg
-            else:
-                for schema, channel, message in reader.iter_messages(topics=topics, log_time_order=log_time_order):
-                    topic = channel.topic
-                    yield channel.topic, schema.name if schema else "", message.log_time, bytes(message.data)
+        f.seek(0)
+        reader = make_reader(f, validate_crcs=True, decoder_factories=factories)
+        if decode:
+            it = reader.iter_decoded_messages(topics=topics, log_time_order=log_time_order)
+            for schema, channel, message, msg in it:
+                topic = channel.topic
+                yield channel.topic, schema.name, message.log_time, msg
+        else:
+            for schema, channel, message in reader.iter_messages(topics=topics, log_time_order=log_time_order):
+                topic = channel.topic
+                yield channel.topic, schema.name if schema else "", message.log_time, bytes(message.data)
     except (LogError, OSError, GeneratorExit):
         raise
     except Exception as exc:  # noqa: BLE001 - damaged chunks and crafted schemas fail in many ways
-        verify(path)  # names the damaged chunk's offset if there is one
+        _verify(f, path)  # names the damaged chunk's offset if there is one
         raise LogError(f"{path}: cannot read the messages (after {topic or 'the start'}): "
                        f"{type(exc).__name__}: {str(exc)[:200]}") from None
 
@@ -739,28 +800,5 @@ def log_topic_names(path: str | os.PathLike, topics=None) -> "M.TopicNames":
     read from the log when not given): those of its namespace for a namespaced node's log
     (gyro_sim.msgs.messages.log_topic_names), with the node's frame_prefix. LogError for a log
     that mixes two robots."""
-    info = read_info(path)
-    prefix = info.params.get("frame_prefix", "")
-    try:
-        return M.log_topic_names(info.topics if topics is None else topics, str(path),
-                                 prefix if isinstance(prefix, str) else "")
-    except M.NamespaceError as exc:
-        raise LogError(str(exc)) from None
+    return read_info(path).topic_names(path, topics)
 
-
-def describe(path: str | os.PathLike) -> str:
-    """A short text about a log: topics with counts, span, parameters."""
-    from mcap.reader import make_reader
-
-    info = read_info(path)
-    with _open(path) as f:
-        summary = make_reader(f).get_summary()
-    counts = summary.statistics.channel_message_counts if summary and summary.statistics else {}
-    lines = [f"{path}: {info.message_count} messages, "
-             f"{(info.end_ns - info.start_ns) / 1e9 if info.message_count else 0:.3f} s of simulated time"]
-    for c in sorted(summary.channels.values(), key=lambda c: c.topic):
-        lines.append(f"  {c.topic:<40} {info.topics.get(c.topic, ''):<36} {counts.get(c.id, 0)}")
-    buf = io.StringIO()
-    json.dump(info.params, buf, sort_keys=True)
-    lines.append(f"  params: {buf.getvalue()}")
-    return "\n".join(lines)

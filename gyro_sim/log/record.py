@@ -172,10 +172,11 @@ def read_schedule(path, axis_names: Sequence[str]) -> list[tuple[float, list[flo
 
     p = Path(path)
     if p.suffix == ".mcap":
-        from gyro_sim.log.mcap_log import iter_messages, read_info
+        from gyro_sim.log.mcap_log import LogReader
 
-        topic = M.log_topic_names(read_info(p).topics, str(p)).axis_moments  # a namespaced node's log too
-        raw = [(t_ns * 1e-9, list(msg.data)) for _, _, t_ns, msg in iter_messages(p, [topic])]
+        with LogReader(p) as log:
+            topic = log.topic_names().axis_moments  # a namespaced node's log too
+            raw = [(t_ns * 1e-9, list(msg.data)) for _, _, t_ns, msg in log.messages([topic])]
         if not raw:
             raise ValueError(f"no {topic} in the log")
     else:

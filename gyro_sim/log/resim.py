@@ -82,7 +82,7 @@ def resimulate(path: str | os.PathLike, *, integrator: str | None = None, rtol: 
     sim = Simulator(scene, integrator=name, rtol=p["rtol"] if rtol is None else rtol,
                     atol=p["atol"] if atol is None else atol, step=p["step"])
     dt = float(p["advance_dt"])
-    names = log_names(path, info)
+    names = info.topic_names(path)
     cmd_topic = p.get("commands_topic", names.axis_moments)
     out = Resimulation(integrator=name)
     if name != p["integrator"] or rtol is not None or atol is not None:
@@ -106,15 +106,6 @@ def resimulate(path: str | os.PathLike, *, integrator: str | None = None, rtol: 
     return out
 
 
-def log_names(path, info) -> M.TopicNames:
-    """The topic names of the node that wrote the log (its namespace: gyro_sim.msgs.messages.
-    log_topic_names); LogError for a log that mixes two robots."""
-    try:
-        return M.log_topic_names(info.topics, str(path))
-    except M.NamespaceError as exc:
-        raise LogError(str(exc)) from None
-
-
 def prepare(path: str | os.PathLike, *, integrator: str | None = None):
     """The log's LogInfo, once everything re-simulation takes from it is checked: the
     parameters (:func:`_check_params`), the types of the topics it reads, and the work its span
@@ -127,7 +118,7 @@ def prepare(path: str | os.PathLike, *, integrator: str | None = None):
     if missing:
         raise LogError(f"{path}: the parameters lack {', '.join(missing)}: not a re-simulable gyro_sim log")
     _check_params(path, p)
-    names = log_names(path, info)
+    names = info.topic_names(path)
     cmd_topic = p.get("commands_topic", names.axis_moments)
     types = {names.joint_states: TOPIC_TYPES[M.JOINT_STATES], names.events: TOPIC_TYPES[M.EVENTS]}
     if cmd_topic in types:

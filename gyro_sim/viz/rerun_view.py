@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from gyro_sim.errors import GyroSimError
-from gyro_sim.log.mcap_log import LogError, read_info
+from gyro_sim.log.mcap_log import LogError, LogReader
 from gyro_sim.viz.chain import from_scene
 from gyro_sim.viz.translate import PLOT_EXTRA, TIMELINE, Translator, canonical, title
 
@@ -51,15 +51,13 @@ def build_recording(path: str | os.PathLike, rec) -> dict:
     Returns what was drawn: {"entities", "views", "scene", "eye", "t_range", "ranges",
     "series"} (the views of the blueprint, the y range and the series of each plot).
     """
-    from gyro_sim.log.mcap_log import iter_messages, log_topic_names
-
-    info = read_info(path)
-    scene = info.scene()
-    names = log_topic_names(path)  # a namespaced node's log too
-    tr = Translator(rec, from_scene(scene), axis_names=info.params.get("axis_names", []),
-                    source=f"log: `{Path(path).name}`", frame_prefix=names.frame_prefix)
-    for topic, _, t_ns, msg in iter_messages(path):
-        tr.message(canonical(topic, names), t_ns / 1e9, msg)
+    with LogReader(path) as log:
+        info = log.info
+        names = log.topic_names()  # a namespaced node's log too
+        tr = Translator(rec, from_scene(info.scene()), axis_names=info.params.get("axis_names", []),
+                        source=f"log: `{Path(path).name}`", frame_prefix=names.frame_prefix)
+        for topic, _, t_ns, msg in log.messages():
+            tr.message(canonical(topic, names), t_ns / 1e9, msg)
     tr.flush()
     return drawn(tr)
 
