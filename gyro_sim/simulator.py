@@ -114,6 +114,7 @@ class Simulator:
         self._axis_angle = np.array([i_phi[h] if h >= 0 else i_kappa[r]
                                      for h, r in zip(m.axis_hinge, m.axis_rotor)], dtype=int)
         self._conserved = inv.conserved(m)
+        self._balanced = inv.balanced_energy(m)  # whose balance E - E0 - W the motion keeps
         self._axis_max_torque = self._axis_limits()
         if m.stateful and integrator not in STATEFUL_INTEGRATORS:
             from gyro_sim.dynamics.actuators import ActuatorError
@@ -153,15 +154,15 @@ class Simulator:
         return np.clip(self._moments, -self._axis_max_torque, self._axis_max_torque)
 
     def _watched_energy(self) -> int | None:
-        """The index in the compiled invariants of the energy the exact motion keeps ("energy",
-        or "jacobi" with speed rotors, gyro_sim.dynamics.invariants.conserved), None when none is
-        kept (a moving base). On the numpy backend the same numbers come from the numpy
+        """The index in the compiled invariants of the energy whose balance the exact motion keeps
+        ("energy", or "jacobi" with speed rotors: gyro_sim.dynamics.invariants.balanced_energy),
+        None when none is kept (a moving base). On the numpy backend the same numbers come from the numpy
         invariants (`_invariants_at`)."""
         from gyro_sim.dynamics import outputs as fast_outputs
 
-        if "energy" in self._conserved:
+        if self._balanced == "energy":
             return fast_outputs.INV_ENERGY
-        return fast_outputs.INV_JACOBI if "jacobi" in self._conserved else None
+        return fast_outputs.INV_JACOBI if self._balanced == "jacobi" else None
 
     def _energy_error(self, t0: float, y0: np.ndarray, t1: float, y1: np.ndarray) -> float:
         """How far an integrator's call from (t0, y0) to (t1, y1) breaks the energy balance,
@@ -173,7 +174,7 @@ class Simulator:
         moving = len(self._axis_angle) and np.any(self._moments)
         if self.model.stateful:  # the applied torques' work is a state: the motors', friction's
             moving = True
-        if self._watched is None or (moving and "energy" not in self._conserved):
+        if self._watched is None or (moving and self._balanced != "energy"):
             return 0.0
         if self.model.stateful:
             w = self.model.i_work
@@ -729,7 +730,7 @@ class Simulator:
               "work": self._work}
         if self.model.actuators is not None:
             kw["friction_work"], kw["saturated_commands"] = self.friction_work, self._saturated
-        if "energy" in self._conserved:
+        if self._balanced == "energy":
             kw["energy_balance"] = now["energy"] - ref["energy"] - self._work - self.friction_work
             kw["energy_scale"] = inv.drift_scale("energy", ref)
         return kw

@@ -34,6 +34,8 @@ from dataclasses import asdict, dataclass, field
 from datetime import date
 from pathlib import Path
 
+from gyro_sim.errors import GyroSimError
+
 #: the extras installed: the node needs [ros], the sweep case [sweep]
 EXTRAS = "ros,sweep"
 #: the files that make a directory a gyro_sim source tree
@@ -120,7 +122,7 @@ print(json.dumps(first), flush=True)
 """
 
 
-class StartupError(RuntimeError):
+class StartupError(GyroSimError, RuntimeError):
     """A case could not be measured (the install failed, a process never answered)."""
 
 

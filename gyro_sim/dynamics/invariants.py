@@ -21,11 +21,25 @@ from gyro_sim.dynamics.reference import Data, cross, lam, matvec
 from gyro_sim.dynamics.model import Model
 
 
+def balanced_energy(model: Model) -> str | None:
+    """The energy whose balance the exact motion keeps: "energy" (E - E0 = the work of the
+    commands and of friction), or "jacobi" with speed rotors (kept with commands zero); None on
+    a moving base."""
+    if model.base_type == "moving":
+        return None
+    return "jacobi" if len(model.speed_body) else "energy"
+
+
 def conserved(model: Model) -> tuple[str, ...]:
-    """Names of the invariants the exact motion keeps in this scene (commands zero)."""
+    """Names of the invariants the exact motion keeps in this scene (commands zero). Friction
+    (gyro_sim.dynamics.actuators) dissipates the energy: no energy or Jacobi integral then (its
+    balance, `balanced_energy`, still holds); it acts between two bodies of the chain or against
+    the base, so the momenta below are kept as without it."""
     names = []
-    if model.base_type != "moving":
-        names.append("jacobi" if len(model.speed_body) else "energy")
+    energy = balanced_energy(model)
+    dissipates = model.actuators is not None and any(t.endswith(".friction") for t in model.actuators.terms)
+    if energy is not None and not dissipates:
+        names.append(energy)
     if model.base_type == "fixed" and not model.is_hinge[0]:
         names.append("vertical_momentum")
     if model.free:

@@ -211,7 +211,8 @@ def test_the_numpy_reference_system_agrees_to_round_off():
     assert np.max(np.abs(a - b)) <= 1e-12 * np.max(np.abs(b))
 
 
-SCENE_NAMES = [p.stem for p in shipped_scenes()]
+#: the shipped scenes lie4 steps (speed-dependent actuator terms are refused by it: test_actuators)
+SCENE_NAMES = [p.stem for p in shipped_scenes() if not compile_model(load_scene(p)).stateful]
 
 
 @needs_numba

@@ -34,7 +34,7 @@ def test_node_publishes_and_records_imus_that_resimulate(tmp_path):
     client = Client(domain)
     received = client.subscribe("/gyro_sim/imu/tip_imu", Imu, depth=1000)
     node = NodeProcess(tmp_path, domain, f"scene:={scene_file(tmp_path, 50.0)}", "physics_rate:=500.0",
-                       "publish_rate:=100.0", "duration:=3.0", f"record:={log}")
+                       "publish_rate:=100.0", "duration:=60.0", f"record:={log}")  # stopped once it has 10
     try:
         wait_for(lambda: len(received) > 10 or not node.alive(), DISCOVERY_TIMEOUT, "10 IMU messages")
         assert node.alive(), node.stderr
