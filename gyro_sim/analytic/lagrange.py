@@ -51,20 +51,8 @@ from typing import Any
 
 import numpy as np
 
+from gyro_sim.jit import njit
 from gyro_sim.scene.records import Body, Scene
-
-try:
-    import numba
-except ImportError:  # pragma: no cover - exercised only where numba is missing
-    numba = None
-
-
-def _njit(fn):
-    """Compiled in nopython mode and cached on disk (as gyro_sim.dynamics.kernel); plain Python
-    without numba."""
-    if numba is None:
-        return fn
-    return numba.njit(cache=True, error_model="numpy")(fn)
 
 __all__ = [
     "LagrangeChain",
@@ -285,7 +273,7 @@ def vertical_momentum_82(chain: LagrangeChain, euler: np.ndarray, rates: np.ndar
     return k + _sums_82(chain.m, chain.c, chain.s, psi, th, dpsi, dth)
 
 
-@_njit
+@njit
 def _sums_82(m, c, s, psi, th, dpsi, dth):
     """The double sums of (82), O(n^2): the running sum S_p = sum_{q<p} sum_{l<p} s^q s^l C_ql
     grows by s^p (sum_{l<p} s^l (C_pl + C_lp)) + (s^p)^2 C_pp from p to p + 1; C_ij from the
@@ -332,7 +320,7 @@ def energy_integral_85(chain: LagrangeChain, euler: np.ndarray, rates: np.ndarra
     return h + _sums_85(chain.m, chain.c, chain.s, psi, th, dpsi, dth)
 
 
-@_njit
+@njit
 def _sums_85(m, c, s, psi, th, dpsi, dth):
     """The double sums of (85), O(n^2): G is symmetric, so the running sum
     T_k = sum_{l<k} sum_{q<k} s^l s^q G_lq grows by 2 s^k sum_{l<k} s^l G_lk + (s^k)^2 G_kk;

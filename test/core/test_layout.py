@@ -18,7 +18,7 @@ ROOT = Path(gyro_sim.__file__).resolve().parent
 PACKAGE = "gyro_sim"
 #: the ROS-free core: scene, dynamics, closed forms, integrators and the Simulator over them
 CORE = ("gyro_sim.scene", "gyro_sim.dynamics", "gyro_sim.analytic", "gyro_sim.integrators",
-        "gyro_sim.simulator", "gyro_sim.snapshot")
+        "gyro_sim.simulator", "gyro_sim.snapshot", "gyro_sim.jit")
 
 
 def _modules() -> dict[str, Path]:

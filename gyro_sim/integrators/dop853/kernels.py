@@ -38,10 +38,7 @@ from __future__ import annotations
 
 import math
 
-try:
-    import numba
-except ImportError:  # pragma: no cover - exercised only where numba is missing
-    numba = None
+from gyro_sim.jit import njit
 
 #: stages of a step (the 13th, FSAL, is f at the new state, row N_STAGES of K)
 N_STAGES = 12
@@ -57,14 +54,7 @@ CONTROL_SIZE = 6
 INITIAL_SIZE = 7
 
 
-def _njit(fn):
-    """Compiled in nopython mode and cached on disk (as gyro_sim.integrators.rk4.kernels)."""
-    if numba is None:
-        return fn
-    return numba.njit(cache=True, error_model="numpy")(fn)
-
-
-@_njit
+@njit
 def dop_stage_state(y, K, A, s, h, ys):
     """ys (n,) = y + (sum_{j<s} A[s, j] K[j]) h: the state of stage s (scipy's rk_step and
     _dense_output_impl: `y + np.dot(K[:s].T, a[:s]) * h`). y (n,), K (>= s, n), A (>s, >=s)."""
@@ -76,7 +66,7 @@ def dop_stage_state(y, K, A, s, h, ys):
         ys[i] = y[i] + acc * h
 
 
-@_njit
+@njit
 def dop_update(y, K, B, h, y_new):
     """y_new (n,) = y + h sum_j B[j] K[j], j < len(B): the step of order 8."""
     n = y.shape[0]
@@ -87,7 +77,7 @@ def dop_update(y, K, B, h, y_new):
         y_new[i] = y[i] + h * acc
 
 
-@_njit
+@njit
 def dop_error_norm(K, E5, E3, h, y, y_new, rtol, atol):
     """DOP853's error norm of the step y -> y_new (HNW I, sec. II.10; scipy's
     DOP853._estimate_error_norm): the 5th-order estimate e5 damped by the 3rd-order one e3,
@@ -117,7 +107,7 @@ def dop_error_norm(K, E5, E3, h, y, y_new, rtol, atol):
     return abs(h) * n5 / math.sqrt((n5 + 0.01 * n3) * n)
 
 
-@_njit
+@njit
 def dop_finite(y):
     """True if every component of y (n,) is finite."""
     for i in range(y.shape[0]):
@@ -126,7 +116,7 @@ def dop_finite(y):
     return True
 
 
-@_njit
+@njit
 def dop_clip(t, h_abs, t1, stretch):
     """(h, t_new) of a trial step of h_abs from t: to exactly t1 when t + h_abs (1 + stretch)
     reaches it (dop853.f stretches the step before t1 rather than leave a sliver), else
@@ -137,7 +127,7 @@ def dop_clip(t, h_abs, t1, stretch):
     return t_new - t, t_new
 
 
-@_njit
+@njit
 def dop_control(err, finite, h, h_abs, rejected, control):
     """The step-size controller (HNW I, sec. II.4, eq. 4.13, with scipy's constants): given the
     error norm `err` of a trial step h (`finite`: its new state is finite), whose trial size
@@ -168,7 +158,7 @@ def dop_control(err, finite, h, h_abs, rejected, control):
     return False, abs(h) * max(min_factor, safety * err ** exponent)
 
 
-@_njit
+@njit
 def _rms_scaled(x, sc):
     """sqrt(sum_i (x_i / sc_i)^2 / n), 0 for n = 0 (scipy's `norm`: RMS)."""
     n = x.shape[0]
@@ -179,7 +169,7 @@ def _rms_scaled(x, sc):
     return math.sqrt(acc / n) if n else 0.0
 
 
-@_njit
+@njit
 def dop_initial_probe(y0, f0, rtol, atol, span, initial, sc, y1):
     """The starting step size, first half (HNW I, sec. II.4, "starting step size"; scipy's
     select_initial_step): sc = atol + |y0| rtol, d0 = ||y0||, d1 = ||f0|| (RMS norms in sc),
@@ -199,7 +189,7 @@ def dop_initial_probe(y0, f0, rtol, atol, span, initial, sc, y1):
     return h0, d1
 
 
-@_njit
+@njit
 def dop_initial_step(f0, f1, sc, h0, d1, span, max_step, order, initial):
     """The starting step size, second half: d2 = ||f1 - f0|| / h0 (an estimate of ||y''||, 0 if
     not finite), h1 = (FRACTION / max(d1, d2))^(1 / (order + 1)) (max(TINY_STEP, TINY_FRACTION
@@ -222,7 +212,7 @@ def dop_initial_step(f0, f1, sc, h0, d1, span, max_step, order, initial):
     return min(growth * h0, h1, span, max_step)
 
 
-@_njit
+@njit
 def dop_dense_coefficients(y_old, y_new, K, D, h, F):
     """The coefficients F (7, n) of DOP853's dense output of order 7 over the step
     y_old -> y_new of size h (HNW I, sec. II.6 and II.10; scipy's _dense_output_impl):
@@ -244,7 +234,7 @@ def dop_dense_coefficients(y_old, y_new, K, D, h, F):
             F[3 + r, i] = h * acc
 
 
-@_njit
+@njit
 def dop_dense_eval(F, y_old, t_old, h, tq, Y):
     """Y (k, n): the dense output at times tq (k,) of the step from (t_old, y_old) of size h,
     x = (t - t_old) / h, by Horner's scheme in x and (1 - x) alternately from the last
@@ -295,7 +285,7 @@ DETECT_SIZE = 4
 NO_HLAMB = -1.0
 
 
-@_njit
+@njit
 def dop_hlamb(h, Y12, f12, y1, f1):
     """dop853.f's stiffness estimate (HLAMB) of an accepted step h: h |lambda| ~
     |h| sqrt(||f1 - f12||^2 / ||y1 - Y12||^2), Y12 (n,) the last stage's state (at t + h),
@@ -313,7 +303,7 @@ def dop_hlamb(h, Y12, f12, y1, f1):
     return abs(h) * math.sqrt(num / den)
 
 
-@_njit
+@njit
 def auto_stiffness_test(hlamb, counters, detect):
     """dop853.f's test on one accepted step of h |lambda| = hlamb: above STIFF_HLAMB a stiff
     step (IASTI + 1, NONSTI = 0), else a non-stiff one (NONSTI + 1; NONSTIFF_RESET of them in a
@@ -328,7 +318,7 @@ def auto_stiffness_test(hlamb, counters, detect):
     return False
 
 
-@_njit
+@njit
 def auto_rejections(counters, attempts):
     """(rejected, all) step attempts in the window: the rejected ones and every attempt."""
     count = counters[C_ATTEMPTS]
@@ -338,7 +328,7 @@ def auto_rejections(counters, attempts):
     return rejected, rejected + count
 
 
-@_njit
+@njit
 def auto_rejection_test(rejected, counters, attempts, detect):
     """Enters the `rejected` attempts before an accepted step in the window of the last
     len(attempts) accepted steps. True when the window holds at least len(attempts) attempts
@@ -352,14 +342,14 @@ def auto_rejection_test(rejected, counters, attempts, detect):
     return n_all >= size and n_rej >= detect[D_REJECT_FRACTION] * n_all
 
 
-@_njit
+@njit
 def auto_clear_attempts(counters):
     """Empties the window of attempts."""
     counters[C_ATTEMPTS] = 0
     counters[C_ATTEMPT_NEXT] = 0
 
 
-@_njit
+@njit
 def auto_measure(dt, nfev, counters, window, cost, method):
     """Enters an accepted step of dt that cost nfev rhs evaluations in the window of the last
     len(window) steps; once full, cost[method] = its evaluations / its span (if > 0)."""
@@ -382,7 +372,7 @@ def auto_measure(dt, nfev, counters, window, cost, method):
             cost[method] = evals / span
 
 
-@_njit
+@njit
 def auto_costlier(cost, candidate, running, margin):
     """Is method `candidate` measured to cost more than `margin` times method `running`?"""
     c, r = cost[candidate], cost[running]

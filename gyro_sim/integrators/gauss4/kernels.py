@@ -38,10 +38,7 @@ from __future__ import annotations
 
 import math
 
-try:
-    import numba
-except ImportError:  # pragma: no cover - exercised only where numba is missing
-    numba = None
+from gyro_sim.jit import njit
 
 #: newton_test results
 NEWTON_CONTINUE, NEWTON_CONVERGED, NEWTON_DIVERGING, NEWTON_NOT_FINITE, NEWTON_STALLED = 0, 1, 2, 3, 4
@@ -100,21 +97,14 @@ NOISE_ULPS = 4.0
 _EPS = 2.220446049250313e-16
 
 
-def _njit(fn):
-    """Compiled in nopython mode and cached on disk (as gyro_sim.dynamics.kernel)."""
-    if numba is None:
-        return fn
-    return numba.njit(cache=True, error_model="numpy")(fn)
-
-
-@_njit
+@njit
 def gauss_weights(y, tol, w):
     """w (n,) = tol (1 + |y|): the per-component scale of the Newton iteration."""
     for i in range(y.shape[0]):
         w[i] = tol * (1.0 + abs(y[i]))
 
 
-@_njit
+@njit
 def gauss_predict(Zp, P, Z):
     """Z (2, n) = P Zp: the starting stage increments, the previous step's collocation
     polynomial extrapolated (P from the class's `predictor`); Zp (2, n) its stage increments."""
@@ -124,14 +114,14 @@ def gauss_predict(Zp, P, Z):
             Z[s, i] = P[s, 0] * Zp[0, i] + P[s, 1] * Zp[1, i]
 
 
-@_njit
+@njit
 def gauss_stage_state(y, Z, s, Ys):
     """Ys (n,) = y + Z[s]: the state of stage s."""
     for i in range(y.shape[0]):
         Ys[i] = y[i] + Z[s, i]
 
 
-@_njit
+@njit
 def all_finite(X):
     """True when every entry of X (k, n) is finite."""
     for s in range(X.shape[0]):
@@ -141,7 +131,7 @@ def all_finite(X):
     return True
 
 
-@_njit
+@njit
 def gmres_start(Z, F, hA, w, V, g):
     """The right-hand side of the Newton system, scaled, as GMRES's first basis vector.
 
@@ -168,7 +158,7 @@ def gmres_start(Z, F, hA, w, V, g):
     return beta
 
 
-@_njit
+@njit
 def gmres_goal(beta, rtol, atol, n):
     """The residual (2-norm, scaled) at which GMRES stops: max(rtol beta, atol sqrt(2 n)) --
     relative (the inexact Newton forcing term) or absolute (atol in rms units of the
@@ -176,7 +166,7 @@ def gmres_goal(beta, rtol, atol, n):
     return max(rtol * beta, atol * math.sqrt(2.0 * n))
 
 
-@_njit
+@njit
 def gauss_perturbed(Ys, w, v, s, eps, out):
     """out (n,) = Ys + eps w v[s]: the state at which f is differenced for J_s (w v_s).
     Ys (n,) the stage state, v (2, n) a scaled Krylov vector."""
@@ -184,7 +174,7 @@ def gauss_perturbed(Ys, w, v, s, eps, out):
         out[i] = Ys[i] + eps * (w[i] * v[s, i])
 
 
-@_njit
+@njit
 def gauss_operator(v, Fp, F, hA, w, inv_eps, out):
     """out (2, n) = v - (h A (x) I) [J_s (w v_s)] / w: the scaled Newton matrix applied to v,
     J_s (w v_s) = (Fp[s] - F[s]) / eps by forward differences (Fp[s] = f at `gauss_perturbed`)."""
@@ -196,7 +186,7 @@ def gauss_operator(v, Fp, F, hA, w, inv_eps, out):
             out[s, i] = v[s, i] - (hA[s, 0] * j0 + hA[s, 1] * j1) / w[i]
 
 
-@_njit
+@njit
 def gmres_arnoldi(V, H, cs, sn, g, k):
     """Arnoldi step k of GMRES with its Givens rotation. On entry V[k + 1] (2, n) holds the
     operator applied to V[k]; it is orthogonalised against V[0..k] (modified Gram-Schmidt),
@@ -242,7 +232,7 @@ def gmres_arnoldi(V, H, cs, sn, g, k):
     return abs(g[k + 1])
 
 
-@_njit
+@njit
 def gmres_update(V, H, g, k, w, Z, coef):
     """The GMRES solution with k vectors added to Z: coef (k,) solves the triangle
     H[:k, :k] coef = g[:k]; Z += w (sum_j coef_j V[j]). Returns the rms norm of the scaled
@@ -266,7 +256,7 @@ def gmres_update(V, H, g, k, w, Z, coef):
     return math.sqrt(acc / (2.0 * n))
 
 
-@_njit
+@njit
 def newton_test(norm, norm_prev, it, kappa, first_tol, diverge, stall, stall_rate):
     """The stop test of the Newton iteration after its update number `it` (0-based) of scaled
     rms size `norm` (Hairer, Wanner II, sec. IV.8, eqs. (8.10)-(8.13)): with the contraction
@@ -299,7 +289,7 @@ def newton_test(norm, norm_prev, it, kappa, first_tol, diverge, stall, stall_rat
     return NEWTON_CONTINUE, theta
 
 
-@_njit
+@njit
 def gauss_scaled(A, h, hA):
     """hA (2, 2) = h A with the symplecticity condition of the 2-stage Gauss method held exactly
     in floating point (Hairer, McLachlan, Razakarivony 2008, sec. 3): with b = (1/2, 1/2) the
@@ -314,7 +304,7 @@ def gauss_scaled(A, h, hA):
     hA[0, 1] = 0.5 * h - hA[1, 0]
 
 
-@_njit
+@njit
 def gauss_update(y, Z, F, hA, h, D):
     """y (n,) += h/2 (F[0] + F[1]) + D[0] e[0] + D[1] e[1], e_s = Z_s - sum_j hA[s, j] F_j:
     the step's result y1 = u(t + h) of the collocation polynomial, no rhs evaluation.
@@ -334,7 +324,7 @@ def gauss_update(y, Z, F, hA, h, D):
 
 
 # --------------------------------------------------------------------------- starting guess
-@_njit
+@njit
 def predictor_matrix(C, ratio, P):
     """P (2, 2): Z_new = P Z_old extrapolates the collocation polynomial u of the last step
     (u(t0 + x h) = y0 + sum_i L_i(x) Z_i, Lagrange basis of the nodes {0, c_1, c_2}) to the
@@ -347,7 +337,7 @@ def predictor_matrix(C, ratio, P):
 
 
 # --------------------------------------------------------------------------- the dense path
-@_njit
+@njit
 def jac_perturb(Ys, j, Yp):
     """Yp (n,) = Ys with component j moved by d = JAC_REL_STEP max(1, |Ys_j|) (rounded so that
     Yp_j - Ys_j is exactly d); returns d. The column j of f' at Ys is (f(Yp) - f(Ys)) / d."""
@@ -358,7 +348,7 @@ def jac_perturb(Ys, j, Yp):
     return Yp[j] - Ys[j]
 
 
-@_njit
+@njit
 def jac_column(Fp, F, d, J, j):
     """Column j of J (n, n) = (Fp - F) / d (forward difference, `jac_perturb`)."""
     inv = 1.0 / d
@@ -366,7 +356,7 @@ def jac_column(Fp, F, d, J, j):
         J[i, j] = (Fp[i] - F[i]) * inv
 
 
-@_njit
+@njit
 def newton_matrix(J, hA, M):
     """M (2n, 2n) = I - (h A (x) I) diag(J_1, J_2): block (s, q) = delta_sq I - hA[s, q] J_q;
     J (2, n, n) the stage Jacobians."""
@@ -382,7 +372,7 @@ def newton_matrix(J, hA, M):
         M[i, i] += 1.0
 
 
-@_njit
+@njit
 def lu_factor(M, piv):
     """Gaussian elimination with partial pivoting, in place: M (m, m) -> L (unit, below the
     diagonal) and U; piv (m,) int64 the row exchanged with row k at step k. Returns 0, or k + 1
@@ -412,7 +402,7 @@ def lu_factor(M, piv):
     return 0
 
 
-@_njit
+@njit
 def lu_solve(M, piv, b):
     """b (m,) = M^-1 b in place, M and piv from `lu_factor`."""
     m = M.shape[0]
@@ -432,7 +422,7 @@ def lu_solve(M, piv, b):
         b[i] = acc / M[i, i]
 
 
-@_njit
+@njit
 def dense_residual(Z, F, hA, r):
     """r (2n,) = -G(Z) = -Z_s + sum_q hA[s, q] F_q, the stages one after the other."""
     n = Z.shape[1]
@@ -441,7 +431,7 @@ def dense_residual(Z, F, hA, r):
             r[s * n + i] = -Z[s, i] + (hA[s, 0] * F[0, i] + hA[s, 1] * F[1, i])
 
 
-@_njit
+@njit
 def dense_update(r, w, Z):
     """Z (2, n) += the update r (2n,); returns its rms size in units of the tolerance, w."""
     n = Z.shape[1]
@@ -455,7 +445,7 @@ def dense_update(r, w, Z):
     return math.sqrt(acc / (2.0 * n)) if n else 0.0
 
 
-@_njit
+@njit
 def scaled_rms(r, w):
     """rms of r (2n,) / w (n,) (both stages), in units of the tolerance."""
     n = w.shape[0]
@@ -467,7 +457,7 @@ def scaled_rms(r, w):
     return math.sqrt(acc / (2.0 * n)) if n else 0.0
 
 
-@_njit
+@njit
 def noise_perturb(Ys, Yp):
     """Yp (n,) = Ys moved by NOISE_ULPS eps (1 + |Ys_i|) per component, signs alternating:
     a change at the level of the state's own round-off, to probe the rhs's."""
@@ -476,7 +466,7 @@ def noise_perturb(Ys, Yp):
         Yp[i] = Ys[i] + d if i % 2 == 0 else Ys[i] - d
 
 
-@_njit
+@njit
 def noise_residual(Fn, F, hA, r):
     """r (2n,) = (h A (x) I) (Fn - F): the residual that round-off of the stage states makes
     (Fn (2, n) the rhs at `noise_perturb` of each stage). M^-1 r is the Newton update it
@@ -487,7 +477,7 @@ def noise_residual(Fn, F, hA, r):
             r[s * n + i] = hA[s, 0] * (Fn[0, i] - F[0, i]) + hA[s, 1] * (Fn[1, i] - F[1, i])
 
 
-@_njit
+@njit
 def refresh_wanted(theta, norm, left, kappa, rate):
     """Should the stage Jacobians be formed anew at the current iterate? Yes when the
     contraction rate theta is above `rate`, or when at that rate the error estimate
@@ -500,7 +490,7 @@ def refresh_wanted(theta, norm, left, kappa, rate):
     return theta ** left / (1.0 - theta) * norm > kappa
 
 
-@_njit
+@njit
 def noise_floor(noise, factor, stall):
     """The round-off floor of the dense iteration (tolerance units): `factor` times the measured
     noise of the update (`noise_residual` solved), at least `stall`; `stall` if the
@@ -510,7 +500,7 @@ def noise_floor(noise, factor, stall):
     return max(stall, factor * noise)
 
 
-@_njit
+@njit
 def retake_next(ok, pos, depth, max_depth, level):
     """The dyadic retake of a step: the step is cut into pieces of h / 2^depth on the grid of
     h / 2^max_depth (positions counted in that unit), starting at depth `level`. After a
@@ -526,7 +516,7 @@ def retake_next(ok, pos, depth, max_depth, level):
     return pos, depth
 
 
-@_njit
+@njit
 def level_start(h, dstate, max_depth):
     """The level the step of size h starts at: dstate[DST_LEVEL] when it was set for this h,
     else 0 (whole steps); at most max_depth."""
@@ -537,7 +527,7 @@ def level_start(h, dstate, max_depth):
     return min(int(dstate[DST_LEVEL]), max_depth)
 
 
-@_njit
+@njit
 def level_next(level, retaken, dstate, level_max, patience):
     """After a step that started at `level` and succeeded: the level of the next one.
 

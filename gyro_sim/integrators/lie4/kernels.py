@@ -29,23 +29,13 @@ from __future__ import annotations
 
 import math
 
-try:
-    import numba
-except ImportError:  # pragma: no cover - exercised only where numba is missing
-    numba = None
+from gyro_sim.jit import njit
 
 #: below this angle (rad) sin(a/2)/a is its series 1/2 - a^2/48 (as rotations.quat_exp)
 SMALL_ANGLE = 1e-8
 
 
-def _njit(fn):
-    """Compiled in nopython mode and cached on disk (as gyro_sim.dynamics.kernel)."""
-    if numba is None:
-        return fn
-    return numba.njit(cache=True, error_model="numpy")(fn)
-
-
-@_njit
+@njit
 def quat_exp(tx, ty, tz):
     """The unit quaternion exp(theta / 2) (w, x, y, z) of the rotation vector theta = (tx, ty,
     tz): rotations.quat_exp of one vector, in the same operations."""
@@ -58,7 +48,7 @@ def quat_exp(tx, ty, tz):
     return math.cos(half), scale * tx, scale * ty, scale * tz
 
 
-@_njit
+@njit
 def quat_left(aw, ax, ay, az, q, i):
     """q[i] (4 consecutive indices i[0..3]) = a (x) q[i]: the Hamilton product of
     rotations.quat_mul, in its operations."""
@@ -69,7 +59,7 @@ def quat_left(aw, ax, ay, az, q, i):
     q[i[3]] = aw * bz + ax * by - ay * bx + az * bw
 
 
-@_njit
+@njit
 def lie_field(Y, f, s, qi, li, W, V):
     """The field of stage s from f (n,) = rhs at Y[s] (Y (stages, n)): W[s, b] (3,) = 2 vec(q'
     (x) conj(q)) of every quaternion block q = Y[s, qi[b]], q' = f[qi[b]]; V[s] (nl,) =
@@ -86,7 +76,7 @@ def lie_field(Y, f, s, qi, li, W, V):
         V[s, i] = f[li[i]]
 
 
-@_njit
+@njit
 def lie_stage(Y, W, V, hALPHA, s, base, qi, li):
     """Y[s] (n,) = exp(sum_{j<s} hALPHA[s, j] (W[j], V[j])) Y[base]: the state of stage s.
     Y (stages, n), W (stages, nq, 3), V (stages, nl), hALPHA (stages, stages) = h ALPHA;
@@ -111,7 +101,7 @@ def lie_stage(Y, W, V, hALPHA, s, base, qi, li):
         Y[s, li[i]] = Y[base, li[i]] + acc
 
 
-@_njit
+@njit
 def lie_update(y, W, V, hBETA, qi, li):
     """The step's result in place: y (n,) <- exp(sum_j hBETA[2, j] W[j]) exp(sum_j hBETA[1, j]
     W[j]) y on every quaternion block (the right exponential acts first), y[li] += sum_j
@@ -137,7 +127,7 @@ def lie_update(y, W, V, hBETA, qi, li):
             quat_left(ew, ex, ey, ez, y, qi[b])
 
 
-@_njit
+@njit
 def lie_start(y, Y):
     """Y[0] (n,) = y: the first stage's state."""
     for i in range(y.shape[0]):

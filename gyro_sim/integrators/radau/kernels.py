@@ -51,6 +51,7 @@ import math
 import numpy as np
 
 from gyro_sim.integrators.dop853.kernels import C_WINDOW, COST_DOP853, COST_RADAU
+from gyro_sim.jit import njit
 
 try:
     import numba
@@ -71,15 +72,8 @@ NEWTON_CONVERGED = 1
 NEWTON_DIVERGING = 2
 
 
-def _njit(fn):
-    """Compiled in nopython mode and cached on disk (as gyro_sim.integrators.rk4.kernels)."""
-    if numba is None:
-        return fn
-    return numba.njit(cache=True, error_model="numpy")(fn)
-
-
 # --- vectors ---------------------------------------------------------------------------------
-@_njit
+@njit
 def rad_finite(x):
     """True if every component of x (n,) is finite."""
     for i in range(x.shape[0]):
@@ -88,7 +82,7 @@ def rad_finite(x):
     return True
 
 
-@_njit
+@njit
 def rad_finite_rows(F, bad):
     """bad (k,) = 1 where the row of F (k, n) has a non-finite component, else 0; returns
     True if none has."""
@@ -103,14 +97,14 @@ def rad_finite_rows(F, bad):
     return ok
 
 
-@_njit
+@njit
 def rad_add(a, b, out):
     """out (n,) = a + b."""
     for i in range(a.shape[0]):
         out[i] = a[i] + b[i]
 
 
-@_njit
+@njit
 def rad_scale(y, y_new, rtol, atol, sc):
     """sc (n,) = atol + max(|y|, |y_new|) rtol (np.maximum: NaN propagates); y_new = y gives
     atol + |y| rtol. atol (n,)."""
@@ -120,7 +114,7 @@ def rad_scale(y, y_new, rtol, atol, sc):
         sc[i] = m * rtol + atol[i]
 
 
-@_njit
+@njit
 def rad_rms_scaled(x, sc):
     """sqrt(sum_i (x_i / sc_i)^2 / n), 0 for n = 0 (scipy's `norm` of x / scale)."""
     n = x.shape[0]
@@ -131,7 +125,7 @@ def rad_rms_scaled(x, sc):
     return math.sqrt(acc / n) if n else 0.0
 
 
-@_njit
+@njit
 def rad_dw_norm(dW, sc):
     """||dW / sc||_rms over all 3 n components, row after row (scipy: norm(dW / scale))."""
     k, n = dW.shape[0], dW.shape[1]
@@ -143,7 +137,7 @@ def rad_dw_norm(dW, sc):
     return math.sqrt(acc / (k * n)) if n else 0.0
 
 
-@_njit
+@njit
 def rad_clip(t, h_abs, t1, stretch):
     """(h, t_new) of a trial step of h_abs from t: to exactly t1 when t + h_abs (1 + stretch)
     reaches it, else t_new = t + h_abs and h = t_new - t (AdaptiveIntegrator._clip)."""
@@ -154,7 +148,7 @@ def rad_clip(t, h_abs, t1, stretch):
 
 
 # --- the Jacobian by forward differences --------------------------------------------------
-@_njit
+@njit
 def rad_fd_delta(y, rel_step, min_scale, delta):
     """delta (n,): the forward-difference steps delta_j = (y_j + rel_step max(|y_j|,
     min_scale)) - y_j, as represented (the difference of two floats: exact in the quotient)."""
@@ -163,7 +157,7 @@ def rad_fd_delta(y, rel_step, min_scale, delta):
         delta[j] = (y[j] + rel_step * (a if a > min_scale else min_scale)) - y[j]
 
 
-@_njit
+@njit
 def rad_fd_column(J, j, fj, f, dj):
     """Column j of the forward-difference Jacobian: J[:, j] = (fj - f) / dj."""
     for i in range(f.shape[0]):
@@ -173,7 +167,7 @@ def rad_fd_column(J, j, fj, f, dj):
 # --- LU with partial pivoting ----------------------------------------------------------------
 # The factors are stored as LAPACK's getrf leaves them, column-major: an (n, n) C-ordered array
 # holding M^T (At[j, i] = M[i, j]); pivots 1-based int32 (row k was swapped with row piv[k]).
-@_njit
+@njit
 def rad_lu(At, piv):
     """LU of M in place, At (n, n) = M^T (M column-major), with partial pivoting (Golub, Van
     Loan, sec. 3.4; LAPACK's dgetf2 / zgetf2): P M = L U, L unit lower, U upper, the pivot the
@@ -230,12 +224,12 @@ LAPACK_GETRF = _XGETRF_REAL is not None
 _KIND_REAL, _KIND_COMPLEX = ord("d"), ord("z")
 
 if LAPACK_GETRF:
-    @_njit
+    @njit
     def _getrf_real(At, piv):
         n = At.shape[0]
         return _XGETRF_REAL(_KIND_REAL, n, n, At.ctypes, n, piv.ctypes)
 
-    @_njit
+    @njit
     def _getrf_complex(At, piv):
         n = At.shape[0]
         return _XGETRF_COMPLEX(_KIND_COMPLEX, n, n, At.ctypes, n, piv.ctypes)
@@ -254,7 +248,7 @@ else:
     _getrf_real = _getrf_complex = rad_lu
 
 
-@_njit
+@njit
 def rad_lu_solve(At, piv, b):
     """Solves M x = b in place (b (n,) becomes x) from the factors of M in At (n, n) = the
     column-major LU (rad_factor): the row swaps, then L (unit lower) forward and U backward,
@@ -278,7 +272,7 @@ def rad_lu_solve(At, piv, b):
             b[i] -= At[j, i] * x
 
 
-@_njit
+@njit
 def rad_factor(J, h, mu_real, mu_complex, LU_real, piv_real, LU_complex, piv_complex):
     """The two matrices of the simplified Newton iteration and their LU (HW II, sec. IV.8):
     MU_REAL/h I - J and MU_COMPLEX/h I - J (complex; off the diagonal -J, on it MU/h - J),
@@ -300,7 +294,7 @@ def rad_factor(J, h, mu_real, mu_complex, LU_real, piv_real, LU_complex, piv_com
 
 
 # --- the collocation system -----------------------------------------------------------------
-@_njit
+@njit
 def rad_transform(M, X, out):
     """out (3, n) = M X, M (3, 3), X (3, n): W = TI Z or Z = T W."""
     n = X.shape[1]
@@ -312,7 +306,7 @@ def rad_transform(M, X, out):
             out[r, i] = acc
 
 
-@_njit
+@njit
 def rad_predict(Qt, t_old, h_old, y_old, t, h, C, y, Z0):
     """The Newton start Z0 (3, n) of a step (t, h) from the collocation polynomial of the
     previous step (Qt (3, n), from (t_old, y_old) of size h_old): Z0[s] = y_poly(t + C[s] h)
@@ -325,14 +319,14 @@ def rad_predict(Qt, t_old, h_old, y_old, t, h, C, y, Z0):
             Z0[s, i] = ((Qt[0, i] * x + Qt[1, i] * x2 + Qt[2, i] * x3) + y_old[i]) - y[i]
 
 
-@_njit
+@njit
 def rad_stage_state(y, Z, s, ys):
     """ys (n,) = y + Z[s]: the state of stage s."""
     for i in range(y.shape[0]):
         ys[i] = y[i] + Z[s, i]
 
 
-@_njit
+@njit
 def rad_newton_residual(F, W, TI, h, mu_real, mu_complex, f_real, f_complex):
     """The right-hand sides of the two linear systems of a simplified Newton iteration in the
     eigenbasis of A^-1 (scipy's solve_collocation_system):
@@ -356,7 +350,7 @@ def rad_newton_residual(F, W, TI, h, mu_real, mu_complex, f_real, f_complex):
         f_complex[i] = complex(b - (cr * w1 - ci * w2), c - (cr * w2 + ci * w1))
 
 
-@_njit
+@njit
 def rad_newton_increment(LU_real, piv_real, LU_complex, piv_complex, f_real, f_complex, scale, dW):
     """dW (3, n): the Newton increment from the residuals (solved in place) through the two
     LUs (dW_0 real, dW_1 + i dW_2 complex); returns ||dW / scale||_rms."""
@@ -369,7 +363,7 @@ def rad_newton_increment(LU_real, piv_real, LU_complex, piv_complex, f_real, f_c
     return rad_dw_norm(dW, scale)
 
 
-@_njit
+@njit
 def rad_newton_advance(dW_norm, dW_norm_old, k, tol, maxiter, W, dW, T, Z):
     """Iteration k (from 0) of the simplified Newton iteration after its increment dW, of norm
     dW_norm (the previous one dW_norm_old; HW II, sec. IV.8, eq. 8.10 ff.; scipy):
@@ -392,7 +386,7 @@ def rad_newton_advance(dW_norm, dW_norm_old, k, tol, maxiter, W, dW, T, Z):
 
 
 # --- error estimate and step control ----------------------------------------------------------
-@_njit
+@njit
 def rad_error_rhs(E, Z, h, f, ZE, b):
     """ZE (n,) = (sum_j E[j] Z[j]) / h and b = f + ZE: the right-hand side of the error
     estimate (HW II, sec. IV.8, eq. 8.19 ff.; scipy: `f + Z.T.dot(E) / h`)."""
@@ -404,7 +398,7 @@ def rad_error_rhs(E, Z, h, f, ZE, b):
         b[i] = f[i] + ZE[i]
 
 
-@_njit
+@njit
 def rad_error(LU_real, piv_real, b, scale):
     """The error estimate err = (MU_REAL/h I - J)^-1 b in place of b (n,); returns
     ||err / scale||_rms."""
@@ -412,7 +406,7 @@ def rad_error(LU_real, piv_real, b, scale):
     return rad_rms_scaled(b, scale)
 
 
-@_njit
+@njit
 def rad_predict_factor(h_abs, h_abs_old, error_norm, error_norm_old):
     """Gustafsson's predictive step-size factor (HW II, sec. IV.8, eq. 8.25; scipy's
     predict_factor): min(1, h/h_old (err_old/err)^(1/4)) err^(-1/4), the first factor 1 when
@@ -424,7 +418,7 @@ def rad_predict_factor(h_abs, h_abs_old, error_norm, error_norm_old):
     return min(1.0, multiplier) * error_norm ** -0.25
 
 
-@_njit
+@njit
 def rad_safety(n_iter, control):
     """SAFETY (2 NEWTON_MAXITER + 1) / (2 NEWTON_MAXITER + n_iter): a step whose Newton
     iteration needed more iterations grows less (radau5.f, scipy)."""
@@ -432,7 +426,7 @@ def rad_safety(n_iter, control):
     return control[C_SAFETY] * (2.0 * maxiter + 1.0) / (2.0 * maxiter + n_iter)
 
 
-@_njit
+@njit
 def rad_control_rejected(h, h_abs_old, error_norm, error_norm_old, n_iter, control):
     """The trial size after a rejected step h (error_norm > 1): |h| max(MIN_FACTOR, safety
     factor), factor from rad_predict_factor with the last accepted step's memory."""
@@ -440,7 +434,7 @@ def rad_control_rejected(h, h_abs_old, error_norm, error_norm_old, n_iter, contr
     return abs(h) * max(control[C_MIN_FACTOR], rad_safety(n_iter, control) * factor)
 
 
-@_njit
+@njit
 def rad_control_accepted(h, h_try, h_abs_old, error_norm, error_norm_old, n_iter, rate, control):
     """After an accepted step h (tried as h_try: h may be shorter, clipped to t1), whose Newton
     iteration took n_iter iterations at the last rate:
@@ -466,7 +460,7 @@ def rad_control_accepted(h, h_try, h_abs_old, error_norm, error_norm_old, n_iter
 
 
 # --- dense output -------------------------------------------------------------------------------
-@_njit
+@njit
 def rad_dense_coefficients(Z, P, Qt):
     """Qt (3, n): the collocation polynomial of a step, Qt[c, i] = sum_j Z[j, i] P[j, c]
     (scipy: Q = Z.T.dot(P)); y(t_old + x h) = y_old + sum_c Qt[c] x^(c + 1)."""
@@ -478,7 +472,7 @@ def rad_dense_coefficients(Z, P, Qt):
             Qt[c, i] = acc
 
 
-@_njit
+@njit
 def rad_dense_eval(Qt, y_old, t_old, h, tq, Y):
     """Y (k, n): the dense output at times tq (k,) of the step from (t_old, y_old) of size h,
     x = (t - t_old) / h, (Q0 x + Q1 x^2 + Q2 x^3) + y_old (scipy's RadauDenseOutput, the
@@ -521,14 +515,14 @@ if _COMPILED:
 _JOB_NONE = ord("N")
 
 if _XGEEV_REAL is not None:
-    @_njit
+    @njit
     def _geev_real(At, wr, wi, v):
         """Eigenvalues wr + i wi of M from At (n, n) = M^T (M column-major; destroyed)."""
         n = At.shape[0]
         return _XGEEV_REAL(_KIND_REAL, _JOB_NONE, _JOB_NONE, n, At.ctypes, n, wr.ctypes, wi.ctypes,
                            v.ctypes, 1, v.ctypes, 1)
 
-    @_njit
+    @njit
     def _eig_radius(J):
         """max |eigenvalue| of J (n, n), n > 0, by LAPACK's dgeev."""
         n = J.shape[0]
@@ -550,7 +544,7 @@ elif not _COMPILED:  # plain Python: numpy's eigenvalues
         """max |eigenvalue| of J (n, n), n > 0."""
         return float(np.max(np.abs(np.linalg.eigvals(J))))
 else:
-    @_njit
+    @njit
     def _eig_radius(J):
         """max |eigenvalue| of J (n, n), n > 0 (numba's eigvals of the complex matrix, whose
         eigenvalues need no change of domain)."""
@@ -563,7 +557,7 @@ else:
         return rho
 
 
-@_njit
+@njit
 def auto_spectral_radius(J, power, handback):
     """rho(J) = max |eigenvalue| of J (n, n): inf if J is not finite, 0 for n = 0; up to
     EIG_MAX_SIZE states from the eigenvalues (LAPACK's dgeev), above it |J x| after
@@ -597,7 +591,7 @@ def auto_spectral_radius(J, power, handback):
     return rho
 
 
-@_njit
+@njit
 def auto_nonstiffness_test(h, easy, handback):
     """An accepted radau step h, with rho(J) = easy[EASY_RHO]: h rho < NONSTIFF_HRHO (an
     explicit step of that size is well inside dop853's stability region) counts one more easy
@@ -611,7 +605,7 @@ def auto_nonstiffness_test(h, easy, handback):
     return easy[EASY_STEPS] >= easy[EASY_NEEDED]
 
 
-@_njit
+@njit
 def auto_dop853_cost(cost, easy, handback):
     """dop853's rhs evaluations per simulated second: measured (cost[COST_DOP853]), else
     estimated at its stability limit on the imaginary axis, DOP853_EVALS rho / DOP853_BOUNDARY
@@ -622,7 +616,7 @@ def auto_dop853_cost(cost, easy, handback):
     return dop
 
 
-@_njit
+@njit
 def auto_cost_test(cost, counters, window, easy, handback):
     """Radau running, its cost window full: True when radau costs more than COST_MARGIN times
     what dop853 did (or would: auto_dop853_cost)."""

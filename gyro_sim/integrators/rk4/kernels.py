@@ -15,20 +15,10 @@ Without numba these stay plain Python (correct, slow).
 """
 from __future__ import annotations
 
-try:
-    import numba
-except ImportError:  # pragma: no cover - exercised only where numba is missing
-    numba = None
+from gyro_sim.jit import njit
 
 
-def _njit(fn):
-    """Compiled in nopython mode and cached on disk (as gyro_sim.dynamics.kernel)."""
-    if numba is None:
-        return fn
-    return numba.njit(cache=True, error_model="numpy")(fn)
-
-
-@_njit
+@njit
 def erk_stage_state(y, K, hA, s, ys):
     """ys (n,) = y + sum_{j<s} hA[s, j] K[j]: the state at which stage s is evaluated.
     y (n,), K (stages, n), hA (stages, stages) = h A."""
@@ -40,7 +30,7 @@ def erk_stage_state(y, K, hA, s, ys):
         ys[i] = acc + y[i]
 
 
-@_njit
+@njit
 def erk_update(y, K, hB):
     """y (n,) += sum_j hB[j] K[j]: the step's result in place. hB (stages,) = h B."""
     n = y.shape[0]
