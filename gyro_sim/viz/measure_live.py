@@ -115,9 +115,10 @@ def main(argv=None) -> int:
         for rtf in args.rtf:
             for viewer in (False, True):
                 r = run_once(n, args.seconds, rtf, viewer, domain)
+                viewer_cpu = f"{r['viewer_cpu_share']:.2f}" if viewer else ""
                 print(f"| {n} | {'max' if rtf == 0 else f'{rtf:g}'} | {'yes' if viewer else 'no'} | {r['rtf']:.2f} | "
-                      f"{r['node_cpu_share']:.2f} | {r['viewer_cpu_share'] if viewer else float('nan'):.2f} | {r.get('drawn', '')} | "
-                      f"{r.get('lag', '')} |", flush=True)
+                      f"{r['node_cpu_share']:.2f} | {viewer_cpu} | {r.get('drawn', '')} | {r.get('lag', '')} |",
+                      flush=True)
     return 0
 
 
