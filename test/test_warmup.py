@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gyro_sim.bench.procs import running
 from gyro_sim.dynamics import kernel as fast
 
 pytestmark = pytest.mark.skipif(not fast.available(), reason="needs numba")
@@ -130,15 +131,6 @@ def locked(path: Path) -> bool:
     return False
 
 
-def alive(pid: int) -> bool:
-    """Whether the process runs (a zombie left for its new parent to reap has ended)."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
-    except FileNotFoundError:
-        return False
-
-
 def test_a_second_helper_waits_for_the_lock_and_ends_with_its_parent(tmp_path):
     """With the cache's lock taken (another helper fills it), a helper says READY at once (its
     parent compiles itself), compiles nothing while it waits, and ends when its parent ends."""
@@ -152,13 +144,13 @@ def test_a_second_helper_waits_for_the_lock_and_ends_with_its_parent(tmp_path):
         try:
             helper = int(parent.stdout.readline())
             assert parent.stdout.readline().strip() == "ready"
-            assert alive(helper)
+            assert running(helper)
             parent.stdin.close()
             assert parent.wait(HELPER_TIMEOUT) == 0, parent.stderr.read()
             end = time.monotonic() + HELPER_TIMEOUT
-            while alive(helper) and time.monotonic() < end:
+            while running(helper) and time.monotonic() < end:
                 time.sleep(0.05)
-            assert not alive(helper), "the helper outlived its parent"
+            assert not running(helper), "the helper outlived its parent"
         finally:
             if parent.poll() is None:
                 parent.kill()
@@ -181,13 +173,13 @@ def test_a_helper_ends_with_its_parent_while_it_compiles(tmp_path):
         end = time.monotonic() + HELPER_TIMEOUT
         while not locked(cache / "gyro_sim_warmup.lock") and time.monotonic() < end:  # it has begun
             time.sleep(0.05)
-        assert alive(helper)
+        assert running(helper)
         parent.stdin.close()
         assert parent.wait(HELPER_TIMEOUT) == 0
         end = time.monotonic() + ENDS_WITHIN
-        while alive(helper) and time.monotonic() < end:
+        while running(helper) and time.monotonic() < end:
             time.sleep(0.05)
-        assert not alive(helper), f"the helper still compiles {ENDS_WITHIN} s after its parent ended"
+        assert not running(helper), f"the helper still compiles {ENDS_WITHIN} s after its parent ended"
     finally:
         if parent.poll() is None:
             parent.kill()

@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gyro_sim.bench.procs import children, rss_mb, running
 from gyro_sim.log.mcap_log import DEFAULT_FLUSH_PERIOD
 
 PHYSICS_RATE = 1000.0
@@ -255,32 +256,6 @@ class Soak:
     stats: dict = field(default_factory=dict)
 
 
-def _children(pid: int) -> list[int]:
-    """The processes `pid` started (Linux: /proc/PID/task/*/children): the node's log writer."""
-    out: list[int] = []
-    for task in Path(f"/proc/{pid}/task").glob("*"):
-        try:
-            out += [int(x) for x in (task / "children").read_text().split()]
-        except OSError:  # the thread ended meanwhile
-            pass
-    return out
-
-
-def _running(pid: int) -> bool:
-    """Whether process `pid` still runs (a zombie, ended and not yet reaped, does not)."""
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
-    except (OSError, IndexError):
-        return False
-
-
-def _rss_mb(pid: int) -> float:
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) / 1024.0
-    return float("nan")
-
-
 def soak(workdir: Path, minutes: float = SOAK_MINUTES, progress=None, domain: int | None = None) -> Soak:
     import json
 
@@ -293,7 +268,7 @@ def soak(workdir: Path, minutes: float = SOAK_MINUTES, progress=None, domain: in
     try:
         while node.poll() is None:
             try:
-                out.rss_mb.append(_rss_mb(node.pid))
+                out.rss_mb.append(rss_mb(node.pid))
                 out.t.append(time.monotonic() - t0)
             except OSError:
                 break
@@ -335,11 +310,11 @@ def kills(workdir: Path, n: int = KILLS, progress=None, domain: int | None = Non
                 w.wait(lambda: w.clock == w.clock or node.poll() is not None, 60.0, "the node's /clock")
                 time.sleep(rng.uniform(*KILL_AFTER))
                 last_seen = w.clock
-                writers = _children(node.pid)
+                writers = children(node.pid)
                 node.send_signal(signal.SIGKILL)
                 node.wait(10)
                 # the log writer outlives the node: it finishes the log and renames it onto `log`
-                w.wait(lambda: not any(map(_running, writers)), WRITER_END, "the log writer to finish")
+                w.wait(lambda: not any(map(running, writers)), WRITER_END, "the log writer to finish")
             finally:
                 _stop(node, signal.SIGKILL)
             r = recover(log, fixed, overwrite=True)

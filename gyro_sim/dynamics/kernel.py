@@ -1362,6 +1362,14 @@ _NULL_ENTRY = []
 KERNEL_ADDRESSES, KERNEL_SIZES = 22, 5
 
 
+def _c_address(compiled: list, fn, signature, nrt: bool = False) -> int:
+    """The address of `fn` compiled as a C function of `signature()` (numpy's error model, cached
+    on disk), compiled or loaded on the first call and kept in `compiled` (one element)."""
+    if not compiled:
+        compiled.append(numba.cfunc(signature(), cache=True, error_model="numpy", _nrt=nrt)(fn))
+    return compiled[0].address
+
+
 def kernel_signature(*extra):
     """The numba signature of the kernel's C function (`_kernel_entry`), `extra` argument types
     after it (fast_canonical's field adds four)."""
@@ -1376,10 +1384,8 @@ def heavy_elimination_address() -> int:
     where `_aba` calls it directly."""
     if numba is None or numba.config.DISABLE_JIT:
         return 0
-    if not _HEAVY_ENTRY:
-        signature = numba.types.void(*(numba.types.int64,) * HEAVY_ENTRY_ARGUMENTS)
-        _HEAVY_ENTRY.append(numba.cfunc(signature, cache=True, error_model="numpy", _nrt=True)(_heavy_entry))
-    return _HEAVY_ENTRY[0].address
+    return _c_address(_HEAVY_ENTRY, _heavy_entry, lambda: numba.types.void(
+        *(numba.types.int64,) * HEAVY_ENTRY_ARGUMENTS), nrt=True)
 
 
 def kernel_address() -> int:
@@ -1388,10 +1394,7 @@ def kernel_address() -> int:
     0 without numba or with NUMBA_DISABLE_JIT, where `rhs_call` calls the kernel directly."""
     if numba is None or numba.config.DISABLE_JIT:
         return 0
-    if not _KERNEL_ENTRY:
-        signature = kernel_signature()
-        _KERNEL_ENTRY.append(numba.cfunc(signature, cache=True, error_model="numpy", _nrt=False)(_kernel_entry))
-    return _KERNEL_ENTRY[0].address
+    return _c_address(_KERNEL_ENTRY, _kernel_entry, kernel_signature)
 
 
 def null_kernel_address() -> int:
@@ -1401,10 +1404,7 @@ def null_kernel_address() -> int:
     it). Never for results. 0 without numba or with NUMBA_DISABLE_JIT."""
     if numba is None or numba.config.DISABLE_JIT:
         return 0
-    if not _NULL_ENTRY:
-        signature = kernel_signature()
-        _NULL_ENTRY.append(numba.cfunc(signature, cache=True, error_model="numpy", _nrt=False)(_null_entry))
-    return _NULL_ENTRY[0].address
+    return _c_address(_NULL_ENTRY, _null_entry, kernel_signature)
 
 
 @_njit_inline

@@ -11,6 +11,7 @@ import time
 import pytest
 
 from gyro_sim.bench import startup
+from gyro_sim.bench.procs import running
 from gyro_sim.cli import main
 
 #: CPU seconds the fake processes burn before they publish or end
@@ -96,17 +97,9 @@ def test_what_a_measured_process_leaves_running_is_ended(tmp_path):
     startup.timed_run([sys.executable, "-c", code], dict(os.environ), timeout=TIMEOUT)
     left = int(pid_file.read_text())
     end = time.monotonic() + TIMEOUT
-    while _alive(left) and time.monotonic() < end:
+    while running(left) and time.monotonic() < end:
         time.sleep(0.05)
-    assert not _alive(left)
-
-
-def _alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
-    except FileNotFoundError:
-        return False
+    assert not running(left)
 
 
 def test_the_first_message_of_a_fake_node_is_timed_with_its_cpu(tmp_path):

@@ -17,6 +17,9 @@ import threading
 import time
 from pathlib import Path
 
+from gyro_sim.bench import procs
+from gyro_sim.bench.procs import children, running  # noqa: F401 - the tests take them from here
+
 ROOT = Path(__file__).resolve().parents[2]
 DISCOVERY_TIMEOUT = 20.0
 _counter = itertools.count()
@@ -80,17 +83,6 @@ class NodeProcess:
         return self.proc.returncode
 
 
-def children(pid: int) -> list[int]:
-    """The processes `pid` started (Linux: /proc/PID/task/*/children)."""
-    out: list[int] = []
-    for task in Path(f"/proc/{pid}/task").glob("*"):
-        try:
-            out += [int(x) for x in (task / "children").read_text().split()]
-        except OSError:  # the thread ended meanwhile
-            pass
-    return out
-
-
 def writer_of(node: "NodeProcess", timeout: float = 60.0) -> int:
     """The pid of the node's log writer process (gyro_sim.ros.recorder's child), once it exists."""
     def find():
@@ -106,20 +98,11 @@ def writer_of(node: "NodeProcess", timeout: float = 60.0) -> int:
     return wait_for(find, timeout, "the log writer process", poll=0.005)
 
 
-def running(pid: int) -> bool:
-    """Whether process `pid` still runs (a zombie, ended and not yet reaped, does not)."""
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
-    except (OSError, IndexError):
-        return False
-
-
 def rss_mb(pid: int) -> float:
     """Resident memory of a process (MB)."""
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) / 1024
-    raise AssertionError(f"no VmRSS for {pid}")
+    mb = procs.rss_mb(pid)
+    assert mb == mb, f"no VmRSS for {pid}"
+    return mb
 
 
 class Client:
