@@ -1,7 +1,8 @@
 """`gyro-sim bench startup`: how long a fresh installation takes to its first output, cold
 (an empty numba cache: every kernel compiled) and warm (the same cache, a second start).
 
-    gyro-sim bench startup [--source DIR] [--keep-venv DIR | --venv DIR] [--json FILE]
+    gyro-sim bench startup [--source DIR] [--keep-venv DIR | --venv DIR] [--warm-starts N]
+                           [--announce-period S] [--json FILE]
 
 The package is installed from a source tree (default: the one this gyro_sim runs from) into a
 new virtual environment, as a user installs it: ``python -m venv`` and ``pip install
@@ -9,14 +10,23 @@ new virtual environment, as a user installs it: ``python -m venv`` and ``pip ins
 NUMBA_CACHE_DIR pointing to a new empty directory for each cold case:
 
 - the node: ``gyro_sim_node`` on the default scene, from its process start to the first
-  /joint_states message a subscriber (a separate process, started and subscribed beforehand,
-  on a private ROS_DOMAIN_ID) receives; with the node's CPU time to that moment;
+  /joint_states message a subscriber (a separate process, subscribed `SETTLE` s beforehand,
+  on a private ROS_DOMAIN_ID) receives; with the node's CPU time to that moment. The
+  subscriber's Fast DDS participant announces itself every `ANNOUNCE_PERIOD` s (a profile in
+  FASTRTPS_DEFAULT_PROFILES_FILE, its own environment only; `--announce-period`, 0 for none)
+  instead of Fast DDS's default 3 s:
+  a participant started after a subscriber is often discovered only at the subscriber's next
+  announcement, whatever the process (a bare rclpy publisher as much as the node), and the
+  case times the node, not that period (docs/performance.md says what it adds);
+- for comparison, the least rclpy node that publishes JointState, timed as the node is: what
+  any ROS 2 Python node's start and discovery cost here;
 - ``gyro-sim run --scene hinge_chain --duration 2``, to its end, with its CPU time;
 - a one-point sweep on a LocalCluster of one worker: the worker's wall time from its process
   start to its first point written, and its CPU time (its start included); and the sweep's,
   from its call to the first point.
 
-Each cold case is followed by a warm one on the same cache. The table is printed with the
+Each cold case is followed by a warm one on the same cache (`--warm-starts N`: N of them, the
+median and the range shown). The table is printed with the
 date, the command, the machine's core count and load average (1 min) before and after.
 """
 from __future__ import annotations
@@ -60,6 +70,31 @@ POLL = 0.2
 #: the private ROS domain: this base plus the process id modulo DOMAIN_SPAN (0-232 are valid)
 DOMAIN_BASE, DOMAIN_SPAN = 120, 100
 
+#: how long (s) the subscriber runs before the measured process starts: past its first
+#: announcements, as a viewer already running is
+SETTLE = 3.5
+#: how often (s) the subscriber's participant announces itself (Fast DDS's default: 3 s)
+ANNOUNCE_PERIOD = 0.2
+
+
+def subscriber_profile(period: float) -> str:
+    """The Fast DDS profile of the subscriber's participant: announcements every `period` s."""
+    sec, nanosec = divmod(round(period * 1e9), 1_000_000_000)
+    return f"""<?xml version="1.0" encoding="UTF-8" ?>
+<profiles xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
+  <participant profile_name="gyro_sim_startup_probe" is_default_profile="true">
+    <rtps>
+      <builtin>
+        <discovery_config>
+          <leaseAnnouncement><sec>{sec}</sec><nanosec>{nanosec}</nanosec></leaseAnnouncement>
+        </discovery_config>
+      </builtin>
+    </rtps>
+  </participant>
+</profiles>
+"""
+
+
 #: the subscriber, run with the measured environment's Python: "ready" once subscribed, then
 #: "first <time.monotonic()>" at the first message (or "none" after argv[1] s)
 SUBSCRIBER = r"""
@@ -80,6 +115,22 @@ while not got and time.monotonic() < end:
 print(f"first {got[0]!r}" if got else "none", flush=True)
 node.destroy_node()
 rclpy.try_shutdown()
+"""
+
+#: the least ROS 2 Python node that publishes JointState, run with the measured environment's
+#: Python: what any rclpy node's start and discovery cost, against which the node's is read
+MINIMAL_NODE = r"""
+import rclpy
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+
+rclpy.init()
+node = Node("minimal_publisher")
+pub = node.create_publisher(JointState, "/joint_states", 10)
+message = JointState(name=["a"], position=[0.0])
+while rclpy.ok():
+    pub.publish(message)
+    rclpy.spin_once(node, timeout_sec=0.01)
 """
 
 #: a one-point sweep on a LocalCluster of one worker, run with the measured environment's
@@ -243,18 +294,27 @@ def _read_line(proc: subprocess.Popen, what: str) -> str:
 
 
 def first_message(python: str, node_cmd: list[str], env: dict, topic: str = TOPIC,
-                  timeout: float = CASE_TIMEOUT, cwd: Path | None = None) -> Timing:
-    """Start a subscriber to `topic` (and wait until it is subscribed), then `node_cmd`: the wall
+                  timeout: float = CASE_TIMEOUT, cwd: Path | None = None,
+                  announce_period: float | None = ANNOUNCE_PERIOD, settle: float = SETTLE) -> Timing:
+    """Start a subscriber to `topic` (and wait until it is subscribed, and `settle` s more), then
+    `node_cmd`: the wall
     seconds from the node's start to the first message received, and the node's CPU seconds
     then. The node is stopped afterwards (SIGINT, then SIGKILL). StartupError if the node ends
-    or says nothing on `topic` within `timeout` s."""
-    sub = subprocess.Popen([python, "-c", SUBSCRIBER, str(timeout), topic], env=env, stdout=subprocess.PIPE,
-                           stderr=subprocess.DEVNULL, text=True, start_new_session=True, cwd=cwd)
+    or says nothing on `topic` within `timeout` s. The subscriber's participant announces
+    itself every `announce_period` s (None: as the environment says, Fast DDS's default 3 s)."""
     node = None
-    with tempfile.TemporaryFile("w+") as node_err:
+    with tempfile.TemporaryFile("w+") as node_err, tempfile.TemporaryDirectory(prefix="gyro_sim_probe_") as tmp:
+        sub_env = env
+        if announce_period:
+            profile = Path(tmp) / "subscriber.xml"
+            profile.write_text(subscriber_profile(announce_period))
+            sub_env = dict(env, FASTRTPS_DEFAULT_PROFILES_FILE=str(profile))
+        sub = subprocess.Popen([python, "-c", SUBSCRIBER, str(timeout), topic], env=sub_env, stdout=subprocess.PIPE,
+                               stderr=subprocess.DEVNULL, text=True, start_new_session=True, cwd=cwd)
         try:
             if _read_line(sub, "the subscriber") != "ready":
                 raise StartupError("the subscriber did not start")
+            time.sleep(settle)
             t0 = time.monotonic()
             node = subprocess.Popen(node_cmd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                     stderr=node_err, start_new_session=True, cwd=cwd)
@@ -328,14 +388,18 @@ def worker_first_point(python: str, env: dict, scene: str = RUN_SCENE, horizon: 
 
 
 #: the cases, in the order they run: (key, label)
-CASES = (("node", f"`gyro_sim_node` (default scene), to the first {TOPIC}"),
+CASES = (("node", f"`gyro_sim_node` (default scene), to the first {TOPIC} a subscriber receives"),
          ("run", f"`gyro-sim run --scene {RUN_SCENE} --duration {RUN_DURATION:g}`, to its end"),
-         ("worker", "a Dask worker's first sweep point (dop853), from the worker's start"))
+         ("worker", "a Dask worker's first sweep point (dop853), from the worker's start"),
+         ("rclpy", f"for comparison: a minimal rclpy node publishing JointState, to the first {TOPIC} received"))
 
 
-def measure(venv: Path, parts, say, timeout: float = CASE_TIMEOUT) -> dict:
-    """Every case of `parts` cold (a new empty cache) then warm (the same cache again), each run
-    from a scratch directory (not a source tree, whose gyro_sim `python -m` would find first)."""
+def measure(venv: Path, parts, say, timeout: float = CASE_TIMEOUT, warm_starts: int = 1,
+            announce_period: float | None = ANNOUNCE_PERIOD) -> dict:
+    """Every case of `parts` cold (a new empty cache) then warm (the same cache again,
+    `warm_starts` times: the median start, with every wall time in its ``walls``), each run
+    from a scratch directory (not a source tree, whose gyro_sim `python -m` would find first).
+    `announce_period`: the node case's subscriber's (`first_message`)."""
     python = str(python_of(venv))
     results: dict[str, dict] = {}
     with tempfile.TemporaryDirectory(prefix="gyro_sim_startup_") as tmp:
@@ -346,17 +410,24 @@ def measure(venv: Path, parts, say, timeout: float = CASE_TIMEOUT) -> dict:
             cache = scratch / f"cache_{key}"
             cache.mkdir()
             env = child_env(venv, cache, scratch)
-            for temp in ("cold", "warm"):
-                say(f"{key}, {temp} ...")
-                if key == "node":
-                    t = first_message(python, [str(script_of(venv, "gyro_sim_node"))], env, timeout=timeout,
-                                      cwd=scratch)
-                elif key == "run":
-                    t = timed_run([str(script_of(venv, "gyro-sim")), "run", "--scene", RUN_SCENE, "--duration",
-                                   str(RUN_DURATION)], env, timeout=timeout, cwd=scratch)
-                else:
-                    t = worker_first_point(python, env, timeout=timeout, cwd=scratch)
-                say(f"{key}, {temp}: {t.wall:.1f} s, CPU {t.cpu:.1f} s")
+            for temp, starts in (("cold", 1), ("warm", warm_starts)):
+                timings = []
+                for i in range(starts):
+                    say(f"{key}, {temp}" + (f" {i + 1}/{starts}" if starts > 1 else "") + " ...")
+                    if key in ("node", "rclpy"):
+                        cmd = [str(script_of(venv, "gyro_sim_node"))] if key == "node" else [python, "-c", MINIMAL_NODE]
+                        t = first_message(python, cmd, env, timeout=timeout, cwd=scratch,
+                                          announce_period=announce_period)
+                    elif key == "run":
+                        t = timed_run([str(script_of(venv, "gyro-sim")), "run", "--scene", RUN_SCENE, "--duration",
+                                       str(RUN_DURATION)], env, timeout=timeout, cwd=scratch)
+                    else:
+                        t = worker_first_point(python, env, timeout=timeout, cwd=scratch)
+                    say(f"{key}, {temp}: {t.wall:.1f} s, CPU {t.cpu:.1f} s")
+                    timings.append(t)
+                t = sorted(timings, key=lambda t: t.wall)[(len(timings) - 1) // 2]
+                if starts > 1:
+                    t = Timing(t.wall, t.cpu, dict(t.extra, walls=[u.wall for u in timings]))
                 results.setdefault(key, {})[temp] = asdict(t)
     return results
 
@@ -366,8 +437,10 @@ def machine() -> dict:
     return {"cores": os.cpu_count(), "load": round(os.getloadavg()[0], 2)}
 
 
-def table(results: dict, before: dict, after: dict, command: str, day: str) -> str:
-    """The Markdown table of `results` (measure's), with the date, command and machine."""
+def table(results: dict, before: dict, after: dict, command: str, day: str,
+          announce_period: float = ANNOUNCE_PERIOD) -> str:
+    """The Markdown table of `results` (measure's), with the date, command and machine, and
+    how often the node case's subscriber announced itself (0: Fast DDS's default)."""
     lines = [f"{day}, `{command}`; {before['cores']} cores, load average {before['load']:.2f} at the start, "
              f"{after['load']:.2f} at the end.", "",
              "| case | cold: wall (s) | cold: CPU (s) | warm: wall (s) | warm: CPU (s) |",
@@ -375,7 +448,12 @@ def table(results: dict, before: dict, after: dict, command: str, day: str) -> s
     for key, label in CASES:
         if key in results:
             c, w = results[key]["cold"], results[key]["warm"]
-            lines.append(f"| {label} | {c['wall']:.1f} | {c['cpu']:.1f} | {w['wall']:.1f} | {w['cpu']:.1f} |")
+            walls = w["extra"].get("walls")
+            spread = f" (median of {len(walls)}: {min(walls):.1f} to {max(walls):.1f})" if walls else ""
+            lines.append(f"| {label} | {c['wall']:.1f} | {c['cpu']:.1f} | {w['wall']:.1f}{spread} | {w['cpu']:.1f} |")
+    if "node" in results or "rclpy" in results:
+        lines += ["", "The subscriber announced itself every "
+                  + (f"{announce_period:g} s." if announce_period else "3 s (Fast DDS's default).")]
     if "worker" in results:
         c = results["worker"]["cold"]["extra"]
         lines += ["", f"The one-point sweep, from its call to its first point: {c['sweep_wall']:.1f} s cold "
@@ -391,6 +469,10 @@ def command_of(args) -> str:
             words += [f"--{option.replace('_', '-')}", str(getattr(args, option))]
     if list(args.parts) != [k for k, _ in CASES]:
         words += ["--parts", *args.parts]
+    if args.warm_starts != 1:
+        words += ["--warm-starts", str(args.warm_starts)]
+    if args.announce_period != ANNOUNCE_PERIOD:
+        words += ["--announce-period", f"{args.announce_period:g}"]
     return " ".join(words)
 
 
@@ -400,6 +482,9 @@ def cmd_bench_startup(args) -> int:
     def say(line: str) -> None:
         print(f"{prog}: {line}", file=sys.stderr, flush=True)
 
+    if args.warm_starts < 1 or not args.announce_period >= 0:
+        print(f"{prog}: --warm-starts must be at least 1 and --announce-period not negative", file=sys.stderr)
+        return 2
     if args.json and Path(args.json).exists() and not args.force:
         print(f"{prog}: {args.json} exists; --force replaces it", file=sys.stderr)
         return 2
@@ -431,7 +516,8 @@ def cmd_bench_startup(args) -> int:
             install(made, source, say)
             keep = bool(args.keep_venv)
         before = machine()
-        results = measure(venv, args.parts, say, timeout=args.timeout)
+        results = measure(venv, args.parts, say, timeout=args.timeout, warm_starts=args.warm_starts,
+                          announce_period=args.announce_period or None)
         after = machine()
     except StartupError as exc:
         print(f"{prog}: {exc}", file=sys.stderr)
@@ -442,13 +528,14 @@ def cmd_bench_startup(args) -> int:
     finally:
         if made is not None and not keep:
             shutil.rmtree(made, ignore_errors=True)
-    print(table(results, before, after, command, date.today().isoformat()))
+    print(table(results, before, after, command, date.today().isoformat(), args.announce_period))
     if args.json:
         from gyro_sim.safe_paths import OutputError, write_atomic
 
         try:
             write_atomic(args.json, json.dumps({"date": date.today().isoformat(), "command": command,
                                                 "machine": {"before": before, "after": after},
+                                                "announce_period": args.announce_period,
                                                 "results": results}, indent=1), force=args.force, what="--json")
         except (OutputError, OSError) as exc:
             print(f"{prog}: {exc}", file=sys.stderr)
@@ -465,6 +552,11 @@ def register(sub, bench) -> None:
     where.add_argument("--venv", metavar="DIR", help="measure in this installed venv (no install)")
     s.add_argument("--parts", nargs="+", default=[k for k, _ in CASES], choices=[k for k, _ in CASES])
     s.add_argument("--timeout", type=float, default=CASE_TIMEOUT, help="longest wait for one case (s)")
+    s.add_argument("--warm-starts", type=int, default=1, metavar="N",
+                   help="warm starts of each case (the table gives the median and the range)")
+    s.add_argument("--announce-period", type=float, default=ANNOUNCE_PERIOD, metavar="S",
+                   help=f"how often the node case's subscriber announces itself (s; default {ANNOUNCE_PERIOD:g}; "
+                        "0: Fast DDS's default, 3 s)")
     s.add_argument("--json", metavar="FILE", help="also write the figures to FILE")
     s.add_argument("--force", action="store_true", help="replace an existing --json FILE")
     s.set_defaults(fn=cmd_bench_startup)

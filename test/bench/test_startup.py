@@ -111,9 +111,31 @@ def test_the_first_message_of_a_fake_node_is_timed_with_its_cpu(tmp_path):
     env["PATH"] = os.environ.get("PATH", "")
     env["PYTHONPATH"] = os.environ.get("PYTHONPATH", "")
     env["AMENT_PREFIX_PATH"] = os.environ.get("AMENT_PREFIX_PATH", sys.prefix)
-    t = startup.first_message(sys.executable, [sys.executable, str(script)], env, timeout=TIMEOUT)
+    t = startup.first_message(sys.executable, [sys.executable, str(script)], env, timeout=TIMEOUT, settle=0)
     assert t.cpu >= BURN  # it published only after burning that much
     assert t.wall >= BURN
+
+
+def test_the_minimal_rclpy_node_is_timed_as_the_node_is(tmp_path):
+    pytest.importorskip("rclpy")
+    pytest.importorskip("sensor_msgs.msg")
+    env = dict(os.environ, ROS_DOMAIN_ID=str(startup.DOMAIN_BASE + os.getpid() % startup.DOMAIN_SPAN),
+               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_LOG_DIR=str(tmp_path))
+    t = startup.first_message(sys.executable, [sys.executable, "-c", startup.MINIMAL_NODE], env, timeout=TIMEOUT, settle=0)
+    assert 0 < t.cpu and 0 < t.wall < TIMEOUT
+
+
+def test_the_subscribers_profile_is_fast_dds_xml_with_its_announcement_period():
+    import xml.etree.ElementTree as ET
+
+    ns = {"p": "http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles"}
+    for seconds in (startup.ANNOUNCE_PERIOD, 0.25, 1.5, 3.0):
+        root = ET.fromstring(startup.subscriber_profile(seconds))
+        period = root.find("p:participant/p:rtps/p:builtin/p:discovery_config/p:leaseAnnouncement", ns)
+        nanosec = int(period.find("p:nanosec", ns).text)
+        assert 0 <= nanosec < 1_000_000_000
+        assert int(period.find("p:sec", ns).text) + nanosec * 1e-9 == pytest.approx(seconds)
+        assert root.find("p:participant", ns).get("is_default_profile") == "true"
 
 
 def test_a_node_that_never_publishes_is_an_error(tmp_path):
@@ -122,7 +144,7 @@ def test_a_node_that_never_publishes_is_an_error(tmp_path):
                ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_LOG_DIR=str(tmp_path))
     with pytest.raises(startup.StartupError, match="no /joint_states message within 3 s"):
         startup.first_message(sys.executable, [sys.executable, "-c", "import time; time.sleep(600)"], env,
-                              timeout=3.0)
+                              timeout=3.0, settle=0)
 
 
 def test_a_node_that_ends_before_publishing_is_an_error_with_its_last_line(tmp_path):
@@ -131,7 +153,7 @@ def test_a_node_that_ends_before_publishing_is_an_error_with_its_last_line(tmp_p
                ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_LOG_DIR=str(tmp_path))
     with pytest.raises(startup.StartupError, match=r"ended \(exit 2\) before its first /joint_states: no scene"):
         startup.first_message(sys.executable, [sys.executable, "-c", "import sys; print('no scene', file=sys.stderr); sys.exit(2)"], env,
-                              timeout=TIMEOUT)
+                              timeout=TIMEOUT, settle=0)
 
 
 def test_the_table_shows_every_figure_with_the_machine():
@@ -146,13 +168,26 @@ def test_the_table_shows_every_figure_with_the_machine():
     assert node.split("|")[2:6] == [" 18.2 ", " 15.5 ", " 1.2 ", " 0.9 "]
     assert not any(x.startswith("| `gyro-sim run") for x in lines)  # not measured: not shown
     assert "21.0 s cold" in text and "16.0 s CPU" in text
+    assert f"announced itself every {startup.ANNOUNCE_PERIOD:g} s" in text
+
+
+def test_repeated_warm_starts_show_their_median_and_range_and_the_subscribers_period():
+    results = {"node": {"cold": {"wall": 18.25, "cpu": 15.5, "extra": {}},
+                        "warm": {"wall": 1.0, "cpu": 0.9, "extra": {"walls": [1.0, 3.31, 0.94]}}}}
+    text = startup.table(results, {"cores": 2, "load": 1.5}, {"cores": 2, "load": 2.25}, "c", "2026-11-26", 0.0)
+    node = next(x for x in text.splitlines() if x.startswith("| `gyro_sim_node`"))
+    assert node.split("|")[4] == " 1.0 (median of 3: 0.9 to 3.3) "
+    assert "every 3 s (Fast DDS's default)" in text
 
 
 def test_the_command_line_is_given_back(tmp_path):
     class Args:
         source, keep_venv, venv, parts = None, None, str(tmp_path), ["node"]
+        warm_starts, announce_period = 1, startup.ANNOUNCE_PERIOD
 
     assert startup.command_of(Args) == f"gyro-sim bench startup --venv {tmp_path} --parts node"
+    Args.warm_starts, Args.announce_period = 16, 0.0
+    assert startup.command_of(Args).endswith("--parts node --warm-starts 16 --announce-period 0")
 
 
 def test_a_process_stopped_with_sigint_is_gone():
@@ -171,10 +206,10 @@ def test_the_command_prints_the_table_and_writes_the_json(tmp_path, monkeypatch,
     (venv / "bin" / "python").write_text("")
     figures = {"run": {"cold": {"wall": 17.5, "cpu": 14.25, "extra": {}}, "warm": {"wall": 1.5, "cpu": 1.0, "extra": {}}}}
     asked = []
-    monkeypatch.setattr(startup, "measure", lambda v, parts, say, timeout: asked.append((v, parts)) or figures)
+    monkeypatch.setattr(startup, "measure", lambda v, parts, say, timeout, **kw: asked.append((v, parts, kw)) or figures)
     out = tmp_path / "startup.json"
     assert main(["bench", "startup", "--venv", str(venv), "--parts", "run", "--json", str(out)]) == 0
-    assert asked == [(venv, ["run"])]
+    assert asked == [(venv, ["run"], {"warm_starts": 1, "announce_period": startup.ANNOUNCE_PERIOD})]
     printed = capsys.readouterr().out
     assert "| `gyro-sim run --scene hinge_chain --duration 2`, to its end | 17.5 | 14.2 | 1.5 | 1.0 |" in printed
     data = json.loads(out.read_text())
