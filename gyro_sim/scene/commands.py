@@ -91,10 +91,11 @@ def cmd_import(args) -> int:
     axes = [name for b in scene.bodies  # in command order (docs/scene-format.md)
             for name in ([b.name] if b.joint.type == "hinge" else [])
             + [r.name for r in b.rotors if r.actuated]]
+    imus = f", IMUs {[imu.name for imu in scene.imus]}" if scene.imus else ""
     print(f"wrote {out}: scene '{scene.name}', {len(scene.bodies)} bodies, {rotors} rotors, "
-          f"{scene.base.type} base, commanded axes {axes}")
+          f"{scene.base.type} base, commanded axes {axes}{imus}")
     for note in imported.notes:
-        print(f"  left out: {note}")
+        print(f"  note: {note}")
     return 0
 
 
