@@ -105,8 +105,8 @@ def register(sub, bench) -> None:
 
     p = sub.add_parser("import", help="write an MJCF or URDF model (MuJoCo) as a gyro_sim scene",
                        description="Write an MJCF or URDF model as a gyro_sim scene file (YAML): "
-                                   "the chain, its rotors, gravity and the initial state of a "
-                                   "keyframe. docs/models.md gives the mapping.",
+                                   "the chain, its rotors, gravity, its IMUs and the initial state "
+                                   "of a keyframe. docs/models.md gives the mapping.",
                        epilog=EXAMPLES, formatter_class=RawDescriptionHelpFormatter)
     p.add_argument("model", metavar="MODEL", help="the MJCF or URDF file")
     p.add_argument("-o", "--output", required=True, metavar="SCENE.yaml", help="the scene file to write")

@@ -178,9 +178,8 @@ class _Reader:
         spec = NoiseSpec()
         if not any(axes):
             return spec
-        get = [[a.get(key, 0.0) for a in axes] for key in ("stddev", "dynamic_bias_stddev",
-                                                           "dynamic_bias_correlation_time")]
-        stddev, walk, tau = get
+        stddev, walk, tau = ([a.get(key, 0.0) for a in axes]
+                             for key in ("stddev", "dynamic_bias_stddev", "dynamic_bias_correlation_time"))
         spec.stddev = max(stddev)
         if len(set(stddev)) > 1:
             imu.notes.append(f"{what} stddev differs by axis ({', '.join(f'{v:g}' for v in stddev)}): "
@@ -214,8 +213,10 @@ class _Reader:
             for group, axes, what in (("angular_velocity", gyro_axes, "gyro"),
                                       ("linear_acceleration", accel_axes, "accelerometer")):
                 node = body.find(group)
-                for axis in AXES:
-                    element = node.find(axis) if node is not None else None
+                if node is None:
+                    continue
+                for axis in AXES:  # an axis without <noise> has none
+                    element = node.find(axis)
                     values = self.noise(element.find("noise") if element is not None else None, imu, what)
                     if values is None:
                         ok = False

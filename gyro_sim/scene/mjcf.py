@@ -101,7 +101,7 @@ class ImportedModel:
     path: str  # the model file
     kind: str  # "MJCF" or "URDF"
     keyframe: str | None  # the keyframe the initial state comes from ("" unnamed), None: rest
-    names: tuple[tuple[str, str], ...]  # (model element, scene name), in chain order
+    names: tuple[tuple[str, str], ...]  # (model element, scene name), in chain order, then the IMUs
     commands: tuple[Command, ...]  # the model's actuators
     notes: tuple[str, ...]  # what was left out or approximated (contacts, limits, sensors...), one line each
     where: dict[str, str] = field(default_factory=dict)  # scene key path -> model element
@@ -204,7 +204,7 @@ def import_model(path: str | os.PathLike, keyframe: str | None = None) -> Import
     return _Importer(mujoco, model, path, kind, gazebo, sites).run(keyframe)
 
 
-#: the sites put where a URDF's Gazebo IMUs are are named this and a number
+#: the sites put where the Gazebo IMUs of a URDF are take this name and a number
 GAZEBO_SITE = "gyro_sim_gazebo_imu_"
 
 

@@ -352,6 +352,17 @@ def test_without_an_interval_the_noise_is_kept_at_the_default_publish_rate(tmp_p
                             "the model's at 100 Hz") for n in imported.notes)
 
 
+def test_imported_imus_with_noise_draw_different_noise(tmp_path):
+    xml = PENDULUM.replace('<site name="tip" pos="0 0 -0.6"/>', '<site name="tip" pos="0 0 -0.6"/><site name="mid"/>')
+    path = write(tmp_path, "two.xml", xml.replace("{sensors}", """
+        <gyro site="tip" noise="0.01"/><gyro site="mid" noise="0.01"/>"""))
+    tip, mid = load_scene(path).imus
+    assert (tip.seed, mid.seed) == (0, 1)
+    draws = [ImuNoise(imu.gyro_noise_density, 0.0, 0.0, 0.0, DEFAULT_IMU_RATE, imu.seed).record(100)[:, :3]
+             for imu in (tip, mid)]
+    assert abs(np.corrcoef(draws[0].ravel(), draws[1].ravel())[0, 1]) < 0.3  # independent, not the same draws
+
+
 def test_what_mujoco_says_of_a_sensor_and_gyro_sim_does_not_model_is_noted(tmp_path):
     path = pendulum(tmp_path, """
         <gyro site="tip" name="g" nsample="3" interval="0.01" delay="0.01" cutoff="5"/>
@@ -424,9 +435,11 @@ def test_a_gazebo_pose_is_placed_as_a_fixed_joint_would_place_it(tmp_path):
     by_joint = import_model(urdf(tmp_path, "joint.urdf", xyz=xyz, rpy=rpy)).mapping["imus"][0]
     roll, pitch, yaw = (float(a) for a in rpy.split())
     q = mujoco_quat_of_rpy(roll, pitch, yaw)
+    degrees = " ".join(repr(math.degrees(a)) for a in (roll, pitch, yaw))
+    xyzw = " ".join(repr(float(c)) for c in q[[1, 2, 3, 0]])
     forms = {"rpy": f"<pose>{xyz} {rpy}</pose>",
-             "degrees": f'<pose degrees="true">{xyz} {" ".join(str(math.degrees(a)) for a in (roll, pitch, yaw))}</pose>',
-             "quat_xyzw": f'<pose rotation_format="quat_xyzw">{xyz} {" ".join(repr(float(c)) for c in q[[1, 2, 3, 0]])}</pose>',
+             "degrees": f'<pose degrees="true">{xyz} {degrees}</pose>',
+             "quat_xyzw": f'<pose rotation_format="quat_xyzw">{xyz} {xyzw}</pose>',
              "relative_to_link": f'<pose relative_to="fore">{xyz} {rpy}</pose>'}
     for form, pose in forms.items():
         on_fore = import_model(urdf(tmp_path, f"{form}.urdf", xyz="0 0 0", rpy="0 0 0", link="fore",
@@ -453,7 +466,9 @@ def test_gazebo_sensors_that_are_no_imus_are_named_in_the_notes(tmp_path):
       <gazebo><sensor name="loose" type="imu"/></gazebo>
       <gazebo reference="nowhere"><sensor name="lost" type="imu"/></gazebo>
       <gazebo reference="base_link"><sensor name="fixed" type="imu"/></gazebo>
-      <gazebo reference="fore"><sensor name="far" type="imu"><pose relative_to="upper">0 0 0 0 0 0</pose></sensor></gazebo>
+      <gazebo reference="fore">
+        <sensor name="far" type="imu"><pose relative_to="upper">0 0 0 0 0 0</pose></sensor>
+      </gazebo>
     </robot>""")
     imported = import_model(write(tmp_path, "many.urdf", text))
     assert [imu["name"] for imu in imported.mapping["imus"]] == ["imu_sensor"]
