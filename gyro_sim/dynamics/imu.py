@@ -99,6 +99,13 @@ def sample_index(t: float, rate: float) -> int:
     return int(math.floor(t * rate + SAMPLE_TOLERANCE))
 
 
+def divides(rate: float, publish_rate: float) -> bool:
+    """Whether publications every 1 / publish_rate simulated seconds can sample an IMU of
+    `rate` (Hz): publish_rate / rate is a whole number (to RATIO_RTOL)."""
+    ratio = publish_rate / rate
+    return rate <= publish_rate * (1.0 + RATIO_RTOL) and abs(ratio - round(ratio)) <= RATIO_RTOL * ratio
+
+
 def check_rates(scene, publish_rate: float) -> str | None:
     """Why the publications (every 1 / publish_rate simulated seconds) cannot sample the
     scene's IMUs, or None: each IMU's rate must divide the publish rate (an IMU without a rate
@@ -106,9 +113,7 @@ def check_rates(scene, publish_rate: float) -> str | None:
     for i, imu in enumerate(scene.imus):
         if imu.rate is None:
             continue
-        ratio = publish_rate / imu.rate
-        whole = round(ratio)
-        if imu.rate > publish_rate * (1.0 + RATIO_RTOL) or abs(ratio - whole) > RATIO_RTOL * ratio:
+        if not divides(imu.rate, publish_rate):
             return (f"imus[{i}].rate: {imu.rate:g} Hz must divide the publish rate {publish_rate:g} Hz "
                     f"(publish_rate / rate a whole number): IMUs are sampled at publications")
     return None

@@ -91,10 +91,11 @@ def cmd_import(args) -> int:
     axes = [name for b in scene.bodies  # in command order (docs/scene-format.md)
             for name in ([b.name] if b.joint.type == "hinge" else [])
             + [r.name for r in b.rotors if r.actuated]]
+    imus = f", IMUs {[imu.name for imu in scene.imus]}" if scene.imus else ""
     print(f"wrote {out}: scene '{scene.name}', {len(scene.bodies)} bodies, {rotors} rotors, "
-          f"{scene.base.type} base, commanded axes {axes}")
+          f"{scene.base.type} base, commanded axes {axes}{imus}")
     for note in imported.notes:
-        print(f"  left out: {note}")
+        print(f"  note: {note}")
     return 0
 
 
@@ -104,8 +105,8 @@ def register(sub, bench) -> None:
 
     p = sub.add_parser("import", help="write an MJCF or URDF model (MuJoCo) as a gyro_sim scene",
                        description="Write an MJCF or URDF model as a gyro_sim scene file (YAML): "
-                                   "the chain, its rotors, gravity and the initial state of a "
-                                   "keyframe. docs/models.md gives the mapping.",
+                                   "the chain, its rotors, gravity, its IMUs and the initial state "
+                                   "of a keyframe. docs/models.md gives the mapping.",
                        epilog=EXAMPLES, formatter_class=RawDescriptionHelpFormatter)
     p.add_argument("model", metavar="MODEL", help="the MJCF or URDF file")
     p.add_argument("-o", "--output", required=True, metavar="SCENE.yaml", help="the scene file to write")

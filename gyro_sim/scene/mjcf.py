@@ -26,6 +26,14 @@ Names: a hinge and a rotor are named after their joint (so ``joint_states`` and 
 moments use the joint names of the file, as MuJoCo's ``qpos`` and actuators do), a ball or
 free body after its body.
 
+Sensors. A gyro or an accelerometer on a site (a framequat or framelinacc of the same site
+joins them) becomes one IMU of the scene, named after the site, on the chain body the site
+moves with, at the site's pose in that body's frame at the reference pose; a URDF's Gazebo
+IMUs (:mod:`gyro_sim.scene.gazebo`) become sites on their links first, so MuJoCo carries them
+through fused fixed links. A rate is MuJoCo's ``interval`` or Gazebo's ``update_rate``, kept
+as given; a noise's standard deviation per sample sigma becomes the density sigma / sqrt(rate)
+(the default publish rate when none is given). Every other sensor is named in a note.
+
 Everything the equations of gyro_sim cannot express (slide joints, tendons, equality
 constraints, springs, damping, armature, friction loss, servos, branching trees, ...) is
 refused with one line naming the element; contacts, joint limits and control ranges are
@@ -43,8 +51,11 @@ from typing import Any
 
 import numpy as np
 
+from gyro_sim.dynamics.imu import divides
+from gyro_sim.dynamics.rotations import matrix_to_quat
 from gyro_sim.errors import GyroSimError
 from gyro_sim.paths import MODEL_SUFFIXES
+from gyro_sim.scene.gazebo import GazeboImu, GazeboSensors, read_gazebo_sensors
 
 __all__ = ["ModelError", "ImportedModel", "Command", "import_model", "is_model_path",
            "scene_yaml", "MODEL_SUFFIXES", "ROTOR_RTOL"]
@@ -90,9 +101,9 @@ class ImportedModel:
     path: str  # the model file
     kind: str  # "MJCF" or "URDF"
     keyframe: str | None  # the keyframe the initial state comes from ("" unnamed), None: rest
-    names: tuple[tuple[str, str], ...]  # (model element, scene name), in chain order
+    names: tuple[tuple[str, str], ...]  # (model element, scene name), in chain order, then the IMUs
     commands: tuple[Command, ...]  # the model's actuators
-    notes: tuple[str, ...]  # what was left out (contacts, limits, ...), one line each
+    notes: tuple[str, ...]  # what was left out or approximated (contacts, limits, sensors...), one line each
     where: dict[str, str] = field(default_factory=dict)  # scene key path -> model element
 
     def describe(self, errors: Sequence[str]) -> list[str]:
@@ -178,12 +189,43 @@ def import_model(path: str | os.PathLike, keyframe: str | None = None) -> Import
     if size > MAX_MODEL_BYTES:
         raise ModelError([f"{path}: {size} bytes, more than a model file holds "
                           f"(at most {MAX_MODEL_BYTES})"], path)
+    kind = _kind(path)
+    gazebo: GazeboSensors | None = None
+    sites: list[tuple[GazeboImu, str]] = []
     try:
-        model = mujoco.MjSpec.from_file(path).compile()
+        spec = mujoco.MjSpec.from_file(path)
+        if kind == "URDF":
+            gazebo = read_gazebo_sensors(path)
+            sites = _gazebo_sites(spec, gazebo)
+        model = spec.compile()
     except ValueError as exc:  # MuJoCo's parse and compile errors
         text = "; ".join(line.strip() for line in str(exc).splitlines() if line.strip())
         raise ModelError([f"{path}: MuJoCo cannot read it: {text}"], path) from None
-    return _Importer(mujoco, model, path, _kind(path)).run(keyframe)
+    return _Importer(mujoco, model, path, kind, gazebo, sites).run(keyframe)
+
+
+#: the sites put where the Gazebo IMUs of a URDF are take this name and a number
+GAZEBO_SITE = "gyro_sim_gazebo_imu_"
+
+
+def _gazebo_sites(spec: Any, gazebo: GazeboSensors) -> list[tuple[GazeboImu, str]]:
+    """A site on each Gazebo IMU's link at its pose, so that MuJoCo's compiler carries it
+    with the link wherever it fuses a fixed link into its parent; the IMUs with their sites'
+    names."""
+    out = []
+    for i, imu in enumerate(gazebo.imus):
+        body = spec.body(imu.link)
+        if body is None:  # a link MuJoCo did not make a body of
+            gazebo.notes.append(f"{imu.element}: not imported: MuJoCo has no body for the link")
+            continue
+        name, extra = f"{GAZEBO_SITE}{i}", 0
+        while spec.site(name) is not None:
+            extra += 1
+            name = f"{GAZEBO_SITE}{i}_{extra}"
+        body.add_site(name=name, pos=[float(x) for x in imu.position],
+                      quat=[float(x) for x in imu.quaternion])
+        out.append((imu, name))
+    return out
 
 
 #: how much of a file's head is read to find its root element
@@ -216,14 +258,32 @@ class _Group:
     children: list[int] = field(default_factory=list)
 
 
+@dataclass
+class _ImuSource:
+    """The sensors of one site that make an IMU: how the file gives them."""
+
+    site: int  # the site in the compiled model
+    element: str  # how messages name it
+    name: str  # the IMU's name before it is made unique
+    rate: float | None = None  # Hz; None: every publication
+    gyro_sigma: float = 0.0  # white noise, standard deviation per sample (rad/s)
+    accel_sigma: float = 0.0  # (m/s^2)
+    gyro_walk: float = 0.0  # bias random walk density (rad/s^2/sqrt(Hz))
+    accel_walk: float = 0.0  # (m/s^3/sqrt(Hz))
+    notes: list[str] = field(default_factory=list)  # what of it is left out, one line each
+
+
 class _Importer:
     """One model's conversion: refusals first, then the chain, frames and initial state."""
 
-    def __init__(self, mujoco: Any, model: Any, path: str, kind: str):
+    def __init__(self, mujoco: Any, model: Any, path: str, kind: str,
+                 gazebo: GazeboSensors | None = None, gazebo_sites: Sequence[tuple[GazeboImu, str]] = ()):
         self.mj = mujoco
         self.m = model
         self.path = path
         self.kind = kind
+        self.gazebo = gazebo
+        self.gazebo_sites = list(gazebo_sites)
         self.errors: list[str] = []
         self.notes: list[str] = []
 
@@ -393,6 +453,8 @@ class _Importer:
         mj.mj_kinematics(m, d)
         self.R_ref = d.xmat.reshape(-1, 3, 3).copy()
         self.ximat_ref = d.ximat.reshape(-1, 3, 3).copy()
+        self.site_pos_ref = d.site_xpos.reshape(-1, 3).copy()
+        self.site_R_ref = d.site_xmat.reshape(-1, 3, 3).copy()
         for g in groups.values():
             masses = np.array([m.body_mass[b] for b in g.members])
             coms = np.array([d.xipos[b] for b in g.members])
@@ -489,6 +551,9 @@ class _Importer:
     # --- the scene
     def run(self, keyframe: str | None) -> ImportedModel:
         self.check_elements()
+        if self.gazebo is not None:
+            for element, why in self.gazebo.errors:
+                self.fail(element, why)
         self.raise_errors()
         groups = self.groups()
         self.measure(groups)
@@ -502,10 +567,12 @@ class _Importer:
         m, mj = self.m, self.mj
         actuated = {c.axis for c in commands}
         names, where, bodies = [], {}, []
+        frames: dict[int, tuple[str, np.ndarray, np.ndarray]] = {}  # group root -> name, G, O^k
         G_parent = np.eye(3)
         for k, g in enumerate(chain):
             name = self.scene_name(g, g.kind == "hinge")
             G = self.R_ref[g.root] if g.kind in ("free", "ball") else G_parent
+            frames[g.root] = (name, G, g.origin)
             body: dict[str, Any] = {"name": name}
             if g.kind == "hinge":
                 body["joint"] = {"type": "hinge", "axis": _vec(G_parent.T @ g.axis)}
@@ -558,11 +625,178 @@ class _Importer:
             where["gravity"] = "option gravity"
         mapping["base"] = base
         mapping["bodies"] = bodies
+        rotor_joints = {r.root: r.joint for rs in rotors.values() for r in rs}
+        imus = self.imus(frames, rotor_joints, names, where)
+        if imus:
+            mapping["imus"] = imus
         if m.ngeom and not int(m.opt.disableflags) & int(mj.mjtDisableBit.mjDSBL_CONTACT):
             self.notes.insert(0, "contacts: ignored (no contacts in gyro_sim)")
         return ImportedModel(mapping=mapping, path=self.path, kind=self.kind, keyframe=key_name,
                              names=tuple(names), commands=tuple(commands),
                              notes=tuple(self.notes), where=where)
+
+    # --- sensors
+    def sensor(self, s: int) -> str:
+        """How messages name sensor `s`: its type and name (or number)."""
+        kind = self.mj.mjtSensor(int(self.m.sensor_type[s])).name.removeprefix("mjSENS_").lower()
+        name = self._name(self.mj.mjtObj.mjOBJ_SENSOR, s)
+        return f"{kind} {name!r}" if name else f"{kind} #{s}"
+
+    def site(self, i: int) -> str:
+        name = self._name(self.mj.mjtObj.mjOBJ_SITE, i)
+        return f"site {name!r}" if name else f"site #{i} (unnamed)"
+
+    def mjcf_imus(self) -> list[_ImuSource]:
+        """The MJCF sensors that make IMUs, one per site (docs/models.md, "Sensors"): a gyro
+        or an accelerometer makes one; a framequat or framelinacc of the same site in the world
+        frame joins it. The other sensors are listed in one note."""
+        mj, m = self.mj, self.m
+        kinds = mj.mjtSensor
+        makes = {int(kinds.mjSENS_GYRO), int(kinds.mjSENS_ACCELEROMETER)}
+        joins = {int(kinds.mjSENS_FRAMEQUAT), int(kinds.mjSENS_FRAMELINACC)}
+        on_site = int(mj.mjtObj.mjOBJ_SITE)
+        world = int(mj.mjtObj.mjOBJ_UNKNOWN)  # no reference frame: the world's
+        by_site: dict[int, list[int]] = {}
+        joining: dict[int, list[int]] = {}
+        skipped: list[int] = []
+        for s in range(m.nsensor):
+            kind, site = int(m.sensor_type[s]), int(m.sensor_objid[s])
+            if kind in makes:
+                by_site.setdefault(site, []).append(s)
+            elif kind in joins and int(m.sensor_objtype[s]) == on_site and int(m.sensor_reftype[s]) == world:
+                joining.setdefault(site, []).append(s)
+            else:
+                skipped.append(s)
+        for site, sensors in joining.items():
+            if site in by_site:
+                by_site[site] += sensors
+            else:
+                skipped += sensors
+        if skipped:
+            self.notes.append("sensors not imported (an IMU is a gyro or an accelerometer on a site): "
+                              + ", ".join(self.sensor(s) for s in sorted(skipped)))
+        return [self.mjcf_imu(site, sorted(sensors)) for site, sensors in sorted(by_site.items())]
+
+    def mjcf_imu(self, site: int, sensors: list[int]) -> _ImuSource:
+        """The IMU of one site's sensors: its name, rate (MuJoCo's ``interval``) and noise."""
+        mj, m = self.mj, self.m
+        kinds = mj.mjtSensor
+        kind = {s: int(m.sensor_type[s]) for s in sensors}
+        gyros = [s for s in sensors if kind[s] == int(kinds.mjSENS_GYRO)]
+        accels = [s for s in sensors if kind[s] == int(kinds.mjSENS_ACCELEROMETER)]
+        element = f"{self.site(site)} ({', '.join(self.sensor(s) for s in sensors)})"
+        name = self._name(mj.mjtObj.mjOBJ_SITE, site)  # MJCF sensors name their sites
+        source = _ImuSource(site=site, element=element, name=name)
+        periods = [float(m.sensor_interval[s][0]) for s in gyros + accels]
+        if all(p > 0.0 for p in periods):  # else one is computed every step: the fastest
+            source.rate = _tidy(1.0 / min(periods))
+        if len(set(periods)) > 1:
+            source.notes.append("its sensors' intervals differ ("
+                                + ", ".join(f"{p:g} s" for p in periods) + "): the IMU samples at "
+                                + (f"{source.rate:g} Hz" if source.rate else "every publication"))
+        if any(float(m.sensor_interval[s][1]) != 0.0 for s in sensors):
+            source.notes.append("interval phase not kept (sample i is at time i / rate)")
+        for s in sensors:
+            if float(m.sensor_delay[s]) > 0.0:
+                source.notes.append(f"{self.sensor(s)}: delay {float(m.sensor_delay[s]):g} s not "
+                                    "modelled (the IMU reads the present state)")
+            if float(m.sensor_cutoff[s]) > 0.0:
+                source.notes.append(f"{self.sensor(s)}: cutoff {float(m.sensor_cutoff[s]):g} not "
+                                    "enforced")
+            if kind[s] == int(kinds.mjSENS_FRAMELINACC):
+                source.notes.append(f"{self.sensor(s)}: given by the IMU in its own frame (the world "
+                                    "frame's is its orientation times its linear_acceleration)")
+            if s not in gyros + accels and float(m.sensor_noise[s]) > 0.0:
+                source.notes.append(f"{self.sensor(s)}: noise not modelled (an IMU's orientation and "
+                                    "world-frame acceleration have none)")
+        source.gyro_sigma = max((float(m.sensor_noise[s]) for s in gyros), default=0.0)
+        source.accel_sigma = max((float(m.sensor_noise[s]) for s in accels), default=0.0)
+        return source
+
+    def gazebo_imus(self) -> list[_ImuSource]:
+        """The IMUs of a URDF's ``<gazebo>`` sensors (gyro_sim.scene.gazebo), on their sites."""
+        gazebo = self.gazebo
+        if gazebo is None:
+            return []
+        if gazebo.skipped:
+            self.notes.append("gazebo sensors not imported (IMUs only): " + ", ".join(gazebo.skipped))
+        self.notes += gazebo.notes
+        out = []
+        for imu, site_name in self.gazebo_sites:
+            site = self.mj.mj_name2id(self.m, self.mj.mjtObj.mjOBJ_SITE, site_name)
+            source = _ImuSource(site=site, element=imu.element, name=imu.name, rate=imu.rate,
+                                gyro_sigma=imu.gyro.stddev, accel_sigma=imu.accel.stddev,
+                                gyro_walk=imu.gyro.walk, accel_walk=imu.accel.walk, notes=list(imu.notes))
+            for what, noise in (("gyro", imu.gyro), ("accelerometer", imu.accel)):
+                if noise.walk > 0.0:
+                    source.notes.append(f"{what} dynamic bias: correlation time "
+                                        f"{noise.correlation_time:g} s not kept (the bias walks "
+                                        "without decay: the same for times short against it)")
+            out.append(source)
+        return out
+
+    def imus(self, frames: dict[int, tuple[str, np.ndarray, np.ndarray]], rotor_joints: dict[int, int],
+             names: list, where: dict) -> list[dict]:
+        """The scene's `imus` from the model's sensors (docs/models.md, "Sensors"): each on the
+        chain body its site moves with, at the site's pose in that body's frame at the
+        reference pose; the noise per sample converted to densities at its rate. What cannot
+        be an IMU is said in the notes; `names` and `where` gain the IMUs."""
+        from gyro_sim.simulator import DEFAULT_IMU_RATE
+
+        m = self.m
+        taken = {frame[0] for frame in frames.values()}
+        out = []
+        for source in self.mjcf_imus() + self.gazebo_imus():
+            notes = list(dict.fromkeys(source.notes))
+            body = int(m.site_bodyid[source.site])
+            root = int(m.body_weldid[body])
+            if root == 0:
+                on = "the world body" if body == 0 else f"the static {self.body(body)} (part of the base)"
+                self.notes.append(f"{source.element}: not imported: on {on}; an IMU is fixed to a "
+                                  "moving body")
+                continue
+            if root in rotor_joints:
+                self.notes.append(f"{source.element}: not imported: on the rotor of "
+                                  f"{self.joint(rotor_joints[root])}, which is no body of the scene")
+                continue
+            body_name, G, origin = frames[root]
+            name = source.name
+            if name in taken:
+                base, extra = f"{name}_imu", 1
+                name = base
+                while name in taken:
+                    extra += 1
+                    name = f"{base}{extra}"
+                notes.append(f"named {name!r}: {source.name!r} is a body's or another IMU's name")
+            taken.add(name)
+            imu: dict[str, Any] = {
+                "name": name, "body": body_name,
+                "position": _vec(G.T @ (self.site_pos_ref[source.site] - origin)),
+                "orientation": _vec(matrix_to_quat(G.T @ self.site_R_ref[source.site])),
+            }
+            rate = source.rate
+            if rate is not None:
+                imu["rate"] = rate
+                if not divides(rate, DEFAULT_IMU_RATE):
+                    notes.append(f"rate {rate:g} Hz kept: publications at the default "
+                                 f"{DEFAULT_IMU_RATE:g} Hz cannot sample it (publish at a multiple "
+                                 f"of {rate:g} Hz)")
+            per_second = rate if rate is not None else DEFAULT_IMU_RATE
+            noise = {"gyro_noise_density": source.gyro_sigma / math.sqrt(per_second),
+                     "gyro_bias_instability": source.gyro_walk,
+                     "accel_noise_density": source.accel_sigma / math.sqrt(per_second),
+                     "accel_bias_instability": source.accel_walk}
+            if rate is None and (source.gyro_sigma or source.accel_sigma):
+                notes.append(f"no rate: the noise per sample is the model's at {DEFAULT_IMU_RATE:g} Hz, "
+                             "the default publish rate (the density is what is kept)")
+            imu.update({key: _tidy(value) for key, value in noise.items() if value})
+            if any(noise.values()):
+                imu["seed"] = len(out)
+            self.notes += [f"{source.element}: {note}" for note in notes]
+            where[f"imus[{len(out)}]"] = source.element
+            names.append((source.element, name))
+            out.append(imu)
+        return out
 
     def model_name(self) -> str:
         """The scene's title: the model's name (the first of MuJoCo's names), kind and file."""
@@ -649,7 +883,8 @@ class _Importer:
 # ----------------------------------------------------------------------------- writing
 def scene_yaml(imported: ImportedModel) -> str:
     """The scene of `imported` as YAML text: a comment naming the source, the names, how
-    MuJoCo's controls map onto the axis moments and what was left out, then the scene
+    MuJoCo's controls map onto the axis moments and the notes (what was left out or
+    approximated), then the scene
     (numbers as Python's repr: they read back exactly)."""
     import yaml
 
@@ -659,14 +894,14 @@ def scene_yaml(imported: ImportedModel) -> str:
     lines = [f"# gyro_sim scene imported by gyro-sim import from {source} ({imported.kind}), "
              f"initial state from {key}.",
              "# Names: a hinge or rotor is named after its joint, a ball or free body after its "
-             "body (docs/models.md)."]
+             "body, an IMU after its site or Gazebo sensor (docs/models.md)."]
     lines += [f"#   {element} -> {name}" for element, name in imported.names]
     if imported.commands:
         lines.append("# Commands: the axis moment is gear x gain x ctrl of the actuator:")
         lines += [f"#   {c.actuator} -> axis {c.axis}: moment = {c.factor!r} x ctrl"
                   for c in imported.commands]
     if imported.notes:
-        lines.append("# Left out:")
+        lines.append("# Notes (left out or approximated):")
         lines += [f"#   {note}" for note in imported.notes]
     body = yaml.safe_dump(imported.mapping, sort_keys=False, default_flow_style=None, width=100,
                           allow_unicode=True)
