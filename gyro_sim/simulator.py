@@ -57,9 +57,6 @@ class BodyState:
     velocity: np.ndarray  # velocity of O^k, world
 
 
-#: the rate of a scene's IMUs that give none, until `Simulator.set_imu_default_rate` (Hz): the
-#: publish rate of the node's and of `gyro-sim run`'s defaults
-DEFAULT_IMU_RATE = 100.0
 
 
 class Simulator:
@@ -133,7 +130,7 @@ class Simulator:
         self._imus = None  # the IMUs (gyro_sim.dynamics.imu.ImuSet), when the scene has some
         self._acc_ok = False  # the compiled scratch holds the accelerations of the current state
         if scene.imus:
-            from gyro_sim.dynamics.imu import ImuSet
+            from gyro_sim.dynamics.imu import DEFAULT_IMU_RATE, ImuSet
 
             self._imus = ImuSet(scene, {b.name: k for k, b in enumerate(scene.bodies)}, scene.gravity,
                                 DEFAULT_IMU_RATE)

@@ -55,6 +55,9 @@ DRAWS_PER_SAMPLE = 12
 DRAW_BLOCK = 65536
 #: publish_rate / rate within this relative tolerance of a whole number counts as one
 RATIO_RTOL = 1e-9
+#: the rate of a scene's IMUs that give none, until `Simulator.set_imu_default_rate` (Hz): the
+#: publish rate of the node's and of `gyro-sim run`'s defaults
+DEFAULT_IMU_RATE = 100.0
 
 
 def compiled_accelerations(scratch: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -51,7 +51,7 @@ from typing import Any
 
 import numpy as np
 
-from gyro_sim.dynamics.imu import divides
+from gyro_sim.dynamics.imu import DEFAULT_IMU_RATE, divides
 from gyro_sim.dynamics.rotations import matrix_to_quat
 from gyro_sim.errors import GyroSimError
 from gyro_sim.paths import MODEL_SUFFIXES
@@ -741,7 +741,6 @@ class _Importer:
         chain body its site moves with, at the site's pose in that body's frame at the
         reference pose; the noise per sample converted to densities at its rate. What cannot
         be an IMU is said in the notes; `names` and `where` gain the IMUs."""
-        from gyro_sim.simulator import DEFAULT_IMU_RATE
 
         m = self.m
         taken = {frame[0] for frame in frames.values()}

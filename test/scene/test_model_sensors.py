@@ -28,7 +28,7 @@ from gyro_sim.dynamics.rotations import quat_to_matrix  # noqa: E402
 from gyro_sim.paths import find_scene  # noqa: E402
 from gyro_sim.scene.load import SceneError, load_scene, parse_yaml  # noqa: E402
 from gyro_sim.scene.mjcf import ModelError, import_model  # noqa: E402
-from gyro_sim.simulator import DEFAULT_IMU_RATE  # noqa: E402
+from gyro_sim.dynamics.imu import DEFAULT_IMU_RATE  # noqa: E402
 
 #: gyro_sim's IMU readings against MuJoCo's sensordata at the same state: the two compute the
 #: same kinematics and forward dynamics by different algorithms (MuJoCo's CRB and RNE,
