@@ -20,6 +20,8 @@ NUMBA_CACHE_DIR pointing to a new empty directory for each cold case:
   case times the node, not that period (docs/performance.md says what it adds);
 - for comparison, the least rclpy node that publishes JointState, timed as the node is: what
   any ROS 2 Python node's start and discovery cost here;
+- a subscriber started `SETTLE` s after the node runs (as a viewer opened on a running node):
+  from its subscription to its first message;
 - ``gyro-sim run --scene hinge_chain --duration 2``, to its end, with its CPU time;
 - a one-point sweep on a LocalCluster of one worker: the worker's wall time from its process
   start to its first point written, and its CPU time (its start included); and the sweep's,
@@ -45,6 +47,7 @@ from datetime import date
 from pathlib import Path
 
 from gyro_sim.errors import GyroSimError
+from gyro_sim.ros.discovery import ANNOUNCE_PERIOD as ANNOUNCE_PERIOD_NODE, PROFILE_VARIABLES, profile_xml
 
 #: the extras installed: the node needs [ros], the sweep case [sweep]
 EXTRAS = "ros,sweep"
@@ -73,26 +76,12 @@ DOMAIN_BASE, DOMAIN_SPAN = 120, 100
 #: how long (s) the subscriber runs before the measured process starts: past its first
 #: announcements, as a viewer already running is
 SETTLE = 3.5
+#: Fast DDS's default announcement period (s)
+FAST_DDS_ANNOUNCE_PERIOD = 3.0
+#: what the node says on stderr once its physics thread runs (it publishes from then on)
+NODE_READY = "physics thread:"
 #: how often (s) the subscriber's participant announces itself (Fast DDS's default: 3 s)
 ANNOUNCE_PERIOD = 0.2
-
-
-def subscriber_profile(period: float) -> str:
-    """The Fast DDS profile of the subscriber's participant: announcements every `period` s."""
-    sec, nanosec = divmod(round(period * 1e9), 1_000_000_000)
-    return f"""<?xml version="1.0" encoding="UTF-8" ?>
-<profiles xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
-  <participant profile_name="gyro_sim_startup_probe" is_default_profile="true">
-    <rtps>
-      <builtin>
-        <discovery_config>
-          <leaseAnnouncement><sec>{sec}</sec><nanosec>{nanosec}</nanosec></leaseAnnouncement>
-        </discovery_config>
-      </builtin>
-    </rtps>
-  </participant>
-</profiles>
-"""
 
 
 #: the subscriber, run with the measured environment's Python: "ready" once subscribed, then
@@ -307,7 +296,7 @@ def first_message(python: str, node_cmd: list[str], env: dict, topic: str = TOPI
         sub_env = env
         if announce_period:
             profile = Path(tmp) / "subscriber.xml"
-            profile.write_text(subscriber_profile(announce_period))
+            profile.write_text(profile_xml(announce_period, "gyro_sim_startup_probe"))
             sub_env = dict(env, FASTRTPS_DEFAULT_PROFILES_FILE=str(profile))
         sub = subprocess.Popen([python, "-c", SUBSCRIBER, str(timeout), topic], env=sub_env, stdout=subprocess.PIPE,
                                stderr=subprocess.DEVNULL, text=True, start_new_session=True, cwd=cwd)
@@ -334,6 +323,46 @@ def first_message(python: str, node_cmd: list[str], env: dict, topic: str = TOPI
                 if p is not None:
                     stop(p)
             sub.stdout.close()
+
+
+def late_subscriber(python: str, node_cmd: list[str], env: dict, topic: str = TOPIC,
+                    timeout: float = CASE_TIMEOUT, cwd: Path | None = None, settle: float = SETTLE) -> Timing:
+    """Start `node_cmd`, wait until it says NODE_READY on stderr and `settle` s more, then a
+    subscriber to `topic`: the wall seconds from its subscription to its first message (no CPU
+    time: NaN). Both are stopped afterwards. StartupError if the node ends
+    first or nothing comes within `timeout` s."""
+    sub = None
+    with tempfile.TemporaryFile("w+") as node_err:
+        node = subprocess.Popen(node_cmd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                stderr=node_err, start_new_session=True, cwd=cwd)
+        try:
+            end = time.monotonic() + timeout
+            while True:
+                node_err.seek(0)
+                said = node_err.read()
+                if NODE_READY in said:
+                    break
+                if node.poll() is not None or time.monotonic() > end:
+                    last = said.strip().splitlines()
+                    raise StartupError(f"{Path(node_cmd[0]).name} did not start (exit {node.poll()}): "
+                                       f"{last[-1] if last else ''}")
+                time.sleep(POLL)
+            time.sleep(settle)
+            sub = subprocess.Popen([python, "-c", SUBSCRIBER, str(timeout), topic], env=env, stdout=subprocess.PIPE,
+                                   stderr=subprocess.DEVNULL, text=True, start_new_session=True, cwd=cwd)
+            if _read_line(sub, "the subscriber") != "ready":
+                raise StartupError("the subscriber did not start")
+            t0 = time.monotonic()
+            line = _read_line(sub, "the subscriber")
+            if not line.startswith("first "):
+                raise StartupError(f"no {topic} message within {timeout:g} s")
+            return Timing(float(line.split()[1]) - t0, float("nan"))
+        finally:
+            for p in (sub, node):
+                if p is not None:
+                    stop(p)
+            if sub is not None:
+                sub.stdout.close()
 
 
 def timed_run(cmd: list[str], env: dict, timeout: float = CASE_TIMEOUT, cwd: Path | None = None) -> Timing:
@@ -391,7 +420,8 @@ def worker_first_point(python: str, env: dict, scene: str = RUN_SCENE, horizon: 
 CASES = (("node", f"`gyro_sim_node` (default scene), to the first {TOPIC} a subscriber receives"),
          ("run", f"`gyro-sim run --scene {RUN_SCENE} --duration {RUN_DURATION:g}`, to its end"),
          ("worker", "a Dask worker's first sweep point (dop853), from the worker's start"),
-         ("rclpy", f"for comparison: a minimal rclpy node publishing JointState, to the first {TOPIC} received"))
+         ("rclpy", f"for comparison: a minimal rclpy node publishing JointState, to the first {TOPIC} received"),
+         ("late", f"a subscriber started {SETTLE:g} s after the node runs, from its subscription to its first {TOPIC}"))
 
 
 def measure(venv: Path, parts, say, timeout: float = CASE_TIMEOUT, warm_starts: int = 1,
@@ -399,7 +429,8 @@ def measure(venv: Path, parts, say, timeout: float = CASE_TIMEOUT, warm_starts: 
     """Every case of `parts` cold (a new empty cache) then warm (the same cache again,
     `warm_starts` times: the median start, with every wall time in its ``walls``), each run
     from a scratch directory (not a source tree, whose gyro_sim `python -m` would find first).
-    `announce_period`: the node case's subscriber's (`first_message`)."""
+    `announce_period`: the node case's subscriber's (`first_message`); None: Fast DDS's default
+    for every process (the node's own shorter period, gyro_sim.ros.discovery, turned off)."""
     python = str(python_of(venv))
     results: dict[str, dict] = {}
     with tempfile.TemporaryDirectory(prefix="gyro_sim_startup_") as tmp:
@@ -410,6 +441,10 @@ def measure(venv: Path, parts, say, timeout: float = CASE_TIMEOUT, warm_starts: 
             cache = scratch / f"cache_{key}"
             cache.mkdir()
             env = child_env(venv, cache, scratch)
+            if not announce_period:  # Fast DDS's default for every process, the node's own period too
+                default = scratch / "fast_dds_default.xml"
+                default.write_text(profile_xml(FAST_DDS_ANNOUNCE_PERIOD, "fast_dds_default"))
+                env[PROFILE_VARIABLES[0]] = str(default)
             for temp, starts in (("cold", 1), ("warm", warm_starts)):
                 timings = []
                 for i in range(starts):
@@ -418,6 +453,9 @@ def measure(venv: Path, parts, say, timeout: float = CASE_TIMEOUT, warm_starts: 
                         cmd = [str(script_of(venv, "gyro_sim_node"))] if key == "node" else [python, "-c", MINIMAL_NODE]
                         t = first_message(python, cmd, env, timeout=timeout, cwd=scratch,
                                           announce_period=announce_period)
+                    elif key == "late":
+                        t = late_subscriber(python, [str(script_of(venv, "gyro_sim_node"))], env, timeout=timeout,
+                                            cwd=scratch)
                     elif key == "run":
                         t = timed_run([str(script_of(venv, "gyro-sim")), "run", "--scene", RUN_SCENE, "--duration",
                                        str(RUN_DURATION)], env, timeout=timeout, cwd=scratch)
@@ -450,15 +488,21 @@ def table(results: dict, before: dict, after: dict, command: str, day: str,
             c, w = results[key]["cold"], results[key]["warm"]
             walls = w["extra"].get("walls")
             spread = f" (median of {len(walls)}: {min(walls):.1f} to {max(walls):.1f})" if walls else ""
-            lines.append(f"| {label} | {c['wall']:.1f} | {c['cpu']:.1f} | {w['wall']:.1f}{spread} | {w['cpu']:.1f} |")
-    if "node" in results or "rclpy" in results:
-        lines += ["", "The subscriber announced itself every "
-                  + (f"{announce_period:g} s." if announce_period else "3 s (Fast DDS's default).")]
+            lines.append(f"| {label} | {c['wall']:.1f} | {_seconds(c['cpu'])} | {w['wall']:.1f}{spread} "
+                         f"| {_seconds(w['cpu'])} |")
+    if {"node", "rclpy", "late"} & set(results):
+        lines += ["", (f"The node's subscriber announced itself every {announce_period:g} s, the node every "
+                       f"{ANNOUNCE_PERIOD_NODE:g} s." if announce_period else
+                       "Every process announced itself every 3 s (Fast DDS's default).")]
     if "worker" in results:
         c = results["worker"]["cold"]["extra"]
         lines += ["", f"The one-point sweep, from its call to its first point: {c['sweep_wall']:.1f} s cold "
                       f"(the calling process: {c['client_cpu']:.1f} s CPU, its compile for the workers included)."]
     return "\n".join(lines)
+
+
+def _seconds(x: float) -> str:
+    return "-" if x != x else f"{x:.1f}"  # NaN: not measured
 
 
 def command_of(args) -> str:
@@ -556,7 +600,7 @@ def register(sub, bench) -> None:
                    help="warm starts of each case (the table gives the median and the range)")
     s.add_argument("--announce-period", type=float, default=ANNOUNCE_PERIOD, metavar="S",
                    help=f"how often the node case's subscriber announces itself (s; default {ANNOUNCE_PERIOD:g}; "
-                        "0: Fast DDS's default, 3 s)")
+                        "0: Fast DDS's default, 3 s, for every process, the node's own 0.5 s too)")
     s.add_argument("--json", metavar="FILE", help="also write the figures to FILE")
     s.add_argument("--force", action="store_true", help="replace an existing --json FILE")
     s.set_defaults(fn=cmd_bench_startup)

@@ -97,6 +97,9 @@ def cmd_publish(args) -> int:
         print(f"gyro-sim cmd: {topic!r} is not a valid topic name ({str(exc).splitlines()[0]})", file=sys.stderr)
         return 2
     args.topic = topic
+    from gyro_sim.ros.discovery import announce_often
+
+    announce_often()
     rclpy.init()
     node = rclpy.create_node("gyro_sim_cmd")
     pub = node.create_publisher(Float64MultiArray, args.topic, 10)

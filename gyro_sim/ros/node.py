@@ -467,6 +467,9 @@ def _main(argv, shutdown: Shutdown) -> int:
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
 
+    from gyro_sim.ros.discovery import announce_often
+
+    announce_often()
     try:
         rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     except Exception as exc:  # noqa: BLE001 - rcl's argument errors (a missing --params-file ...)

@@ -136,6 +136,9 @@ def replay(path: str | os.PathLike, *, rate: float = 1.0, loop: bool = False, to
 
     own_context = not rclpy.ok()
     if own_context:
+        from gyro_sim.ros.discovery import announce_often
+
+        announce_often()
         rclpy.init()
     node = rclpy.create_node(node_name)
     try:

@@ -376,6 +376,9 @@ def run(namespace: str = "", *, mode: str = "spawn", save: str | None = None, se
         namespace = "/" + namespace
     stop = threading.Event()
     previous = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
+    from gyro_sim.ros.discovery import announce_often
+
+    announce_often()
     context = rclpy.Context()
     rec = rr.RecordingStream(APP_ID, recording_id=f"gyro_sim:live:{namespace or '/'}:{time.time_ns()}")
     live = None

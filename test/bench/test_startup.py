@@ -125,17 +125,24 @@ def test_the_minimal_rclpy_node_is_timed_as_the_node_is(tmp_path):
     assert 0 < t.cpu and 0 < t.wall < TIMEOUT
 
 
-def test_the_subscribers_profile_is_fast_dds_xml_with_its_announcement_period():
-    import xml.etree.ElementTree as ET
+def test_a_subscriber_started_after_a_node_is_timed_from_its_subscription(tmp_path):
+    pytest.importorskip("rclpy")
+    pytest.importorskip("sensor_msgs.msg")
+    script = tmp_path / "fake_node.py"
+    script.write_text(FAKE_NODE.replace("while rclpy.ok():",
+                                        f"import sys\nprint({startup.NODE_READY!r}, file=sys.stderr, flush=True)\n"
+                                        "while rclpy.ok():"))
+    env = dict(os.environ, ROS_DOMAIN_ID=str(startup.DOMAIN_BASE + os.getpid() % startup.DOMAIN_SPAN),
+               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_LOG_DIR=str(tmp_path))
+    t = startup.late_subscriber(sys.executable, [sys.executable, str(script)], env, timeout=TIMEOUT, settle=0)
+    assert 0 < t.wall < TIMEOUT and t.cpu != t.cpu  # no CPU time: NaN
 
-    ns = {"p": "http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles"}
-    for seconds in (startup.ANNOUNCE_PERIOD, 0.25, 1.5, 3.0):
-        root = ET.fromstring(startup.subscriber_profile(seconds))
-        period = root.find("p:participant/p:rtps/p:builtin/p:discovery_config/p:leaseAnnouncement", ns)
-        nanosec = int(period.find("p:nanosec", ns).text)
-        assert 0 <= nanosec < 1_000_000_000
-        assert int(period.find("p:sec", ns).text) + nanosec * 1e-9 == pytest.approx(seconds)
-        assert root.find("p:participant", ns).get("is_default_profile") == "true"
+
+def test_a_node_that_never_says_it_runs_is_an_error_for_the_late_subscriber(tmp_path):
+    env = dict(os.environ, ROS_LOG_DIR=str(tmp_path))
+    with pytest.raises(startup.StartupError, match=r"did not start \(exit 2\): no scene"):
+        startup.late_subscriber(sys.executable, [sys.executable, "-c", "import sys; print('no scene', file=sys.stderr); sys.exit(2)"],
+                                env, timeout=TIMEOUT, settle=0)
 
 
 def test_a_node_that_never_publishes_is_an_error(tmp_path):
