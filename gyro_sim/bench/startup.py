@@ -85,7 +85,8 @@ ANNOUNCE_PERIOD = 0.2
 
 
 #: the subscriber, run with the measured environment's Python: "ready" once subscribed, then
-#: "first <time.monotonic()>" at the first message (or "none" after argv[1] s)
+#: "first <time.monotonic()>" at the first message (or "none" after argv[1] s); "ready" gives
+#: its time.monotonic() too
 SUBSCRIBER = r"""
 import sys, time
 import rclpy
@@ -97,7 +98,7 @@ rclpy.init()
 node = Node("gyro_sim_startup_probe")
 got = []
 node.create_subscription(JointState, sys.argv[2], lambda m: got.append(time.monotonic()), qos_profile_sensor_data)
-print("ready", flush=True)
+print(f"ready {time.monotonic()!r}", flush=True)
 end = time.monotonic() + float(sys.argv[1])
 while not got and time.monotonic() < end:
     rclpy.spin_once(node, timeout_sec=0.05)
@@ -301,7 +302,7 @@ def first_message(python: str, node_cmd: list[str], env: dict, topic: str = TOPI
         sub = subprocess.Popen([python, "-c", SUBSCRIBER, str(timeout), topic], env=sub_env, stdout=subprocess.PIPE,
                                stderr=subprocess.DEVNULL, text=True, start_new_session=True, cwd=cwd)
         try:
-            if _read_line(sub, "the subscriber") != "ready":
+            if not _read_line(sub, "the subscriber").startswith("ready"):
                 raise StartupError("the subscriber did not start")
             time.sleep(settle)
             t0 = time.monotonic()
@@ -350,9 +351,10 @@ def late_subscriber(python: str, node_cmd: list[str], env: dict, topic: str = TO
             time.sleep(settle)
             sub = subprocess.Popen([python, "-c", SUBSCRIBER, str(timeout), topic], env=env, stdout=subprocess.PIPE,
                                    stderr=subprocess.DEVNULL, text=True, start_new_session=True, cwd=cwd)
-            if _read_line(sub, "the subscriber") != "ready":
+            ready = _read_line(sub, "the subscriber").split()
+            if ready[:1] != ["ready"]:
                 raise StartupError("the subscriber did not start")
-            t0 = time.monotonic()
+            t0 = float(ready[1])  # its own clock reading: not the pipe's latency
             line = _read_line(sub, "the subscriber")
             if not line.startswith("first "):
                 raise StartupError(f"no {topic} message within {timeout:g} s")
@@ -477,10 +479,9 @@ def machine() -> dict:
 
 def table(results: dict, before: dict, after: dict, command: str, day: str,
           announce_period: float = ANNOUNCE_PERIOD) -> str:
-    """The Markdown table of `results` (measure's), with the date, command and machine, and
+    """The Markdown table of `results` (measure's), with the date, command and core count, and
     how often the node case's subscriber announced itself (0: Fast DDS's default)."""
-    lines = [f"{day}, `{command}`; {before['cores']} cores, load average {before['load']:.2f} at the start, "
-             f"{after['load']:.2f} at the end.", "",
+    lines = [f"{day}, `{command}`; {before['cores']} cores.", "",
              "| case | cold: wall (s) | cold: CPU (s) | warm: wall (s) | warm: CPU (s) |",
              "|---|---:|---:|---:|---:|"]
     for key, label in CASES:
