@@ -14,7 +14,7 @@ import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 
-from gyro_sim.log.mcap_log import DEFAULT_FLUSH_PERIOD  # noqa: E402
+from gyro_sim.log.mcap_log import DEFAULT_FLUSH_PERIOD, interrupt_behind  # noqa: E402
 from gyro_sim.progress import Progress  # noqa: E402  (cmd_run, cmd_bench_scaling)
 
 
@@ -351,6 +351,17 @@ def _compile_first(args) -> None:
     precompile(sys.stderr, prog=f"gyro-sim {args.cmd}", integrator=getattr(args, "integrator", None) or "auto")
 
 
+def _interrupted(args, exc: KeyboardInterrupt) -> int:
+    """Say that the command was interrupted (by `exc`, SIGINT or SIGTERM) and end it: exit 1."""
+    print(f"\ngyro-sim {args.cmd}: interrupted ({getattr(exc, 'name', 'SIGINT')}) before finishing; "
+          "no output is left half-written under its name", file=sys.stderr)
+    # what the interrupt cut half-way (a library object whose constructor it stopped) may
+    # fail again when collected at exit: that is not news after the line above
+    sys.unraisablehook = _quiet
+    end_after_interrupt()
+    return 1
+
+
 def main(argv=None) -> int:
     ap = build_parser()
     args = ap.parse_args(argv)
@@ -366,13 +377,7 @@ def main(argv=None) -> int:
             _compile_first(args)
             return args.fn(args)
     except KeyboardInterrupt as exc:  # SIGINT or SIGTERM where the command does not handle it
-        print(f"\ngyro-sim {args.cmd}: interrupted ({getattr(exc, 'name', 'SIGINT')}) before finishing; "
-              "no output is left half-written under its name", file=sys.stderr)
-        # what the interrupt cut half-way (a library object whose constructor it stopped) may
-        # fail again when collected at exit: that is not news after the line above
-        sys.unraisablehook = _quiet
-        end_after_interrupt()
-        return 1
+        return _interrupted(args, exc)
     except OutputError as exc:  # an output taken by another writer while this one worked
         print(f"gyro-sim {args.cmd}: {exc}", file=sys.stderr)
         return 2
@@ -383,6 +388,11 @@ def main(argv=None) -> int:
         print(f"gyro-sim {args.cmd}: needs {exc.name.split('.')[0]}, not installed; "
               f"install it with: pip install 'gyro_sim[{extra}]'", file=sys.stderr)
         return 2
+    except Exception as exc:  # noqa: BLE001 - only to find a signal Python wrapped (interrupt_behind)
+        interrupt = interrupt_behind(exc)
+        if interrupt is None:
+            raise
+        return _interrupted(args, interrupt)
 
 
 if __name__ == "__main__":

@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from gyro_sim.errors import GyroSimError
+from gyro_sim.log.mcap_log import raise_interrupt_behind
 from gyro_sim.sweep.point import run_batch
 from gyro_sim.sweep.results import read_parts, write_part
 
@@ -107,8 +108,8 @@ def prepare_scene(sweep, point) -> None:
         sim = Simulator(load_scene(scene_map), integrator=run["integrator"], rtol=run["rtol"], atol=run["atol"],
                         step=run["step"], backend=run["backend"])
         sim.snapshot(bodies=False, wrenches=False)
-    except Exception:  # noqa: BLE001 - the point itself reports what fails here
-        pass
+    except Exception as exc:  # noqa: BLE001 - the point itself reports what fails here
+        raise_interrupt_behind(exc)
 
 
 def stop_local_workers() -> None:
@@ -201,6 +202,7 @@ def _run_dask(sweep, todo, workers, scheduler, finished, stats) -> None:
     except ClusterError:
         raise
     except Exception as exc:  # noqa: BLE001  (a cluster that does not start: one line, exit 1)
+        raise_interrupt_behind(exc)
         raise ClusterError(f"could not start the Dask cluster: {type(exc).__name__}: {exc}".splitlines()[0]) from None
     futures = []
     try:
