@@ -88,6 +88,32 @@ class LogError(GyroSimError, RuntimeError):
     """A log cannot be written or read as asked (closed writer, unknown type, bad value...)."""
 
 
+def interrupt_behind(exc: BaseException) -> KeyboardInterrupt | None:
+    """The KeyboardInterrupt (SIGINT, or SIGTERM under `safe_paths.raise_on_signals`) that
+    `exc` comes from, if any (its causes and contexts followed), else None.
+
+    A signal's exception is raised wherever the main thread is when the signal comes, and
+    Python 3.11 wraps one raised while a class is created (a signal during the import of a
+    module that defines a dataclass: mcap's records are imported when a log is first opened)
+    in a RuntimeError: a handler that turns every Exception into "damaged log" (LogError) must
+    let the interrupt through instead (:func:`raise_interrupt_behind`).
+    """
+    seen: set[int] = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
+def raise_interrupt_behind(exc: BaseException) -> None:
+    """Raise the KeyboardInterrupt that `exc` comes from (:func:`interrupt_behind`), if any."""
+    interrupt = interrupt_behind(exc)
+    if interrupt is not None:
+        raise interrupt from None
+
+
 def compression():
     """The chunk compression every gyro_sim log is written with: zstd, else lz4, else none
     (by the compression library installed)."""
@@ -386,6 +412,7 @@ class LogWriter:
         try:
             return enc(dec(bytes(data)))
         except Exception as exc:  # noqa: BLE001 - any decoding failure means bad bytes
+            raise_interrupt_behind(exc)
             raise LogError(f"not a CDR {self._msgtype(ch)}: {type(exc).__name__}: {exc}") from exc
 
     def _msgtype(self, ch: int) -> str:
@@ -582,6 +609,7 @@ def decode_chunk(chunk) -> bytes:
     except ChunkError:
         raise
     except Exception as exc:  # noqa: BLE001 - each decompressor has its own errors
+        raise_interrupt_behind(exc)
         raise ChunkError(f"does not decompress ({type(exc).__name__}: {exc})") from None
     if len(data) != size:
         raise ChunkError(f"decompresses to {len(data)} bytes, its header says {size}")
@@ -602,6 +630,7 @@ def chunk_records(chunk, data: bytes) -> list:
     try:
         return breakup_chunk(plain, validate_crc=False)
     except Exception as exc:  # noqa: BLE001 - a damaged record inside can fail anywhere
+        raise_interrupt_behind(exc)
         raise ChunkError(f"holds an unreadable record ({type(exc).__name__}: {exc})") from None
 
 
@@ -632,6 +661,7 @@ def _verify(f: BinaryIO, path):
     try:
         summary = make_reader(f, validate_crcs=True).get_summary()
     except Exception as exc:  # noqa: BLE001 - mcap raises many kinds on a damaged file
+        raise_interrupt_behind(exc)
         raise LogError(f"{path}: not a readable MCAP log, no summary ({type(exc).__name__}: {exc}); "
                        f"if the run was killed, run `gyro-sim recover {path} -o fixed.mcap`") from None
     if summary is None:
@@ -663,6 +693,7 @@ def _verify(f: BinaryIO, path):
         except ChunkError as exc:
             raise _damaged(path, f"chunk at byte {off}", str(exc)) from None
         except Exception as exc:  # noqa: BLE001 - a damaged header fails in the record parser
+            raise_interrupt_behind(exc)
             raise _damaged(path, f"chunk at byte {off}", f"unreadable ({type(exc).__name__}: {exc})") from None
     return summary
 
@@ -696,6 +727,7 @@ class LogReader:
             raise
         except Exception as exc:  # noqa: BLE001 - mcap raises many kinds on a damaged file
             self._f.close()
+            raise_interrupt_behind(exc)
             raise LogError(f"{self.path}: not a readable gyro_sim log ({type(exc).__name__}: {exc}); "
                            f"if it is damaged, run `gyro-sim recover {self.path} -o fixed.mcap`") from None
         return self
@@ -790,6 +822,7 @@ def _messages(f: BinaryIO, path, topics, decode: bool, log_time_order: bool):
     except (LogError, OSError, GeneratorExit):
         raise
     except Exception as exc:  # noqa: BLE001 - damaged chunks and crafted schemas fail in many ways
+        raise_interrupt_behind(exc)
         _verify(f, path)  # names the damaged chunk's offset if there is one
         raise LogError(f"{path}: cannot read the messages (after {topic or 'the start'}): "
                        f"{type(exc).__name__}: {str(exc)[:200]}") from None

@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from gyro_sim.progress import plural
-from gyro_sim.log.mcap_log import OP_CHUNK, ChunkError, LogError, chunk_records, decode_chunk
+from gyro_sim.log.mcap_log import OP_CHUNK, ChunkError, LogError, chunk_records, decode_chunk, raise_interrupt_behind
 from gyro_sim.safe_paths import atomic_output, check_output
 
 #: MCAP magic (8 bytes) at both ends of a file
@@ -198,6 +198,7 @@ def _parse_exact(cls, body: bytes):
     try:
         rec = cls.read(stream)
     except Exception as exc:  # noqa: BLE001 - mcap's readers fail in many ways on bad bytes
+        raise_interrupt_behind(exc)
         raise ValueError(f"does not parse ({type(exc).__name__}: {exc})") from None
     if stream.count != len(body):
         raise ValueError(f"its fields take {stream.count} of its {len(body)} bytes")

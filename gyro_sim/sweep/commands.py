@@ -4,7 +4,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import logging
-import multiprocessing
 import signal
 import sys
 from pathlib import Path
@@ -64,23 +63,17 @@ def cmd_sweep(args) -> int:
         return 2
 
 
-#: the name multiprocessing gives the worker processes of a local Dask cluster
-LOCAL_WORKER_NAME = "Dask Worker process"
-
-
 @contextlib.contextmanager
 def _stop_on_signals():
     """SIGINT and SIGTERM end the sweep at once: the local cluster's worker processes are
-    killed (a busy worker takes seconds to close gracefully, and its batch is run again on
-    --resume anyway) and Dask's logging, which would report their loss, is silenced; then
-    Interrupted unwinds the driver, which keeps the finished parts."""
+    killed (`execute.stop_local_workers`) and Dask's logging, which would report their loss, is
+    silenced; then Interrupted unwinds the driver, which keeps the finished parts."""
     from gyro_sim.safe_paths import Interrupted, raise_on_signals
+    from gyro_sim.sweep.execute import stop_local_workers
 
     def handler(signum, frame):
         logging.disable(logging.CRITICAL)  # the command ends now: one line, from cmd_sweep
-        for child in multiprocessing.active_children():
-            if child.name.startswith(LOCAL_WORKER_NAME):
-                child.kill()
+        stop_local_workers()
         raise Interrupted(signum)
 
     with raise_on_signals():  # restores the previous handlers on the way out
@@ -151,6 +144,9 @@ def _cmd_sweep(args) -> int:
     if stats["interrupted"] and len(rows) < len(sweep.points):
         print(f"\n{prog}: interrupted: {len(rows)} of {len(sweep.points)} points done, kept in "
               f"{out / res.PARTS}; continue with --resume", file=sys.stderr)
+        from gyro_sim.cli import end_after_interrupt
+
+        end_after_interrupt()
         return 1
     if len(rows) < len(sweep.points):
         print(f"{prog}: only {len(rows)} of {len(sweep.points)} points done; run again with --resume",
