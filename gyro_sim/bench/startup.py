@@ -28,8 +28,8 @@ NUMBA_CACHE_DIR pointing to a new empty directory for each cold case:
   from its call to the first point.
 
 Each cold case is followed by a warm one on the same cache (`--warm-starts N`: N of them, the
-median and the range shown). The table is printed with the
-date, the command, the machine's core count and load average (1 min) before and after.
+median and the range shown). The table is printed with the date, the command and the core
+count; `--json` also gives the 1-minute load average before and after.
 """
 from __future__ import annotations
 

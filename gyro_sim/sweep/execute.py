@@ -117,7 +117,7 @@ def stop_local_workers() -> None:
 
     Each nanny is first told that its worker goes away for good: a nanny that saw its worker
     die would start another one, and closing the cluster then waits until that one is up (a
-    new process importing gyro_sim: 0.6 s on the idle machine) before it can stop it. Busy
+    new process importing gyro_sim, most of a second) before it can stop it. Busy
     workers are killed rather than closed: one takes seconds to close gracefully, and its batch
     is run again on --resume anyway.
     """
