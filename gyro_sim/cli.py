@@ -8,29 +8,14 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
-import gc  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 
-from gyro_sim.log.mcap_log import DEFAULT_FLUSH_PERIOD, interrupt_behind  # noqa: E402
+from gyro_sim.log.mcap_log import DEFAULT_FLUSH_PERIOD  # noqa: E402
+from gyro_sim.safe_paths import end_after_interrupt, interrupt_behind  # noqa: E402
 from gyro_sim.progress import Progress  # noqa: E402  (cmd_run, cmd_bench_scaling)
-
-
-def end_after_interrupt() -> None:
-    """Make the exit that follows an interrupt prompt: the objects alive now are left out of
-    the interpreter's last garbage collections.
-
-    At exit Python tears the imported modules down with full collections over every object
-    still alive (numba's and scipy's: about 1e5 after a heavy-top run), and that is most of the
-    CPU a command spends between SIGINT / SIGTERM and its end (measured: 0.2 s of 0.25 s after
-    `gyro-sim run`, 0.04 s without them). Call it once the command has said its line and its
-    outputs are closed (published or removed): atexit handlers, the standard streams' flush and
-    the reference-counted teardown still run; only objects in reference cycles are left
-    unfinalized, and the process ends right after.
-    """
-    gc.freeze()
 
 
 def cmd_run(args) -> int:

@@ -57,8 +57,6 @@ class BodyState:
     velocity: np.ndarray  # velocity of O^k, world
 
 
-
-
 class Simulator:
     """Simulate a scene. See the README, "Python API".
 

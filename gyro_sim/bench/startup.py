@@ -47,7 +47,8 @@ from datetime import date
 from pathlib import Path
 
 from gyro_sim.errors import GyroSimError
-from gyro_sim.ros.discovery import ANNOUNCE_PERIOD as ANNOUNCE_PERIOD_NODE, PROFILE_VARIABLES, profile_xml
+from gyro_sim.ros.discovery import ANNOUNCE_PERIOD as ANNOUNCE_PERIOD_NODE, FAST_DDS_ANNOUNCE_PERIOD, PROFILE_VARIABLES, \
+    profile_xml
 
 #: the extras installed: the node needs [ros], the sweep case [sweep]
 EXTRAS = "ros,sweep"
@@ -76,11 +77,9 @@ DOMAIN_BASE, DOMAIN_SPAN = 120, 100
 #: how long (s) the subscriber runs before the measured process starts: past its first
 #: announcements, as a viewer already running is
 SETTLE = 3.5
-#: Fast DDS's default announcement period (s)
-FAST_DDS_ANNOUNCE_PERIOD = 3.0
 #: what the node says on stderr once its physics thread runs (it publishes from then on)
 NODE_READY = "physics thread:"
-#: how often (s) the subscriber's participant announces itself (Fast DDS's default: 3 s)
+#: how often (s) the subscriber's participant announces itself
 ANNOUNCE_PERIOD = 0.2
 
 
@@ -287,18 +286,13 @@ def first_message(python: str, node_cmd: list[str], env: dict, topic: str = TOPI
                   timeout: float = CASE_TIMEOUT, cwd: Path | None = None,
                   announce_period: float | None = ANNOUNCE_PERIOD, settle: float = SETTLE) -> Timing:
     """Start a subscriber to `topic` (and wait until it is subscribed, and `settle` s more), then
-    `node_cmd`: the wall
-    seconds from the node's start to the first message received, and the node's CPU seconds
-    then. The node is stopped afterwards (SIGINT, then SIGKILL). StartupError if the node ends
-    or says nothing on `topic` within `timeout` s. The subscriber's participant announces
-    itself every `announce_period` s (None: as the environment says, Fast DDS's default 3 s)."""
+    `node_cmd`: the wall seconds from the node's start to the first message received, and the
+    node's CPU seconds then. The node is stopped afterwards (SIGINT, then SIGKILL). StartupError
+    if the node ends or says nothing on `topic` within `timeout` s. The subscriber's participant
+    announces itself every `announce_period` s (None: as the environment says)."""
     node = None
     with tempfile.TemporaryFile("w+") as node_err, tempfile.TemporaryDirectory(prefix="gyro_sim_probe_") as tmp:
-        sub_env = env
-        if announce_period:
-            profile = Path(tmp) / "subscriber.xml"
-            profile.write_text(profile_xml(announce_period, "gyro_sim_startup_probe"))
-            sub_env = dict(env, FASTRTPS_DEFAULT_PROFILES_FILE=str(profile))
+        sub_env = with_profile(env, Path(tmp), announce_period) if announce_period else env
         sub = subprocess.Popen([python, "-c", SUBSCRIBER, str(timeout), topic], env=sub_env, stdout=subprocess.PIPE,
                                stderr=subprocess.DEVNULL, text=True, start_new_session=True, cwd=cwd)
         try:
@@ -324,6 +318,14 @@ def first_message(python: str, node_cmd: list[str], env: dict, topic: str = TOPI
                 if p is not None:
                     stop(p)
             sub.stdout.close()
+
+
+def with_profile(env: dict, directory: Path, period: float) -> dict:
+    """`env` with a Fast DDS profile (written in `directory`) whose participants announce
+    themselves every `period` s."""
+    profile = directory / f"announce_{period:g}s.xml"
+    profile.write_text(profile_xml(period, "gyro_sim_startup"))
+    return dict(env, **{PROFILE_VARIABLES[0]: str(profile)})
 
 
 def late_subscriber(python: str, node_cmd: list[str], env: dict, topic: str = TOPIC,
@@ -444,9 +446,7 @@ def measure(venv: Path, parts, say, timeout: float = CASE_TIMEOUT, warm_starts: 
             cache.mkdir()
             env = child_env(venv, cache, scratch)
             if not announce_period:  # Fast DDS's default for every process, the node's own period too
-                default = scratch / "fast_dds_default.xml"
-                default.write_text(profile_xml(FAST_DDS_ANNOUNCE_PERIOD, "fast_dds_default"))
-                env[PROFILE_VARIABLES[0]] = str(default)
+                env = with_profile(env, scratch, FAST_DDS_ANNOUNCE_PERIOD)
             for temp, starts in (("cold", 1), ("warm", warm_starts)):
                 timings = []
                 for i in range(starts):
@@ -477,8 +477,7 @@ def machine() -> dict:
     return {"cores": os.cpu_count(), "load": round(os.getloadavg()[0], 2)}
 
 
-def table(results: dict, before: dict, after: dict, command: str, day: str,
-          announce_period: float = ANNOUNCE_PERIOD) -> str:
+def table(results: dict, before: dict, command: str, day: str, announce_period: float = ANNOUNCE_PERIOD) -> str:
     """The Markdown table of `results` (measure's), with the date, command and core count, and
     how often the node case's subscriber announced itself (0: Fast DDS's default)."""
     lines = [f"{day}, `{command}`; {before['cores']} cores.", "",
@@ -494,7 +493,8 @@ def table(results: dict, before: dict, after: dict, command: str, day: str,
     if {"node", "rclpy", "late"} & set(results):
         lines += ["", (f"The node's subscriber announced itself every {announce_period:g} s, the node every "
                        f"{ANNOUNCE_PERIOD_NODE:g} s." if announce_period else
-                       "Every process announced itself every 3 s (Fast DDS's default).")]
+                       f"Every process announced itself every {FAST_DDS_ANNOUNCE_PERIOD:g} s (Fast DDS's "
+                       "default).")]
     if "worker" in results:
         c = results["worker"]["cold"]["extra"]
         lines += ["", f"The one-point sweep, from its call to its first point: {c['sweep_wall']:.1f} s cold "
@@ -573,7 +573,7 @@ def cmd_bench_startup(args) -> int:
     finally:
         if made is not None and not keep:
             shutil.rmtree(made, ignore_errors=True)
-    print(table(results, before, after, command, date.today().isoformat(), args.announce_period))
+    print(table(results, before, command, date.today().isoformat(), args.announce_period))
     if args.json:
         from gyro_sim.safe_paths import OutputError, write_atomic
 
@@ -601,7 +601,8 @@ def register(sub, bench) -> None:
                    help="warm starts of each case (the table gives the median and the range)")
     s.add_argument("--announce-period", type=float, default=ANNOUNCE_PERIOD, metavar="S",
                    help=f"how often the node case's subscriber announces itself (s; default {ANNOUNCE_PERIOD:g}; "
-                        "0: Fast DDS's default, 3 s, for every process, the node's own 0.5 s too)")
+                        f"0: Fast DDS's default, {FAST_DDS_ANNOUNCE_PERIOD:g} s, for every process, the node's own "
+                        f"{ANNOUNCE_PERIOD_NODE:g} s too)")
     s.add_argument("--json", metavar="FILE", help="also write the figures to FILE")
     s.add_argument("--force", action="store_true", help="replace an existing --json FILE")
     s.set_defaults(fn=cmd_bench_startup)

@@ -58,6 +58,7 @@ from pathlib import Path
 from typing import Any, BinaryIO, Iterator, Mapping
 
 from gyro_sim.errors import GyroSimError
+from gyro_sim.safe_paths import raise_interrupt_behind
 from gyro_sim.msgs import messages as M
 from gyro_sim.msgs import msgdefs
 
@@ -86,32 +87,6 @@ DEFAULT_FLUSH_PERIOD = 0.2
 
 class LogError(GyroSimError, RuntimeError):
     """A log cannot be written or read as asked (closed writer, unknown type, bad value...)."""
-
-
-def interrupt_behind(exc: BaseException) -> KeyboardInterrupt | None:
-    """The KeyboardInterrupt (SIGINT, or SIGTERM under `safe_paths.raise_on_signals`) that
-    `exc` comes from, if any (its causes and contexts followed), else None.
-
-    A signal's exception is raised wherever the main thread is when the signal comes, and
-    Python 3.11 wraps one raised while a class is created (a signal during the import of a
-    module that defines a dataclass: mcap's records are imported when a log is first opened)
-    in a RuntimeError: a handler that turns every Exception into "damaged log" (LogError) must
-    let the interrupt through instead (:func:`raise_interrupt_behind`).
-    """
-    seen: set[int] = set()
-    while exc is not None and id(exc) not in seen:
-        if isinstance(exc, KeyboardInterrupt):
-            return exc
-        seen.add(id(exc))
-        exc = exc.__cause__ or exc.__context__
-    return None
-
-
-def raise_interrupt_behind(exc: BaseException) -> None:
-    """Raise the KeyboardInterrupt that `exc` comes from (:func:`interrupt_behind`), if any."""
-    interrupt = interrupt_behind(exc)
-    if interrupt is not None:
-        raise interrupt from None
 
 
 def compression():

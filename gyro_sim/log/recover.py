@@ -42,8 +42,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from gyro_sim.progress import plural
-from gyro_sim.log.mcap_log import OP_CHUNK, ChunkError, LogError, chunk_records, decode_chunk, raise_interrupt_behind
-from gyro_sim.safe_paths import atomic_output, check_output
+from gyro_sim.log.mcap_log import OP_CHUNK, ChunkError, LogError, chunk_records, decode_chunk
+from gyro_sim.safe_paths import atomic_output, check_output, raise_interrupt_behind
 
 #: MCAP magic (8 bytes) at both ends of a file
 MAGIC = b"\x89MCAP0\r\n"

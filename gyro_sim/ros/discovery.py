@@ -15,7 +15,9 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-#: how often (s) gyro_sim's ROS processes announce themselves (Fast DDS's default: 3 s)
+#: how often (s) a Fast DDS participant announces itself by default
+FAST_DDS_ANNOUNCE_PERIOD = 3.0
+#: how often (s) gyro_sim's ROS processes announce themselves
 ANNOUNCE_PERIOD = 0.5
 #: the profile that says so, shipped with the package (`profile_xml(ANNOUNCE_PERIOD)`)
 PROFILE = Path(__file__).with_name("discovery.xml")

@@ -144,7 +144,7 @@ def _cmd_sweep(args) -> int:
     if stats["interrupted"] and len(rows) < len(sweep.points):
         print(f"\n{prog}: interrupted: {len(rows)} of {len(sweep.points)} points done, kept in "
               f"{out / res.PARTS}; continue with --resume", file=sys.stderr)
-        from gyro_sim.cli import end_after_interrupt
+        from gyro_sim.safe_paths import end_after_interrupt
 
         end_after_interrupt()
         return 1

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from gyro_sim.errors import GyroSimError
-from gyro_sim.log.mcap_log import raise_interrupt_behind
+from gyro_sim.safe_paths import raise_interrupt_behind
 from gyro_sim.sweep.point import run_batch
 from gyro_sim.sweep.results import read_parts, write_part
 
