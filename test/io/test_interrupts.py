@@ -9,7 +9,7 @@ same, not a "damaged log" (exit 2) nor a traceback: the last section makes that 
 the commands meet by chance (`view` when it first opens its log).
 
 How soon: after the signal a command only closes or removes its outputs, says its line and
-ends, leaving out the interpreter's final garbage collections (`gyro_sim.cli.end_after_interrupt`:
+ends, leaving out the interpreter's final garbage collections (`gyro_sim.safe_paths.end_after_interrupt`:
 with numba and scipy loaded they cost 0.2 s of CPU, most of what the exit took); a sweep's
 nannies are told not to start new workers, which closing the cluster would wait for
 (`gyro_sim.sweep.execute.stop_local_workers`). The module prints each command's time from the
