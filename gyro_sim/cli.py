@@ -20,10 +20,11 @@ from gyro_sim.progress import Progress  # noqa: E402  (cmd_run, cmd_bench_scalin
 
 def cmd_run(args) -> int:
     from gyro_sim.scene.load import SceneError, load_scene
+    from gyro_sim.scene.commands import model_options
     from gyro_sim.paths import find_scene
 
     try:
-        scene = load_scene(find_scene(args.scene), keyframe=args.keyframe)
+        scene = load_scene(find_scene(args.scene), **model_options(args))
     except (SceneError, FileNotFoundError) as exc:
         print(f"gyro-sim run: {exc}", file=sys.stderr)
         return 2
@@ -251,6 +252,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="scene file, an MJCF or URDF model (docs/models.md), or the name of a shipped scene (config/)")
     r.add_argument("--keyframe", metavar="NAME",
                    help="models only: the keyframe of the initial state (default: the model's first)")
+    from gyro_sim.scene.commands import add_model_options
+
+    add_model_options(r)
     r.add_argument("--duration", type=float, required=True, help="simulated seconds")
     r.add_argument("--integrator", default="auto", help="auto (dop853, switching to radau when stiff) | dop853 | radau | rk4 | lie4 | gauss4 | fixed")
     r.add_argument("--rtol", type=float, default=1e-10)
@@ -315,10 +319,11 @@ def _compile_first(args) -> None:
     first one compiles (gyro_sim.warmup) instead of staying silent for seconds."""
     if args.cmd == "run":
         from gyro_sim.scene.load import SceneError, load_scene
+        from gyro_sim.scene.commands import model_options
         from gyro_sim.paths import find_scene
 
         try:
-            load_scene(find_scene(args.scene), keyframe=args.keyframe)
+            load_scene(find_scene(args.scene), **model_options(args))
         except (SceneError, FileNotFoundError):
             return  # cmd_run reports it, with nothing compiled
     elif args.cmd == "replay" and getattr(args, "resimulate", False) and Path(args.log).is_file():

@@ -41,7 +41,6 @@ Non-finite numbers never leave here: every builder raises :class:`NonFiniteError
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass
 from typing import ClassVar, Iterable, Mapping, Sequence
 
@@ -49,6 +48,7 @@ import numpy as np
 
 from gyro_sim.errors import GyroSimError
 from gyro_sim.msgs.cdr import NS_PER_S, CdrWriter, Refill
+from gyro_sim.scene.names import topic_token
 
 # --- names ---------------------------------------------------------------------------------------
 WORLD_FRAME = "world"
@@ -123,12 +123,6 @@ def axis_moment_key(axis: str) -> str:
 
 class NonFiniteError(GyroSimError, ValueError):
     """A NaN or infinity in an output: refused, it must never reach a topic or a log."""
-
-
-def topic_token(name: str) -> str:
-    """A body name as a ROS topic token (letters, digits, underscores; not starting with a digit)."""
-    tok = re.sub(r"\W", "_", name)
-    return tok if tok and not tok[0].isdigit() else f"_{tok}"
 
 
 def wrench_topic(joint: str, namespace: str = NAMESPACE) -> str:

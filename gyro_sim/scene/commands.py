@@ -43,6 +43,20 @@ def _write_new(path: Path, text: str, force: bool) -> None:
             os.unlink(tmp)
 
 
+def add_model_options(parser) -> None:
+    """The options of a command that reads a model (`run`, `import`): where its packages are."""
+    parser.add_argument("--package-path", action="append", default=[], metavar="DIR",
+                        help="models only: a directory searched first for the packages of "
+                             "package:// URIs (repeatable; then the ament index, ROS_PACKAGE_PATH, "
+                             "the package.xml above the file: docs/models.md)")
+
+
+def model_options(args) -> dict:
+    """`load_scene`'s and `import_model`'s keyword arguments from a command's options."""
+    return {"keyframe": getattr(args, "keyframe", None),
+            "package_path": list(getattr(args, "package_path", None) or [])}
+
+
 def cmd_import(args) -> int:
     from gyro_sim.paths import find_scene
     from gyro_sim.safe_paths import OutputError, check_output
@@ -64,7 +78,7 @@ def cmd_import(args) -> int:
         _err(exc)
         return 2
     try:
-        imported = import_model(model, args.keyframe)
+        imported = import_model(model, **model_options(args))
     except ModelError as exc:
         for line in exc.errors:
             _err(line)
@@ -113,4 +127,5 @@ def register(sub, bench) -> None:
     p.add_argument("--keyframe", metavar="NAME",
                    help="the keyframe giving the initial state (default: the first; none: rest)")
     p.add_argument("--force", action="store_true", help="replace an existing output file (never the model)")
+    add_model_options(p)
     p.set_defaults(fn=cmd_import)

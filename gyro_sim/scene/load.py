@@ -14,9 +14,9 @@ Conventions fixed here (beyond the SPEC's example file):
 - inertia tensors must be those of a real mass distribution: symmetric, positive definite,
   principal moments obeying the triangle inequality, both about O^k and about the centre of
   mass (docs/theory.md section 6: about the centre of mass the transverse moment is B - m c^2);
-- names are ROS name tokens of at most ``MAX_NAME_LENGTH`` characters (they become topic
-  names ``~/wrench/<name>``), unique over bodies and rotors, and so are the joint-state names
-  they produce (``<body>_psi`` ... for spherical joints, docs/scene-format.md);
+- names are kept as given (printable, no whitespace or ``/``, at most ``MAX_NAME_LENGTH``
+  characters: gyro_sim.scene.names), unique over bodies and rotors, and so are the joint-state
+  names they produce and the topic tokens of the bodies' and IMUs' topics (``<body>_psi`` ... for spherical joints, docs/scene-format.md);
 - crafted input is bounded: only a regular file is read (a FIFO, ``/dev/zero`` or another
   device is refused before anything is read from it), of at most ``MAX_SCENE_BYTES``; its
   YAML at most ``MAX_YAML_DEPTH`` levels deep (aliases expanded) and at most
@@ -44,6 +44,7 @@ import yaml
 
 from gyro_sim.errors import GyroSimError
 from gyro_sim.scene.mjcf import ModelError, import_model, is_model_path
+from gyro_sim.scene.names import name_problem, topic_token
 from gyro_sim.scene.records import (
     BASE_TYPES, DEFAULT_STICK_SPEED, JOINT_TYPES, ROTOR_MODES, Base, Body, Friction, Imu, Initial, Joint,
     Limits, Rotor, Scene,
@@ -57,15 +58,9 @@ TRIANGLE_RTOL = 1e-9
 SYMMETRY_RTOL = 1e-9
 #: smallest principal moment, relative to the largest, of a positive definite inertia
 PD_RTOL = 1e-12
-#: a ROS name token (rcl: letters, digits, underscores; not starting with a digit)
-NAME_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
 #: joint-state suffixes of a spherical joint's Euler angles (docs/scene-format.md)
 EULER_SUFFIXES = ("psi", "theta", "phi")
 MOTION_TYPES = ("sine",)
-#: longest body or rotor name: names become topic names ``/<node>/wrench/<name>``, and ROS
-#: refuses a topic name longer than 247 characters (rmw: 255 - 8; measured with rclpy: a
-#: name of 230 characters under ``/gyro_sim/wrench/``); 64 leaves room for namespaces
-MAX_NAME_LENGTH = 64
 #: deepest nesting of a scene file, aliases expanded (a scene needs 6 levels)
 MAX_YAML_DEPTH = 32
 #: most nodes reached through aliases, counted expanded (what an alias costs once the data is
@@ -138,7 +133,8 @@ class SceneError(GyroSimError, ValueError):
         super().__init__(f"{where} ({count}):\n" + "\n".join("  " + e for e in self.errors))
 
 
-def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None) -> Scene:
+def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None,
+               package_path: Sequence[str | os.PathLike] = ()) -> Scene:
     """Load and validate a scene.
 
     Parameters
@@ -152,6 +148,10 @@ def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None)
     keyframe : str, optional
         Models only: the keyframe giving the initial state (default: the model's first, or
         the reference pose at rest).
+    package_path : sequence of directories, optional
+        Models only: searched first for the packages of ``package://`` mesh URIs, before the
+        ament index, ROS_PACKAGE_PATH and the package.xml above the file
+        (:mod:`gyro_sim.scene.packages`).
 
     Returns
     -------
@@ -179,7 +179,7 @@ def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None)
                 raise SceneError([str(exc)], path) from None
         if is_model_path(path):  # MJCF or URDF: its scene mapping, refusals naming elements
             try:
-                model = import_model(path, keyframe)
+                model = import_model(path, keyframe, package_path=package_path)
             except ModelError as exc:
                 raise SceneError(exc.errors, path) from None
             data = model.mapping
@@ -549,27 +549,18 @@ class _Checker:
         return bool(value)
 
     def name(self, mapping: Mapping, key: str, path: str) -> str | None:
-        """A ROS name token: [A-Za-z][A-Za-z0-9_]*, no repeated underscores."""
+        """A name (gyro_sim.scene.names): printable, no whitespace or '/', not too long."""
         value = mapping.get(key)
         if value is None:
             return None
         if not isinstance(value, str):
             self.fail(_at(path, key), f"must be a string (got {_describe(value)})")
-        elif not value:
-            self.fail(_at(path, key), "must not be empty")
-        elif not NAME_PATTERN.match(value):
-            shown = value if len(value) <= 40 else value[:37] + "..."
-            self.fail(_at(path, key), f"must be a ROS name token: a letter, then letters, "
-                                      f"digits or underscores (got {shown!r})")
-        elif len(value) > MAX_NAME_LENGTH:
-            self.fail(_at(path, key), f"at most {MAX_NAME_LENGTH} characters (got {len(value)}): "
-                                      f"names become topic names ~/wrench/<name>, which ROS limits")
-        elif "__" in value:
-            self.fail(_at(path, key), f"must not contain repeated underscores, reserved by "
-                                      f"ROS (got {value!r})")
-        else:
-            return value
-        return None
+            return None
+        problem = name_problem(value)
+        if problem:
+            self.fail(_at(path, key), problem)
+            return None
+        return value
 
 
 def _inertia_problem(inertia: np.ndarray) -> str | None:
@@ -691,6 +682,14 @@ def _check_names(ch: _Checker, names: list[tuple[str, str, str]]) -> None:
                           f"names must be unique")
         else:
             seen[name] = path
+    tokens: dict[str, tuple[str, str]] = {}
+    for name, path, kind in names:
+        if kind == "rotor":
+            continue  # a body's name makes its wrench topic
+        other = tokens.setdefault(topic_token(name), (name, path))
+        if other[0] != name:
+            ch.fail(path, f"{name!r} and {other[0]!r} (at {other[1]}) make the same topic "
+                          f"~/wrench/{topic_token(name)}; rename one")
     states: dict[str, tuple[str, str]] = {}
     for name, path, kind in names:
         outputs = [f"{name}_{s}" for s in EULER_SUFFIXES] if kind == "spherical" else [name]
@@ -981,6 +980,7 @@ def _imus(ch: _Checker, value: Any, bodies: Any) -> tuple[Imu, ...] | None:
     body_names = [b.get("name") for b in bodies if isinstance(b, Mapping)] \
         if isinstance(bodies, (list, tuple)) else []
     seen: dict[str, str] = {}
+    tokens: dict[str, tuple[str, str]] = {}
     imus = []
     for index, item in enumerate(value):
         path = f"imus[{index}]"
@@ -995,7 +995,12 @@ def _imus(ch: _Checker, value: Any, bodies: Any) -> tuple[Imu, ...] | None:
         elif name in body_names:
             ch.fail(where, f"{name!r} is a body's name; an IMU's name is its frame_id and must "
                            f"differ from the bodies' frames")
+        elif tokens.get(topic_token(name), (name,))[0] != name:
+            other = tokens[topic_token(name)]
+            ch.fail(where, f"{name!r} and {other[0]!r} (at {other[1]}) make the same topic "
+                           f"~/imu/{topic_token(name)}; rename one")
         seen.setdefault(name, where)
+        tokens.setdefault(topic_token(name), (name, where))
     return None if any(imu is None for imu in imus) else tuple(imus)
 
 

@@ -42,6 +42,7 @@ ignored and listed in :attr:`ImportedModel.notes`. This module raises :class:`Mo
 """
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import re
@@ -56,6 +57,7 @@ from gyro_sim.dynamics.rotations import matrix_to_quat
 from gyro_sim.errors import GyroSimError
 from gyro_sim.paths import MODEL_SUFFIXES
 from gyro_sim.scene.gazebo import GazeboImu, GazeboSensors, read_gazebo_sensors
+from gyro_sim.scene.packages import PackageResolver
 
 __all__ = ["ModelError", "ImportedModel", "Command", "import_model", "is_model_path",
            "scene_yaml", "MODEL_SUFFIXES", "ROTOR_RTOL"]
@@ -161,7 +163,8 @@ def _mat(a: np.ndarray) -> list[list[float]]:
 
 
 # ----------------------------------------------------------------------------- reading
-def import_model(path: str | os.PathLike, keyframe: str | None = None) -> ImportedModel:
+def import_model(path: str | os.PathLike, keyframe: str | None = None,
+                 package_path: Sequence[str | os.PathLike] = ()) -> ImportedModel:
     """Read an MJCF or URDF model as a scene mapping (module docstring, docs/models.md).
 
     Parameters
@@ -169,6 +172,8 @@ def import_model(path: str | os.PathLike, keyframe: str | None = None) -> Import
     path : the model file: MJCF, or URDF (a ``<robot>`` root), whatever its suffix
     keyframe : the name of the keyframe giving the initial state; None: the model's first
         keyframe, or the reference pose at rest when it has none
+    package_path : directories searched first for the packages of ``package://`` URIs
+        (:mod:`gyro_sim.scene.packages`)
 
     Raises
     ------
@@ -192,16 +197,90 @@ def import_model(path: str | os.PathLike, keyframe: str | None = None) -> Import
     kind = _kind(path)
     gazebo: GazeboSensors | None = None
     sites: list[tuple[GazeboImu, str]] = []
+    resolver = PackageResolver(path, [os.fspath(p) for p in package_path])
+    notes: list[str] = []
+    with _mujoco_warnings(mujoco) as warned:
+        try:
+            spec = mujoco.MjSpec.from_file(path)
+            errors = _prepare_meshes(spec, path, resolver, notes)
+            if errors:
+                raise ModelError(errors, path)
+            if kind == "URDF":
+                gazebo = read_gazebo_sensors(path)
+                sites = _gazebo_sites(spec, gazebo)
+            model = spec.compile()
+        except ValueError as exc:  # MuJoCo's parse and compile errors
+            if isinstance(exc, ModelError):
+                raise
+            text = "; ".join(line.strip() for line in str(exc).splitlines() if line.strip())
+            raise ModelError([f"{path}: MuJoCo cannot read it: {text}"], path) from None
+    notes = resolver.notes() + notes + [f"MuJoCo: {w}" for w in dict.fromkeys(warned)]
+    importer = _Importer(mujoco, model, path, kind, gazebo, sites)
+    importer.notes += notes
+    return importer.run(keyframe)
+
+
+@contextlib.contextmanager
+def _mujoco_warnings(mujoco: Any):
+    """MuJoCo's warnings (its parser's and compiler's ``WARNING: ...`` lines), collected into
+    the list yielded instead of printed; the previous handler restored after."""
+    caught: list[str] = []
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(lambda message: caught.append(str(message).strip()))
     try:
-        spec = mujoco.MjSpec.from_file(path)
-        if kind == "URDF":
-            gazebo = read_gazebo_sensors(path)
-            sites = _gazebo_sites(spec, gazebo)
-        model = spec.compile()
-    except ValueError as exc:  # MuJoCo's parse and compile errors
-        text = "; ".join(line.strip() for line in str(exc).splitlines() if line.strip())
-        raise ModelError([f"{path}: MuJoCo cannot read it: {text}"], path) from None
-    return _Importer(mujoco, model, path, kind, gazebo, sites).run(keyframe)
+        yield caught
+    finally:
+        mujoco.set_mju_user_warning(previous)
+
+
+#: the mesh files MuJoCo reads (by suffix); others (COLLADA .dae ...) are left out as missing
+MUJOCO_MESHES = (".stl", ".obj", ".msh")
+
+
+def _prepare_meshes(spec: Any, path: str, resolver: PackageResolver, notes: list[str]) -> list[str]:
+    """Every mesh file of `spec` resolved (``package://``, ``file://``, relative paths:
+    :mod:`gyro_sim.scene.packages`) to an absolute path; a mesh that cannot be found or read
+    is left out with its geoms and one note, unless a body's mass comes from it: then an
+    error naming the body and the file. The errors."""
+    import mujoco
+
+    model_dir = os.path.dirname(os.path.abspath(path))
+    base = os.path.join(model_dir, spec.meshdir) if spec.meshdir else model_dir
+    from_geoms = spec.compiler.inertiafromgeom
+    always = from_geoms == mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_TRUE
+    never = from_geoms == mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
+    errors = []
+    for mesh in list(spec.meshes):
+        if not mesh.file:
+            continue  # vertices given inline
+        file, shown = resolver.resolve(mesh.file, base)
+        if file is None:
+            why = f"package {shown[len('package://'):].partition('/')[0]!r} not found"
+        elif not os.path.isfile(file):
+            why = f"no such file ({file})"
+        elif os.path.splitext(file)[1].lower() not in MUJOCO_MESHES:
+            why = f"MuJoCo reads {', '.join(MUJOCO_MESHES)} meshes only"
+        else:
+            mesh.file = file
+            continue
+        geoms = [g for g in spec.geoms if g.meshname == mesh.name]
+        bodies = list(dict.fromkeys(g.parent.name for g in geoms))
+        needs = [b for b in bodies if b and b != "world" and not never
+                 and (always or not spec.body(b).explicitinertial)]
+        kind = "link" if _kind(path) == "URDF" else "body"
+        for b in needs:
+            errors.append(f"{path}: {kind} {b!r}: its mass would come from the mesh {shown}, "
+                          f"which cannot be read: {why}; give the {kind} an inertial or the "
+                          "mesh (--package-path DIR)")
+        if needs:
+            continue
+        for g in geoms:
+            spec.delete(g)
+        spec.delete(mesh)
+        on = f" (on {', '.join(repr(b) for b in bodies)})" if bodies else ""
+        notes.append(f"mesh {shown}{on}: left out, {why}; the motion does not need it "
+                     "(masses and inertias are given)")
+    return errors
 
 
 #: the sites put where the Gazebo IMUs of a URDF are take this name and a number

@@ -409,12 +409,12 @@ MALFORMED = [
     ("duplicate body names", put("bodies[1].name", "arm1"), "bodies[1].name", "duplicate name"),
     ("body and rotor share a name", put("bodies[1].rotors[0].name", "arm3"),
      "bodies[2].name", "duplicate name 'arm3'"),
-    ("name not a ROS token", put("bodies[0].name", "arm-1"), "bodies[0].name",
-     "ROS name token"),
-    ("name starts with a digit", put("bodies[0].name", "1arm"), "bodies[0].name",
-     "ROS name token"),
-    ("repeated underscores", put("bodies[0].rotors[0].name", "wheel__1"),
-     "bodies[0].rotors[0].name", "repeated underscores"),
+    ("name with a space", put("bodies[0].name", "arm 1"), "bodies[0].name",
+     "must not contain whitespace"),
+    ("name with a slash", put("bodies[0].name", "arm/1"), "bodies[0].name",
+     "must not contain whitespace, '/'"),
+    ("names making one wrench topic", both(put("bodies[0].name", "arm_1"), put("bodies[1].name", "arm-1")),
+     "bodies[1].name", "make the same topic ~/wrench/arm_1"),
     ("joint-state name clash", put("bodies[0].rotors[0].name", "arm2_theta"),
      "bodies[1].name", "joint-state name 'arm2_theta'"),
     # base
@@ -644,7 +644,7 @@ def test_the_name_limit_is_within_what_ros_accepts_for_a_wrench_topic():
     rclpy = pytest.importorskip("rclpy")
     from rclpy.validate_full_topic_name import validate_full_topic_name
 
-    from gyro_sim.scene.load import MAX_NAME_LENGTH
+    from gyro_sim.scene.names import MAX_NAME_LENGTH
 
     validate_full_topic_name("/gyro_sim/wrench/" + "a" * MAX_NAME_LENGTH)
     with pytest.raises(rclpy.exceptions.InvalidTopicNameException):

@@ -459,8 +459,8 @@ REFUSED = {
     "motor on a ball joint": (bad(inner=CHILD.format(name="hand", joint="wrist", type="ball", attrs=""),
                                   extra='<actuator><motor name="twist" joint="wrist" gear="0 0 1"/></actuator>'),
                               "actuator 'twist': drives the ball joint 'wrist'; only hinges take a commanded moment"),
-    "a name ROS refuses": (bad(inner=CHILD.format(name="hand", joint="wrist-1", type="hinge", attrs='axis="1 0 0"')),
-                           "body 'hand' (hinge joint 'wrist-1'): name: must be a ROS name token"),
+    "a name no frame can have": (bad(inner=CHILD.format(name="hand", joint="wrist 1", type="hinge", attrs='axis="1 0 0"')),
+                                 "body 'hand' (hinge joint 'wrist 1'): name: must not contain whitespace"),
 }
 
 

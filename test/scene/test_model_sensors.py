@@ -311,12 +311,18 @@ def test_an_imu_is_named_after_its_site_and_made_unique(tmp_path):
     assert [imu.name for imu in load_scene(path).imus] == ["tip", "swing_imu"]
 
 
-def test_a_name_that_is_no_ros_token_is_refused_naming_the_site(tmp_path):
-    path = pendulum(tmp_path, '<gyro site="tip"/>').read_text().replace('"tip"', '"tip-1"')
+def test_a_name_no_frame_can_have_is_refused_naming_the_site(tmp_path):
+    path = pendulum(tmp_path, '<gyro site="tip"/>').read_text().replace('"tip"', '"tip 1"')
     with pytest.raises(SceneError) as err:
         load_scene(write(tmp_path, "bad.xml", path))
     assert len(err.value.errors) == 1
-    assert err.value.errors[0].startswith(f"{tmp_path / 'bad.xml'}: site 'tip-1' (gyro #0): name: ")
+    assert err.value.errors[0].startswith(f"{tmp_path / 'bad.xml'}: site 'tip 1' (gyro #0): name: ")
+
+
+def test_a_site_name_that_is_no_ros_token_is_kept_and_its_topic_made_one(tmp_path):
+    path = pendulum(tmp_path, '<gyro site="tip"/>').read_text().replace('"tip"', '"tip-1"')
+    scene = load_scene(write(tmp_path, "named.xml", path))
+    assert [imu.name for imu in scene.imus] == ["tip-1"]
 
 
 # ------------------------------------------------------------------------------ MJCF: rate and noise
