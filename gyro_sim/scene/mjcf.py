@@ -34,8 +34,9 @@ through fused fixed links. A rate is MuJoCo's ``interval`` or Gazebo's ``update_
 as given; a noise's standard deviation per sample sigma becomes the density sigma / sqrt(rate)
 (the default publish rate when none is given). Every other sensor is named in a note.
 
-Everything the equations of gyro_sim cannot express (slide joints, tendons, equality
-constraints, springs, damping, armature, friction loss, servos, branching trees, ...) is
+A hinge's or rotor's joint damping and frictionloss become its `friction` (viscous and
+Coulomb). Everything the equations of gyro_sim cannot express (slide joints, tendons, equality
+constraints, springs, armature, a ball joint's damping, servos, branching trees, ...) is
 refused with one line naming the element; contacts, joint limits and control ranges are
 ignored and listed in :attr:`ImportedModel.notes`. This module raises :class:`ModelError`;
 ``gyro_sim.scene.load.load_scene`` turns it into a ``SceneError``.
@@ -365,6 +366,7 @@ class _Importer:
         self.gazebo_sites = list(gazebo_sites)
         self.errors: list[str] = []
         self.notes: list[str] = []
+        self.friction: dict[int, dict[str, float]] = {}  # hinge joint -> its scene friction
 
     # --- names
     def _name(self, obj: Any, index: int) -> str:
@@ -439,17 +441,25 @@ class _Importer:
             stiff = m.jnt_stiffness[j] != 0.0 or np.any(getattr(m, "jnt_stiffnesspoly", np.zeros((m.njnt, 1)))[j])
             if springs and stiff:
                 self.fail(self.joint(j), "stiffness (a joint spring) is not supported")
-            damping = np.any(m.dof_damping[dofs]) or np.any(
-                getattr(m, "dof_dampingpoly", np.zeros((m.nv, 1)))[dofs])
-            if dampers and damping:
-                self.fail(self.joint(j), "damping is not supported (no joint friction in the "
-                                         "equations of motion)")
+            if dampers and np.any(getattr(m, "dof_dampingpoly", np.zeros((m.nv, 1)))[dofs]):
+                self.fail(self.joint(j), "dampingpoly (a nonlinear damper) is not supported; "
+                                         "a linear damping is")
+            viscous = float(m.dof_damping[dofs][0]) if dampers else 0.0
+            coulomb = float(m.dof_frictionloss[dofs][0]) if friction else 0.0
+            if kind == int(mj.mjtJoint.mjJNT_HINGE):
+                if viscous or coulomb:  # the axis's friction (docs/models.md, "Damping and friction")
+                    self.friction[j] = {key: _tidy(value) for key, value in
+                                        (("coulomb", coulomb), ("viscous", viscous)) if value}
+            elif dampers and np.any(m.dof_damping[dofs]):
+                self.fail(self.joint(j), f"damping on a {('free', 'ball')[kind]} joint is not "
+                                         "supported (friction acts on a hinge's or rotor's axis)")
+            elif friction and np.any(m.dof_frictionloss[dofs]):
+                self.fail(self.joint(j), f"frictionloss on a {('free', 'ball')[kind]} joint is "
+                                         "not supported (friction acts on a hinge's or rotor's axis)")
             if np.any(m.dof_armature[dofs]):
                 self.fail(self.joint(j), "armature (a reflected rotor inertia) is not supported; "
                                          "model the rotor as a body on a hinge: it becomes a "
                                          "gyrostat rotor")
-            if friction and np.any(m.dof_frictionloss[dofs]):
-                self.fail(self.joint(j), "frictionloss (dry friction) is not supported")
             if kind == int(mj.mjtJoint.mjJNT_HINGE) and m.qpos0[m.jnt_qposadr[j]] != 0.0:
                 self.fail(self.joint(j), f"ref = {m.qpos0[m.jnt_qposadr[j]]:g}: a reference angle "
                                          "is not supported (the hinge angle is MuJoCo's qpos)")
@@ -655,6 +665,8 @@ class _Importer:
             body: dict[str, Any] = {"name": name}
             if g.kind == "hinge":
                 body["joint"] = {"type": "hinge", "axis": _vec(G_parent.T @ g.axis)}
+                if g.joint in self.friction:
+                    body["joint"]["friction"] = self.friction[g.joint]
             else:
                 body["joint"] = {"type": "spherical"}
             body["mass"] = _tidy(g.mass)
@@ -677,6 +689,8 @@ class _Importer:
                     "mode": "torque", "spin": _tidy(state["spin"][r.root]),
                     "actuated": self.kind == "URDF" or rname in actuated,
                 })
+                if r.joint in self.friction:
+                    body_rotors[-1]["friction"] = self.friction[r.joint]
                 if state["angle"][r.root] != 0.0:
                     self.notes.append(f"{self.joint(r.joint)}: the keyframe's angle "
                                       f"{state['angle'][r.root]:g} not kept (a rotor's angle "

@@ -432,9 +432,12 @@ REFUSED = {
                      extra='<equality><joint name="coupling" joint1="pivot" joint2="elbow"/></equality>'),
                  "equality 'coupling': equality constraints are not supported"),
     "spring": (bad(joint_attrs='stiffness="2"'), "joint 'pivot': stiffness (a joint spring) is not supported"),
-    "damping": (bad(joint_attrs='damping="0.1"'), "joint 'pivot': damping is not supported"),
+    "damping of a ball joint": (bad(inner=CHILD.format(name="hand", joint="wrist", type="ball", attrs='damping="0.1"')),
+                                "joint 'wrist': damping on a ball joint is not supported"),
     "armature": (bad(joint_attrs='armature="0.01"'), "joint 'pivot': armature (a reflected rotor inertia) is not supported"),
-    "friction loss": (bad(joint_attrs='frictionloss="0.1"'), "joint 'pivot': frictionloss (dry friction) is not supported"),
+    "friction loss of a ball joint": (bad(inner=CHILD.format(name="hand", joint="wrist", type="ball",
+                                                             attrs='frictionloss="0.1"')),
+                                      "joint 'wrist': frictionloss on a ball joint is not supported"),
     "reference angle": (bad(joint_attrs='ref="0.2"'), "joint 'pivot': ref = 0.2: a reference angle is not supported"),
     "two joints in a body": (bad(inner='<joint name="roll" type="hinge" axis="0 1 0"/>'),
                              "body 'link': 2 joints; one joint per body"),
@@ -493,8 +496,7 @@ URDF_JOINT = """<robot name="bad">
 
 @pytest.mark.parametrize("joint, dynamics, expected", [
     ("prismatic", "", "joint 'rail': slide joints are not supported"),
-    ("revolute", '<dynamics damping="0.2"/>', "joint 'rail': damping is not supported"),
-    ("revolute", '<dynamics friction="0.2"/>', "joint 'rail': frictionloss (dry friction) is not supported"),
+    ("prismatic", '<dynamics damping="0.2" friction="0.1"/>', "joint 'rail': slide joints are not supported"),
 ])
 def test_urdf_joints_gyro_sim_cannot_express_are_refused(tmp_path, joint, dynamics, expected):
     path = write(tmp_path, "bad.urdf", URDF_JOINT.format(name="rail", type=joint, dynamics=dynamics))
@@ -525,7 +527,7 @@ def test_the_refusals_come_before_anything_runs(tmp_path, capsys):
 
 
 def test_every_refusal_is_reported_at_once(tmp_path):
-    path = write(tmp_path, "bad.xml", bad(joint_attrs='damping="0.1" armature="0.01"',
+    path = write(tmp_path, "bad.xml", bad(joint_attrs='stiffness="0.1" armature="0.01"',
                                           extra='<tendon><fixed name="cable"><joint joint="pivot" coef="1"/></fixed></tendon>'))
     with pytest.raises(SceneError) as info:
         load_scene(path)
