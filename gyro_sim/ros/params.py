@@ -37,6 +37,10 @@ class Parameter:
 
 PARAMETERS: tuple[Parameter, ...] = (
     Parameter("scene", str, "hinge_chain", "scene file (YAML), or the name of a shipped scene in config/"),
+    Parameter("lock", str, "", "models only: joints welded where they are, comma-separated JOINT or JOINT=VALUE "
+              "(rad or m; default the keyframe's or reference position), as gyro-sim run --lock"),
+    Parameter("package_path", str, "", "models only: directories searched first for package:// meshes, "
+              "separated by ':' (as gyro-sim run --package-path)"),
     Parameter("physics_rate", float, 1000.0, "physics steps per simulated second (Hz); 1/physics_rate is the step",
               1.0, MAX_PHYSICS_RATE),
     Parameter("publish_rate", float, 100.0,
@@ -99,6 +103,8 @@ class NodeConfig:
     record_queue_mb: float = RECORD_QUEUE_MB
     demo: bool = False
     frame_prefix: str = ""
+    lock: str = ""
+    package_path: str = ""
 
     @property
     def dt(self) -> float:
@@ -151,6 +157,7 @@ def validate(values: dict) -> NodeConfig:
     all problems, or return the NodeConfig with the scene loaded."""
     from gyro_sim.integrators import INTEGRATORS
     from gyro_sim.scene.load import SceneError, load_scene
+    from gyro_sim.scene.commands import node_model_options as model_options
     from gyro_sim.paths import find_scene
 
     v = {p.name: values.get(p.name, p.default) for p in PARAMETERS}
@@ -196,7 +203,7 @@ def validate(values: dict) -> NodeConfig:
         else:
             try:
                 scene_path = find_scene(v["scene"])
-                scene = load_scene(scene_path)
+                scene = load_scene(scene_path, **model_options(v))
             except FileNotFoundError as exc:
                 problems.append(f"scene: {exc}")
             except SceneError as exc:

@@ -49,12 +49,25 @@ def add_model_options(parser) -> None:
                         help="models only: a directory searched first for the packages of "
                              "package:// URIs (repeatable; then the ament index, ROS_PACKAGE_PATH, "
                              "the package.xml above the file: docs/models.md)")
+    parser.add_argument("--lock", action="append", default=[], metavar="JOINT[=VALUE]",
+                        help="models only: weld JOINT at VALUE (rad or m; default its keyframe or "
+                             "reference position), its body merged into its parent (repeatable: a "
+                             "gripper's fingers, a target's slides)")
 
 
 def model_options(args) -> dict:
     """`load_scene`'s and `import_model`'s keyword arguments from a command's options."""
     return {"keyframe": getattr(args, "keyframe", None),
-            "package_path": list(getattr(args, "package_path", None) or [])}
+            "package_path": list(getattr(args, "package_path", None) or []),
+            "lock": list(getattr(args, "lock", None) or [])}
+
+
+def node_model_options(values: dict) -> dict:
+    """`load_scene`'s model arguments from the node's parameters `lock` (comma-separated
+    JOINT[=VALUE]) and `package_path` (directories separated by os.pathsep)."""
+    lock = [item.strip() for item in str(values.get("lock") or "").split(",") if item.strip()]
+    paths = [item for item in str(values.get("package_path") or "").split(os.pathsep) if item.strip()]
+    return {"lock": lock, "package_path": paths}
 
 
 def cmd_import(args) -> int:

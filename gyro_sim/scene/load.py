@@ -134,7 +134,8 @@ class SceneError(GyroSimError, ValueError):
 
 
 def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None,
-               package_path: Sequence[str | os.PathLike] = ()) -> Scene:
+               package_path: Sequence[str | os.PathLike] = (),
+               lock: Mapping[str, float | None] | Sequence[str] = ()) -> Scene:
     """Load and validate a scene.
 
     Parameters
@@ -152,6 +153,10 @@ def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None,
         Models only: searched first for the packages of ``package://`` mesh URIs, before the
         ament index, ROS_PACKAGE_PATH and the package.xml above the file
         (:mod:`gyro_sim.scene.packages`).
+    lock : mapping or sequence, optional
+        Models only: joints welded where they are, their bodies merged into their parents: a
+        mapping joint name -> value (rad or m; None: the keyframe's value, else the reference
+        position), or ``"NAME"`` / ``"NAME=VALUE"`` strings (docs/models.md, "Locked joints").
 
     Returns
     -------
@@ -179,7 +184,7 @@ def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None,
                 raise SceneError([str(exc)], path) from None
         if is_model_path(path):  # MJCF or URDF: its scene mapping, refusals naming elements
             try:
-                model = import_model(path, keyframe, package_path=package_path)
+                model = import_model(path, keyframe, package_path=package_path, lock=lock)
             except ModelError as exc:
                 raise SceneError(exc.errors, path) from None
             data = model.mapping
@@ -187,6 +192,9 @@ def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None,
             data = _read_yaml(path)
     else:
         raise SceneError([f"scene: must be a file path or a mapping (got {_describe(source)})"])
+    if lock and model is None:
+        raise SceneError(["lock: only the joints of an MJCF or URDF model are locked (a scene "
+                          "file's chain is written as it moves)"], path)
     if keyframe is not None and model is None:
         raise SceneError([f"keyframe: only an MJCF or URDF model has keyframes (got {keyframe!r})"],
                          path)

@@ -44,23 +44,24 @@ ignored and listed in :attr:`ImportedModel.notes`. This module raises :class:`Mo
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 import os
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from gyro_sim.dynamics.imu import DEFAULT_IMU_RATE, divides
-from gyro_sim.dynamics.rotations import matrix_to_quat
+from gyro_sim.dynamics.rotations import matrix_to_quat, quat_mul, quat_to_matrix
 from gyro_sim.errors import GyroSimError
 from gyro_sim.paths import MODEL_SUFFIXES
 from gyro_sim.scene.gazebo import GazeboImu, GazeboSensors, read_gazebo_sensors
 from gyro_sim.scene.packages import PackageResolver
 
-__all__ = ["ModelError", "ImportedModel", "Command", "import_model", "is_model_path",
+__all__ = ["ModelError", "ImportedModel", "Command", "import_model", "is_model_path", "parse_locks",
            "scene_yaml", "MODEL_SUFFIXES", "ROTOR_RTOL"]
 
 #: a body on a hinge is a rotor when its centre of mass is off the hinge axis by at most this
@@ -108,6 +109,7 @@ class ImportedModel:
     commands: tuple[Command, ...]  # the model's actuators
     notes: tuple[str, ...]  # what was left out or approximated (contacts, limits, sensors...), one line each
     where: dict[str, str] = field(default_factory=dict)  # scene key path -> model element
+    locked: tuple[tuple[str, float], ...] = ()  # the joints welded (name, value), in the file's order
 
     def describe(self, errors: Sequence[str]) -> list[str]:
         """`load_scene`'s errors on :attr:`mapping` with key paths named by model elements
@@ -165,7 +167,8 @@ def _mat(a: np.ndarray) -> list[list[float]]:
 
 # ----------------------------------------------------------------------------- reading
 def import_model(path: str | os.PathLike, keyframe: str | None = None,
-                 package_path: Sequence[str | os.PathLike] = ()) -> ImportedModel:
+                 package_path: Sequence[str | os.PathLike] = (),
+                 lock: Mapping[str, float | None] | Sequence[str] = ()) -> ImportedModel:
     """Read an MJCF or URDF model as a scene mapping (module docstring, docs/models.md).
 
     Parameters
@@ -175,6 +178,8 @@ def import_model(path: str | os.PathLike, keyframe: str | None = None,
         keyframe, or the reference pose at rest when it has none
     package_path : directories searched first for the packages of ``package://`` URIs
         (:mod:`gyro_sim.scene.packages`)
+    lock : joints welded where they are: a mapping joint name -> value (rad or m; None: the
+        keyframe's value, else the reference position), or a sequence of names
 
     Raises
     ------
@@ -206,6 +211,12 @@ def import_model(path: str | os.PathLike, keyframe: str | None = None,
             errors = _prepare_meshes(spec, path, resolver, notes)
             if errors:
                 raise ModelError(errors, path)
+            locked: dict[str, float] = {}
+            if lock:
+                locks = parse_locks(lock, path)
+                errors = _lock_joints(mujoco, spec, spec.compile(), path, locks, keyframe, locked, notes)
+                if errors:
+                    raise ModelError(errors, path)
             if kind == "URDF":
                 gazebo = read_gazebo_sensors(path)
                 sites = _gazebo_sites(spec, gazebo)
@@ -218,7 +229,132 @@ def import_model(path: str | os.PathLike, keyframe: str | None = None,
     notes = resolver.notes() + notes + [f"MuJoCo: {w}" for w in dict.fromkeys(warned)]
     importer = _Importer(mujoco, model, path, kind, gazebo, sites)
     importer.notes += notes
-    return importer.run(keyframe)
+    return dataclasses.replace(importer.run(keyframe), locked=tuple(locked.items()))
+
+
+def parse_locks(lock: Mapping[str, float | None] | Sequence[str], path: str | None = None) -> dict[str, float | None]:
+    """Joints to lock as a mapping name -> value (None: the keyframe's, else the reference):
+    from a mapping, or from ``NAME`` / ``NAME=VALUE`` strings (``--lock``, the node's ``lock``
+    parameter). Raises ModelError naming a value that is no finite number."""
+    if isinstance(lock, Mapping):
+        items = list(lock.items())
+    else:
+        items = []
+        for text in lock:
+            name, sep, value = str(text).partition("=")
+            items.append((name.strip(), value.strip() if sep else None))
+    out: dict[str, float | None] = {}
+    where = f"{path}: " if path else ""
+    for name, value in items:
+        if value is not None and not isinstance(value, (bool, np.bool_)):
+            try:
+                value = float(value)
+            except (TypeError, ValueError):
+                value = None if value is None else math.nan
+        elif value is not None:
+            value = math.nan
+        if value is not None and not math.isfinite(value):
+            raise ModelError([f"{where}lock: joint {name!r}: the value must be a finite number "
+                              f"(NAME=VALUE, rad or m)"], path)
+        out[name] = value
+    return out
+
+
+def _lock_joints(mujoco: Any, spec: Any, m0: Any, path: str, locks: dict[str, float | None],
+                 keyframe: str | None, locked: dict[str, float], notes: list[str]) -> list[str]:
+    """Weld the joints of `locks` in `spec` where they are (docs/models.md, "Locked joints"):
+    each child body turned (hinge) or moved (slide) to the joint's value from the reference
+    position, then the joint deleted, so that MuJoCo's compiler merges the body into its parent;
+    the actuators, equalities and sensors of a locked joint deleted with a note, keyframes
+    without its entries. `m0`: the model compiled before; `locked` gains (name, value) in the
+    file's order. The errors."""
+    obj, jt = mujoco.mjtObj, mujoco.mjtJoint
+    errors = []
+    key = None
+    if keyframe is not None:
+        key = mujoco.mj_name2id(m0, obj.mjOBJ_KEY, keyframe)
+        key = None if key < 0 else key  # an unknown keyframe is said by the importer
+    elif m0.nkey:
+        key = 0
+    joints = {}
+    for name in locks:
+        j = mujoco.mj_name2id(m0, obj.mjOBJ_JOINT, name) if name else -1
+        if j < 0:
+            named = [mujoco.mj_id2name(m0, obj.mjOBJ_JOINT, i) for i in range(m0.njnt)]
+            errors.append(f"{path}: lock: no joint named {name!r} (the model's: "
+                          + ", ".join(repr(n) for n in named if n) + ")")
+        elif int(m0.jnt_type[j]) not in (int(jt.mjJNT_HINGE), int(jt.mjJNT_SLIDE)):
+            errors.append(f"{path}: lock: joint {name!r} is a {('free', 'ball')[int(m0.jnt_type[j])]} "
+                          "joint; only hinge and slide joints are locked")
+        elif m0.body_jntnum[m0.jnt_bodyid[j]] > 1:
+            errors.append(f"{path}: lock: joint {name!r} shares its body with other joints; "
+                          "only a body's only joint is locked")
+        else:
+            joints[name] = j
+    if errors:
+        return errors
+    removed_q: list[int] = []
+    removed_a: list[int] = []
+    for name, j in sorted(joints.items(), key=lambda item: item[1]):
+        joint = spec.joint(name)
+        body = joint.parent
+        qa = int(m0.jnt_qposadr[j])
+        ref = float(m0.qpos0[qa])
+        value = locks[name]
+        if value is None:
+            value = float(m0.key_qpos[key][qa]) if key is not None else ref
+        value = float(value)
+        if not math.isfinite(value):
+            errors.append(f"{path}: lock: joint {name!r}: the value must be finite (got {value!r})")
+            continue
+        pos = np.asarray(joint.pos, dtype=float)
+        axis = np.asarray(joint.axis, dtype=float)
+        axis = axis / np.linalg.norm(axis)
+        delta = value - ref
+        quat = np.asarray(body.quat if body.alt.type == mujoco.mjtOrientation.mjORIENTATION_QUAT else
+                          spec.resolve_orientation(spec.compiler.degree, spec.compiler.eulerseq, body.alt),
+                          dtype=float)
+        quat = quat / np.linalg.norm(quat)
+        R = quat_to_matrix(quat)
+        if int(m0.jnt_type[j]) == int(jt.mjJNT_HINGE):
+            turn = np.concatenate([[math.cos(0.5 * delta)], math.sin(0.5 * delta) * axis])
+            body.pos = np.asarray(body.pos, dtype=float) + R @ (pos - quat_to_matrix(turn) @ pos)
+            body.quat = quat_mul(quat, turn)
+            body.alt.type = mujoco.mjtOrientation.mjORIENTATION_QUAT
+        else:
+            body.pos = np.asarray(body.pos, dtype=float) + R @ (delta * axis)
+        removed_q.append(qa)
+        removed_a += [a for a in range(m0.nu) if int(m0.actuator_trnid[a][0]) == j and
+                      int(m0.actuator_trntype[a]) in (int(mujoco.mjtTrn.mjTRN_JOINT),
+                                                      int(mujoco.mjtTrn.mjTRN_JOINTINPARENT))]
+        locked[name] = value
+        notes.append(f"joint {name!r}: locked at {value:g} (its body welded to its parent)")
+    if errors:
+        return errors
+    for actuator in [spec.actuators[a] for a in removed_a]:
+        notes.append(f"actuator {actuator.name or '(unnamed)'!r}: left out with the joint it drives "
+                     f"{actuator.target!r} (locked)")
+        spec.delete(actuator)
+    for equality in list(spec.equalities):
+        if equality.type == mujoco.mjtEq.mjEQ_JOINT and (equality.name1 in locked or equality.name2 in locked):
+            notes.append(f"equality {equality.name or '(unnamed)'!r}: left out with the locked "
+                         f"joint {equality.name1 if equality.name1 in locked else equality.name2!r}")
+            spec.delete(equality)
+    for sensor in list(spec.sensors):
+        if sensor.objtype == obj.mjOBJ_JOINT and sensor.objname in locked:
+            notes.append(f"sensor {sensor.name or '(unnamed)'!r}: left out with the locked joint "
+                         f"{sensor.objname!r}")
+            spec.delete(sensor)
+    for k in spec.keys:
+        if len(k.qpos) == m0.nq:
+            k.qpos = np.delete(np.asarray(k.qpos), removed_q)
+        if len(k.qvel) == m0.nv:
+            k.qvel = np.delete(np.asarray(k.qvel), [int(m0.jnt_dofadr[j]) for j in joints.values()])
+        if len(k.ctrl) == m0.nu and removed_a:
+            k.ctrl = np.delete(np.asarray(k.ctrl), removed_a)
+    for name in joints:
+        spec.delete(spec.joint(name))
+    return errors
 
 
 @contextlib.contextmanager
@@ -414,7 +550,8 @@ class _Importer:
             for e in range(m.neq):
                 name = self._name(obj.mjOBJ_EQUALITY, e)
                 self.fail(f"equality {name!r}" if name else f"equality #{e}",
-                          "equality constraints are not supported (an open chain only)")
+                          "equality constraints are not supported (an open chain only); "
+                          "--lock the joints it couples to weld them")
         for f in range(m.nflex):
             name = self._name(obj.mjOBJ_FLEX, f)
             self.fail(f"flex {name!r}" if name else f"flex #{f}",
@@ -435,8 +572,9 @@ class _Importer:
             kind = int(m.jnt_type[j])
             dofs = range(m.jnt_dofadr[j], m.jnt_dofadr[j] + (6 if kind == 0 else 3 if kind == 1 else 1))
             if kind == int(mj.mjtJoint.mjJNT_SLIDE):
+                lock = f"--lock {self.joint_name(j)}" if self.joint_name(j) else "--lock JOINT"
                 self.fail(self.joint(j), "slide joints are not supported (chains of ball and "
-                                         "hinge joints only)")
+                                         f"hinge joints only); weld it where it is with {lock}")
                 continue
             stiff = m.jnt_stiffness[j] != 0.0 or np.any(getattr(m, "jnt_stiffnesspoly", np.zeros((m.njnt, 1)))[j])
             if springs and stiff:
@@ -605,7 +743,8 @@ class _Importer:
         elif len(top) > 1:
             self.fail("worldbody", f"{len(top)} moving bodies hang from the world ("
                       + ", ".join(repr(self.body_name(g.root)) for g in top)
-                      + "); one chain only (branching trees are not supported)")
+                      + "); one chain only (branching trees are not supported; weld the other "
+                        "chains' joints with --lock JOINT)")
         self.raise_errors()
         chain, rotors = [top[0]], {}
         while True:
@@ -621,7 +760,8 @@ class _Importer:
                           f"{len(rest)} moving children ("
                           + ", ".join(repr(self.body_name(c.root)) for c in rest)
                           + "): a chain only, branching trees are not supported"
-                          + (f" ({why})" if why else ""))
+                          + (f" ({why})" if why else "") + "; weld the other branches' joints with "
+                          "--lock JOINT")
                 break
             if not rest:
                 break

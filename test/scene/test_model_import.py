@@ -102,11 +102,12 @@ def write(tmp_path: Path, name: str, text: str) -> Path:
 
 
 # ------------------------------------------------------------------------------ the judges
-def mujoco_run(path: Path, ctrl: dict[str, float], forces: dict[str, float], instants) -> list:
-    """MuJoCo on the file itself from its first keyframe (or qpos0 at rest): RK4 at
-    MUJOCO_STEP, contacts and constraints off, constant ctrl (by actuator) and generalised
-    forces (by joint). Per instant: (model, data copy)."""
-    m = mujoco.MjSpec.from_file(str(path)).compile()
+def mujoco_run(path: Path | None, ctrl: dict[str, float], forces: dict[str, float], instants,
+               model=None) -> list:
+    """MuJoCo on the file itself (or on `model`, compiled from it) from its first keyframe (or
+    qpos0 at rest): RK4 at MUJOCO_STEP, contacts and constraints off, constant ctrl (by
+    actuator) and generalised forces (by joint). Per instant: (model, data copy)."""
+    m = mujoco.MjSpec.from_file(str(path)).compile() if model is None else model
     m.opt.integrator = mujoco.mjtIntegrator.mjINT_RK4
     m.opt.timestep = MUJOCO_STEP
     m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT) | int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
@@ -618,7 +619,7 @@ def test_import_refuses_bad_input_with_exit_2(tmp_path, capsys):
     assert main(["import", str(bad_model), "-o", str(tmp_path / "a.yaml")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"gyro-sim import: {bad_model}: joint 'rail': slide joints are not supported "
-                   "(chains of ball and hinge joints only)"]
+                   "(chains of ball and hinge joints only); weld it where it is with --lock rail"]
     assert main(["import", str(ARM), "-o", str(tmp_path / "b.yaml"), "--keyframe", "nope"]) == 2
     assert "keyframe 'nope': no such keyframe" in capsys.readouterr().err
     assert main(["import", "hinge_chain", "-o", str(tmp_path / "c.yaml")]) == 2
