@@ -30,7 +30,9 @@ setup(
         ("share/" + package_name + "/config", glob("config/*.yaml")),
         ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
         ("share/" + package_name + "/config/sweeps", glob("config/sweeps/*.yaml")),
-        ("share/" + package_name + "/config/models", glob("config/models/*.xml") + glob("config/models/*.urdf")),
+        ("share/" + package_name + "/config/models", glob("config/models/*.xml") + glob("config/models/*.urdf")
+         + glob("config/models/LICENSE-*")),  # *.xml: package.xml too (the meshes' package)
+        ("share/" + package_name + "/config/models/meshes/ur5", glob("config/models/meshes/ur5/*.stl")),
     ],
     # mcap + mcap-ros2-support: logs are written and read without ROS installed;
     # numba: the compiled dynamics (35x faster than numpy at n = 10: real time at 1 kHz)

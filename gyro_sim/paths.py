@@ -20,6 +20,8 @@ def config_dirs() -> list[Path]:
 
 #: files in config/ that are not scenes (ROS parameter files for the node)
 NOT_SCENES = ("params.yaml",)
+#: files of config/models/ that are no models (the ROS package that names the shipped meshes)
+NOT_MODELS = ("package.xml",)
 #: suffixes of MJCF and URDF models (read through MuJoCo: gyro_sim.scene.mjcf)
 MODEL_SUFFIXES = (".xml", ".mjcf", ".urdf")
 #: where the shipped models are, under config/
@@ -36,7 +38,7 @@ def shipped_models() -> list[Path]:
     """The MJCF and URDF models of config/models/ (the source tree when present)."""
     dirs = config_dirs()
     return [] if not dirs else sorted(p for p in (dirs[0] / MODELS_DIR).glob("*")
-                                      if p.suffix.lower() in MODEL_SUFFIXES)
+                                      if p.suffix.lower() in MODEL_SUFFIXES and p.name not in NOT_MODELS)
 
 
 def find_scene(name: str | os.PathLike) -> Path:
@@ -55,7 +57,7 @@ def find_scene(name: str | os.PathLike) -> Path:
         raise FileNotFoundError(f"scene {text!r}: no such file")
     if p.suffix.lower() in MODEL_SUFFIXES:  # a shipped model by its file name
         for d in config_dirs():
-            if (d / MODELS_DIR / p.name).is_file():
+            if (d / MODELS_DIR / p.name).is_file() and p.name not in NOT_MODELS:
                 return d / MODELS_DIR / p.name
         known = sorted({f.name for f in shipped_models()})
         raise FileNotFoundError(f"model {text!r} not found (shipped models: {', '.join(known) or 'none'})")

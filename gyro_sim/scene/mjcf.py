@@ -61,7 +61,7 @@ from gyro_sim.paths import MODEL_SUFFIXES
 from gyro_sim.scene.gazebo import GazeboImu, GazeboSensors, read_gazebo_sensors
 from gyro_sim.scene.packages import PackageResolver
 
-__all__ = ["ModelError", "ImportedModel", "Command", "import_model", "is_model_path", "parse_locks",
+__all__ = ["ModelError", "ImportedModel", "Command", "caught_warnings", "import_model", "is_model_path", "parse_locks",
            "scene_yaml", "MODEL_SUFFIXES", "ROTOR_RTOL"]
 
 #: a body on a hinge is a rotor when its centre of mass is off the hinge axis by at most this
@@ -205,7 +205,7 @@ def import_model(path: str | os.PathLike, keyframe: str | None = None,
     sites: list[tuple[GazeboImu, str]] = []
     resolver = PackageResolver(path, [os.fspath(p) for p in package_path])
     notes: list[str] = []
-    with _mujoco_warnings(mujoco) as warned:
+    with caught_warnings(mujoco) as warned:
         try:
             spec = mujoco.MjSpec.from_file(path)
             errors = _prepare_meshes(spec, path, resolver, notes)
@@ -358,7 +358,7 @@ def _lock_joints(mujoco: Any, spec: Any, m0: Any, path: str, locks: dict[str, fl
 
 
 @contextlib.contextmanager
-def _mujoco_warnings(mujoco: Any):
+def caught_warnings(mujoco: Any):
     """MuJoCo's warnings (its parser's and compiler's ``WARNING: ...`` lines), collected into
     the list yielded instead of printed; the previous handler restored after."""
     caught: list[str] = []
