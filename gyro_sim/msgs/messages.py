@@ -354,6 +354,14 @@ def tf_message(snap, t_ns: int) -> bytes:
     return bytes(_tf_message(CdrWriter(), snap.body_names, _poses_xyzw(snap, "tf"), t_ns))
 
 
+def frames_tf_message(names: Sequence[str], positions, quaternions, t_ns: int) -> bytes:
+    """tf2_msgs/TFMessage: world -> each named frame at its position (n, 3) and quaternion (n, 4;
+    w, x, y, z): a URDF robot's link frames (gyro_sim.scene.robot). Refuses a non-finite number."""
+    p = _finite(np.asarray(positions, dtype=float), "tf.translation")
+    q = _finite(np.asarray(quaternions, dtype=float), "tf.rotation")
+    return bytes(_tf_message(CdrWriter(), names, np.concatenate([p, q[:, 1:], q[:, :1]], axis=1), t_ns))
+
+
 def _tf_message(w: CdrWriter, body_names, poses, t_ns: int) -> CdrWriter:
     w.u32(len(poses))
     for name, pose in zip(body_names, poses):

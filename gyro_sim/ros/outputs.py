@@ -157,7 +157,9 @@ class Outputs:
         self.command_topic = topics.axis_moments
         self.events_topic = topics.events
         self.pubs: dict[str, object] = {}
-        self.robot_description = urdf(sim.scene)
+        #: a URDF robot's own description, its links' frames on /tf beside the bodies' (scene.robot)
+        self.robot = sim.scene.robot
+        self.robot_description = urdf(sim.scene) if self.robot is None else self.robot.urdf
         self._description_pub = node.create_publisher(message_class(M.STRING_TYPE), topics.robot_description,
                                                       _qos_profile(M.LATCHED_QOS))
 
@@ -217,8 +219,27 @@ class Outputs:
         """The state's messages: [(topic, type, bytes)]. `diagnostics_run`: False for none, else the
         run's status (or None) to go with the dynamics' one. Raises SimulationError rather than
         let a non-finite value out."""
-        if self.imu_ticks is None:
-            return self._prepare_state(t_ns, sim, diagnostics_run)
+        out = self._prepare_state(t_ns, sim, diagnostics_run) if self.imu_ticks is None \
+            else self._prepare_with_imus(t_ns, sim, diagnostics_run)
+        if self.robot is not None and (self.recorder is not None or self.listeners.listened.get(M.TF, False)):
+            out.append((M.TF, M.TF_TYPE, self._link_tf(t_ns, sim)))  # a URDF robot's links by name
+        return out
+
+    def _link_tf(self, t_ns: int, sim) -> bytes:
+        """/tf of a URDF robot's links, by their names (with the frame prefix)."""
+        from gyro_sim.scene.robot import link_transforms
+
+        names, positions, quaternions = link_transforms(self.robot, sim)
+        keep = [i for i, n in enumerate(names) if n != M.WORLD_FRAME]  # a root link named world is /tf's root
+        names, positions, quaternions = [names[i] for i in keep], positions[keep], quaternions[keep]
+        prefix = self.topics.frame_prefix
+        try:
+            return M.frames_tf_message([prefix + n for n in names], positions, quaternions, t_ns)
+        except M.NonFiniteError as exc:
+            raise SimulationError(f"t = {sim.time:.6g} s: {exc} (not published)") from exc
+
+    def _prepare_with_imus(self, t_ns: int, sim, diagnostics_run) -> list:
+        """`_prepare_state` and the IMUs due now."""
         due = self.imu_ticks.due(sim.time)
         out = self._prepare_state(t_ns, sim, diagnostics_run, accelerations=bool(due))
         if due:  # the IMUs whose sample starts now, from the accelerations the outputs just computed

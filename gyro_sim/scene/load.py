@@ -202,7 +202,8 @@ def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None,
     scene = _scene(checker, data)
     if checker.errors:
         raise SceneError(checker.errors if model is None else model.describe(checker.errors), path)
-    return dataclasses.replace(scene, source=_plain(data), path=path)
+    return dataclasses.replace(scene, source=_plain(data), path=path,
+                               robot=None if model is None else model.robot)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -60,6 +60,7 @@ from gyro_sim.errors import GyroSimError
 from gyro_sim.paths import MODEL_SUFFIXES
 from gyro_sim.scene.gazebo import GazeboImu, GazeboSensors, read_gazebo_sensors
 from gyro_sim.scene.packages import PackageResolver
+from gyro_sim.scene.robot import RobotDescription, describe_robot
 
 __all__ = ["ModelError", "ImportedModel", "Command", "caught_warnings", "import_model", "is_model_path", "parse_locks",
            "scene_yaml", "MODEL_SUFFIXES", "ROTOR_RTOL"]
@@ -110,6 +111,7 @@ class ImportedModel:
     notes: tuple[str, ...]  # what was left out or approximated (contacts, limits, sensors...), one line each
     where: dict[str, str] = field(default_factory=dict)  # scene key path -> model element
     locked: tuple[tuple[str, float], ...] = ()  # the joints welded (name, value), in the file's order
+    robot: RobotDescription | None = None  # a URDF's own description and link frames (None: MJCF)
 
     def describe(self, errors: Sequence[str]) -> list[str]:
         """`load_scene`'s errors on :attr:`mapping` with key paths named by model elements
@@ -229,6 +231,7 @@ def import_model(path: str | os.PathLike, keyframe: str | None = None,
     notes = resolver.notes() + notes + [f"MuJoCo: {w}" for w in dict.fromkeys(warned)]
     importer = _Importer(mujoco, model, path, kind, gazebo, sites)
     importer.notes += notes
+    importer.locked = locked
     return dataclasses.replace(importer.run(keyframe), locked=tuple(locked.items()))
 
 
@@ -503,6 +506,7 @@ class _Importer:
         self.errors: list[str] = []
         self.notes: list[str] = []
         self.friction: dict[int, dict[str, float]] = {}  # hinge joint -> its scene friction
+        self.locked: dict[str, float] = {}  # joints welded (gyro_sim.scene.mjcf._lock_joints)
 
     # --- names
     def _name(self, obj: Any, index: int) -> str:
@@ -864,9 +868,17 @@ class _Importer:
             mapping["imus"] = imus
         if m.ngeom and not int(m.opt.disableflags) & int(mj.mjtDisableBit.mjDSBL_CONTACT):
             self.notes.insert(0, "contacts: ignored (no contacts in gyro_sim)")
+        robot = None
+        if self.kind == "URDF":  # the robot's own description and its links on the scene's bodies
+            with open(self.path, encoding="utf-8") as stream:
+                text = stream.read()
+            body_frames = {name: (G, origin) for name, G, origin in frames.values()}
+            rotor_axes = {self.scene_name(r, True): (frames[g.root][0], r.axis / np.linalg.norm(r.axis), r.origin)
+                          for g in chain for r in rotors[g.root]}
+            robot = describe_robot(text, self.locked, body_frames, rotor_axes)
         return ImportedModel(mapping=mapping, path=self.path, kind=self.kind, keyframe=key_name,
                              names=tuple(names), commands=tuple(commands),
-                             notes=tuple(self.notes), where=where)
+                             notes=tuple(self.notes), where=where, robot=robot)
 
     # --- sensors
     def sensor(self, s: int) -> str:

@@ -154,3 +154,4 @@ class Scene:
     source: dict[str, Any] = field(default_factory=dict, compare=False)
     path: str | None = None
     imus: tuple[Imu, ...] = ()
+    robot: Any = None  # gyro_sim.scene.robot.RobotDescription of a URDF model; None otherwise
