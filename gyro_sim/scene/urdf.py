@@ -5,8 +5,10 @@ time 0): links named after the bodies, so that the /tf frames world -> <body> pl
 Viewers that draw a robot from its description and its TF (rerun opening the .mcap
 directly, Foxglove, RViz) then show the moving chain without gyro_sim. Each body is a
 cylinder along s^k (or along twice its centre of mass on the last body) of the scene's visual
-radius; each rotor a disc at h_i about e_i, sized from its mass and inertia. The joints are
-``floating`` from ``world``: the poses come from /tf, not from joint states.
+radius; each rotor a disc at h_i about e_i, sized from its mass and inertia, its visual named
+after the rotor. The joints are ``floating`` from ``world``: the poses come from /tf, not from
+joint states. A ``<gyro_sim base="x y z" gravity="x y z"/>`` element (which URDF readers skip)
+gives a viewer the base point and gravity, so a live view draws what a log's view draws.
 """
 from __future__ import annotations
 
@@ -91,8 +93,9 @@ def _v(a) -> str:
     return " ".join(repr(float(x)) for x in a)
 
 
-def _visual(xyz, rpy, radius: float, length: float, material: str, rgba) -> str:
-    return (f'    <visual><origin xyz="{_v(xyz)}" rpy="{_v(rpy)}"/>'
+def _visual(xyz, rpy, radius: float, length: float, material: str, rgba, name: str | None = None) -> str:
+    named = f" name={quoteattr(name)}" if name else ""
+    return (f'    <visual{named}><origin xyz="{_v(xyz)}" rpy="{_v(rpy)}"/>'
             f'<geometry><cylinder radius="{radius!r}" length="{length!r}"/></geometry>'
             f'<material name="{material}"><color rgba="{_v(rgba)}"/></material></visual>')
 
@@ -101,6 +104,9 @@ def urdf(scene) -> str:
     """The URDF text of a scene (module docstring)."""
     length = chain_length(scene)
     lines = ['<?xml version="1.0"?>', '<robot name="gyro_sim">', f'  <link name="{ROOT_LINK}"/>']
+    # what a viewer draws besides the links (URDF readers skip an element they do not know)
+    gravity = f' gravity="{_v(scene.gravity)}"' if scene.gravity is not None else ""
+    lines.append(f'  <gyro_sim base="{_v(scene.base.position)}"{gravity}/>')
     for b in scene.bodies:
         lines.append(f"  <link name={quoteattr(b.name)}>")
         ext = body_extent(b)
@@ -109,7 +115,7 @@ def urdf(scene) -> str:
             lines.append(_visual(ext / 2, rpy_z_to(ext), body_radius(b, length), n, "body", BODY_RGBA))
         for r in b.rotors:
             rad, thick = rotor_size(r, length)
-            lines.append(_visual(r.position, rpy_z_to(r.axis), rad, thick, "rotor", ROTOR_RGBA))
+            lines.append(_visual(r.position, rpy_z_to(r.axis), rad, thick, "rotor", ROTOR_RGBA, r.name))
         lines.append("  </link>")
         lines.append(f"  <joint name={quoteattr(ROOT_LINK + '_to_' + b.name)} type=\"floating\">"
                      f"<parent link=\"{ROOT_LINK}\"/><child link={quoteattr(b.name)}/></joint>")

@@ -99,7 +99,8 @@ def _floats(text: str | None, n: int) -> np.ndarray:
 def from_urdf(text: str) -> Chain:
     """The chain of a gyro_sim URDF (gyro_sim.scene.urdf.urdf); ChainError if it is not one.
 
-    Rotors are not named in a URDF: their discs are drawn, not their spin.
+    Its rotors are named by their visuals' names (their spin is drawn), its base and gravity
+    given by its ``<gyro_sim>`` element.
     """
     try:
         root = ET.fromstring(text)
@@ -124,7 +125,7 @@ def from_urdf(text: str) -> Chain:
                 r, ln = float(cyl.get("radius", "0")), float(cyl.get("length", "0"))
                 mat = vis.find("material")
                 if mat is not None and mat.get("name") == "rotor":
-                    rotors.append(RotorShape(None, xyz, axis, r, ln))
+                    rotors.append(RotorShape(vis.get("name") or None, xyz, axis, r, ln))
                 else:
                     extent, radius = axis * ln, r
             bodies.append(BodyShape(name, extent, radius, rotors))
@@ -133,4 +134,13 @@ def from_urdf(text: str) -> Chain:
     if not bodies:
         raise ChainError("robot_description has no links besides the root")
     length = sum(float(np.linalg.norm(b.extent)) for b in bodies) or 1.0
-    return Chain(root.get("name", "robot"), bodies, length)
+    extra = root.find("gyro_sim")  # the base and gravity (gyro_sim.scene.urdf)
+    gravity, base = None, np.zeros(3)
+    if extra is not None:
+        try:
+            if extra.get("gravity"):
+                gravity = _floats(extra.get("gravity"), 3)
+            base = _floats(extra.get("base"), 3)
+        except (TypeError, ValueError) as exc:
+            raise ChainError(f"robot_description: <gyro_sim>: {exc}") from None
+    return Chain(root.get("name", "robot"), bodies, length, gravity, base)

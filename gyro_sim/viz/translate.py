@@ -33,6 +33,7 @@ or ``Translator.PREFIX_HANDLERS[prefix]`` (one topic per joint or sensor); the m
 from __future__ import annotations
 
 import math
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -40,6 +41,7 @@ import numpy as np
 from gyro_sim.msgs import messages as M
 from gyro_sim.scene.urdf import quat_z_to
 from gyro_sim.viz.chain import Chain, ChainError, from_urdf
+from gyro_sim.viz.robot import is_robot_urdf, log_link_poses, log_robot
 
 TIMELINE = "sim_time"
 #: the largest arrow of a kind is this fraction of the chain's length
@@ -162,6 +164,8 @@ class Translator:
         self._imus: list[str] = []  # the IMUs plotted, in the order they came
         self._lines: dict[str, tuple] = {}  # plot entity -> (plot, names, colours) of its series
         self.notes: list[str] = []  # one line per problem met (bad description, ...)
+        self.robot_links: set[str] = set()  # a URDF robot's links (its own description: viz.robot)
+        self.package_path: list[str] = []  # where the robot's package:// meshes are looked for first
         self._static("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP)
         if chain is not None:
             self.set_chain(chain)
@@ -256,6 +260,15 @@ class Translator:
         self._static("world/legend", self.rr.TextDocument(text, media_type="text/markdown"))
 
     def _robot_description(self, t: float, msg) -> None:
+        if is_robot_urdf(msg.data):  # the robot's own URDF: its links drawn where /tf puts them
+            try:
+                self.robot_links, notes = log_robot(self.rec, msg.data, self.package_path)
+            except (ET.ParseError, ValueError, TypeError) as exc:
+                self._note(f"robot_description: the robot's links not drawn: {exc}")
+                return
+            for line in notes:
+                self._note(line)
+            return
         try:
             chain = from_urdf(msg.data)
         except ChainError as exc:
@@ -276,6 +289,13 @@ class Translator:
         names = [self._body(tr.child_frame_id) for tr in msg.transforms]
         pos = np.array([_xyz(tr.transform.translation) for tr in msg.transforms])
         quat = np.array([_xyz(tr.transform.rotation) + [float(tr.transform.rotation.w)] for tr in msg.transforms])
+        bodies = set(self.chain.body_names) if self.chain is not None else set()
+        if names and ((self.robot_links and set(names) <= self.robot_links) or (bodies and not bodies & set(names))):
+            # a URDF robot's link frames (published beside the bodies'): they move its visuals
+            if np.all(np.isfinite(pos)) and np.all(np.isfinite(quat)):
+                self._time(t)
+                log_link_poses(self._rows, names, pos, quat, t)
+            return
         self.from_tf = True
         self._pose(t, names, pos, quat)
 
