@@ -48,6 +48,7 @@ import dataclasses
 import math
 import os
 import re
+import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -875,7 +876,10 @@ class _Importer:
             body_frames = {name: (G, origin) for name, G, origin in frames.values()}
             rotor_axes = {self.scene_name(r, True): (frames[g.root][0], r.axis / np.linalg.norm(r.axis), r.origin)
                           for g in chain for r in rotors[g.root]}
-            robot = describe_robot(text, self.locked, body_frames, rotor_axes)
+            try:
+                robot = describe_robot(text, self.locked, body_frames, rotor_axes)
+            except (ValueError, TypeError, KeyError, AttributeError, ET.ParseError) as exc:  # MuJoCo read it
+                self.notes.append(f"robot description not kept (ROS gets the chain's): {exc}")
         return ImportedModel(mapping=mapping, path=self.path, kind=self.kind, keyframe=key_name,
                              names=tuple(names), commands=tuple(commands),
                              notes=tuple(self.notes), where=where, robot=robot)

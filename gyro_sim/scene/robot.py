@@ -101,8 +101,10 @@ def _reference(root: ET.Element, locked: Mapping[str, float]) -> tuple[dict, dic
             joint = joints[name]
             p, R = pose(joint.find("parent").get("link"))
             xyz, Ro = _origin(joint)
-            t, Rm = _motion(joint, locked.get(joint.get("name"), 0.0))
-            poses[name] = (p + R @ (xyz + Ro @ t), R @ Ro @ Rm)
+            if joint.get("name") in locked:  # every other joint at 0: no motion (a fixed joint may have no axis)
+                t, Rm = _motion(joint, locked[joint.get("name")])
+                xyz, Ro = xyz + Ro @ t, Ro @ Rm
+            poses[name] = (p + R @ xyz, R @ Ro)
         return poses[name]
 
     for name in links:

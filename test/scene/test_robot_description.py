@@ -51,6 +51,7 @@ CASES = {
     "Panda, fingers locked open": lambda tmp: (ERD / "panda.urdf", ["panda_finger_joint1=0.02",
                                                                    "panda_finger_joint2=0.03"]),
     "arm with a wheel and a fixed flange": lambda tmp: (write(tmp, "arm_wheel.urdf", ARM_URDF), []),
+    "Kinova (fixed joints without an axis)": lambda tmp: (ERD / "kinova.urdf", []),
 }
 
 
