@@ -258,8 +258,8 @@ def parse_locks(lock: Mapping[str, float | None] | Sequence[str], path: str | No
         elif value is not None:
             value = math.nan
         if value is not None and not math.isfinite(value):
-            raise ModelError([f"{where}lock: joint {name!r}: the value must be a finite number "
-                              f"(NAME=VALUE, rad or m)"], path)
+            raise ModelError([f"{where}lock: joint {name!r}: the value must be a finite number (NAME=VALUE, rad or m)"],
+                             path)
         out[name] = value
     return out
 

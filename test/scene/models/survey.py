@@ -91,7 +91,7 @@ def compare(path: Path, scene, locked) -> tuple[float, float]:
     worst = moved = 0.0
     start = None
     for t in np.linspace(0.0, HORIZON, 9):
-        n = int(round((t - d.time) / STEP))
+        n = round((t - d.time) / STEP)
         if n:
             mujoco.mj_step(m, d, nstep=n)
         if d.time > sim.time:
