@@ -195,3 +195,35 @@ def test_names_making_one_topic_are_refused_naming_both(tmp_path):
         load_scene(model)
     assert len(info.value.errors) == 1
     assert "'arm.1' and 'arm-1'" in info.value.errors[0] and "~/wrench/arm_1" in info.value.errors[0]
+
+
+MJCF = """<mujoco model="mesh_arm">
+  <compiler meshdir="meshes"/>
+  <asset><mesh name="shell" file="{file}"/></asset>
+  <worldbody>
+    <body name="arm" pos="0 0 1">
+      <joint name="pivot" type="hinge" axis="0 1 0"/>
+      {inertial}
+      <geom type="mesh" mesh="shell"/>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+
+def test_an_mjcf_mesh_is_found_under_meshdir_or_left_out_when_the_mass_is_given(tmp_path):
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "shell.stl").write_bytes(stl())
+    inertial = '<inertial pos="0.1 0 0" mass="1.5" diaginertia="0.01 0.02 0.02"/>'
+    found = tmp_path / "found.xml"
+    found.write_text(MJCF.format(file="shell.stl", inertial=inertial))
+    missing = tmp_path / "missing.xml"
+    missing.write_text(MJCF.format(file="absent.stl", inertial=inertial))
+    with_mesh, without = import_model(found), import_model(missing)
+    assert without.mapping["bodies"] == with_mesh.mapping["bodies"]
+    assert any(n.startswith("mesh absent.stl (on 'arm'): left out, no such file") for n in without.notes)
+    needed = tmp_path / "needed.xml"
+    needed.write_text(MJCF.format(file="absent.stl", inertial=""))
+    with pytest.raises(ModelError, match="body 'arm': its mass would come from the mesh absent.stl"):
+        import_model(needed)
+    assert load_scene(tmp_path / "found.xml").bodies[0].mass == 1.5
