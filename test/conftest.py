@@ -6,11 +6,15 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
-# rclpy writes a log file per process: keep them out of ~/.ros and out of the tree
-os.environ.setdefault("ROS_LOG_DIR", os.path.join(tempfile.gettempdir(), "gyro_sim_test_ros_log"))
+# rclpy writes a log file per process: keep them out of ~/.ros and out of the tree, in a
+# directory of this run's own (removed at its end), unless the caller chose one
+_OWN_ROS_LOG_DIR = None
+if "ROS_LOG_DIR" not in os.environ:
+    _OWN_ROS_LOG_DIR = tempfile.mkdtemp(prefix="gyro_sim-test-ros-log-")
+    os.environ["ROS_LOG_DIR"] = _OWN_ROS_LOG_DIR
 
 #: what a run may leave in the clone: caches of Python, numba and pytest, build metadata, venvs
-_TREE_OWN = {"__pycache__", ".git", ".pytest_cache", ".ci-venv", ".venv", "build", "dist"}
+_TREE_OWN = {"__pycache__", ".git", ".pytest_cache", ".ci-venv", ".ci-peers-venv", ".venv", "build", "dist"}
 
 
 def _tree_files() -> dict[str, float]:
@@ -34,6 +38,10 @@ def pytest_sessionstart(session):
 def pytest_sessionfinish(session, exitstatus):
     """Tests run in their own temporary directories: a file the run created or changed in the
     clone fails the run, named."""
+    if _OWN_ROS_LOG_DIR is not None:
+        import shutil
+
+        shutil.rmtree(_OWN_ROS_LOG_DIR, ignore_errors=True)
     before = getattr(session.config, "_gyro_sim_tree", None)
     if before is None:
         return

@@ -5,7 +5,6 @@ from __future__ import annotations
 import importlib
 import json
 import re
-import time
 
 import pytest
 
@@ -103,11 +102,9 @@ def test_a_tiny_step_is_refused_before_anything_runs(recorded, tmp_path, monkeyp
     bad = rewrite(log, tmp_path / "dt.mcap", params_json=json.dumps(p))
     span = read_info(bad).end_ns / 1e9
     assert span / value > MAX_RESIM_STEPS  # the case really is beyond the bound
-    _nothing_simulated(monkeypatch)
-    t0 = time.monotonic()
+    _nothing_simulated(monkeypatch)  # refused before any step: no Simulator may even be built
     with pytest.raises(LogError, match=re.escape(f"the limit is {MAX_RESIM_STEPS:.0e}")):
         resimulate(bad)
-    assert time.monotonic() - t0 < 30
     monkeypatch.undo()
     _refused_in_one_line(bad, "limit")
 
@@ -116,11 +113,10 @@ def test_a_joint_state_stamped_far_in_the_future_cannot_hang_resimulation(record
     log, _ = recorded
     bad = rewrite(log, tmp_path / "future.mcap",
                   retime=lambda topic, i, t: 10**18 if (topic == "/joint_states" and i == 3) else t)
-    _nothing_simulated(monkeypatch)  # the log's own span (its statistics) already says so
-    t0 = time.monotonic()
+    # the log's own span (its statistics) already says so: refused before any Simulator is built
+    _nothing_simulated(monkeypatch)
     with pytest.raises(LogError, match=r"the log's 1e\+09 s at advance_dt = 0\.005 s would take 2e\+11 steps"):
         resimulate(bad)
-    assert time.monotonic() - t0 < 30
     monkeypatch.undo()
     _refused_in_one_line(bad, "limit")
 

@@ -15,9 +15,6 @@ from gyro_sim.safe_paths import OutputError, check_output
 
 from .conftest import ROOT, SCENE, gyro_sim
 
-needs_permissions = pytest.mark.skipif(os.geteuid() == 0, reason="root ignores file permissions")
-
-
 def _bytes(path):
     return path.read_bytes()
 
@@ -59,16 +56,58 @@ def test_directories_missing_parents_and_dangling_links_are_refused(tmp_path, ma
         check_output(out, force=True)
 
 
-@needs_permissions
-def test_an_unwritable_directory_is_refused(tmp_path):
-    d = tmp_path / "ro"
-    d.mkdir()
-    d.chmod(stat.S_IRUSR | stat.S_IXUSR)
+#: the unwritable-directory check as a user without privileges (root passes every permission
+#: check): imports first, then the user dropped, then the check on a writable and a read-only
+#: directory of that user; prints what each check said
+UNPRIVILEGED_CHECK = """
+import os, sys
+from pathlib import Path
+from gyro_sim.safe_paths import OutputError, check_output
+os.setgroups([])
+os.setgid(NOBODY)
+os.setuid(NOBODY)
+for name in ("rw", "ro"):
     try:
-        with pytest.raises(OutputError, match="is not writable"):
-            check_output(d / "out.mcap")
+        check_output(Path(sys.argv[1]) / name / "out.mcap")
+        print(name, "accepted")
+    except OutputError as exc:
+        print(name, exc)
+"""
+NOBODY = 65534
+
+
+def test_an_unwritable_directory_is_refused(tmp_path):
+    """A directory its user may not write to: refused. Run as root (as CI runs), the check runs
+    in a child process that has dropped to an unprivileged user, in a directory of that user's
+    under the system's temporary directory (the user cannot enter pytest's own, root's)."""
+    if os.geteuid() != 0:
+        d = tmp_path / "ro"
+        d.mkdir()
+        d.chmod(stat.S_IRUSR | stat.S_IXUSR)
+        try:
+            with pytest.raises(OutputError, match="is not writable"):
+                check_output(d / "out.mcap")
+        finally:
+            d.chmod(stat.S_IRWXU)
+        return
+    import shutil
+    import tempfile
+
+    base = Path(tempfile.mkdtemp(prefix="gyro_sim-unwritable-"))
+    try:
+        os.chmod(base, 0o755)
+        for name, mode in (("rw", 0o700), ("ro", 0o500)):
+            (base / name).mkdir()
+            os.chown(base / name, NOBODY, NOBODY)
+            os.chmod(base / name, mode)
+        done = subprocess.run([sys.executable, "-c", UNPRIVILEGED_CHECK.replace("NOBODY", str(NOBODY)), str(base)],
+                              capture_output=True, text=True, timeout=120)
+        assert done.returncode == 0, done.stderr
+        said = dict(line.split(" ", 1) for line in done.stdout.splitlines())
+        assert said["rw"] == "accepted"  # the same user may write to its own directory
+        assert "is not writable" in said["ro"] and str(base / "ro") in said["ro"], said
     finally:
-        d.chmod(stat.S_IRWXU)
+        shutil.rmtree(base)
 
 
 # --- the LogWriter: no code path can clobber a file -------------------------------------------------

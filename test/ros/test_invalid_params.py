@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import subprocess
-import time
 
 import pytest
 
@@ -31,15 +30,13 @@ def test_invalid_parameters_refused_before_publishing(tmp_path):
     try:
         client.subscribe("/joint_states", JointState)
         env = ros_env(domain, tmp_path)
-        t0 = time.monotonic()
         procs = {arg: subprocess.Popen(node_command(arg, "duration:=30.0"), cwd=ROOT, env=env, text=True,
                                        stdout=subprocess.PIPE, stderr=subprocess.PIPE) for arg in CASES}
         for arg, p in procs.items():
             out, err = p.communicate(timeout=60)
             assert p.returncode == 2, (arg, p.returncode, err)
             assert "invalid parameters, nothing started" in err and CASES[arg] in err, (arg, err)
-            assert "simulated" not in out
-        assert time.monotonic() - t0 < 60
+            assert "simulated" not in out  # refused before the 30 s run: exit 2, not the run's end
         # a bad scene file: the scene loader's message names the key
         bad = tmp_path / "bad.yaml"
         bad.write_text("name: x\nbase: {type: fixed}\nbodies:\n"
