@@ -37,7 +37,7 @@ import pytest
 from gyro_sim.log.mcap_log import read_info
 from gyro_sim.safe_paths import PARTIAL, Interrupted
 
-from .conftest import ROOT
+from test.conftest import ROOT
 
 #: how long a command may take to end after the signal (s): generous for a command that has
 #: other processes beside it on the same cores (module docstring)

@@ -13,7 +13,7 @@ from gyro_sim import load_scene
 from gyro_sim.log.mcap_log import LogWriter, read_info
 from gyro_sim.safe_paths import OutputError, check_output
 
-from .conftest import ROOT, SCENE, gyro_sim
+from test.conftest import ROOT, SCENE, gyro_sim
 
 def _bytes(path):
     return path.read_bytes()

@@ -18,7 +18,7 @@ pytest.importorskip("rclpy", reason="the ROS 2 node needs rclpy (pip install '.[
 
 from gyro_sim.bench import soak  # noqa: E402
 
-from .helpers import new_domain_id  # noqa: E402
+from test.ros.helpers import new_domain_id  # noqa: E402
 
 
 @pytest.mark.slow

@@ -11,7 +11,7 @@ from gyro_sim import Simulator, load_scene
 from gyro_sim.dynamics import reference as dyn
 from gyro_sim.dynamics.invariants import conserved
 
-from .chains import random_chain
+from test.dynamics.chains import random_chain
 
 
 def run_invariants(scene, T, **kw):

@@ -18,8 +18,8 @@ from gyro_sim.dynamics import kernel as fast, entry as fast_entry
 from gyro_sim.dynamics.model import compile_model, initial_state
 from gyro_sim.dynamics.system import ChainODE, FastChainODE
 
-from .chains import random_chain
-from .test_fast import BASES, assert_rhs_equal, chain_scene, random_state
+from test.dynamics.chains import random_chain
+from test.dynamics.test_kernel import BASES, assert_rhs_equal, chain_scene, random_state
 
 pytestmark = pytest.mark.skipif(not fast.available(), reason="numba is not installed")
 

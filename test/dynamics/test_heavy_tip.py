@@ -2,7 +2,7 @@
 
 The accelerations of `mass_ratio_chain(ratio)` (a three-body spherical chain whose tip is
 `ratio` x its neighbour) from the compiled kernel and from the numpy reference, against the
-same equations evaluated in 80 digits (test/core/extended_precision.py). Relative errors are
+same equations evaluated in 80 digits (test/dynamics/extended_precision.py). Relative errors are
 to the largest acceleration. The 80-digit values do not depend on the elimination (the
 pre-change kernel gives the same digits) and move by < 2e-15 when the inputs move by one
 ulp: the problem is well conditioned, the old losses were the algorithm's.
@@ -18,7 +18,7 @@ from gyro_sim.dynamics.model import compile_model, initial_state
 from gyro_sim.scene.load import load_scene
 from gyro_sim.dynamics.system import ChainODE, FastChainODE
 
-from .extended_precision import mass_ratio_accelerations
+from test.dynamics.extended_precision import mass_ratio_accelerations
 
 pytestmark = pytest.mark.skipif(not fast.available(), reason="needs numba")
 
@@ -73,7 +73,7 @@ def test_square_root_elimination_on_hinges_rotors_and_bases(seed, base):
     """The square-root form (taken above STABLE_ABA_RATIO) on random chains with hinges,
     rotors, commands and every base, the tip made 1e3 x heavier: the numpy reference is
     right to ~1e-10 there."""
-    from .test_fast import chain_scene
+    from test.dynamics.test_kernel import chain_scene
 
     sd = chain_scene(seed, base, n=5)
     tip = sd["bodies"][-1]

@@ -20,7 +20,7 @@ from gyro_sim.dynamics.system import (
     BACKENDS, ChainODE, FastChainODE, heavy_subtree_ratio, make_system,
 )
 
-from .chains import random_chain
+from test.dynamics.chains import random_chain
 
 pytestmark = pytest.mark.skipif(not fast.available(), reason="numba is not installed")
 
@@ -258,7 +258,7 @@ def test_make_system_falls_back_without_numba(monkeypatch):
 
 def test_auto_backend_stays_compiled_on_a_heavy_tip():
     """No mass-ratio fallback: "auto" compiles a heavy tip (1e6) as any other chain; its
-    accuracy is test/core/test_heavy_tip.py's."""
+    accuracy is test/dynamics/test_heavy_tip.py's."""
     from gyro_sim.bench.extreme import mass_ratio_chain
 
     heavy = compile_model(load_scene(mass_ratio_chain(1e6)))

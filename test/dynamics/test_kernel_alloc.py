@@ -23,7 +23,7 @@ from gyro_sim import load_scene
 from gyro_sim.bench.scenes import spherical_chain
 from gyro_sim.dynamics import kernel as fast
 from gyro_sim.dynamics.model import compile_model, initial_state
-from test.core.chains import random_chain
+from test.dynamics.chains import random_chain
 
 @numba.njit
 def repeat(m, t, y, ydot, args):

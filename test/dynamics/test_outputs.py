@@ -9,7 +9,7 @@ import pytest
 from gyro_sim.dynamics import kernel as fast
 from gyro_sim.simulator import Simulator
 
-from .chains import random_chain
+from test.dynamics.chains import random_chain
 
 pytestmark = pytest.mark.skipif(not fast.available(), reason="numba is not installed")
 

@@ -43,9 +43,9 @@ from gyro_sim.dynamics.model import compile_model, initial_state
 from gyro_sim.scene.load import load_scene
 from gyro_sim.simulator import Simulator
 from gyro_sim.dynamics.system import FastChainODE
-from test.core.package_paths import in_package
+from test.integrators.package_paths import in_package
 
-from .chains import random_chain
+from test.dynamics.chains import random_chain
 
 pytestmark = pytest.mark.skipif(not fast.available(), reason="numba is not installed")
 

@@ -3,7 +3,7 @@ on both paths, |q| and the quadratic invariants of a rigid body kept to round-of
 momentum of a free chain, bounded energy over a long horizon, Newton failures reported with
 their reason, the compiled and Python drivers step for step (retakes included), and O(n)
 memory on a long chain. The stiff cases (stability function, heavy tip, step moments, fast
-double gyroscope) are in test_gauss_stiff.py."""
+double gyroscope) are in test_gauss4_stiff.py."""
 import tracemalloc
 from fractions import Fraction
 
@@ -24,7 +24,7 @@ from gyro_sim.scene.load import load_scene
 from gyro_sim.simulator import SimulationError, Simulator
 from gyro_sim.dynamics.system import FastChainODE, make_system
 
-from .chains import random_chain
+from test.dynamics.chains import random_chain
 
 needs_numba = pytest.mark.skipif(not fast.available(), reason="numba is not installed")
 
@@ -47,7 +47,7 @@ def _no_retake(integ):
 
 
 def fast_heavy_top(spin):
-    """config/heavy_top.yaml spun about its axis at `spin` rad/s (as test_choose)."""
+    """config/heavy_top.yaml spun about its axis at `spin` rad/s (as test_fixed)."""
     sd = load_dict("heavy_top")
     sd["bodies"][0]["initial"]["euler_rates"] = [0.0, 0.0, spin]
     return sd
@@ -271,7 +271,7 @@ def test_bounded_retake_stops_the_simulator_with_the_reason():
     """The heavy tip (mass ratio 1e6) whips at t = 0.0874 s (accelerations of 4e9 rad/s^2 for
     microseconds, the two light links passing through alignment); with a retake budget of 4
     attempts the step cannot be taken: the Simulator reports the integrator's reason and keeps
-    its state (the default budget gets through: test_gauss_stiff.py)."""
+    its state (the default budget gets through: test_gauss4_stiff.py)."""
     sim = Simulator(mass_ratio_chain(1e6), integrator="gauss4", step=1e-3)
     sim.integrator._params[gk.PAR_BUDGET] = 4
     with pytest.raises(SimulationError, match="gauss4: Newton iteration failed.*retaken in halves"):

@@ -18,8 +18,8 @@ from gyro_sim.dynamics import kernel as fast
 from gyro_sim.integrators.gauss4 import kernels as gk
 from gyro_sim.dynamics.system import ChainODE, FastChainODE, make_system
 
-from .chains import random_chain
-from .test_fast import chain_scene, hold_random
+from test.dynamics.chains import random_chain
+from test.dynamics.test_kernel import chain_scene, hold_random
 
 CASES = [(seed, base) for seed in range(8) for base in ("fixed", "free", "moving")]
 

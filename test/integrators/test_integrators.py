@@ -195,8 +195,8 @@ def _quat_err(y, ref):
 # ------------------------------------------------------------------ registry
 def test_registry_and_documentation():
     # the named methods, plus "auto" (dop853 that switches to radau on stiffness) and "fixed"
-    # (rk4 that switches to gauss4: test_choose.py), and "gauss4s" (gauss4 on the chain's
-    # canonical equations: chains only, test_gauss_canonical.py)
+    # (rk4 that switches to gauss4: test_fixed.py), and "gauss4s" (gauss4 on the chain's
+    # canonical equations: chains only, test_gauss4s.py)
     assert set(INTEGRATORS) == set(NAMES) | {"auto", "fixed", "gauss4s"}
     for name, cls in INTEGRATORS.items():
         assert cls.name == name

@@ -7,7 +7,7 @@ Measured when written: the kernel quat_exp equals rotations.quat_exp bit for bit
 random vectors (1e-12 to 1e3 rad; asserted to 2 ulps, numpy's sin/cos may differ elsewhere);
 the kernels' lie4 and the former numpy step differ by <= 5.4e-15 relative on every shipped
 scene after 0.2 s (round-off of the reordered sums). Order 4: test_integrators.py (Python
-driver, rigid body) and test_integrator_orders.py (the compiled march, through Simulator)."""
+driver, rigid body) and test_orders.py (the compiled march, through Simulator)."""
 import numpy as np
 import pytest
 
@@ -23,9 +23,9 @@ from gyro_sim.dynamics.rotations import quat_conj, quat_exp, quat_mul, quat_to_m
 from gyro_sim.simulator import Simulator
 from gyro_sim.dynamics.system import ChainODE, FastChainODE
 from gyro_sim.paths import shipped_scenes
-from test.core.package_paths import in_package
+from test.integrators.package_paths import in_package
 
-from .chains import random_chain
+from test.dynamics.chains import random_chain
 
 needs_numba = pytest.mark.skipif(not fast.available(), reason="numba is not installed")
 
@@ -90,7 +90,7 @@ class RigidBody:
 
 
 def held_system(scene, seed=0):
-    """A FastChainODE of `scene` with random held inputs and velocities (as test_fast_loop)."""
+    """A FastChainODE of `scene` with random held inputs and velocities (as test_rk4_loop)."""
     model = compile_model(load_scene(scene))
     system = FastChainODE(model)
     rng = np.random.default_rng(seed)

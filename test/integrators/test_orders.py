@@ -6,7 +6,7 @@ import pytest
 
 from gyro_sim import Simulator, load_scene
 
-from .chains import random_chain
+from test.dynamics.chains import random_chain
 
 T = 0.5
 

@@ -52,10 +52,10 @@ from gyro_sim.integrators.radau import driver as R
 from gyro_sim.integrators.radau.driver import Radau
 from gyro_sim.scene.load import load_scene
 from gyro_sim.simulator import Simulator
-from test.core.package_paths import in_package
+from test.integrators.package_paths import in_package
 
-from .chains import random_chain
-from .test_fast_dop853 import held_system, hinge_pendulum
+from test.dynamics.chains import random_chain
+from test.integrators.test_dop853 import held_system, hinge_pendulum
 
 pytestmark = pytest.mark.skipif(not fast.available(), reason="numba is not installed")
 

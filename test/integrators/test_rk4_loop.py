@@ -15,7 +15,7 @@ from gyro_sim.dynamics.model import compile_model, initial_state
 from gyro_sim.integrators.rk4.kernels import erk_stage_state, erk_update
 from gyro_sim.dynamics.system import FastChainODE
 
-from .chains import random_chain
+from test.dynamics.chains import random_chain
 
 pytestmark = pytest.mark.skipif(not fast.available(), reason="numba is not installed")
 

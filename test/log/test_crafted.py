@@ -11,8 +11,8 @@ import pytest
 from gyro_sim.log.mcap_log import LogError, iter_messages, read_info
 from gyro_sim.log.resim import MAX_RESIM_STEPS, resimulate
 
-from .conftest import gyro_sim
-from .crafted import rewrite
+from test.conftest import gyro_sim
+from test.log.crafted import rewrite
 
 
 def _params(log) -> dict:

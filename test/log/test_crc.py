@@ -8,8 +8,8 @@ import pytest
 from gyro_sim.log.mcap_log import LogError, iter_messages, read_info
 from gyro_sim.log.recover import recover
 
-from .conftest import gyro_sim, rosbags_messages
-from .crafted import flip, truncate
+from test.conftest import gyro_sim, rosbags_messages
+from test.log.crafted import flip, truncate
 
 #: the chunk header's fixed fields before its CRC: start time, end time, uncompressed size
 CRC_FIELD = 9 + 8 + 8 + 8

@@ -12,7 +12,7 @@ from gyro_sim import load_scene
 from gyro_sim.log.mcap_log import LogError, LogWriter
 from gyro_sim.msgs import messages as M
 
-from .conftest import SCENE, gyro_sim
+from test.conftest import SCENE, gyro_sim
 
 
 def _channels(path) -> dict:

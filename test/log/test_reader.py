@@ -8,8 +8,8 @@ from gyro_sim.log import mcap_log
 from gyro_sim.log.mcap_log import LogError, LogReader, iter_messages, read_info
 from gyro_sim.log.record import record_run
 
-from .conftest import SCENE
-from .crafted import chunk_offsets, flip
+from test.conftest import SCENE
+from test.log.crafted import chunk_offsets, flip
 
 
 @pytest.fixture

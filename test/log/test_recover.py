@@ -15,7 +15,7 @@ from gyro_sim.log.mcap_log import LogError, read_info
 from gyro_sim.log.recover import recover
 from gyro_sim.safe_paths import PARTIAL, OutputError
 
-from .conftest import ROOT, gyro_sim, rosbags_messages
+from test.conftest import ROOT, gyro_sim, rosbags_messages
 
 FLUSH_PERIOD = 0.25
 KILL_AFTER = 2.0

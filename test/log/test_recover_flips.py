@@ -13,7 +13,7 @@ import pytest
 
 from gyro_sim.log.recover import recover
 
-from .crafted import truncate
+from test.log.crafted import truncate
 
 #: bytes between two flips inside a record's body (every byte of every record's opcode and
 #: length, and of the magic, footer and data end, is flipped)

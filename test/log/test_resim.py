@@ -10,7 +10,7 @@ from gyro_sim.msgs import messages as M
 from gyro_sim.log.record import LogRecorder, record_run, run_params
 from gyro_sim.log.resim import resimulate
 
-from .conftest import DURATION, PUBLISH_RATE, SCENE, SCHEDULE, gyro_sim
+from test.conftest import DURATION, PUBLISH_RATE, SCENE, SCHEDULE, gyro_sim
 
 
 def test_recorded_run_with_commands_resimulates_bit_for_bit(recorded):

@@ -13,7 +13,7 @@ from gyro_sim.log.mcap_log import LogError, LogWriter, iter_messages, read_info
 from gyro_sim.log.record import LogRecorder, run_params
 from gyro_sim.scene.urdf import urdf
 
-from .conftest import SCENE
+from test.conftest import SCENE
 
 TYPES = sorted(set(M.topic_types(["a"]).values()))
 

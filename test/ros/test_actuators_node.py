@@ -7,7 +7,7 @@ import yaml
 
 pytest.importorskip("rclpy", reason="the ROS 2 node needs rclpy (pip install '.[ros]')")
 
-from test.core.test_actuators import wheel_scene  # noqa: E402
+from test.dynamics.test_actuators import wheel_scene  # noqa: E402
 
 from .helpers import NodeProcess, new_domain_id  # noqa: E402
 

@@ -14,7 +14,7 @@ from gyro_sim.msgs import messages as M
 from gyro_sim.log.mcap_log import iter_messages
 from gyro_sim.log.record import record_run
 
-from .conftest import ROOT
+from test.conftest import ROOT
 
 pytest.importorskip("rclpy")
 

@@ -27,7 +27,7 @@ from gyro_sim.dynamics.model import compile_model, initial_state  # noqa: E402
 from gyro_sim.paths import find_scene, shipped_models  # noqa: E402
 from gyro_sim.scene.load import SceneError, load_scene, parse_yaml  # noqa: E402
 from gyro_sim.scene.mjcf import ModelError, import_model  # noqa: E402
-from test.core.chains import random_chain  # noqa: E402
+from test.dynamics.chains import random_chain  # noqa: E402
 
 #: largest difference allowed between MuJoCo and gyro_sim on the same file (m, rad, rad/s)
 AGREEMENT = 1e-7

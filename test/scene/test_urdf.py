@@ -9,7 +9,7 @@ import pytest
 from gyro_sim import load_scene
 from gyro_sim.scene.urdf import quat_z_to, rpy_z_to, urdf
 
-from .conftest import ROOT
+from test.conftest import ROOT
 
 
 @pytest.mark.parametrize("name", ["hinge_chain", "double_gyro_plus", "free_chain_rotors", "chain_4"])

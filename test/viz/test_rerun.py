@@ -13,7 +13,7 @@ from gyro_sim import load_scene
 from gyro_sim.msgs import messages as M
 from gyro_sim.log.mcap_log import iter_messages
 
-from .conftest import SCENE, gyro_sim
+from test.conftest import SCENE, gyro_sim
 
 rr = pytest.importorskip("rerun")
 RERUN = str(Path(sys.executable).with_name("rerun")) if Path(sys.executable).with_name("rerun").is_file() else shutil.which("rerun")

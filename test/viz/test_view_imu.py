@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from test.io.conftest import gyro_sim
+from test.conftest import gyro_sim
 from test.viz.test_live import chunks, column
 
 pytest.importorskip("rerun")

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from .conftest import gyro_sim
+from test.conftest import gyro_sim
 
 pytest.importorskip("rerun")
 Image = pytest.importorskip("PIL.Image")  # a dependency of rerun-sdk
