@@ -24,7 +24,8 @@ def test_run_prints_summary_with_drift():
 
 def test_run_refuses_bad_scene(tmp_path):
     bad = tmp_path / "bad.yaml"
-    bad.write_text("name: x\nbase: {type: fixed}\nbodies:\n  - {name: a, joint: {type: spherical}, mass: -1, inertia: {axial: 1, transverse: 1}}\n")
+    bad.write_text("name: x\nbase: {type: fixed}\nbodies:\n"
+                   "  - {name: a, joint: {type: spherical}, mass: -1, inertia: {axial: 1, transverse: 1}}\n")
     r = gyro_sim("run", "--scene", str(bad), "--duration", "1")
     assert r.returncode == 2
     assert "bodies[0].mass" in r.stderr

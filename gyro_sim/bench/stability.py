@@ -646,7 +646,8 @@ class Report:
             if best is None:
                 hold.append(f"{method}: no measured n")
             else:
-                hold.append(f"{method}: n = {best} measured" + (f", about {crossing:.0f} interpolated" if crossing else ""))
+                hold.append(f"{method}: n = {best} measured"
+                            + (f", about {crossing:.0f} interpolated" if crossing else ""))
         steps = max(r.steps for r in self.costs)
         return [
             "### The cost of one physics step: gauss4s and gauss4 beside rk4",

@@ -623,8 +623,8 @@ class Publication:
             if tf:
                 out.append((TF, TF_TYPE, self._tf.fill(t_ns, xyzw)[0]))
         if diagnostics_run is not False:
-            out.append((DIAGNOSTICS, DIAGNOSTICS_TYPE, diagnostics(snap, t_ns, self.hardware_id, diagnostics_run or None,
-                                                                   self.dynamics_status)))
+            out.append((DIAGNOSTICS, DIAGNOSTICS_TYPE,
+                        diagnostics(snap, t_ns, self.hardware_id, diagnostics_run or None, self.dynamics_status)))
         return out
 
 

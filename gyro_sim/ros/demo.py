@@ -71,7 +71,8 @@ class Demo:
 
     def moments(self, t: float) -> list[float]:
         n = len(self.amplitudes)
-        return [float(a * math.sin(2.0 * math.pi * (self.frequency * t + i / n))) for i, a in enumerate(self.amplitudes)]
+        return [float(a * math.sin(2.0 * math.pi * (self.frequency * t + i / n)))
+                for i, a in enumerate(self.amplitudes)]
 
     def describe(self, axis_names) -> str:
         amps = ", ".join(f"{a} {v:.3g}" for a, v in zip(axis_names, self.amplitudes))

@@ -35,12 +35,12 @@ import os
 # One BLAS thread: the chain's matrices are small and a threaded BLAS fights the loop (cli.py).
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import dataclasses  # noqa: E402
-import json  # noqa: E402
-import signal  # noqa: E402
-import sys  # noqa: E402
-import threading  # noqa: E402
-import time  # noqa: E402
+import dataclasses
+import json
+import signal
+import sys
+import threading
+import time
 
 try:  # rclpy from ROS 2 Jazzy (pip install 'gyro_sim[ros]'); --help works without it
     from rcl_interfaces.msg import ParameterDescriptor, ParameterType
@@ -53,11 +53,11 @@ except ImportError as _exc:  # the class below is then never instantiated
     Node = object
     ROS_IMPORT_ERROR = _exc
 
-from gyro_sim.simulator import Simulator  # noqa: E402
-from gyro_sim.msgs.messages import decode_axis_moments  # noqa: E402
-from gyro_sim.ros.loop import Pause, Reset, SimLoop, warm_up  # noqa: E402
-from gyro_sim.ros.outputs import Outputs, node_topics  # noqa: E402
-from gyro_sim.ros.params import PARAMETERS, ParameterError, validate  # noqa: E402
+from gyro_sim.simulator import Simulator
+from gyro_sim.msgs.messages import decode_axis_moments
+from gyro_sim.ros.loop import Pause, Reset, SimLoop, warm_up
+from gyro_sim.ros.outputs import Outputs, node_topics
+from gyro_sim.ros.params import PARAMETERS, ParameterError, validate
 
 #: bytes in a megabyte (record_queue_mb)
 MEGABYTE = 1 << 20
@@ -440,7 +440,7 @@ def main(argv=None) -> int:
         code = _main(argv, shutdown)
         shutdown.hold_if_giving_up()
         return code
-    except BaseException as exc:  # noqa: BLE001 - only resources are said in one line; bugs keep their traceback
+    except BaseException as exc:  # only resources are said in one line; bugs keep their traceback
         shutdown.hold_if_giving_up()
         why = resource_error(exc)
         if why is None:
@@ -473,7 +473,7 @@ def _main(argv, shutdown: Shutdown) -> int:
     announce_often()
     try:
         rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
-    except Exception as exc:  # noqa: BLE001 - rcl's argument errors (a missing --params-file ...)
+    except Exception as exc:  # rcl's argument errors (a missing --params-file ...)
         if resource_error(exc) is not None:
             raise
         print(f"gyro_sim_node: bad arguments: {exc}".splitlines()[0], file=sys.stderr)
@@ -487,7 +487,7 @@ def _main(argv, shutdown: Shutdown) -> int:
             print("gyro_sim_node: invalid parameters, nothing started:" + sep + str(exc).replace("\n", "\n  "),
                   file=sys.stderr)
             return 2
-        except Exception as exc:  # noqa: BLE001 - the log writer could not start (no space left...)
+        except Exception as exc:  # the log writer could not start (no space left...)
             from gyro_sim.ros.recorder import RecordingError
 
             if not isinstance(exc, RecordingError):

@@ -22,12 +22,12 @@ import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # test/: the oracles package
 
-from gyro_sim.analytic import lagrange as lg  # noqa: E402
-from gyro_sim.dynamics import rotations as rot  # noqa: E402
-from gyro_sim.scene.load import load_scene  # noqa: E402
-from oracles.pin_chain import PinChain  # noqa: E402
+from gyro_sim.analytic import lagrange as lg
+from gyro_sim.dynamics import rotations as rot
+from gyro_sim.scene.load import load_scene
+from oracles.pin_chain import PinChain
 
-from gyro_sim.simulator import Simulator  # noqa: E402
+from gyro_sim.simulator import Simulator
 
 REPO = Path(__file__).resolve().parents[2]
 CONFIG = REPO / "config"

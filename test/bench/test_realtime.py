@@ -10,7 +10,7 @@ import pytest
 
 pytest.importorskip("rclpy", reason="the realtime bench runs the ROS 2 node (pip install '.[ros]')")
 
-from test.ros.helpers import ROOT  # noqa: E402
+from test.ros.helpers import ROOT
 
 
 def test_bench_realtime_quick(tmp_path):

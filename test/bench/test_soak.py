@@ -16,9 +16,9 @@ import pytest
 
 pytest.importorskip("rclpy", reason="the ROS 2 node needs rclpy (pip install '.[ros]')")
 
-from gyro_sim.bench import soak  # noqa: E402
+from gyro_sim.bench import soak
 
-from test.ros.helpers import new_domain_id  # noqa: E402
+from test.ros.helpers import new_domain_id
 
 
 @pytest.mark.slow

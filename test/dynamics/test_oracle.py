@@ -18,11 +18,11 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # test/: the oracles package
 
-from gyro_sim.dynamics import rotations as rot  # noqa: E402
-from gyro_sim.scene.records import Base, Body, Initial, Joint, Rotor, Scene  # noqa: E402
-from oracles.pin_chain import PinChain  # noqa: E402
+from gyro_sim.dynamics import rotations as rot
+from gyro_sim.scene.records import Base, Body, Initial, Joint, Rotor, Scene
+from oracles.pin_chain import PinChain
 
-from gyro_sim import Simulator, load_scene  # noqa: E402
+from gyro_sim import Simulator, load_scene
 
 G = 9.81
 T_FINAL = 1.0
@@ -160,7 +160,10 @@ def records(d: dict) -> Scene:
                   r["mode"], float(r["spin"]), bool(r.get("actuated", False)))
             for r in bd.get("rotors", ()))
         ini = bd.get("initial", {})
-        arr = (lambda key: np.array(ini[key], dtype=float) if key in ini else None)
+
+        def arr(key, ini=ini):
+            return np.array(ini[key], dtype=float) if key in ini else None
+
         if joint.type == "hinge":
             initial = Initial(angle=float(ini.get("angle", 0.0)), rate=float(ini.get("rate", 0.0)))
         elif "quaternion" in ini:

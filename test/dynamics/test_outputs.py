@@ -28,7 +28,7 @@ def close(a, b, scale=None):
 
 def check(sim):
     fast_snap = sim.snapshot()
-    ref = sim._snapshot_numpy()  # noqa: SLF001 - the reference path of the same state
+    ref = sim._snapshot_numpy()  # the reference path of the same state
     assert fast_snap.joint_names == ref.joint_names
     for name in ("position", "velocity", "body_position", "body_quaternion", "wrench_force"):
         assert close(getattr(fast_snap, name), getattr(ref, name)), name
@@ -51,7 +51,7 @@ def check(sim):
     assert fast_snap.drift.keys() == ref.drift.keys()
     assert fast_snap.nonfinite() is None
     # the public outputs are the snapshot's numbers on this backend
-    for b, r in zip(sim.body_states(), sim._body_states_numpy()):  # noqa: SLF001
+    for b, r in zip(sim.body_states(), sim._body_states_numpy()):
         for name in ("position", "rotation", "angular_velocity", "velocity"):
             assert close(getattr(b, name), getattr(r, name), 1.0 + np.max(np.abs(getattr(r, name)))), name
     np.testing.assert_array_equal(sim.joint_states().position, fast_snap.position)

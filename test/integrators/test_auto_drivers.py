@@ -40,8 +40,8 @@ def drivers(scene: dict, rtol: float):
     system = FastChainODE(model)
     compiled = make_integrator("auto", system, rtol=rtol, atol=rtol * 1e-2)
     python = make_integrator("auto", system, rtol=rtol, atol=rtol * 1e-2)
-    python.explicit._loop = None  # noqa: SLF001 - the Python loops on the same system
-    python.implicit._loop = None  # noqa: SLF001
+    python.explicit._loop = None  # the Python loops on the same system
+    python.implicit._loop = None
     assert compiled.explicit.compiled and compiled.implicit.compiled
     assert not (python.explicit.compiled or python.implicit.compiled)
     return compiled, python, initial_state(model)
@@ -76,10 +76,10 @@ def assert_same(a, b, ra, rb):
     assert (a.nfev, a.nsteps, a.nrejected, a.njev, a.nlu, a.method) == \
         (b.nfev, b.nsteps, b.nrejected, b.njev, b.nlu, b.method)
     assert (a.error_estimate, a.last_step) == (b.error_estimate, b.last_step)
-    np.testing.assert_array_equal(a._counters, b._counters)  # noqa: SLF001
-    np.testing.assert_array_equal(a._cost, b._cost)  # noqa: SLF001
-    np.testing.assert_array_equal(a._easy, b._easy)  # noqa: SLF001
-    np.testing.assert_array_equal(a._window, b._window)  # noqa: SLF001
+    np.testing.assert_array_equal(a._counters, b._counters)
+    np.testing.assert_array_equal(a._cost, b._cost)
+    np.testing.assert_array_equal(a._easy, b._easy)
+    np.testing.assert_array_equal(a._window, b._window)
 
 
 def test_not_stiff_chain():
@@ -154,7 +154,7 @@ def test_power_iterations(monkeypatch):
     a, b, y0 = drivers(ROTOR, 1e-8)
     ra, rb = run(a, y0, 0.5, 0.01), run(b, y0, 0.5, 0.01)
     assert [s[1:3] for s in a.switches][:1] == [("dop853", "radau")]
-    rho = a._easy[0]  # noqa: SLF001
+    rho = a._easy[0]
     w_n, _ = ex.fast_rotor_frequencies(ex.fast_rotor_spin(1e4))
     assert rho == pytest.approx(w_n, rel=1e-2)
     assert_same(a, b, ra, rb)

@@ -98,13 +98,13 @@ def held_system(scene, seed=0):
 def python_driver(system, **options) -> DOP853:
     """DOP853 stepping in Python on a system that has the compiled loop."""
     integ = DOP853(system, **options)
-    integ._loop = None  # noqa: SLF001 - the Python driver on the same system
+    integ._loop = None  # the Python driver on the same system
     return integ
 
 
 def counters(integ):
     return (integ.nfev, integ.nsteps, integ.nrejected, integ.error_estimate, integ.last_step,
-            integ._h_abs)  # noqa: SLF001
+            integ._h_abs)
 
 
 def scipy_run(system, y0, t0, t1, rtol, atol, dense=False, **options):
@@ -132,7 +132,7 @@ def test_initial_step_is_scipys():
     integ = DOP853(system, rtol=1e-9, atol=1e-11)
     integ.begin(0.1, y0.copy(), 3.0)
     ref = si.DOP853(system.rhs, 0.1, y0, 3.0, rtol=1e-9, atol=1e-11)
-    assert integ._h_abs == pytest.approx(ref.h_abs, rel=1e-14)  # noqa: SLF001
+    assert integ._h_abs == pytest.approx(ref.h_abs, rel=1e-14)
 
 
 @pytest.mark.parametrize("compiled", (False, True))
@@ -144,13 +144,13 @@ def test_accepted_steps_are_scipys(compiled):
     assert system.quaternion_block()[1] == 0  # nothing projected: scipy's problem exactly
     integ = DOP853(system, rtol=rtol, atol=atol) if compiled else python_driver(system, rtol=rtol, atol=atol)
     integ.begin(t0, y0.copy(), t1)  # the first step, here, to hand to scipy
-    h0 = integ._h_abs  # noqa: SLF001
+    h0 = integ._h_abs
     integ.reset()
     ref, ts_ref, ys_ref, _ = scipy_run(system, y0, t0, t1, rtol, atol, first_step=h0)
     if compiled:
-        integ._trace = np.zeros(len(ts_ref) + 5)  # noqa: SLF001 - the ends of the steps
+        integ._trace = np.zeros(len(ts_ref) + 5)  # the ends of the steps
         ys = integ.advance(t0, y0, t1)[None, :]
-        ts = integ._trace[:integ._status[fast_dop853.S_TRACED]]  # noqa: SLF001
+        ts = integ._trace[:integ._status[fast_dop853.S_TRACED]]
     else:
         y, ts, ys, t = y0.copy(), [], [], t0
         integ.begin(t0, y, t1)
@@ -185,14 +185,14 @@ def test_pinned_steps_and_dense_output_are_scipys(compiled):
     te = np.sort(np.concatenate([np.linspace(t0, t1, 97), ts_ref[:-1]]))
     integ = DOP853(system, rtol=rtol, atol=atol, max_step=h) if compiled else \
         python_driver(system, rtol=rtol, atol=atol, max_step=h)
-    integ._h_abs = h  # noqa: SLF001 - scipy's first step
+    integ._h_abs = h  # scipy's first step
     n_steps = len(ts_ref)
     if compiled:
-        integ._trace = np.zeros(n_steps)  # noqa: SLF001
+        integ._trace = np.zeros(n_steps)
     y1, Y = integ.advance(t0, y0, t1, t_eval=te)
     assert integ.nsteps == n_steps and integ.nrejected == 0
     if compiled:
-        np.testing.assert_array_equal(integ._trace, ts_ref)  # noqa: SLF001
+        np.testing.assert_array_equal(integ._trace, ts_ref)
     scale = np.abs(ys_ref).max()
     assert np.abs(y1 - ys_ref[-1]).max() <= SAME_STEP_RTOL * scale
     starts = np.concatenate([[t0], ts_ref])
@@ -241,7 +241,7 @@ def test_step_and_error_norm_are_scipys():
     assert np.abs(y_new - y_ref).max() <= 4 * np.finfo(float).eps * np.abs(y_ref).max()
     scale = atol + np.maximum(np.abs(y), np.abs(y_ref)) * rtol
     solver = rk.DOP853(system.rhs, t, y, t + 1.0, rtol=rtol, atol=atol)
-    err_ref = solver._estimate_error_norm(K_ref, h, scale)  # noqa: SLF001
+    err_ref = solver._estimate_error_norm(K_ref, h, scale)
     assert err == pytest.approx(err_ref, rel=1e-6) and err > 1e-3
 
 
@@ -254,7 +254,7 @@ def test_compiled_advance_is_the_python_driver_bit_for_bit(seed, base):
     system, y0 = held_system(random_chain(seed, base=base), seed)
     kw = dict(rtol=1e-8, atol=1e-10 if base == "fixed" else np.geomspace(1e-11, 1e-9, system.size))
     compiled, python = DOP853(system, **kw), python_driver(system, **kw)
-    assert compiled._loop is not None  # noqa: SLF001
+    assert compiled._loop is not None
     ya, yb = y0.copy(), y0.copy()
     for k in range(6):
         t0, t1 = 0.1 + 0.01 * k, 0.1 + 0.01 * (k + 1)
@@ -278,7 +278,7 @@ def test_every_scene_compiled_equals_python_driver(scene):
     for compiled in (True, False):
         sim = Simulator(load_scene(scene), integrator="dop853", rtol=1e-8, atol=1e-10, backend="numba")
         if not compiled:
-            sim.integrator._loop = None  # noqa: SLF001
+            sim.integrator._loop = None
         for _ in range(50):
             sim.advance(0.01)
         states.append((sim.state.copy(), counters(sim.integrator)))
@@ -345,7 +345,7 @@ def test_stiffness_estimate_steps_in_python_with_the_same_bits():
 def _failure(integ, y0, t1, h=None):
     """The IntegrationError of advance from (0.1, y0) to t1 (h: the step-size memory of an
     earlier call; None: the first call selects it) and the counters after it."""
-    integ._h_abs = h  # noqa: SLF001
+    integ._h_abs = h
     with pytest.raises(IntegrationError) as info:
         integ.advance(0.1, y0, t1)
     return str(info.value), info.value.t, info.value.h, counters(integ)
@@ -385,8 +385,8 @@ def test_one_compiled_loop_per_process_and_argument_types():
     dispatch is paid once per process; other argument types get a loop of their own."""
     a, _ = held_system("chain_4")
     b, _ = held_system("heavy_top", seed=1)
-    loop = DOP853(a)._loop  # noqa: SLF001
-    assert DOP853(b)._loop is loop and fast_dop853.loop_for(b.kernel_arguments()) is loop  # noqa: SLF001
+    loop = DOP853(a)._loop
+    assert DOP853(b)._loop is loop and fast_dop853.loop_for(b.kernel_arguments()) is loop
     args = list(a.kernel_arguments())
     args[0] = args[0].copy()
     args[0].flags.writeable = False

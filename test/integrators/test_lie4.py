@@ -176,7 +176,7 @@ def test_compiled_march_equals_the_python_driver_bit_for_bit(seed, base):
     from Python: identical bits, with t_eval stops on the way."""
     system, y0 = held_system(random_chain(seed, base=base), seed)
     compiled, python = Lie4(system, step=1e-3), python_driver(system, step=1e-3)
-    assert compiled._compiled is not None  # noqa: SLF001 - the march is what is tested
+    assert compiled._compiled is not None  # the march is what is tested
     te = np.array([0.1, 0.1037, 0.11])
     a, A = compiled.advance(0.1, y0, 0.125, t_eval=te)
     b, B = python.advance(0.1, y0, 0.125, t_eval=te)

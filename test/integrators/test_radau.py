@@ -101,13 +101,13 @@ def forward_difference_jacobian(fun):
 def python_driver(system, **options) -> Radau:
     """Radau stepping in Python on a system that has the compiled loop."""
     integ = Radau(system, **options)
-    integ._loop = None  # noqa: SLF001 - the Python driver on the same system
+    integ._loop = None  # the Python driver on the same system
     return integ
 
 
 def counters(integ):
     return (integ.nfev, integ.nsteps, integ.nrejected, integ.njev, integ.nlu, integ.error_estimate,
-            integ.last_step, integ._h_abs)  # noqa: SLF001
+            integ.last_step, integ._h_abs)
 
 
 def scipy_run(system, y0, t0, t1, rtol, atol, first_step):
@@ -138,13 +138,13 @@ def test_accepted_steps_are_scipys(scene, rtol, t1, compiled):
     assert system.quaternion_block()[1] == 0  # nothing projected: scipy's problem exactly
     integ = Radau(system, rtol=rtol, atol=atol) if compiled else python_driver(system, rtol=rtol, atol=atol)
     integ.begin(t0, y0.copy(), t1)  # the first step, here, to hand to scipy
-    h0 = integ._h_abs  # noqa: SLF001
+    h0 = integ._h_abs
     integ.reset()
     ref, ts_ref, ys_ref = scipy_run(system, y0, t0, t1, rtol, atol, h0)
     if compiled:
-        integ._trace = np.zeros(len(ts_ref) + 5)  # noqa: SLF001 - the ends of the steps
+        integ._trace = np.zeros(len(ts_ref) + 5)  # the ends of the steps
         y1 = integ.advance(t0, y0, t1)
-        ts = integ._trace[:integ._flags[fast_radau.F_TRACED]]  # noqa: SLF001
+        ts = integ._trace[:integ._flags[fast_radau.F_TRACED]]
     else:
         y1, ts, t = y0.copy(), [], t0
         integ.begin(t0, y1, t1)
@@ -170,21 +170,21 @@ def test_newton_solve_is_scipys():
     rtol, atol, t, h = 1e-8, 1e-10, 0.1, 0.004
     integ = python_driver(system, rtol=rtol, atol=atol)
     f = system.rhs(t, y)
-    integ._jacobian(t, y, f)  # noqa: SLF001
-    integ._factor(h)  # noqa: SLF001
+    integ._jacobian(t, y, f)
+    integ._factor(h)
     scale = atol + np.abs(y) * rtol
-    integ._Z0[:] = 0.0  # noqa: SLF001
-    converged, n_iter, rate = integ._newton(t, y, h, scale)  # noqa: SLF001
+    integ._Z0[:] = 0.0
+    converged, n_iter, rate = integ._newton(t, y, h, scale)
     J = integ.jacobian
     I = np.identity(y.size)
     LU_real = sl.lu_factor(ra.MU_REAL / h * I - J)
     LU_complex = sl.lu_factor(ra.MU_COMPLEX / h * I - J)
     ok, k, Z, rate_ref = ra.solve_collocation_system(
-        system.rhs, t, y, h, np.zeros((3, y.size)), scale, integ._newton_tol,  # noqa: SLF001
+        system.rhs, t, y, h, np.zeros((3, y.size)), scale, integ._newton_tol,
         LU_real, LU_complex, sl.lu_solve)
     assert (converged, n_iter) == (ok, k) and converged and n_iter >= 2
     assert rate == pytest.approx(rate_ref, rel=1e-6)
-    assert np.abs(integ._Z - Z).max() <= NEWTON_RTOL * np.abs(Z).max()  # noqa: SLF001
+    assert np.abs(integ._Z - Z).max() <= NEWTON_RTOL * np.abs(Z).max()
 
 
 def _radau_matrices(n=23, h=0.01, seed=7):
@@ -305,7 +305,7 @@ def test_compiled_advance_is_the_python_driver_bit_for_bit(seed, base):
     system, y0 = held_system(random_chain(seed, base=base), seed)
     kw = dict(rtol=1e-7, atol=1e-9 if base == "fixed" else np.geomspace(1e-10, 1e-8, system.size))
     compiled, python = Radau(system, **kw), python_driver(system, **kw)
-    assert compiled._loop is not None  # noqa: SLF001
+    assert compiled._loop is not None
     ya, yb = y0.copy(), y0.copy()
     for k in range(6):
         t0, t1 = 0.1 + 0.01 * k, 0.1 + 0.01 * (k + 1)
@@ -330,7 +330,7 @@ def _scene_runs(scene):
     for compiled in (True, False):
         sim = Simulator(load_scene(scene), integrator="radau", rtol=1e-8, atol=1e-10, backend="numba")
         if not compiled:
-            sim.integrator._loop = None  # noqa: SLF001
+            sim.integrator._loop = None
         for _ in range(50):
             sim.advance(0.01)
         states.append((sim.state.copy(), counters(sim.integrator)))
@@ -388,7 +388,7 @@ def test_single_steps_after_compiled_calls_continue_the_same():
 
 # ------------------------------------------------------------------ failures
 def _failure(integ, y0, t1, h=None):
-    integ._h_abs = h  # noqa: SLF001
+    integ._h_abs = h
     with pytest.raises(IntegrationError) as info:
         integ.advance(0.1, y0, t1)
     return str(info.value), info.value.t, info.value.h, counters(integ)
@@ -426,14 +426,14 @@ def test_loop_cache_is_keyed_on_every_file_it_compiles_in():
 def test_one_compiled_loop_per_process_and_argument_types():
     a, _ = held_system("chain_4")
     b, _ = held_system("heavy_top", seed=1)
-    loop = Radau(a)._loop  # noqa: SLF001
-    assert Radau(b)._loop is loop and fast_radau.loop_for(b.kernel_arguments()) is loop  # noqa: SLF001
+    loop = Radau(a)._loop
+    assert Radau(b)._loop is loop and fast_radau.loop_for(b.kernel_arguments()) is loop
 
 
 def test_matrix_free_and_system_jacobian_step_in_python(monkeypatch):
     system, _ = held_system("chain_4")
     monkeypatch.setattr(R, "DENSE_MAX", -1)
-    assert Radau(system)._loop is None  # noqa: SLF001
+    assert Radau(system)._loop is None
 
 
 def test_warm_up_compiles_and_forgets():
@@ -442,13 +442,13 @@ def test_warm_up_compiles_and_forgets():
     system, y0 = held_system("heavy_top", seed=5)
     warm, fresh = Radau(system, rtol=1e-8, atol=1e-10), Radau(system, rtol=1e-8, atol=1e-10)
     warm.warm_up(0.1, y0)
-    assert warm._loop.entry is not None  # noqa: SLF001 - compiled (or loaded): straight to it
-    assert (warm.nfev, warm.nsteps, warm.njev, warm.nlu, warm._h_abs) == (0, 0, 0, 0, None)  # noqa: SLF001
+    assert warm._loop.entry is not None  # compiled (or loaded): straight to it
+    assert (warm.nfev, warm.nsteps, warm.njev, warm.nlu, warm._h_abs) == (0, 0, 0, 0, None)
     np.testing.assert_array_equal(warm.advance(0.1, y0, 0.2), fresh.advance(0.1, y0, 0.2))
     assert counters(warm) == counters(fresh)
     single = Radau(system, rtol=1e-8, atol=1e-10)
     single.warm_up(0.1, y0, loop=False)  # what "auto" needs: the single step only
-    assert single.nfev == 0 and single._h_abs is None  # noqa: SLF001
+    assert single.nfev == 0 and single._h_abs is None
 
 
 def test_a_recorded_radau_run_resimulates_bit_for_bit(tmp_path):
@@ -472,7 +472,7 @@ def test_python_driver_on_the_numpy_reference_agrees():
     runs = []
     for backend in ("numba", "numpy"):
         sim = Simulator(load_scene("hinge_chain"), integrator="radau", rtol=1e-8, atol=1e-10, backend=backend)
-        assert (sim.integrator._loop is not None) == (backend == "numba")  # noqa: SLF001
+        assert (sim.integrator._loop is not None) == (backend == "numba")
         for _ in range(30):
             sim.advance(0.01)
         runs.append((sim.state.copy(), sim.integrator.nsteps, sim.integrator.nrejected, sim.integrator.njev))
@@ -523,11 +523,11 @@ def test_detection_mode_stops_at_the_accepted_state():
     of "auto" evaluates it); the next plain call continues from it as from the end of a call."""
     system, y0 = held_system(stiff_hinges())
     stopped, plain = (Radau(system, rtol=1e-8, atol=1e-10) for _ in range(2))
-    stopped._trace = np.zeros(10)  # noqa: SLF001 - the ends of the steps
+    stopped._trace = np.zeros(10)  # the ends of the steps
     y_s = y0.copy()
     t, code = stopped.advance_detecting(0.1, y_s, 1.0, None, None, _detection(y0.size, math.inf, 3.0))
     assert code == fast_radau.REASON_NONSTIFF and stopped.nsteps == 3
-    assert t == stopped._trace[2] < 1.0  # noqa: SLF001
+    assert t == stopped._trace[2] < 1.0
     y_p = plain.advance(0.1, y0, t)
     np.testing.assert_array_equal(y_s, y_p)
     assert counters(stopped)[1:] == counters(plain)[1:] and stopped.nfev == plain.nfev + 1

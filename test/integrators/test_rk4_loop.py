@@ -69,7 +69,7 @@ def test_compiled_march_equals_the_python_driver_bit_for_bit(seed, base):
     system, y0 = held_system(random_chain(seed, base=base), seed)
     compiled = RK4(system, step=1e-3)
     python = RK4(system, step=1e-3)
-    python._march_system = None  # noqa: SLF001 - the Python driver on the same system
+    python._march_system = None  # the Python driver on the same system
     assert np.array_equal(compiled.advance(0.1, y0, 0.125), python.advance(0.1, y0, 0.125))
 
 

@@ -79,8 +79,9 @@ def expected_messages(sim, t_ns: int) -> dict:
                                               "wrench": {"force": _xyz(w.force), "torque": _xyz(w.moment)}}
     bodies = sim.body_states()
     world = {"stamp": _stamp(t_ns), "frame_id": "world"}
-    out["/gyro_sim/poses"] = {"header": world, "poses": [{"position": _xyz(b.position), "orientation": _quat(b.quaternion)}
-                                                       for b in bodies]}
+    out["/gyro_sim/poses"] = {"header": world,
+                              "poses": [{"position": _xyz(b.position), "orientation": _quat(b.quaternion)}
+                                        for b in bodies]}
     out["/tf"] = {"transforms": [{"header": world, "child_frame_id": b.name,
                                   "transform": {"translation": _xyz(b.position), "rotation": _quat(b.quaternion)}}
                                  for b in bodies]}

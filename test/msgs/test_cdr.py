@@ -23,7 +23,8 @@ def snapshot(suffix: str, n: int = 3) -> Snapshot:
     q = rng.normal(size=(n, 4))
     return Snapshot(
         time=1.25, joint_names=tuple(f"j{k}{suffix * k}" for k in range(2 * n)), position=rng.normal(size=2 * n),
-        velocity=rng.normal(size=2 * n), effort=np.zeros(2 * n), axis_names=("a" + suffix,), axis_moments=np.array([0.5]),
+        velocity=rng.normal(size=2 * n), effort=np.zeros(2 * n), axis_names=("a" + suffix,),
+        axis_moments=np.array([0.5]),
         integrator="rk4", error_estimate=None, body_names=names, body_position=rng.normal(size=(n, 3)),
         body_quaternion=q / np.linalg.norm(q, axis=1, keepdims=True), wrench_force=rng.normal(size=(n, 3)),
         wrench_moment=rng.normal(size=(n, 3)),

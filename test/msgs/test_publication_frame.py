@@ -103,7 +103,7 @@ def test_node_outputs_are_the_builders_bytes_and_refuse_non_finite_numbers(backe
         assert [b[2] for b in batch] == want
     bad = sim.state
     bad[sim.model.i_vel.start + 1] = np.nan  # a joint rate: every output of the bodies past it
-    sim._y, sim._cache, sim._kin_ok = bad, None, False  # noqa: SLF001 - a state the integrator would refuse
+    sim._y, sim._cache, sim._kin_ok = bad, None, False  # a state the integrator would refuse
     with pytest.raises(SimulationError, match="non-finite (position|velocity)"):
         out.prepare_state(M.time_ns(sim.time), sim)
 
@@ -221,7 +221,7 @@ def test_node_diagnostics_refuse_a_non_finite_scalar(backend):
     for _ in range(2):  # the frame made
         out.prepare_state(M.time_ns(sim.time), sim)
     out.prepare_state(M.time_ns(sim.time), sim, None)  # with diagnostics: all finite
-    sim._work = float("nan")  # noqa: SLF001 - a scalar only the diagnostics carry
+    sim._work = float("nan")  # a scalar only the diagnostics carry
     out.prepare_state(M.time_ns(sim.time), sim)  # not in these messages
     with pytest.raises(SimulationError, match="non-finite work"):
         out.prepare_state(M.time_ns(sim.time), sim, None)

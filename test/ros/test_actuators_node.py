@@ -7,9 +7,9 @@ import yaml
 
 pytest.importorskip("rclpy", reason="the ROS 2 node needs rclpy (pip install '.[ros]')")
 
-from test.dynamics.test_actuators import wheel_scene  # noqa: E402
+from test.dynamics.test_actuators import wheel_scene
 
-from .helpers import NodeProcess, new_domain_id  # noqa: E402
+from .helpers import NodeProcess, new_domain_id
 
 
 def test_node_refuses_a_method_the_actuators_do_not_take_in_one_line(tmp_path):

@@ -9,9 +9,9 @@ import yaml
 
 pytest.importorskip("rclpy", reason="the ROS 2 node needs rclpy (pip install '.[ros]')")
 
-from sensor_msgs.msg import Imu  # noqa: E402
+from sensor_msgs.msg import Imu
 
-from .helpers import DISCOVERY_TIMEOUT, Client, NodeProcess, new_domain_id, stamp_ns, wait_for  # noqa: E402
+from .helpers import DISCOVERY_TIMEOUT, Client, NodeProcess, new_domain_id, stamp_ns, wait_for
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENE = ROOT / "config" / "imu_pendulum.yaml"

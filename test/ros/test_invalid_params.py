@@ -7,9 +7,9 @@ import pytest
 
 pytest.importorskip("rclpy", reason="the ROS 2 node needs rclpy (pip install '.[ros]')")
 
-from sensor_msgs.msg import JointState  # noqa: E402
+from sensor_msgs.msg import JointState
 
-from .helpers import ROOT, Client, new_domain_id, node_command, ros_env  # noqa: E402
+from .helpers import ROOT, Client, new_domain_id, node_command, ros_env
 
 CASES = {
     "physics_rate:=-5.0": "physics_rate: must be >= 1",
@@ -106,8 +106,8 @@ def test_record_and_stats_file_into_directories_are_refused(tmp_path, target, ne
 def test_the_node_refuses_an_existing_record_file_and_leaves_it_unchanged(tmp_path):
     old = tmp_path / "previous_log.mcap"
     old.write_bytes(b"a previous log")
-    r = subprocess.run(node_command(f"record:={old}", "duration:=1.0"), cwd=ROOT, env=ros_env(new_domain_id(), tmp_path),
-                       text=True, capture_output=True, timeout=60)
+    r = subprocess.run(node_command(f"record:={old}", "duration:=1.0"), cwd=ROOT,
+                       env=ros_env(new_domain_id(), tmp_path), text=True, capture_output=True, timeout=60)
     assert r.returncode == 2, r.stderr
     assert f"record: {old}: exists" in r.stderr and "Traceback" not in r.stderr, r.stderr
     assert old.read_bytes() == b"a previous log"

@@ -18,7 +18,7 @@ def test_live_recorder_writes_the_bytes_it_gets(tmp_path):
     rec = LiveRecorder(str(tmp_path / "live.mcap"), scene=sim.scene, params={})
     assert rec.writer.flush_period == DEFAULT_FLUSH_PERIOD <= 0.2 and SEND_PERIOD <= 0.05
     sent = []
-    for i in range(5):
+    for _ in range(5):
         t = M.time_ns(sim.time)
         for topic, msgtype, data in pub.messages(sim.snapshot(), t):
             rec.raw(topic, msgtype, t, data)
@@ -66,7 +66,7 @@ def test_a_stopped_writer_drops_the_oldest_publications_never_commands(tmp_path)
     pub = M.Publication(sim.model.names)
     frame = pub.frame(sim.snapshot().joint_names, wrenches=True, poses=True, tf=True)
     rec = LiveRecorder(str(tmp_path / "stall.mcap"), scene=sim.scene, params={}, max_backlog_bytes=100_000)
-    os.kill(rec._proc.pid, signal.SIGSTOP)  # noqa: SLF001
+    os.kill(rec._proc.pid, signal.SIGSTOP)
     sent, commands = [], []
 
     def publish() -> int:
@@ -90,7 +90,7 @@ def test_a_stopped_writer_drops_the_oldest_publications_never_commands(tmp_path)
                 time.sleep(2 * SEND_PERIOD)  # the sender takes what waits, drops, and writes what the pipe takes
         assert rec.dropped_publications > 0 and rec.failure is None
     finally:
-        os.kill(rec._proc.pid, signal.SIGCONT)  # noqa: SLF001
+        os.kill(rec._proc.pid, signal.SIGCONT)
     # resumed, the writer catches up; what comes after is kept whole
     deadline = time.monotonic() + 60.0
     while rec.backlog_bytes and time.monotonic() < deadline:

@@ -222,7 +222,8 @@ def test_a_command_flood_keeps_only_the_latest_for_the_next_step():
     run_until(loop, lambda: loop.steps >= 3)
     assert out.commands == [(0, b"%d" % i) for i in range(10_000)]
     assert loop.sim.axis_moments[1] == pytest.approx(1e-6 * 9999)
-    assert loop.commands.counters.accepted == 10_000 and loop.commands.counters.superseded == 9_999 and loop.commands.counters.rejected == 1
+    counters = loop.commands.counters
+    assert counters.accepted == 10_000 and counters.superseded == 9_999 and counters.rejected == 1
 
 
 def test_gc_pauses_are_timed_from_the_collectors_callbacks():
@@ -395,7 +396,8 @@ def test_a_fifo_thread_that_cannot_keep_up_goes_back_to_the_normal_scheduler(mon
     from gyro_sim.ros import loop_pacing as loop_module
 
     calls = []
-    monkeypatch.setattr(loop_module, "realtime_priority", lambda p: (calls.append(("fifo", p)) or (p, f"SCHED_FIFO priority {p}")))
+    monkeypatch.setattr(loop_module, "realtime_priority",
+                        lambda p: (calls.append(("fifo", p)) or (p, f"SCHED_FIFO priority {p}")))
     monkeypatch.setattr(loop_module, "normal_priority", lambda: calls.append(("normal",)))
     clock = FakeClock()
     loop, out = make_loop(clock, step_cost=3 * 4e-3, thread_priority=7)  # a 4 ms step costs 12 ms

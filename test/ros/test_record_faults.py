@@ -20,9 +20,9 @@ import pytest
 
 pytest.importorskip("rclpy", reason="the ROS 2 node needs rclpy (pip install '.[ros]')")
 
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray
 
-from .helpers import (  # noqa: E402
+from .helpers import (
     DISCOVERY_TIMEOUT, ROOT, Client, NodeProcess, children, diag_values, new_domain_id, node_command, ros_env,
     rss_mb, running, wait_for, writer_of,
 )

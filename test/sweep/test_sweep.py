@@ -14,11 +14,11 @@ import pytest
 
 pytest.importorskip("distributed")
 
-from gyro_sim.cli import main  # noqa: E402
-from gyro_sim.sweep import execute, results  # noqa: E402
-from gyro_sim.sweep.commands import find_sweep  # noqa: E402
-from gyro_sim.sweep.point import TIMING_COLUMNS  # noqa: E402
-from gyro_sim.sweep.spec import SweepError, load_sweep  # noqa: E402
+from gyro_sim.cli import main
+from gyro_sim.sweep import execute, results
+from gyro_sim.sweep.commands import find_sweep
+from gyro_sim.sweep.point import TIMING_COLUMNS
+from gyro_sim.sweep.spec import SweepError, load_sweep
 
 #: a small grid: the sleeping top of config/sweeps/sleeping_top.yaml, 3 x 4 points, 0.3 s each
 SMALL = {

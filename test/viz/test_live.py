@@ -21,7 +21,7 @@ pytest.importorskip("rclpy")
 pytest.importorskip("rerun")
 pytest.importorskip("sensor_msgs.msg")
 
-from test.ros.helpers import ROOT, Client, NodeProcess, new_domain_id, ros_env, wait_for  # noqa: E402
+from test.ros.helpers import ROOT, Client, NodeProcess, new_domain_id, ros_env, wait_for
 
 #: a node's start (a cold numba cache compiles for ~30 s), DDS discovery, a capture (s)
 START_TIMEOUT = 180.0
@@ -62,7 +62,8 @@ class Live:
         self.err_path = tmp / f"{name}.err"
         self.out_path = tmp / f"{name}.out"
         self.proc = subprocess.Popen([sys.executable, "-m", "gyro_sim.cli", "view", "--live", *map(str, args)],
-                                     cwd=ROOT, env=env, stdout=open(self.out_path, "w"), stderr=open(self.err_path, "w"))
+                                     cwd=ROOT, env=env, stdout=open(self.out_path, "w"),
+                                     stderr=open(self.err_path, "w"))
 
     @property
     def stderr(self) -> str:
@@ -155,7 +156,8 @@ def test_save_for_seconds_holds_the_moving_chain_and_the_commanded_plots(tmp_pat
     for b in scene.bodies:
         t = times(got[f"/world/{b.name}"])
         assert t.size > 40 and np.all(np.diff(t) > 0), f"{b.name}: {t.size} poses"
-        trans = np.array([v[0] if isinstance(v[0], list) else v for v in column(got[f"/world/{b.name}"], "Transform3D:translation")])
+        trans = np.array([v[0] if isinstance(v[0], list) else v
+                          for v in column(got[f"/world/{b.name}"], "Transform3D:translation")])
         assert len(trans) == t.size
         assert column(got[f"/world/{b.name}/body"], "Capsules3D:lengths")
     # the chain moves: the last body's origin is not where it started

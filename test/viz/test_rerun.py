@@ -16,7 +16,8 @@ from gyro_sim.log.mcap_log import iter_messages
 from test.conftest import SCENE, gyro_sim
 
 rr = pytest.importorskip("rerun")
-RERUN = str(Path(sys.executable).with_name("rerun")) if Path(sys.executable).with_name("rerun").is_file() else shutil.which("rerun")
+_BESIDE = Path(sys.executable).with_name("rerun")  # the venv's own binary, else the one on PATH
+RERUN = str(_BESIDE) if _BESIDE.is_file() else shutil.which("rerun")
 pytestmark = pytest.mark.skipif(RERUN is None, reason="the rerun binary (rerun-sdk) is not installed")
 
 
@@ -37,7 +38,8 @@ def column(batches, name):
 def test_rerun_mcap_convert_holds_joint_scalars_and_body_transforms(recorded, tmp_path):
     path, rec = recorded
     rrd = tmp_path / "log.rrd"
-    r = subprocess.run([RERUN, "mcap", "convert", str(path), "-o", str(rrd)], capture_output=True, text=True, timeout=120)
+    r = subprocess.run([RERUN, "mcap", "convert", str(path), "-o", str(rrd)], capture_output=True, text=True,
+                       timeout=120)
     assert r.returncode == 0, r.stderr
     got = chunks(rrd)
     bodies = [b.name for b in load_scene(SCENE).bodies]

@@ -21,7 +21,8 @@ from test.conftest import gyro_sim
 pytest.importorskip("rerun")
 Image = pytest.importorskip("PIL.Image")  # a dependency of rerun-sdk
 
-RERUN = str(Path(sys.executable).with_name("rerun")) if Path(sys.executable).with_name("rerun").is_file() else shutil.which("rerun")
+_BESIDE = Path(sys.executable).with_name("rerun")  # the venv's own binary, else the one on PATH
+RERUN = str(_BESIDE) if _BESIDE.is_file() else shutil.which("rerun")
 VULKAN = ctypes.util.find_library("vulkan") is not None and bool(
     glob.glob("/usr/share/vulkan/icd.d/*.json") + glob.glob("/etc/vulkan/icd.d/*.json"))
 pytestmark = [
