@@ -160,6 +160,7 @@ def big_log(tmp_path_factory):
 
 
 @pytest.mark.parametrize("sig", SIGNALS, ids=lambda s: s.name)
+@pytest.mark.slow
 def test_recover_interrupted_ends_at_once_and_leaves_no_output(big_log, tmp_path, sig):
     out = tmp_path / "fixed.mcap"
     cmd = Command("recover", big_log, "-o", out)
@@ -177,6 +178,7 @@ def test_recover_interrupted_ends_at_once_and_leaves_no_output(big_log, tmp_path
 RUN_DURATION = 100_000
 
 
+@pytest.mark.slow
 def test_run_interrupted_while_recording_publishes_the_closed_log_and_says_so(tmp_path):
     log = tmp_path / "run.mcap"
     cmd = Command("run", "--scene", "heavy_top", "--duration", RUN_DURATION, "--record", log, "--flush-period", "0.05")
@@ -191,6 +193,7 @@ def test_run_interrupted_while_recording_publishes_the_closed_log_and_says_so(tm
 
 
 @pytest.mark.parametrize("sig", SIGNALS, ids=lambda s: s.name)
+@pytest.mark.slow
 def test_run_without_a_log_interrupted_says_so_in_one_line(sig):
     cmd = Command("run", "--scene", "heavy_top", "--duration", RUN_DURATION)
     cmd.wait_until(lambda: "t = " in cmd.stderr, "the run started")
@@ -221,6 +224,7 @@ def long_log(tmp_path_factory):
 
 
 @pytest.mark.parametrize("sig", SIGNALS, ids=lambda s: s.name)
+@pytest.mark.slow
 def test_view_interrupted_leaves_no_recording(long_log, tmp_path, sig):
     pytest.importorskip("rerun", reason="view needs rerun-sdk")
     out = tmp_path / "view.rrd"
@@ -250,6 +254,7 @@ batch: 1
 
 @pytest.mark.parametrize("workers", [0, 2])
 @pytest.mark.parametrize("sig", SIGNALS, ids=lambda s: s.name)
+@pytest.mark.slow
 def test_sweep_interrupted_keeps_finished_parts_and_writes_no_results(tmp_path, sig, workers):
     pytest.importorskip("distributed", reason="sweeps need dask.distributed")
     spec = tmp_path / "grid.yaml"

@@ -131,6 +131,7 @@ def _one_line_no_traceback(r, *needles):
         assert n in err, err
 
 
+@pytest.mark.slow
 def test_run_record_refuses_an_existing_log_and_force_replaces_it(tmp_path):
     out = tmp_path / "old.mcap"
     out.write_bytes(b"previous log")
@@ -143,6 +144,7 @@ def test_run_record_refuses_an_existing_log_and_force_replaces_it(tmp_path):
     assert read_info(out).message_count > 0
 
 
+@pytest.mark.slow
 def test_run_record_never_writes_over_its_scene(tmp_path):
     scene = tmp_path / "scene.yaml"
     scene.write_bytes(SCENE.read_bytes())
@@ -155,6 +157,7 @@ def test_run_record_never_writes_over_its_scene(tmp_path):
     assert scene.read_bytes() == SCENE.read_bytes()
 
 
+@pytest.mark.slow
 def test_run_record_into_a_directory_or_a_missing_one_is_bad_input(tmp_path):
     for out, needle in ((tmp_path, "is a directory"), (tmp_path / "no" / "x.mcap", "does not exist")):
         r = gyro_sim("run", "--scene", SCENE, "--duration", "0.02", "--record", out)
@@ -162,6 +165,7 @@ def test_run_record_into_a_directory_or_a_missing_one_is_bad_input(tmp_path):
         _one_line_no_traceback(r, needle)
 
 
+@pytest.mark.slow
 def test_recover_onto_a_hard_link_of_its_input_is_refused_and_the_input_kept(recorded, tmp_path):
     log, _ = recorded
     src = tmp_path / "in.mcap"
@@ -176,6 +180,7 @@ def test_recover_onto_a_hard_link_of_its_input_is_refused_and_the_input_kept(rec
         assert src.read_bytes() == before
 
 
+@pytest.mark.slow
 def test_recover_default_output_is_not_overwritten_without_force(recorded, tmp_path):
     log, _ = recorded
     src = tmp_path / "run.mcap"
@@ -191,6 +196,7 @@ def test_recover_default_output_is_not_overwritten_without_force(recorded, tmp_p
     assert read_info(default).message_count == read_info(src).message_count
 
 
+@pytest.mark.slow
 def test_view_save_refuses_the_log_itself_and_existing_files(recorded, tmp_path):
     log, _ = recorded
     src = tmp_path / "run.mcap"
@@ -270,6 +276,7 @@ def test_the_later_of_two_writers_is_refused_and_the_first_file_kept(tmp_path):
     assert out.read_bytes() == b"forced" and list(tmp_path.iterdir()) == [out]
 
 
+@pytest.mark.slow
 def test_two_recover_processes_on_one_output_one_wins_and_the_other_exits_2(recorded, tmp_path):
     log, _ = recorded
     out = tmp_path / "fixed.mcap"

@@ -301,6 +301,7 @@ def test_precession_state_layout():
 
 # ------------------------------------------------------------ regular precession, engines
 @pytest.mark.parametrize("case", PRECESSION_CASES)
+@pytest.mark.slow
 def test_regular_precession_independent_engine(case):
     """Pinocchio (DOP853, rtol = atol = 1e-12) keeps theta_k and psi_k' to round-off."""
     scene_dict = PRECESSIONS[case]
@@ -312,6 +313,7 @@ def test_regular_precession_independent_engine(case):
 
 
 @pytest.mark.parametrize("case", ["double_gyro_plus.yaml", "three_plus_minus"])
+@pytest.mark.slow
 def test_regular_precession_independent_engine_perturbed(case):
     """A 5 % error in phi_k' breaks the precession: the checks above can fail."""
     scene_dict = _perturbed(PRECESSIONS[case])
@@ -320,6 +322,7 @@ def test_regular_precession_independent_engine_perturbed(case):
     assert precession_deviation(E, R, _kappa(scene_dict)) > PERTURBED_MIN
 
 
+@pytest.mark.slow
 def test_general_n_printed_sign_fails():
     """The transcription's eps_ql (for eps_kl) in the inner sum of the general-n rows gives a
     different phi_2' for n = 3, eps = (+1, -1), and that state does not precess regularly."""
@@ -413,6 +416,7 @@ def _check_integrals(chain, E, R, reference, label):
 
 
 @pytest.mark.parametrize("n", GENERIC_N)
+@pytest.mark.slow
 def test_integrals_independent_engine(n):
     scene = load_scene(generic_chain(n))
     chain = lg.LagrangeChain.from_scene(scene)

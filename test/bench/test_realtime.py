@@ -13,6 +13,7 @@ pytest.importorskip("rclpy", reason="the realtime bench runs the ROS 2 node (pip
 from test.ros.helpers import ROOT
 
 
+@pytest.mark.slow
 def test_bench_realtime_quick(tmp_path):
     r = subprocess.run([sys.executable, "-m", "gyro_sim.cli", "bench", "realtime", "--quick", "--out", str(tmp_path)],
                        cwd=ROOT, capture_output=True, text=True, timeout=170)

@@ -20,6 +20,10 @@ from gyro_sim.bench import spin_sweep as ss
 from gyro_sim.bench import stability as st
 from gyro_sim.scene.load import load_scene
 
+#: the tests here (most of them) read the report `gyro-sim bench stability --quick` writes once per run (a
+#: session fixture of half a minute or more): outside the fast lane
+pytestmark = pytest.mark.slow
+
 mujoco = pytest.importorskip("mujoco")
 
 

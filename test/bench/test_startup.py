@@ -78,6 +78,7 @@ def test_the_source_tree_is_found_from_the_package():
     assert (root / "setup.py").is_file() and (root / "gyro_sim" / "bench" / "startup.py").is_file()
 
 
+@pytest.mark.slow
 def test_a_run_is_timed_to_its_end_with_its_cpu():
     t = startup.timed_run([sys.executable, "-c", BURN_CODE], dict(os.environ), timeout=TIMEOUT)
     assert t.cpu >= BURN
@@ -104,6 +105,7 @@ def test_what_a_measured_process_leaves_running_is_ended(tmp_path):
     assert not running(left)
 
 
+@pytest.mark.slow
 def test_the_first_message_of_a_fake_node_is_timed_with_its_cpu(tmp_path):
     pytest.importorskip("rclpy")
     pytest.importorskip("sensor_msgs.msg")
@@ -128,6 +130,7 @@ def test_the_minimal_rclpy_node_is_timed_as_the_node_is(tmp_path):
     assert 0 < t.cpu and 0 < t.wall < TIMEOUT
 
 
+@pytest.mark.slow
 def test_a_subscriber_started_after_a_node_is_timed_from_its_subscription(tmp_path):
     pytest.importorskip("rclpy")
     pytest.importorskip("sensor_msgs.msg")
@@ -147,6 +150,7 @@ def test_a_node_that_never_says_it_runs_is_an_error_for_the_late_subscriber(tmp_
         startup.late_subscriber(sys.executable, NO_SCENE, env, timeout=TIMEOUT, settle=0)
 
 
+@pytest.mark.slow
 def test_a_node_that_never_publishes_is_an_error(tmp_path):
     pytest.importorskip("rclpy")
     env = dict(os.environ, ROS_DOMAIN_ID=str(startup.DOMAIN_BASE + os.getpid() % startup.DOMAIN_SPAN),

@@ -82,6 +82,7 @@ def test_viscous_spin_down_is_exponential_with_the_effective_inertia(carrier, ba
 
 
 @pytest.mark.filterwarnings("ignore::gyro_sim.integrators.StiffnessWarning")  # radau takes the stuck wheel
+@pytest.mark.slow
 def test_coulomb_spin_down_is_linear_then_stays_at_rest():
     tau_c, stick = 0.05, 1e-2
     sim = Simulator(wheel_scene("free", friction={"coulomb": tau_c, "stick_speed": stick}), integrator="auto",
@@ -217,6 +218,7 @@ def test_friction_torque_is_basilisks(stribeck):
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.slow
 def test_an_a_stable_fixed_step_brings_a_coulomb_wheel_to_rest(backend):
     """gauss4 at a step 60 times the stick region's time constant: the wheel stops, as the
     closed form says, and rests at zero speed (an explicit step this long chatters about it)."""
@@ -273,6 +275,7 @@ def test_limits_where_there_is_no_commanded_torque_are_refused():
 
 @pytest.mark.skipif(not kernel.available(), reason="numba missing")
 @pytest.mark.parametrize("integrator", ["rk4", "dop853", "radau", "gauss4"])
+@pytest.mark.slow
 def test_the_compiled_kernel_integrates_the_actuators_as_the_reference(integrator):
     """Same motion, efforts and works on both backends, to round-off."""
     runs = []
@@ -304,6 +307,7 @@ def test_a_scene_without_limits_keeps_the_held_spin_layout():
     assert messages.FRICTION_WORK_KEY not in messages.dynamics_values(sim.snapshot())
 
 
+@pytest.mark.slow
 def test_the_cli_refuses_a_method_the_actuators_do_not_take_in_one_line(tmp_path):
     import subprocess
     import sys

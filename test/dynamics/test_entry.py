@@ -226,6 +226,7 @@ print(json.dumps(counts))
 """
 
 
+@pytest.mark.slow
 def test_entry_views_allocate_nothing():
     """The views rhs_entry cuts from the buffer allocate nothing: eleven evaluations inside one
     compiled call count the same allocations as one (the arguments' unboxing at the call;

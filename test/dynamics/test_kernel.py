@@ -213,6 +213,7 @@ def test_unavailable_numba_is_reported(monkeypatch):
 
 # --- trajectories ----------------------------------------------------------------------------
 @pytest.mark.parametrize("seed,base", [(0, "fixed"), (3, "free"), (5, "moving")])
+@pytest.mark.slow
 def test_trajectory_equals_reference(seed, base):
     """One second of DOP853 at rtol 1e-11 with commands held: the same final state."""
     model, ref, fst = systems(chain_scene(seed, base))

@@ -54,6 +54,7 @@ print(json.dumps(out))
 """
 
 
+@pytest.mark.slow
 def test_classic_path_allocates_nothing():
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     env = {**os.environ, "NUMBA_NRT_STATS": "1"}

@@ -120,6 +120,7 @@ def test_the_null_kernel_only_zeroes_the_rate():
     assert not ydot.any()
 
 
+@pytest.mark.slow
 def test_outputs_and_publications_share_one_specialization():
     code = ("import numpy as np\nfrom gyro_sim.simulator import Simulator\n"
             "from gyro_sim.dynamics import outputs as fast_outputs\n"

@@ -252,6 +252,7 @@ CONSERVATIVE = [(seed, base) for seed in range(4) for base in ("fixed", "free")]
 
 
 @pytest.mark.parametrize("seed,base", CONSERVATIVE)
+@pytest.mark.slow
 def test_oracle_energy_conserved(seed, base):
     """T + V (pinocchio's own energy functions) over 1 s of a random conservative chain."""
     chain = PinChain(records(random_chain(seed, base, conservative=True)))
@@ -267,6 +268,7 @@ def test_oracle_energy_conserved(seed, base):
 
 
 @pytest.mark.parametrize("seed,base", [(0, "fixed"), (5, "free"), (7, "moving")])
+@pytest.mark.slow
 def test_oracle_rotor_spins(seed, base):
     """Eq (29): a torque rotor's absolute spin grows as L_i t / A_i whatever the carrier does;
     a speed rotor keeps its kappa_i'."""
@@ -315,6 +317,7 @@ def _lagrange_chain(kappa: float, thetas, eps21: int) -> tuple[dict, list[float]
     (3.0, [0.6], 1), (-4.0, [2.0], 1),
     (3.0, [0.6, 0.9], 1), (3.0, [0.6, 0.9], -1), (5.0, [2.2, 1.2], -1),
 ])
+@pytest.mark.slow
 def test_oracle_regular_precession(kappa, thetas, eps21):
     """Eq (88) (THEORY section 4): started in it, theta_k and psi_k' stay constant."""
     d, _ = _lagrange_chain(kappa, thetas, eps21)
@@ -380,6 +383,7 @@ def _joint_closure(scene: Scene, wrenches, moments: dict[str, float]) -> None:
 
 
 @pytest.mark.parametrize("seed,base", CASES)
+@pytest.mark.slow
 def test_random_chain_matches_oracle(seed, base):
     d = random_chain(seed, base)
     scene = _gyro_scene(d)

@@ -287,6 +287,7 @@ def test_every_scene_compiled_equals_python_driver(scene):
 
 
 @pytest.mark.parametrize("scene", ("hinge_chain", "free_chain_rotors", "vibrating_base"))
+@pytest.mark.slow
 def test_python_driver_on_the_numpy_reference_agrees(scene):
     """The Python driver on the numpy reference (ChainODE: another implementation of the rhs,
     equal to round-off) and the compiled loop: the same steps, the state after 0.5 s equal to

@@ -111,6 +111,7 @@ def test_body_rate_bound_bounds_every_body_rate(scene):
 
 
 @pytest.mark.parametrize("n", [2, 50, 1000])
+@pytest.mark.slow
 def test_body_rate_bound_is_exact_on_a_spherical_chain_of_any_length(n):
     """On a spherical chain the bound is the largest |w^k| of the compiled outputs (eq 34), to
     round-off, at random joint rates: it does not grow with the chain's length (the sum of

@@ -281,6 +281,7 @@ def test_bounded_retake_stops_the_simulator_with_the_reason():
 
 
 # ------------------------------------------------------------------ invariants
+@pytest.mark.slow
 def test_angular_momentum_of_a_free_chain():
     """Free-floating chain with rotors, gravity removed: 1e4 steps of 1 ms. World angular
     momentum is not a quadratic invariant of this state (quaternions times body rates: cubic),
@@ -324,6 +325,7 @@ class EulerBody:
 
 
 @pytest.mark.parametrize("dense", [True, False])
+@pytest.mark.slow
 def test_quadratic_invariants_of_a_free_rigid_body_to_round_off(dense):
     """Euler's equations keep 2T = w . I w and |L|^2 = |I w|^2, both quadratic: gauss4 keeps
     them to round-off, 1e4 steps of h = 10 ms (measured: relative drift <= 4.4e-15 at every

@@ -125,6 +125,7 @@ def _run(scene, T, moments=None, backend="auto", at=0.01, integrator="gauss4"):
 
 
 @pytest.mark.parametrize("backend", ["auto", "numpy"])
+@pytest.mark.slow
 def test_heavy_tip_runs(backend):
     """The heavy tip (mass ratio 1e6), 0.1 s: the Krylov-only gauss4 failed at t = 0.087 s
     (compiled) and at its first step (numpy: the reference rhs carries ~6e-8 relative round-off,
@@ -169,6 +170,7 @@ def test_step_moments_run():
 
 
 @pytest.mark.parametrize("case", ["heavy_tip", "step_moments"])
+@pytest.mark.slow
 def test_gauss4s_gets_through_the_hard_spots(case):
     """gauss4s (levels on: steps start in equal pieces where most need a retake) through the
     heavy tip's whip (retaken down to ~h / 2^12 within one step) and the step moments: no

@@ -185,6 +185,7 @@ def test_free_floating_chain_keeps_its_momenta_to_round_off():
     assert drift["gauss4"] >= 30 * drift["gauss4s"], drift
 
 
+@pytest.mark.slow
 def test_order_four_on_a_chain():
     """Global error at t = 0.2 s against dop853 at rtol 1e-13, for h = 20, 10, 5 ms: the ratio
     of successive errors tends to 2^4."""
@@ -221,6 +222,7 @@ def test_only_chains():
 
 
 @needs_numba
+@pytest.mark.slow
 def test_energy_stays_bounded_on_the_fast_double_gyroscope():
     """The double gyroscope spun at 1e3 rad/s (1 rad a 1 ms step), 2e4 steps: gauss4s's energy
     error stays at round-off level and does not grow (its largest over the second 10 s is no

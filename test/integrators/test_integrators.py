@@ -292,6 +292,7 @@ def test_fixed_step_order_linear(name):
 
 
 @pytest.mark.parametrize("name", FIXED)
+@pytest.mark.slow
 def test_fixed_step_order_symmetric_top(name):
     """Global error against the closed-form symmetric top: of the quaternion alone (where
     lie4 differs from rk4) and of the whole state."""
@@ -401,6 +402,7 @@ def test_error_estimate_against_true_local_error(name, steps):
 
 
 @pytest.mark.parametrize("name", ADAPTIVE)
+@pytest.mark.slow
 def test_adaptive_on_rigid_body(name):
     """Tight tolerance on the symmetric top; project keeps |q| = 1; invariants hold."""
     body = RigidBody([1.0, 1.0, 2.5])

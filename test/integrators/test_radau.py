@@ -130,6 +130,7 @@ def scipy_run(system, y0, t0, t1, rtol, atol, first_step):
 @pytest.mark.parametrize("scene, rtol, t1", [(hinge_pendulum(), 1e-6, 3.1), (stiff_hinges(), 1e-8, 1.1)],
                          ids=["pendulum", "stiff"])
 @pytest.mark.parametrize("compiled", (False, True))
+@pytest.mark.slow
 def test_accepted_steps_are_scipys(scene, rtol, t1, compiled):
     """From the same first step: scipy's steps (as many accepted, as many rejected, as many LU
     factorisations), at times equal to STEP_TIME_RTOL, the state at t1 equal to round-off."""
@@ -218,6 +219,7 @@ def test_lu_is_lapacks():
         assert np.abs(x - x_ref).max() <= 1e-12 * np.abs(x_ref).max()
 
 
+@pytest.mark.slow
 def test_textbook_lu_agrees_with_lapack():
     """The fallback LU (rad_lu, where numba offers no LAPACK): LAPACK's pivots, factors and
     solutions to round-off."""
@@ -465,6 +467,7 @@ def test_a_recorded_radau_run_resimulates_bit_for_bit(tmp_path):
     assert res.compared == rec.publications > 5 and res.max_deviation == 0.0, res.report()
 
 
+@pytest.mark.slow
 def test_python_driver_on_the_numpy_reference_agrees():
     """The Python driver on the numpy reference (ChainODE: another implementation of the rhs,
     equal to round-off) and the compiled loop: the same steps, the state after 0.3 s equal to

@@ -14,6 +14,7 @@ from gyro_sim.simulator import Simulator
 
 
 @pytest.mark.parametrize("scene", ["hinge_chain", "heavy_top", "stiff_fast_rotor"])
+@pytest.mark.slow
 def test_matrix_free_takes_the_dense_steps(scene, monkeypatch):
     runs = {}
     for free in (False, True):

@@ -28,6 +28,7 @@ def _refused_in_one_line(log, *needles):
         assert n in err, err
 
 
+@pytest.mark.slow
 def test_a_python_object_tag_in_the_embedded_scene_is_refused_and_never_run(recorded, tmp_path):
     log, _ = recorded
     marker = tmp_path / "pwned"
@@ -50,6 +51,7 @@ def test_a_deeply_nested_embedded_scene_is_refused(recorded, tmp_path):
     ("null", "must be a JSON object"),
     ("{not json", "is not JSON"),
 ])
+@pytest.mark.slow
 def test_unreadable_parameters_are_refused(recorded, tmp_path, params, needle):
     log, _ = recorded
     bad = rewrite(log, tmp_path / "p.mcap", params_json=params)
@@ -60,6 +62,7 @@ def test_unreadable_parameters_are_refused(recorded, tmp_path, params, needle):
 
 @pytest.mark.parametrize("key, value", [("step", "abc"), ("advance_dt", -0.01), ("rtol", None),
                                         ("integrator", "no_such")])
+@pytest.mark.slow
 def test_bad_recorded_parameters_are_refused_naming_the_key(recorded, tmp_path, key, value):
     log, _ = recorded
     p = _params(log)
@@ -93,6 +96,7 @@ def _nothing_simulated(monkeypatch):
     ("advance_dt", 1e-9, None),  # 4e8 steps
     ("step", 1e-12, "rk4"),  # a fixed-step integrator takes span / step steps whatever advance_dt is
 ])
+@pytest.mark.slow
 def test_a_tiny_step_is_refused_before_anything_runs(recorded, tmp_path, monkeypatch, key, value, integrator):
     log, _ = recorded
     p = _params(log)
@@ -109,6 +113,7 @@ def test_a_tiny_step_is_refused_before_anything_runs(recorded, tmp_path, monkeyp
     _refused_in_one_line(bad, "limit")
 
 
+@pytest.mark.slow
 def test_a_joint_state_stamped_far_in_the_future_cannot_hang_resimulation(recorded, tmp_path, monkeypatch):
     log, _ = recorded
     bad = rewrite(log, tmp_path / "future.mcap",
@@ -127,6 +132,7 @@ def test_a_joint_state_stamped_far_in_the_future_cannot_hang_resimulation(record
     ("/gyro_sim/events", "is the topic of std_msgs/msg/String"),
     ("/robot_description", "carries std_msgs/msg/String, not std_msgs/msg/Float64MultiArray"),
 ])
+@pytest.mark.slow
 def test_a_commands_topic_of_another_type_is_refused(recorded, tmp_path, monkeypatch, topic, needle):
     log, _ = recorded
     p = _params(log)
@@ -139,6 +145,7 @@ def test_a_commands_topic_of_another_type_is_refused(recorded, tmp_path, monkeyp
     _refused_in_one_line(bad, "commands_topic", needle)
 
 
+@pytest.mark.slow
 def test_a_schema_without_the_fields_of_its_type_is_refused_in_one_line(recorded, tmp_path):
     log, _ = recorded
     bad = rewrite(log, tmp_path / "fields.mcap", schemas={"std_msgs/msg/Float64MultiArray": "int32 other\n"})

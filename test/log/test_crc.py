@@ -104,6 +104,7 @@ def test_recover_of_a_log_cut_in_a_chunk_keeps_the_chunks_before(chunked, tmp_pa
 
 
 @pytest.mark.parametrize("command", [("view", "--save", "{out}"), ("replay", "--resimulate")])
+@pytest.mark.slow
 def test_commands_refuse_a_damaged_log_with_exit_2_and_one_line(chunked, tmp_path, command):
     path, chunks, _ = chunked
     start, length = _middle(chunks)

@@ -119,6 +119,7 @@ def test_a_log_with_imus_resimulates_bit_for_bit(imu_log):
     assert other.by_field["imu_linear_acceleration"] > 0 and other.by_field["imu_angular_velocity"] > 0
 
 
+@pytest.mark.slow
 def test_run_refuses_an_imu_rate_the_publications_cannot_sample(tmp_path):
     scene = tmp_path / "scene.yaml"
     data = scene_with([dict(SECOND, rate=30.0)])

@@ -6,6 +6,8 @@ from __future__ import annotations
 import tracemalloc
 from pathlib import Path
 
+import pytest
+
 from gyro_sim import load_scene
 from gyro_sim.msgs import messages as M
 from gyro_sim.log.mcap_log import LogWriter
@@ -16,6 +18,7 @@ CHANNELS = 12
 MAX_BYTES_PER_CHUNK = 300
 
 
+@pytest.mark.slow
 def test_chunk_indexes_cost_little_memory_and_the_summary_is_whole(tmp_path):
     from mcap.reader import make_reader
     from rosbags.highlevel import AnyReader

@@ -68,6 +68,7 @@ def mixed(tmp_path_factory):
     return path
 
 
+@pytest.mark.slow
 def test_a_log_mixing_two_robots_is_refused_in_one_line(mixed):
     from gyro_sim.log.record import read_schedule
     from gyro_sim.log.resim import resimulate

@@ -33,6 +33,7 @@ record_run(sim, sys.argv[1], duration=1000.0, chunk=0.01, publish_rate=100.0,
 """
 
 
+@pytest.mark.slow
 def test_sigkill_during_recording_loses_at_most_the_last_flush_period(tmp_path):
     log = tmp_path / "killed.mcap"
     proc = subprocess.Popen([sys.executable, "-c", WRITER, str(log)], cwd=ROOT, env=dict(os.environ),
@@ -78,6 +79,7 @@ def test_sigkill_during_recording_loses_at_most_the_last_flush_period(tmp_path):
     print(f"written {written[-1][1]:.2f} s, recovered {rec.end_ns / 1e9:.2f} s of simulated time, lost {lost:.2f} s")
 
 
+@pytest.mark.slow
 def test_cli_recover_and_sigterm_closes_cleanly(tmp_path):
     log = tmp_path / "run.mcap"
     proc = subprocess.Popen([sys.executable, "-m", "gyro_sim.cli", "run", "--scene", "heavy_top", "--duration", "1000",

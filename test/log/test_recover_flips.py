@@ -147,6 +147,7 @@ def _sweep(log: Path, tmp_path: Path, complete: bool):
     return problems, regions
 
 
+@pytest.mark.slow
 def test_every_intact_chunk_survives_a_flipped_byte_anywhere_in_a_complete_log(chunked, tmp_path):
     log, chunks, _ = chunked
     problems, regions = _sweep(log, tmp_path, complete=True)
@@ -156,6 +157,7 @@ def test_every_intact_chunk_survives_a_flipped_byte_anywhere_in_a_complete_log(c
     assert not problems, f"{len(problems)} of {sum(regions.values())} flips: {problems[:3]}"
 
 
+@pytest.mark.slow
 def test_every_intact_chunk_survives_a_flipped_byte_in_a_log_cut_short(chunked, tmp_path):
     log, chunks, _ = chunked
     start, length = chunks[-2]

@@ -26,6 +26,7 @@ def test_recorded_run_with_commands_resimulates_bit_for_bit(recorded):
     assert res.notes == []
 
 
+@pytest.mark.slow
 def test_cli_reports_deviation_zero(recorded):
     path, _ = recorded
     r = gyro_sim("replay", "--resimulate", path)
@@ -33,6 +34,7 @@ def test_cli_reports_deviation_zero(recorded):
     assert "largest deviation: 0.000e+00" in r.stdout and "bit-for-bit" in r.stdout
 
 
+@pytest.mark.slow
 def test_another_integrator_shows_a_deviation_and_says_why(recorded):
     path, _ = recorded
     res = resimulate(path, integrator="rk4")
@@ -98,6 +100,7 @@ def test_embedded_parameters_make_the_log_self_contained(recorded):
     assert p["command_schedule"] == [[t, v] for t, v in SCHEDULE]
 
 
+@pytest.mark.slow
 def test_run_records_zero_commands_and_resimulates(tmp_path):
     path = tmp_path / "cli.mcap"
     r = gyro_sim("run", "--scene", "double_gyro_plus", "--duration", "0.2", "--record", path, "--publish-rate", "50")

@@ -37,6 +37,7 @@ REJECTED = 10
 PROBES, PROBE_WAIT = 10, 3.0
 
 
+@pytest.mark.slow
 def test_every_command_received_is_in_the_log(tmp_path):
     from rosbags.highlevel import AnyReader
 

@@ -24,6 +24,7 @@ CASES = {
 }
 
 
+@pytest.mark.slow
 def test_invalid_parameters_refused_before_publishing(tmp_path):
     domain = new_domain_id()
     client = Client(domain)
@@ -49,6 +50,7 @@ def test_invalid_parameters_refused_before_publishing(tmp_path):
         client.close()
 
 
+@pytest.mark.slow
 def test_shipped_params_file_runs(tmp_path):
     """config/params.yaml starts the node (a later -p overrides it) and a bounded run exits 0."""
     domain = new_domain_id()
@@ -103,6 +105,7 @@ def test_record_and_stats_file_into_directories_are_refused(tmp_path, target, ne
             _validate(**{name: str(target(tmp_path))})
 
 
+@pytest.mark.slow
 def test_the_node_refuses_an_existing_record_file_and_leaves_it_unchanged(tmp_path):
     old = tmp_path / "previous_log.mcap"
     old.write_bytes(b"a previous log")

@@ -12,6 +12,7 @@ from gyro_sim.safe_paths import OutputError
 from gyro_sim.ros.recorder import SEND_PERIOD, WRITER_NICE, LiveRecorder
 
 
+@pytest.mark.slow
 def test_live_recorder_writes_the_bytes_it_gets(tmp_path):
     sim = Simulator(load_scene("hinge_chain"))
     pub = M.Publication(sim.model.names)
@@ -51,6 +52,7 @@ def test_the_writer_process_runs_at_a_lower_priority_than_the_node(tmp_path):
 AFTER_RESUME = 10
 
 
+@pytest.mark.slow
 def test_a_stopped_writer_drops_the_oldest_publications_never_commands(tmp_path):
     """The writer process stopped (SIGSTOP): past max_backlog_bytes the oldest publications
     waiting are dropped whole and counted, the commands and events never; resumed, the log holds

@@ -25,6 +25,9 @@ from std_srvs.srv import Trigger
 
 from .helpers import DISCOVERY_TIMEOUT, ROOT, Client, NodeProcess, new_domain_id, wait_for
 
+#: these tests share real nodes over DDS, started for the module (seconds each): outside the fast lane
+pytestmark = pytest.mark.slow
+
 SCENE = "hinge_chain"
 AXES = ("wheel2", "arm3", "arm4")
 COMMAND_1 = [0.001, 0.02, -0.01]

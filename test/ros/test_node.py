@@ -29,6 +29,9 @@ from .helpers import (
     DISCOVERY_TIMEOUT, Client, NodeProcess, all_finite, diag_values, new_domain_id, stamp_ns, stamp_s, wait_for,
 )
 
+#: these tests share real nodes over DDS, started for the module (seconds each): outside the fast lane
+pytestmark = pytest.mark.slow
+
 SCENE = "hinge_chain"
 PHYSICS_RATE = 100.0
 PUBLISH_RATE = 20.0  # from the command line; the file says 10

@@ -124,6 +124,7 @@ time.sleep(60)
 """
 
 
+@pytest.mark.slow
 def test_sigkill_leaves_a_complete_log(tmp_path):
     from mcap.reader import make_reader
 

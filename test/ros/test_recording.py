@@ -21,6 +21,7 @@ COMMAND = [0.001, 0.02, -0.01]
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+@pytest.mark.slow
 def test_signal_during_recording_leaves_a_complete_log(tmp_path, sig):
     from mcap.reader import make_reader
     from rosbags.highlevel import AnyReader

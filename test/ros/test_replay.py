@@ -56,6 +56,7 @@ def ros_env(tmp_path) -> dict:
     return env
 
 
+@pytest.mark.slow
 def test_replay_publishes_the_same_messages_in_order_at_the_recorded_pace(tmp_path):
     log = tmp_path / "replay.mcap"
     record_run(Simulator(load_scene(ROOT / "config" / "heavy_top.yaml")), log, duration=DURATION, chunk=0.02,
@@ -150,6 +151,7 @@ def _missing(got, logged) -> str:
     return f"{len(got)} of {len(logged)} arrived; lost {len(lost)}: first {lost[:3]}, last {lost[-3:]}"
 
 
+@pytest.mark.slow
 def test_replay_without_subscribers_and_skipped_types(tmp_path):
     """Types that are not installed (tf2_msgs from PyPI) are skipped with a note; --rate speeds up."""
     log = tmp_path / "all.mcap"

@@ -682,6 +682,7 @@ def _one_line_refusal(path, needle: str) -> None:
     assert needle in text and "\n" not in text, text
 
 
+@pytest.mark.slow
 def test_a_5000_body_chain_written_by_yaml_safe_dump_loads(tmp_path):
     data = long_chain(5000)
     path = tmp_path / "chain.yaml"

@@ -205,6 +205,7 @@ def case_path(name: str, tmp_path: Path) -> Path:
 
 
 @pytest.mark.parametrize("name", list(CASES))
+@pytest.mark.slow
 def test_the_model_moves_as_in_mujoco(name, tmp_path):
     case = CASES[name]
     path = case_path(name, tmp_path)
@@ -321,6 +322,7 @@ def exported(scene_map: dict, tmp_path: Path) -> Path:
 
 
 @pytest.mark.parametrize("seed, base", [(1, "fixed"), (2, "fixed"), (3, "free"), (4, "free"), (5, "fixed")])
+@pytest.mark.slow
 def test_a_scene_exported_by_peers_comes_back_the_same(seed, base, tmp_path):
     scene_map = random_chain(seed, base=base, speed_rotors=False, gravity=base == "fixed")
     original = load_scene(scene_map)
@@ -594,6 +596,7 @@ def test_contacts_limits_and_control_ranges_are_left_out_and_listed(tmp_path):
 
 
 # ------------------------------------------------------------------------------- gyro-sim import
+@pytest.mark.slow
 def test_import_writes_a_scene_that_loads_and_moves_as_the_model(tmp_path, capsys):
     out = tmp_path / "arm.yaml"
     assert main(["import", str(ARM), "-o", str(out)]) == 0

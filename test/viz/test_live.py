@@ -128,6 +128,7 @@ def node(tmp_path, d, name="node"):
     return NodeProcess(tmp_path, d, f"scene:={SCENE}", "real_time_factor:=1.0", name=name)
 
 
+@pytest.mark.slow
 def test_save_for_seconds_holds_the_moving_chain_and_the_commanded_plots(tmp_path, domain):
     d, env, client = domain
     n = node(tmp_path, d)
@@ -181,6 +182,7 @@ def test_save_for_seconds_holds_the_moving_chain_and_the_commanded_plots(tmp_pat
     assert np.all(np.diff(times(got["/plots/euler/arm1"])) > 0)
 
 
+@pytest.mark.slow
 def test_follows_a_node_that_stops_and_starts_again_and_ends_on_sigint(tmp_path, domain):
     d, env, client = domain
     rrd = tmp_path / "live.rrd"
@@ -219,6 +221,7 @@ def test_follows_a_node_that_stops_and_starts_again_and_ends_on_sigint(tmp_path,
     assert np.any(every < marks[0]) and np.any(every >= marks[0])
 
 
+@pytest.mark.slow
 def test_sigterm_ends_with_exit_0_and_a_readable_file(tmp_path, domain):
     d, env, client = domain
     describe(client)
@@ -232,6 +235,7 @@ def test_sigterm_ends_with_exit_0_and_a_readable_file(tmp_path, domain):
     assert "/world/arm1/body" in got  # the shapes from the description
 
 
+@pytest.mark.slow
 def test_an_existing_file_is_refused_without_force(tmp_path):
     rrd = tmp_path / "taken.rrd"
     rrd.write_bytes(b"not mine")
@@ -242,6 +246,7 @@ def test_an_existing_file_is_refused_without_force(tmp_path):
 
 
 @pytest.mark.parametrize("args", [["--live", "some.mcap"], [], ["x.mcap", "--serve"], ["--live", "--seconds", "0"]])
+@pytest.mark.slow
 def test_bad_combinations_are_refused_in_one_line(args, tmp_path):
     r = subprocess.run([sys.executable, "-m", "gyro_sim.cli", "view", *args], cwd=ROOT, env=dict(os.environ),
                        capture_output=True, text=True, timeout=120)
@@ -287,6 +292,7 @@ def test_a_new_robot_description_replaces_the_shapes(tmp_path):
         assert any("Clear" in str(bt.schema.names) for bt in got[f"/world/{name}/body"]), name
 
 
+@pytest.mark.slow
 def test_serve_on_a_port_in_use_is_refused_in_one_line(tmp_path):
     import socket
 

@@ -74,6 +74,7 @@ def test_rerun_mcap_convert_holds_joint_scalars_and_body_transforms(recorded, tm
     assert np.allclose(quats[-len(bodies):], [[r.x, r.y, r.z, r.w] for r in q], atol=1e-6)
 
 
+@pytest.mark.slow
 def test_view_save_writes_a_verified_rrd_with_the_chain_and_plots(recorded, tmp_path):
     path, _ = recorded
     rrd = tmp_path / "view.rrd"

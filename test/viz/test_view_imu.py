@@ -10,6 +10,7 @@ from test.viz.test_live import chunks, column
 pytest.importorskip("rerun")
 
 
+@pytest.mark.slow
 def test_the_imu_of_a_pendulum_is_plotted_and_reads_the_hinge_rate(tmp_path):
     log, rrd = tmp_path / "imu.mcap", tmp_path / "imu.rrd"
     r = gyro_sim("run", "--scene", "imu_pendulum", "--duration", 3, "--record", log, timeout=300)
