@@ -459,3 +459,19 @@ def test_a_physics_thread_failing_at_its_start_still_says_it_finished():
         assert loop.out_of_memory and loop.crash is None
     finally:
         loop.stop()
+
+
+def test_building_the_loop_runs_nothing_on_the_simulator():
+    """The loop's constructor only sets up its jobs: no step, no snapshot, no reset (the node
+    warms the Simulator up itself, before it builds the loop)."""
+    cfg = validate({"scene": "hinge_chain", "physics_rate": 250.0, "publish_rate": 50.0, "thread_priority": 0})
+    sim = Simulator(cfg.scene, integrator=cfg.integrator, step=cfg.dt)
+    calls = []
+    for name in ("advance", "snapshot", "reset", "set_axis_moments"):
+        real = getattr(sim, name)
+        setattr(sim, name, lambda *a, _real=real, _name=name, **kw: calls.append(_name) or _real(*a, **kw))
+    clock = FakeClock()
+    loop = SimLoop(sim, cfg, Outputs(), clock=clock, sleep=clock.sleep)
+    assert calls == [] and loop.steps == 0 and not loop.thread.is_alive()
+    warm_up(sim, cfg.dt)
+    assert "advance" in calls and calls[-1] == "reset" and sim.time == 0.0
