@@ -60,7 +60,8 @@ def rosbags_messages(path) -> list[tuple[str, int]]:
 
 
 #: what a run may leave in the clone: caches of Python, numba, pytest and ruff, build metadata, venvs
-_TREE_OWN = {"__pycache__", ".git", ".pytest_cache", ".ruff_cache", ".ci-venv", ".ci-peers-venv", ".venv", "build", "dist"}
+_TREE_OWN = {"__pycache__", ".git", ".pytest_cache", ".ruff_cache", ".ci-venv", ".ci-peers-venv", ".venv", "build",
+             "dist"}
 
 
 def _tree_files() -> dict[str, float]:
