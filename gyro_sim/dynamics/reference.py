@@ -69,6 +69,8 @@ def base_motion(model: Model, t: float) -> tuple[np.ndarray, np.ndarray, np.ndar
 def positions(model: Model, data: Data, t: float, y: np.ndarray) -> None:
     """R^k and O^k of every body; eq (34) summed: O^k = O^1 + sum_{l<k} s^l."""
     R = data.R
+    if R.dtype != np.result_type(y, float):  # a complex y (linearisation's complex step): a workspace of its type
+        R = data.R = np.tile(EYE3.astype(np.result_type(y, float)), (model.n, 1, 1))
     if len(model.sph_bodies):
         R[model.sph_bodies] = quat_to_matrix(y[model.i_quat])
     if len(model.hinge_bodies):
@@ -108,7 +110,7 @@ def positions(model: Model, data: Data, t: float, y: np.ndarray) -> None:
 def velocities(model: Model, data: Data, t: float, u: np.ndarray) -> None:
     """Angular velocities w^k (prefix sums of joint rates, eqs 50, 53) and velocities of O^k (eq 34)."""
     n = model.n
-    wrel = np.zeros((n, 3))
+    wrel = np.zeros((n, 3), dtype=np.result_type(u, data.R))
     if len(model.sph_bodies):
         wrel[model.sph_bodies] = u[model.col_sph]
     if len(model.hinge_bodies):
@@ -122,7 +124,7 @@ def velocities(model: Model, data: Data, t: float, u: np.ndarray) -> None:
         v_o += base_motion(model, t)[1]
     data.wrel, data.w, data.v_o = wrel, w, v_o
     data.vO = v_o + cross(w, O)  # (34): velocity of O^k
-    w_parent = np.zeros((n, 3))
+    w_parent = np.zeros((n, 3), dtype=w.dtype)
     w_parent[1:] = w[:-1]
     data.w_parent = w_parent
 
@@ -190,7 +192,7 @@ def bias_accelerations(model: Model, data: Data, t: float) -> tuple[np.ndarray, 
 
 def joint_columns(model: Model, data: Data) -> tuple[np.ndarray, np.ndarray]:
     """Unit motions S_j (angular, linear-at-origin) of every velocity column, (N, 3) each."""
-    Sa = np.zeros((model.N, 3))
+    Sa = np.zeros((model.N, 3), dtype=data.R.dtype)
     Sa[model.col_sph.ravel()] = np.tile(EYE3, (len(model.sph_bodies), 1))
     Sa[model.col_hinge] = data.e_w
     Sb = cross(data.O[model.col_body], Sa)

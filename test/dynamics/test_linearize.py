@@ -1,0 +1,238 @@
+"""Linearisation (gyro_sim.linear): the complex step against central differences of the same
+dynamics, and the eigenvalues against closed forms derived in docs/theory.md section 9."""
+import math
+
+import numpy as np
+import pytest
+
+from gyro_sim import Simulator
+from gyro_sim.scene.load import load_scene
+
+G = 9.81
+
+
+def _sim(scene, **kw):
+    return Simulator(load_scene(scene), backend="numpy", **kw)
+
+
+def _close_sets(got, want, rtol=1e-9, atol=1e-9):
+    """Every eigenvalue of `want` matched by one of `got` (greedy, nearest), to rtol relative or
+    atol absolute (zero eigenvalues)."""
+    got = list(got)
+    scale = max(1.0, max(abs(w) for w in want))
+    for w in sorted(want, key=abs, reverse=True):
+        i = int(np.argmin([abs(g - w) for g in got]))
+        assert abs(got[i] - w) <= max(rtol * abs(w), atol * (1.0 if w == 0 else scale)), (w, got[i], got)
+        got.pop(i)
+
+
+# --- exact derivatives ---------------------------------------------------------------------
+@pytest.mark.parametrize("scene", ["hinge_chain", "imu_pendulum", "free_chain_rotors", "double_gyro_plus",
+                                   "vibrating_base"])
+@pytest.mark.parametrize("chart", ["world", "body"])
+def test_complex_step_agrees_with_central_differences(scene, chart):
+    sim = _sim(scene)
+    sim.advance(0.05)
+    if sim.axis_names:
+        sim.set_axis_moments(0.001 * np.arange(1, len(sim.axis_names) + 1))
+    exact = sim.linearize(chart=chart, rotor_angles=True)
+    fd = sim.linearize(chart=chart, rotor_angles=True, method="fd")
+    for name in "ABCD":
+        a, b = getattr(exact, name), getattr(fd, name)
+        if a.size:
+            assert np.max(np.abs(a - b)) <= 1e-6 * max(1.0, np.max(np.abs(a))), name
+    np.testing.assert_array_equal(exact.f0, fd.f0)
+
+
+def test_f0_is_the_simulators_own_derivative_and_every_row_is_named():
+    sim = _sim("hinge_chain")
+    sim.set_axis_moments([0.01, 0.02, -0.01])
+    sim.advance(0.1)
+    lin = sim.linearize(rotor_angles=True)
+    m = sim.model
+    ydot = sim.system.rhs(sim.time, sim.state)
+    N = m.N
+    np.testing.assert_allclose(lin.f0[N:2 * N], ydot[m.i_vel], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(lin.f0[m.col_hinge], ydot[m.i_phi], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(lin.f0[2 * N + 1:], ydot[m.i_kappa], rtol=1e-12, atol=1e-12)
+    assert len(lin.state_names) == len(set(lin.state_names)) == lin.A.shape[0] == lin.A.shape[1]
+    assert lin.input_names == ("wheel2", "arm3", "arm4") and lin.B.shape == (lin.A.shape[0], 3)
+    assert lin.state_names[:3] == ("arm1_rx", "arm1_ry", "arm1_rz") and "wheel2_spin" in lin.state_names
+    assert len(lin.output_names) == lin.C.shape[0]
+    assert not lin.is_equilibrium and lin.verdict() == "not an equilibrium"
+    # the rotation vector's rate at the point is the body's angular velocity (world components)
+    w = sim.body_states()[0].angular_velocity
+    np.testing.assert_allclose(lin.f0[:3], w, rtol=1e-12, atol=1e-12)
+
+
+# --- closed forms (docs/theory.md section 9) --------------------------------------------------
+def _hinge_pair(m1, c1, I1c, l1, m2, c2, I2c):
+    """Two bodies on parallel hinges about x, hanging at rest (com below O^k along -z)."""
+    def body(name, m, c, Ic, nxt):
+        b = {"name": name, "joint": {"type": "hinge", "axis": [1.0, 0.0, 0.0]}, "mass": m, "com": [0.0, 0.0, -c],
+             "inertia_com": np.diag(Ic).tolist(), "initial": {"angle": 0.0, "rate": 0.0}}
+        if nxt:
+            b["next_joint"] = [0.0, 0.0, -nxt]
+        return b
+    return {"name": "pair", "gravity": [0.0, 0.0, -G], "base": {"type": "fixed", "position": [0, 0, 0]},
+            "bodies": [body("upper", m1, c1, I1c, l1), body("lower", m2, c2, I2c, None)]}
+
+
+def test_hanging_hinge_pair_frequencies_are_the_roots_of_det_K_minus_w2_M():
+    m1, c1, I1c, l1 = 0.7, 0.12, [3e-3, 2e-3, 1e-3], 0.3
+    m2, c2, I2c = 0.4, 0.1, [1.5e-3, 1e-3, 8e-4]
+    lin = _sim(_hinge_pair(m1, c1, I1c, l1, m2, c2, I2c)).linearize()
+    assert lin.is_equilibrium and lin.verdict() == "marginal"
+    I1, I2 = I1c[0] + m1 * c1 ** 2, I2c[0] + m2 * c2 ** 2  # about the hinges
+    M = np.array([[I1 + m2 * l1 ** 2, m2 * l1 * c2], [m2 * l1 * c2, I2]])  # absolute angles
+    K = np.diag([(m1 * c1 + m2 * l1) * G, m2 * c2 * G])
+    w2 = np.linalg.eigvals(np.linalg.solve(M, K)).real
+    want = [s * 1j * math.sqrt(x) for x in w2 for s in (1, -1)]
+    _close_sets(lin.eigenvalues(), want)
+
+
+def test_equal_point_masses_tend_to_two_plus_minus_root_two_g_over_l():
+    l, m, tiny = 0.5, 1.0, 1e-9
+    lin = _sim(_hinge_pair(m, l, [tiny] * 3, l, m, l, [tiny] * 3)).linearize()
+    w2 = sorted(-(lin.eigenvalues() ** 2).real)[::2]
+    np.testing.assert_allclose(w2, [(2 - math.sqrt(2)) * G / l, (2 + math.sqrt(2)) * G / l], rtol=1e-7)
+
+
+def _top(A_c, B_c, m, l, rotor_A, rotor_B, rotor_m, rotor_h, p, upright=True):
+    """A carrier at rest on a spherical joint, its axis up (theta = pi) or down, with a torque
+    rotor on its axis spinning at p."""
+    return {"name": "top", "gravity": [0.0, 0.0, -G], "base": {"type": "fixed", "position": [0, 0, 0]},
+            "bodies": [{"name": "top", "joint": {"type": "spherical"}, "mass": m, "com": [0.0, 0.0, l],
+                        "inertia_com": np.diag([B_c, B_c, A_c]).tolist(),
+                        "rotors": [{"name": "rotor", "axis": [0, 0, 1], "position": [0, 0, rotor_h], "mass": rotor_m,
+                                    "axial_inertia": rotor_A, "transverse_inertia": rotor_B, "mode": "torque",
+                                    "spin": p}],
+                        "initial": {"euler": [0.0, math.pi if upright else 0.0, 0.0], "euler_rates": [0, 0, 0]}}]}
+
+
+@pytest.mark.parametrize("p", [400.0, 60.0])
+def test_upright_top_as_carrier_at_rest_with_a_rotor(p):
+    A_c, B_c, m, l = 2e-4, 1.5e-4, 0.3, 0.04
+    rA, rB, rm, rh = 1.2e-4, 6.5e-5, 0.2, 0.05
+    lin = _sim(_top(A_c, B_c, m, l, rA, rB, rm, rh, p)).linearize()
+    assert lin.is_equilibrium
+    mgl = (m * l + rm * rh) * G
+    A_t = B_c + m * l ** 2 + rB + rm * rh ** 2  # transverse, about the pivot, rotor axial excluded
+    h = rA * p
+    disc = h * h - 4 * A_t * mgl
+    if disc > 0:
+        want = [s * 1j * (h + r * math.sqrt(disc)) / (2 * A_t) for r in (1, -1) for s in (1, -1)]
+        assert lin.verdict() == "marginal"
+    else:
+        re, im = math.sqrt(-disc) / (2 * A_t), h / (2 * A_t)
+        want = [a * re + 1j * b * im for a in (1, -1) for b in (1, -1)]
+        assert lin.verdict() == "unstable"
+        assert abs(lin.eigenvalues()[0].real - re) <= 1e-9 * re
+    _close_sets(lin.eigenvalues(), want + [0.0, 0.0, 0.0])
+
+
+def test_free_gyrostat_at_rest_with_a_spinning_rotor():
+    I1, I2, I3, rA, p = 0.02, 0.03, 0.045, 1e-3, 300.0
+    scene = {"name": "gyrostat", "base": {"type": "free", "position": [0, 0, 0]},
+             "bodies": [{"name": "body", "joint": {"type": "spherical"}, "mass": 2.0, "com": [0, 0, 0],
+                         "inertia_com": np.diag([I1, I2, I3]).tolist(),
+                         "rotors": [{"name": "rotor", "axis": [0, 1, 0], "position": [0, 0, 0], "mass": 0.0,
+                                     "axial_inertia": rA, "transverse_inertia": 0.6 * rA, "mode": "torque",
+                                     "spin": p}],
+                         "initial": {"quaternion": [1, 0, 0, 0], "angular_velocity": [0, 0, 0]}}]}
+    lin = _sim(scene).linearize()
+    assert lin.is_equilibrium
+    J1, J3 = I1 + 0.6 * rA, I3 + 0.6 * rA  # the rotor's transverse moment is the carrier's
+    w = rA * p / math.sqrt(J1 * J3)
+    _close_sets(lin.eigenvalues(), [1j * w, -1j * w] + [0.0] * 11)
+
+
+def test_reaction_wheel_pendulum_upright_without_friction():
+    s = load_scene("imu_pendulum").source
+    import copy
+    s = copy.deepcopy(s)
+    rotor = s["bodies"][0]["rotors"][0]
+    for k in ("friction", "max_speed", "max_torque"):
+        rotor.pop(k, None)
+    s["bodies"][0]["initial"] = {"angle": math.pi, "rate": 0.0}
+    lin = _sim(s).linearize()
+    assert lin.is_equilibrium and lin.verdict() == "unstable"
+    b = s["bodies"][0]
+    mbar = b["mass"] * 0.15 + rotor["mass"] * 0.2
+    J = b["inertia"]["transverse"] + rotor["mass"] * 0.2 ** 2  # the wheel's axial moment is in lambda
+    r = math.sqrt(mbar * G / J)
+    _close_sets(lin.eigenvalues(), [r, -r, 0.0])
+    assert lin.controllability_rank() == 3
+
+
+@pytest.mark.parametrize("h_rotor", [0.0, 0.004, -0.02])
+def test_intermediate_axis_spin_in_the_co_rotating_chart(h_rotor):
+    I1, I2, I3, W = 0.02, 0.03, 0.045, 5.0
+    rA = 1e-3
+    scene = {"name": "spin", "base": {"type": "fixed", "position": [0, 0, 0]},
+             "bodies": [{"name": "body", "joint": {"type": "spherical"}, "mass": 1.0, "com": [0, 0, 0],
+                         "inertia_com": np.diag([I1, I2, I3]).tolist(),
+                         "rotors": [{"name": "rotor", "axis": [0, 1, 0], "position": [0, 0, 0], "mass": 0.0,
+                                     "axial_inertia": rA, "transverse_inertia": 0.5 * rA, "mode": "torque",
+                                     "spin": h_rotor / rA}],
+                         "initial": {"quaternion": [0.9, 0.1, -0.3, 0.2], "angular_velocity": [0, W, 0]}}]}
+    sim = _sim(scene)
+    world = sim.linearize()
+    assert not world.is_equilibrium  # the attitude turns: no verdict in the world chart
+    lin = sim.linearize(chart="body")
+    assert lin.is_equilibrium
+    J1, J2, J3 = I1 + 0.5 * rA, I2, I3 + 0.5 * rA  # the rotor's transverse moments are the carrier's
+    lam2 = -((J2 - J1) * W + h_rotor) * ((J2 - J3) * W + h_rotor) / (J1 * J3)
+    lam = math.sqrt(lam2) if lam2 > 0 else 1j * math.sqrt(-lam2)
+    _close_sets(lin.eigenvalues(), [lam, -lam, 1j * W, -1j * W, 0.0, 0.0, 0.0])
+    assert lin.verdict() == ("unstable" if lam2 > 0 else "marginal")
+
+
+# --- discrete models -------------------------------------------------------------------------
+def test_discrete_rk4_is_the_derivative_of_one_rk4_step_at_an_equilibrium():
+    s = _hinge_pair(0.7, 0.12, [3e-3, 2e-3, 1e-3], 0.3, 0.4, 0.1, [1.5e-3, 1e-3, 8e-4])
+    h = 0.01
+    sim = _sim(s, integrator="rk4", step=h)
+    lin = sim.linearize()
+    d = lin.discrete(h, "rk4")
+    # central differences of the simulator's own rk4 step, in the hinge coordinates
+    y0 = sim.state.copy()
+    m = sim.model
+    idx = list(np.arange(m.size)[m.i_phi]) + list(np.arange(m.size)[m.i_vel])
+    eps = 1e-6
+    Ad = np.empty((4, 4))
+    for j, i in enumerate(idx):
+        out = []
+        for sgn in (1, -1):
+            y = y0.copy()
+            y[i] += sgn * eps
+            sim.reset()
+            sim._y = y  # the state the step starts from
+            sim.advance(h)
+            out.append(sim.state[idx])
+        Ad[:, j] = (out[0] - out[1]) / (2 * eps)
+    np.testing.assert_allclose(d.Ad, Ad, rtol=0, atol=1e-8)
+    zoh = lin.discrete(h)
+    np.testing.assert_allclose(np.sort(np.abs(np.linalg.eigvals(zoh.Ad))), 1.0, atol=1e-12)  # undamped
+
+
+def test_bad_arguments_are_refused_in_one_line():
+    from gyro_sim.linear.linearize import LinearizationError
+
+    sim = _sim("imu_pendulum")
+    with pytest.raises(LinearizationError, match="chart"):
+        sim.linearize(chart="spinning")
+    with pytest.raises(LinearizationError, match="method"):
+        sim.linearize(method="forward")
+    with pytest.raises(LinearizationError, match="adaptive"):
+        sim.linearize().discrete(0.01, "dop853")
+
+
+def test_a_saturated_command_is_said_and_its_column_is_zero():
+    sim = _sim("imu_pendulum")
+    sim.set_axis_moments([0.0, 0.05])  # beyond the wheel's max_torque 0.02
+    lin = sim.linearize()
+    assert any("saturated" in n and n.startswith("wheel") for n in lin.notes)
+    assert np.all(lin.B[:, 1] == 0.0)
+    sim.set_axis_moments([0.0, 0.01])
+    assert np.any(sim.linearize().B[:, 1] != 0.0)
