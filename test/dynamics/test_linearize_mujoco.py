@@ -10,9 +10,9 @@ import pytest
 
 mujoco = pytest.importorskip("mujoco", reason="MuJoCo is the optional extra [models]")
 
-from gyro_sim import Simulator  # noqa: E402
-from gyro_sim.paths import find_scene  # noqa: E402
-from gyro_sim.scene.load import load_scene  # noqa: E402
+from gyro_sim import Simulator
+from gyro_sim.paths import find_scene
+from gyro_sim.scene.load import load_scene
 
 #: central differences of MuJoCo: step, and the agreement asked of the eigenvalues, relative
 #: to max(1, |A|, the largest eigenvalue): the differenced entries err by ~1e-9 |A| (round-off
@@ -98,7 +98,7 @@ def _mujoco_continuous(m, d0):
 def _agree(ours, theirs, norm):
     scale = max(1.0, norm, np.max(np.abs(ours)), np.max(np.abs(theirs)))
     big_o = sorted((e for e in ours if abs(e) > ZERO * scale), key=lambda e: (round(e.real, 6), e.imag))
-    big_t = list(e for e in theirs if abs(e) > ZERO * scale)
+    big_t = [e for e in theirs if abs(e) > ZERO * scale]
     assert len(big_o) == len(big_t) and len(ours) == len(theirs), (ours, theirs)
     for e in big_o:
         i = int(np.argmin([abs(t - e) for t in big_t]))
