@@ -233,8 +233,8 @@ def reactions(model: Model, data: Data, f_ang: np.ndarray, f_lin: np.ndarray):
 
 def accelerations_from(model: Model, data: Data, Sa, Sb, udot, acc_w0, acc_v0):
     """Body spatial accelerations for generalized accelerations udot (bias included)."""
-    da = np.zeros((model.n, 3))
-    dv = np.zeros((model.n, 3))
+    da = np.zeros((model.n, 3), dtype=np.result_type(Sa, udot))
+    dv = np.zeros((model.n, 3), dtype=da.dtype)
     np.add.at(da, model.col_body, Sa * udot[:, None])
     np.add.at(dv, model.col_body, Sb * udot[:, None])
     return acc_w0 + np.cumsum(da, axis=0), acc_v0 + np.cumsum(dv, axis=0)

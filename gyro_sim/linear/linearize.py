@@ -1,7 +1,7 @@
 """The linear model of a chain about a state, in its tangent space (docs/linearization.md).
 
     dx' = A dx + B du + f0        (continuous; f0 = x' at the point: zero at an equilibrium)
-    z   = C dx + D du             (joint states of hinges and rotors, IMU gyros)
+    z   = C dx + D du             (joint states of hinges and rotors, IMU gyros and accelerometers)
 
 The state x is in the tangent space of the chain's configuration (docs/linearization.md,
 "The state"): [positions (N) | generalized velocities (N) | torque-rotor spins p_i (nt) |
@@ -150,6 +150,8 @@ def _layout(model: Model, rotor_angles: bool, chart: str) -> Layout:
     outs += [f"{r}.velocity" for r in model.torque_names]
     for imu in model.scene.imus:
         outs += [f"{imu.name}.gyro_{a}" for a in "xyz"]
+    for imu in model.scene.imus:
+        outs += [f"{imu.name}.accel_{a}" for a in "xyz"]
     return Layout(N, nt, rotor_angles, tuple(names), tuple(outs))
 
 
@@ -186,8 +188,12 @@ class TangentField:
         if act is not None:
             self._max = np.array([act.hinge.max_torque[h] if h >= 0 else act.rotor.max_torque[r]
                                   for h, r in zip(m.axis_hinge, m.axis_rotor)]) if na else np.zeros(0)
-        self._imu = [(m.names.index(imu.body), quat_to_matrix(np.asarray(imu.orientation, dtype=float)))
-                     for imu in m.scene.imus]
+        self._imus = None
+        if m.scene.imus:
+            from gyro_sim.dynamics.imu import DEFAULT_IMU_RATE, ImuSet
+
+            self._imus = ImuSet(m.scene, {name: k for k, name in enumerate(m.names)}, m.scene.gravity,
+                                DEFAULT_IMU_RATE)
 
     # the inputs: the commanded moments saturated as Simulator._inputs does; ties go inside
     def _inputs(self, v):
@@ -240,7 +246,8 @@ class TangentField:
         N, nt = L.N, L.nt
         y, p = self.state(x)
         hinge_tau, L_rotor = self._inputs(v)
-        udot = dyn.forward(m, d, self.t, y, hinge_tau, p if nt else None, L_rotor)
+        ev = dyn.Evaluation() if self._imus is not None else None  # the accelerations an IMU reads
+        udot = dyn.forward(m, d, self.t, y, hinge_tau, p if nt else None, L_rotor, ev)
         u = y[m.i_vel]
         dt = udot.dtype
         xd = np.zeros(L.size, dtype=dt)
@@ -275,8 +282,9 @@ class TangentField:
         if L.rotor_angles:
             z.append(y[m.i_kappa])
         z.append(kdot)
-        for k, body_R_imu in self._imu:
-            z.append((d.R[k] @ body_R_imu).T @ d.w[k])  # the gyro: imu_R_world w^k
+        if self._imus is not None:  # noise-free readings (gyro_sim.dynamics.imu)
+            gyro, accel, _ = self._imus.true_values(d.R, d.w, d.vO, ev.acc_w, ev.acc_v + cross(ev.acc_w, d.O))
+            z += [gyro.ravel(), accel.ravel()]
         z = np.concatenate([np.asarray(a, dtype=dt) for a in z]) if z else np.zeros(0, dtype=dt)
         return xd, z
 

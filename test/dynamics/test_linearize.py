@@ -236,3 +236,25 @@ def test_a_saturated_command_is_said_and_its_column_is_zero():
     assert np.all(lin.B[:, 1] == 0.0)
     sim.set_axis_moments([0.0, 0.01])
     assert np.any(sim.linearize().B[:, 1] != 0.0)
+
+
+def test_imu_outputs_at_the_point_are_what_the_simulator_reads():
+    import copy
+
+    s = copy.deepcopy(load_scene("imu_pendulum").source)
+    for key in ("gyro_noise_density", "gyro_bias_instability", "accel_noise_density", "accel_bias_instability"):
+        s["imus"][0][key] = 0.0
+    sim = Simulator(load_scene(s))  # the compiled outputs: another path to the accelerations
+    sim.set_axis_moments([0.01, 0.005])
+    sim.advance(0.05)
+    lin = sim.linearize()
+    reading = sim.imus()[0]
+    names = list(lin.output_names)
+    gyro = lin.z0[[names.index(f"tip_imu.gyro_{a}") for a in "xyz"]]
+    accel = lin.z0[[names.index(f"tip_imu.accel_{a}") for a in "xyz"]]
+    np.testing.assert_allclose(gyro, reading.angular_velocity, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(accel, reading.linear_acceleration, rtol=1e-12, atol=1e-12)
+    # a wheel torque reaches the accelerometer at once (D), the gyro only through the state (C)
+    iw = lin.input_names.index("wheel")
+    assert np.any(lin.D[[names.index(f"tip_imu.accel_{a}") for a in "yz"], iw] != 0.0)
+    assert np.all(lin.D[[names.index(f"tip_imu.gyro_{a}") for a in "xyz"], iw] == 0.0)
