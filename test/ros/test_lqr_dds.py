@@ -1,6 +1,7 @@
 """The LQR example over DDS: the simulator node and examples/lqr_balance.py in their own
 processes, 20 s of real time. A smoke test with a looser bound than the lockstep test
-(test/examples/test_lqr_balance.py): upright the whole time, no command timeout."""
+(test/examples/test_lqr_balance.py): upright the whole time, no command timeout; the node's
+log of the closed loop re-simulates bit for bit."""
 from __future__ import annotations
 
 import math
@@ -36,8 +37,8 @@ def test_the_lqr_example_holds_the_pendulum_up_over_dds(tmp_path):
     client = Client(domain)
     client.subscribe("/joint_states", JointState, depth=5000)
     client.subscribe("/diagnostics", DiagnosticArray, depth=1000)
-    node = NodeProcess(tmp_path, domain, "scene:=rw_pendulum", "duration:=0.0")
-    (tmp_path / "ctrl_log").mkdir()
+    log = tmp_path / "loop.mcap"
+    node = NodeProcess(tmp_path, domain, "scene:=rw_pendulum", "duration:=0.0", f"record:={log}")
     ctrl_out = (tmp_path / "ctrl.out").open("w")
     ctrl = subprocess.Popen([sys.executable, str(ROOT / "examples" / "lqr_balance.py"), "--duration", str(SECONDS + 60)],
                             cwd=tmp_path, env=node.env, stdout=ctrl_out, stderr=subprocess.STDOUT)
@@ -71,3 +72,7 @@ def test_the_lqr_example_holds_the_pendulum_up_over_dds(tmp_path):
     assert all(math.isfinite(m.position[i]) for m in after)
     last = diag_values([m for w, m in client.messages("/diagnostics") if w < wall1][-1])
     assert last.get("command_timeouts") == "0", last
+    from gyro_sim.log.resim import resimulate
+
+    out = resimulate(log)
+    assert out.max_deviation == 0.0, out.report()

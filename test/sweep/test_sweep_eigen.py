@@ -24,6 +24,7 @@ def test_sleeping_top_map_from_eigenvalues_matches_maievski_cell_for_cell(tmp_pa
     done = results.finish(sweep, tmp_path, rows, {})
     assert done["check"]["disagree"] == 0, done["check"]
     assert {r["verdict.stays_up"] for r in rows} == {True, False}
+    assert "- run: none, a linearisation at each point's initial state" in (tmp_path / results.SUMMARY).read_text()
     A, B, m, g = 0.004, 0.015, 1.0, 9.81  # config/heavy_top.yaml's top
     unstable = 0
     for r in rows:
