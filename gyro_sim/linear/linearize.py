@@ -426,11 +426,13 @@ class Linearization:
     seconds: float = 0.0
     evaluations: int = 0
     fd_steps: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
+    #: the rows of the cyclic rotor angles (with rotor_angles=True), left out of the equilibrium test
+    cyclic: tuple[int, ...] = ()
 
     @property
     def equilibrium_residual(self) -> float:
         """max |f0| over the state without the cyclic rotor angles."""
-        f = self.f0[[i for i, n in enumerate(self.state_names) if not n.endswith("_angle")]]
+        f = np.delete(self.f0, list(self.cyclic))
         return float(np.max(np.abs(f))) if len(f) else 0.0
 
     @property
@@ -531,4 +533,5 @@ def linearize(model: Model, t: float, y: np.ndarray, spins: np.ndarray | None, m
                          input_names=tuple(model.axis_names), output_names=fld.layout.output_names,
                          chart=chart, method=method, t=float(t), notes=fld.notes(),
                          seconds=_time.perf_counter() - start, evaluations=evaluations,
-                         fd_steps=fd_steps(fld) if method == "fd" else None)
+                         fd_steps=fd_steps(fld) if method == "fd" else None,
+                         cyclic=tuple(range(2 * fld.layout.N + fld.layout.nt, nx)) if rotor_angles else ())

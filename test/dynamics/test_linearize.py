@@ -258,3 +258,21 @@ def test_imu_outputs_at_the_point_are_what_the_simulator_reads():
     iw = lin.input_names.index("wheel")
     assert np.any(lin.D[[names.index(f"tip_imu.accel_{a}") for a in "yz"], iw] != 0.0)
     assert np.all(lin.D[[names.index(f"tip_imu.gyro_{a}") for a in "xyz"], iw] == 0.0)
+
+
+def test_on_the_speed_limits_ramp_the_torque_is_scaled_and_said():
+    import copy
+
+    s = copy.deepcopy(load_scene("imu_pendulum").source)
+    rotor = s["bodies"][0]["rotors"][0]
+    rotor["spin"] = 599.7  # relative speed 599.7 of max_speed 600: halfway down the ramp (600 - 0.6 .. 600)
+    rotor.pop("friction")
+    sim = _sim(s)
+    sim.set_axis_moments([0.0, 0.01])  # driving the wheel faster: the ramp applies
+    lin = sim.linearize()
+    assert any(n.startswith("wheel: speed 599.7 inside the speed limit's ramp") for n in lin.notes), lin.notes
+    i, j = lin.state_names.index("wheel_spin"), lin.input_names.index("wheel")
+    A_w = rotor["axial_inertia"]
+    assert lin.B[i, j] == pytest.approx(0.5 / A_w, rel=1e-9)  # p' = ramp L / A_w, ramp = (600 - 599.7) / 0.6
+    sim.set_axis_moments([0.0, -0.01])  # braking: no cut, the full torque
+    assert sim.linearize().B[i, j] == pytest.approx(1.0 / A_w, rel=1e-12)
