@@ -13,7 +13,7 @@ LINEARIZE_EXAMPLES = """examples:
   gyro-sim linearize rw_pendulum
   gyro-sim linearize rw_pendulum --discrete 0.01 --json
   gyro-sim linearize heavy_top --state upright.yaml
-  gyro-sim linearize arm_flywheel.xml --keyframe home
+  gyro-sim linearize arm_flywheel.xml --keyframe swing
 
 --state FILE: a YAML mapping of body names to the scene's `initial` keys, e.g.
   pendulum: {angle: 3.14159, rate: 0.0}

@@ -163,6 +163,11 @@ def test_reaction_wheel_pendulum_upright_without_friction():
     r = math.sqrt(mbar * G / J)
     _close_sets(lin.eigenvalues(), [r, -r, 0.0])
     assert lin.controllability_rank() == 3
+    # the wheel torque u: J theta'' = ... - u, I_w p' = u (docs/theory.md section 9)
+    iw = lin.input_names.index("wheel")
+    np.testing.assert_allclose(lin.B[:, iw], [0.0, -1.0 / J, 1.0 / rotor["axial_inertia"]], rtol=1e-12, atol=1e-12)
+    # the hinge's own motor turns the pendulum alone: J theta'' = tau
+    np.testing.assert_allclose(lin.B[:, lin.input_names.index("pendulum")], [0.0, 1.0 / J, 0.0], rtol=1e-12, atol=1e-12)
 
 
 @pytest.mark.parametrize("h_rotor", [0.0, 0.004, -0.02])
