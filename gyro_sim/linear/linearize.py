@@ -524,6 +524,13 @@ def linearize(model: Model, t: float, y: np.ndarray, spins: np.ndarray | None, m
     (central differences, the steps in `fd_steps`)."""
     if method not in METHODS:
         raise LinearizationError(f"method: {method!r} is not one of {', '.join(METHODS)}")
+    nt = len(model.torque_body)
+    for name, value, shape in (("y", y, (model.size,)), ("spins", np.zeros(nt) if spins is None else spins, (nt,)),
+                               ("moments", moments, (len(model.axis_names),))):
+        a = np.asarray(value)
+        if a.shape != shape or not np.issubdtype(a.dtype, np.number) or not np.all(np.isfinite(a)):
+            raise LinearizationError(f"{name}: expected {shape[0]} finite numbers (the model's layout), "
+                                     f"got shape {a.shape}")
     start = _time.perf_counter()
     fld = TangentField(model, t, y, spins, moments, rotor_angles, chart)
     nx, nu = fld.layout.size, len(model.axis_names)

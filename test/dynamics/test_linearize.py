@@ -231,6 +231,16 @@ def test_bad_arguments_are_refused_in_one_line():
         sim.linearize(method="forward")
     with pytest.raises(LinearizationError, match="adaptive"):
         sim.linearize().discrete(0.01, "dop853")
+    with pytest.raises(LinearizationError, match="^y: expected 6 finite numbers"):
+        sim.linearize(np.zeros(3))
+    y = sim.state
+    y[0] = np.nan
+    with pytest.raises(LinearizationError, match="^y: "):
+        sim.linearize(y)
+    with pytest.raises(LinearizationError, match="^spins: "):
+        sim.linearize(sim.state, spins=np.zeros(2))
+    with pytest.raises(LinearizationError, match="step"):
+        sim.linearize().discrete(-1.0)
 
 
 def test_a_saturated_command_is_said_and_its_column_is_zero():
