@@ -238,7 +238,7 @@ PLUGINS = (
     "gyro_sim.bench.soak",
     "gyro_sim.bench.startup",
     "gyro_sim.linear.commands",  # linearize (the linear model at a state)
-    "gyro_sim.linear.bench",  # bench linearize (its cost against pinocchio)
+    "gyro_sim.bench.linearize",  # bench linearize (its cost against pinocchio)
 )
 
 

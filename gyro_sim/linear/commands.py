@@ -47,9 +47,9 @@ def _with_state(scene, path: str):
     """The scene with the initial keys of `path` for the bodies it names (SceneError, OSError)."""
     import copy
 
-    from gyro_sim.scene.load import SceneError, _read_yaml, load_scene
+    from gyro_sim.scene.load import SceneError, load_scene, parse_yaml, read_text_file
 
-    data = _read_yaml(path)
+    data = parse_yaml(read_text_file(path), path)
     if not isinstance(data, dict) or not data:
         raise SceneError([f"--state {path}: must map body names to their `initial` keys"])
     source = copy.deepcopy(scene.source)
@@ -64,11 +64,10 @@ def _with_state(scene, path: str):
 
 
 def cmd_linearize(args) -> int:
-    from gyro_sim.dynamics.actuators import ActuatorError
-    from gyro_sim.linear.linearize import LinearizationError
+    from gyro_sim.dynamics.model import compile_model, initial_state
+    from gyro_sim.linear.linearize import LinearizationError, linearize
     from gyro_sim.paths import find_scene
     from gyro_sim.scene.load import SceneError, load_scene
-    from gyro_sim.simulator import Simulator
 
     if args.discrete is not None and not (args.discrete > 0 and math.isfinite(args.discrete)):
         return _fail(f"--discrete: the step must be a positive finite number of seconds, got {args.discrete}")
@@ -79,11 +78,14 @@ def cmd_linearize(args) -> int:
     except (SceneError, FileNotFoundError, OSError) as exc:
         return _fail(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
     start = time.perf_counter()
-    try:
-        sim = Simulator(scene, integrator="rk4", backend="numpy")  # the linearisation uses the numpy reference
-        lin = sim.linearize(method="fd" if args.fd else "complex", chart=args.chart, rotor_angles=args.rotor_angles)
+    try:  # the scene's initial state, zero commands (what Simulator.linearize() gives after a reset)
+        model = compile_model(scene)
+        y = initial_state(model)
+        spins = y[model.i_spin] if model.stateful else model.torque_p0
+        lin = linearize(model, 0.0, y, spins, np.zeros(len(model.axis_names)), method="fd" if args.fd else "complex",
+                        chart=args.chart, rotor_angles=args.rotor_angles)
         disc = lin.discrete(args.discrete, args.method) if args.discrete is not None else None
-    except (ActuatorError, LinearizationError) as exc:
+    except LinearizationError as exc:
         return _fail(str(exc))
     report = describe(lin, disc, scene.name)
     report["seconds"] = time.perf_counter() - start

@@ -288,6 +288,24 @@ class TangentField:
         z = np.concatenate([np.asarray(a, dtype=dt) for a in z]) if z else np.zeros(0, dtype=dt)
         return xd, z
 
+    def fd_steps(self) -> tuple[np.ndarray, np.ndarray]:
+        """The central differences' steps of x and of the inputs: FD_STEP max(1, |value|), with the
+        value of the coordinate at the point (0 for a rotation vector: its step is FD_STEP)."""
+        m, L = self.model, self.layout
+        N, nt = L.N, L.nt
+        scale = np.ones(L.size)
+        if m.free:
+            scale[m.col_base] = np.maximum(1.0, np.abs(self.y0[m.i_r0]))
+        scale[m.col_hinge] = np.maximum(1.0, np.abs(self.y0[m.i_phi]))
+        u0 = self.y0[m.i_vel].copy()
+        if self.chart == "body" and len(m.sph_bodies):
+            u0[m.col_sph] = self._nu0
+        scale[N:2 * N] = np.maximum(1.0, np.abs(u0))
+        scale[2 * N:2 * N + nt] = np.maximum(1.0, np.abs(self.p0))
+        if L.rotor_angles:
+            scale[2 * N + nt:] = np.maximum(1.0, np.abs(self.y0[m.i_kappa]))
+        return FD_STEP * scale, FD_STEP * np.maximum(1.0, np.abs(self.m0))
+
     def notes(self) -> tuple[str, ...]:
         """Where the model is one-sided or time-varying at the point."""
         m, out = self.model, []
@@ -354,29 +372,10 @@ def _complex_step(field: TangentField, nx: int, nu: int):
     return np.real(f0), np.real(z0), A, B, C, D
 
 
-def fd_steps(field: TangentField) -> tuple[np.ndarray, np.ndarray]:
-    """The central differences' steps of x and of the inputs: FD_STEP max(1, |value|), with the
-    value of the coordinate at the point (0 for a rotation vector: its step is FD_STEP)."""
-    m, L = field.model, field.layout
-    N, nt = L.N, L.nt
-    scale = np.ones(L.size)
-    if m.free:
-        scale[m.col_base] = np.maximum(1.0, np.abs(field.y0[m.i_r0]))
-    scale[m.col_hinge] = np.maximum(1.0, np.abs(field.y0[m.i_phi]))
-    u0 = field.y0[m.i_vel].copy()
-    if field.chart == "body" and len(m.sph_bodies):
-        u0[m.col_sph] = field._nu0
-    scale[N:2 * N] = np.maximum(1.0, np.abs(u0))
-    scale[2 * N:2 * N + nt] = np.maximum(1.0, np.abs(field.p0))
-    if L.rotor_angles:
-        scale[2 * N + nt:] = np.maximum(1.0, np.abs(field.y0[m.i_kappa]))
-    return FD_STEP * scale, FD_STEP * np.maximum(1.0, np.abs(field.m0))
-
-
 def _central(field: TangentField, nx: int, nu: int):
     x0, v0 = np.zeros(nx), np.zeros(nu)
     f0, z0 = field(x0, v0)
-    hx, hu = fd_steps(field)
+    hx, hu = field.fd_steps()
     A, C = np.empty((nx, nx)), np.empty((len(z0), nx))
     for j in range(nx):
         e = np.zeros(nx)
@@ -540,5 +539,5 @@ def linearize(model: Model, t: float, y: np.ndarray, spins: np.ndarray | None, m
                          input_names=tuple(model.axis_names), output_names=fld.layout.output_names,
                          chart=chart, method=method, t=float(t), notes=fld.notes(),
                          seconds=_time.perf_counter() - start, evaluations=evaluations,
-                         fd_steps=fd_steps(fld) if method == "fd" else None,
+                         fd_steps=fld.fd_steps() if method == "fd" else None,
                          cyclic=tuple(range(2 * fld.layout.N + fld.layout.nt, nx)) if rotor_angles else ())

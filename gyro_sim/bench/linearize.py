@@ -1,5 +1,5 @@
-"""`gyro-sim bench linearize`: the cost of one linearisation against Pinocchio's
-computeABADerivatives on the same chain.
+"""`gyro-sim bench linearize`: the cost of one linearisation (gyro_sim.linear) against
+Pinocchio's computeABADerivatives on the same chain.
 
 The chain is the scaling report's (`gyro_sim.bench.scenes.spherical_chain`: n identical links on
 spherical joints under gravity, swinging), linearised at its initial state; Pinocchio's model is
