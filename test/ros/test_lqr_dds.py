@@ -66,7 +66,7 @@ def test_the_lqr_example_holds_the_pendulum_up_over_dds(tmp_path):
     after = [m for w, m in client.messages("/joint_states") if wall0 + 0.5 < w < wall1]
     i = list(after[0].name).index("pendulum")
     settled = [m for m in after if stamp_s(m) >= 3.0]
-    assert stamp_s(after[-1]) > 0.8 * SECONDS and len(settled) > 100
+    assert stamp_s(after[-1]) > 0.5 * SECONDS and len(settled) > 100  # a loaded machine runs behind real time
     worst = max(abs(m.position[i]) for m in settled)
     assert worst < 0.1, f"the pendulum left upright: |angle| {worst:.3f} rad"
     assert all(math.isfinite(m.position[i]) for m in after)
