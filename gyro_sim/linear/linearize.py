@@ -222,7 +222,6 @@ class TangentField:
         if m.free:
             y[m.i_r0] = self.y0[m.i_r0] + x[m.col_base]
         body = self.chart == "body"
-        R = []
         for j in range(len(m.sph_bodies)):
             d = x[m.col_sph[j]]
             y[m.i_quat[j]] = quat_mul(self._q0[j], _exp_half(d)) if body else quat_mul(_exp_half(d), self._q0[j])
