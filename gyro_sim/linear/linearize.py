@@ -67,46 +67,50 @@ def _dot(a, b):
     return np.sum(a * b, axis=-1)
 
 
+def _sqrt(t2):
+    """The square root of theta . theta, complex-safe (the principal root)."""
+    return np.sqrt(t2.astype(complex)) if np.iscomplexobj(t2) else np.sqrt(t2)
+
+
 def _exp_half(theta: np.ndarray) -> np.ndarray:
-    """The unit quaternion (4,) of a rotation vector theta (3,), real or complex."""
+    """The unit quaternions (..., 4) of rotation vectors theta (..., 3), real or complex."""
     t2 = _dot(theta, theta)
-    if abs(t2) < 1e-6:
-        c = 1.0 - t2 / 8.0 + t2 * t2 / 384.0
-        s = 0.5 - t2 / 48.0 + t2 * t2 / 3840.0
-    else:
-        a = np.sqrt(t2 + 0j) if np.iscomplexobj(t2) else np.sqrt(t2)
-        c, s = np.cos(a / 2.0), np.sin(a / 2.0) / a
-    return np.concatenate(([c], s * theta))
+    small = np.abs(t2) < 1e-6
+    a = _sqrt(np.where(small, 1.0, t2))
+    c = np.where(small, 1.0 - t2 / 8.0 + t2 * t2 / 384.0, np.cos(a / 2.0))
+    s = np.where(small, 0.5 - t2 / 48.0 + t2 * t2 / 3840.0, np.sin(a / 2.0) / a)
+    return np.concatenate((c[..., None], s[..., None] * theta), axis=-1)
 
 
 def _jinv_coefficient(t2):
     """c(theta^2) of J^-1 = I -+ 1/2 [theta]x + c [theta]x^2: 1/t^2 - (1 + cos t) / (2 t sin t)."""
-    if abs(t2) < 1e-4:
-        return 1.0 / 12.0 + t2 / 720.0 + t2 * t2 / 30240.0
-    a = np.sqrt(t2 + 0j) if np.iscomplexobj(t2) else np.sqrt(t2)
-    return 1.0 / t2 - (1.0 + np.cos(a)) / (2.0 * a * np.sin(a))
+    small = np.abs(t2) < 1e-4
+    t2s = np.where(small, 1.0, t2)
+    a = _sqrt(t2s)
+    return np.where(small, 1.0 / 12.0 + t2 / 720.0 + t2 * t2 / 30240.0,
+                    1.0 / t2s - (1.0 + np.cos(a)) / (2.0 * a * np.sin(a)))
 
 
 def _jl_inv(theta, w):
-    """J_l^-1(theta) w: theta' of q = exp(theta / 2) (x) q0 turning at w (world components)."""
+    """J_l^-1(theta) w (rows): theta' of q = exp(theta / 2) (x) q0 turning at w (world components)."""
     tw = cross(theta, w)
-    return w - 0.5 * tw + _jinv_coefficient(_dot(theta, theta)) * cross(theta, tw)
+    return w - 0.5 * tw + _jinv_coefficient(_dot(theta, theta))[..., None] * cross(theta, tw)
 
 
 def _jr_inv(delta, w):
-    """J_r^-1(delta) w: delta' of q = q0 (x) exp(delta / 2) turning at w (body components)."""
+    """J_r^-1(delta) w (rows): delta' of q = q0 (x) exp(delta / 2) turning at w (body components)."""
     tw = cross(delta, w)
-    return w + 0.5 * tw + _jinv_coefficient(_dot(delta, delta)) * cross(delta, tw)
+    return w + 0.5 * tw + _jinv_coefficient(_dot(delta, delta))[..., None] * cross(delta, tw)
 
 
 def _rotate(theta, v):
-    """exp([theta]x) v (Rodrigues), complex-safe."""
+    """exp([theta]x) v (Rodrigues, rows), complex-safe."""
     t2 = _dot(theta, theta)
-    if abs(t2) < 1e-6:
-        s, c = 1.0 - t2 / 6.0, 0.5 - t2 / 24.0
-    else:
-        a = np.sqrt(t2 + 0j) if np.iscomplexobj(t2) else np.sqrt(t2)
-        s, c = np.sin(a) / a, (1.0 - np.cos(a)) / t2
+    small = np.abs(t2) < 1e-6
+    t2s = np.where(small, 1.0, t2)
+    a = _sqrt(t2s)
+    s = np.where(small, 1.0 - t2 / 6.0, np.sin(a) / a)[..., None]
+    c = np.where(small, 0.5 - t2 / 24.0, (1.0 - np.cos(a)) / t2s)[..., None]
     tv = cross(theta, v)
     return v + s * tv + c * cross(theta, tv)
 
@@ -222,9 +226,9 @@ class TangentField:
         if m.free:
             y[m.i_r0] = self.y0[m.i_r0] + x[m.col_base]
         body = self.chart == "body"
-        for j in range(len(m.sph_bodies)):
-            d = x[m.col_sph[j]]
-            y[m.i_quat[j]] = quat_mul(self._q0[j], _exp_half(d)) if body else quat_mul(_exp_half(d), self._q0[j])
+        if len(m.sph_bodies):
+            e = _exp_half(x[m.col_sph])
+            y[m.i_quat] = quat_mul(self._q0, e) if body else quat_mul(e, self._q0)
         y[m.i_phi] = self.y0[m.i_phi] + x[m.col_hinge]
         u = self.y0[m.i_vel].astype(dt) + x[N:2 * N]
         if body and len(m.sph_bodies):
@@ -253,16 +257,16 @@ class TangentField:
         if m.free:
             xd[m.col_base] = u[m.col_base]
         body = self.chart == "body"
-        for j, k in enumerate(m.sph_bodies):
-            c = m.col_sph[j]
+        if len(m.sph_bodies):
+            c, w = m.col_sph, d.w[m.sph_bodies]
             if body:
-                Rk = d.R[k]
-                Omega = Rk.T @ d.w[k]
-                xd[c] = _jr_inv(x[c], Omega - _rotate(-x[c], self._Omega0[j]))
+                Rk = d.R[m.sph_bodies]
+                Omega = np.einsum("nji,nj->ni", Rk, w)
+                xd[c] = _jr_inv(x[c], Omega - _rotate(-x[c], self._Omega0))
                 # nu = R^T u: nu' = R^T (u' - w x u)
-                xd[N + c] = Rk.T @ (udot[c] - cross(d.w[k], u[c]))
+                xd[N + c] = np.einsum("nji,nj->ni", Rk, udot[c] - cross(w, u[c]))
             else:
-                xd[c] = _jl_inv(x[c], d.w[k])
+                xd[c] = _jl_inv(x[c], w)
                 xd[N + c] = udot[c]
         xd[m.col_hinge] = u[m.col_hinge]
         xd[N + m.col_hinge] = udot[m.col_hinge]

@@ -291,3 +291,30 @@ def test_on_the_speed_limits_ramp_the_torque_is_scaled_and_said():
     assert lin.B[i, j] == pytest.approx(0.5 / A_w, rel=1e-9)  # p' = ramp L / A_w, ramp = (600 - 599.7) / 0.6
     sim.set_axis_moments([0.0, -0.01])  # braking: no cut, the full torque
     assert sim.linearize().B[i, j] == pytest.approx(1.0 / A_w, rel=1e-12)
+
+
+def test_chart_maps_at_large_angles_match_the_rotations_module():
+    """The charts' helpers away from their series (a linearisation uses them near zero)."""
+    from gyro_sim.dynamics.rotations import axis_angle_matrix, quat_exp
+    from gyro_sim.linear.linearize import _exp_half, _jl_inv, _jr_inv, _rotate
+
+    rng = np.random.default_rng(3)
+    theta = rng.normal(size=(4, 3))
+    theta[0] *= 1e-5  # one in the series' range
+    np.testing.assert_allclose(_exp_half(theta), quat_exp(theta), rtol=1e-14, atol=1e-15)
+    v = rng.normal(size=(4, 3))
+    for t, vv, got in zip(theta, v, _rotate(theta, v)):
+        angle = np.linalg.norm(t)
+        np.testing.assert_allclose(got, axis_angle_matrix(t / angle, angle) @ vv, rtol=1e-13, atol=1e-15)
+    # J_l^-1 and J_r^-1 invert the exponential's differentials: exp(theta + J^-1 w eps) ~ exp(w eps) exp(theta)
+    eps = 1e-6
+    from gyro_sim.dynamics.rotations import quat_mul
+
+    for t, w in zip(theta[1:], v[1:]):
+        q = quat_exp(t)
+        left = (quat_exp(t + eps * _jl_inv(t, w)) - quat_exp(t - eps * _jl_inv(t, w))) / (2 * eps)
+        want = (quat_mul(quat_exp(eps * w), q) - quat_mul(quat_exp(-eps * w), q)) / (2 * eps)
+        np.testing.assert_allclose(left, want, atol=1e-8)
+        right = (quat_exp(t + eps * _jr_inv(t, w)) - quat_exp(t - eps * _jr_inv(t, w))) / (2 * eps)
+        want = (quat_mul(q, quat_exp(eps * w)) - quat_mul(q, quat_exp(-eps * w))) / (2 * eps)
+        np.testing.assert_allclose(right, want, atol=1e-8)
