@@ -294,6 +294,19 @@ def forward(
     p: absolute spins of the torque rotors at t; L_rotor: their axial torques (eq 29).
     If `out` is given, the intermediate results needed for reactions are stored in it.
     """
+    rhs, parts = closure(model, data, t, y, hinge_tau, p, L_rotor)
+    udot = np.linalg.solve(mass_matrix(model, data, parts[0], parts[1]), rhs)
+    if out is not None:
+        fill_evaluation(model, data, udot, parts, out)
+    return udot
+
+
+def closure(model: Model, data: Data, t: float, y: np.ndarray, hinge_tau: np.ndarray | None,
+            p: np.ndarray | None, L_rotor: np.ndarray | None) -> tuple[np.ndarray, tuple]:
+    """The rows of eqs (52)-(54) at (t, y) before the solve (arguments as `forward`): rhs (N,)
+    of M u' = rhs, and parts = (Sa, Sb, lam_w, dlam_w, acc_w0, acc_v0), the joint columns (M is
+    mass_matrix(model, data, Sa, Sb)), the gyrostatic moments and the bias accelerations, for
+    `fill_evaluation`."""
     positions(model, data, t, y)
     velocities(model, data, t, y[model.i_vel])
     if model.stateful:  # the torques applied at this state: motors after the cut, and friction
@@ -305,9 +318,13 @@ def forward(
     rhs = -project_subtree(model, Sa, Sb, f_ang, f_lin)
     if hinge_tau is not None:
         rhs[model.col_hinge] += hinge_tau  # (51): e^k . L^k = L_k
-    udot = np.linalg.solve(mass_matrix(model, data, Sa, Sb), rhs)
-    if out is not None:
-        out.udot, out.Sa, out.Sb, out.lam_w, out.dlam_w = udot, Sa, Sb, lam_w, dlam_w
-        out.acc_w, out.acc_v = accelerations_from(model, data, Sa, Sb, udot, acc_w0, acc_v0)
-        out.f_ang, out.f_lin = body_forces(model, data, out.acc_w, out.acc_v, lam_w, dlam_w)
-    return udot
+    return rhs, (Sa, Sb, lam_w, dlam_w, acc_w0, acc_v0)
+
+
+def fill_evaluation(model: Model, data: Data, udot: np.ndarray, parts: tuple, out: Evaluation) -> None:
+    """`out` for the accelerations udot of a `closure` (its parts): body accelerations and
+    forces, for reactions."""
+    Sa, Sb, lam_w, dlam_w, acc_w0, acc_v0 = parts
+    out.udot, out.Sa, out.Sb, out.lam_w, out.dlam_w = udot, Sa, Sb, lam_w, dlam_w
+    out.acc_w, out.acc_v = accelerations_from(model, data, Sa, Sb, udot, acc_w0, acc_v0)
+    out.f_ang, out.f_lin = body_forces(model, data, out.acc_w, out.acc_v, lam_w, dlam_w)

@@ -24,8 +24,9 @@ Two charts of the rotations:
 Derivatives are by the complex step, Im f(x + i h e_j) / h with h = 1e-30, through the numpy
 reference of the dynamics (:mod:`gyro_sim.dynamics.reference`), which takes complex states:
 exact to round-off (no subtraction, so no step to tune), and it uses the same equations as
-every simulation, so nothing is derived twice. Switches (saturation, the friction's stick band,
-the speed limit's ramp) are decided on real parts: at a non-differentiable point the model is
+every simulation, so nothing is derived twice; the mass matrix is factorised once at the
+point, each direction then costs its right-hand side and a back-substitution. Switches
+(saturation, the friction's stick band, the speed limit's ramp) are decided on real parts: at a non-differentiable point the model is
 the one-sided one of the side the code takes, and `notes` says so. `method="fd"` gives central
 differences with the step FD_STEP times max(1, |value|) per coordinate, as a cross-check.
 """
@@ -115,6 +116,12 @@ def _rotate(theta, v):
     return v + s * tv + c * cross(theta, tv)
 
 
+def _lu_solve(lu, b):
+    from scipy.linalg import lu_solve
+
+    return lu_solve(lu, b)
+
+
 # --- the layout ---------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Layout:
@@ -192,12 +199,28 @@ class TangentField:
         if act is not None:
             self._max = np.array([act.hinge.max_torque[h] if h >= 0 else act.rotor.max_torque[r]
                                   for h, r in zip(m.axis_hinge, m.axis_rotor)]) if na else np.zeros(0)
+        # the complex step's shortcut: M u' = rhs at the point, M factorised once (the real part
+        # of every direction's M); each direction then costs a back-substitution
+        from scipy.linalg import lu_factor
+
+        hinge_tau, L_rotor = self._inputs(np.zeros(len(self.m0)))
+        point = dyn.Data(m)
+        rhs0, parts = dyn.closure(m, point, self.t, self._y_with_spins(), hinge_tau, self.p0 if len(self.p0) else None,
+                                  L_rotor)
+        self._lu0 = lu_factor(dyn.mass_matrix(m, point, parts[0], parts[1]))
+        self._udot0 = _lu_solve(self._lu0, rhs0)
         self._imus = None
         if m.scene.imus:
             from gyro_sim.dynamics.imu import DEFAULT_IMU_RATE, ImuSet
 
             self._imus = ImuSet(m.scene, {name: k for k, name in enumerate(m.names)}, m.scene.gravity,
                                 DEFAULT_IMU_RATE)
+
+    def _y_with_spins(self) -> np.ndarray:
+        y = self.y0.copy()
+        if self.model.stateful:
+            y[self.model.i_spin] = self.p0
+        return y
 
     # the inputs: the commanded moments saturated as Simulator._inputs does; ties go inside
     def _inputs(self, v):
@@ -250,7 +273,18 @@ class TangentField:
         y, p = self.state(x)
         hinge_tau, L_rotor = self._inputs(v)
         ev = dyn.Evaluation() if self._imus is not None else None  # the accelerations an IMU reads
-        udot = dyn.forward(m, d, self.t, y, hinge_tau, p if nt else None, L_rotor, ev)
+        if np.iscomplexobj(y) or np.iscomplexobj(hinge_tau) or np.iscomplexobj(L_rotor):
+            # a complex step (imaginary parts infinitesimal): with M = M0 + i M1, rhs = r0 + i r1,
+            # u' = u0' + i M0^-1 (r1 - M1 u0') to first order; M1 = 0 unless positions moved
+            rhs, parts = dyn.closure(m, d, self.t, y, hinge_tau, p if nt else None, L_rotor)
+            r = rhs.imag
+            if np.any(np.imag(x[:N])):
+                r = r - dyn.mass_matrix(m, d, parts[0], parts[1]).imag @ self._udot0
+            udot = self._udot0 + 1j * _lu_solve(self._lu0, r)
+            if ev is not None:
+                dyn.fill_evaluation(m, d, udot, parts, ev)
+        else:
+            udot = dyn.forward(m, d, self.t, y, hinge_tau, p if nt else None, L_rotor, ev)
         u = y[m.i_vel]
         dt = udot.dtype
         xd = np.zeros(L.size, dtype=dt)
