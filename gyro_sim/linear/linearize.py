@@ -45,6 +45,8 @@ from gyro_sim.dynamics.rotations import cross, quat_mul, quat_to_matrix
 COMPLEX_STEP = 1e-30
 #: central differences' relative step, the cube root of the double's epsilon (error ~ eps^(2/3))
 FD_STEP = float(np.finfo(float).eps ** (1.0 / 3.0))
+#: the most states a linearisation takes: A is dense (3000 states: 72 MB, some minutes)
+MAX_STATES = 3000
 #: an equilibrium: |f0| at most this (absolute, SI units of each state's rate)
 EQUILIBRIUM_TOL = 1e-9
 CHARTS = ("world", "body")
@@ -568,6 +570,10 @@ def linearize(model: Model, t: float, y: np.ndarray, spins: np.ndarray | None, m
             raise LinearizationError(f"{name}: expected {shape[0]} finite numbers (the model's layout), "
                                      f"got shape {a.shape}")
     start = _time.perf_counter()
+    size = _layout(model, rotor_angles, chart).size
+    if size > MAX_STATES:
+        raise LinearizationError(f"{size} states: more than the {MAX_STATES} a dense linear model takes "
+                                 "(gyro_sim.linear.linearize.MAX_STATES)")
     fld = TangentField(model, t, y, spins, moments, rotor_angles, chart)
     nx, nu = fld.layout.size, len(model.axis_names)
     f0, z0, A, B, C, D = (_complex_step if method == "complex" else _central)(fld, nx, nu)

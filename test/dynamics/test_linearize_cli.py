@@ -45,3 +45,15 @@ def test_a_missing_scene_and_a_bad_step_are_refused_in_one_line(capsys):
     assert main(["linearize", "imu_pendulum", "--discrete", "-1"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2 and "no_such_scene" in err[0] and "--discrete" in err[1]
+
+
+def test_a_chain_too_long_for_a_dense_model_is_refused_in_one_line(tmp_path, capsys):
+    import yaml
+
+    from gyro_sim.bench.scenes import spherical_chain
+
+    f = tmp_path / "long.yaml"
+    f.write_text(yaml.safe_dump(spherical_chain(501)))  # 6 states per body: 3006
+    assert main(["linearize", str(f)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "3006 states" in err
