@@ -30,8 +30,11 @@ def register(sub, bench) -> None:
     p.add_argument("--discrete", type=float, metavar="H", help="also the model of one step of H seconds")
     p.add_argument("--method", default="zoh", choices=("zoh", "rk4", "gauss4", "gauss4s"),
                    help="the step of --discrete: zoh (exact, input held), or a fixed-step integrator's")
-    p.add_argument("--chart", default="world", choices=("world", "body"),
-                   help="rotations: world (rotation vectors in world axes) or body (co-rotating with a steady spin)")
+    p.add_argument("--chart", default="world", choices=("world", "body", "frame"),
+                   help="rotations: world (rotation vectors in world axes), body (co-rotating with a steady spin) "
+                        "or frame (seen from a frame turning at --frame-rate)")
+    p.add_argument("--frame-rate", type=float, nargs=3, metavar=("WX", "WY", "WZ"),
+                   help="--chart frame: the frame's angular velocity, rad/s, world axes (a precession's rate)")
     p.add_argument("--rotor-angles", action="store_true", help="keep the rotor angles in the state (cyclic)")
     p.add_argument("--fd", action="store_true", help="central differences instead of the exact complex step")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
@@ -83,7 +86,7 @@ def cmd_linearize(args) -> int:
         y = initial_state(model)
         spins = y[model.i_spin] if model.stateful else model.torque_p0
         lin = linearize(model, 0.0, y, spins, np.zeros(len(model.axis_names)), method="fd" if args.fd else "complex",
-                        chart=args.chart, rotor_angles=args.rotor_angles)
+                        chart=args.chart, rotor_angles=args.rotor_angles, frame_rate=args.frame_rate)
         disc = lin.discrete(args.discrete, args.method) if args.discrete is not None else None
     except LinearizationError as exc:
         return _fail(str(exc))
@@ -140,7 +143,7 @@ def text(r: dict) -> str:
                      f"|real part| <= {r['tolerance']:.2g} counts as zero)")
     else:
         lines.append(f"verdict: none, not an equilibrium (max |f0| = {r['equilibrium_residual']:.3g} > 1e-9): "
-                     "the eigenvalues depend on the chart; try --chart body for a steady spin")
+                     "the eigenvalues depend on the chart; try --chart body for a steady spin, --chart frame for a precession")
     lines.append(f"controllability rank: {r['controllability_rank']} of {r['states']}")
     if "discrete" in r:
         d = r["discrete"]

@@ -20,6 +20,12 @@ Two charts of the rotations:
   against the reference rotation that turns at the body's angular velocity at the point
   (delta' = J_r^-1(delta) (Omega - exp(-delta) Omega0)). A steady spin about a principal axis, or
   a sleeping top, is an equilibrium there (f0 = 0).
+- "frame": the world chart seen from a frame turning at a constant angular velocity
+  `frame_rate` (world components) about an axis through the base point O^1 (the world origin for
+  a free base): theta' = J_l^-1(theta) (w - Omega), and every world vector of the state (joint
+  rates, the free base's velocity and point) in the frame's axes. A regular precession written
+  as a carrier precessing about the vertical with a rotor carrying the spin is an equilibrium
+  there with frame_rate = the precession's rate.
 
 Derivatives are by the complex step, Im f(x + i h e_j) / h with h = 1e-30, through the numpy
 reference of the dynamics (:mod:`gyro_sim.dynamics.reference`), which takes complex states:
@@ -49,7 +55,7 @@ FD_STEP = float(np.finfo(float).eps ** (1.0 / 3.0))
 MAX_STATES = 3000
 #: an equilibrium: |f0| at most this (absolute, SI units of each state's rate)
 EQUILIBRIUM_TOL = 1e-9
-CHARTS = ("world", "body")
+CHARTS = ("world", "body", "frame")
 #: the fixed-step methods `discrete` knows by their Butcher tableaux; "zoh" is the exact
 #: transition with the input held over the step
 DISCRETE_METHODS = ("zoh", "rk4", "gauss4", "gauss4s")
@@ -146,7 +152,7 @@ def _layout(model: Model, rotor_angles: bool, chart: str) -> Layout:
     if model.free:
         for i, a in zip(model.col_base, "xyz"):
             pos[i], vel[i] = f"base_{a}", f"base_v{a}"
-    rv, av = ("r", "w") if chart == "world" else ("d", "v")
+    rv, av = ("d", "v") if chart == "body" else ("r", "w")
     for j, k in enumerate(model.sph_bodies):
         for i, a in zip(model.col_sph[j], "xyz"):
             pos[i], vel[i] = f"{model.names[k]}_{rv}{a}", f"{model.names[k]}_{av}{a}"
@@ -174,10 +180,16 @@ class TangentField:
     x the tangent state (Layout), v the change of the commanded moments. Real or complex."""
 
     def __init__(self, model: Model, t: float, y0: np.ndarray, p0: np.ndarray | None,
-                 moments0: np.ndarray, rotor_angles: bool = False, chart: str = "world"):
+                 moments0: np.ndarray, rotor_angles: bool = False, chart: str = "world",
+                 frame_rate: np.ndarray | None = None):
         if chart not in CHARTS:
             raise LinearizationError(f"chart: {chart!r} is not one of {', '.join(CHARTS)}")
+        if (chart == "frame") != (frame_rate is not None):
+            raise LinearizationError("frame_rate: the frame chart's angular velocity (3 numbers), and only for it")
         self.model, self.t, self.chart = model, float(t), chart
+        self.frame_rate = np.zeros(3) if frame_rate is None else np.asarray(frame_rate, dtype=float)
+        if self.frame_rate.shape != (3,) or not np.all(np.isfinite(self.frame_rate)):
+            raise LinearizationError(f"frame_rate: 3 finite numbers (rad/s, world axes), got {frame_rate!r}")
         self.y0 = np.asarray(y0, dtype=float).copy()
         self.p0 = np.zeros(0) if p0 is None else np.asarray(p0, dtype=float).copy()
         self.m0 = np.asarray(moments0, dtype=float).copy()
@@ -290,12 +302,18 @@ class TangentField:
         u = y[m.i_vel]
         dt = udot.dtype
         xd = np.zeros(L.size, dtype=dt)
+        body, frame = self.chart == "body", self.chart == "frame"
+        W = self.frame_rate
         if m.free:
             xd[m.col_base] = u[m.col_base]
-        body = self.chart == "body"
+            if frame:  # the point seen from the frame turning about the world origin
+                xd[m.col_base] -= cross(W, y[m.i_r0])
         if len(m.sph_bodies):
             c, w = m.col_sph, d.w[m.sph_bodies]
-            if body:
+            if frame:
+                xd[c] = _jl_inv(x[c], w - W)
+                xd[N + c] = udot[c] - cross(W, u[c])  # world vectors in the frame's axes
+            elif body:
                 Rk = d.R[m.sph_bodies]
                 Omega = np.einsum("nji,nj->ni", Rk, w)
                 xd[c] = _jr_inv(x[c], Omega - _rotate(-x[c], self._Omega0))
@@ -307,7 +325,7 @@ class TangentField:
         xd[m.col_hinge] = u[m.col_hinge]
         xd[N + m.col_hinge] = udot[m.col_hinge]
         if m.free:
-            xd[N + m.col_base] = udot[m.col_base]
+            xd[N + m.col_base] = udot[m.col_base] - (cross(W, u[m.col_base]) if frame else 0.0)
         kdot = dyn.torque_rotor_rates(m, d, p) if nt else np.zeros(0)
         if nt:
             if m.stateful:
@@ -556,7 +574,8 @@ METHODS = ("complex", "fd")
 
 
 def linearize(model: Model, t: float, y: np.ndarray, spins: np.ndarray | None, moments: np.ndarray, *,
-              method: str = "complex", rotor_angles: bool = False, chart: str = "world") -> Linearization:
+              method: str = "complex", rotor_angles: bool = False, chart: str = "world",
+              frame_rate=None) -> Linearization:
     """The linear model of `model` at time t, state y (the model's layout), torque-rotor spins
     (nt,) and commanded axis moments (na,). method: "complex" (exact, the complex step) or "fd"
     (central differences, the steps in `fd_steps`)."""
@@ -574,7 +593,7 @@ def linearize(model: Model, t: float, y: np.ndarray, spins: np.ndarray | None, m
     if size > MAX_STATES:
         raise LinearizationError(f"{size} states: more than the {MAX_STATES} a dense linear model takes "
                                  "(gyro_sim.linear.linearize.MAX_STATES)")
-    fld = TangentField(model, t, y, spins, moments, rotor_angles, chart)
+    fld = TangentField(model, t, y, spins, moments, rotor_angles, chart, frame_rate)
     nx, nu = fld.layout.size, len(model.axis_names)
     f0, z0, A, B, C, D = (_complex_step if method == "complex" else _central)(fld, nx, nu)
     evaluations = 1 + (nx + nu) * (1 if method == "complex" else 2)

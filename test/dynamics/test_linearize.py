@@ -318,3 +318,49 @@ def test_chart_maps_at_large_angles_match_the_rotations_module():
         right = (quat_exp(t + eps * _jr_inv(t, w)) - quat_exp(t - eps * _jr_inv(t, w))) / (2 * eps)
         want = (quat_mul(q, quat_exp(eps * w)) - quat_mul(q, quat_exp(-eps * w))) / (2 * eps)
         np.testing.assert_allclose(right, want, atol=1e-8)
+
+
+@pytest.mark.parametrize("theta0, kappa", [(0.5, 4.0), (1.0, -6.0), (2.2, 5.0), (0.3, 1.5)])
+def test_regular_precession_of_a_carrier_with_a_rotor_in_the_precessing_frame(theta0, kappa):
+    """A top whose carrier precesses at kappa about the vertical, tilted theta0 from it, its
+    rotor carrying the spin (docs/theory.md section 9): an equilibrium in the frame turning at
+    kappa, with the nutation's eigenvalues from the reduced potential V_eff(theta)."""
+    A_c, B_c, m, l = 2e-4, 1.5e-4, 0.3, 0.04
+    rA, rB, rm, rh = 1.2e-4, 6.5e-5, 0.2, 0.05
+    B = B_c + m * l ** 2 + rB + rm * rh ** 2  # transverse, about the pivot
+    mgl = (m * l + rm * rh) * G
+    c0, s0 = math.cos(theta0), math.sin(theta0)
+    P_phi = (mgl + B * kappa ** 2 * c0) / kappa  # the axial momentum a steady precession needs
+    p = (P_phi - A_c * kappa * c0) / rA  # the carrier turns at kappa about the vertical: w3 = kappa cos theta0
+    P_psi = B * kappa * s0 ** 2 + P_phi * c0
+
+    def V(th):  # the reduced potential (Routh), theta from the upward vertical
+        return (P_psi - P_phi * np.cos(th)) ** 2 / (2 * B * np.sin(th) ** 2) + mgl * np.cos(th)
+
+    f, f1, f2 = B * kappa * s0 ** 2, P_phi * s0, P_phi * c0  # P_psi - P_phi cos and its derivatives at theta0
+    V2 = (f1 ** 2 + f * f2) / (B * s0 ** 2) - 4 * f * f1 * c0 / (B * s0 ** 3) + f ** 2 * (s0 ** 2 + 3 * c0 ** 2) / (
+        B * s0 ** 4) - mgl * c0
+    e = 1e-4  # the formula checked against its definition (V'(theta0) = 0, V'' by differences)
+    assert abs((V(theta0 + e) - V(theta0 - e)) / (2 * e)) < 1e-6 * abs(V2)
+    assert abs((V(theta0 + e) - 2 * V(theta0) + V(theta0 - e)) / e ** 2 - V2) < 1e-5 * abs(V2)
+    k = V2 / B
+    scene = {"name": "precession", "gravity": [0.0, 0.0, -G], "base": {"type": "fixed", "position": [0, 0, 0]},
+             "bodies": [{"name": "top", "joint": {"type": "spherical"}, "mass": m, "com": [0.0, 0.0, l],
+                         "inertia_com": np.diag([B_c, B_c, A_c]).tolist(),
+                         "rotors": [{"name": "rotor", "axis": [0, 0, 1], "position": [0, 0, rh], "mass": rm,
+                                     "axial_inertia": rA, "transverse_inertia": rB, "mode": "torque", "spin": p}],
+                         "initial": {"quaternion": [math.cos(theta0 / 2), math.sin(theta0 / 2), 0.0, 0.0],
+                                     "angular_velocity": [0.0, kappa * s0, kappa * c0]}}]}
+    sim = _sim(scene)
+    assert not sim.linearize().is_equilibrium  # the world chart sees the axis turn
+    lin = sim.linearize(chart="frame", frame_rate=[0.0, 0.0, kappa])
+    assert lin.is_equilibrium, lin.equilibrium_residual
+    assert k > 0  # V_eff is convex at a steady precession of this top: a nutation, no growth
+    lam = 1j * math.sqrt(k)
+    ev = lin.eigenvalues()
+    big = ev[np.abs(ev) > 1e-6 * abs(lam)]
+    assert len(big) == 2 and len(ev) == 7, ev
+    _close_sets(big, [lam, -lam])
+    assert lin.verdict() == "marginal"
+    fd = sim.linearize(chart="frame", frame_rate=[0.0, 0.0, kappa], method="fd")
+    assert np.max(np.abs(fd.A - lin.A)) <= 1e-6 * np.max(np.abs(lin.A))

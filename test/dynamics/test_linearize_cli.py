@@ -57,3 +57,11 @@ def test_a_chain_too_long_for_a_dense_model_is_refused_in_one_line(tmp_path, cap
     assert main(["linearize", str(f)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "3006 states" in err
+
+
+def test_the_frame_chart_needs_its_rate(capsys):
+    assert main(["linearize", "heavy_top", "--chart", "frame"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "frame_rate" in err
+    assert main(["linearize", "heavy_top", "--chart", "frame", "--frame-rate", "0", "0", "-3", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["chart"] == "frame"
