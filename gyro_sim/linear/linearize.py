@@ -11,7 +11,7 @@ spherical body (3) and each hinge angle (1). The inputs are the commanded axis m
 command order (`Simulator.axis_names`). The work accumulators of a scene with friction are
 left out: they feed nothing back.
 
-Two charts of the rotations:
+Three charts of the rotations:
 
 - "world" (default): q = exp(theta / 2) (x) q0, theta in world components; velocities are the
   model's generalized velocities (relative angular velocities in world components).
