@@ -17,7 +17,11 @@ MODELS = ["mujoco>=3.3"]
 # gyro-sim sweep: dask[distributed] runs the points on a local or remote cluster; pyarrow writes
 # the Parquet table (without pandas); matplotlib draws the map
 SWEEP = ["dask[distributed]>=2024.1", "pyarrow>=14", "matplotlib>=3.6"]
-TEST = ["pytest>=7", "rosbags>=0.9"] + ROS + VIZ + BENCH + SWEEP + MODELS
+# ruff: the linter .ci/run runs before the tests (ruff.toml)
+TEST = ["pytest>=7", "rosbags>=0.9", "ruff>=0.5"] + ROS + VIZ + BENCH + SWEEP + MODELS
+# Basilisk (bsk): the peer engine of the reaction-wheel cross-check; it caps numpy, matplotlib and
+# protobuf below what the test extra installs, so CI gives it a venv of its own (.ci/run)
+PEERS = ["bsk>=2.12"]
 
 setup(
     name=package_name,
@@ -42,7 +46,8 @@ setup(
         "mcap>=1.6",
         "mcap-ros2-support>=0.5",
     ],
-    extras_require={"ros": ROS, "viz": VIZ, "bench": BENCH, "sweep": SWEEP, "models": MODELS, "test": TEST},
+    extras_require={"ros": ROS, "viz": VIZ, "bench": BENCH, "sweep": SWEEP, "models": MODELS, "test": TEST,
+                    "peers": PEERS},
     python_requires=">=3.10",
     zip_safe=True,
     maintainer="gyro_sim developers",

@@ -7,15 +7,15 @@ import os
 # and on 2 cores it fights the step loop (measured: n = 50 solve 5x slower). Must precede numpy.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import argparse  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
+import argparse
+import sys
+import time
+from pathlib import Path
 
 
-from gyro_sim.log.mcap_log import DEFAULT_FLUSH_PERIOD  # noqa: E402
-from gyro_sim.safe_paths import end_after_interrupt, interrupt_behind  # noqa: E402
-from gyro_sim.progress import Progress  # noqa: E402  (cmd_run, cmd_bench_scaling)
+from gyro_sim.log.mcap_log import DEFAULT_FLUSH_PERIOD
+from gyro_sim.safe_paths import end_after_interrupt, interrupt_behind
+from gyro_sim.progress import Progress  # cmd_run, cmd_bench_scaling
 
 
 def cmd_run(args) -> int:
@@ -150,9 +150,12 @@ def _report(args, scene, sim, inv0, record, wall0, cpu0) -> None:
     inv1 = snap.invariants
     integ = sim.integrator
     print(f"scene:                     {scene.name} ({len(scene.bodies)} bodies, {sim.model.N} velocities)")
-    print(f"integrator:                {args.integrator} (rtol {args.rtol:g}, atol {args.atol:g}, step {args.step:g} s)")
-    print(f"simulated:                 {sim.time:.6g} s in {cpu:.3f} s CPU, {wall:.3f} s wall: real-time factor {sim.time / max(wall, 1e-9):.1f}")
-    print(f"work:                      {integ.nsteps} steps, {integ.nrejected} rejected, {sim.system.nfev} dynamics evaluations")
+    print(f"integrator:                {args.integrator} (rtol {args.rtol:g}, atol {args.atol:g}, "
+          f"step {args.step:g} s)")
+    print(f"simulated:                 {sim.time:.6g} s in {cpu:.3f} s CPU, {wall:.3f} s wall: "
+          f"real-time factor {sim.time / max(wall, 1e-9):.1f}")
+    print(f"work:                      {integ.nsteps} steps, {integ.nrejected} rejected, "
+          f"{sim.system.nfev} dynamics evaluations")
     for name, drift in snap.drift.items():
         print(f"{name + ' drift:':<26}{drift:.3e} (relative, conserved in this scene without commands)")
     if snap.work:
@@ -182,7 +185,8 @@ def cmd_bench_scaling(args) -> int:
     feat = scaling.features(quick=args.quick)
     text += "\n\n### Leaving out what a scene does not have\n\n" + scaling.features_table(feat)
     fixed = scaling.fixed_step(scaling.QUICK_FIXED_STEP_SIZES if args.quick else scaling.FIXED_STEP_SIZES,
-                               seconds=0.2 if args.quick else 1.0, repeats=1 if args.quick else scaling.FIXED_STEP_REPEATS)
+                               seconds=0.2 if args.quick else 1.0,
+                               repeats=1 if args.quick else scaling.FIXED_STEP_REPEATS)
     text += ("\n\n### One simulated second, RK4 at 1 kHz, beside MuJoCo (CPU, median of runs)\n\n"
              + scaling.fixed_step_table(fixed))
     mem = []
@@ -254,7 +258,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--keyframe", metavar="NAME",
                    help="models only: the keyframe of the initial state (default: the model's first)")
     r.add_argument("--duration", type=float, required=True, help="simulated seconds")
-    r.add_argument("--integrator", default="auto", help="auto (dop853, switching to radau when stiff) | dop853 | radau | rk4 | lie4 | gauss4 | fixed")
+    r.add_argument("--integrator", default="auto",
+                   help="auto (dop853, switching to radau when stiff) | dop853 | radau | rk4 | lie4 | gauss4 | fixed")
     r.add_argument("--rtol", type=float, default=1e-10)
     r.add_argument("--atol", type=float, default=1e-12)
     r.add_argument("--step", type=float, default=1e-3, help="step of fixed-step methods (s)")
@@ -279,7 +284,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--sizes", type=int, nargs="+")
     s.add_argument("--quick", action="store_true", help="small sizes, short timings (CI)")
     s.add_argument("--memory", action="store_true",
-                   help="also the peak memory of 0.1 s at n = 1000 and 5000 with every integrator (minutes; quick: n = 300)")
+                   help="also the peak memory of 0.1 s at n = 1000 and 5000 with every integrator "
+                        "(minutes; quick: n = 300)")
     s.add_argument("--out", default="out/bench", help="directory for scaling.md, .json and .png")
     s.add_argument("--force", action="store_true", help="replace existing report files in --out")
     s.set_defaults(fn=cmd_bench_scaling)
@@ -375,7 +381,7 @@ def main(argv=None) -> int:
         print(f"gyro-sim {args.cmd}: needs {exc.name.split('.')[0]}, not installed; "
               f"install it with: pip install 'gyro_sim[{extra}]'", file=sys.stderr)
         return 2
-    except Exception as exc:  # noqa: BLE001 - only to find a signal Python wrapped (interrupt_behind)
+    except Exception as exc:  # only to find a signal Python wrapped (interrupt_behind)
         interrupt = interrupt_behind(exc)
         if interrupt is None:
             raise

@@ -1,16 +1,67 @@
+"""Fixtures and helpers shared across the test tree; the run's ROS log directory; the check
+that the tests write nothing into the clone."""
 import os
-import tempfile
+import subprocess
 import sys
+import tempfile
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
-# rclpy writes a log file per process: keep them out of ~/.ros and out of the tree
-os.environ.setdefault("ROS_LOG_DIR", os.path.join(tempfile.gettempdir(), "gyro_sim_test_ros_log"))
+# rclpy writes a log file per process: keep them out of ~/.ros and out of the tree, in a
+# directory of this run's own (removed at its end), unless the caller chose one
+_OWN_ROS_LOG_DIR = None
+if "ROS_LOG_DIR" not in os.environ:
+    _OWN_ROS_LOG_DIR = tempfile.mkdtemp(prefix="gyro_sim-test-ros-log-")
+    os.environ["ROS_LOG_DIR"] = _OWN_ROS_LOG_DIR
 
-#: what a run may leave in the clone: caches of Python, numba and pytest, build metadata, venvs
-_TREE_OWN = {"__pycache__", ".git", ".pytest_cache", ".ci-venv", ".venv", "build", "dist"}
+# --- shared by the tests of logs, messages, replay and views: a short recorded run ---------------
+#: hinge_chain has spherical joints, hinges, an actuated rotor: every kind of joint state
+SCENE = ROOT / "config" / "hinge_chain.yaml"
+#: (t, axis moments) for hinge_chain's axes (wheel2, arm3, arm4)
+SCHEDULE = [(0.0, [0.001, 0.0, 0.0]), (0.1, [0.0, 0.02, -0.01]), (0.23, [-0.002, -0.01, 0.03])]
+DURATION = 0.4
+PUBLISH_RATE = 50.0
+CHUNK = 0.005
+
+
+def gyro_sim(*args, timeout=120, **kw):
+    """Run the CLI in a subprocess (the whole environment passed on: the ROS wheels need theirs)."""
+    return subprocess.run([sys.executable, "-m", "gyro_sim.cli", *map(str, args)], cwd=ROOT,
+                          capture_output=True, text=True, timeout=timeout, env=dict(os.environ), **kw)
+
+
+@pytest.fixture(scope="session")
+def recorded(tmp_path_factory):
+    """(path, RunRecord) of a 0.4 s hinge_chain run with commands, published at 50 Hz."""
+    from gyro_sim import Simulator, load_scene
+    from gyro_sim.log.record import record_run
+
+    path = tmp_path_factory.mktemp("log") / "run.mcap"
+    sim = Simulator(load_scene(SCENE))
+    rec = record_run(sim, path, duration=DURATION, chunk=CHUNK, publish_rate=PUBLISH_RATE, schedule=SCHEDULE)
+    return path, rec
+
+
+def rosbags_messages(path) -> list[tuple[str, int]]:
+    """(topic, log time) of every message in file order, each deserialised by rosbags (an
+    independent reader)."""
+    from rosbags.highlevel import AnyReader
+
+    out = []
+    with AnyReader([Path(path)]) as reader:
+        for con, t, raw in reader.messages():
+            reader.deserialize(raw, con.msgtype)
+            out.append((con.topic, t))
+    return out
+
+
+#: what a run may leave in the clone: caches of Python, numba, pytest and ruff, build metadata, venvs
+_TREE_OWN = {"__pycache__", ".git", ".pytest_cache", ".ruff_cache", ".ci-venv", ".ci-peers-venv", ".venv", "build",
+             "dist"}
 
 
 def _tree_files() -> dict[str, float]:
@@ -34,6 +85,10 @@ def pytest_sessionstart(session):
 def pytest_sessionfinish(session, exitstatus):
     """Tests run in their own temporary directories: a file the run created or changed in the
     clone fails the run, named."""
+    if _OWN_ROS_LOG_DIR is not None:
+        import shutil
+
+        shutil.rmtree(_OWN_ROS_LOG_DIR, ignore_errors=True)
     before = getattr(session.config, "_gyro_sim_tree", None)
     if before is None:
         return

@@ -4,6 +4,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -13,6 +15,7 @@ def gyro_sim(*args, **kw):
     )
 
 
+@pytest.mark.slow
 def test_run_prints_summary_with_drift():
     r = gyro_sim("run", "--scene", "heavy_top", "--duration", "0.5")
     assert r.returncode == 0, r.stderr
@@ -22,9 +25,11 @@ def test_run_prints_summary_with_drift():
     assert "real-time factor" in r.stdout
 
 
+@pytest.mark.slow
 def test_run_refuses_bad_scene(tmp_path):
     bad = tmp_path / "bad.yaml"
-    bad.write_text("name: x\nbase: {type: fixed}\nbodies:\n  - {name: a, joint: {type: spherical}, mass: -1, inertia: {axial: 1, transverse: 1}}\n")
+    bad.write_text("name: x\nbase: {type: fixed}\nbodies:\n"
+                   "  - {name: a, joint: {type: spherical}, mass: -1, inertia: {axial: 1, transverse: 1}}\n")
     r = gyro_sim("run", "--scene", str(bad), "--duration", "1")
     assert r.returncode == 2
     assert "bodies[0].mass" in r.stderr
@@ -32,6 +37,7 @@ def test_run_refuses_bad_scene(tmp_path):
     assert r.returncode == 2 and "shipped scenes" in r.stderr
 
 
+@pytest.mark.slow
 def test_bench_scaling_quick(tmp_path):
     r = gyro_sim("bench", "scaling", "--quick", "--out", str(tmp_path))
     assert r.returncode == 0, r.stderr

@@ -2,7 +2,10 @@
 import subprocess
 import sys
 
+import pytest
 
+
+@pytest.mark.slow
 def test_core_does_not_import_rclpy():
     code = (
         "import sys, gyro_sim\n"

@@ -321,6 +321,7 @@ def shown_commands(page: Path) -> list[str]:
 
 
 @pytest.mark.parametrize("page", DOC_PAGES, ids=lambda p: p.name)
+@pytest.mark.slow
 def test_commands_in_the_docs_parse(page):
     from gyro_sim.cli import build_parser
     from gyro_sim.ros.params import parse_ros_argv, unknown_parameters

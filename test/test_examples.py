@@ -113,6 +113,7 @@ def logs(tmp_path_factory) -> Path:
 
 
 @pytest.mark.parametrize("where, line", EXAMPLES, ids=[c for _, c in EXAMPLES])
+@pytest.mark.slow
 def test_example(where, line, tmp_path, logs, monkeypatch):
     argv = shlex.split(line)
     program, argv = argv[0], argv[1:]

@@ -76,6 +76,7 @@ def test_run_command_installs_the_viewer_its_hint_names():
     ("rclpy", ["replay", "LOG"], "ros"),
     ("rclpy", ["cmd", "constant", "0.0"], "ros"),
 ])
+@pytest.mark.slow
 def test_missing_optional_module_gives_one_line_hint(tmp_path, module, argv, extra):
     log = tmp_path / "some.mcap"
     log.write_bytes(b"not read: the missing module is found first")
@@ -313,6 +314,7 @@ def test_counts_are_singular_for_one():
     assert not re.search(r"\b1 \w+s\b", text), text
 
 
+@pytest.mark.slow
 def test_cmd_says_at_once_that_it_waits_for_the_node(tmp_path):
     pytest.importorskip("rclpy")
     domain = str(230 + os.getpid() % 3)  # 230..232: no test or bench node runs there

@@ -626,7 +626,7 @@ def _header(fname: str, args: Mapping[str, Any]) -> str:
         f"double\nprecision, written by\n"
         f"    python -m gyro_sim.analytic.lagrange config\n"
         f"from gyro_sim.analytic.lagrange.SHIPPED_SCENES[{fname!r}] (precession_scene_dict);\n"
-        f"test/core/test_lagrange.py regenerates them and checks this file is unchanged.\n"
+        f"test/analytic/test_lagrange.py regenerates them and checks this file is unchanged.\n"
         f"Inertia is about O^k (about the centre of mass the transverse moment is B - m c^2).\n")
 
 

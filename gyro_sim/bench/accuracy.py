@@ -413,7 +413,7 @@ PEER_TARGET = 1e-8
 
 def peer_ratio_table(points: list[Point], target: float = PEER_TARGET) -> str:
     """Per scene: gyro_sim dop853's CPU and MuJoCo RK4's CPU to reach `target`, and their ratio."""
-    lines = [f"| scene | gyro_sim dop853 (ms) | MuJoCo RK4 (ms) | dop853 / MuJoCo RK4 |", "|---|---:|---:|---:|"]
+    lines = ["| scene | gyro_sim dop853 (ms) | MuJoCo RK4 (ms) | dop853 / MuJoCo RK4 |", "|---|---:|---:|---:|"]
     for scene in dict.fromkeys(p.scene for p in points):
         by = by_method([p for p in points if p.scene == scene])
         mine = cost_at(by.get("dop853", []), target)

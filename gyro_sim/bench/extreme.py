@@ -238,7 +238,7 @@ def abrupt_commands(factor: float = ABRUPT_FACTOR) -> tuple[dict[str, Any], list
 
 # ------------------------------------------------------------------------ shipped files
 #: file name -> (builder, header comment). Not the heavy tip: no integrator gets through it at
-#: the tight tolerances of test/core/test_conservation.py (see the stability report).
+#: the tight tolerances of test/dynamics/test_conservation.py (see the stability report).
 SHIPPED: dict[str, tuple[Any, str]] = {
     "stiff_fast_rotor.yaml": (
         lambda: fast_rotor_precession(1e4),

@@ -4,7 +4,7 @@ For `extreme.mass_ratio_chain(ratio)` (a three-body spherical chain whose tip is
 neighbour) at ratios RATIOS and their inverses, at its initial state: the accelerations u'
 from the compiled (numba) kernel and from the numpy reference (a dense solve of the
 composite-inertia matrix), and the same equations evaluated in 80-digit decimal arithmetic
-(the oracle the tests use too, test/core/extended_precision.py; here so the report runs
+(the oracle the tests use too, test/dynamics/extended_precision.py; here so the report runs
 from the installed package): the compiled kernel run as plain Python (NUMBA_DISABLE_JIT=1, in a
 subprocess) on 80-digit numbers. Its inputs are the float64 ones, converted exactly, so it
 gives the exact accelerations of those inputs to ~1e-75, whatever elimination the kernel uses.

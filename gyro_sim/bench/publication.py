@@ -7,8 +7,8 @@ one publisher per joint wrench topic as docs/ros-interface.md gives, and the sam
 recorder). This bench runs exactly that code on the physics thread of this process, with a real
 rclpy node, real publishers and a real recorder (gyro_sim.ros.recorder.LiveRecorder writing an
 MCAP file from its child process), on spherical chains of gyro_sim.bench.scenes with a rotor on
-every body (in space: no gravity, as bench realtime), RK4 at 1 ms, with wrenches, poses and /tf on (what a recording node publishes), and
-/diagnostics every 10th publication as the node sends them.
+every body (in space: no gravity, as bench realtime), RK4 at 1 ms, with wrenches, poses and /tf
+on (what a recording node publishes), and /diagnostics every 10th publication as the node sends them.
 
 Parts (wall time on the calling thread, medians and p99 over the publications). Each
 publication runs what the node runs right after the physics steps, timed (prepare, publish,
@@ -121,7 +121,8 @@ def _simulator(n: int):
     from gyro_sim.simulator import Simulator
     from gyro_sim.bench.scenes import spherical_chain
 
-    sim = Simulator(spherical_chain(n, gravity=False, rotors=True), integrator="rk4", step=PHYSICS_STEP, backend="numba")
+    sim = Simulator(spherical_chain(n, gravity=False, rotors=True), integrator="rk4", step=PHYSICS_STEP,
+                    backend="numba")
     sim.advance(PUBLISH_PERIOD)  # compiles, and leaves the reset state
     return sim
 
@@ -136,12 +137,13 @@ def _kernel(sim, out, diag: bool) -> None:
     """The compiled outputs call of a publication alone, as prepare_state asks for it."""
     from gyro_sim.dynamics import outputs as fo
 
-    want = getattr(fo, "WANT_BODIES", 0) | getattr(fo, "WANT_WRENCHES", 0) | (getattr(fo, "WANT_INVARIANTS", 0) if diag else 0)
+    want = (getattr(fo, "WANT_BODIES", 0) | getattr(fo, "WANT_WRENCHES", 0)
+            | (getattr(fo, "WANT_INVARIANTS", 0) if diag else 0))
     frame = _frame(out)
     try:
-        sim._outputs_compiled(want, None if frame is None else frame.scatter, fresh=False)  # noqa: SLF001
+        sim._outputs_compiled(want, None if frame is None else frame.scatter, fresh=False)
     except TypeError:  # before the publication kernel: one call computed everything
-        sim._outputs_compiled()  # noqa: SLF001
+        sim._outputs_compiled()
 
 
 def _bytes(sim, out, snap, t_ns: int, run) -> None:
@@ -318,15 +320,15 @@ def isolated(n: int, repeats: int = 300) -> dict[str, float]:
     res = {}
     scatter = None if frame is None else frame.scatter
     if hasattr(fo, "WANT_BODIES"):
-        res["kernel, joint states"] = med(lambda: sim._outputs_compiled(0, None, fresh=False))  # noqa: SLF001
-        res["kernel, + wrenches, poses"] = med(lambda: sim._outputs_compiled(  # noqa: SLF001
+        res["kernel, joint states"] = med(lambda: sim._outputs_compiled(0, None, fresh=False))
+        res["kernel, + wrenches, poses"] = med(lambda: sim._outputs_compiled(
             fo.WANT_BODIES | fo.WANT_WRENCHES, scatter, fresh=False))
         res["snapshot"] = med(lambda: sim.snapshot(invariants=False, into=scatter))
         if hasattr(sim, "write_outputs"):
             res["write_outputs"] = med(lambda: sim.write_outputs(scatter))
         res["bytes"] = med(lambda: frame.messages(1))
     else:
-        res["kernel, + wrenches, poses"] = med(lambda: sim._outputs_compiled())  # noqa: SLF001
+        res["kernel, + wrenches, poses"] = med(lambda: sim._outputs_compiled())
         res["snapshot"] = med(lambda: sim.snapshot(invariants=False))
         snap = sim.snapshot(invariants=False)
         res["bytes"] = med(lambda: out.publication.messages(snap, 1))
@@ -406,7 +408,8 @@ def recorder_costs(n: int, publications: int = 300, workdir: str | None = None) 
     us = 1e6
     return {"hand_off": float(np.median(hand) * us), "hand_off_p99": float(np.percentile(hand, 99) * us),
             "sender_cpu": recorder.sender_cpu / publications * us,
-            "pack": _sender_python(batch, t_ns) * us, "writer_cpu": (recorder.thread_cpu - getattr(recorder, "open_cpu", 0.0)) / publications * us,
+            "pack": _sender_python(batch, t_ns) * us,
+            "writer_cpu": (recorder.thread_cpu - getattr(recorder, "open_cpu", 0.0)) / publications * us,
             "advance": float(np.median(adv) * us), "records": records, "written": recorder.written,
             "publications": publications,
             "error": recorder.error}
@@ -443,8 +446,9 @@ def _sender_python(batch: list, t_ns: int, repeats: int = 200) -> float:
 
 def recorder_table(costs: dict[int, dict]) -> str:
     """Markdown: one line per chain length of :func:`recorder_costs`."""
-    text = ("| n | records / publication | hand-off p50 / p99 (us) | sender thread CPU (us) | sender's Python work (us) "
-            "| writer process CPU (us) | 10 physics steps (us) |\n|---:|---:|---:|---:|---:|---:|---:|\n")
+    text = ("| n | records / publication | hand-off p50 / p99 (us) | sender thread CPU (us) "
+            "| sender's Python work (us) | writer process CPU (us) | 10 physics steps (us) |\n"
+            "|---:|---:|---:|---:|---:|---:|---:|\n")
     for n, c in costs.items():
         text += (f"| {n} | {c['records'] / c['publications']:.1f} | {c['hand_off']:.1f} / {c['hand_off_p99']:.1f} "
                  f"| {c['sender_cpu']:.1f} | {c['pack']:.1f} | {c['writer_cpu']:.0f} | {c['advance']:.0f} |\n")
@@ -452,7 +456,8 @@ def recorder_table(costs: dict[int, dict]) -> str:
              "/diagnostics every 10th): the physics thread's hand-off to the recorder, the CPU of the recorder's "
              "sender thread (wake-ups and pipe writes included), its Python work for one publication timed alone "
              "(what it holds the interpreter lock the physics thread needs for), of the writer process, and "
-             f"the physics thread's own 10 steps. Machine load {os.getloadavg()[0]:.2f} ({os.cpu_count()} cores, shared).\n")
+             f"the physics thread's own 10 steps. Machine load {os.getloadavg()[0]:.2f} "
+             f"({os.cpu_count()} cores, shared).\n")
     return text
 
 
@@ -465,7 +470,7 @@ def publish_costs(node, repeats: int = 3000) -> dict[str, float]:
 
     pub = node.create_publisher(WrenchStamped, "/gyro_sim_bench/wrench_probe", 10)
     data = M.wrench_stamped(1, "probe", np.ones(3), np.ones(3))
-    raw = getattr(pub, "_Publisher__publisher").publish_raw
+    raw = pub._Publisher__publisher.publish_raw  # rclpy keeps the C publisher private
     out = {}
     for name, fn in (("publish", pub.publish), ("publish_raw", raw)):
         ts = []
@@ -537,7 +542,8 @@ def measure(sizes=DEFAULT_SIZES, publications: int = DEFAULT_PUBLICATIONS, *, su
             node.destroy_node()
         finally:
             rclpy.shutdown()
-    return {"rows": rows, "isolated": alone, "publish": one, "gil": gil, "load": os.getloadavg()[0], "cores": os.cpu_count()}
+    return {"rows": rows, "isolated": alone, "publish": one, "gil": gil, "load": os.getloadavg()[0],
+            "cores": os.cpu_count()}
 
 
 def table(result: dict) -> str:

@@ -369,7 +369,8 @@ def features(quick: bool = False) -> list[tuple[str, float, float]]:
     min_time = 0.05 if quick else 0.3
     out = []
     cases = [
-        ("gravity", spherical_chain(FEATURE_N, gravity=False), _zero_gravity(spherical_chain(FEATURE_N, gravity=False))),
+        ("gravity", spherical_chain(FEATURE_N, gravity=False),
+         _zero_gravity(spherical_chain(FEATURE_N, gravity=False))),
         ("rotors", spherical_chain(FEATURE_N), _zero_rotors(spherical_chain(FEATURE_N))),
     ]
     for name, without, with_zero in cases:
@@ -424,7 +425,8 @@ built = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 t = time.process_time()
 sim.advance(seconds)
 i = sim.integrator
-print(json.dumps({"size": i.n, "built_mb": built / 1024, "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+print(json.dumps({"size": i.n, "built_mb": built / 1024,
+                  "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
                   "cpu_s": time.process_time() - t, "steps": i.nsteps, "nfev": i.nfev}))
 """
 
@@ -470,11 +472,12 @@ def memory(sizes=MEMORY_SIZES, integrators=MEMORY_INTEGRATORS, seconds: float = 
 
 
 def memory_table(rows: list[MemoryRow]) -> str:
-    lines = [f"| n (states) | integrator | peak RSS (MB) | of which the model and kernels (MB) | CPU (s) | steps |",
+    lines = ["| n (states) | integrator | peak RSS (MB) | of which the model and kernels (MB) | CPU (s) | steps |",
              "|---:|---|---:|---:|---:|---:|"]
     for r in rows:
         if r.failed:
             lines.append(f"| {r.n} | {r.integrator} | failed: {r.failed} | | | |")
         else:
-            lines.append(f"| {r.n} ({r.size}) | {r.integrator} | {r.peak_mb:.0f} | {r.built_mb:.0f} | {r.cpu_s:.1f} | {r.steps} |")
+            lines.append(f"| {r.n} ({r.size}) | {r.integrator} | {r.peak_mb:.0f} | {r.built_mb:.0f} | {r.cpu_s:.1f} "
+                         f"| {r.steps} |")
     return "\n".join(lines)

@@ -214,9 +214,9 @@ def flood(workdir: Path, rate: float = FLOOD_RATE, seconds: float = FLOOD_SECOND
         # the flooders run at the lowest CPU priority: what is measured is whether the node's own
         # command intake steals its physics thread's time, not how the OS shares 2 cores among
         # three busy processes
-        floods = [subprocess.Popen(["nice", "-n", "19", sys.executable, "-c", FLOODER, str(rate / publishers), str(seconds),
-                                    "0.001", "0.01", "-0.01"], env=_env(domain, workdir), stdin=subprocess.PIPE,
-                                   stdout=subprocess.PIPE, text=True) for _ in range(publishers)]
+        floods = [subprocess.Popen(["nice", "-n", "19", sys.executable, "-c", FLOODER, str(rate / publishers),
+                                    str(seconds), "0.001", "0.01", "-0.01"], env=_env(domain, workdir),
+                                   stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True) for _ in range(publishers)]
         for f in floods:
             if f.stdout.readline().strip() != "ready":
                 raise RuntimeError("a flood publisher did not start")

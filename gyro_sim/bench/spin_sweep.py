@@ -9,7 +9,7 @@ theta_k and psi_k' = kappa stay constant, phi_k' is constant
 - :func:`heavy_top` -- config/heavy_top.yaml (theta = 0.6) with proper rotation phi' = spin;
   for n = 1, eq 88 reads A phi' = (B - A) kappa cos th - m c g / kappa - lambda, whose slow
   root is kappa ~ -m c g / (A phi'): the precession slows as the spin grows (-2.4, -0.24,
-  -0.024 rad/s at 1e2, 1e3, 1e4 rad/s). It is the fast heavy top of test/core/test_choose.py
+  -0.024 rad/s at 1e2, 1e3, 1e4 rad/s). It is the fast heavy top of test/integrators/test_fixed.py
   (heavy_top.yaml spun at `spin` with psi' = 0 at the start) without the nutation that start
   excites: the same stiffness (rk4 at 1 ms is unstable past h |lambda| = 2 sqrt 2), a known
   solution.

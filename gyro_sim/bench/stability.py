@@ -78,7 +78,7 @@ ERROR_TOL = 1e-3
 REF_RTOL, CHECK_RTOL = 1e-11, 1e-10
 REF_AGREE = 0.1 * 1e-3
 NO_REF_HEAVY = ("no reference: the motion amplifies round-off (rhs exact to 1e-14 relative on the compiled "
-                "path, 6e-8 on the numpy one: test/core/test_heavy_tip.py), a tight run cannot be had")
+                "path, 6e-8 on the numpy one: test/dynamics/test_heavy_tip.py), a tight run cannot be had")
 #: Kapitza: the upright rod "falls" once its tilt from the upward vertical passes FALLEN
 #: (below the horizontal), else it "stays up" (Kapitza's effective potential
 #: cos(tilt) + (margin / 2) sin(tilt)^2 keeps a margin > 1 rod below its barrier at
@@ -646,7 +646,8 @@ class Report:
             if best is None:
                 hold.append(f"{method}: no measured n")
             else:
-                hold.append(f"{method}: n = {best} measured" + (f", about {crossing:.0f} interpolated" if crossing else ""))
+                hold.append(f"{method}: n = {best} measured"
+                            + (f", about {crossing:.0f} interpolated" if crossing else ""))
         steps = max(r.steps for r in self.costs)
         return [
             "### The cost of one physics step: gauss4s and gauss4 beside rk4",
@@ -676,7 +677,7 @@ class Report:
             "accelerations u', relative to the largest 80-digit acceleration, between the compiled "
             "(numba) kernel, the numpy reference (dense solve of the composite-inertia matrix) and the "
             "same equations in 80-digit arithmetic (the kernel run as Python on decimal numbers: "
-            "`gyro_sim.bench.heavy_tips`, as test/core/extended_precision.py).",
+            "`gyro_sim.bench.heavy_tips`, as test/dynamics/extended_precision.py).",
             "",
             ht.table(self.tips),
             "",

@@ -47,8 +47,9 @@ from datetime import date
 from pathlib import Path
 
 from gyro_sim.errors import GyroSimError
-from gyro_sim.ros.discovery import ANNOUNCE_PERIOD as ANNOUNCE_PERIOD_NODE, FAST_DDS_ANNOUNCE_PERIOD, PROFILE_VARIABLES, \
-    profile_xml
+from gyro_sim.ros.discovery import (
+    ANNOUNCE_PERIOD as ANNOUNCE_PERIOD_NODE, FAST_DDS_ANNOUNCE_PERIOD, PROFILE_VARIABLES, profile_xml,
+)
 
 #: the extras installed: the node needs [ros], the sweep case [sweep]
 EXTRAS = "ros,sweep"
@@ -439,7 +440,7 @@ def measure(venv: Path, parts, say, timeout: float = CASE_TIMEOUT, warm_starts: 
     results: dict[str, dict] = {}
     with tempfile.TemporaryDirectory(prefix="gyro_sim_startup_") as tmp:
         scratch = Path(tmp)
-        for key, label in CASES:
+        for key, _label in CASES:
             if key not in parts:
                 continue
             cache = scratch / f"cache_{key}"

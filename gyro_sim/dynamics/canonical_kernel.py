@@ -21,7 +21,7 @@ and of its momentum; `cflags` (i_pr, i_kappa of z, the model's size); `cwork`, t
                             p_rel' = S' . h + S . F + tau, then the canonical rates
 
 The derivation and the formulas are in canonical.py's docstring; this is the same arithmetic
-in scalar loops (test/core/test_gauss_canonical.py checks the two against each other).
+in scalar loops (test/integrators/test_gauss4s.py checks the two against each other).
 """
 from __future__ import annotations
 

@@ -10,7 +10,7 @@ microseconds. :class:`gyro_sim.dynamics.system.FastChainODE` is the ODE system b
 Same equations, same velocity basis, state layout and signs as :mod:`gyro_sim.dynamics.model` and
 :mod:`gyro_sim.dynamics.reference` (world components; spherical joints move with the relative
 angular velocity in world components). Two things differ, neither visible in the results
-beyond round-off (test/core/test_fast.py):
+beyond round-off (test/dynamics/test_kernel.py):
 
 - the spatial quantities of body k are taken about its own joint point O^k (world axes)
   instead of the world origin, so neighbouring bodies differ by the translation s^k only
@@ -32,7 +32,7 @@ Pipeline of one evaluation (`rhs_kernel`), all about O^k in world axes:
     ABA          I, p, c  -> u'                                               (eqs 44, 51, 54)
     y'           u', w    -> quaternion rates, phi', u', rotor angle rates    (eqs 18-19)
 
-Nothing is allocated per evaluation (test/core/test_fast_alloc.py): every intermediate lives in
+Nothing is allocated per evaluation (test/dynamics/test_kernel_alloc.py): every intermediate lives in
 the workspace `workspace(model)` gives, viewed by `block2`/`block3`; 3-vectors, the spherical
 elimination (3 x 3 blocks of J, H, M) and the forward sweep's acceleration are scalars, so that
 LLVM keeps them in registers. Where a product meets a known zero (a cross-product matrix) it is
@@ -43,7 +43,7 @@ Reactions (eqs 40, 48) are outputs and stay on the numpy path (`FastChainODE.rhs
 out=ev)` delegates to the `ChainODE` it holds).
 
 Small formulas have their numpy home elsewhere and a scalar twin here, written in the same
-operations (the kernel inlines it; test/core/test_fast.py checks the twins against their
+operations (the kernel inlines it; test/dynamics/test_kernel.py checks the twins against their
 homes): `_quat_to_matrix` = :func:`gyro_sim.dynamics.rotations.quat_to_matrix`, `_quat_rate` =
 :func:`gyro_sim.dynamics.rotations.quat_rates`, `_rotor_angle_rate` =
 :func:`gyro_sim.dynamics.reference.torque_rotor_rates`. They stay in this file because numba's
@@ -96,7 +96,7 @@ WORK_FIXED = 81
 #: `_aba` takes the square-root form (`_aba_stable`) when the classic elimination passes on to
 #: a body more than this many times its own mass (the subtree's apparent, articulated mass at
 #: the joint); below, the formed projection (`_aba_classic`) loses ~10 eps ratio^2 relative
-#: (9e-12 at 1e2: test/core/test_heavy_tip.py). Chains whose subtrees all weigh less than this
+#: (9e-12 at 1e2: test/dynamics/test_heavy_tip.py). Chains whose subtrees all weigh less than this
 #: many times their carriers cannot pass on more and skip the check.
 STABLE_ABA_RATIO = 100.0
 #: flags (`model_arguments`, int64): base type, has gravity, has lambda (rotors), i_r0, i_vel,
@@ -904,7 +904,7 @@ def _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Di
 
     so the factor passed to the parent is R22 N^T: no subtraction at all. Then one step of
     iterative refinement with the residual of the inverse dynamics (`_aba_resolve`) takes the
-    last ~eps x ratio off (test/core/test_heavy_tip.py). The base body's joint with a free base (six columns) is solved with its
+    last ~eps x ratio off (test/dynamics/test_heavy_tip.py). The base body's joint with a free base (six columns) is solved with its
     articulated inertia formed, F^T F (nothing passes on from it).
     """
     n = IA.shape[0]

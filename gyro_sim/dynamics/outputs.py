@@ -6,7 +6,7 @@ compiled C function, `fast.rhs_call`), what
 :class:`gyro_sim.simulator.Simulator` otherwise builds from the numpy reference
 (`joint_states`, `body_states`, `wrenches`, `invariants`); :class:`gyro_sim.dynamics.system.
 FastChainODE` offers everything it computes as `outputs`. Same equations, about each joint point O^k instead of
-the world origin; the results agree to round-off (test/core/test_fast_outputs.py).
+the world origin; the results agree to round-off (test/dynamics/test_outputs.py).
 
 Pipeline (all world components, about O^k unless said):
     rhs_kernel      t, y          -> u', torque-rotor angle rates kappa'          (eqs 18-19, 48)

@@ -6,7 +6,7 @@
 
 :class:`OdeSystem` is all the integrators (:mod:`gyro_sim.integrators`) ask of a system.
 Two implementations of it, same equations, same state layout (:mod:`gyro_sim.dynamics.model`),
-same results to round-off (test/core/test_fast.py):
+same results to round-off (test/dynamics/test_kernel.py):
 
 - :class:`ChainODE`: the numpy reference, :mod:`gyro_sim.dynamics.reference` (eqs 34-54 with a
   composite-inertia matrix); it also fills the outputs (reactions, rotor torques);
@@ -372,7 +372,7 @@ def make_system(model: Model, backend: str = "auto") -> ChainODE | FastChainODE:
     "auto" -> as "numba" if numba imports and the kernels compile, else ChainODE with a
     warning when numba is there but failed. Heavy tips stay compiled: the kernel's
     elimination is exact to ~1e-14 relative at any mass ratio up to 1e7 either way
-    (`gyro_sim.dynamics.kernel.STABLE_ABA_RATIO`, test/core/test_heavy_tip.py).
+    (`gyro_sim.dynamics.kernel.STABLE_ABA_RATIO`, test/dynamics/test_heavy_tip.py).
     """
     if backend not in BACKENDS:
         raise ValueError(f"unknown backend {backend!r}; valid: {', '.join(BACKENDS)}")

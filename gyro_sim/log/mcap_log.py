@@ -40,8 +40,8 @@ the file without raising again, so the part flushed before stays readable by
 
 Reading verifies (:func:`verify`): :class:`LogReader` (and :func:`read_info`) checks the
 summary's CRC and every chunk's CRC (and that it decompresses) on opening, and its `messages`
-(and :func:`iter_messages`) read with the chunk CRCs checked; a damaged log is refused with a :class:`LogError` naming the chunk's byte offset
-and ``gyro-sim recover``.
+(and :func:`iter_messages`) read with the chunk CRCs checked; a damaged log is refused with a
+:class:`LogError` naming the chunk's byte offset and ``gyro-sim recover``.
 
 The writer is thread-safe (one lock around the MCAP writer).
 """
@@ -171,7 +171,8 @@ class _PackedChunkIndexes:
             return
         for ci in lst:
             base = ci.chunk_start_offset
-            if any(not 0 <= off - base < 2**32 or not 0 <= cid < 2**32 for cid, off in ci.message_index_offsets.items()):
+            if any(not 0 <= off - base < 2**32 or not 0 <= cid < 2**32
+                   for cid, off in ci.message_index_offsets.items()):
                 return  # not representable (never for gyro_sim's chunks): keep the objects
         for ci in lst:
             base = ci.chunk_start_offset
@@ -245,7 +246,8 @@ class LogWriter:
             except FileExistsError:
                 from gyro_sim.safe_paths import OutputError
 
-                raise OutputError(f"log {self.path}: exists; refused to overwrite it (overwrite=True to replace)") from None
+                raise OutputError(f"log {self.path}: exists; refused to overwrite it "
+                                  "(overwrite=True to replace)") from None
         self.failure: OSError | None = None
         self._chunk_indexes = _PackedChunkIndexes()
         self._writer = Writer(self._file, chunk_size=CHUNK_SIZE, compression=compression())
@@ -386,7 +388,7 @@ class LogWriter:
         enc = self._encoders.get(ch) or self._encoder(ch)
         try:
             return enc(dec(bytes(data)))
-        except Exception as exc:  # noqa: BLE001 - any decoding failure means bad bytes
+        except Exception as exc:  # any decoding failure means bad bytes
             raise_interrupt_behind(exc)
             raise LogError(f"not a CDR {self._msgtype(ch)}: {type(exc).__name__}: {exc}") from exc
 
@@ -425,7 +427,7 @@ class LogWriter:
             if hasattr(self._writer, "flush"):  # mcap >= 1.6: finish the chunk, write, flush
                 self._writer.flush()
             else:  # older mcap: the same steps through the private method
-                self._writer._Writer__finalize_chunk()  # noqa: SLF001
+                self._writer._Writer__finalize_chunk()
                 self._file.flush()
             self._dirty = False
             self._chunk_indexes.pack(self._writer)

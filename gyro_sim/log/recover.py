@@ -183,7 +183,7 @@ def _is_chunk_at(m, q: int, size: int) -> bool:
 class _Strict(io.BytesIO):
     """Bytes that refuse a short read (mcap's readers take what is there)."""
 
-    def read(self, n: int = -1) -> bytes:  # noqa: D102
+    def read(self, n: int = -1) -> bytes:
         data = super().read(n)
         if n is not None and n >= 0 and len(data) != n:
             raise EOFError(f"record ends {n - len(data)} bytes early")

@@ -61,7 +61,8 @@ class Resimulation:
             + (f" and {plural(self.imu_compared, 'IMU message')}" if self.imu_compared else "")
             + (f" ({self.off_boundary} off the step boundaries, skipped)" if self.off_boundary else ""),
             f"largest deviation: {self.max_deviation:.3e}"
-            + (f" ({self.worst[2]} of {self.worst[1]} at t = {self.worst[0]:.6g} s)" if self.worst and self.max_deviation else ""),
+            + (f" ({self.worst[2]} of {self.worst[1]} at t = {self.worst[0]:.6g} s)"
+               if self.worst and self.max_deviation else ""),
             "  by field: " + ", ".join(f"{k} {v:.3e}" for k, v in self.by_field.items()),
         ]
         if self.max_deviation == 0.0 and self.compared:
@@ -230,7 +231,8 @@ def _fields(path, msg, topic: str, t_ns: int, names):
 def _compare(out: Resimulation, js, logged, t_ns: int) -> None:
     out.compared += 1
     if list(js.name) != list(logged.name):
-        raise LogError(f"joint names differ at t = {t_ns / 1e9:g} s: log {list(logged.name)}, re-simulation {list(js.name)}")
+        raise LogError(f"joint names differ at t = {t_ns / 1e9:g} s: log {list(logged.name)}, "
+                       f"re-simulation {list(js.name)}")
     for fld in ("position", "velocity", "effort"):
         mine, theirs = getattr(js, fld), getattr(logged, fld)
         if len(theirs) != len(mine):

@@ -623,8 +623,8 @@ class Publication:
             if tf:
                 out.append((TF, TF_TYPE, self._tf.fill(t_ns, xyzw)[0]))
         if diagnostics_run is not False:
-            out.append((DIAGNOSTICS, DIAGNOSTICS_TYPE, diagnostics(snap, t_ns, self.hardware_id, diagnostics_run or None,
-                                                                   self.dynamics_status)))
+            out.append((DIAGNOSTICS, DIAGNOSTICS_TYPE,
+                        diagnostics(snap, t_ns, self.hardware_id, diagnostics_run or None, self.dynamics_status)))
         return out
 
 
@@ -632,7 +632,7 @@ class Frame:
     """Every message of fixed layout of one publication, written once into one buffer: the
     compiled outputs put their numbers straight into its float64 slots (`scatter`, a
     gyro_sim.snapshot.Scatter), `messages` puts the stamps in and cuts the bytes. The same
-    bytes as the builders above (test/io/test_publication_frame.py).
+    bytes as the builders above (test/msgs/test_publication_frame.py).
 
     Each message starts 8-aligned in the buffer, whose start is 4 bytes past an 8-byte
     boundary: every float64 of every message (8-aligned after its 4-byte CDR header) is then an

@@ -9,7 +9,7 @@ its initial state (`effective_inertias`): the change of the axis's rate under a 
 of each sign, ``J_i = 2 tau T / (rate(+tau) - rate(-tau))``; gravity and the coupling to the
 other axes cancel in the difference to first order.
 
-The commands go through the node's command path (gyro_sim.ros.loop.SimLoop): they are checked,
+The commands go through the node's command path (gyro_sim.ros.command_path): they are checked,
 applied and logged on ~/axis_moments as any command is, so a log of a demo re-simulates like
 any other. They stop for good at the first command received from outside.
 """
@@ -71,7 +71,8 @@ class Demo:
 
     def moments(self, t: float) -> list[float]:
         n = len(self.amplitudes)
-        return [float(a * math.sin(2.0 * math.pi * (self.frequency * t + i / n))) for i, a in enumerate(self.amplitudes)]
+        return [float(a * math.sin(2.0 * math.pi * (self.frequency * t + i / n)))
+                for i, a in enumerate(self.amplitudes)]
 
     def describe(self, axis_names) -> str:
         amps = ", ".join(f"{a} {v:.3g}" for a, v in zip(axis_names, self.amplitudes))

@@ -35,12 +35,12 @@ import os
 # One BLAS thread: the chain's matrices are small and a threaded BLAS fights the loop (cli.py).
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import dataclasses  # noqa: E402
-import json  # noqa: E402
-import signal  # noqa: E402
-import sys  # noqa: E402
-import threading  # noqa: E402
-import time  # noqa: E402
+import dataclasses
+import json
+import signal
+import sys
+import threading
+import time
 
 try:  # rclpy from ROS 2 Jazzy (pip install 'gyro_sim[ros]'); --help works without it
     from rcl_interfaces.msg import ParameterDescriptor, ParameterType
@@ -53,11 +53,11 @@ except ImportError as _exc:  # the class below is then never instantiated
     Node = object
     ROS_IMPORT_ERROR = _exc
 
-from gyro_sim.simulator import Simulator  # noqa: E402
-from gyro_sim.msgs.messages import decode_axis_moments  # noqa: E402
-from gyro_sim.ros.loop import SimLoop  # noqa: E402
-from gyro_sim.ros.outputs import Outputs, node_topics  # noqa: E402
-from gyro_sim.ros.params import PARAMETERS, ParameterError, validate  # noqa: E402
+from gyro_sim.simulator import Simulator
+from gyro_sim.msgs.messages import decode_axis_moments
+from gyro_sim.ros.loop import Pause, Reset, SimLoop, warm_up
+from gyro_sim.ros.outputs import Outputs, node_topics
+from gyro_sim.ros.params import PARAMETERS, ParameterError, validate
 
 #: bytes in a megabyte (record_queue_mb)
 MEGABYTE = 1 << 20
@@ -176,6 +176,7 @@ class GyroSimNode(Node):
                 from gyro_sim.ros.demo import Demo
 
                 demo = Demo.for_scene(self.sim, cfg.dt)
+            warm_up(self.sim, cfg.dt)  # every path the loop takes, run once: its first steps pay for none
             self.loop = SimLoop(self.sim, cfg, self.outputs, demo=demo)
             self.outputs.publish_robot_description()
         except BaseException:  # nothing recorded yet: the file created is removed
@@ -193,7 +194,7 @@ class GyroSimNode(Node):
             + (f" = {choice}" if (choice := method_choice(self.sim, cfg)) else "")
             + f", {self.sim.backend} dynamics), "
             f"publish {cfg.publish_rate:g} Hz, "
-            f"real-time factor {cfg.real_time_factor:g}, {self.loop.per_chunk} steps per wake-up"
+            f"real-time factor {cfg.real_time_factor:g}, {self.loop.pacing.per_chunk} steps per wake-up"
             + (f"; recording to {cfg.record}" if cfg.record else "")
         )
         if demo is not None:
@@ -214,14 +215,14 @@ class GyroSimNode(Node):
         if reason:
             self.get_logger().warning(
                 f"command rejected ({reason}); axes: {self.sim.axis_names}; "
-                f"{self.loop.counters.rejected} rejected so far", throttle_duration_sec=2.0)
+                f"{self.loop.commands.counters.rejected} rejected so far", throttle_duration_sec=2.0)
 
     def on_reset(self, request, response):
-        response.success, response.message = self.loop.request("reset")
+        response.success, response.message = self.loop.request(Reset())
         return response
 
     def on_pause(self, request, response):
-        response.success, response.message = self.loop.request("pause", bool(request.data))
+        response.success, response.message = self.loop.request(Pause(bool(request.data)))
         return response
 
     def finish(self) -> dict:
@@ -439,7 +440,7 @@ def main(argv=None) -> int:
         code = _main(argv, shutdown)
         shutdown.hold_if_giving_up()
         return code
-    except BaseException as exc:  # noqa: BLE001 - only resources are said in one line; bugs keep their traceback
+    except BaseException as exc:  # only resources are said in one line; bugs keep their traceback
         shutdown.hold_if_giving_up()
         why = resource_error(exc)
         if why is None:
@@ -472,7 +473,7 @@ def _main(argv, shutdown: Shutdown) -> int:
     announce_often()
     try:
         rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
-    except Exception as exc:  # noqa: BLE001 - rcl's argument errors (a missing --params-file ...)
+    except Exception as exc:  # rcl's argument errors (a missing --params-file ...)
         if resource_error(exc) is not None:
             raise
         print(f"gyro_sim_node: bad arguments: {exc}".splitlines()[0], file=sys.stderr)
@@ -486,7 +487,7 @@ def _main(argv, shutdown: Shutdown) -> int:
             print("gyro_sim_node: invalid parameters, nothing started:" + sep + str(exc).replace("\n", "\n  "),
                   file=sys.stderr)
             return 2
-        except Exception as exc:  # noqa: BLE001 - the log writer could not start (no space left...)
+        except Exception as exc:  # the log writer could not start (no space left...)
             from gyro_sim.ros.recorder import RecordingError
 
             if not isinstance(exc, RecordingError):
@@ -502,9 +503,9 @@ def _main(argv, shutdown: Shutdown) -> int:
             if not shutdown.requested.is_set():
                 node.loop.start()
                 if node.loop.started.wait(STARTED_TIMEOUT):  # how the physics thread is scheduled
-                    log = node.get_logger().info if node.loop.priority or not node.config.thread_priority \
+                    log = node.get_logger().info if node.loop.pacing.priority or not node.config.thread_priority \
                         or node.config.real_time_factor <= 0 else node.get_logger().warning
-                    log(f"physics thread: {node.loop.scheduling}")
+                    log(f"physics thread: {node.loop.pacing.scheduling}")
             while not shutdown.requested.is_set() and not node.loop.finished.is_set():
                 if node.loop.thread.ident is not None and not node.loop.thread.is_alive():
                     break  # never without `finished`; a guard: nothing here waits on a dead thread

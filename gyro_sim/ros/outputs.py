@@ -273,7 +273,8 @@ class Outputs:
                 data = M.diagnostics(snap, t_ns, self.publication.hardware_id, diagnostics_run or None,
                                      self.publication.dynamics_status)
             except M.NonFiniteError as exc:
-                raise SimulationError(f"t = {sim.time:.6g} s: non-finite {snap.nonfinite() or exc} (not published)") from exc
+                raise SimulationError(f"t = {sim.time:.6g} s: non-finite {snap.nonfinite() or exc} "
+                                      "(not published)") from exc
             out.append((M.DIAGNOSTICS, M.DIAGNOSTICS_TYPE, data))
         return out
 
@@ -290,7 +291,8 @@ class Outputs:
         fn = self._publish_fn.get(topic, False)
         if fn is False:
             pub = self.pubs.get(topic)
-            fn = None if pub is None else getattr(getattr(pub, "_Publisher__publisher", None), "publish_raw", pub.publish)
+            raw = getattr(pub, "_Publisher__publisher", None)
+            fn = None if pub is None else getattr(raw, "publish_raw", pub.publish)
             self._publish_fn[topic] = fn
         return fn
 
@@ -312,7 +314,8 @@ class Outputs:
         if layout is not None:
             plan = self._plan
             if plan is None or plan[0] is not layout or plan[1] != self.listeners.version:
-                calls = tuple((fn, a, b) for fn, (topic, _, a, b) in zip(map(self._publisher, (x[0] for x in layout)), layout)
+                publishers = map(self._publisher, (x[0] for x in layout))
+                calls = tuple((fn, a, b) for fn, (topic, _, a, b) in zip(publishers, layout)
                               if fn is not None and listened(topic, True))
                 plan = self._plan = (layout, self.listeners.version, calls)
             block, rest = batch.block, batch.extra

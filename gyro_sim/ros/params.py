@@ -45,9 +45,11 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("real_time_factor", float, 1.0, "simulated seconds per wall second; 0 = as fast as possible",
               0.0, 1000.0),
     Parameter("integrator", str, "fixed",
-              "fixed (rk4, or gauss4s while the scene is stiff for rk4: chosen for the scene and re-checked as it moves) "
-              "| rk4 | lie4 | gauss4 | gauss4s | dop853 | radau | auto (fixed-step methods take one step per physics step)"),
-    Parameter("backend", str, "auto", "dynamics: auto (numba-compiled when numba is installed, else numpy) | numba | numpy"),
+              "fixed (rk4, or gauss4s while the scene is stiff for rk4: chosen for the scene and re-checked as it "
+              "moves) | rk4 | lie4 | gauss4 | gauss4s | dop853 | radau | auto (fixed-step methods take one step per "
+              "physics step)"),
+    Parameter("backend", str, "auto",
+              "dynamics: auto (numba-compiled when numba is installed, else numpy) | numba | numpy"),
     Parameter("rtol", float, 1e-8, "relative tolerance of adaptive integrators", 1e-14, 1.0),
     Parameter("atol", float, 1e-10, "absolute tolerance of adaptive integrators", 0.0, 1.0),
     Parameter("record", str, "", "MCAP file to record every published message and command to; empty = no recording; "
@@ -55,7 +57,8 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("command_timeout", float, 0.5,
               "simulated seconds without a good command after which the axis moments fall back to zero", 1e-3, 1e9),
     Parameter("duration", float, 0.0, "simulated seconds to run, then exit; 0 = until shut down", 0.0, 1e9),
-    Parameter("publish_wrenches", bool, True, "publish ~/wrench/<joint> (computed only while someone listens or records)"),
+    Parameter("publish_wrenches", bool, True,
+              "publish ~/wrench/<joint> (computed only while someone listens or records)"),
     Parameter("publish_poses", bool, True, "publish ~/poses (computed only while someone listens or records)"),
     Parameter("stats_file", str, "", "write the run's timing statistics as JSON to this file at exit; empty = none"),
     Parameter("overwrite", bool, False, "replace existing record / stats_file files (never the scene file)"),
@@ -172,7 +175,8 @@ def validate(values: dict) -> NodeConfig:
     if not {"physics_rate", "publish_rate"} & bad:
         ratio = v["physics_rate"] / v["publish_rate"]
         if ratio < 1 - RATIO_TOLERANCE:
-            problems.append(f"publish_rate: must not exceed physics_rate ({v['physics_rate']:g} Hz), got {v['publish_rate']:g}")
+            problems.append(f"publish_rate: must not exceed physics_rate ({v['physics_rate']:g} Hz), "
+                            f"got {v['publish_rate']:g}")
         elif abs(ratio - round(ratio)) > RATIO_TOLERANCE * ratio:
             lo, hi = v["physics_rate"] / math.ceil(ratio), v["physics_rate"] / math.floor(ratio)
             problems.append(

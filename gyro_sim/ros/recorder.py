@@ -70,9 +70,9 @@ in the node, at most `max_backlog_bytes` (the records' bytes plus ITEM_OVERHEAD 
 the node's resident memory then grows by about 1.2 times the bound). While the pipe is full and
 more waits than that, the *oldest* publications waiting are dropped, each whole, counted in
 `dropped_records` and `dropped_publications`; commands and events (`raw`, `raw_many`) are never
-dropped (nor bounded: a flood of commands into a stopped writer grows the node's memory). A writer stopped for good (SIGSTOP) thus costs
-the node a bounded amount of memory, and once it runs again the log is complete and readable,
-with the publications dropped missing from it.
+dropped (nor bounded: a flood of commands into a stopped writer grows the node's memory). A
+writer stopped for good (SIGSTOP) thus costs the node a bounded amount of memory, and once it
+runs again the log is complete and readable, with the publications dropped missing from it.
 
 Pipe frames: a head (kind: 1 byte, payload length: uint32) and the payload. Node to child:
 ``S`` start (pickled descriptor, file, rename target, scene, params, writer options), ``L``
@@ -284,7 +284,8 @@ def _create(final: str, overwrite: bool, what: str) -> LogFile:
         try:
             fd = os.open(final, flags, 0o666)
         except FileExistsError:
-            raise OutputError(f"{what}: {final}: exists; refused to overwrite it (overwrite:=true to replace)") from None
+            raise OutputError(f"{what}: {final}: exists; refused to overwrite it "
+                              "(overwrite:=true to replace)") from None
         except OSError as exc:
             raise OutputError(f"{what}: {final}: cannot create it ({exc.strerror or exc})") from None
         written, target = final, None
@@ -343,7 +344,8 @@ class _Packer:
     batch) from `raw_batch`. Blocks and records keep the order they were handed over in."""
 
     def __init__(self) -> None:
-        self.layouts: dict[int, tuple[tuple, int]] = {}  # id(layout) -> (layout, its id in the child); kept: no id reused
+        # id(layout) -> (layout, its id in the child); kept: no id reused
+        self.layouts: dict[int, tuple[tuple, int]] = {}
         self.error: str | None = None
 
     def pack(self, items: list) -> tuple[list, int]:
@@ -493,8 +495,8 @@ class LiveRecorder:
             raise RecordingError(f"log {self.path}: the log writer process {_exit_text(code)} before it opened the log")
         if reply[0] == "error":
             exc = reply[1]
-            raise RecordingError(f"log {self.path}: {exc.strerror if isinstance(exc, OSError) and exc.strerror else exc}"
-                                 ) from exc
+            why = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+            raise RecordingError(f"log {self.path}: {why}") from exc
         self.writer = SimpleNamespace(flush_period=reply[1], nice=reply[3])
         self.open_cpu = reply[2]  # CPU seconds of the writer process to start and open the log
         os.set_blocking(self._proc.stdin.fileno(), False)  # the sender never waits for the writer

@@ -144,8 +144,8 @@ def replay(path: str | os.PathLike, *, rate: float = 1.0, loop: bool = False, to
     try:
         from rclpy.qos import DurabilityPolicy, QoSProfile
 
-        pubs = {t: node.create_publisher(cls, t, QoSProfile(depth=QOS_DEPTH, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-                                         if t in latched else QOS_DEPTH)
+        latched_qos = QoSProfile(depth=QOS_DEPTH, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        pubs = {t: node.create_publisher(cls, t, latched_qos if t in latched else QOS_DEPTH)
                 for t, cls in classes.items()}
         if wait_for_subscribers > 0:
             deadline = time.monotonic() + wait_for_subscribers

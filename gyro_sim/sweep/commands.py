@@ -26,7 +26,8 @@ def register(sub, bench) -> None:
     p.add_argument("--quick", action="store_true", help="the file's coarse version (its quick: entries)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--workers", type=int, metavar="N",
-                   help="local Dask workers (processes, one thread each); default: the cores; 0: serially, without Dask")
+                   help="local Dask workers (processes, one thread each); default: the cores; "
+                        "0: serially, without Dask")
     g.add_argument("--scheduler", metavar="ADDRESS", help="an existing Dask scheduler (tcp://host:8786)")
     h = p.add_mutually_exclusive_group()
     h.add_argument("--resume", action="store_true", help="continue the sweep in DIR: skip the points already done")

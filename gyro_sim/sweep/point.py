@@ -35,7 +35,7 @@ from typing import Any
 # as in gyro_sim.cli: one BLAS thread per worker process (workers are processes, one thread each)
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
 #: the column that depends on the machine's load, left out of the bit-for-bit comparisons
 TIMING_COLUMNS = ("cpu_s",)

@@ -121,7 +121,8 @@ def set_path(data: Any, path: Sequence[str | int], value: Any) -> None:
             if not isinstance(node, dict):
                 raise KeyError(f"{where} is not a mapping")
             if key not in node and not last:
-                raise KeyError(f"{_fmt(path[:i + 1])}: no such key ({where} has: {', '.join(map(str, node)) or 'nothing'})")
+                has = ", ".join(map(str, node)) or "nothing"
+                raise KeyError(f"{_fmt(path[:i + 1])}: no such key ({where} has: {has})")
         if last:
             node[key] = value
         else:
@@ -325,7 +326,8 @@ def _resolve_scene(source: Any, base_dir: Path | None, errors: list[str]):
     if isinstance(source, dict):
         return copy.deepcopy(source), None
     if not isinstance(source, str) or not source.strip():
-        errors.append("scene: the name of a shipped scene, a path (a scene, or an MJCF or URDF model), or a scene mapping")
+        errors.append("scene: the name of a shipped scene, a path (a scene, or an MJCF or URDF model), "
+                      "or a scene mapping")
         return None, None
     candidates = []
     if base_dir is not None and not os.path.isabs(source):

@@ -23,6 +23,10 @@ from gyro_sim.bench import peers
 from gyro_sim.scene.load import load_scene
 from gyro_sim.simulator import Simulator
 
+#: the tests here (most of them) read the report `gyro-sim bench accuracy --quick` writes once per run (a
+#: session fixture of half a minute or more): outside the fast lane
+pytestmark = pytest.mark.slow
+
 EXACT = ("heavy_top", "double_gyro_plus", "double_gyro_minus")
 #: dop853's global error at the horizon, against rtol: at most this factor (quick horizons)
 PROMISE = 100.0

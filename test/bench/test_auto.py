@@ -130,14 +130,14 @@ def test_one_compiled_call_per_advance_in_radau():
                     backend="numba")
     integ = sim.integrator
     assert integ.explicit.compiled and integ.implicit.compiled
-    assert integ.implicit._loop.entry is not None  # noqa: SLF001 - loaded: straight to it
-    loop, calls = integ.implicit._loop, []  # noqa: SLF001
+    assert integ.implicit._loop.entry is not None  # loaded: straight to it
+    loop, calls = integ.implicit._loop, []
 
     def counted(*args):
         calls.append(sim.time)
         return loop(*args)
 
-    integ.implicit._loop = counted  # noqa: SLF001
+    integ.implicit._loop = counted
     ends = []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", StiffnessWarning)

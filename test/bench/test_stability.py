@@ -20,6 +20,10 @@ from gyro_sim.bench import budget
 from gyro_sim.bench import stability as st
 from gyro_sim.simulator import SimulationError, Simulator
 
+#: the tests here (most of them) read the report `gyro-sim bench stability --quick` writes once per run (a
+#: session fixture of half a minute or more): outside the fast lane
+pytestmark = pytest.mark.slow
+
 VERDICTS = {"stable", "drifts", "fails", "too slow"}
 
 

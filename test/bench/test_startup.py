@@ -18,6 +18,8 @@ from gyro_sim.cli import main
 BURN = 0.6
 #: generous bound for a fake process on a busy machine (s)
 TIMEOUT = 120.0
+#: a node command that refuses its scene at once (exit 2)
+NO_SCENE = [sys.executable, "-c", "import sys; print('no scene', file=sys.stderr); sys.exit(2)"]
 
 BURN_CODE = f"""
 import time
@@ -76,6 +78,7 @@ def test_the_source_tree_is_found_from_the_package():
     assert (root / "setup.py").is_file() and (root / "gyro_sim" / "bench" / "startup.py").is_file()
 
 
+@pytest.mark.slow
 def test_a_run_is_timed_to_its_end_with_its_cpu():
     t = startup.timed_run([sys.executable, "-c", BURN_CODE], dict(os.environ), timeout=TIMEOUT)
     assert t.cpu >= BURN
@@ -102,6 +105,7 @@ def test_what_a_measured_process_leaves_running_is_ended(tmp_path):
     assert not running(left)
 
 
+@pytest.mark.slow
 def test_the_first_message_of_a_fake_node_is_timed_with_its_cpu(tmp_path):
     pytest.importorskip("rclpy")
     pytest.importorskip("sensor_msgs.msg")
@@ -121,10 +125,12 @@ def test_the_minimal_rclpy_node_is_timed_as_the_node_is(tmp_path):
     pytest.importorskip("sensor_msgs.msg")
     env = dict(os.environ, ROS_DOMAIN_ID=str(startup.DOMAIN_BASE + os.getpid() % startup.DOMAIN_SPAN),
                ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_LOG_DIR=str(tmp_path))
-    t = startup.first_message(sys.executable, [sys.executable, "-c", startup.MINIMAL_NODE], env, timeout=TIMEOUT, settle=0)
+    t = startup.first_message(sys.executable, [sys.executable, "-c", startup.MINIMAL_NODE], env, timeout=TIMEOUT,
+                              settle=0)
     assert 0 < t.cpu and 0 < t.wall < TIMEOUT
 
 
+@pytest.mark.slow
 def test_a_subscriber_started_after_a_node_is_timed_from_its_subscription(tmp_path):
     pytest.importorskip("rclpy")
     pytest.importorskip("sensor_msgs.msg")
@@ -141,10 +147,10 @@ def test_a_subscriber_started_after_a_node_is_timed_from_its_subscription(tmp_pa
 def test_a_node_that_never_says_it_runs_is_an_error_for_the_late_subscriber(tmp_path):
     env = dict(os.environ, ROS_LOG_DIR=str(tmp_path))
     with pytest.raises(startup.StartupError, match=r"did not start \(exit 2\): no scene"):
-        startup.late_subscriber(sys.executable, [sys.executable, "-c", "import sys; print('no scene', file=sys.stderr); sys.exit(2)"],
-                                env, timeout=TIMEOUT, settle=0)
+        startup.late_subscriber(sys.executable, NO_SCENE, env, timeout=TIMEOUT, settle=0)
 
 
+@pytest.mark.slow
 def test_a_node_that_never_publishes_is_an_error(tmp_path):
     pytest.importorskip("rclpy")
     env = dict(os.environ, ROS_DOMAIN_ID=str(startup.DOMAIN_BASE + os.getpid() % startup.DOMAIN_SPAN),
@@ -159,12 +165,12 @@ def test_a_node_that_ends_before_publishing_is_an_error_with_its_last_line(tmp_p
     env = dict(os.environ, ROS_DOMAIN_ID=str(startup.DOMAIN_BASE + os.getpid() % startup.DOMAIN_SPAN),
                ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_LOG_DIR=str(tmp_path))
     with pytest.raises(startup.StartupError, match=r"ended \(exit 2\) before its first /joint_states: no scene"):
-        startup.first_message(sys.executable, [sys.executable, "-c", "import sys; print('no scene', file=sys.stderr); sys.exit(2)"], env,
-                              timeout=TIMEOUT, settle=0)
+        startup.first_message(sys.executable, NO_SCENE, env, timeout=TIMEOUT, settle=0)
 
 
 def test_the_table_shows_every_figure_with_the_machine():
-    results = {"node": {"cold": {"wall": 18.25, "cpu": 15.5, "extra": {}}, "warm": {"wall": 1.21, "cpu": 0.9, "extra": {}}},
+    results = {"node": {"cold": {"wall": 18.25, "cpu": 15.5, "extra": {}},
+                        "warm": {"wall": 1.21, "cpu": 0.9, "extra": {}}},
                "worker": {"cold": {"wall": 4.0, "cpu": 2.5, "extra": {"sweep_wall": 21.0, "client_cpu": 16.0}},
                           "warm": {"wall": 3.0, "cpu": 2.0, "extra": {"sweep_wall": 5.0, "client_cpu": 1.0}}}}
     text = startup.table(results, {"cores": 2, "load": 1.5}, "gyro-sim bench startup",
@@ -211,9 +217,11 @@ def test_the_command_prints_the_table_and_writes_the_json(tmp_path, monkeypatch,
     venv = tmp_path / "venv"
     (venv / "bin").mkdir(parents=True)
     (venv / "bin" / "python").write_text("")
-    figures = {"run": {"cold": {"wall": 17.5, "cpu": 14.25, "extra": {}}, "warm": {"wall": 1.5, "cpu": 1.0, "extra": {}}}}
+    figures = {"run": {"cold": {"wall": 17.5, "cpu": 14.25, "extra": {}},
+                       "warm": {"wall": 1.5, "cpu": 1.0, "extra": {}}}}
     asked = []
-    monkeypatch.setattr(startup, "measure", lambda v, parts, say, timeout, **kw: asked.append((v, parts, kw)) or figures)
+    monkeypatch.setattr(startup, "measure",
+                        lambda v, parts, say, timeout, **kw: asked.append((v, parts, kw)) or figures)
     out = tmp_path / "startup.json"
     assert main(["bench", "startup", "--venv", str(venv), "--parts", "run", "--json", str(out)]) == 0
     assert asked == [(venv, ["run"], {"warm_starts": 1, "announce_period": startup.ANNOUNCE_PERIOD})]

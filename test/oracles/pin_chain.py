@@ -23,6 +23,11 @@ translation, speed-rotor angles, with known accelerations a_p(t)),
 integrated with scipy's DOP853 on (q, v); quaternions (pinocchio stores x, y, z, w) follow
 q' = 1/2 q (x) (0, omega_local) and are renormalised when read.
 
+Rotations: Pinocchio's own (``pin.exp3``, ``pin.Quaternion``) and the Euler convention built
+here from its definition (docs/scene-format.md: z-x-z angles of the body relative to the
+"down" frame whose z is gravity's direction nu), so that a convention error in
+gyro_sim.dynamics.rotations is not shared by the oracle.
+
 Joint reactions: rnea(q, v, a) leaves in ``data.f[j]`` the spatial force that the parent
 exerts on the subtree of joint j, at the joint origin, in joint j's frame. For a carrier's
 joint the subtree is the carrier, its rotors and every later body: exactly the paper's
@@ -36,7 +41,6 @@ import numpy as np
 import pinocchio as pin
 from scipy.integrate import solve_ivp
 
-from gyro_sim.dynamics import rotations as rot
 from gyro_sim.scene.records import Scene
 
 RTOL = 1e-12
@@ -90,8 +94,44 @@ def _inertia_about_com(mass: float, com: np.ndarray, inertia_O: np.ndarray) -> n
 
 def _quat_xyzw(R: np.ndarray) -> np.ndarray:
     """Pinocchio's quaternion storage (x, y, z, w) of a rotation matrix."""
-    w, x, y, z = rot.matrix_to_quat(R)
-    return np.array([x, y, z, w])
+    return np.array(pin.Quaternion(np.asarray(R, dtype=float)).coeffs())
+
+
+def _quat_matrix(wxyz: np.ndarray) -> np.ndarray:
+    """The rotation of a quaternion (w, x, y, z), of any non-zero norm."""
+    w, x, y, z = np.asarray(wxyz, dtype=float)
+    return pin.Quaternion(w, x, y, z).normalized().toRotationMatrix()
+
+
+def _axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
+    """The rotation by `angle` about the unit vector `axis` (Pinocchio's exponential map)."""
+    return pin.exp3(np.asarray(axis, dtype=float) * float(angle))
+
+
+_EX, _EY, _EZ = np.eye(3)
+
+
+def _down_frame(nu: np.ndarray | None) -> np.ndarray:
+    """The frame of the Euler angles, world_R_down: its z is nu (no gravity: -z of the world),
+    its x the world's x made orthogonal to nu (the world's y when nu is along x)."""
+    z = -_EZ if nu is None else np.asarray(nu, dtype=float) / np.linalg.norm(nu)
+    ref = _EY if abs(z @ _EX) > 1 - 1e-9 else _EX
+    x = ref - (ref @ z) * z
+    x = x / np.linalg.norm(x)
+    return np.column_stack([x, np.cross(z, x), z])
+
+
+def _euler_state(euler: np.ndarray, rates: np.ndarray, down: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """world_R_body and the world angular velocity of z-x-z Euler angles (psi, theta, phi)
+    relative to `down`: precession psi about down's z, nutation theta about the line of nodes
+    (the x after the precession), proper rotation phi about the body's z; each rate turns about
+    the axis its angle turns about."""
+    psi, theta, phi = euler
+    after_psi = down @ _axis_angle(_EZ, psi)
+    after_theta = after_psi @ _axis_angle(_EX, theta)
+    R = after_theta @ _axis_angle(_EZ, phi)
+    w = rates[0] * down[:, 2] + rates[1] * after_psi[:, 0] + rates[2] * after_theta[:, 2]
+    return R, w
 
 
 def _quat_rate_xyzw(quat: np.ndarray, omega_local: np.ndarray) -> np.ndarray:
@@ -204,7 +244,7 @@ class PinChain:
         nu = None
         if scene.gravity is not None and np.linalg.norm(scene.gravity) > 0.0:
             nu = np.asarray(scene.gravity, dtype=float) / np.linalg.norm(scene.gravity)
-        down = rot.down_frame(nu)
+        down = _down_frame(nu)
         parent_R, parent_w = np.eye(3), np.zeros(3)
         for k, body in enumerate(scene.bodies):
             jmodel = model.joints[self.carrier_joint[k]]
@@ -213,22 +253,21 @@ class PinChain:
             if body.joint.type == "hinge" and not (k == 0 and scene.base.type == "free"):
                 axis = np.asarray(body.joint.axis, dtype=float)
                 axis = axis / np.linalg.norm(axis)
-                R = parent_R @ rot.axis_angle_matrix(axis, float(init.angle))
+                R = parent_R @ _axis_angle(axis, float(init.angle))
                 w = parent_w + parent_R @ axis * float(init.rate)
                 q[iq] = float(init.angle)
                 v[iv] = float(init.rate)
             else:
                 if init.quaternion is not None:
                     quat = np.asarray(init.quaternion, dtype=float)
-                    R = rot.quat_to_matrix(quat / np.linalg.norm(quat))
+                    R = _quat_matrix(quat)
                     w = R @ np.asarray(init.angular_velocity if init.angular_velocity is not None
                                        else np.zeros(3), dtype=float)
                 else:
                     euler = np.zeros(3) if init.euler is None else np.asarray(init.euler, float)
                     rates = (np.zeros(3) if init.euler_rates is None
                              else np.asarray(init.euler_rates, float))
-                    R = rot.euler_to_matrix(euler, down)
-                    w = rot.euler_rates_to_omega(euler, rates, down)
+                    R, w = _euler_state(euler, rates, down)
                 if k == 0 and scene.base.type == "free":
                     vel = (np.zeros(3) if scene.base.velocity is None
                            else np.asarray(scene.base.velocity, dtype=float))

@@ -7,11 +7,12 @@ import yaml
 
 pytest.importorskip("rclpy", reason="the ROS 2 node needs rclpy (pip install '.[ros]')")
 
-from test.core.test_actuators import wheel_scene  # noqa: E402
+from test.dynamics.test_actuators import wheel_scene
 
-from .helpers import NodeProcess, new_domain_id  # noqa: E402
+from .helpers import NodeProcess, new_domain_id
 
 
+@pytest.mark.slow
 def test_node_refuses_a_method_the_actuators_do_not_take_in_one_line(tmp_path):
     scene = tmp_path / "wheel.yaml"
     scene.write_text(yaml.safe_dump(wheel_scene("held", friction={"viscous": 1e-3})), encoding="utf-8")

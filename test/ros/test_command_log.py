@@ -18,11 +18,11 @@ import pytest
 
 pytest.importorskip("rclpy", reason="the ROS 2 node needs rclpy (pip install '.[ros]')")
 
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from std_msgs.msg import Float64MultiArray  # noqa: E402
-from std_srvs.srv import SetBool  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import SetBool
 
-from .helpers import DISCOVERY_TIMEOUT, Client, NodeProcess, diag_values, new_domain_id, wait_for  # noqa: E402
+from .helpers import DISCOVERY_TIMEOUT, Client, NodeProcess, diag_values, new_domain_id, wait_for
 
 #: commands sent while running and while paused, in bursts (shorter than a physics step of 4 ms:
 #: the later ones of a burst supersede the earlier) that fit the node's subscription depth (10)
@@ -37,6 +37,7 @@ REJECTED = 10
 PROBES, PROBE_WAIT = 10, 3.0
 
 
+@pytest.mark.slow
 def test_every_command_received_is_in_the_log(tmp_path):
     from rosbags.highlevel import AnyReader
 

@@ -9,9 +9,9 @@ import yaml
 
 pytest.importorskip("rclpy", reason="the ROS 2 node needs rclpy (pip install '.[ros]')")
 
-from sensor_msgs.msg import Imu  # noqa: E402
+from sensor_msgs.msg import Imu
 
-from .helpers import DISCOVERY_TIMEOUT, Client, NodeProcess, new_domain_id, stamp_ns, wait_for  # noqa: E402
+from .helpers import DISCOVERY_TIMEOUT, Client, NodeProcess, new_domain_id, stamp_ns, wait_for
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENE = ROOT / "config" / "imu_pendulum.yaml"
@@ -25,6 +25,7 @@ def scene_file(tmp_path: Path, rate: float) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_node_publishes_and_records_imus_that_resimulate(tmp_path):
     from gyro_sim.log.mcap_log import iter_messages
     from gyro_sim.log.resim import resimulate
@@ -55,6 +56,7 @@ def test_node_publishes_and_records_imus_that_resimulate(tmp_path):
     assert out.max_deviation == 0.0, out.report()
 
 
+@pytest.mark.slow
 def test_node_refuses_an_imu_rate_the_publications_cannot_sample(tmp_path):
     node = NodeProcess(tmp_path, new_domain_id(), f"scene:={scene_file(tmp_path, 30.0)}", "publish_rate:=100.0")
     rc = node.proc.wait(timeout=120)

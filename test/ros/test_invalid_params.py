@@ -2,15 +2,14 @@
 from __future__ import annotations
 
 import subprocess
-import time
 
 import pytest
 
 pytest.importorskip("rclpy", reason="the ROS 2 node needs rclpy (pip install '.[ros]')")
 
-from sensor_msgs.msg import JointState  # noqa: E402
+from sensor_msgs.msg import JointState
 
-from .helpers import ROOT, Client, new_domain_id, node_command, ros_env  # noqa: E402
+from .helpers import ROOT, Client, new_domain_id, node_command, ros_env
 
 CASES = {
     "physics_rate:=-5.0": "physics_rate: must be >= 1",
@@ -25,21 +24,20 @@ CASES = {
 }
 
 
+@pytest.mark.slow
 def test_invalid_parameters_refused_before_publishing(tmp_path):
     domain = new_domain_id()
     client = Client(domain)
     try:
         client.subscribe("/joint_states", JointState)
         env = ros_env(domain, tmp_path)
-        t0 = time.monotonic()
         procs = {arg: subprocess.Popen(node_command(arg, "duration:=30.0"), cwd=ROOT, env=env, text=True,
                                        stdout=subprocess.PIPE, stderr=subprocess.PIPE) for arg in CASES}
         for arg, p in procs.items():
             out, err = p.communicate(timeout=60)
             assert p.returncode == 2, (arg, p.returncode, err)
             assert "invalid parameters, nothing started" in err and CASES[arg] in err, (arg, err)
-            assert "simulated" not in out
-        assert time.monotonic() - t0 < 60
+            assert "simulated" not in out  # refused before the 30 s run: exit 2, not the run's end
         # a bad scene file: the scene loader's message names the key
         bad = tmp_path / "bad.yaml"
         bad.write_text("name: x\nbase: {type: fixed}\nbodies:\n"
@@ -52,6 +50,7 @@ def test_invalid_parameters_refused_before_publishing(tmp_path):
         client.close()
 
 
+@pytest.mark.slow
 def test_shipped_params_file_runs(tmp_path):
     """config/params.yaml starts the node (a later -p overrides it) and a bounded run exits 0."""
     domain = new_domain_id()
@@ -106,11 +105,12 @@ def test_record_and_stats_file_into_directories_are_refused(tmp_path, target, ne
             _validate(**{name: str(target(tmp_path))})
 
 
+@pytest.mark.slow
 def test_the_node_refuses_an_existing_record_file_and_leaves_it_unchanged(tmp_path):
     old = tmp_path / "previous_log.mcap"
     old.write_bytes(b"a previous log")
-    r = subprocess.run(node_command(f"record:={old}", "duration:=1.0"), cwd=ROOT, env=ros_env(new_domain_id(), tmp_path),
-                       text=True, capture_output=True, timeout=60)
+    r = subprocess.run(node_command(f"record:={old}", "duration:=1.0"), cwd=ROOT,
+                       env=ros_env(new_domain_id(), tmp_path), text=True, capture_output=True, timeout=60)
     assert r.returncode == 2, r.stderr
     assert f"record: {old}: exists" in r.stderr and "Traceback" not in r.stderr, r.stderr
     assert old.read_bytes() == b"a previous log"

@@ -52,7 +52,8 @@ def _built(monkeypatch, **arguments):
     for name, mod in _stand_ins(ROOT).items():
         monkeypatch.setitem(sys.modules, name, mod)
     description = runpy.run_path(str(LAUNCH_FILE))["generate_launch_description"]()
-    declared = {a.args[0]: a.kwargs["default_value"] for a in description if type(a).__name__ == "DeclareLaunchArgument"}
+    declared = {a.args[0]: a.kwargs["default_value"] for a in description
+                if type(a).__name__ == "DeclareLaunchArgument"}
     (opaque,) = [a for a in description if type(a).__name__ == "OpaqueFunction"]
     (node,) = opaque.kwargs["function"]({**declared, **arguments})
     return declared, node

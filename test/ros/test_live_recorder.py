@@ -12,13 +12,14 @@ from gyro_sim.safe_paths import OutputError
 from gyro_sim.ros.recorder import SEND_PERIOD, WRITER_NICE, LiveRecorder
 
 
+@pytest.mark.slow
 def test_live_recorder_writes_the_bytes_it_gets(tmp_path):
     sim = Simulator(load_scene("hinge_chain"))
     pub = M.Publication(sim.model.names)
     rec = LiveRecorder(str(tmp_path / "live.mcap"), scene=sim.scene, params={})
     assert rec.writer.flush_period == DEFAULT_FLUSH_PERIOD <= 0.2 and SEND_PERIOD <= 0.05
     sent = []
-    for i in range(5):
+    for _ in range(5):
         t = M.time_ns(sim.time)
         for topic, msgtype, data in pub.messages(sim.snapshot(), t):
             rec.raw(topic, msgtype, t, data)
@@ -51,6 +52,7 @@ def test_the_writer_process_runs_at_a_lower_priority_than_the_node(tmp_path):
 AFTER_RESUME = 10
 
 
+@pytest.mark.slow
 def test_a_stopped_writer_drops_the_oldest_publications_never_commands(tmp_path):
     """The writer process stopped (SIGSTOP): past max_backlog_bytes the oldest publications
     waiting are dropped whole and counted, the commands and events never; resumed, the log holds
@@ -66,7 +68,7 @@ def test_a_stopped_writer_drops_the_oldest_publications_never_commands(tmp_path)
     pub = M.Publication(sim.model.names)
     frame = pub.frame(sim.snapshot().joint_names, wrenches=True, poses=True, tf=True)
     rec = LiveRecorder(str(tmp_path / "stall.mcap"), scene=sim.scene, params={}, max_backlog_bytes=100_000)
-    os.kill(rec._proc.pid, signal.SIGSTOP)  # noqa: SLF001
+    os.kill(rec._proc.pid, signal.SIGSTOP)
     sent, commands = [], []
 
     def publish() -> int:
@@ -90,7 +92,7 @@ def test_a_stopped_writer_drops_the_oldest_publications_never_commands(tmp_path)
                 time.sleep(2 * SEND_PERIOD)  # the sender takes what waits, drops, and writes what the pipe takes
         assert rec.dropped_publications > 0 and rec.failure is None
     finally:
-        os.kill(rec._proc.pid, signal.SIGCONT)  # noqa: SLF001
+        os.kill(rec._proc.pid, signal.SIGCONT)
     # resumed, the writer catches up; what comes after is kept whole
     deadline = time.monotonic() + 60.0
     while rec.backlog_bytes and time.monotonic() < deadline:

@@ -18,12 +18,15 @@ import yaml
 
 pytest.importorskip("rclpy", reason="the ROS 2 node needs rclpy (pip install '.[ros]')")
 
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
-from sensor_msgs.msg import JointState  # noqa: E402
-from std_msgs.msg import Float64MultiArray, String  # noqa: E402
-from std_srvs.srv import Trigger  # noqa: E402
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, String
+from std_srvs.srv import Trigger
 
-from .helpers import DISCOVERY_TIMEOUT, ROOT, Client, NodeProcess, new_domain_id, wait_for  # noqa: E402
+from .helpers import DISCOVERY_TIMEOUT, ROOT, Client, NodeProcess, new_domain_id, wait_for
+
+#: these tests share real nodes over DDS, started for the module (seconds each): outside the fast lane
+pytestmark = pytest.mark.slow
 
 SCENE = "hinge_chain"
 AXES = ("wheel2", "arm3", "arm4")
@@ -214,7 +217,8 @@ def test_diagnostics_status_names_say_the_robot(robots):
 
     for ns, log in robots["logs"].items():
         _, _, _, first = next(iter_messages(log, ["/diagnostics"]))
-        assert {s.name for s in first.status} == {f"{ns.strip('/')}/gyro_sim: dynamics", f"{ns.strip('/')}/gyro_sim: run"}
+        prefix = ns.strip("/")
+        assert {s.name for s in first.status} == {f"{prefix}/gyro_sim: dynamics", f"{prefix}/gyro_sim: run"}
 
 
 def test_the_frame_prefix_names_the_bodies_frames(robots, tmp_path):

@@ -28,6 +28,9 @@ from gyro_sim.log.mcap_log import iter_messages, read_info  # noqa: E402
 
 from .helpers import DISCOVERY_TIMEOUT, Client, NodeProcess, new_domain_id, ros_env, wait_for  # noqa: E402
 
+#: these tests share real nodes over DDS, started for the module (seconds each): outside the fast lane
+pytestmark = pytest.mark.slow
+
 DURATION = 3.0
 STEP_AT = 1.0
 

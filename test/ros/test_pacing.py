@@ -10,7 +10,7 @@ import pytest
 
 from gyro_sim.simulator import Simulator
 from gyro_sim.paths import find_scene
-from gyro_sim.ros.loop import Request, SimLoop, check_command
+from gyro_sim.ros.loop import Pause, Reset, SimLoop, check_command, warm_up
 from gyro_sim.ros.pacing import Floor, Pacer, chunk_steps, realtime_priority
 from gyro_sim.ros.params import ParameterError, validate
 
@@ -70,6 +70,7 @@ def make_loop(clock, step_cost=0.0, **params):
 
         sim.advance = slow
     out = Outputs()
+    warm_up(sim, cfg.dt)
     return SimLoop(sim, cfg, out, clock=clock, sleep=clock.sleep), out
 
 
@@ -116,7 +117,7 @@ def test_loop_tracks_wall_time_and_applies_commands_at_the_next_step():
     run_until(loop, lambda: len(out.states) >= 50)
     t = np.array([s[0] for s in out.states])
     assert np.all(np.diff(t) == 20_000_000)  # ns
-    assert loop.pacer.misses == 0 and abs(loop.pacer.lag(loop.node_time)) <= loop.dt
+    assert loop.pacing.pacer.misses == 0 and abs(loop.pacing.pacer.lag(loop.node_time)) <= loop.dt
     # the good command recorded at the step it took effect; the bad ones counted and logged as
     # events with their reasons (their values never reach the log)
     assert out.commands == [(0, b"x")]
@@ -124,7 +125,7 @@ def test_loop_tracks_wall_time_and_applies_commands_at_the_next_step():
     assert rejected == ["command rejected (expected 3 values (one per axis), got 1)",
                         "command rejected (holds NaN or inf)"]
     assert out.states[0][2] == [0.0, 0.0, 0.0] and out.states[1][2] == [0.0, 0.05, -0.03]
-    assert loop.counters.accepted == 1 and loop.counters.rejected == 2
+    assert loop.commands.counters.accepted == 1 and loop.commands.counters.rejected == 2
 
 
 def test_loop_slow_cpu_counts_misses_and_never_bursts():
@@ -132,7 +133,7 @@ def test_loop_slow_cpu_counts_misses_and_never_bursts():
     loop, out = make_loop(clock, step_cost=6e-3)  # a step costs 6 ms of wall time for 4 ms simulated
     run_until(loop, lambda: len(out.states) >= 20)
     s = loop.summary()
-    assert loop.pacer.misses > 10
+    assert loop.pacing.pacer.misses > 10
     assert s["real_time_factor_achieved"] == pytest.approx(4 / 6, rel=0.05)
 
 
@@ -141,10 +142,10 @@ def test_loop_timeout_zeroes_moments_and_reset_restarts():
     loop, out = make_loop(clock, command_timeout=0.1)
     loop.submit_command(b"x", [0.0, 0.05, 0.0])
     run_until(loop, lambda: loop.node_time > 0.3)
-    assert loop.counters.timeouts == 1 and np.all(loop.sim.axis_moments == 0)
+    assert loop.commands.counters.timeouts == 1 and np.all(loop.sim.axis_moments == 0)
     assert any("timeout" in e for _, e in out.events)
     n = len(out.states)
-    loop.requests.append(Request("reset"))
+    loop.requests.post(Reset())
     run_until(loop, lambda: len(out.states) > n + 2)
     t_reset = [t for t, e in out.events if e == "reset"][0]
     assert loop.offset_ns == t_reset
@@ -221,11 +222,12 @@ def test_a_command_flood_keeps_only_the_latest_for_the_next_step():
     run_until(loop, lambda: loop.steps >= 3)
     assert out.commands == [(0, b"%d" % i) for i in range(10_000)]
     assert loop.sim.axis_moments[1] == pytest.approx(1e-6 * 9999)
-    assert loop.counters.accepted == 10_000 and loop.counters.superseded == 9_999 and loop.counters.rejected == 1
+    counters = loop.commands.counters
+    assert counters.accepted == 10_000 and counters.superseded == 9_999 and counters.rejected == 1
 
 
 def test_gc_pauses_are_timed_from_the_collectors_callbacks():
-    from gyro_sim.ros.loop import GcPauses
+    from gyro_sim.ros.loop_pacing import GcPauses
 
     clock = FakeClock()
     meter = GcPauses(clock=clock)
@@ -250,17 +252,17 @@ def test_start_freezes_the_start_up_heap_and_times_collections():
     try:
         # the physics thread, running by now, may free frozen objects (it replaces lists made at
         # start-up): the count can only have gone down since the freeze, never up
-        assert 0 < gc.get_freeze_count() <= loop.frozen
+        assert 0 < gc.get_freeze_count() <= loop.pacing.frozen
         assert not any(o is before for o in gc.get_objects())  # out of every generation the collector scans
-        assert loop.gc_pauses in gc.callbacks
-        n = loop.gc_pauses.pauses.n
+        assert loop.pacing.gc_pauses in gc.callbacks
+        n = loop.pacing.gc_pauses.pauses.n
         gc.collect()
-        assert loop.gc_pauses.pauses.n == n + 1
+        assert loop.pacing.gc_pauses.pauses.n == n + 1
     finally:
         loop.stop()
-    assert loop.gc_pauses not in gc.callbacks
+    assert loop.pacing.gc_pauses not in gc.callbacks
     s = loop.summary()
-    assert s["gc_collections"] >= 1 and s["gc_frozen_objects"] == loop.frozen
+    assert s["gc_collections"] >= 1 and s["gc_frozen_objects"] == loop.pacing.frozen
 
 
 def test_run_delay_and_host_steal_read_the_kernels_figures(tmp_path):
@@ -305,10 +307,10 @@ def test_misses_after_waiting_for_a_cpu_are_told_apart():
         out = Outputs()
         loop = SimLoop(sim, cfg, out, clock=clock, sleep=clock.sleep, run_delay=run_delay)
         run_until(loop, lambda: len(out.states) >= 20)
-        assert loop.pacer.misses > 10
-        assert loop.cpu_wait_misses == (loop.pacer.misses if expect_all else 0)
+        assert loop.pacing.pacer.misses > 10
+        assert loop.pacing.cpu_wait_misses == (loop.pacing.pacer.misses if expect_all else 0)
         s = loop.summary()
-        assert s["cpu_wait_misses"] == loop.cpu_wait_misses
+        assert s["cpu_wait_misses"] == loop.pacing.cpu_wait_misses
         assert s["physics_cpu_wait_s"] == pytest.approx(waited[0] - wait_per_check)  # the last read less the first
 
 
@@ -355,13 +357,13 @@ def test_the_physics_thread_is_fifo_only_while_pacing_in_real_time():
         loop.thread.join(10)
         assert loop.started.is_set() and not loop.crash
         if rtf == 0.0:
-            assert loop.priority == 0 and "as fast as possible" in loop.scheduling
+            assert loop.pacing.priority == 0 and "as fast as possible" in loop.pacing.scheduling
             assert seen == [(os.SCHED_OTHER, 0)]
-        elif loop.priority:
-            assert loop.scheduling == "SCHED_FIFO priority 7" and seen == [(os.SCHED_FIFO, 7)]
+        elif loop.pacing.priority:
+            assert loop.pacing.scheduling == "SCHED_FIFO priority 7" and seen == [(os.SCHED_FIFO, 7)]
         else:  # refused here (no rtprio limit): said so, and the thread is as it was
-            assert "refused" in loop.scheduling and seen == [(os.SCHED_OTHER, 0)]
-        assert loop.summary()["physics_thread_priority"] == loop.priority
+            assert "refused" in loop.pacing.scheduling and seen == [(os.SCHED_OTHER, 0)]
+        assert loop.summary()["physics_thread_priority"] == loop.pacing.priority
 
 
 def test_the_floor_counts_the_wake_ups_the_machine_delays():
@@ -391,16 +393,17 @@ def test_a_fifo_thread_that_cannot_keep_up_goes_back_to_the_normal_scheduler(mon
     """Steps that cost 3x real time: the thread never sleeps; after FIFO_DEMOTE_AFTER of wall
     time without a sleep it drops SCHED_FIFO (scheduler calls faked: the fake clock's loop
     must not really run under FIFO), says so in an event and the stats, and goes on."""
-    from gyro_sim.ros import loop as loop_module
+    from gyro_sim.ros import loop_pacing as loop_module
 
     calls = []
-    monkeypatch.setattr(loop_module, "realtime_priority", lambda p: (calls.append(("fifo", p)) or (p, f"SCHED_FIFO priority {p}")))
+    monkeypatch.setattr(loop_module, "realtime_priority",
+                        lambda p: (calls.append(("fifo", p)) or (p, f"SCHED_FIFO priority {p}")))
     monkeypatch.setattr(loop_module, "normal_priority", lambda: calls.append(("normal",)))
     clock = FakeClock()
     loop, out = make_loop(clock, step_cost=3 * 4e-3, thread_priority=7)  # a 4 ms step costs 12 ms
     run_until(loop, lambda: clock.t > 100.0 + 3 * loop_module.FIFO_DEMOTE_AFTER)
     assert calls[:2] == [("fifo", 7), ("normal",)] and len(calls) == 2
-    assert loop.priority == 0 and "SCHED_FIFO priority 7 dropped" in loop.scheduling
+    assert loop.pacing.priority == 0 and "SCHED_FIFO priority 7 dropped" in loop.pacing.scheduling
     demoted = [(t, text) for t, text in out.events if "physics thread: normal scheduler since" in text]
     assert len(demoted) == 1
     # demoted about FIFO_DEMOTE_AFTER of wall time after the start (node time runs at 1/3 of it)
@@ -417,27 +420,27 @@ def test_commands_received_while_paused_or_before_a_reset_are_all_logged_in_caus
     clock = FakeClock()
     loop, out = make_loop(clock, command_timeout=1e6)
     run_until(loop, lambda: loop.steps >= 5)
-    loop.requests.append(Request("pause", True))
+    loop.requests.post(Pause(True))
     run_until(loop, lambda: loop.paused)
     t_pause = loop.node_ns
     for i in range(3):
         assert loop.submit_command(b"p%d" % i, [0.0, 0.01 * (i + 1), 0.0]) is None
     run_until(loop, lambda: len(out.commands) >= 2)  # the idle loop logs the superseded two
     assert out.commands[:2] == [(t_pause, b"p0"), (t_pause, b"p1")] and loop.node_ns == t_pause
-    loop.requests.append(Request("pause", False))
+    loop.requests.post(Pause(False))
     steps = loop.steps
     run_until(loop, lambda: loop.steps > steps)
     assert out.commands[2] == (t_pause, b"p2") and loop.sim.axis_moments[1] == pytest.approx(0.03)
-    loop.requests.append(Request("pause", True))
+    loop.requests.post(Pause(True))
     run_until(loop, lambda: loop.paused)
     assert loop.submit_command(b"r0", [0.0, 0.5, 0.0]) is None
-    loop.requests.append(Request("reset"))
+    loop.requests.post(Reset())
     run_until(loop, lambda: any(e == "reset" for _, e in out.events))
     t_reset = [t for t, e in out.events if e == "reset"][0]
     order = [(kind, t, x) for kind, t, x in out.log if t == t_reset]
     assert order[-2:] == [("command", t_reset, b"r0"), ("event", t_reset, "reset")]
     assert np.all(loop.sim.axis_moments == 0.0)
-    assert loop.counters.accepted == 4 == len(out.commands)
+    assert loop.commands.counters.accepted == 4 == len(out.commands)
 
 
 def test_a_physics_thread_failing_at_its_start_still_says_it_finished():
@@ -456,3 +459,19 @@ def test_a_physics_thread_failing_at_its_start_still_says_it_finished():
         assert loop.out_of_memory and loop.crash is None
     finally:
         loop.stop()
+
+
+def test_building_the_loop_runs_nothing_on_the_simulator():
+    """The loop's constructor only sets up its jobs: no step, no snapshot, no reset (the node
+    warms the Simulator up itself, before it builds the loop)."""
+    cfg = validate({"scene": "hinge_chain", "physics_rate": 250.0, "publish_rate": 50.0, "thread_priority": 0})
+    sim = Simulator(cfg.scene, integrator=cfg.integrator, step=cfg.dt)
+    calls = []
+    for name in ("advance", "snapshot", "reset", "set_axis_moments"):
+        real = getattr(sim, name)
+        setattr(sim, name, lambda *a, _real=real, _name=name, **kw: calls.append(_name) or _real(*a, **kw))
+    clock = FakeClock()
+    loop = SimLoop(sim, cfg, Outputs(), clock=clock, sleep=clock.sleep)
+    assert calls == [] and loop.steps == 0 and not loop.thread.is_alive()
+    warm_up(sim, cfg.dt)
+    assert "advance" in calls and calls[-1] == "reset" and sim.time == 0.0

@@ -20,9 +20,9 @@ import pytest
 
 pytest.importorskip("rclpy", reason="the ROS 2 node needs rclpy (pip install '.[ros]')")
 
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray
 
-from .helpers import (  # noqa: E402
+from .helpers import (
     DISCOVERY_TIMEOUT, ROOT, Client, NodeProcess, children, diag_values, new_domain_id, node_command, ros_env,
     rss_mb, running, wait_for, writer_of,
 )
@@ -30,8 +30,12 @@ from .helpers import (  # noqa: E402
 #: the light configuration of the other node tests
 LIGHT = ("scene:=hinge_chain", "physics_rate:=250.0", "publish_rate:=50.0")
 #: how soon a fault must be acted on (s): generous against a loaded machine, far below what
-#: "never" would take
+#: "never" would take (wall time on purpose: the node reacts to a real process's death)
 PROMPT = 10.0
+#: "at once" for a signal during the start-up (s). Wall time on purpose: what is checked is that
+#: the process does not wait for what it was doing (a numba compile of minutes, a writer that
+#: never answers), which only a real process and a real clock show; 2 s is far from both
+AT_ONCE = 2.0
 #: the stall of the writer (s), and when the node's memory is first sampled in it (s)
 STALL = 60.0
 STALL_SETTLED = 10.0
@@ -91,6 +95,7 @@ def recovered(path: Path, tmp: Path) -> int:
 
 
 # --- the writer dies --------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_a_killed_writer_stops_the_run_at_once_and_says_so(tmp_path):
     log = tmp_path / "live.mcap"
     domain = new_domain_id()
@@ -119,6 +124,7 @@ def test_a_killed_writer_stops_the_run_at_once_and_says_so(tmp_path):
 
 
 # --- the writer stops (SIGSTOP) ---------------------------------------------------------------------
+@pytest.mark.slow
 def test_a_stalled_writer_costs_bounded_memory_and_the_drops_are_counted(tmp_path):
     """The writer stopped for 60 s while the node publishes 1000 times a second: the node's
     resident memory stays bounded (the oldest publications dropped beyond record_queue_mb);
@@ -204,6 +210,7 @@ def _stops_with_one_line(node: NodeProcess, log: Path, tmp: Path, cause: str) ->
     assert recovered(log, tmp) > 0
 
 
+@pytest.mark.slow
 def test_a_full_device_stops_the_run_with_one_line_and_a_recoverable_log(tmp_path, small_tmpfs):
     log = small_tmpfs / "full.mcap"
     node = NodeProcess(tmp_path, new_domain_id(), *LIGHT, "duration:=120.0", f"record:={log}")
@@ -213,6 +220,7 @@ def test_a_full_device_stops_the_run_with_one_line_and_a_recoverable_log(tmp_pat
         node.stop(signal.SIGKILL)
 
 
+@pytest.mark.slow
 def test_a_file_size_limit_of_the_writer_is_the_same_fault(tmp_path):
     import resource
 
@@ -228,6 +236,7 @@ def test_a_file_size_limit_of_the_writer_is_the_same_fault(tmp_path):
 
 
 # --- paths ------------------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_two_nodes_on_one_path_one_runs_the_other_is_refused_in_one_line(tmp_path):
     log = tmp_path / "shared.mcap"
     procs = [subprocess.Popen(node_command(*LIGHT, "duration:=1.0", f"record:={log}"), cwd=ROOT,
@@ -243,6 +252,7 @@ def test_two_nodes_on_one_path_one_runs_the_other_is_refused_in_one_line(tmp_pat
     assert int(LOG_WRITTEN.search(out).group(2)) == summary_count(log) == len(read_all(log))
 
 
+@pytest.mark.slow
 def test_two_nodes_overwriting_one_path_leave_one_complete_log(tmp_path):
     log = tmp_path / "shared.mcap"
     log.write_bytes(b"an older file")
@@ -257,6 +267,7 @@ def test_two_nodes_overwriting_one_path_leave_one_complete_log(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith("shared")) == ["shared.mcap"]
 
 
+@pytest.mark.slow
 def test_a_record_path_where_no_file_can_be_created_is_refused_before_the_run(tmp_path):
     r = subprocess.run(node_command(*LIGHT, "duration:=1.0", "record:=/proc/x.mcap"), cwd=ROOT,
                        env=ros_env(new_domain_id(), tmp_path), text=True, capture_output=True, timeout=120)
@@ -267,6 +278,7 @@ def test_a_record_path_where_no_file_can_be_created_is_refused_before_the_run(tm
 
 # --- SIGKILL ----------------------------------------------------------------------------------------
 @pytest.mark.parametrize("overwrite", [False, True], ids=["new", "overwrite"])
+@pytest.mark.slow
 def test_sigkill_of_the_node_alone_leaves_a_complete_log(tmp_path, overwrite):
     """The writer outlives the node: it sees the end of its input, finishes the log (summary and
     index) and, with overwrite, renames it onto the record path."""
@@ -288,6 +300,7 @@ def test_sigkill_of_the_node_alone_leaves_a_complete_log(tmp_path, overwrite):
     assert not list(tmp_path.glob("killed.mcap.*"))
 
 
+@pytest.mark.slow
 def test_sigkill_of_node_and_writer_leaves_a_file_without_summary_that_recover_reads(tmp_path):
     log = tmp_path / "both.mcap"
     node = NodeProcess(tmp_path, new_domain_id(), *LIGHT, f"record:={log}", new_session=True)
@@ -305,6 +318,7 @@ def test_sigkill_of_node_and_writer_leaves_a_file_without_summary_that_recover_r
 # --- start-up ---------------------------------------------------------------------------------------
 @pytest.mark.parametrize("signals", [(signal.SIGTERM,), (signal.SIGINT,), (signal.SIGTERM, signal.SIGTERM)],
                          ids=["SIGTERM", "SIGINT", "two SIGTERMs"])
+@pytest.mark.slow
 def test_a_signal_during_the_first_compile_ends_the_start_at_once(tmp_path, signals):
     """The numba compile (an empty cache: NUMBA_CACHE_DIR) takes minutes: a signal during it ends
     the process within 2 s, exit 0, one line, nothing left behind."""
@@ -328,7 +342,7 @@ def test_a_signal_during_the_first_compile_ends_the_start_at_once(tmp_path, sign
         took = time.monotonic() - t0
     finally:
         node.stop(signal.SIGKILL)
-    assert rc == 0 and took < 2.0, (rc, took, node.stderr[-2000:])
+    assert rc == 0 and took < AT_ONCE, (rc, took, node.stderr[-2000:])
     said = [line for line in node.stderr.splitlines() if "during start-up" in line]
     assert said == [f"gyro_sim_node: {signals[0].name} during start-up: not started (nothing recorded)"], node.stderr
     assert "Traceback" not in node.stderr and not log.exists()
@@ -368,7 +382,7 @@ def test_a_signal_while_the_writer_starts_kills_it_and_removes_the_file(tmp_path
     finally:
         if proc.poll() is None:
             proc.kill()
-    assert proc.returncode == 0 and took < 2.0, (proc.returncode, took, err)
+    assert proc.returncode == 0 and took < AT_ONCE, (proc.returncode, took, err)
     assert err.strip() == "gyro_sim_node: SIGTERM during start-up: not started (nothing recorded)" and not out
     assert not log.exists() and not running(writer)
 
@@ -389,6 +403,7 @@ def test_scipy_lapack_under_a_tight_address_space_limit_is_refused_not_a_hang(tm
     assert r.stdout.startswith("refused:") and "scipy's LAPACK needs" in r.stdout, (r.stdout, r.stderr)
 
 
+@pytest.mark.slow
 def test_the_node_under_a_tight_address_space_limit_ends_in_one_line(tmp_path):
     """prlimit --as just above what the node's imports take: it ends at once with one line and
     exit 1 (it died with a traceback, or an abort, or hung in Fast DDS or OpenBLAS)."""

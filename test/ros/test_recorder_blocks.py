@@ -40,7 +40,8 @@ def test_blocks_plain_batches_and_lone_records_are_logged_as_handed_over(tmp_pat
     sim = Simulator(load_scene("hinge_chain"))
     pub = M.Publication(sim.model.names)
     names = sim.snapshot().joint_names
-    frames = [pub.frame(names, wrenches=True, poses=True, tf=True), pub.frame(names, wrenches=False, poses=False, tf=True)]
+    frames = [pub.frame(names, wrenches=True, poses=True, tf=True),
+              pub.frame(names, wrenches=False, poses=False, tf=True)]
     rec = LiveRecorder(str(tmp_path / "blocks.mcap"), scene=sim.scene, params={})
     sent = []
     for i in range(12):
@@ -70,7 +71,7 @@ def test_packer_sends_each_layout_once_and_blocks_unpickled():
     pub = M.Publication(sim.model.names)
     frame = pub.frame(sim.snapshot().joint_names, wrenches=True, poses=True, tf=True)
     items = list(frame_batches(sim, pub, frame, 3))
-    p = R._Packer()  # noqa: SLF001
+    p = R._Packer()
     bufs, count = p.pack(items)
     kinds = [b[:1] for b in bufs[::2]]
     assert kinds == [b"L", b"B", b"B", b"B"] and count == 3 * len(frame.layout)
@@ -93,7 +94,7 @@ def test_partial_pipe_writes_are_completed():
 
         th = threading.Thread(target=drain)
         th.start()
-        R._write_all(w, list(data))  # noqa: SLF001 - more than a default pipe holds: partial writes
+        R._write_all(w, list(data))  # more than a default pipe holds: partial writes
         th.join(10)
         assert bytes(got) == b"".join(bytes(d) for d in data)
     finally:
@@ -123,6 +124,7 @@ time.sleep(60)
 """
 
 
+@pytest.mark.slow
 def test_sigkill_leaves_a_complete_log(tmp_path):
     from mcap.reader import make_reader
 

@@ -10,17 +10,18 @@ import pytest
 
 pytest.importorskip("rclpy", reason="the ROS 2 node needs rclpy (pip install '.[ros]')")
 
-from rclpy.serialization import deserialize_message  # noqa: E402
-from sensor_msgs.msg import JointState  # noqa: E402
-from std_msgs.msg import Float64MultiArray  # noqa: E402
-from std_srvs.srv import Trigger  # noqa: E402
+from rclpy.serialization import deserialize_message
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
 
-from .helpers import DISCOVERY_TIMEOUT, Client, NodeProcess, new_domain_id, stamp_ns, wait_for  # noqa: E402
+from .helpers import DISCOVERY_TIMEOUT, Client, NodeProcess, new_domain_id, stamp_ns, wait_for
 
 COMMAND = [0.001, 0.02, -0.01]
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+@pytest.mark.slow
 def test_signal_during_recording_leaves_a_complete_log(tmp_path, sig):
     from mcap.reader import make_reader
     from rosbags.highlevel import AnyReader

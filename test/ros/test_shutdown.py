@@ -21,9 +21,9 @@ import pytest
 
 pytest.importorskip("rclpy", reason="the ROS 2 node needs rclpy (pip install '.[ros]')")
 
-from std_srvs.srv import Trigger  # noqa: E402
+from std_srvs.srv import Trigger
 
-from .helpers import DISCOVERY_TIMEOUT, Client, NodeProcess, new_domain_id, wait_for  # noqa: E402
+from .helpers import DISCOVERY_TIMEOUT, Client, NodeProcess, new_domain_id, wait_for
 
 RUNS_PER_SIGNAL = 30
 SEED = 20261123
@@ -40,8 +40,8 @@ def cases() -> list[tuple[int, signal.Signals, str, float]]:
     for i in range(2 * RUNS_PER_SIGNAL):
         sig = signal.SIGTERM if i % 2 == 0 else signal.SIGINT
         mode = str(rng.choice(names, p=shares))
-        delay = {"start-up": rng.uniform(0.0, 0.3), "first second": rng.uniform(0.3, 1.3), "reset": rng.uniform(0.0, 0.5),
-                 "later": rng.uniform(1.3, 3.0)}[mode]
+        delay = {"start-up": rng.uniform(0.0, 0.3), "first second": rng.uniform(0.3, 1.3),
+                 "reset": rng.uniform(0.0, 0.5), "later": rng.uniform(1.3, 3.0)}[mode]
         out.append((i, sig, mode, float(delay)))
     return out
 

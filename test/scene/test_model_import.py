@@ -27,7 +27,7 @@ from gyro_sim.dynamics.model import compile_model, initial_state  # noqa: E402
 from gyro_sim.paths import find_scene, shipped_models  # noqa: E402
 from gyro_sim.scene.load import SceneError, load_scene, parse_yaml  # noqa: E402
 from gyro_sim.scene.mjcf import ModelError, import_model  # noqa: E402
-from test.core.chains import random_chain  # noqa: E402
+from test.dynamics.chains import random_chain  # noqa: E402
 
 #: largest difference allowed between MuJoCo and gyro_sim on the same file (m, rad, rad/s)
 AGREEMENT = 1e-7
@@ -81,7 +81,8 @@ ARM_URDF = """<?xml version="1.0"?>
     <origin xyz="0.2 0 0" rpy="0 0.5 0"/>
   </joint>
   <link name="flange_link">
-    <inertial><origin xyz="0.01 0 0"/><mass value="0.1"/><inertia ixx="1e-5" iyy="1e-5" izz="1e-5" ixy="0" ixz="0" iyz="0"/></inertial>
+    <inertial><origin xyz="0.01 0 0"/><mass value="0.1"/>
+      <inertia ixx="1e-5" iyy="1e-5" izz="1e-5" ixy="0" ixz="0" iyz="0"/></inertial>
   </link>
   <joint name="wheel" type="continuous">
     <parent link="fore"/><child link="wheel_link"/>
@@ -89,7 +90,8 @@ ARM_URDF = """<?xml version="1.0"?>
     <axis xyz="0 0 1"/>
   </joint>
   <link name="wheel_link">
-    <inertial><origin xyz="0 0 0.01"/><mass value="0.3"/><inertia ixx="1.5e-4" iyy="1.5e-4" izz="2.8e-4" ixy="0" ixz="0" iyz="0"/></inertial>
+    <inertial><origin xyz="0 0 0.01"/><mass value="0.3"/>
+      <inertia ixx="1.5e-4" iyy="1.5e-4" izz="2.8e-4" ixy="0" ixz="0" iyz="0"/></inertial>
   </link>
 </robot>
 """
@@ -181,12 +183,14 @@ def deviations(scene, mj_out, gs_out, bodies, rotors, hinges) -> dict[str, float
 #: by joint (URDF: no actuators), and what is compared
 CASES = {
     "arm_flywheel": dict(
-        ctrl={"elbow_motor": 0.1, "spin_motor": 0.02}, gear={"elbow_motor": ("elbow", 2.0), "spin_motor": ("spin", 0.5)},
+        ctrl={"elbow_motor": 0.1, "spin_motor": 0.02},
+        gear={"elbow_motor": ("elbow", 2.0), "spin_motor": ("spin", 0.5)},
         forces={}, bodies={"upper": ["upper"], "elbow": ["fore"], "hand": ["hand", "tool"]},
         rotors={"flywheel": ("elbow", "spin")}, hinges=["elbow"]),
     "satellite_wheels": dict(
         ctrl={"wx_motor": 0.01, "wy_motor": -0.02, "wz_motor": 0.015, "deploy_motor": 0.05},
-        gear={"wx_motor": ("wx", 1.0), "wy_motor": ("wy", 1.0), "wz_motor": ("wz", 1.0), "deploy_motor": ("deploy", 3.0)},
+        gear={"wx_motor": ("wx", 1.0), "wy_motor": ("wy", 1.0), "wz_motor": ("wz", 1.0),
+              "deploy_motor": ("deploy", 3.0)},
         forces={}, bodies={"bus": ["bus"], "deploy": ["panel"]},
         rotors={"wheel_x": ("bus", "wx"), "wheel_y": ("bus", "wy"), "wheel_z": ("bus", "wz")}, hinges=["deploy"]),
     "arm_wheel_urdf": dict(
@@ -201,6 +205,7 @@ def case_path(name: str, tmp_path: Path) -> Path:
 
 
 @pytest.mark.parametrize("name", list(CASES))
+@pytest.mark.slow
 def test_the_model_moves_as_in_mujoco(name, tmp_path):
     case = CASES[name]
     path = case_path(name, tmp_path)
@@ -238,7 +243,8 @@ def test_names_and_structure_follow_the_documented_rule(tmp_path):
     assert [b.name for b in urdf.bodies] == ["shoulder", "elbow"]
     assert urdf.bodies[1].rotors[0].actuated  # URDF: every revolute or continuous joint is commanded
     assert Simulator(urdf, backend="numpy").axis_names == ["shoulder", "elbow", "wheel"]
-    as_xml = import_model(write(tmp_path, "arm.xml", ARM_URDF.replace("<robot", "<!-- a URDF named .xml -->\n<robot", 1)))
+    named_xml = ARM_URDF.replace("<robot", "<!-- a URDF named .xml -->\n<robot", 1)
+    as_xml = import_model(write(tmp_path, "arm.xml", named_xml))
     assert as_xml.kind == "URDF" and as_xml.mapping["bodies"][1]["rotors"][0]["actuated"]
 
 
@@ -316,6 +322,7 @@ def exported(scene_map: dict, tmp_path: Path) -> Path:
 
 
 @pytest.mark.parametrize("seed, base", [(1, "fixed"), (2, "fixed"), (3, "free"), (4, "free"), (5, "fixed")])
+@pytest.mark.slow
 def test_a_scene_exported_by_peers_comes_back_the_same(seed, base, tmp_path):
     scene_map = random_chain(seed, base=base, speed_rotors=False, gravity=base == "fixed")
     original = load_scene(scene_map)
@@ -433,8 +440,10 @@ REFUSED = {
                  "equality 'coupling': equality constraints are not supported"),
     "spring": (bad(joint_attrs='stiffness="2"'), "joint 'pivot': stiffness (a joint spring) is not supported"),
     "damping": (bad(joint_attrs='damping="0.1"'), "joint 'pivot': damping is not supported"),
-    "armature": (bad(joint_attrs='armature="0.01"'), "joint 'pivot': armature (a reflected rotor inertia) is not supported"),
-    "friction loss": (bad(joint_attrs='frictionloss="0.1"'), "joint 'pivot': frictionloss (dry friction) is not supported"),
+    "armature": (bad(joint_attrs='armature="0.01"'),
+                 "joint 'pivot': armature (a reflected rotor inertia) is not supported"),
+    "friction loss": (bad(joint_attrs='frictionloss="0.1"'),
+                      "joint 'pivot': frictionloss (dry friction) is not supported"),
     "reference angle": (bad(joint_attrs='ref="0.2"'), "joint 'pivot': ref = 0.2: a reference angle is not supported"),
     "two joints in a body": (bad(inner='<joint name="roll" type="hinge" axis="0 1 0"/>'),
                              "body 'link': 2 joints; one joint per body"),
@@ -446,7 +455,8 @@ REFUSED = {
                    "worldbody: 2 moving bodies hang from the world ('link', 'other'); one chain only"),
     "nothing moves": (bad().replace('<joint name="pivot" type="hinge" axis="1 0 0" />', ""),
                       "worldbody: no body has a joint: nothing moves"),
-    "gravity compensation": (bad(body_attrs='gravcomp="1"'), "body 'link': gravcomp (gravity compensation) is not supported"),
+    "gravity compensation": (bad(body_attrs='gravcomp="1"'),
+                             "body 'link': gravcomp (gravity compensation) is not supported"),
     "fluid forces": (bad(option='<option density="1.2"/>'),
                      "option: density and viscosity (fluid forces) are not supported"),
     "servo": (bad(extra='<actuator><position name="servo" joint="pivot" kp="10"/></actuator>'),
@@ -525,8 +535,8 @@ def test_the_refusals_come_before_anything_runs(tmp_path, capsys):
 
 
 def test_every_refusal_is_reported_at_once(tmp_path):
-    path = write(tmp_path, "bad.xml", bad(joint_attrs='damping="0.1" armature="0.01"',
-                                          extra='<tendon><fixed name="cable"><joint joint="pivot" coef="1"/></fixed></tendon>'))
+    tendon = '<tendon><fixed name="cable"><joint joint="pivot" coef="1"/></fixed></tendon>'
+    path = write(tmp_path, "bad.xml", bad(joint_attrs='damping="0.1" armature="0.01"', extra=tendon))
     with pytest.raises(SceneError) as info:
         load_scene(path)
     assert len(info.value.errors) == 3
@@ -561,7 +571,8 @@ def test_a_model_file_beyond_the_size_bound_is_refused_unread(tmp_path):
 
 def test_without_mujoco_the_error_names_the_extra(monkeypatch, tmp_path, capsys):
     monkeypatch.setitem(sys.modules, "mujoco", None)  # import mujoco raises ImportError
-    with pytest.raises(ModelError, match=r"needs mujoco, not installed; install it with: pip install 'gyro_sim\[models\]'"):
+    with pytest.raises(ModelError,
+                       match=r"needs mujoco, not installed; install it with: pip install 'gyro_sim\[models\]'"):
         import_model(ARM)
     with pytest.raises(SceneError, match=r"gyro_sim\[models\]"):
         load_scene(ARM)
@@ -585,6 +596,7 @@ def test_contacts_limits_and_control_ranges_are_left_out_and_listed(tmp_path):
 
 
 # ------------------------------------------------------------------------------- gyro-sim import
+@pytest.mark.slow
 def test_import_writes_a_scene_that_loads_and_moves_as_the_model(tmp_path, capsys):
     out = tmp_path / "arm.yaml"
     assert main(["import", str(ARM), "-o", str(out)]) == 0

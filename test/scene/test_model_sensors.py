@@ -165,6 +165,7 @@ def test_imu_readings_are_mujocos_sensordata(name, tmp_path):
     assert worst < READING_RTOL
 
 
+@pytest.mark.slow
 def test_imu_readings_follow_mujoco_as_the_model_moves(tmp_path):
     rng = np.random.default_rng(7)
     source, bodies = MOVING["arm_flywheel"]

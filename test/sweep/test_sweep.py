@@ -14,11 +14,11 @@ import pytest
 
 pytest.importorskip("distributed")
 
-from gyro_sim.cli import main  # noqa: E402
-from gyro_sim.sweep import execute, results  # noqa: E402
-from gyro_sim.sweep.commands import find_sweep  # noqa: E402
-from gyro_sim.sweep.point import TIMING_COLUMNS  # noqa: E402
-from gyro_sim.sweep.spec import SweepError, load_sweep  # noqa: E402
+from gyro_sim.cli import main
+from gyro_sim.sweep import execute, results
+from gyro_sim.sweep.commands import find_sweep
+from gyro_sim.sweep.point import TIMING_COLUMNS
+from gyro_sim.sweep.spec import SweepError, load_sweep
 
 #: a small grid: the sleeping top of config/sweeps/sleeping_top.yaml, 3 x 4 points, 0.3 s each
 SMALL = {
@@ -106,6 +106,7 @@ def test_points_deterministic_seeds():
 
 
 # ------------------------------------------------------------------------- on the cluster
+@pytest.mark.slow
 def test_parallel_equals_serial_bit_for_bit(cluster, reference, tmp_path):
     sweep = load_sweep(SMALL)
     out = tmp_path / "par"
@@ -116,6 +117,7 @@ def test_parallel_equals_serial_bit_for_bit(cluster, reference, tmp_path):
     assert table(out).equals(reference)
 
 
+@pytest.mark.slow
 def test_killed_worker_loses_nothing(cluster, reference, tmp_path):
     sweep = load_sweep(SMALL)
     out = tmp_path / "killed"
@@ -138,6 +140,7 @@ def test_killed_worker_loses_nothing(cluster, reference, tmp_path):
     cluster.wait_for_workers(2, timeout=60)  # the nanny restarted it (the next tests use both)
 
 
+@pytest.mark.slow
 def test_interrupt_then_resume(cluster, reference, tmp_path, capsys):
     sweep = load_sweep(SMALL)
     out = tmp_path / "res"
@@ -172,6 +175,7 @@ def test_interrupt_then_resume(cluster, reference, tmp_path, capsys):
 
 
 @pytest.mark.parametrize("name", ["kapitza", "sleeping_top"])
+@pytest.mark.slow
 def test_theory_map_within_one_cell(cluster, tmp_path, name):
     """The shipped maps (--quick): the computed stability boundary within one grid cell of
     Kapitza's (a W)^2 = 2 g I / (m c), of Maievski's (A p)^2 = 4 B m g c."""
@@ -187,6 +191,7 @@ def test_theory_map_within_one_cell(cluster, tmp_path, name):
     assert (out / results.MAP).stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_fixed_step_map_rk4(tmp_path):
     """The largest stable rk4 step against rotor spin: where 2 sqrt(2) / w_n says, to one cell."""
     d = load_sweep(find_sweep("fixed_step"), quick=True)

@@ -21,7 +21,7 @@ pytest.importorskip("rclpy")
 pytest.importorskip("rerun")
 pytest.importorskip("sensor_msgs.msg")
 
-from test.ros.helpers import ROOT, Client, NodeProcess, new_domain_id, ros_env, wait_for  # noqa: E402
+from test.ros.helpers import ROOT, Client, NodeProcess, new_domain_id, ros_env, wait_for
 
 #: a node's start (a cold numba cache compiles for ~30 s), DDS discovery, a capture (s)
 START_TIMEOUT = 180.0
@@ -62,7 +62,8 @@ class Live:
         self.err_path = tmp / f"{name}.err"
         self.out_path = tmp / f"{name}.out"
         self.proc = subprocess.Popen([sys.executable, "-m", "gyro_sim.cli", "view", "--live", *map(str, args)],
-                                     cwd=ROOT, env=env, stdout=open(self.out_path, "w"), stderr=open(self.err_path, "w"))
+                                     cwd=ROOT, env=env, stdout=open(self.out_path, "w"),
+                                     stderr=open(self.err_path, "w"))
 
     @property
     def stderr(self) -> str:
@@ -127,6 +128,7 @@ def node(tmp_path, d, name="node"):
     return NodeProcess(tmp_path, d, f"scene:={SCENE}", "real_time_factor:=1.0", name=name)
 
 
+@pytest.mark.slow
 def test_save_for_seconds_holds_the_moving_chain_and_the_commanded_plots(tmp_path, domain):
     d, env, client = domain
     n = node(tmp_path, d)
@@ -155,7 +157,8 @@ def test_save_for_seconds_holds_the_moving_chain_and_the_commanded_plots(tmp_pat
     for b in scene.bodies:
         t = times(got[f"/world/{b.name}"])
         assert t.size > 40 and np.all(np.diff(t) > 0), f"{b.name}: {t.size} poses"
-        trans = np.array([v[0] if isinstance(v[0], list) else v for v in column(got[f"/world/{b.name}"], "Transform3D:translation")])
+        trans = np.array([v[0] if isinstance(v[0], list) else v
+                          for v in column(got[f"/world/{b.name}"], "Transform3D:translation")])
         assert len(trans) == t.size
         assert column(got[f"/world/{b.name}/body"], "Capsules3D:lengths")
     # the chain moves: the last body's origin is not where it started
@@ -179,6 +182,7 @@ def test_save_for_seconds_holds_the_moving_chain_and_the_commanded_plots(tmp_pat
     assert np.all(np.diff(times(got["/plots/euler/arm1"])) > 0)
 
 
+@pytest.mark.slow
 def test_follows_a_node_that_stops_and_starts_again_and_ends_on_sigint(tmp_path, domain):
     d, env, client = domain
     rrd = tmp_path / "live.rrd"
@@ -217,6 +221,7 @@ def test_follows_a_node_that_stops_and_starts_again_and_ends_on_sigint(tmp_path,
     assert np.any(every < marks[0]) and np.any(every >= marks[0])
 
 
+@pytest.mark.slow
 def test_sigterm_ends_with_exit_0_and_a_readable_file(tmp_path, domain):
     d, env, client = domain
     describe(client)
@@ -230,6 +235,7 @@ def test_sigterm_ends_with_exit_0_and_a_readable_file(tmp_path, domain):
     assert "/world/arm1/body" in got  # the shapes from the description
 
 
+@pytest.mark.slow
 def test_an_existing_file_is_refused_without_force(tmp_path):
     rrd = tmp_path / "taken.rrd"
     rrd.write_bytes(b"not mine")
@@ -240,6 +246,7 @@ def test_an_existing_file_is_refused_without_force(tmp_path):
 
 
 @pytest.mark.parametrize("args", [["--live", "some.mcap"], [], ["x.mcap", "--serve"], ["--live", "--seconds", "0"]])
+@pytest.mark.slow
 def test_bad_combinations_are_refused_in_one_line(args, tmp_path):
     r = subprocess.run([sys.executable, "-m", "gyro_sim.cli", "view", *args], cwd=ROOT, env=dict(os.environ),
                        capture_output=True, text=True, timeout=120)
@@ -285,6 +292,7 @@ def test_a_new_robot_description_replaces_the_shapes(tmp_path):
         assert any("Clear" in str(bt.schema.names) for bt in got[f"/world/{name}/body"]), name
 
 
+@pytest.mark.slow
 def test_serve_on_a_port_in_use_is_refused_in_one_line(tmp_path):
     import socket
 

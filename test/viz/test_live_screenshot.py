@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from test.io.test_view_screenshot import PLOTS, RERUN, VULKAN, Image, inspect  # noqa: F401
+from test.viz.test_view_screenshot import PLOTS, RERUN, VULKAN, Image, inspect
 from test.viz.test_live import START_TIMEOUT, Commander, Live, node, wait_for
 from test.viz.test_live import domain  # noqa: F401 (fixture)
 

@@ -4,12 +4,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from test.io.conftest import gyro_sim
+from test.conftest import gyro_sim
 from test.viz.test_live import chunks, column
 
 pytest.importorskip("rerun")
 
 
+@pytest.mark.slow
 def test_the_imu_of_a_pendulum_is_plotted_and_reads_the_hinge_rate(tmp_path):
     log, rrd = tmp_path / "imu.mcap", tmp_path / "imu.rrd"
     r = gyro_sim("run", "--scene", "imu_pendulum", "--duration", 3, "--record", log, timeout=300)
@@ -27,7 +28,8 @@ def test_the_imu_of_a_pendulum_is_plotted_and_reads_the_hinge_rate(tmp_path):
     # reading follows the hinge's rate (up to the IMU's noise)
     from gyro_sim.log.mcap_log import iter_messages
 
-    hinge_rate = np.array([m.velocity[list(m.name).index("pendulum")] for _, _, _, m in iter_messages(log, ["/joint_states"])])
+    hinge_rate = np.array([m.velocity[list(m.name).index("pendulum")]
+                           for _, _, _, m in iter_messages(log, ["/joint_states"])])
     n = min(len(hinge_rate), len(gyro))
     assert np.corrcoef(hinge_rate[:n], gyro[:n, 0])[0, 1] > 0.9
     assert np.std(hinge_rate) > 0.01  # it does swing

@@ -240,7 +240,7 @@ class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
     rhs evaluations. The two give the same bits, counters included; against scipy's DOP853 on
     the same rhs they take the same steps (times equal to ~1e-9 relative: the round-off of the
     error norm's cancelling sums, through err^(-1/8)) with states equal to round-off
-    (test/core/test_fast_dop853.py). The starting step is `AdaptiveIntegrator._initial_step`'s,
+    (test/integrators/test_dop853.py). The starting step is `AdaptiveIntegrator._initial_step`'s,
     in the kernels' arithmetic.
 
     With `stiffness_estimate=True`, each accepted step also gets dop853.f's estimate of

@@ -6,7 +6,7 @@ system (the numpy reference among them), and the compiled loop
 :func:`gyro_sim.integrators.gauss4.loop.gauss_march` calls the same functions between calls of the
 articulated-body kernel. Every number either driver looks at (norms, rates, the decisions of
 the stop tests, the pivots) comes out of these functions, so both take the same steps bit for
-bit (test/core/test_gauss.py).
+bit (test/integrators/test_gauss4.py).
 
 The collocation equations of the 2-stage Gauss method for the stage increments Z (2, n)
 (Hairer, Wanner II, sec. IV.8, eq. (8.2)):

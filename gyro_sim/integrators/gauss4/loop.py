@@ -6,7 +6,7 @@ finiteness check) statement for statement, calling the articulated-body kernel
 :func:`gyro_sim.dynamics.kernel.rhs_kernel` (through its compiled C function, `fast.rhs_call`; the
 canonical field through `fast_canonical.canonical_call`) and the arithmetic of
 :mod:`gyro_sim.integrators.gauss4.kernels` (the very functions the Python driver calls): no Python
-between two evaluations, and the same steps bit for bit (test/core/test_gauss.py).
+between two evaluations, and the same steps bit for bit (test/integrators/test_gauss4.py).
 :class:`GaussMarch` binds it to a :class:`gyro_sim.dynamics.system.FastChainODE` through the
 system's public `kernel_arguments()` and `quaternion_block()`; `Gauss4` uses it when its
 system offers them.

@@ -5,7 +5,7 @@ One implementation, two drivers, as :mod:`gyro_sim.integrators.rk4.kernels`:
 :class:`gyro_sim.integrators.lie4.driver.Lie4` calls these between its rhs evaluations on any
 system (the numpy reference among them), and the compiled loop
 :func:`gyro_sim.integrators.lie4.loop.lie_march` calls the same functions between calls of the
-articulated-body kernel: both take the same steps bit for bit (test/core/test_fast_lie.py).
+articulated-body kernel: both take the same steps bit for bit (test/integrators/test_lie4.py).
 The method's coefficients are data (the class attributes of `Lie4`: ALPHA, BASE, BETA1,
 BETA2, B, C).
 

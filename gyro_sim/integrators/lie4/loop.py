@@ -6,7 +6,7 @@ the base's projection and finiteness check) statement for statement, calling the
 articulated-body kernel :func:`gyro_sim.dynamics.kernel.rhs_kernel` (through its compiled C function,
 `fast.rhs_call`) and the arithmetic of
 :mod:`gyro_sim.integrators.lie4.kernels` (the very functions the Python driver calls): no Python
-between two evaluations, and the same steps bit for bit (test/core/test_fast_lie.py).
+between two evaluations, and the same steps bit for bit (test/integrators/test_lie4.py).
 :class:`LieMarch` binds it to a :class:`gyro_sim.dynamics.system.FastChainODE` through the
 system's public `kernel_arguments()` and `quaternion_block()`; `Lie4` uses it when its system
 offers them.

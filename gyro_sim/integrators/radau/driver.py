@@ -114,7 +114,7 @@ class Radau(AdaptiveIntegrator):
     `dense`, which "auto" drives where there is no compiled loop) this class steps in Python, calling the same
     arithmetic between its rhs evaluations. The two give the same bits, counters included;
     against scipy's Radau on the same rhs, Jacobian and tolerances they take the same steps
-    (test/core/test_fast_radau.py). The LU is the kernels' own (partial pivoting, as
+    (test/integrators/test_radau.py). The LU is the kernels' own (partial pivoting, as
     LAPACK's getrf): the same bits in and out of compiled code.
 
     The controller divides by the last accepted step (radau5.f's HACC); scipy's Radau keeps

@@ -9,7 +9,7 @@ articulated-body kernel. The tableau is data (the method's class attributes `A`,
     y += sum_j (h B)[j] K[j]                 (erk_update: the step)
 
 The sums run over j in increasing order, one product added at a time, as numpy's `dot` of a
-short vector with a (s, n) matrix does (bit for bit; test/core/test_fast_loop.py). No
+short vector with a (s, n) matrix does (bit for bit; test/integrators/test_rk4_loop.py). No
 fastmath: IEEE arithmetic, no contraction into fused multiply-adds.
 Without numba these stay plain Python (correct, slow).
 """

@@ -1,0 +1,164 @@
+"""The physics loop's commands: received from any thread, checked, held one at a time, taken
+by the physics steps, logged in causal order (what is logged when: gyro_sim.ros.loop's
+docstring), replaced by zeros after ``command_timeout`` simulated seconds of silence, and the
+built-in demo's commands (gyro_sim.ros.demo) while none has come from outside."""
+from __future__ import annotations
+
+import collections
+import math
+import threading
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from gyro_sim.log.resim import COMMAND_TIMEOUT_EVENT
+from gyro_sim.msgs import messages as M
+from gyro_sim.ros.demo import DEMO_RATE
+
+
+def check_command(values, n_axes: int) -> str | None:
+    """Why a command is refused (None if good): one finite value per actuated axis."""
+    if len(values) != n_axes:
+        return f"expected {n_axes} values (one per axis), got {len(values)}"
+    if not all(map(math.isfinite, values)):
+        return "holds NaN or inf"
+    return None
+
+
+@dataclass
+class Counters:
+    accepted: int = 0
+    superseded: int = 0  # good commands replaced by a newer one before a step could take them
+    rejected: int = 0
+    timeouts: int = 0
+    last_reject_reason: str = ""
+    last_effective: float = float("nan")  # node time from which the last good command applies
+    moments_since: float = 0.0  # node time from which the moments now applied have been applied
+
+
+class CommandPath:
+    """The commands of one Simulator's axes.
+
+    Parameters
+    ----------
+    n_axes : number of actuated axes
+    out : where commands and events go (gyro_sim.ros.loop.SimLoop's `outputs`)
+    node_ns : the loop's node time (integer ns), read when a command is rejected
+    timeout : command_timeout (simulated s); dt : the physics step (s)
+    demo : the built-in demo (gyro_sim.ros.demo.Demo), or None
+    """
+
+    def __init__(self, n_axes: int, out, node_ns: Callable[[], int], timeout: float, dt: float, demo=None):
+        self.n_axes, self.out, self._node_ns = n_axes, out, node_ns
+        # the fallback comes at the first step starting more than `timeout` after the last good command
+        self._timeout_steps = math.floor(timeout / dt * (1 + 1e-12))
+        self.counters = Counters()
+        # the latest good command: (sequence number, raw bytes, values); one slot, replaced whole
+        self._latest: tuple | None = None
+        self._taken_seq = 0
+        # every good command received and not yet logged: (sequence number, raw bytes), in order
+        self._received: collections.deque = collections.deque()
+        self._last_step: int | None = None  # step at which the last good command took effect
+        #: the built-in demo commands while no command came from outside
+        self.demo = demo
+        self._demo_period_ns = M.time_ns(min(1.0 / DEMO_RATE, 0.5 * timeout))
+        self._next_demo_ns = 0
+        self._demo_stopped = False  # a command from outside arrived: the demo is over
+        self._demo_stop_said = False
+        self._submit_lock = threading.Lock()  # a demo command never lands after one from outside
+
+    # --- from other threads ----------------------------------------------------------------------
+    def submit(self, raw: bytes, values) -> str | None:
+        """A command received (raw CDR bytes and its values); returns why it is refused, if it is.
+        A good one replaces the latest (taken by the next physics step) and ends the demo."""
+        with self._submit_lock:
+            reason = check_command(values, self.n_axes)
+            if reason is None:
+                self._demo_stopped = True
+            return self._submit(raw, values, reason)
+
+    def _submit(self, raw: bytes, values, reason: str | None) -> str | None:
+        if reason is None:
+            seq = self.counters.accepted + 1
+            self._received.append((seq, raw))  # before it is the latest: a step taking it finds it here
+            self.counters.accepted = seq
+            self._latest = (seq, raw, tuple(float(v) for v in values))
+        else:
+            self.counters.rejected += 1
+            self.counters.last_reject_reason = reason
+            self.out.record_event(self._node_ns(), f"command rejected ({reason})")
+        return reason
+
+    # --- in the physics thread -------------------------------------------------------------------
+    def _log_received(self, t_ns: int, upto: int) -> None:
+        """Log, at `t_ns`, the good commands received up to sequence number `upto` not yet logged."""
+        received = self._received
+        raws = []
+        while received and received[0][0] <= upto:
+            raws.append(received.popleft()[1])
+        if raws:
+            self.out.record_commands(t_ns, raws)
+
+    def _demo_command(self, t_ns: int) -> None:
+        """The demo's command for node time t_ns, through the command path, when one is due."""
+        if self._demo_stopped:
+            if not self._demo_stop_said:
+                self._demo_stop_said = True
+                self.out.event(t_ns, "demo stopped: a command arrived")
+            return
+        if t_ns < self._next_demo_ns:
+            return
+        self._next_demo_ns = t_ns + self._demo_period_ns
+        values = self.demo.moments(t_ns * 1e-9)
+        with self._submit_lock:
+            if not self._demo_stopped:
+                self._submit(M.axis_moments(values), values, None)
+
+    def take(self, sim, t_ns: int, step: int) -> None:
+        """Before physics step number `step`, at node time `t_ns`: set the latest good command, if
+        new, on `sim` (logged with those it superseded), or zeros once it has timed out."""
+        t = t_ns * 1e-9
+        if self.demo is not None:
+            self._demo_command(t_ns)
+        new = self._latest
+        latest = None
+        if new is not None and new[0] != self._taken_seq:
+            seq, raw, latest = new
+            self.counters.superseded += seq - self._taken_seq - 1
+            self._taken_seq = seq
+            self._log_received(t_ns, seq)  # the ones it superseded, then it
+        if latest is not None:
+            if np.any(sim.axis_moments != latest):
+                self.counters.moments_since = t
+            sim.set_axis_moments(latest)
+            self._last_step = step
+            self.counters.last_effective = t
+        elif self._last_step is not None and (step - self._last_step) > self._timeout_steps:
+            self._last_step = None
+            if np.any(sim.axis_moments != 0.0):
+                sim.set_axis_moments(np.zeros(self.n_axes))
+                self.counters.timeouts += 1
+                self.counters.moments_since = t
+                self.out.event(t_ns, f"{COMMAND_TIMEOUT_EVENT}: axis moments back to zero")
+
+    def log_superseded(self, t_ns: int) -> None:
+        """Paused or stopped: log the commands already superseded (all but the latest)."""
+        latest = self._latest
+        if latest is not None and self._received and self._received[0][0] < latest[0]:
+            self._log_received(t_ns, latest[0] - 1)
+
+    def discard(self, t_ns: int) -> None:
+        """At a reset (logged just after this): the commands received before it are logged at
+        `t_ns` and never applied after it; the timeout starts again with the next command."""
+        latest = self._latest
+        if latest is not None:
+            self._taken_seq = latest[0]
+            self._log_received(t_ns, latest[0])
+        self._last_step = None
+
+    def log_remaining(self, t_ns: int) -> None:
+        """The loop ends: the commands received and never taken, logged at `t_ns`."""
+        latest = self._latest
+        if latest is not None and self._received:
+            self._log_received(t_ns, latest[0])
