@@ -62,7 +62,8 @@ class LqrBalancer:
         sim = Simulator(load_scene(source), integrator="rk4", backend="numpy")
         lin = sim.linearize()
         if not lin.is_equilibrium:
-            raise ValueError(f"{scene.name}: upright at rest is not an equilibrium (max |f0| {lin.equilibrium_residual:g})")
+            raise ValueError(f"{scene.name}: upright at rest is not an equilibrium "
+                             f"(max |f0| {lin.equilibrium_residual:g})")
         expected = (hinge, f"{hinge}_rate", f"{wheel}_spin")
         if lin.state_names != expected:
             raise ValueError(f"{scene.name}: the state is {lin.state_names}, this controller is for {expected}")

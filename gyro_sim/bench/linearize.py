@@ -71,7 +71,8 @@ def table(rows: list[dict]) -> str:
     for r in rows:
         pin_us = "-" if r["pinocchio_aba_derivatives_s"] is None else f"{r['pinocchio_aba_derivatives_s'] * 1e6:.1f}"
         ratio = "-" if r["ratio"] is None else f"{r['ratio']:.0f}"
-        lines.append(f"| {r['n']} | {r['states']} | {r['evaluations']} | {r['linearize_s'] * 1e3:.1f} | {pin_us} | {ratio} |")
+        lines.append(f"| {r['n']} | {r['states']} | {r['evaluations']} | {r['linearize_s'] * 1e3:.1f} "
+                     f"| {pin_us} | {ratio} |")
     return "\n".join(lines)
 
 

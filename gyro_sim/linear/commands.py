@@ -121,8 +121,10 @@ def describe(lin, disc, name: str) -> dict:
     if disc is not None:
         z = np.linalg.eigvals(disc.Ad)
         z = z[np.argsort(-np.abs(z))]
-        out["discrete"] = {"h": disc.h, "method": disc.method, "spectral_radius": float(np.max(np.abs(z))) if len(z) else 0.0,
-                           "eigenvalues": [{"real": float(v.real), "imag": float(v.imag), "abs": float(abs(v))} for v in z]}
+        out["discrete"] = {"h": disc.h, "method": disc.method,
+                           "spectral_radius": float(np.max(np.abs(z))) if len(z) else 0.0,
+                           "eigenvalues": [{"real": float(v.real), "imag": float(v.imag), "abs": float(abs(v))}
+                                           for v in z]}
     return out
 
 
@@ -143,7 +145,8 @@ def text(r: dict) -> str:
                      f"|real part| <= {r['tolerance']:.2g} counts as zero)")
     else:
         lines.append(f"verdict: none, not an equilibrium (max |f0| = {r['equilibrium_residual']:.3g} > 1e-9): "
-                     "the eigenvalues depend on the chart; try --chart body for a steady spin, --chart frame for a precession")
+                     "the eigenvalues depend on the chart; try --chart body for a steady spin, "
+                     "--chart frame for a precession")
     lines.append(f"controllability rank: {r['controllability_rank']} of {r['states']}")
     if "discrete" in r:
         d = r["discrete"]

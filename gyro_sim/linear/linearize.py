@@ -32,9 +32,10 @@ reference of the dynamics (:mod:`gyro_sim.dynamics.reference`), which takes comp
 exact to round-off (no subtraction, so no step to tune), and it uses the same equations as
 every simulation, so nothing is derived twice; the mass matrix is factorised once at the
 point, each direction then costs its right-hand side and a back-substitution. Switches
-(saturation, the friction's stick band, the speed limit's ramp) are decided on real parts: at a non-differentiable point the model is
-the one-sided one of the side the code takes, and `notes` says so. `method="fd"` gives central
-differences with the step FD_STEP times max(1, |value|) per coordinate, as a cross-check.
+(saturation, the friction's stick band, the speed limit's ramp) are decided on real parts: at a
+non-differentiable point the model is the one-sided one of the side the code takes, and `notes`
+says so. `method="fd"` gives central differences with the step FD_STEP times max(1, |value|)
+per coordinate, as a cross-check.
 """
 from __future__ import annotations
 
@@ -371,7 +372,8 @@ class TangentField:
         for i, name in enumerate(m.axis_names):
             c, mx = abs(self.m0[i]), self._max[i]
             if c > mx:
-                out.append(f"{name}: command {self.m0[i]:g} beyond max_torque {mx:g}: saturated, its column of B is zero")
+                out.append(f"{name}: command {self.m0[i]:g} beyond max_torque {mx:g}: "
+                           "saturated, its column of B is zero")
             elif c == mx:
                 out.append(f"{name}: command at max_torque {mx:g}: not differentiable; the unsaturated side is used")
         act = m.actuators
@@ -381,7 +383,8 @@ class TangentField:
         nt = len(m.torque_body)
         speeds = []
         if nt:
-            speeds += [(m.torque_names[i], act.rotor, i, w) for i, w in enumerate(dyn.torque_rotor_rates(m, d, self.p0))]
+            speeds += [(m.torque_names[i], act.rotor, i, w)
+                       for i, w in enumerate(dyn.torque_rotor_rates(m, d, self.p0))]
         u0 = self.y0[m.i_vel]
         speeds += [(m.names[k], act.hinge, j, u0[m.col_hinge[j]]) for j, k in enumerate(m.hinge_bodies)]
         _, L_rotor = self._inputs(np.zeros(len(self.m0)))

@@ -1,18 +1,19 @@
 """The linear model against MuJoCo on the same imported model, at equilibria: MuJoCo's own
 dynamics (mj_forward) finite-differenced in its tangent space (mj_integratePos), and its RK4
 step differenced as mjd_transitionFD defines it (which refuses RK4 itself) against
-discrete(h, "rk4") at the same step. The charts differ (MuJoCo: a ball joint's rotation in local axes, wheel rates relative), so the
-eigenvalues are compared: a change of coordinates that fixes an equilibrium is a similarity."""
+discrete(h, "rk4") at the same step. The charts differ (MuJoCo: a ball joint's rotation in local
+axes, wheel rates relative), so the eigenvalues are compared: a change of coordinates that fixes
+an equilibrium is a similarity."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-mujoco = pytest.importorskip("mujoco", reason="MuJoCo is the optional extra [models]")
-
 from gyro_sim import Simulator
 from gyro_sim.paths import find_scene
 from gyro_sim.scene.load import load_scene
+
+mujoco = pytest.importorskip("mujoco", reason="MuJoCo is the optional extra [models]")
 
 #: central differences of MuJoCo: step, and the agreement asked of the eigenvalues, relative
 #: to max(1, |A|, the largest eigenvalue): the differenced entries err by ~1e-9 |A| (round-off
@@ -163,4 +164,5 @@ def test_discrete_rk4_agrees_with_mujocos_rk4_transition(tmp_path, which):
     Ad = lin.discrete(h, "rk4").Ad
     z_ours, z_theirs = np.linalg.eigvals(Ad), np.linalg.eigvals(A)
     # the eigenvalues cluster at 1: compare the modes log z / h
-    _agree(np.log(z_ours.astype(complex)) / h, np.log(z_theirs.astype(complex)) / h, np.linalg.norm(A - np.eye(n), 2) / h)
+    _agree(np.log(z_ours.astype(complex)) / h, np.log(z_theirs.astype(complex)) / h,
+           np.linalg.norm(A - np.eye(n), 2) / h)

@@ -40,7 +40,8 @@ def test_the_lqr_example_holds_the_pendulum_up_over_dds(tmp_path):
     log = tmp_path / "loop.mcap"
     node = NodeProcess(tmp_path, domain, "scene:=rw_pendulum", "duration:=0.0", f"record:={log}")
     ctrl_out = (tmp_path / "ctrl.out").open("w")
-    ctrl = subprocess.Popen([sys.executable, str(ROOT / "examples" / "lqr_balance.py"), "--duration", str(SECONDS + 60)],
+    ctrl = subprocess.Popen([sys.executable, str(ROOT / "examples" / "lqr_balance.py"),
+                             "--duration", str(SECONDS + 60)],
                             cwd=tmp_path, env=node.env, stdout=ctrl_out, stderr=subprocess.STDOUT)
     try:
         def wheel_commanded():  # the controller's commands reach the node: the wheel's effort moves
