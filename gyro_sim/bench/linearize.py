@@ -5,8 +5,9 @@ The chain is the scaling report's (`gyro_sim.bench.scenes.spherical_chain`: n id
 spherical joints under gravity, swinging), linearised at its initial state; Pinocchio's model is
 the same chain (`gyro_sim.bench.scaling.pin_chain`). Both are timed as CPU time of the calling
 thread, the best of a few calls; the evaluations of the dynamics a linearisation takes
-(1 + states + inputs, each one complex evaluation of the numpy reference) are counted, which
-does not depend on the machine.
+(1 + states + inputs complex-step directions, stacked through the numpy reference in passes of
+`gyro_sim.linear.linearize.BATCH_ELEMENTS` directions x bodies) are counted, which does not
+depend on the machine.
 """
 from __future__ import annotations
 

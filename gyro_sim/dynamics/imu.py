@@ -239,14 +239,14 @@ class ImuSet:
         """What every IMU reads without noise, from the arguments of `read`: gyro (m, 3) and
         accelerometer (m, 3) in the IMU frames, and world_R_imu (m, 3, 3). Real or complex (the
         linearisation's outputs)."""
-        k = self.body
-        Rk = R[k]
-        r = np.einsum("nij,nj->ni", Rk, self.position)  # P - O^k, world
-        wk = w[k]
-        a_P = a_s[k] + cross(alpha[k], r) + cross(wk, vO[k]) + cross(wk, cross(wk, r))
+        k = self.body  # the arrays may be stacks (leading axes before the bodies' axis)
+        Rk = R[..., k, :, :]
+        r = np.einsum("...nij,nj->...ni", Rk, self.position)  # P - O^k, world
+        wk = w[..., k, :]
+        a_P = a_s[..., k, :] + cross(alpha[..., k, :], r) + cross(wk, vO[..., k, :]) + cross(wk, cross(wk, r))
         world_R_imu = Rk @ self.body_R_imu
-        gyro = np.einsum("nji,nj->ni", world_R_imu, wk)  # imu_R_world w
-        accel = np.einsum("nji,nj->ni", world_R_imu, a_P - self.gravity)
+        gyro = np.einsum("...nji,...nj->...ni", world_R_imu, wk)  # imu_R_world w
+        accel = np.einsum("...nji,...nj->...ni", world_R_imu, a_P - self.gravity)
         return gyro, accel, world_R_imu
 
 

@@ -30,8 +30,10 @@ Three charts of the rotations:
 Derivatives are by the complex step, Im f(x + i h e_j) / h with h = 1e-30, through the numpy
 reference of the dynamics (:mod:`gyro_sim.dynamics.reference`), which takes complex states:
 exact to round-off (no subtraction, so no step to tune), and it uses the same equations as
-every simulation, so nothing is derived twice; the mass matrix is factorised once at the
-point, each direction then costs its right-hand side and a back-substitution. Switches
+every simulation, so nothing is derived twice. The directions go through it stacked on a
+leading axis (BATCH_ELEMENTS), each stack in one pass; the mass matrix is factorised once at
+the point and never formed again (its change along a direction enters as the inertial forces
+of the point's accelerations, O(n)), and one back-substitution serves a whole stack. Switches
 (saturation, the friction's stick band, the speed limit's ramp) are decided on real parts: at a
 non-differentiable point the model is the one-sided one of the side the code takes, and `notes`
 says so. `method="fd"` gives central differences with the step FD_STEP times max(1, |value|)
@@ -54,6 +56,9 @@ COMPLEX_STEP = 1e-30
 FD_STEP = float(np.finfo(float).eps ** (1.0 / 3.0))
 #: the most states a linearisation takes: A is dense (3000 states: 72 MB, some minutes)
 MAX_STATES = 3000
+#: the complex-step directions go through the reference in stacks of at most this many
+#: directions x bodies (a stack's 3 x 3 complex arrays: about 0.6 MB each)
+BATCH_ELEMENTS = 4096
 #: an equilibrium: |f0| at most this (absolute, SI units of each state's rate)
 EQUILIBRIUM_TOL = 1e-9
 CHARTS = ("world", "body", "frame")
@@ -215,7 +220,7 @@ class TangentField:
             self._max = np.array([act.hinge.max_torque[h] if h >= 0 else act.rotor.max_torque[r]
                                   for h, r in zip(m.axis_hinge, m.axis_rotor)]) if na else np.zeros(0)
         # the complex step's shortcut: M u' = rhs at the point, M factorised once (the real part
-        # of every direction's M); each direction then costs a back-substitution
+        # of every direction's M); a stack of directions then costs one back-substitution
         from scipy.linalg import lu_factor
 
         hinge_tau, L_rotor = self._inputs(np.zeros(len(self.m0)))
@@ -245,105 +250,112 @@ class TangentField:
         if np.any(over):
             c = np.where(over, np.sign(np.real(c)) * np.where(over, self._max, 0.0), c)
         hinge_tau = L_rotor = None
-        if len(c):
-            hinge_tau = np.zeros(len(m.hinge_bodies), dtype=c.dtype)
+        if c.shape[-1]:
+            lead = c.shape[:-1]
+            hinge_tau = np.zeros(lead + (len(m.hinge_bodies),), dtype=c.dtype)
             sel = m.axis_hinge >= 0
-            hinge_tau[m.axis_hinge[sel]] = c[sel]
+            hinge_tau[..., m.axis_hinge[sel]] = c[..., sel]
             if len(m.torque_body):
-                L_rotor = np.zeros(len(m.torque_body), dtype=c.dtype)
+                L_rotor = np.zeros(lead + (len(m.torque_body),), dtype=c.dtype)
                 sel = m.axis_rotor >= 0
-                L_rotor[m.axis_rotor[sel]] = c[sel]
+                L_rotor[..., m.axis_rotor[sel]] = c[..., sel]
         return hinge_tau, L_rotor
 
     def state(self, x):
-        """The model's state vector y and spins p of the tangent state x."""
+        """The model's state vector y and spins p of the tangent state x (or of a stack of
+        them, x of shape (..., size): y then (..., model size))."""
         m, L = self.model, self.layout
         N, nt = L.N, L.nt
         dt = np.result_type(x, float)
-        y = self.y0.astype(dt)
+        y = np.broadcast_to(self.y0.astype(dt), x.shape[:-1] + self.y0.shape).copy()
         if m.free:
-            y[m.i_r0] = self.y0[m.i_r0] + x[m.col_base]
+            y[..., m.i_r0] = self.y0[m.i_r0] + x[..., m.col_base]
         body = self.chart == "body"
         if len(m.sph_bodies):
-            e = _exp_half(x[m.col_sph])
-            y[m.i_quat] = quat_mul(self._q0, e) if body else quat_mul(e, self._q0)
-        y[m.i_phi] = self.y0[m.i_phi] + x[m.col_hinge]
-        u = self.y0[m.i_vel].astype(dt) + x[N:2 * N]
+            e = _exp_half(x[..., m.col_sph])
+            y[..., m.i_quat] = quat_mul(self._q0, e) if body else quat_mul(e, self._q0)
+        y[..., m.i_phi] = self.y0[m.i_phi] + x[..., m.col_hinge]
+        u = self.y0[m.i_vel].astype(dt) + x[..., N:2 * N]
         if body and len(m.sph_bodies):
-            R = quat_to_matrix(y[m.i_quat])
-            nu = self._nu0 + x[N:2 * N][m.col_sph]
-            u[m.col_sph] = np.einsum("nij,nj->ni", R, nu)  # body components -> world
-        y[m.i_vel] = u
-        p = self.p0 + x[2 * N:2 * N + nt]
+            R = quat_to_matrix(y[..., m.i_quat])
+            nu = self._nu0 + x[..., N:2 * N][..., m.col_sph]
+            u[..., m.col_sph] = np.einsum("...nij,...nj->...ni", R, nu)  # body components -> world
+        y[..., m.i_vel] = u
+        p = self.p0 + x[..., 2 * N:2 * N + nt]
         if L.rotor_angles:
-            y[m.i_kappa] = self.y0[m.i_kappa] + x[2 * N + nt:]
+            y[..., m.i_kappa] = self.y0[m.i_kappa] + x[..., 2 * N + nt:]
         if m.stateful:
-            y[m.i_spin] = p
+            y[..., m.i_spin] = p
         return y, p
 
     def __call__(self, x, v):
-        """(x', z) at the tangent state x and the change of commands v."""
+        """(x', z) at the tangent state x and the change of commands v: one point, or a stack
+        of complex-step directions (x of shape (k, size), v of shape (k, inputs)) at once."""
         m, L, d = self.model, self.layout, self.data
         N, nt = L.N, L.nt
         y, p = self.state(x)
         hinge_tau, L_rotor = self._inputs(v)
         ev = dyn.Evaluation() if self._imus is not None else None  # the accelerations an IMU reads
-        if np.iscomplexobj(y) or np.iscomplexobj(hinge_tau) or np.iscomplexobj(L_rotor):
+        rhs, parts = dyn.closure(m, d, self.t, y, hinge_tau, p if nt else None, L_rotor)
+        if np.iscomplexobj(rhs):
             # a complex step (imaginary parts infinitesimal): with M = M0 + i M1, rhs = r0 + i r1,
-            # u' = u0' + i M0^-1 (r1 - M1 u0') to first order; M1 = 0 unless positions moved
-            rhs, parts = dyn.closure(m, d, self.t, y, hinge_tau, p if nt else None, L_rotor)
+            # u' = u0' + i M0^-1 (r1 - M1 u0') to first order; M1 = 0 unless positions moved, and
+            # M1 u0' = Im(M u0') is the inertial forces of u0' at the moved positions (O(n))
             r = rhs.imag
-            if np.any(np.imag(x[:N])):
-                r = r - dyn.mass_matrix(m, d, parts[0], parts[1]).imag @ self._udot0
-            udot = self._udot0 + 1j * _lu_solve(self._lu0, r)
-            if ev is not None:
-                dyn.fill_evaluation(m, d, udot, parts, ev)
+            if np.any(np.imag(x[..., :N])):
+                r = r - dyn.mass_times(m, d, parts[0], parts[1], self._udot0).imag
+            udot = self._udot0 + 1j * _lu_solve(self._lu0, r.T).T
+        elif x.ndim == 1 and not np.any(x) and not np.any(v):
+            udot = self._udot0  # the point: its solve is done
         else:
-            udot = dyn.forward(m, d, self.t, y, hinge_tau, p if nt else None, L_rotor, ev)
-        u = y[m.i_vel]
+            udot = np.linalg.solve(dyn.mass_matrix(m, d, parts[0], parts[1]), rhs)
+        if ev is not None:
+            dyn.fill_evaluation(m, d, udot, parts, ev)
+        u = y[..., m.i_vel]
         dt = udot.dtype
-        xd = np.zeros(L.size, dtype=dt)
+        lead = udot.shape[:-1]
+        xd = np.zeros(lead + (L.size,), dtype=dt)
         body, frame = self.chart == "body", self.chart == "frame"
         W = self.frame_rate
         if m.free:
-            xd[m.col_base] = u[m.col_base]
+            xd[..., m.col_base] = u[..., m.col_base]
             if frame:  # the point seen from the frame turning about the world origin
-                xd[m.col_base] -= cross(W, y[m.i_r0])
+                xd[..., m.col_base] -= cross(W, y[..., m.i_r0])
         if len(m.sph_bodies):
-            c, w = m.col_sph, d.w[m.sph_bodies]
+            c, w = m.col_sph, d.w[..., m.sph_bodies, :]
             if frame:
-                xd[c] = _jl_inv(x[c], w - W)
-                xd[N + c] = udot[c] - cross(W, u[c])  # world vectors in the frame's axes
+                xd[..., c] = _jl_inv(x[..., c], w - W)
+                xd[..., N + c] = udot[..., c] - cross(W, u[..., c])  # world vectors in the frame's axes
             elif body:
-                Rk = d.R[m.sph_bodies]
-                Omega = np.einsum("nji,nj->ni", Rk, w)
-                xd[c] = _jr_inv(x[c], Omega - _rotate(-x[c], self._Omega0))
+                Rk = d.R[..., m.sph_bodies, :, :]
+                Omega = np.einsum("...nji,...nj->...ni", Rk, w)
+                xd[..., c] = _jr_inv(x[..., c], Omega - _rotate(-x[..., c], self._Omega0))
                 # nu = R^T u: nu' = R^T (u' - w x u)
-                xd[N + c] = np.einsum("nji,nj->ni", Rk, udot[c] - cross(w, u[c]))
+                xd[..., N + c] = np.einsum("...nji,...nj->...ni", Rk, udot[..., c] - cross(w, u[..., c]))
             else:
-                xd[c] = _jl_inv(x[c], w)
-                xd[N + c] = udot[c]
-        xd[m.col_hinge] = u[m.col_hinge]
-        xd[N + m.col_hinge] = udot[m.col_hinge]
+                xd[..., c] = _jl_inv(x[..., c], w)
+                xd[..., N + c] = udot[..., c]
+        xd[..., m.col_hinge] = u[..., m.col_hinge]
+        xd[..., N + m.col_hinge] = udot[..., m.col_hinge]
         if m.free:
-            xd[N + m.col_base] = udot[m.col_base] - (cross(W, u[m.col_base]) if frame else 0.0)
-        kdot = dyn.torque_rotor_rates(m, d, p) if nt else np.zeros(0)
+            xd[..., N + m.col_base] = udot[..., m.col_base] - (cross(W, u[..., m.col_base]) if frame else 0.0)
+        kdot = dyn.torque_rotor_rates(m, d, p) if nt else np.zeros(lead + (0,))
         if nt:
             if m.stateful:
                 a = d.applied
-                xd[2 * N:2 * N + nt] = (a.rotor_motor + a.rotor_friction) / m.torque_A
+                xd[..., 2 * N:2 * N + nt] = (a.rotor_motor + a.rotor_friction) / m.torque_A
             elif L_rotor is not None:
-                xd[2 * N:2 * N + nt] = L_rotor / m.torque_A  # (29): A_i p_i' = L_i
+                xd[..., 2 * N:2 * N + nt] = L_rotor / m.torque_A  # (29): A_i p_i' = L_i
             if L.rotor_angles:
-                xd[2 * N + nt:] = kdot  # (18)-(19)
-        z = [y[m.i_phi], u[m.col_hinge]]
+                xd[..., 2 * N + nt:] = kdot  # (18)-(19)
+        z = [y[..., m.i_phi], u[..., m.col_hinge]]
         if L.rotor_angles:
-            z.append(y[m.i_kappa])
+            z.append(y[..., m.i_kappa])
         z.append(kdot)
         if self._imus is not None:  # noise-free readings (gyro_sim.dynamics.imu)
             gyro, accel, _ = self._imus.true_values(d.R, d.w, d.vO, ev.acc_w, ev.acc_v + cross(ev.acc_w, d.O))
-            z += [gyro.ravel(), accel.ravel()]
-        z = np.concatenate([np.asarray(a, dtype=dt) for a in z]) if z else np.zeros(0, dtype=dt)
+            z += [gyro.reshape(lead + (-1,)), accel.reshape(lead + (-1,))]
+        z = np.concatenate([np.broadcast_to(np.asarray(a, dtype=dt), lead + a.shape[-1:]) for a in z], axis=-1)
         return xd, z
 
     def fd_steps(self) -> tuple[np.ndarray, np.ndarray]:
@@ -412,24 +424,20 @@ def _max_speed_band() -> float:
 
 # --- derivatives -------------------------------------------------------------------------
 def _complex_step(field: TangentField, nx: int, nu: int):
+    """Every direction (the states', then the inputs') in stacks of at most BATCH_ELEMENTS / n
+    directions, each stack one pass of the reference: the columns of [A B] and [C D]."""
     h = COMPLEX_STEP
-    x0, v0 = np.zeros(nx), np.zeros(nu)
-    f0, z0 = field(x0, v0)
-    A = np.empty((nx, nx))
-    C = np.empty((len(z0), nx))
-    for j in range(nx):
-        x = x0.astype(complex)
-        x[j] += 1j * h
-        xd, z = field(x, v0.astype(complex))
-        A[:, j], C[:, j] = xd.imag / h, z.imag / h
-    B = np.empty((nx, nu))
-    D = np.empty((len(z0), nu))
-    for j in range(nu):
-        v = v0.astype(complex)
-        v[j] += 1j * h
-        xd, z = field(x0.astype(complex), v)
-        B[:, j], D[:, j] = xd.imag / h, z.imag / h
-    return np.real(f0), np.real(z0), A, B, C, D
+    f0, z0 = field(np.zeros(nx), np.zeros(nu))
+    total = nx + nu
+    AB, CD = np.empty((nx, total)), np.empty((len(z0), total))
+    per = max(1, BATCH_ELEMENTS // max(1, field.model.n))
+    for start in range(0, total, per):
+        cols = np.arange(start, min(total, start + per))
+        dirs = np.zeros((len(cols), total), dtype=complex)
+        dirs[np.arange(len(cols)), cols] = 1j * h
+        xd, z = field(dirs[:, :nx], dirs[:, nx:])
+        AB[:, cols], CD[:, cols] = xd.imag.T / h, z.imag.T / h
+    return np.real(f0), np.real(z0), AB[:, :nx], AB[:, nx:], CD[:, :nx], CD[:, nx:]
 
 
 def _central(field: TangentField, nx: int, nu: int):

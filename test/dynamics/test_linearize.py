@@ -364,3 +364,51 @@ def test_regular_precession_of_a_carrier_with_a_rotor_in_the_precessing_frame(th
     assert lin.verdict() == "marginal"
     fd = sim.linearize(chart="frame", frame_rate=[0.0, 0.0, kappa], method="fd")
     assert np.max(np.abs(fd.A - lin.A)) <= 1e-6 * np.max(np.abs(lin.A))
+
+
+@pytest.mark.parametrize("scene", ["free_chain_rotors", "imu_pendulum", "rw_pendulum", "vibrating_base"])
+def test_a_stack_of_states_evaluates_as_each_state_alone(scene):
+    """The reference's stages on a stack of (complex) states, as the linearisation passes its
+    directions, give each state's own evaluation."""
+    from gyro_sim.dynamics import reference as dyn
+
+    sim = _sim(scene)
+    sim.advance(0.05)
+    m = sim.model
+    rng = np.random.default_rng(3)
+    k = 5
+    ys = (np.array(sim.state, float) + 1e-3 * rng.standard_normal((k, m.size))
+          + 1j * 1e-3 * rng.standard_normal((k, m.size)))
+    nh, nt = len(m.hinge_bodies), len(m.torque_body)
+    taus = rng.standard_normal((k, nh)) if nh else None
+    ps = rng.standard_normal((k, nt)) + 0j if nt else None
+    Ls = rng.standard_normal((k, nt)) if nt else None
+    if m.stateful:
+        ys[:, m.i_spin] = ps
+    stack = dyn.Data(m)
+    rhs, parts = dyn.closure(m, stack, 0.1, ys, taus, ps, Ls)
+    Mu = dyn.mass_times(m, stack, parts[0], parts[1], rhs.real)
+    for i in range(k):
+        one = dyn.Data(m)
+        r, p1 = dyn.closure(m, one, 0.1, ys[i], None if taus is None else taus[i], None if ps is None else ps[i],
+                            None if Ls is None else Ls[i])
+        np.testing.assert_allclose(rhs[i], r, rtol=1e-13, atol=1e-13 * np.max(np.abs(r)))
+        M = dyn.mass_matrix(m, one, p1[0], p1[1])
+        np.testing.assert_allclose(Mu[i], M @ rhs[i].real, rtol=1e-12,
+                                   atol=1e-12 * np.max(np.abs(M)) * np.max(np.abs(rhs)))
+
+
+def test_the_stacks_size_does_not_change_the_model(monkeypatch):
+    """All directions in one pass, or one direction per pass: the same A, B, C, D to round-off."""
+    import importlib
+
+    lin_mod = importlib.import_module("gyro_sim.linear.linearize")  # the module, not its function
+    sim = _sim("free_chain_rotors")
+    sim.advance(0.05)
+    sim.set_axis_moments(0.001 * np.arange(1, len(sim.axis_names) + 1))
+    big = sim.linearize(rotor_angles=True)
+    monkeypatch.setattr(lin_mod, "BATCH_ELEMENTS", 1)
+    one = sim.linearize(rotor_angles=True)
+    for name in "ABCD":
+        a, b = getattr(big, name), getattr(one, name)
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-13 * max(1.0, np.max(np.abs(a))), err_msg=name)
