@@ -322,12 +322,14 @@ def forward(
 
 
 def closure(model: Model, data: Data, t: float, y: np.ndarray, hinge_tau: np.ndarray | None,
-            p: np.ndarray | None, L_rotor: np.ndarray | None) -> tuple[np.ndarray, tuple]:
+            p: np.ndarray | None, L_rotor: np.ndarray | None, positions_done: bool = False) -> tuple[np.ndarray, tuple]:
     """The rows of eqs (52)-(54) at (t, y) before the solve (arguments as `forward`): rhs (N,)
     of M u' = rhs, and parts = (Sa, Sb, lam_w, dlam_w, acc_w0, acc_v0), the joint columns (M is
     mass_matrix(model, data, Sa, Sb)), the gyrostatic moments and the bias accelerations, for
-    `fill_evaluation`."""
-    positions(model, data, t, y)
+    `fill_evaluation`. positions_done: `data` already holds the positions of y's configuration
+    (one configuration serves a stack of states that differ only in their rates)."""
+    if not positions_done:
+        positions(model, data, t, y)
     velocities(model, data, t, y[..., model.i_vel])
     if model.stateful:  # the torques applied at this state: motors after the cut, and friction
         hinge_tau, L_rotor = applied_torques(model, data, y, p, hinge_tau, L_rotor)

@@ -228,6 +228,7 @@ class TangentField:
         rhs0, parts = dyn.closure(m, point, self.t, self._y_with_spins(), hinge_tau, self.p0 if len(self.p0) else None,
                                   L_rotor)
         self._lu0 = lu_factor(dyn.mass_matrix(m, point, parts[0], parts[1]))
+        self._at_point = point  # its positions serve every direction that moves none
         self._udot0 = _lu_solve(self._lu0, rhs0)
         self._imus = None
         if m.scene.imus:
@@ -296,13 +297,17 @@ class TangentField:
         y, p = self.state(x)
         hinge_tau, L_rotor = self._inputs(v)
         ev = dyn.Evaluation() if self._imus is not None else None  # the accelerations an IMU reads
-        rhs, parts = dyn.closure(m, d, self.t, y, hinge_tau, p if nt else None, L_rotor)
+        moved = np.any(np.imag(x[..., :N]))
+        if np.iscomplexobj(x) and not moved:  # rates, spins, inputs: the point's positions serve
+            d = self._at_point
+        rhs, parts = dyn.closure(m, d, self.t, y, hinge_tau, p if nt else None, L_rotor,
+                                 positions_done=d is self._at_point)
         if np.iscomplexobj(rhs):
             # a complex step (imaginary parts infinitesimal): with M = M0 + i M1, rhs = r0 + i r1,
             # u' = u0' + i M0^-1 (r1 - M1 u0') to first order; M1 = 0 unless positions moved, and
             # M1 u0' = Im(M u0') is the inertial forces of u0' at the moved positions (O(n))
             r = rhs.imag
-            if np.any(np.imag(x[..., :N])):
+            if moved:
                 r = r - dyn.mass_times(m, d, parts[0], parts[1], self._udot0).imag
             udot = self._udot0 + 1j * _lu_solve(self._lu0, r.T).T
         elif x.ndim == 1 and not np.any(x) and not np.any(v):
@@ -425,14 +430,17 @@ def _max_speed_band() -> float:
 # --- derivatives -------------------------------------------------------------------------
 def _complex_step(field: TangentField, nx: int, nu: int):
     """Every direction (the states', then the inputs') in stacks of at most BATCH_ELEMENTS / n
-    directions, each stack one pass of the reference: the columns of [A B] and [C D]."""
+    directions, each stack one pass of the reference: the columns of [A B] and [C D]. The
+    positions' directions and the others go in separate stacks: the others share the point's
+    positions, computed once."""
     h = COMPLEX_STEP
     f0, z0 = field(np.zeros(nx), np.zeros(nu))
-    total = nx + nu
+    total, npos = nx + nu, field.layout.N
     AB, CD = np.empty((nx, total)), np.empty((len(z0), total))
     per = max(1, BATCH_ELEMENTS // max(1, field.model.n))
-    for start in range(0, total, per):
-        cols = np.arange(start, min(total, start + per))
+    stacks = [np.arange(s, min(end, s + per)) for begin, end in ((0, npos), (npos, total))
+              for s in range(begin, end, per)]
+    for cols in stacks:
         dirs = np.zeros((len(cols), total), dtype=complex)
         dirs[np.arange(len(cols)), cols] = 1j * h
         xd, z = field(dirs[:, :nx], dirs[:, nx:])
