@@ -72,7 +72,7 @@ class CommandPath:
         self._clock, self._due = clock, due
         #: receipt to the step that applies it (wall s), per command from outside that a step applied
         self.latency = Samples(window=window)
-        self._timed_from = -math.inf  # commands received before this clock time are not timed
+        self._timed_after = 0  # commands accepted up to this sequence number are not timed
         # the fallback comes at the first step starting more than `timeout` after the last good command
         self._timeout_steps = math.floor(timeout / dt * (1 + 1e-12))
         self.counters = Counters()
@@ -118,7 +118,7 @@ class CommandPath:
     def time_from_now(self) -> None:
         """The loop runs from now (its start, a resume): commands received before now waited for
         it, not for a step, and are applied untimed."""
-        self._timed_from = self._clock()
+        self._timed_after = self.counters.accepted
 
     def _log_received(self, t_ns: int, upto: int) -> None:
         """Log, at `t_ns`, the good commands received up to sequence number `upto` not yet logged."""
@@ -157,7 +157,7 @@ class CommandPath:
             self.counters.superseded += seq - self._taken_seq - 1
             self._taken_seq = seq
             self._log_received(t_ns, seq)  # the ones it superseded, then it
-            if received is not None and received >= self._timed_from:
+            if received is not None and seq > self._timed_after:
                 starts = self._clock()
                 if self._due is not None:
                     starts = max(starts, self._due(t))

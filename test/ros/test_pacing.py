@@ -431,6 +431,7 @@ def test_commands_received_while_paused_or_before_a_reset_are_all_logged_in_caus
     steps = loop.steps
     run_until(loop, lambda: loop.steps > steps)
     assert out.commands[2] == (t_pause, b"p2") and loop.sim.axis_moments[1] == pytest.approx(0.03)
+    assert loop.commands.latency.run.n == 0  # it waited for the resume, not for a step: not timed
     loop.requests.post(Pause(True))
     run_until(loop, lambda: loop.paused)
     assert loop.submit_command(b"r0", [0.0, 0.5, 0.0]) is None
