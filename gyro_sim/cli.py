@@ -242,6 +242,8 @@ PLUGINS = (
     "gyro_sim.scene.commands",  # import (an MJCF or URDF model as a scene)
     "gyro_sim.bench.soak",
     "gyro_sim.bench.startup",
+    "gyro_sim.linear.commands",  # linearize (the linear model at a state)
+    "gyro_sim.bench.linearize",  # bench linearize (its cost against pinocchio)
 )
 
 

@@ -788,3 +788,20 @@ class Simulator:
         o = self._snapshot_scratch
         alpha, a_s = compiled_accelerations(o["scratch"], self.model.n)
         return self._imus.read(self._t, o["R"], o["w"], o["vO"], alpha, a_s)
+
+    def linearize(self, y: np.ndarray | None = None, spins: np.ndarray | None = None, *, method: str = "complex",
+                  rotor_angles: bool = False, chart: str = "world", frame_rate=None):
+        """The linear model dx' = A dx + B du + f0 at the current state and held commands, or at
+        the state `y` (the model's layout) and torque-rotor `spins`: a
+        :class:`gyro_sim.linear.Linearization` (names, eigenvalues, verdict, `discrete(h)`;
+        docs/linearization.md). method "complex" (exact) or "fd" (central differences); chart
+        "world", "body" (co-rotating with a steady spin) or "frame" (a frame turning at
+        `frame_rate`, world axes: a regular precession's)."""
+        from gyro_sim.linear import linearize
+
+        m = self.model
+        y = self._y if y is None else np.asarray(y, dtype=float)
+        if spins is None:
+            spins = y[m.i_spin] if m.stateful else self._p
+        return linearize(m, self._t, y, spins, self._moments, method=method, rotor_angles=rotor_angles, chart=chart,
+                         frame_rate=frame_rate)

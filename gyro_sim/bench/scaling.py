@@ -119,6 +119,15 @@ def pin_aba_time(scene_dict: dict, min_time: float) -> float | None:
         import pinocchio as pin
     except ImportError:
         return None
+    model, data, q, v, tau = pin_chain(scene_dict)
+    return best_time(lambda: pin.aba(model, data, q, v, tau), min_time)
+
+
+def pin_chain(scene_dict: dict):
+    """The spherical chain of `scenes.spherical_chain` in pinocchio, with a state to time it at:
+    (model, data, q, v, tau). ImportError without pinocchio."""
+    import pinocchio as pin
+
     model = pin.Model()
     parent = 0
     for k, b in enumerate(scene_dict["bodies"]):
@@ -133,7 +142,7 @@ def pin_aba_time(scene_dict: dict, min_time: float) -> float | None:
     q = pin.randomConfiguration(model, -np.ones(model.nq), np.ones(model.nq))
     v = np.random.default_rng(0).normal(size=model.nv)
     tau = np.zeros(model.nv)
-    return best_time(lambda: pin.aba(model, data, q, v, tau), min_time)
+    return model, data, q, v, tau
 
 
 def measure(sizes=DEFAULT_SIZES, min_time: float = 0.3, progress=None) -> list[Row]:

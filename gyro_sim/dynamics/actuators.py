@@ -94,17 +94,20 @@ class AxisLimits:
 
     def friction(self, w: np.ndarray) -> np.ndarray:
         """The friction torque -F(w) (n,) on each axis at relative speeds w (n,)."""
-        return -_friction_force(self, np.where(np.abs(w) < self.stick_speed, self.stick_speed, w)) * \
-            np.where(np.abs(w) < self.stick_speed, w / self.stick_speed, 1.0)
+        stick = np.abs(np.real(w)) < self.stick_speed  # real parts decide: w may be complex (linearisation)
+        return -_friction_force(self, np.where(stick, self.stick_speed, w)) * np.where(stick, w / self.stick_speed, 1.0)
 
     def cut(self, torque: np.ndarray, w: np.ndarray) -> np.ndarray:
         """Motor torques (n,) with the speed limit applied at relative speeds w (n,): a torque that
         drives |w| up is scaled by the ramp of MAX_SPEED_BAND below max_speed."""
         band = MAX_SPEED_BAND * self.max_speed
         with np.errstate(invalid="ignore"):  # inf / inf where there is no limit: the where's other side
-            ramp = np.clip((self.max_speed - np.abs(w)) / band, 0.0, 1.0)
+            # |w| as w sign(w) and the clip by real parts: the same for real w, analytic for
+            # the complex w of the linearisation's complex step
+            ramp = (self.max_speed - w * np.sign(np.real(w))) / band
+            ramp = np.where(np.real(ramp) <= 0.0, 0.0, np.where(np.real(ramp) >= 1.0, 1.0, ramp))
         ramp = np.where(np.isfinite(self.max_speed), ramp, 1.0)
-        return np.where(torque * w > 0.0, torque * ramp, torque)
+        return np.where(np.real(torque * w) > 0.0, torque * ramp, torque)
 
 
 def _friction_force(limits: AxisLimits, w: np.ndarray) -> np.ndarray:
@@ -115,7 +118,7 @@ def _friction_force(limits: AxisLimits, w: np.ndarray) -> np.ndarray:
     x = w / bb
     with_stribeck = (STRIBECK_PEAK * (limits.static - limits.coulomb) * np.exp(-0.5 * x * x) * x
                      + limits.coulomb * np.tanh(STRIBECK_TANH * x))
-    return np.where(stribeck, with_stribeck, limits.coulomb * np.sign(w)) + limits.viscous * w
+    return np.where(stribeck, with_stribeck, limits.coulomb * np.sign(np.real(w))) + limits.viscous * w
 
 
 @dataclass(frozen=True)

@@ -221,14 +221,7 @@ class ImuSet:
         """Every IMU's reading at time t from the bodies' R (n, 3, 3) world_R_body, w (n, 3),
         v(O^k) (n, 3), and their spatial accelerations about O^k: alpha (n, 3), a_s(O^k) (n, 3)
         (module docstring); world components. Noise added where the scene has some."""
-        k = self.body
-        Rk = R[k]
-        r = np.einsum("nij,nj->ni", Rk, self.position)  # P - O^k, world
-        wk = w[k]
-        a_P = a_s[k] + cross(alpha[k], r) + cross(wk, vO[k]) + cross(wk, cross(wk, r))
-        world_R_imu = Rk @ self.body_R_imu
-        gyro = np.einsum("nji,nj->ni", world_R_imu, wk)  # imu_R_world w
-        accel = np.einsum("nji,nj->ni", world_R_imu, a_P - self.gravity)
+        gyro, accel, world_R_imu = self.true_values(R, w, vO, alpha, a_s)
         out = []
         for j, name in enumerate(self.names):
             index = sample_index(t, self.rates[j])
@@ -239,6 +232,22 @@ class ImuSet:
                 g, a = g + e[:3], a + e[3:]
             out.append(ImuReading(name, t, index, matrix_to_quat(world_R_imu[j]), g, a, *self.variances[j]))
         return out
+
+
+    def true_values(self, R: np.ndarray, w: np.ndarray, vO: np.ndarray, alpha: np.ndarray,
+                    a_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What every IMU reads without noise, from the arguments of `read`: gyro (m, 3) and
+        accelerometer (m, 3) in the IMU frames, and world_R_imu (m, 3, 3). Real or complex (the
+        linearisation's outputs)."""
+        k = self.body  # the arrays may be stacks (leading axes before the bodies' axis)
+        Rk = R[..., k, :, :]
+        r = np.einsum("...nij,nj->...ni", Rk, self.position)  # P - O^k, world
+        wk = w[..., k, :]
+        a_P = a_s[..., k, :] + cross(alpha[..., k, :], r) + cross(wk, vO[..., k, :]) + cross(wk, cross(wk, r))
+        world_R_imu = Rk @ self.body_R_imu
+        gyro = np.einsum("...nji,...nj->...ni", world_R_imu, wk)  # imu_R_world w
+        accel = np.einsum("...nji,...nj->...ni", world_R_imu, a_P - self.gravity)
+        return gyro, accel, world_R_imu
 
 
 class ImuTicks:

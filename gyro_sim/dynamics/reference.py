@@ -20,6 +20,10 @@ then the joint kinds: spherical L^k = 0 (eq 44), hinge e^k . L^k = L_k(t) (eq 51
 R^1 = 0 and L^1 = 0 (eq 54). Each row is S_j . F_subtree(k(j)) for the joint's unit motions
 S_j (a rotation about O^k, or a translation), so the rows are affine in u' and the matrix is
 the symmetric composite-inertia matrix (docs/theory.md section 5).
+
+Every stage but the mass matrix and the reactions also takes a stack of states (leading axes
+before the bodies' axis: y of shape (..., size)), evaluated at once by the same operations, the
+same values as one at a time; the linearisation passes all its complex-step directions so.
 """
 from __future__ import annotations
 
@@ -36,9 +40,10 @@ def matvec(A: np.ndarray, x: np.ndarray) -> np.ndarray:
     return (A @ x[..., None])[..., 0]
 
 
-def rcumsum(a: np.ndarray) -> np.ndarray:
-    """Suffix sums over the chain (axis 0): out[k] = sum_{p >= k} a[p] (the sums of eq 48)."""
-    return np.cumsum(a[::-1], axis=0)[::-1]
+def rcumsum(a: np.ndarray, axis: int = 0) -> np.ndarray:
+    """Suffix sums over the chain (its axis `axis`): out[k] = sum_{p >= k} a[p] (the sums of eq 48)."""
+    a = np.flip(a, axis)
+    return np.flip(np.cumsum(a, axis=axis), axis)
 
 
 class Data:
@@ -69,61 +74,67 @@ def base_motion(model: Model, t: float) -> tuple[np.ndarray, np.ndarray, np.ndar
 def positions(model: Model, data: Data, t: float, y: np.ndarray) -> None:
     """R^k and O^k of every body; eq (34) summed: O^k = O^1 + sum_{l<k} s^l."""
     R = data.R
+    lead = np.shape(y)[:-1]  # a stack of states: its leading axes
+    if R.dtype != np.result_type(y, float) or R.shape[:-3] != lead:
+        # a complex y (linearisation's complex step) or a stack: a workspace of its type and shape
+        R = data.R = np.tile(EYE3.astype(np.result_type(y, float)), lead + (model.n, 1, 1))
     if len(model.sph_bodies):
-        R[model.sph_bodies] = quat_to_matrix(y[model.i_quat])
+        R[..., model.sph_bodies, :, :] = quat_to_matrix(y[..., model.i_quat])
     if len(model.hinge_bodies):
-        phi = y[model.i_phi]
+        phi = y[..., model.i_phi]
         # (50): body k is its parent turned by phi_k about e^k
-        Rrel = EYE3 + np.sin(phi)[:, None, None] * data.hinge_K + (1.0 - np.cos(phi))[:, None, None] * data.hinge_K2
+        Rrel = (EYE3 + np.sin(phi)[..., None, None] * data.hinge_K
+                + (1.0 - np.cos(phi))[..., None, None] * data.hinge_K2)
         for i, k in enumerate(model.hinge_bodies):
-            R[k] = Rrel[i] if k == 0 else R[k - 1] @ Rrel[i]
+            R[..., k, :, :] = Rrel[..., i, :, :] if k == 0 else R[..., k - 1, :, :] @ Rrel[..., i, :, :]
     if model.free:
-        O1 = y[model.i_r0]
+        O1 = y[..., model.i_r0][..., None, :]
     elif model.moving:
         O1 = base_motion(model, t)[0]
     else:
         O1 = model.base_position
     s_w = matvec(R, model.s)
-    data.O = O1 + np.cumsum(s_w, axis=0) - s_w
+    data.O = O1 + np.cumsum(s_w, axis=-2) - s_w
     hk = matvec(R, model.first_moment)  # m^k c^k, world components
     data.h = model.mass[:, None] * data.O + hk  # first moments about the origin
-    data.e_w = matvec(R[model.hinge_bodies], model.hinge_axis[model.hinge_bodies])  # hinge axes
+    data.e_w = matvec(R[..., model.hinge_bodies, :, :], model.hinge_axis[model.hinge_bodies])  # hinge axes
     # inertia about the origin: J_O^k (rotated) shifted from O^k to the origin
-    A_w = R @ model.inertia @ R.transpose(0, 2, 1)
+    A_w = R @ model.inertia @ np.swapaxes(R, -1, -2)
     O = data.O
     m = model.mass
-    OO = np.einsum("ni,nj->nij", O, O)
-    Oh = np.einsum("ni,nj->nij", O, hk)
-    dd = np.einsum("ni,ni->n", O, O)
-    dh = np.einsum("ni,ni->n", O, hk)
+    OO = np.einsum("...ni,...nj->...nij", O, O)
+    Oh = np.einsum("...ni,...nj->...nij", O, hk)
+    dd = np.einsum("...ni,...ni->...n", O, O)
+    dh = np.einsum("...ni,...ni->...n", O, hk)
     data.J = (
         A_w
-        + m[:, None, None] * (dd[:, None, None] * EYE3 - OO)
-        + (2.0 * dh)[:, None, None] * EYE3
+        + m[:, None, None] * (dd[..., None, None] * EYE3 - OO)
+        + (2.0 * dh)[..., None, None] * EYE3
         - Oh
-        - Oh.transpose(0, 2, 1)
+        - np.swapaxes(Oh, -1, -2)
     )
 
 
 def velocities(model: Model, data: Data, t: float, u: np.ndarray) -> None:
     """Angular velocities w^k (prefix sums of joint rates, eqs 50, 53) and velocities of O^k (eq 34)."""
     n = model.n
-    wrel = np.zeros((n, 3))
+    lead = np.shape(u)[:-1]
+    wrel = np.zeros(lead + (n, 3), dtype=np.result_type(u, data.R))
     if len(model.sph_bodies):
-        wrel[model.sph_bodies] = u[model.col_sph]
+        wrel[..., model.sph_bodies, :] = u[..., model.col_sph]
     if len(model.hinge_bodies):
-        wrel[model.hinge_bodies] = data.e_w * u[model.col_hinge][:, None]  # (50): e^k phi_k'
-    w = np.cumsum(wrel, axis=0)
+        wrel[..., model.hinge_bodies, :] = data.e_w * u[..., model.col_hinge][..., None]  # (50): e^k phi_k'
+    w = np.cumsum(wrel, axis=-2)
     O = data.O
-    v_o = np.cumsum(cross(O, wrel), axis=0)  # velocity of the body point at the origin
+    v_o = np.cumsum(cross(O, wrel), axis=-2)  # velocity of the body point at the origin
     if model.free:
-        v_o += u[model.col_base]
+        v_o += u[..., model.col_base][..., None, :]
     elif model.moving:
         v_o += base_motion(model, t)[1]
     data.wrel, data.w, data.v_o = wrel, w, v_o
     data.vO = v_o + cross(w, O)  # (34): velocity of O^k
-    w_parent = np.zeros((n, 3))
-    w_parent[1:] = w[:-1]
+    w_parent = np.zeros(w.shape, dtype=w.dtype)
+    w_parent[..., 1:, :] = w[..., :-1, :]
     data.w_parent = w_parent
 
 
@@ -133,8 +144,8 @@ def torque_rotor_rates(model: Model, data: Data, p: np.ndarray) -> np.ndarray:
 
     The numba kernel's scalar twin is `gyro_sim.dynamics.kernel._rotor_angle_rate`.
     """
-    e_w = matvec(data.R[model.torque_body], model.torque_axis)
-    return p - np.einsum("ni,ni->n", data.w[model.torque_body], e_w)
+    e_w = matvec(data.R[..., model.torque_body, :, :], model.torque_axis)
+    return p - np.einsum("...ni,...ni->...n", data.w[..., model.torque_body, :], e_w)
 
 
 def lam(model: Model, data: Data, p: np.ndarray | None, L_rotor: np.ndarray | None):
@@ -142,11 +153,11 @@ def lam(model: Model, data: Data, p: np.ndarray | None, L_rotor: np.ndarray | No
     lam_b = model.lam_speed.copy() if model.lam_speed is not None else None
     dlam_b = None
     if len(model.torque_body):
-        lt = data.rotor_incidence @ ((model.torque_A * p)[:, None] * model.torque_axis)
+        lt = data.rotor_incidence @ ((model.torque_A * p)[..., None] * model.torque_axis)
         lam_b = lt if lam_b is None else lam_b + lt
         if L_rotor is not None:
             # (29): A_i p_i' = L_i
-            dlam_b = data.rotor_incidence @ (L_rotor[:, None] * model.torque_axis)
+            dlam_b = data.rotor_incidence @ (L_rotor[..., None] * model.torque_axis)
     if lam_b is None:
         return None, None
     return matvec(data.R, lam_b), (None if dlam_b is None else matvec(data.R, dlam_b))
@@ -179,10 +190,10 @@ def bias_accelerations(model: Model, data: Data, t: float) -> tuple[np.ndarray, 
     Hinge: e^k' = w^{k-1} x e^k, so S' u = (w^{k-1} x e^k phi', v(O^k) x e^k phi' + O^k x (w^{k-1} x e^k) phi').
     """
     da = cross(data.w_parent, data.wrel)
-    da[model.sph_bodies] = 0.0  # spherical joints: world-component axes do not turn
+    da[..., model.sph_bodies, :] = 0.0  # spherical joints: world-component axes do not turn
     dv = cross(data.vO, data.wrel) + cross(data.O, da)
-    acc_w = np.cumsum(da, axis=0)
-    acc_v = np.cumsum(dv, axis=0)
+    acc_w = np.cumsum(da, axis=-2)
+    acc_v = np.cumsum(dv, axis=-2)
     if model.moving:
         acc_v += base_motion(model, t)[2]
     return acc_w, acc_v
@@ -190,12 +201,12 @@ def bias_accelerations(model: Model, data: Data, t: float) -> tuple[np.ndarray, 
 
 def joint_columns(model: Model, data: Data) -> tuple[np.ndarray, np.ndarray]:
     """Unit motions S_j (angular, linear-at-origin) of every velocity column, (N, 3) each."""
-    Sa = np.zeros((model.N, 3))
-    Sa[model.col_sph.ravel()] = np.tile(EYE3, (len(model.sph_bodies), 1))
-    Sa[model.col_hinge] = data.e_w
-    Sb = cross(data.O[model.col_body], Sa)
+    Sa = np.zeros(data.R.shape[:-3] + (model.N, 3), dtype=data.R.dtype)
+    Sa[..., model.col_sph.ravel(), :] = np.tile(EYE3, (len(model.sph_bodies), 1))
+    Sa[..., model.col_hinge, :] = data.e_w
+    Sb = cross(data.O[..., model.col_body, :], Sa)
     if model.free:
-        Sb[model.col_base] = EYE3
+        Sb[..., model.col_base, :] = EYE3
     return Sa, Sb
 
 
@@ -210,11 +221,20 @@ def mass_matrix(model: Model, data: Data, Sa: np.ndarray, Sb: np.ndarray) -> np.
     return np.where(model.col_upper, Mfull, Mfull.T)
 
 
+def mass_times(model: Model, data: Data, Sa: np.ndarray, Sb: np.ndarray, udot: np.ndarray) -> np.ndarray:
+    """M u' without forming M (the inertial part of body_forces, linear in the accelerations,
+    projected as the rows of eqs 52-54 are): O(n), for a stack of states too."""
+    acc_w, acc_v = accelerations_from(model, data, Sa, Sb, udot, 0.0, 0.0)
+    f_ang = matvec(data.J, acc_w) + cross(data.h, acc_v)
+    f_lin = model.mass[:, None] * acc_v + cross(acc_w, data.h)
+    return project_subtree(model, Sa, Sb, f_ang, f_lin)
+
+
 def project_subtree(model: Model, Sa, Sb, f_ang, f_lin) -> np.ndarray:
     """Generalized forces S_j . sum_{p >= k(j)} f_p (the rows of eqs 52-54)."""
-    FCa = rcumsum(f_ang)[model.col_body]
-    FCl = rcumsum(f_lin)[model.col_body]
-    return np.einsum("ni,ni->n", Sa, FCa) + np.einsum("ni,ni->n", Sb, FCl)
+    FCa = rcumsum(f_ang, -2)[..., model.col_body, :]
+    FCl = rcumsum(f_lin, -2)[..., model.col_body, :]
+    return np.einsum("...ni,...ni->...n", Sa, FCa) + np.einsum("...ni,...ni->...n", Sb, FCl)
 
 
 def reactions(model: Model, data: Data, f_ang: np.ndarray, f_lin: np.ndarray):
@@ -231,11 +251,13 @@ def reactions(model: Model, data: Data, f_ang: np.ndarray, f_lin: np.ndarray):
 
 def accelerations_from(model: Model, data: Data, Sa, Sb, udot, acc_w0, acc_v0):
     """Body spatial accelerations for generalized accelerations udot (bias included)."""
-    da = np.zeros((model.n, 3))
-    dv = np.zeros((model.n, 3))
-    np.add.at(da, model.col_body, Sa * udot[:, None])
-    np.add.at(dv, model.col_body, Sb * udot[:, None])
-    return acc_w0 + np.cumsum(da, axis=0), acc_v0 + np.cumsum(dv, axis=0)
+    lead = np.broadcast_shapes(Sa.shape[:-2], np.shape(udot)[:-1])
+    da = np.zeros(lead + (model.n, 3), dtype=np.result_type(Sa, udot))
+    dv = np.zeros(lead + (model.n, 3), dtype=da.dtype)
+    # summed over each body's columns along the bodies' axis, moved first for np.add.at
+    np.add.at(np.moveaxis(da, -2, 0), model.col_body, np.moveaxis(Sa * udot[..., None], -2, 0))
+    np.add.at(np.moveaxis(dv, -2, 0), model.col_body, np.moveaxis(Sb * udot[..., None], -2, 0))
+    return acc_w0 + np.cumsum(da, axis=-2), acc_v0 + np.cumsum(dv, axis=-2)
 
 
 class Applied:
@@ -262,7 +284,7 @@ def applied_torques(model: Model, data: Data, y: np.ndarray, p: np.ndarray | Non
     nt, nh = len(model.torque_body), len(model.hinge_bodies)
     a = data.applied = Applied()
     a.rotor_speed = torque_rotor_rates(model, data, p) if nt else np.zeros(0)
-    a.hinge_speed = y[model.i_vel][model.col_hinge]
+    a.hinge_speed = y[..., model.i_vel][..., model.col_hinge]
     a.rotor_motor = act.rotor.cut(np.zeros(nt) if L_rotor is None else L_rotor, a.rotor_speed)
     a.rotor_friction = act.rotor.friction(a.rotor_speed)
     a.hinge_motor = np.zeros(nh) if hinge_tau is None else hinge_tau
@@ -292,8 +314,23 @@ def forward(
     p: absolute spins of the torque rotors at t; L_rotor: their axial torques (eq 29).
     If `out` is given, the intermediate results needed for reactions are stored in it.
     """
-    positions(model, data, t, y)
-    velocities(model, data, t, y[model.i_vel])
+    rhs, parts = closure(model, data, t, y, hinge_tau, p, L_rotor)
+    udot = np.linalg.solve(mass_matrix(model, data, parts[0], parts[1]), rhs)
+    if out is not None:
+        fill_evaluation(model, data, udot, parts, out)
+    return udot
+
+
+def closure(model: Model, data: Data, t: float, y: np.ndarray, hinge_tau: np.ndarray | None,
+            p: np.ndarray | None, L_rotor: np.ndarray | None, positions_done: bool = False) -> tuple[np.ndarray, tuple]:
+    """The rows of eqs (52)-(54) at (t, y) before the solve (arguments as `forward`): rhs (N,)
+    of M u' = rhs, and parts = (Sa, Sb, lam_w, dlam_w, acc_w0, acc_v0), the joint columns (M is
+    mass_matrix(model, data, Sa, Sb)), the gyrostatic moments and the bias accelerations, for
+    `fill_evaluation`. positions_done: `data` already holds the positions of y's configuration
+    (one configuration serves a stack of states that differ only in their rates)."""
+    if not positions_done:
+        positions(model, data, t, y)
+    velocities(model, data, t, y[..., model.i_vel])
     if model.stateful:  # the torques applied at this state: motors after the cut, and friction
         hinge_tau, L_rotor = applied_torques(model, data, y, p, hinge_tau, L_rotor)
     lam_w, dlam_w = lam(model, data, p, L_rotor)
@@ -302,10 +339,14 @@ def forward(
     Sa, Sb = joint_columns(model, data)
     rhs = -project_subtree(model, Sa, Sb, f_ang, f_lin)
     if hinge_tau is not None:
-        rhs[model.col_hinge] += hinge_tau  # (51): e^k . L^k = L_k
-    udot = np.linalg.solve(mass_matrix(model, data, Sa, Sb), rhs)
-    if out is not None:
-        out.udot, out.Sa, out.Sb, out.lam_w, out.dlam_w = udot, Sa, Sb, lam_w, dlam_w
-        out.acc_w, out.acc_v = accelerations_from(model, data, Sa, Sb, udot, acc_w0, acc_v0)
-        out.f_ang, out.f_lin = body_forces(model, data, out.acc_w, out.acc_v, lam_w, dlam_w)
-    return udot
+        rhs[..., model.col_hinge] += hinge_tau  # (51): e^k . L^k = L_k
+    return rhs, (Sa, Sb, lam_w, dlam_w, acc_w0, acc_v0)
+
+
+def fill_evaluation(model: Model, data: Data, udot: np.ndarray, parts: tuple, out: Evaluation) -> None:
+    """`out` for the accelerations udot of a `closure` (its parts): body accelerations and
+    forces, for reactions."""
+    Sa, Sb, lam_w, dlam_w, acc_w0, acc_v0 = parts
+    out.udot, out.Sa, out.Sb, out.lam_w, out.dlam_w = udot, Sa, Sb, lam_w, dlam_w
+    out.acc_w, out.acc_v = accelerations_from(model, data, Sa, Sb, udot, acc_w0, acc_v0)
+    out.f_ang, out.f_lin = body_forces(model, data, out.acc_w, out.acc_v, lam_w, dlam_w)

@@ -91,7 +91,8 @@ def quat_to_matrix(q: np.ndarray) -> np.ndarray:
     rotation even for the slightly non-unit quaternions of intermediate integrator stages.
     The numba kernel's scalar twin is `gyro_sim.dynamics.kernel._quat_to_matrix`.
     """
-    q = np.asarray(q, dtype=float)
+    q = np.asarray(q)
+    q = q.astype(np.result_type(q, float), copy=False)  # complex too (linearisation's complex step)
     qq = q[..., :, None] * q[..., None, :]
     R = (qq.reshape(q.shape[:-1] + (16,)) @ _QUAT_OUTER).reshape(q.shape[:-1] + (3, 3))
     return R / np.einsum("...i,...i->...", q, q)[..., None, None]

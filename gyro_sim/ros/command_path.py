@@ -1,12 +1,23 @@
 """The physics loop's commands: received from any thread, checked, held one at a time, taken
 by the physics steps, logged in causal order (what is logged when: gyro_sim.ros.loop's
 docstring), replaced by zeros after ``command_timeout`` simulated seconds of silence, and the
-built-in demo's commands (gyro_sim.ros.demo) while none has come from outside."""
+built-in demo's commands (gyro_sim.ros.demo) while none has come from outside.
+
+Each command from outside that a step applies is timed, on the loop's monotonic wall clock,
+from its receipt to the physics step that applies it (`CommandPath.latency`). A
+Float64MultiArray carries no stamp, so the time starts at the node: the clock read when the
+subscription callback hands the decoded command over (`submit`). It ends when that step starts
+in wall time: the later of the moment the physics thread sets the command on the Simulator
+(just before computing the step) and the step's wall deadline (the wall time its node time is
+paced to: the thread computes up to one wake-up ahead, so a step computed early still starts,
+as the outside sees it, at its deadline). Superseded commands, the demo's, and those received
+while the loop was not running (before its start, paused) are not timed."""
 from __future__ import annotations
 
 import collections
 import math
 import threading
+import time
 from dataclasses import dataclass
 from typing import Callable
 
@@ -15,6 +26,7 @@ import numpy as np
 from gyro_sim.log.resim import COMMAND_TIMEOUT_EVENT
 from gyro_sim.msgs import messages as M
 from gyro_sim.ros.demo import DEMO_RATE
+from gyro_sim.ros.pacing import Samples
 
 
 def check_command(values, n_axes: int) -> str | None:
@@ -47,14 +59,25 @@ class CommandPath:
     node_ns : the loop's node time (integer ns), read when a command is rejected
     timeout : command_timeout (simulated s); dt : the physics step (s)
     demo : the built-in demo (gyro_sim.ros.demo.Demo), or None
+    clock : the loop's monotonic wall clock (s), injectable for tests
+    due : node time (s) -> the wall time (clock units) at which a step starting then is due;
+        None when nothing is paced (real_time_factor 0)
+    window : how many of the last latencies the live percentiles take
     """
 
-    def __init__(self, n_axes: int, out, node_ns: Callable[[], int], timeout: float, dt: float, demo=None):
+    def __init__(self, n_axes: int, out, node_ns: Callable[[], int], timeout: float, dt: float, demo=None,
+                 clock: Callable[[], float] = time.monotonic, due: Callable[[float], float] | None = None,
+                 window: int = 2000):
         self.n_axes, self.out, self._node_ns = n_axes, out, node_ns
+        self._clock, self._due = clock, due
+        #: receipt to the step that applies it (wall s), per command from outside that a step applied
+        self.latency = Samples(window=window)
+        self._timed_after = 0  # commands accepted up to this sequence number are not timed
         # the fallback comes at the first step starting more than `timeout` after the last good command
         self._timeout_steps = math.floor(timeout / dt * (1 + 1e-12))
         self.counters = Counters()
-        # the latest good command: (sequence number, raw bytes, values); one slot, replaced whole
+        # the latest good command: (sequence number, raw bytes, values, clock time of its receipt,
+        # None for the demo's); one slot, replaced whole
         self._latest: tuple | None = None
         self._taken_seq = 0
         # every good command received and not yet logged: (sequence number, raw bytes), in order
@@ -72,18 +95,19 @@ class CommandPath:
     def submit(self, raw: bytes, values) -> str | None:
         """A command received (raw CDR bytes and its values); returns why it is refused, if it is.
         A good one replaces the latest (taken by the next physics step) and ends the demo."""
+        received = self._clock()
         with self._submit_lock:
             reason = check_command(values, self.n_axes)
             if reason is None:
                 self._demo_stopped = True
-            return self._submit(raw, values, reason)
+            return self._submit(raw, values, reason, received)
 
-    def _submit(self, raw: bytes, values, reason: str | None) -> str | None:
+    def _submit(self, raw: bytes, values, reason: str | None, received: float | None = None) -> str | None:
         if reason is None:
             seq = self.counters.accepted + 1
             self._received.append((seq, raw))  # before it is the latest: a step taking it finds it here
             self.counters.accepted = seq
-            self._latest = (seq, raw, tuple(float(v) for v in values))
+            self._latest = (seq, raw, tuple(float(v) for v in values), received)
         else:
             self.counters.rejected += 1
             self.counters.last_reject_reason = reason
@@ -91,6 +115,11 @@ class CommandPath:
         return reason
 
     # --- in the physics thread -------------------------------------------------------------------
+    def time_from_now(self) -> None:
+        """The loop runs from now (its start, a resume): commands received before now waited for
+        it, not for a step, and are applied untimed."""
+        self._timed_after = self.counters.accepted
+
     def _log_received(self, t_ns: int, upto: int) -> None:
         """Log, at `t_ns`, the good commands received up to sequence number `upto` not yet logged."""
         received = self._received
@@ -124,10 +153,15 @@ class CommandPath:
         new = self._latest
         latest = None
         if new is not None and new[0] != self._taken_seq:
-            seq, raw, latest = new
+            seq, raw, latest, received = new
             self.counters.superseded += seq - self._taken_seq - 1
             self._taken_seq = seq
             self._log_received(t_ns, seq)  # the ones it superseded, then it
+            if received is not None and seq > self._timed_after:
+                starts = self._clock()
+                if self._due is not None:
+                    starts = max(starts, self._due(t))
+                self.latency.add(starts - received)
         if latest is not None:
             if np.any(sim.axis_moments != latest):
                 self.counters.moments_since = t

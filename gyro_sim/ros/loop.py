@@ -106,9 +106,11 @@ class SimLoop:
         self.clock = clock
         self.dt = config.dt
         self.per_publish = config.steps_per_publish
-        self.commands = CommandPath(len(sim.axis_names), outputs, lambda: self.node_ns, config.command_timeout,
-                                    self.dt, demo)
         self.pacing = LoopPacing(config, clock=clock, sleep=sleep, run_delay=run_delay)
+        pacer = self.pacing.pacer
+        self.commands = CommandPath(len(sim.axis_names), outputs, lambda: self.node_ns, config.command_timeout,
+                                    self.dt, demo, clock=clock, due=pacer.deadline if pacer.rtf > 0 else None,
+                                    window=int(2 * config.physics_rate))
         self.publications = Publications(outputs, config, clock=clock)
         recorder = getattr(outputs, "recorder", None)
         self.recording = RecordWatch(recorder, outputs, clock) if recorder is not None else None
@@ -176,6 +178,7 @@ class SimLoop:
                 self.paused = req.paused
                 self.out.event(self.node_ns, "pause" if self.paused else "resume")
                 self.pacing.restart(self.node_time)
+                self.commands.time_from_now()
                 self.publications.restart()
             return f"{'paused' if self.paused else 'running'} at node time {self.node_time:.6f} s"
         raise TypeError(f"not a request: {req!r}")
@@ -190,6 +193,7 @@ class SimLoop:
         try:
             self._schedule()
             self.pacing.begin(self.node_time)
+            self.commands.time_from_now()
             self.publications.idle_from_now()
             self._send(self._prepare())
             while not self._stop.is_set():
@@ -274,6 +278,7 @@ class SimLoop:
         rtf_target = pacing.rtf
         p50, p99 = pacing.step_time.window_percentiles(50, 99)
         j50, j99 = pubs.jitter_percentiles(50, 99)
+        l50, l99 = self.commands.latency.window_percentiles(50, 99)
         rtf = float("nan") if (self.paused or self.failure) else pacing.rate.window_rtf(self.node_time)
         state = "stopped: simulation error" if self.failure else ("paused" if self.paused else "running")
         values = {
@@ -287,6 +292,8 @@ class SimLoop:
             "step_time_p99_us": p99 * 1e6,
             "publish_jitter_p50_us": j50 * 1e6,
             "publish_jitter_p99_us": j99 * 1e6,
+            "command_latency_p50_us": l50 * 1e6,  # none before a command from outside was applied
+            "command_latency_p99_us": l99 * 1e6,
             "sim_lag_max_ms": max(pubs.lag.window, default=math.nan) * 1e3,  # none before the first publication
             "deadline_misses": pacing.pacer.misses,
             "slipped_s": pacing.pacer.slipped,
@@ -337,6 +344,9 @@ class SimLoop:
         pacing, pubs, c = self.pacing, self.publications, self.commands.counters
         p50, p99, pmax = pacing.step_time.run_percentiles(50, 99, 100)
         j50, j99 = pubs.jitter_percentiles(50, 99, run=True)
+        # receipt to the step applying it; None when no command from outside was applied
+        latency = self.commands.latency.run_percentiles(50, 99, 100)
+        l50, l99, lmax = (None if math.isnan(x) else x * 1e6 for x in latency)
         wall, cpu = pacing.wall_cpu()
         pauses = pacing.gc_pauses.pauses
         return {
@@ -368,6 +378,10 @@ class SimLoop:
             "commands_accepted": c.accepted,
             "commands_rejected": c.rejected,
             "commands_superseded": c.superseded,
+            "commands_timed": self.commands.latency.run.n,
+            "command_latency_p50_us": l50,
+            "command_latency_p99_us": l99,
+            "command_latency_max_us": lmax,
             "cpu_wait_misses": pacing.cpu_wait_misses,
             "physics_cpu_wait_s": pacing.cpu_wait,
             "host_steal_s": pacing.steal,

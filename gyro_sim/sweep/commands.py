@@ -13,8 +13,9 @@ SWEEP_EXAMPLES = """examples:
   gyro-sim sweep config/sweeps/sleeping_top.yaml --workers 2 --out out/sweep/top
   gyro-sim sweep my_sweep.yaml --scheduler tcp://10.0.0.5:8786 --out results/ --resume
 
-A shipped sweep is also taken by name (kapitza, sleeping_top, fixed_step). Results: DIR/results.parquet
-(one row per point), DIR/summary.md, DIR/map.png; finished batches in DIR/parts/ as they come."""
+A shipped sweep is also taken by name (kapitza, sleeping_top, sleeping_top_linear, fixed_step).
+Results: DIR/results.parquet (one row per point), DIR/summary.md, DIR/map.png; finished batches
+in DIR/parts/ as they come."""
 
 
 def register(sub, bench) -> None:

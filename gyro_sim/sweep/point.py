@@ -14,7 +14,12 @@ A row is a flat dict (the Parquet columns). Always: ``point``, ``seed``, the var
   for scenes that start in one, such as heavy_top and double_gyro_*);
 - ``drift``: ``drift.<invariant>`` (relative drift of each integral this scene conserves, as
   Simulator.snapshot reports it) and ``max_drift`` (their largest magnitude), at the end;
-- ``cpu_time``: ``cpu_s`` (CPU time of the simulation; the one column that varies between runs).
+- ``cpu_time``: ``cpu_s`` (CPU time of the simulation; the one column that varies between runs);
+- ``eigenvalues``: ``max_real_eig``, the largest real part of the eigenvalues of the linear
+  model at the point's initial state and zero commands (``Simulator.linearize`` in the body
+  chart, where a steady spin is an equilibrium: docs/linearization.md), NaN where that state
+  is not an equilibrium (no verdict there); ``eig_tolerance``, the model's own zero tolerance.
+  A sweep whose measures are only ``eigenvalues`` (and ``cpu_time``) simulates nothing.
 
 Verdicts add ``verdict.<name>`` (ok and the measure below the threshold), a theory adds
 ``theory_margin`` and ``theory.<verdict>`` (margin > 1).
@@ -66,6 +71,11 @@ def run_point(scene_map: dict[str, Any], run: dict[str, Any], measures: tuple[st
     else:
         up = np.array([0.0, 0.0, 1.0])
     want = set(measures)
+    from gyro_sim.sweep.spec import STATIC_MEASURES
+
+    if want <= set(STATIC_MEASURES):
+        n = 0  # only the initial state is measured
+    row_eig = _eigen_columns(sim) if "eigenvalues" in want else {}
     axes0 = _axes(sim) if want & {"max_tilt", "max_deviation"} else None
     max_tilt = float(_angle(axes0[0], up)) if "max_tilt" in want else None
     max_dev = 0.0
@@ -117,9 +127,18 @@ def run_point(scene_map: dict[str, Any], run: dict[str, Any], measures: tuple[st
         for name, value in sorted(drift.items()):
             row[f"drift.{name}"] = float(value)
         row["max_drift"] = max((abs(float(v)) for v in drift.values()), default=0.0) if row["ok"] else nan
+    row.update(row_eig)
     if "cpu_time" in want:
         row["cpu_s"] = cpu
     return row
+
+
+def _eigen_columns(sim) -> dict[str, Any]:
+    """max_real_eig and eig_tolerance of the linear model at the simulator's state (body chart)."""
+    lin = sim.linearize(chart="body")
+    ev = lin.eigenvalues()
+    top = float(ev.real.max()) if len(ev) else 0.0
+    return {"max_real_eig": top if lin.is_equilibrium else math.nan, "eig_tolerance": lin.tolerance}
 
 
 def evaluate(sweep_payload: dict[str, Any], point) -> dict[str, Any]:

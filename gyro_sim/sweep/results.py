@@ -137,10 +137,15 @@ def summary(sweep, rows: list[dict], stats: dict[str, Any], check, largest_rows)
         lines.append(f"- random: {sweep.draws} draws, seed {sweep.seed}")
         for k, (dist, args) in sweep.axes.items():
             lines.append(f"  - `{k}`: {dist} {args}")
-    lines.append(f"- run: {run['integrator']}"
-                 + (f" step {run['step']:g} s" if run["integrator"] in ("rk4", "lie4") else
-                    f" rtol {run['rtol']:g}, atol {run['atol']:g}")
-                 + f", horizon {run['horizon']:g} s in chunks of {run['chunk']:g} s, backend {run['backend']}")
+    from gyro_sim.sweep.spec import STATIC_MEASURES
+
+    if set(sweep.measures) <= set(STATIC_MEASURES):
+        lines.append("- run: none, a linearisation at each point's initial state")
+    else:
+        lines.append(f"- run: {run['integrator']}"
+                     + (f" step {run['step']:g} s" if run["integrator"] in ("rk4", "lie4") else
+                        f" rtol {run['rtol']:g}, atol {run['atol']:g}")
+                     + f", horizon {run['horizon']:g} s in chunks of {run['chunk']:g} s, backend {run['backend']}")
     errors = [r for r in rows if not r["ok"]]
     lines.append(f"- points: {len(rows)} of {n}" + (" (--quick)" if sweep.quick else "")
                  + f"; simulation errors: {len(errors)}")

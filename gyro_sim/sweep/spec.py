@@ -12,7 +12,7 @@
     # random: {draws: 200, seed: 1, parameters: {bodies[0].com[2]: {uniform: [0.05, 0.1]}}}
     #   distributions: uniform [a, b], loguniform [a, b], normal [mean, std], choice [v, ...]
     run: {integrator: dop853, rtol: 1.0e-8, atol: 1.0e-10, step: 1.0e-3, horizon: 2.0, chunk: 0.01}
-    measures: [final_state, max_tilt, max_deviation, drift, cpu_time]
+    measures: [final_state, max_tilt, max_deviation, drift, cpu_time]   # also exact_error, eigenvalues
     verdicts:
       - {name: stays_up, measure: max_tilt_rad, below: 1.5707963267948966}
     theory: {formula: kapitza, verdict: stays_up}          # see gyro_sim.sweep.theory
@@ -48,11 +48,13 @@ from gyro_sim.errors import GyroSimError
 __all__ = ["SweepError", "Sweep", "Point", "load_sweep", "set_path", "parse_path", "MEASURES", "RUN_DEFAULTS"]
 
 #: what a point can measure (the columns each adds are in gyro_sim.sweep.point)
-MEASURES = ("final_state", "max_tilt", "max_deviation", "exact_error", "drift", "cpu_time")
+MEASURES = ("final_state", "max_tilt", "max_deviation", "exact_error", "drift", "cpu_time", "eigenvalues")
+#: measures taken from the point's initial state alone: a sweep of only these simulates nothing
+STATIC_MEASURES = ("eigenvalues", "cpu_time")
 DEFAULT_MEASURES = ("final_state", "max_tilt", "max_deviation", "drift", "cpu_time")
 #: scalar measure columns a verdict may test
 VERDICT_MEASURES = {"max_tilt_rad": "max_tilt", "max_deviation_rad": "max_deviation",
-                    "exact_error_rad": "exact_error", "max_drift": "drift"}
+                    "exact_error_rad": "exact_error", "max_drift": "drift", "max_real_eig": "eigenvalues"}
 RUN_DEFAULTS: dict[str, Any] = {"integrator": "dop853", "rtol": 1e-8, "atol": 1e-10, "step": 1e-3,
                                 "horizon": 1.0, "chunk": 0.01, "backend": "auto"}
 RUN_FLOATS = ("rtol", "atol", "step", "horizon", "chunk")

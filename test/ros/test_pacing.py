@@ -431,6 +431,7 @@ def test_commands_received_while_paused_or_before_a_reset_are_all_logged_in_caus
     steps = loop.steps
     run_until(loop, lambda: loop.steps > steps)
     assert out.commands[2] == (t_pause, b"p2") and loop.sim.axis_moments[1] == pytest.approx(0.03)
+    assert loop.commands.latency.run.n == 0  # it waited for the resume, not for a step: not timed
     loop.requests.post(Pause(True))
     run_until(loop, lambda: loop.paused)
     assert loop.submit_command(b"r0", [0.0, 0.5, 0.0]) is None
@@ -475,3 +476,121 @@ def test_building_the_loop_runs_nothing_on_the_simulator():
     assert calls == [] and loop.steps == 0 and not loop.thread.is_alive()
     warm_up(sim, cfg.dt)
     assert "advance" in calls and calls[-1] == "reset" and sim.time == 0.0
+
+
+class _Sim:
+    """What CommandPath asks of a Simulator."""
+
+    def __init__(self, n):
+        self.axis_moments = np.zeros(n)
+
+    def set_axis_moments(self, m):
+        self.axis_moments = np.array(m, float)
+
+
+def test_a_command_is_timed_from_its_receipt_to_the_start_of_the_step_applying_it():
+    """On a fake clock: the later of the take and the step's wall deadline, minus the receipt;
+    a superseded command, the demo's, and one received before the loop ran are not timed."""
+    from gyro_sim.ros.command_path import CommandPath
+    from gyro_sim.ros.demo import Demo
+
+    clock = FakeClock()
+    deadlines = {}  # node time (s) -> wall deadline, as the test sets it
+    path = CommandPath(1, Outputs(), lambda: 0, timeout=1e6, dt=1e-3, clock=clock, due=deadlines.__getitem__)
+    sim = _Sim(1)
+    assert path.submit(b"early", [1.0]) is None  # before the loop runs: waits for its start
+    clock.t = 100.010
+    path.time_from_now()
+    deadlines[0.0] = 100.0105
+    path.take(sim, 0, 0)
+    assert path.latency.run.n == 0 and sim.axis_moments[0] == 1.0
+    # computed ahead: the step starts at its deadline, 1.3 ms after the receipt
+    clock.t = 100.0200
+    assert path.submit(b"a", [2.0]) is None
+    clock.t = 100.0202
+    deadlines[0.001] = 100.0213
+    path.take(sim, 1_000_000, 1)
+    # behind: the step's deadline is past when the thread takes the command, 0.7 ms after it came
+    clock.t = 100.0300
+    for i in range(3):  # two superseded: only the one applied is timed
+        assert path.submit(b"s%d" % i, [3.0 + i]) is None
+    clock.t = 100.0307
+    deadlines[0.002] = 100.0250
+    path.take(sim, 2_000_000, 2)
+    got = list(path.latency.window)
+    assert got == pytest.approx([1.3e-3, 0.7e-3], abs=1e-9) and path.counters.superseded == 2
+    # unpaced (real_time_factor 0): the take alone
+    free = CommandPath(1, Outputs(), lambda: 0, timeout=1e6, dt=1e-3, clock=clock, due=None)
+    free.time_from_now()
+    assert free.submit(b"f", [1.0]) is None
+    clock.t += 4e-4
+    free.take(sim, 0, 0)
+    assert list(free.latency.window) == pytest.approx([4e-4], abs=1e-9)
+    # the demo's commands are not timed
+    demo_path = CommandPath(1, Outputs(), lambda: 0, timeout=1e6, dt=1e-3, clock=clock, due=None,
+                            demo=Demo(np.array([1.0])))
+    demo_path.time_from_now()
+    demo_path.take(sim, 0, 0)
+    assert demo_path.counters.accepted == 1 and demo_path.latency.run.n == 0
+
+
+class _ClockWithArrival(FakeClock):
+    """A fake clock whose sleep runs `arrive()` once, half-way through the first sleep after it
+    is set: a command received while the physics thread waits for its deadline."""
+
+    def __init__(self):
+        super().__init__()
+        self.arrive = None
+        self.received = self.woke = None
+
+    def sleep(self, s):
+        if self.arrive is not None and self.received is None:
+            self.t += 0.5 * s
+            self.received = self.t
+            self.arrive()
+            self.t += 0.5 * s + 5e-5
+            self.woke = self.t
+            return
+        super().sleep(s)
+
+
+def test_the_loop_times_commands_and_reports_the_latency_in_its_diagnostics():
+    """1 kHz physics, two steps per wake-up. A command received while the thread sleeps is
+    applied by the first step after the wake-up: timed from the receipt to the wake-up. One
+    received while a chunk is computed is applied by the chunk's next step: timed to that
+    step's wall deadline, 1 ms of node time after the loop's start on the clock."""
+    clock = _ClockWithArrival()
+    loop, out = make_loop(clock, physics_rate=1000.0, publish_rate=100.0, command_timeout=1e6)
+    assert loop.pacing.per_chunk == 2
+    assert "command_latency_p50_us" not in loop.report().values  # nothing timed yet
+    run_until(loop, lambda: loop.steps >= 10)
+    clock.arrive = lambda: loop.submit_command(b"asleep", [0.0, 0.01, 0.0])
+    run_until(loop, lambda: loop.commands.latency.run.n >= 1)
+    (asleep,) = loop.commands.latency.window
+    assert asleep == pytest.approx(clock.woke - clock.received, abs=1e-12)
+    assert 0.9e-3 < asleep < 1.1e-3  # half of a 2 ms sleep, and the sleep's overshoot
+
+    # a command arriving during the first step of a chunk
+    advance, arrived = loop.sim.advance, []
+
+    def advance_and_receive(dt):
+        advance(dt)
+        if not arrived and loop.steps % 2 == 0:
+            arrived.append((clock.t, loop.offset_ns * 1e-9 + loop.sim.time))
+            loop.submit_command(b"computing", [0.0, 0.02, 0.0])
+
+    loop.sim.advance = advance_and_receive
+    begin_clock, begin_node = clock.t, loop.node_time  # the loop restarts its pacing from here
+    run_until(loop, lambda: loop.commands.latency.run.n >= 2)
+    assert loop.pacing.pacer.misses == 0 and loop.pacing.pacer.slipped == 0
+    received, step_node_time = arrived[0]
+    mid = list(loop.commands.latency.window)[-1]
+    assert loop.commands.counters.last_effective == pytest.approx(step_node_time, abs=1e-12)
+    assert mid == pytest.approx(begin_clock + (step_node_time - begin_node) - received, abs=1e-9)
+    assert 0.9e-3 < mid < 1e-3 + 1e-9  # the step is due 1 ms after the chunk began
+
+    values = loop.report().values
+    assert float(values["command_latency_p99_us"]) == pytest.approx(1e6 * max(asleep, mid), rel=0.02)
+    s = loop.summary()
+    assert s["commands_timed"] == 2 and s["commands_accepted"] == 2
+    assert s["command_latency_max_us"] == pytest.approx(1e6 * max(asleep, mid), rel=1e-9)
