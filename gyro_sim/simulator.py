@@ -576,13 +576,14 @@ class Simulator:
         J = len(self._joint_names)
         self._snapshot_nowhere = Scatter(np.zeros(0), *(np.zeros((0, *shape), dtype=np.int64)
                                                       for shape in ((3, J), (n, 3), (n, 4), (n, 6))))
-        self._snapshot_inputs = None  # (moments, pdot, L_rotor, tau) of `_held_now`
-        # the kernel's arguments that stay the same objects from call to call: ydot and those of
-        # fast.rhs_kernel before its held inputs (the system's workspace and model, packed once);
-        # the model beyond them; the joint-state entries and the outputs
+        # the kernel's records with held inputs of the publications' own (`_held_now`)
+        self._snapshot_records = self.system.records_with_own_inputs()
+        self._snapshot_moments = None  # the commanded moments of the inputs held there
+        # the kernel's arguments that stay the same objects from call to call: ydot and the
+        # kernel's records; the model beyond them; the joint-state entries and the outputs
         o, model = self._snapshot_scratch, self._snapshot_model
         self._snapshot_arguments = (
-            (o["ydot"], *self.system.kernel_arguments()[:fast_outputs.HELD_T0]), model[:7],
+            (o["ydot"], *self._snapshot_records), model[:7],
             (*model[8:], o["R"], o["w"], o["vO"], o["O"], o["quat"], o["euler"], o["euler_rate"], o["L_speed"],
              o["wrench_force"], o["wrench_moment"], o["inv"]))
         self._snapshot_joints = (np.empty(J), np.empty(J), np.empty(J))  # write_outputs' joint states
@@ -607,23 +608,21 @@ class Simulator:
                 kind.append(fo.JOINT_SPEED_ROTOR), ref.append(i - 3 * n - nh - nt)
         return np.array(kind, dtype=np.int64), np.array(ref, dtype=np.int64)
 
-    def _held_now(self) -> tuple:
-        """(p0, pdot, L_rotor, tau): the inputs fast.rhs_kernel reads after its t0, held from now
-        on (what `system.hold(t, p, *self._inputs())` would leave, without holding: the system
-        keeps the hold of the last advance, and only the held t0 and spins change from one
-        publication to the next; the rest is made again only when the commands change)."""
-        inputs = self._snapshot_inputs
-        if inputs is None or inputs[0] is not self._moments:
-            from gyro_sim.dynamics.outputs import held_inputs
+    def _held_now(self) -> None:
+        """Hold in the publications' own inputs (`_snapshot_records`) from now on what
+        `system.hold(t, p, *self._inputs())` would hold, without holding it in the system (which
+        keeps the hold of the last advance): only t0 and the spins change from one publication
+        to the next; the rest is written again only when the commands change."""
+        from gyro_sim.dynamics.outputs import hold
 
-            _, _, pdot, L, tau = held_inputs(self.model, self._t, None, *self._inputs())
-            inputs = self._snapshot_inputs = (self._moments, pdot, L, tau)
-        p = self._p
-        if p is None:  # no torque rotors
-            p = inputs[1]
-        elif p.dtype != np.float64 or not p.flags.c_contiguous:  # the compiled entry does not convert
-            p = self._p = np.ascontiguousarray(p, dtype=np.float64)
-        return (p, *inputs[1:])
+        inputs = self._snapshot_records[2]
+        if self._snapshot_moments is not self._moments:
+            hold(inputs, self.model, self._t, self._p, *self._inputs())
+            self._snapshot_moments = self._moments
+        else:
+            inputs.t0[0] = self._t
+            if self._p is not None:
+                inputs.p0[:] = self._p
 
     def _compiled_call(self, want: int, into: Scatter, pos, vel, eff) -> int:
         """fast_outputs.publication_kernel at the current state: the outputs into the scratch
@@ -637,7 +636,8 @@ class Simulator:
             y = self._y = np.ascontiguousarray(y, dtype=np.float64)
         head, middle, tail = self._snapshot_arguments
         t = float(self._t)
-        bad = self._snapshot_kernel(t, y, *head, t, *self._held_now(), *middle, want, *tail, pos, vel, eff,
+        self._held_now()
+        bad = self._snapshot_kernel(t, y, *head, *middle, want, *tail, pos, vel, eff,
                                     into.dst, into.joint, into.position, into.quaternion, into.wrench,
                                     self._snapshot_scratch["scratch"])
         if self._imus is not None:  # the IMUs read the accelerations this call left, if it made them

@@ -5,7 +5,7 @@ Kernels only. `rhs_kernel` computes what :meth:`gyro_sim.dynamics.system.ChainOD
 18-19 and 29), but in one compiled call instead of some hundred numpy calls: the numpy path
 costs ~150 us of call overhead per evaluation for any short chain, the kernel a few
 microseconds. :class:`gyro_sim.dynamics.system.FastChainODE` is the ODE system built on it
-(`model_arguments`, `input_arguments` and `workspace` give the kernel's arguments).
+(`records` gives the kernel's records: ChainModel, Workspace, HeldInputs).
 
 Same equations, same velocity basis, state layout and signs as :mod:`gyro_sim.dynamics.model` and
 :mod:`gyro_sim.dynamics.reference` (world components; spherical joints move with the relative
@@ -63,6 +63,7 @@ heavy-subtree path through another (`_heavy`, flags[FLAG_HEAVY]), so each is com
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -80,6 +81,76 @@ if jit.compiling():
 #: the files the kernels here compile in (the key of their numba cache directory,
 #: `gyro_sim.jit.cache_directory`): this one and the actuators' constants it reads
 DEPENDENCIES = (Path(__file__), Path(actuators.__file__))
+
+class ChainModel(NamedTuple):
+    """The chain's constant arrays as every compiled kernel reads them (numba types a module-level
+    NamedTuple of arrays as one record, which caches on disk like its arrays: `chain_model`
+    builds it). The one place the model's arrays are named; n bodies, N velocity columns, nt
+    torque rotors."""
+
+    #: (n,) bool: body k's own joint is a hinge (else spherical)
+    is_hinge: np.ndarray
+    #: (n,) int64: the y index of body k's quaternion (spherical) or of phi_k (hinge)
+    qrow: np.ndarray
+    #: (n,) int64: the first velocity column of body k's own joint
+    own_col: np.ndarray
+    #: (n + 1,) int64: body k's columns are col_start[k]:col_start[k + 1] (a free base's
+    #: translations belong to body 0)
+    col_start: np.ndarray
+    #: (n, 3) hinge axes e^k in body k's frame (eq 50)
+    hinge_axis: np.ndarray
+    #: (n, 3) s^k, the joint point O^{k+1} from O^k in body k's frame
+    s: np.ndarray
+    #: (n,) masses
+    mass: np.ndarray
+    #: (n, 3) m^k c^k, first moments about O^k in body k's frame
+    first_moment: np.ndarray
+    #: (n, 3, 3) inertia operators about O^k (eqs 22, 30)
+    inertia: np.ndarray
+    #: (n, 3) the constant part of the gyrostatic moments (eq 31)
+    lam_speed: np.ndarray
+    #: (nt,) int64: the body of each torque rotor
+    torque_body: np.ndarray
+    #: (nt, 3) torque rotors' axes in their bodies' frames
+    torque_axis: np.ndarray
+    #: (nt,) axial moments of inertia A_i of the torque rotors (eq 29)
+    torque_A: np.ndarray
+    #: (FLAGS_SIZE,) int64: see FLAGS_SIZE
+    flags: np.ndarray
+    #: (7,): moving-base amplitude (3), W = 2 pi f, gravity (3)
+    base: np.ndarray
+
+
+#: the index of `flags` among ChainModel's fields (its address in a descriptor: D_MODEL + this)
+MODEL_FLAGS = list(ChainModel.__annotations__).index("flags")
+
+
+class Workspace(NamedTuple):
+    """What one evaluation writes (`workspace`): the kernel's scratch, and the descriptor by
+    which the kernel's C function finds a model, this workspace and held inputs (`describe`,
+    the one place it is written): a workspace belongs to the model and inputs it describes."""
+
+    #: the float scratch (`scratch_size`), with a stateful model's actuator parameters in its tail
+    work: np.ndarray
+    #: (DESCRIPTOR_SIZE,) int64: the arrays' addresses and sizes, and the evaluations counted
+    descriptor: np.ndarray
+
+
+class HeldInputs(NamedTuple):
+    """The inputs held from t0 on (the zero-order hold of `Simulator.advance`), as the compiled
+    kernels read them (`held_inputs`; written in place by `hold`)."""
+
+    #: (1,): t0, the start of the hold
+    t0: np.ndarray
+    #: (nt,) torque-rotor spins p_i(t0) (eq 29)
+    p0: np.ndarray
+    #: (nt,) their rates L_i / A_i
+    pdot: np.ndarray
+    #: (nt,) the torque rotors' axial torques L_i
+    L_rotor: np.ndarray
+    #: (N,) generalized forces of the columns (hinge commands, eq 51)
+    tau: np.ndarray
+
 
 # base kinds, as the kernel sees them
 BASE_FIXED, BASE_MOVING, BASE_FREE = 0, 1, 2
@@ -102,7 +173,7 @@ WORK_FIXED = 81
 #: (9e-12 at 1e2: test/core/test_heavy_tip.py). Chains whose subtrees all weigh less than this
 #: many times their carriers cannot pass on more and skip the check.
 STABLE_ABA_RATIO = 100.0
-#: flags (`model_arguments`, int64): base type, has gravity, has lambda (rotors), i_r0, i_vel,
+#: flags (`chain_model`, int64): base type, has gravity, has lambda (rotors), i_r0, i_vel,
 #: i_kappa, N, then FLAG_HEAVY: the address of the compiled heavy-subtree elimination
 #: (`heavy_elimination_address`), 0 for a model whose subtrees all weigh at most STABLE_ABA_RATIO
 #: times their carriers (the kernel never takes that path there)
@@ -118,6 +189,15 @@ FLAGS_SIZE = 12
 #: per actuated axis, floats of the workspace's tail of a stateful model: max_speed (inf: none),
 #: coulomb, viscous, static, stribeck_speed (0: no Stribeck term), stick_speed
 ACTUATOR_PARAMETERS = 6
+#: a workspace's descriptor (int64, `describe`): the addresses of the model's arrays (in
+#: ChainModel's order) from D_MODEL, of the scratch at D_WORK, of the held inputs' arrays (in
+#: HeldInputs' order) from D_INPUTS; n, N, nt and the scratch's size; the evaluations counted
+#: (the compiled entry from Python, gyro_sim.dynamics.entry, counts there)
+D_MODEL, D_WORK, D_INPUTS = 0, 15, 16
+D_N, D_NCOL, D_NT, D_NWORK, D_NFEV = 21, 22, 23, 24, 25
+DESCRIPTOR_SIZE = 26
+assert D_WORK - D_MODEL == len(ChainModel.__annotations__) and D_N - D_INPUTS == len(HeldInputs.__annotations__), \
+    "the descriptor's layout (D_*) no longer matches the records' fields"
 
 
 def available() -> bool:
@@ -1124,7 +1204,7 @@ if jit.compiling():
     def _heavy(address, is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
                Ia, pa, Dx, T, G, x):
         """`_aba_heavy` through the address of its compiled entry (`heavy_elimination_address`).
-        Address 0 (a model built without it, `model_arguments` says why that cannot happen with
+        Address 0 (a model built without it, `chain_model` says why that cannot happen with
         heavy subtrees): u' not a number, which the integrators report as a non-finite rhs."""
         if address == 0:
             for j in range(udot.shape[0]):
@@ -1153,60 +1233,42 @@ if jit.compiling():
                    block2(vector_at(G, 9, f), 0, 3, 3), vector_at(x, 6, f))
 
     @_njit_inline
-    def kernel_arrays(work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
-                      inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base, p0, pdot,
-                      L_rotor, tau, nwork, n, N, nt):
-        """The kernel's arrays at these addresses (`rhs_call` passes them), C-contiguous, of the
-        shapes `workspace`, `model_arguments` and `input_arguments` give them: (work and the
-        model's 15), (p0, pdot, L_rotor, tau)."""
+    def records_at(descriptor):
+        """The records a descriptor (`describe`) gives the addresses and sizes of: (ChainModel,
+        Workspace, HeldInputs) of C-contiguous views, of the types every caller passes (so the
+        kernel's one specialisation serves them), owned elsewhere."""
         f, i = np.float64, np.int64
-        return ((vector_at(work, nwork, f), vector_at(is_hinge, n, np.bool_), vector_at(qrow, n, i),
-                 vector_at(own_col, n, i), vector_at(col_start, n + 1, i),
-                 block2(vector_at(hinge_axis, 3 * n, f), 0, n, 3), block2(vector_at(s, 3 * n, f), 0, n, 3),
-                 vector_at(mass, n, f), block2(vector_at(first_moment, 3 * n, f), 0, n, 3),
-                 block3(vector_at(inertia, 9 * n, f), 0, n, 3, 3), block2(vector_at(lam_speed, 3 * n, f), 0, n, 3),
-                 vector_at(torque_body, nt, i), block2(vector_at(torque_axis, 3 * nt, f), 0, nt, 3),
-                 vector_at(torque_A, nt, f), vector_at(flags, FLAGS_SIZE, i), vector_at(base, 7, f)),
-                (vector_at(p0, nt, f), vector_at(pdot, nt, f), vector_at(L_rotor, nt, f), vector_at(tau, N, f)))
+        d = vector_at(descriptor, DESCRIPTOR_SIZE, i)
+        n, N, nt = d[D_N], d[D_NCOL], d[D_NT]
+        a = d[D_MODEL:D_WORK]
+        model = ChainModel(
+            vector_at(a[0], n, np.bool_), vector_at(a[1], n, i), vector_at(a[2], n, i),
+            vector_at(a[3], n + 1, i), block2(vector_at(a[4], 3 * n, f), 0, n, 3),
+            block2(vector_at(a[5], 3 * n, f), 0, n, 3), vector_at(a[6], n, f),
+            block2(vector_at(a[7], 3 * n, f), 0, n, 3), block3(vector_at(a[8], 9 * n, f), 0, n, 3, 3),
+            block2(vector_at(a[9], 3 * n, f), 0, n, 3), vector_at(a[10], nt, i),
+            block2(vector_at(a[11], 3 * nt, f), 0, nt, 3), vector_at(a[12], nt, f),
+            vector_at(a[13], FLAGS_SIZE, i), vector_at(a[14], 7, f))
+        h = d[D_INPUTS:D_N]
+        inputs = HeldInputs(vector_at(h[0], 1, f), vector_at(h[1], nt, f), vector_at(h[2], nt, f),
+                            vector_at(h[3], nt, f), vector_at(h[4], N, f))
+        return model, Workspace(vector_at(d[D_WORK], d[D_NWORK], f), d), inputs
+
+    def _kernel_entry(t, y, ydot, size, descriptor):
+        """`rhs_kernel` on y, ydot (`size` floats at these addresses) and the records `descriptor`
+        (an address) describes: compiled as a C function (`kernel_address`)."""
+        model, data, inputs = records_at(descriptor)
+        rhs_kernel(t, vector_at(y, size, np.float64), vector_at(ydot, size, np.float64), model, data, inputs)
 
     @_njit_inline
-    def kernel_addresses(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                         first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
-                         base, t0, p0, pdot, L_rotor, tau):
-        """What the C entry of the kernel takes (`_kernel_entry`): t, the addresses of y, ydot and
-        the kernel's arrays, t0, then the sizes of y, the workspace, n, N, nt."""
-        return (t, address_of(y), address_of(ydot), address_of(work), address_of(is_hinge), address_of(qrow),
-                address_of(own_col), address_of(col_start), address_of(hinge_axis), address_of(s),
-                address_of(mass), address_of(first_moment), address_of(inertia), address_of(lam_speed),
-                address_of(torque_body), address_of(torque_axis), address_of(torque_A), address_of(flags),
-                address_of(base), address_of(p0), address_of(pdot), address_of(L_rotor), address_of(tau), t0,
-                y.shape[0], work.shape[0], mass.shape[0], tau.shape[0], torque_body.shape[0])
+    def rhs_call(t, y, ydot, model, data, inputs):
+        """`rhs_kernel` (same arguments, y and ydot C-contiguous; `data` the workspace that
+        describes `model` and `inputs`) through its compiled C function at flags[FLAG_KERNEL]:
+        for compiled loops, which then do not compile the kernel in."""
+        call_address(model.flags[FLAG_KERNEL],
+                     (t, address_of(y), address_of(ydot), y.shape[0], address_of(data.descriptor)))
 
-    def _kernel_entry(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                      first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base,
-                      p0, pdot, L_rotor, tau, t0, size, nwork, n, N, nt):
-        """`rhs_kernel` on the arrays at these addresses (`kernel_arrays`): compiled as a C
-        function (`kernel_address`)."""
-        m, h = kernel_arrays(work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
-                             inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base, p0, pdot,
-                             L_rotor, tau, nwork, n, N, nt)
-        rhs_kernel(t, vector_at(y, size, np.float64), vector_at(ydot, size, np.float64), m[0], m[1], m[2], m[3],
-                   m[4], m[5], m[6], m[7], m[8], m[9], m[10], m[11], m[12], m[13], m[14], m[15], t0,
-                   h[0], h[1], h[2], h[3])
-
-    @_njit_inline
-    def rhs_call(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                 first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
-                 base, t0, p0, pdot, L_rotor, tau):
-        """`rhs_kernel` (same arguments, C-contiguous) through its compiled C function at
-        flags[FLAG_KERNEL]: for compiled loops, which then do not compile the kernel in."""
-        call_address(flags[FLAG_KERNEL], kernel_addresses(
-            t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia,
-            lam_speed, torque_body, torque_axis, torque_A, flags, base, t0, p0, pdot, L_rotor, tau))
-
-    def _null_entry(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                    first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base,
-                    p0, pdot, L_rotor, tau, t0, size, nwork, n, N, nt):
+    def _null_entry(t, y, ydot, size, descriptor):
         """`_kernel_entry`'s signature, y' = 0: compiled as a C function (`null_kernel_address`)."""
         v = vector_at(ydot, size, np.float64)
         for k in range(size):
@@ -1219,16 +1281,12 @@ else:  # plain Python: the heavy path and the kernel called directly
         rhs_kernel(*arguments)
 
 
-#: `_kernel_entry`'s arguments after t: the addresses of y, ydot and the kernel's 20 arrays (all
-#: but t0), then t0, then the sizes of y, the workspace, n, N, nt
-KERNEL_ADDRESSES, KERNEL_SIZES = 22, 5
-
-
 def kernel_signature(*extra):
-    """The numba signature of the kernel's C function (`_kernel_entry`), `extra` argument types
-    after it (fast_canonical's field adds four)."""
+    """The numba signature of the kernel's C function (`_kernel_entry`: t, the addresses of y and
+    ydot, their size, the descriptor's address), `extra` argument types after it (fast_canonical's
+    field adds four)."""
     f, i = numba.types.float64, numba.types.int64
-    return numba.types.void(f, *(i,) * KERNEL_ADDRESSES, f, *(i,) * KERNEL_SIZES, *extra)
+    return numba.types.void(f, i, i, i, i, *extra)
 
 
 def heavy_elimination_address() -> int:
@@ -1316,22 +1374,25 @@ def workspace_views(work, n, N, nt):
 
 
 @_njit
-def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
-                flags, base, t0, p0, pdot, L_rotor, tau):
-    """y' (size,) at (t, y) into ydot: what system.ChainODE.rhs computes.
+def rhs_kernel(t, y, ydot, model, data, inputs):
+    """y' (size,) at (t, y) into ydot: what system.ChainODE.rhs computes, for the ChainModel
+    `model` (`chain_model`), the Workspace `data` (its scratch: n WORK_PER_BODY + N
+    WORK_PER_COLUMN + nt + WORK_FIXED floats; nothing is allocated per call) and the
+    HeldInputs `inputs`.
 
-    work: float workspace of n WORK_PER_BODY + N WORK_PER_COLUMN + nt + WORK_FIXED (`workspace`);
-    nothing is allocated per call.
-    flags (int, FLAGS_SIZE): base type, has gravity, has lambda (rotors), i_r0, i_vel, i_kappa,
-    N, the heavy path's address (FLAG_HEAVY), this kernel's C function's (FLAG_KERNEL: for
-    the compiled loops, `rhs_call`).
-    base (float, 7): moving-base amplitude (3), W = 2 pi f, gravity (3).
+    model.flags (int, FLAGS_SIZE): base type, has gravity, has lambda (rotors), i_r0, i_vel,
+    i_kappa, N, the heavy path's address (FLAG_HEAVY), this kernel's C function's (FLAG_KERNEL:
+    for the compiled loops, `rhs_call`). model.base (float, 7): moving-base amplitude (3),
+    W = 2 pi f, gravity (3).
     Held inputs: torque-rotor spins p_i = p0_i + pdot_i (t - t0) (eq 29), their torques
     L_rotor, the generalized forces tau (N,) of the columns (hinge commands, eq 51).
     A stateful model (flags[FLAG_ACTUATORS]) reads the spins from y instead and applies the
     commands through its actuators' speed cut and friction (`_actuate`).
     """
+    (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
+     torque_axis, torque_A, flags, base) = model
+    work = data.work
+    t0, p0, pdot, L_rotor, tau = inputs.t0[0], inputs.p0, inputs.pdot, inputs.L_rotor, inputs.tau
     base_type, has_gravity, has_lam = flags[0], flags[1] != 0, flags[2] != 0
     i_r0, i_vel, i_kap, N = flags[3], flags[4], flags[5], flags[6]
     base_amplitude, base_omega, gravity = base[0:3], base[3], base[4:7]
@@ -1437,9 +1498,9 @@ def normalize_quaternions(y, i_q0, nq):
             y[i + a] /= nrm
 
 
-# --- the kernel's arguments -------------------------------------------------------------------
-def model_arguments(model: Model) -> tuple:
-    """The model as `rhs_kernel` reads it: the arguments from `is_hinge` to `base` (15 arrays).
+# --- the kernel's records --------------------------------------------------------------------
+def chain_model(model: Model) -> ChainModel:
+    """The model as the compiled kernels read it (see ChainModel).
 
     Per body: the y index of its quaternion (spherical) or of phi_k (hinge) (`qrow`); the first
     velocity column of its own joint (`own_col`); the range of all its columns (`col_start`,
@@ -1474,41 +1535,50 @@ def model_arguments(model: Model) -> tuple:
     def f64(a, shape):
         return np.ascontiguousarray(np.asarray(a, dtype=np.float64).reshape(shape))
 
-    return (
-        np.ascontiguousarray(m.is_hinge, dtype=np.bool_),
-        qrow,
-        own_col,
-        col_start,
-        f64(m.hinge_axis, (n, 3)),
-        f64(m.s, (n, 3)),
-        f64(m.mass, (n,)),
-        f64(m.first_moment, (n, 3)),
-        f64(m.inertia, (n, 3, 3)),
-        f64(np.zeros((n, 3)) if m.lam_speed is None else m.lam_speed, (n, 3)),
-        np.ascontiguousarray(m.torque_body, dtype=np.int64),
-        f64(m.torque_axis, (nt, 3)),
-        f64(m.torque_A, (nt,)),
-        flags,
-        base,
+    return ChainModel(
+        is_hinge=np.ascontiguousarray(m.is_hinge, dtype=np.bool_),
+        qrow=qrow,
+        own_col=own_col,
+        col_start=col_start,
+        hinge_axis=f64(m.hinge_axis, (n, 3)),
+        s=f64(m.s, (n, 3)),
+        mass=f64(m.mass, (n,)),
+        first_moment=f64(m.first_moment, (n, 3)),
+        inertia=f64(m.inertia, (n, 3, 3)),
+        lam_speed=f64(np.zeros((n, 3)) if m.lam_speed is None else m.lam_speed, (n, 3)),
+        torque_body=np.ascontiguousarray(m.torque_body, dtype=np.int64),
+        torque_axis=f64(m.torque_axis, (nt, 3)),
+        torque_A=f64(m.torque_A, (nt,)),
+        flags=flags,
+        base=base,
     )
 
 
-def input_arguments(model: Model, t0: float, p0, hinge_tau, L_rotor) -> tuple:
-    """The held inputs as `rhs_kernel` reads them: (t0, p0 (nt,), pdot = L / A (nt,),
-    L (nt,), tau (N,)); None stands for zeros."""
+def held_inputs(model: Model, t0: float = 0.0, p0=None, hinge_tau=None, L_rotor=None) -> HeldInputs:
+    """New held inputs of `model` (see HeldInputs and `hold`); None stands for zeros."""
+    nt = len(model.torque_body)
+    inputs = HeldInputs(np.zeros(1), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(model.N))
+    hold(inputs, model, t0, p0, hinge_tau, L_rotor)
+    return inputs
+
+
+def hold(inputs: HeldInputs, model: Model, t0: float, p0, hinge_tau, L_rotor) -> None:
+    """Write into `inputs`, in place: t0, the spins p0 (nt,) at t0, pdot = L / A, the torques
+    L_rotor (nt,), tau (N,) with the hinge moments in the hinges' columns; None stands for
+    zeros."""
     m = model
     nt = len(m.torque_body)
-    p0_ = np.zeros(nt) if p0 is None else np.array(p0, dtype=np.float64).reshape(nt)
-    L = np.zeros(nt) if L_rotor is None else np.array(L_rotor, dtype=np.float64).reshape(nt)
-    pdot = L / m.torque_A if nt else np.zeros(0)
-    tau = np.zeros(m.N)
+    inputs.t0[0] = float(t0)
+    inputs.p0[:] = 0.0 if p0 is None else np.asarray(p0, dtype=np.float64).reshape(nt)
+    inputs.L_rotor[:] = 0.0 if L_rotor is None else np.asarray(L_rotor, dtype=np.float64).reshape(nt)
+    inputs.pdot[:] = inputs.L_rotor / m.torque_A if nt else 0.0
+    inputs.tau[:] = 0.0
     if hinge_tau is not None:
-        tau[m.col_hinge] = hinge_tau  # (51): e^k . L^k = L_k
-    return float(t0), p0_, pdot, L, tau
+        inputs.tau[m.col_hinge] = hinge_tau  # (51): e^k . L^k = L_k
 
 
-def workspace(model: Model) -> np.ndarray:
-    """The float workspace of `rhs_kernel`: n WORK_PER_BODY + N WORK_PER_COLUMN
+def scratch(model: Model) -> np.ndarray:
+    """The float scratch of `rhs_kernel`: n WORK_PER_BODY + N WORK_PER_COLUMN
     + nt WORK_PER_ROTOR + WORK_FIXED (nt torque rotors). A stateful model (`Model.stateful`)
     appends its actuators' parameters, ACTUATOR_PARAMETERS per torque rotor then per body
     (hinges'; zero on spherical bodies), and the scratch of the applied torques (nt + N)."""
@@ -1522,6 +1592,37 @@ def workspace(model: Model) -> np.ndarray:
     hinge[:, 5] = 1.0
     hinge[m.hinge_bodies] = _axis_parameters(act.hinge)
     return np.concatenate((np.zeros(size), _axis_parameters(act.rotor).ravel(), hinge.ravel(), np.zeros(nt + m.N)))
+
+
+def workspace(model: Model, chain: ChainModel, inputs: HeldInputs) -> Workspace:
+    """A new workspace for `chain` (of `model`) and `inputs`: its scratch, and its descriptor of
+    all three (`describe`). The three stay bound: pass them together."""
+    data = Workspace(scratch(model), np.zeros(DESCRIPTOR_SIZE, dtype=np.int64))
+    describe(chain, data, inputs)
+    return data
+
+
+def describe(chain: ChainModel, data: Workspace, inputs: HeldInputs) -> None:
+    """Write into data.descriptor where the kernel's C function finds `chain`, `data` and
+    `inputs` (the one place its layout is written; `records_at` reads it): the arrays'
+    addresses, n, N, nt, the scratch's size; the evaluations counted start at 0. The arrays
+    must be C-contiguous and stay alive and in place as long as the descriptor is used."""
+    arrays = (*chain, data.work, *inputs)
+    if not all(a.flags.c_contiguous for a in arrays):
+        raise ValueError("the kernel's arrays must be C-contiguous")
+    d = data.descriptor
+    d[D_MODEL:D_MODEL + len(chain)] = [a.ctypes.data for a in chain]
+    d[D_WORK] = data.work.ctypes.data
+    d[D_INPUTS:D_INPUTS + len(inputs)] = [a.ctypes.data for a in inputs]
+    d[D_N], d[D_NCOL], d[D_NT] = len(chain.mass), len(inputs.tau), len(chain.torque_body)
+    d[D_NWORK], d[D_NFEV] = len(data.work), 0
+
+
+def records(model: Model) -> tuple[ChainModel, Workspace, HeldInputs]:
+    """(model, data, inputs) of `model` as the compiled kernels take them, bound together, the
+    inputs held at zero from t0 = 0 (`hold` writes others in place)."""
+    chain, inputs = chain_model(model), held_inputs(model)
+    return chain, workspace(model, chain, inputs), inputs
 
 
 def _axis_parameters(limits) -> np.ndarray:

@@ -129,23 +129,8 @@ def _euler(Rs, ws, k, down, singular, angs, rates):
     rates[k, 2] = dphi
 
 
-def _held_t0_index() -> int:
-    """Where the held t0 sits among fast.rhs_kernel's arguments after (t, y, ydot)."""
-    import inspect
-
-    kernel = getattr(fast.rhs_kernel, "py_func", fast.rhs_kernel)
-    return list(inspect.signature(kernel).parameters).index("t0") - 3
-
-
-#: the held inputs (t0, p0, pdot, L_rotor, tau) start here in the arguments of fast.rhs_kernel
-#: after (t, y, ydot) (FastChainODE.kernel_arguments())
-HELD_T0 = _held_t0_index()
-
-
-def held_inputs(model, t0: float, p0, hinge_tau, L_rotor) -> tuple:
-    """(t0, p0, pdot, L_rotor, tau) as fast.rhs_kernel reads them (fast.input_arguments), for a
-    caller that passes the inputs of the kernel itself instead of holding them in the system."""
-    return fast.input_arguments(model, t0, p0, hinge_tau, L_rotor)
+#: the held inputs written in place by a caller that holds its own (the Simulator's publications)
+hold = fast.hold
 
 
 #: bits of `want` (publication_kernel): the parts computed beyond the joint states
@@ -197,9 +182,7 @@ SCRATCH_PER_BODY, SCRATCH_FIXED = 51, 24
 
 
 @_njit_uncounted
-def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                       first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
-                       base, t0, p0, pdot, L_rotor, tau,
+def publication_kernel(t, y, ydot, model, data, inputs,
                        base_position, down, singular, speed_body, speed_axis, speed_A, speed_rate,
                        want, joint_kind, joint_ref,
                        R, w, vO, O, quat, euler, euler_rate, L_speed, wrench_force, wrench_moment, inv,
@@ -208,8 +191,8 @@ def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hin
     poses and invariants when `want` says so; written into the output arrays and, for each
     copy c, into dst at the slots at_...[c] (any flat float64 buffer: the messages' bytes).
 
-    The arguments up to `tau` are those of fast.rhs_kernel (its y' in ydot when it runs: only
-    for wrenches or speed rotors, which need the accelerations). base_position (3,), down
+    model, data, inputs: fast.rhs_kernel's records (its y' in ydot when it runs: only for
+    wrenches or speed rotors, which need the accelerations). base_position (3,), down
     (3, 3) world_R_down of the Euler angles, singular: the Euler singularity threshold
     (rotations.EULER_SINGULAR_SIN); speed rotors: body (nv,), axis (nv, 3), A (nv,), rate
     (nv,). want: WANT_* bits. joint_kind, joint_ref (J,): what each joint-state entry is
@@ -227,6 +210,10 @@ def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hin
     and the poses and wrenches asked for, are all checked when written: the first field checked,
     wrenches, then poses, then joint states, holding one).
     """
+    (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
+     torque_axis, torque_A, flags, base) = model
+    work = data.work
+    t0, p0, pdot, L_rotor, tau = inputs.t0[0], inputs.p0, inputs.pdot, inputs.L_rotor, inputs.tau
     base_type, has_gravity, has_lam = flags[0], flags[1] != 0, flags[2] != 0
     i_r0, i_vel, i_kap, N = flags[3], flags[4], flags[5], flags[6]
     amp, W, gravity = base[0:3], base[3], base[4:7]
@@ -239,9 +226,7 @@ def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hin
     (R_k, s_w, hk, Aw, e_w, w_k, vO_k, c, _, _, _, lam_b, _, S, _, _, _, p,
      _, _, _, _, _, _, _) = fast.workspace_views(work, n, N, nt)
     if do_wrench or nv > 0:  # the accelerations: u' into ydot; the kinematics, p (29), S as above
-        fast.rhs_call(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                        first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
-                        base, t0, p0, pdot, L_rotor, tau)
+        fast.rhs_call(t, y, ydot, model, data, inputs)
     else:
         for i in range(nt):
             p[i] = p0[i] + pdot[i] * (t - t0)  # (29)

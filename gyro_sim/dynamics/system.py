@@ -155,12 +155,13 @@ class FastChainODE:
         self.data = self._ref.data
         self.size = model.size
         self.quat_index = model.i_quat
-        # the kernel's arrays packed once in one buffer (fast_entry): `rhs` passes it, four
-        # arguments a call; the compiled loops get views of the same buffer
-        inputs = fast.input_arguments(model, self._ref.t0, self._ref.p0, None, None)
-        self._buf = fast_entry.pack(fast.workspace(model), fast.model_arguments(model), inputs)
-        self._words = self._buf.view(np.int64)  # nfev: the word the compiled entry counts in
-        self._args = fast_entry.kernel_arguments(self._buf)
+        # the kernel's records, bound together (the workspace's descriptor finds all three):
+        # `rhs` passes the descriptor's address, four arguments a call; the compiled loops get
+        # the records
+        chain = fast.chain_model(model)
+        inputs = fast.held_inputs(model, self._ref.t0, self._ref.p0, None, None)
+        self._records = (chain, fast.workspace(model, chain, inputs), inputs)
+        self._descriptor = self._records[1].descriptor  # nfev: the word the compiled entry counts in
         self._shape = (model.size,)
         self.rhs = self._make_rhs()
         self._i_q0 = int(model.i_quat[0, 0]) if len(model.sph_bodies) else 0
@@ -186,10 +187,7 @@ class FastChainODE:
     def hold(self, t0: float, p0: np.ndarray | None, hinge_tau, L_rotor) -> None:
         """Hold the inputs from t0 on (the zero-order hold of `Simulator.advance`)."""
         self._ref.hold(t0, p0, hinge_tau, L_rotor)
-        inputs = fast.input_arguments(self.model, t0, p0, hinge_tau, L_rotor)
-        fast_entry.set_inputs(self._buf, inputs)  # in place: the views see them
-        i = fast_entry.T0_ARGUMENT  # the held t0 is a float: a new tuple
-        self._args = (*self._args[:i], inputs[0], *self._args[i + 1:])
+        fast.hold(self._records[2], self.model, t0, p0, hinge_tau, L_rotor)  # in place
 
     @property
     def inputs_version(self) -> int:
@@ -197,11 +195,19 @@ class FastChainODE:
         return self._ref.inputs_version
 
     def kernel_arguments(self) -> tuple:
-        """The arguments of :func:`gyro_sim.dynamics.kernel.rhs_kernel` after (t, y, out), with the
-        inputs held now (`work`, the model's arrays, the held inputs): for compiled loops of
-        other modules that call the kernel directly. Valid until the next `hold` (which
-        writes the new inputs into the same arrays)."""
-        return self._args
+        """The arguments of :func:`gyro_sim.dynamics.kernel.rhs_kernel` after (t, y, out): its
+        records (model, data, inputs), the inputs held now, for compiled loops of other modules
+        that call the kernel. The same objects from call to call (`hold` writes the new inputs
+        into the same arrays)."""
+        return self._records
+
+    def records_with_own_inputs(self) -> tuple:
+        """The kernel's records (as `kernel_arguments`) with held inputs of their own (held at
+        zero; written with gyro_sim.dynamics.outputs.hold) and a workspace for them: for a
+        caller that evaluates the same model under other inputs than those held here."""
+        chain = self._records[0]
+        inputs = fast.held_inputs(self.model)
+        return chain, fast.workspace(self.model, chain, inputs), inputs
 
     def quaternion_block(self) -> tuple[int, int]:
         """(i_q0, nq): the quaternions are y[i_q0 + 4 j : i_q0 + 4 j + 4], j < nq (for
@@ -223,11 +229,11 @@ class FastChainODE:
     def nfev(self) -> int:
         """Evaluations of y' counted (rhs, the compiled loops that add
         theirs); settable (the integrators add to it, reset or restore it)."""
-        return int(self._words[fast_entry.H_NFEV])
+        return int(self._descriptor[fast.D_NFEV])
 
     @nfev.setter
     def nfev(self, value: int) -> None:
-        self._words[fast_entry.H_NFEV] = value
+        self._descriptor[fast.D_NFEV] = value
 
     def _make_rhs(self):
         """`rhs(t, y, out=None)`: y' (size,) at (t, y); with `out`, by the numpy reference, which
@@ -239,12 +245,17 @@ class FastChainODE:
         nfev; its dtype and dimensions are checked here, as the entry point converts without
         checking them. Another y (dtype, layout) goes through numba's dispatcher
         (`_rhs_other`): correct too, but it compiles one more specialization of the kernel."""
-        buf, size, other = self._buf, self.size, self._rhs_other
-        address = buf.ctypes.data  # the entry takes the address; `other` (self) keeps buf alive
+        size, other = self.size, self._rhs_other
+        address = self._descriptor.ctypes.data  # the entry takes the address; `other` (self) keeps it alive
 
         def first(t, y, ydot, address):
             nonlocal entry
             entry = fast_entry.entry_point()
+            if entry is None:  # nothing compiles (NUMBA_DISABLE_JIT): the kernel in Python
+
+                def entry(t, y, ydot, address):
+                    ydot[:] = other(t, y, None)
+
             entry(t, y, ydot, address)
 
         entry = first
@@ -265,13 +276,13 @@ class FastChainODE:
     def _rhs_other(self, t: float, y, out: dyn.Evaluation | None) -> np.ndarray:
         """rhs for what the compiled entry point does not take: outputs (`out`), another dtype
         or layout of y."""
-        self._words[fast_entry.H_NFEV] += 1
+        self._descriptor[fast.D_NFEV] += 1
         if out is not None:
             return self._ref.rhs(t, y, out)
         if np.shape(y) != self._shape:  # the kernel does not check its indices
             raise ValueError(f"y must have shape ({self.size},), got {np.shape(y)}")
         ydot = _empty(self.size)
-        fast.rhs_kernel(float(t), y, ydot, *self._args)
+        fast.rhs_kernel(float(t), y, ydot, *self._records)
         return ydot
 
     def outputs(self, t: float, y: np.ndarray) -> dict[str, np.ndarray]:
@@ -300,7 +311,7 @@ class FastChainODE:
         if y.shape != (self.size,):
             raise ValueError(f"y must have shape ({self.size},), got {y.shape}")
         joints, scatter = self._no_publication
-        self._outputs(float(t), y, out["ydot"], *self._args, *self._speed_args, int(fast_outputs.WANT_ALL),
+        self._outputs(float(t), y, out["ydot"], *self._records, *self._speed_args, int(fast_outputs.WANT_ALL),
                       *joints, out["R"], out["w"], out["vO"], out["O"], out["quat"], out["euler"], out["euler_rate"],
                       out["L_speed"], out["wrench_force"], out["wrench_moment"], out["inv"], *scatter)
         return out

@@ -35,7 +35,6 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import numpy as np
 
 from gyro_sim.integrators.dop853 import kernels as dop853_kernels
 from gyro_sim.dynamics import kernel as fast
@@ -91,9 +90,7 @@ H_Y1, H_Y12, H_F12 = range(3)
 def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, D, control,
                    initial, i_q0, nq, f, K, ys, y_new, y_old, F, bad, trace, real, status,
                    detect, counters, attempts, window, cost, held, held_at,
-                   work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
-                   inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base,
-                   ht0, p0, pdot, L_rotor, tau):
+                   model, data, inputs):
     """DOP853 from (t0, y) to exactly t1 > t0, y (size,) in place; Y (m, size) the states at
     te (m,), sorted within [t0, t1].
 
@@ -112,8 +109,8 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
     memory, the error norm and size of the last accepted step, its start; status
     (STATUS_SIZE,) the status (DONE, COLLAPSED, ...), rhs evaluations, accepted and rejected
     steps, outputs filled, whether f = rhs(y_new) is known, whether the last failing step had
-    a non-finite trial, the steps traced, the reason of a SWITCH. The arguments from `work`
-    on are those of fast.rhs_kernel (`ht0` its `t0`, the start of the hold).
+    a non-finite trial, the steps traced, the reason of a SWITCH. model, data, inputs:
+    fast.rhs_kernel's records.
 
     Detection mode (detect not empty), the "auto" method's dop853 phase
     (gyro_sim.integrators.auto.Auto, whose Python loop over DOP853's public single step
@@ -142,9 +139,7 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
     status[S_NONFINITE] = 0
     status[S_STATUS] = DONE
     status[S_REASON] = 0
-    fast.rhs_call(t0, y, f, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                    first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
-                    flags, base, ht0, p0, pdot, L_rotor, tau)
+    fast.rhs_call(t0, y, f, model, data, inputs)
     nfev += 1
     if not dop_finite(f):
         status[S_STATUS] = INITIAL_RHS_NONFINITE
@@ -152,9 +147,7 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
     elif h_mem <= 0.0:  # the starting step (AdaptiveIntegrator.begin), F[0] and F[1] as scratch
         sc, f1 = F[0], F[1]
         h0, d1 = dop_initial_probe(y, f, rtol, atol, t1 - t0, initial, sc, ys)
-        fast.rhs_call(t0 + h0, ys, f1, work, is_hinge, qrow, own_col, col_start, hinge_axis, s,
-                        mass, first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
-                        flags, base, ht0, p0, pdot, L_rotor, tau)
+        fast.rhs_call(t0 + h0, ys, f1, model, data, inputs)
         nfev += 1
         h_mem = dop_initial_step(f, f1, sc, h0, d1, t1 - t0, max_step, ORDER_OF_ESTIMATOR, initial)
     if detecting and status[S_STATUS] == DONE:  # the last call's last step, if this continues it
@@ -189,9 +182,7 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
             K[0, :] = f
             for st in range(1, N_STAGES):
                 dop_stage_state(y, K, A, st, h, ys)
-                fast.rhs_call(t + C[st] * h, ys, K[st], work, is_hinge, qrow, own_col, col_start,
-                                hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-                                torque_axis, torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
+                fast.rhs_call(t + C[st] * h, ys, K[st], model, data, inputs)
                 nfev += 1
             dop_update(y, K, A[N_STAGES, :N_STAGES], h, y_new)
             err = dop_error_norm(K, E5, E3, h, y, y_new, rtol, atol)
@@ -215,9 +206,7 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
         fast.normalize_quaternions(y_new, i_q0, nq)
         status[S_F_NEW] = 0
         if t_new < t1:
-            fast.rhs_call(t_new, y_new, f, work, is_hinge, qrow, own_col, col_start, hinge_axis,
-                            s, mass, first_moment, inertia, lam_speed, torque_body, torque_axis,
-                            torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
+            fast.rhs_call(t_new, y_new, f, model, data, inputs)
             nfev += 1
             if not dop_finite(f):
                 status[S_STATUS] = ACCEPTED_RHS_NONFINITE
@@ -247,9 +236,7 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
             k += 1
         if k > j:
             if status[S_F_NEW] == 0:
-                fast.rhs_call(t, y_new, f, work, is_hinge, qrow, own_col, col_start, hinge_axis,
-                                s, mass, first_moment, inertia, lam_speed, torque_body,
-                                torque_axis, torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
+                fast.rhs_call(t, y_new, f, model, data, inputs)
                 nfev += 1
                 if not dop_finite(f):
                     status[S_STATUS] = ACCEPTED_RHS_NONFINITE
@@ -263,10 +250,7 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
                     held_at[H_T] = math.nan
             for st in range(N_STAGES + 1, N_EXTENDED):
                 dop_stage_state(y_old, K, A, st, last_step, ys)
-                fast.rhs_call(t_old + C[st] * last_step, ys, K[st], work, is_hinge, qrow, own_col,
-                                col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed,
-                                torque_body, torque_axis, torque_A, flags, base, ht0, p0, pdot,
-                                L_rotor, tau)
+                fast.rhs_call(t_old + C[st] * last_step, ys, K[st], model, data, inputs)
                 nfev += 1
             dop_dense_coefficients(y_old, y_new, K, D, last_step, F)
             dop_dense_eval(F, y_old, t_old, last_step, te[j:k], Y[j:k])
@@ -317,23 +301,13 @@ def _equal(a, b):
 _LOOPS: dict[tuple, jit.Direct] = {}
 
 
-def _type_key(a) -> tuple:
-    """What numba's type of an argument depends on: dtype, dimensions, layout (as numba.typeof
-    reads it: C if C-contiguous, else F if Fortran-contiguous, else A), writeability of an
-    array; the Python type of a scalar."""
-    if isinstance(a, np.ndarray):
-        layout = "C" if a.flags.c_contiguous else ("F" if a.flags.f_contiguous else "A")
-        return (a.dtype.str, a.ndim, layout, a.flags.writeable)
-    return (type(a),)
-
-
 def loop_for(kernel_arguments: tuple) -> jit.Direct:
     """:func:`dop853_advance` called through its compiled entry point, for a system whose
     kernel arguments (`FastChainODE.kernel_arguments()`) have the types of these: one per
     process and combination of types (the first call dispatches, the later ones go straight
     to the entry point). The caller passes the other arguments with fixed types: float64
     C-contiguous arrays of fixed dimensions, Python floats and ints."""
-    key = tuple(_type_key(a) for a in kernel_arguments)
+    key = jit.type_key(kernel_arguments)
     loop = _LOOPS.get(key)
     if loop is None:
         loop = _LOOPS[key] = jit.Direct(dop853_advance)

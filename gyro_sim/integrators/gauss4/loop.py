@@ -61,7 +61,7 @@ def _field(t, y, out, kargs):
     """out = f(t, y): the chain's kernel (fast.rhs_kernel) for a FastChainODE's arguments, the
     canonical one (fast_canonical.canonical_kernel: gauss4s) for a FastCanonicalChain's, which
     are longer; chosen when the march is compiled for the arguments' types."""
-    if len(kargs) == fast_canonical.CHAIN_ARGUMENTS:
+    if len(kargs) == fast_canonical.CHAIN_RECORDS:
         fast.rhs_call(t, y, out, *kargs)
     else:
         fast_canonical.canonical_call(t, y, out, *kargs)
@@ -72,7 +72,7 @@ if jit.available():
 
     @overload(_field, inline="always")
     def _field_typed(t, y, out, kargs):
-        if len(kargs) == fast_canonical.CHAIN_ARGUMENTS:
+        if len(kargs) == fast_canonical.CHAIN_RECORDS:
             return lambda t, y, out, kargs: fast.rhs_call(t, y, out, *kargs)
         return lambda t, y, out, kargs: fast_canonical.canonical_call(t, y, out, *kargs)
 

@@ -33,9 +33,7 @@ _njit = jit.njit_with_dependencies(*DEPENDENCIES)
 
 @_njit
 def lie_march(t0, h, nsteps, y, ALPHA, BASE, BETA, C, Y, F, W, V, qi, li, i_q0, nq,
-              work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
-              inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base,
-              ht0, p0, pdot, L_rotor, tau):
+              model, data, inputs):
     """`nsteps` CF4 steps of size h from (t0, y), y (size,) in place; step k starts at
     t0 + k h. ALPHA (stages, stages), BASE (stages,) int, BETA (3, stages) = (B, BETA1, BETA2),
     C (stages,): the method's coefficients (lie_kernels); qi (nq, 4), li (nl,): the quaternion
@@ -44,8 +42,8 @@ def lie_march(t0, h, nsteps, y, ALPHA, BASE, BETA, C, Y, F, W, V, qi, li, i_q0, 
 
     After each step: quaternions y[i_q0 + 4 j : +4], j < nq, renormalised; the state checked.
     Returns the number of steps completed with a finite state: nsteps, or k < nsteps when step
-    k left a non-finite state (y is then that state). The arguments from `work` on are those of
-    fast.rhs_kernel (`ht0` its `t0`, the start of the hold).
+    k left a non-finite state (y is then that state). model, data, inputs: fast.rhs_kernel's
+    records.
     """
     stages = C.shape[0]
     hALPHA = ALPHA * h
@@ -53,15 +51,11 @@ def lie_march(t0, h, nsteps, y, ALPHA, BASE, BETA, C, Y, F, W, V, qi, li, i_q0, 
     for k in range(nsteps):
         t = t0 + k * h
         lk.lie_start(y, Y)
-        fast.rhs_call(t, Y[0], F, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                        first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
-                        flags, base, ht0, p0, pdot, L_rotor, tau)
+        fast.rhs_call(t, Y[0], F, model, data, inputs)
         lk.lie_field(Y, F, 0, qi, li, W, V)
         for st in range(1, stages):
             lk.lie_stage(Y, W, V, hALPHA, st, BASE[st], qi, li)
-            fast.rhs_call(t + C[st] * h, Y[st], F, work, is_hinge, qrow, own_col, col_start,
-                            hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-                            torque_axis, torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
+            fast.rhs_call(t + C[st] * h, Y[st], F, model, data, inputs)
             lk.lie_field(Y, F, st, qi, li, W, V)
         lk.lie_update(y, W, V, hBETA, qi, li)
         fast.normalize_quaternions(y, i_q0, nq)

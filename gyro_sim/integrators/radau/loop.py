@@ -43,7 +43,6 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import numpy as np
 
 from gyro_sim.integrators.dop853 import kernels as dop853_kernels
 from gyro_sim.dynamics import kernel as fast
@@ -113,9 +112,7 @@ FLAGS_SIZE = 16
 
 @_njit
 def _fd_jacobian(t, y, f, J, fd_rel_step, fd_min_scale, delta, ys, fj,
-                 work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
-                 inertia, lam_speed, torque_body, torque_axis, torque_A, flags_k, base,
-                 ht0, p0, pdot, L_rotor, tau):
+                 model, data, inputs):
     """J (size, size) = d rhs / dy at (t, y) by forward differences around f = rhs(t, y)
     (Radau._jacobian: rad_fd_delta, one rhs evaluation and rad_fd_column a column); delta, ys,
     fj (size,) scratch. Returns the rhs evaluations (size)."""
@@ -124,9 +121,7 @@ def _fd_jacobian(t, y, f, J, fd_rel_step, fd_min_scale, delta, ys, fj,
     ys[:] = y
     for c in range(n):
         ys[c] = y[c] + delta[c]
-        fast.rhs_call(t, ys, fj, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                        first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
-                        flags_k, base, ht0, p0, pdot, L_rotor, tau)
+        fast.rhs_call(t, ys, fj, model, data, inputs)
         rad_fd_column(J, c, fj, f, delta[c])
         ys[c] = y[c]
     return n
@@ -138,9 +133,7 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
                   f, J, LU_real, piv_real, LU_complex, piv_complex, Z0, Z, W, dW, F, ys, f_real,
                   f_complex, scale, delta, ZE, err, fe, y_new, y_old, y_bad, bad, Qt, sol_y, y_end,
                   trace, mem, flags, counters, window, cost, handback, easy, power,
-                  work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
-                  inertia, lam_speed, torque_body, torque_axis, torque_A, flags_k, base,
-                  ht0, p0, pdot, L_rotor, tau):
+                  model, data, inputs):
     """Radau IIA from (t0, y) to exactly t1 > t0, y (size,) in place; Y (m, size) the states
     at te (m,), sorted within [t0, t1].
 
@@ -156,8 +149,8 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
     slots). Scratch, left as the Python driver leaves its own: Z0, Z, W, dW, F (3, size),
     ys, scale, delta, ZE, err, fe, y_new, y_old (size,), f_real (size,), f_complex (size,
     complex); y_bad (size,) and bad (3,): the state or stages of the last non-finite trial.
-    trace (k,): the ends of the first k accepted steps (k may be 0). The arguments from `work`
-    on are those of fast.rhs_kernel (`flags_k` its `flags`, `ht0` its `t0`).
+    trace (k,): the ends of the first k accepted steps (k may be 0). model, data, inputs:
+    fast.rhs_kernel's records.
 
     Detection mode (handback not empty), the "auto" method's radau phase
     (gyro_sim.integrators.auto.Auto, whose Python loop over Radau's public single step
@@ -203,9 +196,7 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
         Y[j, :] = y
         j += 1
     # --- begin: a fresh rhs, the starting step, is this call a continuation?
-    fast.rhs_call(t0, y, f, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                    first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
-                    flags_k, base, ht0, p0, pdot, L_rotor, tau)
+    fast.rhs_call(t0, y, f, model, data, inputs)
     nfev += 1
     if not rad_finite(f):
         status = INITIAL_RHS_NONFINITE
@@ -215,9 +206,7 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
             sc, f1 = F[0], F[1]
             h0, d1 = dop_initial_probe(y, f, rtol, atol, t1 - t0, initial, sc, ys)
             if h0 > 0.0:
-                fast.rhs_call(t0 + h0, ys, f1, work, is_hinge, qrow, own_col, col_start,
-                                hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-                                torque_axis, torque_A, flags_k, base, ht0, p0, pdot, L_rotor, tau)
+                fast.rhs_call(t0 + h0, ys, f1, model, data, inputs)
                 nfev += 1
                 h_mem = dop_initial_step(f, f1, sc, h0, d1, t1 - t0, max_step, ORDER_OF_ESTIMATOR,
                                          initial)
@@ -253,10 +242,7 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
         rate = math.nan
         error_norm = math.nan
         if not has_J or recompute_jac:  # the Jacobian at (t, y) (Radau._jacobian)
-            nfev += _fd_jacobian(t, y, f, J, fd_rel_step, fd_min_scale, delta, ys, fe, work,
-                                 is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                                 first_moment, inertia, lam_speed, torque_body, torque_axis,
-                                 torque_A, flags_k, base, ht0, p0, pdot, L_rotor, tau)
+            nfev += _fd_jacobian(t, y, f, J, fd_rel_step, fd_min_scale, delta, ys, fe, model, data, inputs)
             njev += 1
             has_J = True
             has_lu = False
@@ -292,10 +278,7 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
                     n_iter = k + 1
                     for st in range(3):
                         rad_stage_state(y, Z, st, ys)
-                        fast.rhs_call(t + h * C[st], ys, F[st], work, is_hinge, qrow, own_col,
-                                        col_start, hinge_axis, s, mass, first_moment, inertia,
-                                        lam_speed, torque_body, torque_axis, torque_A, flags_k,
-                                        base, ht0, p0, pdot, L_rotor, tau)
+                        fast.rhs_call(t + h * C[st], ys, F[st], model, data, inputs)
                         nfev += 1
                     if not rad_finite_rows(F, bad):
                         nonfinite = NONFINITE_STAGES
@@ -314,10 +297,7 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
                 if converged or current_jac:
                     break
                 # failed with an old Jacobian: a new one at (t, y), the same step again
-                nfev += _fd_jacobian(t, y, f, J, fd_rel_step, fd_min_scale, delta, ys, fe, work,
-                                     is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                                     first_moment, inertia, lam_speed, torque_body, torque_axis,
-                                     torque_A, flags_k, base, ht0, p0, pdot, L_rotor, tau)
+                nfev += _fd_jacobian(t, y, f, J, fd_rel_step, fd_min_scale, delta, ys, fe, model, data, inputs)
                 njev += 1
                 has_lu = False
                 current_jac = True
@@ -334,9 +314,7 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
             error_norm = rad_error(LU_real, piv_real, err, scale)
             if rejected and error_norm > 1.0:
                 rad_add(y, err, ys)
-                fast.rhs_call(t, ys, fe, work, is_hinge, qrow, own_col, col_start, hinge_axis,
-                                s, mass, first_moment, inertia, lam_speed, torque_body,
-                                torque_axis, torque_A, flags_k, base, ht0, p0, pdot, L_rotor, tau)
+                fast.rhs_call(t, ys, fe, model, data, inputs)
                 nfev += 1
                 rad_add(fe, ZE, err)
                 error_norm = rad_error(LU_real, piv_real, err, scale)
@@ -375,9 +353,7 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
         has_sol = True
         f_new = False
         if t_new < t1:
-            fast.rhs_call(t_new, y_new, f, work, is_hinge, qrow, own_col, col_start, hinge_axis,
-                            s, mass, first_moment, inertia, lam_speed, torque_body, torque_axis,
-                            torque_A, flags_k, base, ht0, p0, pdot, L_rotor, tau)
+            fast.rhs_call(t_new, y_new, f, model, data, inputs)
             nfev += 1
             if not rad_finite(f):
                 status = ACCEPTED_RHS_NONFINITE
@@ -454,16 +430,6 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
 _LOOPS: dict[tuple, jit.Direct] = {}
 
 
-def _type_key(a) -> tuple:
-    """What numba's type of an argument depends on: dtype, dimensions, layout (as numba.typeof
-    reads it: C if C-contiguous, else F if Fortran-contiguous, else A), writeability of an
-    array; the Python type of a scalar."""
-    if isinstance(a, np.ndarray):
-        layout = "C" if a.flags.c_contiguous else ("F" if a.flags.f_contiguous else "A")
-        return (a.dtype.str, a.ndim, layout, a.flags.writeable)
-    return (type(a),)
-
-
 def loop_for(kernel_arguments: tuple) -> jit.Direct:
     """:func:`radau_advance` called through its compiled entry point, for a system whose kernel
     arguments (`FastChainODE.kernel_arguments()`) have the types of these: one per process and
@@ -471,7 +437,7 @@ def loop_for(kernel_arguments: tuple) -> jit.Direct:
     point). The caller passes the other arguments with fixed types: float64 (complex128 for
     the complex LU and residual) C-contiguous arrays of fixed dimensions, int64 pivots and
     flags, Python floats, a complex and ints."""
-    key = tuple(_type_key(a) for a in kernel_arguments)
+    key = jit.type_key(kernel_arguments)
     loop = _LOOPS.get(key)
     if loop is None:
         loop = _LOOPS[key] = jit.Direct(radau_advance)

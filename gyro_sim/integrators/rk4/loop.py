@@ -46,30 +46,24 @@ def finite(y):
 
 @_njit
 def erk_march(t0, h, nsteps, y, A, B, C, K, ys, i_q0, nq,
-              work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
-              inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base,
-              ht0, p0, pdot, L_rotor, tau):
+              model, data, inputs):
     """`nsteps` steps of size h of the explicit tableau (A, B, C) from (t0, y), y (size,) in
     place; step k starts at t0 + k h. K (stages, size), ys (size,): scratch.
 
     After each step: quaternions y[i_q0 + 4 j : +4], j < nq, renormalised; the state checked.
     Returns the number of steps completed with a finite state: nsteps, or k < nsteps when step
-    k left a non-finite state (y is then that state). The arguments from `work` on are those of
-    fast.rhs_kernel (`ht0` its `t0`, the start of the hold).
+    k left a non-finite state (y is then that state). model, data, inputs: fast.rhs_kernel's
+    records.
     """
     stages = B.shape[0]
     hA = A * h
     hB = B * h
     for k in range(nsteps):
         t = t0 + k * h
-        fast.rhs_call(t, y, K[0], work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                        first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
-                        flags, base, ht0, p0, pdot, L_rotor, tau)
+        fast.rhs_call(t, y, K[0], model, data, inputs)
         for st in range(1, stages):
             erk_stage_state(y, K, hA, st, ys)
-            fast.rhs_call(t + C[st] * h, ys, K[st], work, is_hinge, qrow, own_col, col_start,
-                            hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-                            torque_axis, torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
+            fast.rhs_call(t + C[st] * h, ys, K[st], model, data, inputs)
         erk_update(y, K, hB)
         fast.normalize_quaternions(y, i_q0, nq)
         if not finite(y):
