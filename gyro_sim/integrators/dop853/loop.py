@@ -34,40 +34,28 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
 
 
+from gyro_sim.integrators.adaptive_kernels import (  # what the loop returns in status[S_STATUS] (its reasons)
+    ACCEPTED_RHS_NONFINITE, COLLAPSED, DONE, INITIAL_RHS_NONFINITE, REASON_REJECTED, REASON_STIFF, SWITCH,
+    clip_step,
+)
 from gyro_sim.integrators.dop853 import kernels as dop853_kernels
 from gyro_sim.dynamics import kernel as fast
 from gyro_sim import jit
 from gyro_sim.integrators.dop853.kernels import (
     C_STIFF, COST_DOP853, COST_RADAU, N_EXTENDED, N_STAGES, NO_HLAMB, auto_clear_attempts,
-    auto_costlier, auto_measure, auto_rejection_test, auto_stiffness_test, dop_clip, dop_control,
+    auto_costlier, auto_measure, auto_rejection_test, auto_stiffness_test, dop_control,
     dop_dense_coefficients, dop_dense_eval, dop_error_norm, dop_finite, dop_hlamb,
     dop_initial_probe, dop_initial_step, dop_stage_state, dop_update,
 )
 
 #: the files the loop compiles in (the key of its cache directory)
-DEPENDENCIES = (*fast.DEPENDENCIES, Path(dop853_kernels.__file__), Path(__file__))
+DEPENDENCIES = (*fast.DEPENDENCIES, *dop853_kernels.DEPENDENCIES, Path(__file__))
 _njit = jit.njit_with_dependencies(*DEPENDENCIES)
-
-# --- what the loop returns in status[0] ----------------------------------------------------
-#: t1 reached
-DONE = 0
-#: the step size fell below MIN_STEP_RELATIVE max(|t|, |t1|) (HNW's "step size too small")
-COLLAPSED = 1
-#: the fresh rhs at (t0, y0) is not finite
-INITIAL_RHS_NONFINITE = 2
-#: the rhs at an accepted state (FSAL, or for the dense output) is not finite
-ACCEPTED_RHS_NONFINITE = 3
-#: detection mode: a test asks for a switch at the accepted state real[R_T] < t1 (the reason
-#: in status[S_REASON])
-SWITCH = 4
-
-# --- the reasons of a SWITCH, in status[S_REASON]
-#: dop853.f's test: STIFF_STEPS steps with h |lambda| > STIFF_HLAMB
-REASON_STIFF = 1
-#: REJECT_FRACTION of the last REJECT_WINDOW step attempts rejected
-REASON_REJECTED = 2
 
 #: the order of DOP853's error estimator (the starting step's exponent)
 ORDER_OF_ESTIMATOR = 7
@@ -86,13 +74,74 @@ HELD_AT_SIZE = 2
 H_Y1, H_Y12, H_F12 = range(3)
 
 
+class Outputs(NamedTuple):
+    """The states asked of a call: Y (m, size) at te (m,), sorted within [t0, t1]."""
+
+    te: np.ndarray
+    Y: np.ndarray
+
+
+class Options(NamedTuple):
+    """A call's step-size memory h_mem, its options, and where the state's quaternions are."""
+
+    h_mem: float
+    max_step: float
+    rtol: float
+    #: (size,)
+    atol: np.ndarray
+    i_q0: int
+    nq: int
+
+
+class Method(NamedTuple):
+    """DOP853's constants (the class attributes of gyro_sim.integrators.dop853.driver.DOP853)."""
+
+    #: (16, 16), (16,): the extended tableau
+    A: np.ndarray
+    C: np.ndarray
+    #: (12,)
+    E5: np.ndarray
+    E3: np.ndarray
+    #: (4, 16)
+    D: np.ndarray
+    #: dop853_kernels' CONTROL_SIZE, INITIAL_SIZE
+    control: np.ndarray
+    initial: np.ndarray
+
+
+class State(NamedTuple):
+    """What the loop keeps and returns between calls, and its scratch (see dop853_advance)."""
+
+    f: np.ndarray
+    K: np.ndarray
+    ys: np.ndarray
+    y_new: np.ndarray
+    y_old: np.ndarray
+    F: np.ndarray
+    bad: np.ndarray
+    trace: np.ndarray
+    real: np.ndarray
+    status: np.ndarray
+    held: np.ndarray
+    held_at: np.ndarray
+
+
+class Detection(NamedTuple):
+    """The stiffness detection's state (dop853_kernels), carried from call to call; `detect`
+    empty: off."""
+
+    detect: np.ndarray
+    counters: np.ndarray
+    attempts: np.ndarray
+    window: np.ndarray
+    cost: np.ndarray
+
+
 @_njit
-def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, D, control,
-                   initial, i_q0, nq, f, K, ys, y_new, y_old, F, bad, trace, real, status,
-                   detect, counters, attempts, window, cost, held, held_at,
-                   model, data, inputs):
-    """DOP853 from (t0, y) to exactly t1 > t0, y (size,) in place; Y (m, size) the states at
-    te (m,), sorted within [t0, t1].
+def dop853_advance(t0, t1, y, outputs, options, method, state, detection, model, data, inputs):
+    """DOP853 from (t0, y) to exactly t1 > t0, y (size,) in place; outputs.Y (m, size) the
+    states at outputs.te (m,), sorted within [t0, t1]. The records: Outputs, Options, Method,
+    State, Detection (their fields are named below as in the loop).
 
     The call starts with a fresh f = rhs(t0, y) (inputs may have changed since the last call).
     h_mem: the step-size memory of the last call; 0 on the first call after a reset: the
@@ -125,6 +174,11 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
     from its end (then a switch may end the call before its first step). Off, these are not
     read (empty or not).
     """
+    te, Y = outputs
+    h_mem, max_step, rtol, atol, i_q0, nq = options
+    A, C, E5, E3, D, control, initial = method
+    f, K, ys, y_new, y_old, F, bad, trace, real, status, held, held_at = state
+    detect, counters, attempts, window, cost = detection
     detecting = detect.shape[0] > 0
     m = te.shape[0]
     nfev = 0
@@ -178,7 +232,7 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
                 real[R_T] = t
                 real[R_H] = h_abs
                 break
-            h, t_new = dop_clip(t, h_abs, t1, stretch)
+            h, t_new = clip_step(t, h_abs, t1, stretch)
             K[0, :] = f
             for st in range(1, N_STAGES):
                 dop_stage_state(y, K, A, st, h, ys)
