@@ -208,16 +208,14 @@ class Simulator:
             return out
         if getattr(self, "_snapshot_kernel", None) is None:
             self._snapshot_setup()
-        o, model, into = self._snapshot_scratch, self._snapshot_model, self._snapshot_nowhere
+        o = self._snapshot_scratch
         J = len(self._joint_names)
         js = self._watch_joints
-        if js is None or js.shape[1] != J:
-            js = self._watch_joints = np.empty((3, J))
+        if js is None or js.position.shape[0] != J:
+            js = self._watch_joints = fo.JointStates(np.empty(J), np.empty(J), np.empty(J))
         self._snapshot_kernel(
             float(t), np.ascontiguousarray(y, dtype=np.float64), o["ydot"], *self.system.kernel_arguments(),
-            *model[:7], int(fo.WANT_INVARIANTS), *model[8:], o["R"], o["w"], o["vO"], o["O"], o["quat"], o["euler"],
-            o["euler_rate"], o["L_speed"], o["wrench_force"], o["wrench_moment"], o["inv"], js[0], js[1], js[2],
-            into.dst, into.joint, into.position, into.quaternion, into.wrench, o["scratch"])
+            self._snapshot_layout, int(fo.WANT_INVARIANTS), self._snapshot_outputs, js, self._snapshot_no_slots)
         return o["inv"].copy()
 
     def _joint_layout(self) -> None:
@@ -558,34 +556,24 @@ class Simulator:
         scratch arrays: made once, on the first compiled snapshot."""
         from gyro_sim import jit
         from gyro_sim.dynamics import outputs as fast_outputs
-        from gyro_sim.dynamics.rotations import EULER_SINGULAR_SIN
 
         m = self.model
         n, nv = m.n, len(m.speed_body)
-        f64 = np.ascontiguousarray
         self._snapshot_kernel = jit.Direct(fast_outputs.publication_kernel)
-        self._snapshot_model = (
-            f64(m.base_position, dtype=np.float64), f64(m.down, dtype=np.float64), EULER_SINGULAR_SIN,
-            f64(m.speed_body, dtype=np.int64), f64(np.reshape(m.speed_axis, (-1, 3)), dtype=np.float64),
-            f64(m.speed_A, dtype=np.float64), f64(m.speed_rate, dtype=np.float64), 0, *self._joint_arrays_sources())
+        self._snapshot_layout = fast_outputs.layout(m, *self._joint_arrays_sources())
         self._snapshot_scratch = {
             "ydot": np.zeros(m.size), "R": np.zeros((n, 3, 3)), "w": np.zeros((n, 3)), "vO": np.zeros((n, 3)),
             "O": np.zeros((n, 3)), "quat": np.zeros((n, 4)), "euler": np.zeros((n, 3)), "euler_rate": np.zeros((n, 3)),
             "L_speed": np.zeros(nv), "wrench_force": np.zeros((n, 3)), "wrench_moment": np.zeros((n, 3)),
             "inv": np.zeros(fast_outputs.INV_SIZE), "scratch": np.zeros(fast_outputs.scratch_size(n))}
+        self._snapshot_outputs = fast_outputs.Outputs(*(self._snapshot_scratch[k] for k in fast_outputs.OUTPUT_NAMES))
         J = len(self._joint_names)
         self._snapshot_nowhere = Scatter(np.zeros(0), *(np.zeros((0, *shape), dtype=np.int64)
                                                       for shape in ((3, J), (n, 3), (n, 4), (n, 6))))
+        self._snapshot_no_slots = self._slots(self._snapshot_nowhere)
         # the kernel's records with held inputs of the publications' own (`_held_now`)
         self._snapshot_records = self.system.records_with_own_inputs()
         self._snapshot_moments = None  # the commanded moments of the inputs held there
-        # the kernel's arguments that stay the same objects from call to call: ydot and the
-        # kernel's records; the model beyond them; the joint-state entries and the outputs
-        o, model = self._snapshot_scratch, self._snapshot_model
-        self._snapshot_arguments = (
-            (o["ydot"], *self._snapshot_records), model[:7],
-            (*model[8:], o["R"], o["w"], o["vO"], o["O"], o["quat"], o["euler"], o["euler_rate"], o["L_speed"],
-             o["wrench_force"], o["wrench_moment"], o["inv"]))
         self._snapshot_joints = (np.empty(J), np.empty(J), np.empty(J))  # write_outputs' joint states
         self._snapshot_want = (fast_outputs.WANT_BODIES, fast_outputs.WANT_WRENCHES)
 
@@ -624,6 +612,13 @@ class Simulator:
             if self._p is not None:
                 inputs.p0[:] = self._p
 
+    @staticmethod
+    def _slots(into: Scatter):
+        """The slots of `into` as the compiled outputs take them (fast_outputs.Slots)."""
+        from gyro_sim.dynamics.outputs import Slots
+
+        return Slots(into.dst, into.joint, into.position, into.quaternion, into.wrench)
+
     def _compiled_call(self, want: int, into: Scatter, pos, vel, eff) -> int:
         """fast_outputs.publication_kernel at the current state: the outputs into the scratch
         arrays, the joint states into pos, vel, eff (J,), the numbers also into the slots of
@@ -634,12 +629,14 @@ class Simulator:
         y = self._y
         if y.dtype != np.float64 or not y.flags.c_contiguous:  # the compiled entry does not convert
             y = self._y = np.ascontiguousarray(y, dtype=np.float64)
-        head, middle, tail = self._snapshot_arguments
+        from gyro_sim.dynamics.outputs import JointStates
+
         t = float(self._t)
         self._held_now()
-        bad = self._snapshot_kernel(t, y, *head, *middle, want, *tail, pos, vel, eff,
-                                    into.dst, into.joint, into.position, into.quaternion, into.wrench,
-                                    self._snapshot_scratch["scratch"])
+        slots = self._snapshot_no_slots if into is self._snapshot_nowhere else self._slots(into)
+        bad = self._snapshot_kernel(t, y, self._snapshot_scratch["ydot"], *self._snapshot_records,
+                                    self._snapshot_layout, want, self._snapshot_outputs, JointStates(pos, vel, eff),
+                                    slots)
         if self._imus is not None:  # the IMUs read the accelerations this call left, if it made them
             from gyro_sim.dynamics.outputs import WANT_WRENCHES
 

@@ -153,12 +153,12 @@ def _rates(t, z, model, data, inputs, zrow, cflags, cwork):
     for a in range(6):
         a_base[a] = 0.0
     fast.joint_columns_stage(is_hinge, own_col, base_type, e_w, S)
-    fast.articulated_solve(is_hinge, col_start, S, I6, pb, c, prel, a_base, s_w, U, W, u, Dinv, rate,
-                           Ia, pa, Dx, T, G, x, flags[fast.FLAG_HEAVY])
+    fast.articulated_solve(is_hinge, col_start,
+                           fast.Elimination(S, I6, pb, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x),
+                           prel, rate, flags[fast.FLAG_HEAVY])
     for j in range(N):
         y[i_vel + j] = rate[j]
-    fast.velocities_stage(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, i_vel,
-                          s_w, e_w, w, vO, c)
+    fast.velocities_stage(t, y, model, s_w, e_w, w, vO, c)
 
 
 @_njit

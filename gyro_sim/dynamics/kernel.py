@@ -511,8 +511,7 @@ def body_positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s
 
 
 @_njit_inline
-def body_velocities(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, i_vel,
-                s_w, e_w, w, vO, c):
+def body_velocities(t, y, model, s_w, e_w, w, vO, c):
     """w^k (prefix sums of the joint rates, eqs 50, 53), v(O^k) (eq 34) and the joint bias
     accelerations c^k = S_k' u_k about O^k (dyn.bias_accelerations are their prefix sums about
     the origin):
@@ -520,6 +519,8 @@ def body_velocities(t, y, is_hinge, own_col, base_type, base_amplitude, base_ome
         spherical joint (world-component axes do not turn): c = (0, v(O^k) x w_rel)
         hinge, (e^k)' = w^{k-1} x e^k: c = (w^{k-1} x e^k phi', v(O^k) x e^k phi')
     """
+    is_hinge, own_col, flags, base = model.is_hinge, model.own_col, model.flags, model.base
+    base_type, i_vel, base_amplitude, base_omega = flags[0], flags[4], base[0:3], base[3]
     n = s_w.shape[0]
     wp0, wp1, wp2 = 0.0, 0.0, 0.0  # w^{k-1}
     for k in range(n):
@@ -579,8 +580,7 @@ def _spatial_inertia(k, m, h0, h1, h2, Aw, I6):
 
 
 @_njit_inline
-def bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
-                 torque_A, p, L_rotor, has_gravity, gravity, lam_b, dlam_b, I6, pb):
+def bias_forces(model, R, hk, Aw, w, vO, p, L_rotor, lam_b, dlam_b, I6, pb):
     """Spatial inertias I6 (n, 6, 6) and body forces at zero acceleration pb (n, 6) about O^k,
     as dyn.body_forces with acc = 0 (eqs 36-39, 58; h = m c in world components):
 
@@ -589,6 +589,9 @@ def bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_
     lambda^k = R (lam_speed^k + sum_i A_i p_i e_i) (eq 31), lambda' = R sum_i L_i e_i (eq 29).
     lam_b, dlam_b (n, 3): scratch.
     """
+    mass, lam_speed, torque_body, torque_axis, torque_A = (model.mass, model.lam_speed, model.torque_body,
+                                                           model.torque_axis, model.torque_A)
+    has_lam, has_gravity, gravity = model.flags[2] != 0, model.flags[1] != 0, model.base[4:7]
     n = mass.shape[0]
     if has_lam:
         for k in range(n):
@@ -732,9 +735,33 @@ def _hinge_reflector(e, H):
     return -sg
 
 
+class Elimination(NamedTuple):
+    """The arrays of one articulated-body elimination (`_aba`), views of a workspace: the joint
+    columns S (N, 6), the bodies' inertias IA (n, 6, 6) and bias forces pA (n, 6) (overwritten),
+    the joint bias accelerations c (n, 6), the base's acceleration a_base (6,), the joint
+    offsets s_w (n, 3); U, W (N, 6), u (N,), Dinv (n, 6, 6), Ia (6, 6), pa (6,), Dx, T, G (3, 3),
+    x (6,): scratch."""
+
+    S: np.ndarray
+    IA: np.ndarray
+    pA: np.ndarray
+    c: np.ndarray
+    a_base: np.ndarray
+    s_w: np.ndarray
+    U: np.ndarray
+    W: np.ndarray
+    u: np.ndarray
+    Dinv: np.ndarray
+    Ia: np.ndarray
+    pa: np.ndarray
+    Dx: np.ndarray
+    T: np.ndarray
+    G: np.ndarray
+    x: np.ndarray
+
+
 @_njit_inline
-def _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
-                 Ia, pa, Dx, T, G, x):
+def _aba_classic(is_hinge, col_start, e, tau, udot):
     """`_aba` as Featherstone writes it, the articulated inertias formed: I^a = I^A - U D^-1 U^T.
     Fast, and exact to round-off while no subtree is much heavier than its carrier (see
     STABLE_ABA_RATIO); IA leaves as the articulated inertias. Returns the largest apparent mass
@@ -750,6 +777,7 @@ def _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, D
     (S = (1, 0)) is eliminated in closed form, in scalars: D = J, and only the apparent mass
     M - H^T J^-1 H passes to the parent.
     """
+    S, IA, pA, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x = e
     n = IA.shape[0]
     worst = 0.0  # largest apparent mass passed on / the carrier's own mass
     # backward: I^a = I^A - U D^-1 U^T, p^a = p^A + I^a c + U D^-1 u, to the parent's O^{k-1}
@@ -897,10 +925,10 @@ def _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, D
 
 
 @_njit_inline
-def _aba(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot, Ia, pa, Dx, T, G, x,
-         heavy):
+def _aba(is_hinge, col_start, e, tau, udot, heavy):
     """Articulated-body algorithm: u' (N,) of the closure rows S_j . F_subtree(k(j)) = tau_j
-    (eqs 44, 51, 54; Featherstone 2008, Table 7.1), about each body's O^k in world axes.
+    (eqs 44, 51, 54; Featherstone 2008, Table 7.1), about each body's O^k in world axes; e the
+    Elimination's arrays.
 
     IA (n, 6, 6) and pA (n, 6) enter as the bodies' own inertias and bias forces (both are
     overwritten); c (n, 6): joint bias accelerations; a_base (6,): acceleration of the base at
@@ -915,6 +943,7 @@ def _aba(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udo
     square-root form are two thirds of the kernel's compile time, and no model below
     STABLE_ABA_RATIO ever runs it).
     """
+    IA = e.IA
     n = IA.shape[0]
     after = 0.0
     worst = 0.0
@@ -923,33 +952,30 @@ def _aba(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udo
         if after > worst * IA[k - 1, 3, 3]:
             worst = after / IA[k - 1, 3, 3]
     if worst <= STABLE_ABA_RATIO:  # no subtree can pass on more mass than it has
-        _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
-                     Ia, pa, Dx, T, G, x)
+        _aba_classic(is_hinge, col_start, e, tau, udot)
         return
     # a heavy subtree: what decides is the mass its elimination passes on (an articulated, not a
     # rigid, inertia: a uniform chain of 1000 links passes on about a link's mass at each joint),
     # known only once the classic elimination has run
-    _heavy(heavy, is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
-           Ia, pa, Dx, T, G, x)
+    _heavy(heavy, is_hinge, col_start, e, tau, udot)
 
 
 @_njit_alloc
-def _aba_heavy(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot, Ia, pa, Dx,
-               T, G, x):
+def _aba_heavy(is_hinge, col_start, e, tau, udot):
     """`_aba` where a subtree is more than STABLE_ABA_RATIO times heavier than its carrier:
     `_aba_classic`, and `_aba_stable` from the bodies' own inertias again if the classic
     elimination passed on too much (arguments as `_aba`)."""
+    IA, pA = e.IA, e.pA
     IA0 = IA.copy()
     pA0 = pA.copy()
-    if _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
-                    Ia, pa, Dx, T, G, x) > STABLE_ABA_RATIO:
+    if _aba_classic(is_hinge, col_start, e, tau, udot) > STABLE_ABA_RATIO:
         IA[:] = IA0
         pA[:] = pA0
-        _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot)
+        _aba_stable(is_hinge, col_start, e, tau, udot)
 
 
 @_njit_alloc
-def _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot):
+def _aba_stable(is_hinge, col_start, e, tau, udot):
     """`_aba` for heavy subtrees on light carriers (and any other chain, at ~2.5 x the cost of
     `_aba_classic`).
 
@@ -974,6 +1000,7 @@ def _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Di
     last ~eps x ratio off (test/core/test_heavy_tip.py). The base body's joint with a free base (six columns) is solved with its
     articulated inertia formed, F^T F (nothing passes on from it).
     """
+    S, IA, pA, c, a_base, s_w, U, W, u, Dinv = e.S, e.IA, e.pA, e.c, e.a_base, e.s_w, e.U, e.W, e.u, e.Dinv
     n = IA.shape[0]
     Ia = np.empty((6, 6))
     pa = np.empty(6)
@@ -1201,8 +1228,7 @@ HEAVY_ENTRY_ARGUMENTS = 22
 
 if jit.compiling():
     @_njit_inline
-    def _heavy(address, is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
-               Ia, pa, Dx, T, G, x):
+    def _heavy(address, is_hinge, col_start, e, tau, udot):
         """`_aba_heavy` through the address of its compiled entry (`heavy_elimination_address`).
         Address 0 (a model built without it, `chain_model` says why that cannot happen with
         heavy subtrees): u' not a number, which the integrators report as a non-finite rhs."""
@@ -1211,26 +1237,28 @@ if jit.compiling():
                 udot[j] = np.nan
             return
         call_address(address, (
-            address_of(is_hinge), address_of(col_start), address_of(S), address_of(IA), address_of(pA),
-            address_of(c), address_of(tau), address_of(a_base), address_of(s_w), address_of(U),
-            address_of(W), address_of(u), address_of(Dinv), address_of(udot), address_of(Ia),
-            address_of(pa), address_of(Dx), address_of(T), address_of(G), address_of(x),
-            IA.shape[0], S.shape[0]))
+            address_of(is_hinge), address_of(col_start), address_of(e.S), address_of(e.IA), address_of(e.pA),
+            address_of(e.c), address_of(tau), address_of(e.a_base), address_of(e.s_w), address_of(e.U),
+            address_of(e.W), address_of(e.u), address_of(e.Dinv), address_of(udot), address_of(e.Ia),
+            address_of(e.pa), address_of(e.Dx), address_of(e.T), address_of(e.G), address_of(e.x),
+            e.IA.shape[0], e.S.shape[0]))
 
     def _heavy_entry(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot, Ia, pa,
                      Dx, T, G, x, n, N):
         """`_aba_heavy` on the arrays at these addresses (C-contiguous, the shapes `_aba` gives
         them for n bodies and N columns): compiled as a C function (`heavy_elimination_address`)."""
         f = np.float64
-        _aba_heavy(vector_at(is_hinge, n, np.bool_), vector_at(col_start, n + 1, np.int64),
-                   block2(vector_at(S, 6 * N, f), 0, N, 6), block3(vector_at(IA, 36 * n, f), 0, n, 6, 6),
-                   block2(vector_at(pA, 6 * n, f), 0, n, 6), block2(vector_at(c, 6 * n, f), 0, n, 6),
-                   vector_at(tau, N, f), vector_at(a_base, 6, f), block2(vector_at(s_w, 3 * n, f), 0, n, 3),
-                   block2(vector_at(U, 6 * N, f), 0, N, 6), block2(vector_at(W, 6 * N, f), 0, N, 6),
-                   vector_at(u, N, f), block3(vector_at(Dinv, 36 * n, f), 0, n, 6, 6), vector_at(udot, N, f),
-                   block2(vector_at(Ia, 36, f), 0, 6, 6), vector_at(pa, 6, f),
-                   block2(vector_at(Dx, 9, f), 0, 3, 3), block2(vector_at(T, 9, f), 0, 3, 3),
-                   block2(vector_at(G, 9, f), 0, 3, 3), vector_at(x, 6, f))
+        e = Elimination(
+            block2(vector_at(S, 6 * N, f), 0, N, 6), block3(vector_at(IA, 36 * n, f), 0, n, 6, 6),
+            block2(vector_at(pA, 6 * n, f), 0, n, 6), block2(vector_at(c, 6 * n, f), 0, n, 6),
+            vector_at(a_base, 6, f), block2(vector_at(s_w, 3 * n, f), 0, n, 3),
+            block2(vector_at(U, 6 * N, f), 0, N, 6), block2(vector_at(W, 6 * N, f), 0, N, 6),
+            vector_at(u, N, f), block3(vector_at(Dinv, 36 * n, f), 0, n, 6, 6),
+            block2(vector_at(Ia, 36, f), 0, 6, 6), vector_at(pa, 6, f),
+            block2(vector_at(Dx, 9, f), 0, 3, 3), block2(vector_at(T, 9, f), 0, 3, 3),
+            block2(vector_at(G, 9, f), 0, 3, 3), vector_at(x, 6, f))
+        _aba_heavy(vector_at(is_hinge, n, np.bool_), vector_at(col_start, n + 1, np.int64), e,
+                   vector_at(tau, N, f), vector_at(udot, N, f))
 
     @_njit_inline
     def records_at(descriptor):
@@ -1274,8 +1302,8 @@ if jit.compiling():
         for k in range(size):
             v[k] = 0.0
 else:  # plain Python: the heavy path and the kernel called directly
-    def _heavy(address, *arrays):
-        _aba_heavy(*arrays)
+    def _heavy(address, is_hinge, col_start, e, tau, udot):
+        _aba_heavy(is_hinge, col_start, e, tau, udot)
 
     def rhs_call(*arguments):
         rhs_kernel(*arguments)
@@ -1393,9 +1421,9 @@ def rhs_kernel(t, y, ydot, model, data, inputs):
      torque_axis, torque_A, flags, base) = model
     work = data.work
     t0, p0, pdot, L_rotor, tau = inputs.t0[0], inputs.p0, inputs.pdot, inputs.L_rotor, inputs.tau
-    base_type, has_gravity, has_lam = flags[0], flags[1] != 0, flags[2] != 0
+    base_type = flags[0]
     i_r0, i_vel, i_kap, N = flags[3], flags[4], flags[5], flags[6]
-    base_amplitude, base_omega, gravity = base[0:3], base[3], base[4:7]
+    base_amplitude, base_omega = base[0:3], base[3]
     n = mass.shape[0]
     nt = torque_body.shape[0]
     (R, s_w, hk, Aw, e_w, w, vO, c, I6, pb, Dinv, lam_b, dlam_b, S, U, W, u, p,
@@ -1403,16 +1431,14 @@ def rhs_kernel(t, y, ydot, model, data, inputs):
 
     # positions, velocities
     body_positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, hk, Aw, e_w)
-    body_velocities(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, i_vel, s_w, e_w, w, vO, c)
+    body_velocities(t, y, model, s_w, e_w, w, vO, c)
     L_applied, tau_applied = L_rotor, tau
     if flags[FLAG_ACTUATORS] != 0:  # spins and works are states; the torques applied at this state
-        L_applied, tau_applied = _actuate(y, ydot, work, is_hinge, own_col, torque_body, torque_axis,
-                                          torque_A, flags, L_rotor, tau, R, w, p, n, N, nt, i_vel)
+        L_applied, tau_applied = _actuate(y, ydot, model, data, inputs, R, w, p)
     else:  # bias forces: p_i(t) = p_i(t0) + (L_i / A_i)(t - t0) (eq 29)
         for i in range(nt):
             p[i] = p0[i] + pdot[i] * (t - t0)
-    bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
-                 torque_A, p, L_applied, has_gravity, gravity, lam_b, dlam_b, I6, pb)
+    bias_forces(model, R, hk, Aw, w, vO, p, L_applied, lam_b, dlam_b, I6, pb)
     # ABA
     _joint_columns(is_hinge, own_col, base_type, e_w, S)
     for a in range(6):
@@ -1421,8 +1447,8 @@ def rhs_kernel(t, y, ydot, model, data, inputs):
         sw = -base_omega * base_omega * math.sin(base_omega * t)
         for a in range(3):
             a_base[3 + a] = base_amplitude[a] * sw
-    _aba(is_hinge, col_start, S, I6, pb, c, tau_applied, a_base, s_w, U, W, u, Dinv, ydot[i_vel:i_vel + N],
-         Ia, pa, Dx, T, G, x, flags[FLAG_HEAVY])
+    _aba(is_hinge, col_start, Elimination(S, I6, pb, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x),
+         tau_applied, ydot[i_vel:i_vel + N], flags[FLAG_HEAVY])
     # y'
     if base_type == BASE_FREE:
         for a in range(3):
@@ -1444,12 +1470,15 @@ def rhs_kernel(t, y, ydot, model, data, inputs):
 
 
 @_njit_inline
-def _actuate(y, ydot, work, is_hinge, own_col, torque_body, torque_axis, torque_A, flags, L_rotor, tau,
-             R, w, p, n, N, nt, i_vel):
+def _actuate(y, ydot, model, data, inputs, R, w, p):
     """A stateful model's applied torques (gyro_sim.dynamics.reference.applied_torques): the
     spins p from y, the rotor torques (nt,) and generalized forces (N,) applied (views of the
     workspace's tail), and y' of the spins (eq 29) and of the works (the motors' power,
     friction's)."""
+    is_hinge, own_col, torque_body, torque_axis, torque_A, flags = (model.is_hinge, model.own_col, model.torque_body,
+                                                                    model.torque_axis, model.torque_A, model.flags)
+    work, L_rotor, tau = data.work, inputs.L_rotor, inputs.tau
+    n, N, nt, i_vel = model.mass.shape[0], flags[6], torque_body.shape[0], flags[4]
     i_spin, i_work = flags[FLAG_I_SPIN], flags[FLAG_I_WORK]
     rotor_at = n * WORK_PER_BODY + N * WORK_PER_COLUMN + nt * WORK_PER_ROTOR + WORK_FIXED
     hinge_at = rotor_at + nt * ACTUATOR_PARAMETERS

@@ -31,7 +31,7 @@ from gyro_sim.dynamics import reference as dyn
 from gyro_sim import jit
 from gyro_sim.dynamics import kernel as fast, entry as fast_entry, outputs as fast_outputs
 from gyro_sim.dynamics.model import Model, initial_state
-from gyro_sim.dynamics.rotations import EULER_SINGULAR_SIN, quat_rates
+from gyro_sim.dynamics.rotations import quat_rates
 
 
 class OdeSystem(Protocol):
@@ -171,17 +171,12 @@ class FastChainODE:
         self._outputs = jit.Direct(fast_outputs.publication_kernel)
         nothing, none = np.empty(0), np.empty(0, dtype=np.int64)
         n = model.n
+        self._layout = fast_outputs.layout(model, none, none)  # the model beyond the kernel's records
         self._no_publication = (
-            (none, none), (nothing, nothing, nothing, nothing, np.empty((0, 3, 0), dtype=np.int64),
-                           np.empty((0, n, 3), dtype=np.int64), np.empty((0, n, 4), dtype=np.int64),
-                           np.empty((0, n, 6), dtype=np.int64), np.empty(fast_outputs.scratch_size(n))))
-        self._speed_args = (  # outputs: the model beyond the kernel's arguments
-            np.ascontiguousarray(model.base_position, dtype=np.float64),
-            np.ascontiguousarray(model.down, dtype=np.float64), EULER_SINGULAR_SIN,
-            np.ascontiguousarray(model.speed_body, dtype=np.int64),
-            np.ascontiguousarray(np.reshape(model.speed_axis, (-1, 3)), dtype=np.float64),
-            np.ascontiguousarray(model.speed_A, dtype=np.float64),
-            np.ascontiguousarray(model.speed_rate, dtype=np.float64))
+            fast_outputs.JointStates(nothing, nothing, nothing),
+            fast_outputs.Slots(nothing, np.empty((0, 3, 0), dtype=np.int64), np.empty((0, n, 3), dtype=np.int64),
+                               np.empty((0, n, 4), dtype=np.int64), np.empty((0, n, 6), dtype=np.int64)))
+        self._scratch = np.empty(fast_outputs.scratch_size(n))
 
     # --- inputs ------------------------------------------------------------------------------
     def hold(self, t0: float, p0: np.ndarray | None, hinge_tau, L_rotor) -> None:
@@ -310,10 +305,10 @@ class FastChainODE:
         y = np.ascontiguousarray(y, dtype=np.float64)
         if y.shape != (self.size,):
             raise ValueError(f"y must have shape ({self.size},), got {y.shape}")
-        joints, scatter = self._no_publication
-        self._outputs(float(t), y, out["ydot"], *self._records, *self._speed_args, int(fast_outputs.WANT_ALL),
-                      *joints, out["R"], out["w"], out["vO"], out["O"], out["quat"], out["euler"], out["euler_rate"],
-                      out["L_speed"], out["wrench_force"], out["wrench_moment"], out["inv"], *scatter)
+        states, slots = self._no_publication
+        outputs = fast_outputs.Outputs(*(self._scratch if k == "scratch" else out[k] for k in fast_outputs.OUTPUT_NAMES))
+        self._outputs(float(t), y, out["ydot"], *self._records, self._layout, int(fast_outputs.WANT_ALL), outputs,
+                      states, slots)
         return out
 
     def warm_up(self) -> None:
