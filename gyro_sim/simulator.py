@@ -512,7 +512,7 @@ class Simulator:
     @property
     def backend(self) -> str:
         """"numba" or "numpy": which dynamics the Simulator runs."""
-        return "numba" if type(self.system).__name__.startswith("Fast") else "numpy"
+        return self.system.backend
 
     def reference_invariants(self) -> dict:
         """The invariants of the state at the last reset (what drifts are measured against)."""

@@ -75,6 +75,9 @@ class ChainODE:
     p_i(t) = p_i(t0) + (L_i / A_i) (t - t0) (eq 29).
     """
 
+    #: which dynamics this system runs (`make_system`'s backend names)
+    backend = "numpy"
+
     def __init__(self, model: Model):
         self.model = model
         self.data = dyn.Data(model)
@@ -146,6 +149,9 @@ class FastChainODE:
 
     Raises ImportError if numba is not available (see `gyro_sim.dynamics.kernel.available`).
     """
+
+    #: which dynamics this system runs (`make_system`'s backend names)
+    backend = "numba"
 
     def __init__(self, model: Model):
         if not fast.available():
