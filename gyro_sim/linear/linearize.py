@@ -49,6 +49,7 @@ import numpy as np
 from gyro_sim.dynamics import reference as dyn
 from gyro_sim.dynamics.model import Model
 from gyro_sim.dynamics.rotations import cross, quat_mul, quat_to_matrix
+from gyro_sim.errors import GyroSimError
 
 #: the complex step: below any term's round-off, above the smallest normal number squared
 COMPLEX_STEP = 1e-30
@@ -73,7 +74,7 @@ _TABLEAUX = {
 _TABLEAUX["gauss4s"] = _TABLEAUX["gauss4"]  # the same map at an equilibrium (RK methods are affine covariant)
 
 
-class LinearizationError(ValueError):
+class LinearizationError(GyroSimError, ValueError):
     """A linearisation that cannot be made as asked (one line)."""
 
 
