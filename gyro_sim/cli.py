@@ -226,8 +226,8 @@ Each writes <report>.md and <report>.png to --out (default out/bench)."""
 # Modules that add their own subcommands: each has `register(sub, bench)` (sub: the top-level
 # subparsers, bench: the `gyro-sim bench` subparsers) and imports heavy dependencies lazily.
 PLUGINS = (
-    "gyro_sim.log.commands",  # run --record, view, replay, recover
-    "gyro_sim.viz.commands",  # view --live (after the log commands, which create view)
+    "gyro_sim.log.commands",  # recover
+    "gyro_sim.viz.commands",  # view (a log, or --live)
     "gyro_sim.ros.commands",  # cmd (publish axis moments)
     "gyro_sim.bench.accuracy",
     "gyro_sim.bench.stability",
@@ -238,6 +238,77 @@ PLUGINS = (
     "gyro_sim.bench.soak",
     "gyro_sim.bench.startup",
 )
+
+
+# --- replay ------------------------------------------------------------------------------------------
+def cmd_replay(args) -> int:
+    """`gyro-sim replay`: a log's topics published on ROS 2, or the log re-simulated."""
+    import signal
+
+    from gyro_sim.log.commands import input_file
+    from gyro_sim.log.mcap_log import LogError
+
+    if not input_file("replay", args.log):
+        return 2
+    if args.resimulate:
+        from gyro_sim.simulator import SimulationError
+        from gyro_sim.log.resim import resimulate
+
+        try:
+            res = resimulate(args.log, integrator=args.integrator, rtol=args.rtol, atol=args.atol)
+        except SimulationError as exc:
+            _err_replay(exc)
+            return 1
+        except (LogError, ValueError, OSError) as exc:  # damaged or crafted log, bad option: bad input
+            _err_replay(exc)
+            return 2
+        print(res.report())
+        return 0 if (res.max_deviation <= args.tolerance and res.compared) else 1
+    try:
+        import rclpy  # noqa: F401
+    except ImportError as exc:
+        _err_replay(f"needs rclpy ({exc}): pip install 'gyro_sim[ros]', or source a ROS 2 Jazzy install")
+        return 2
+    from gyro_sim.ros.replay import replay
+
+    stop = []
+    old = signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
+    try:
+        stats = replay(args.log, rate=args.rate, loop=args.loop, topics=args.topics,
+                       wait_for_subscribers=args.wait_for_subscribers, should_stop=lambda: bool(stop))
+    except (LogError, OSError) as exc:
+        _err_replay(exc)
+        return 2
+    except KeyboardInterrupt:
+        return 0
+    finally:
+        signal.signal(signal.SIGTERM, old)
+    print(stats.report())
+    return 0
+
+
+def _err_replay(msg) -> None:
+    print(f"gyro-sim replay: {msg}", file=sys.stderr)
+
+
+def _register_replay(sub) -> None:
+    """Add replay to the `gyro-sim` subparsers."""
+    r = sub.add_parser("replay", help="publish a log's topics on ROS 2 at recorded pace, or re-simulate it")
+    r.add_argument("log", help="an MCAP log")
+    r.add_argument("--rate", type=float, default=1.0, help="speed factor (2: twice as fast as recorded)")
+    r.add_argument("--loop", action="store_true", help="start again at the end, until Ctrl-C")
+    r.add_argument("--topics", nargs="+", metavar="TOPIC", help="only these topics")
+    r.add_argument("--wait-for-subscribers", type=float, default=0.0, metavar="S",
+                   help="wait up to S seconds for a subscriber on every topic before starting")
+    r.add_argument("--resimulate", action="store_true",
+                   help="no ROS: re-run the embedded scene with the recorded commands and report the "
+                        "largest deviation from the logged joint states (0 expected)")
+    r.add_argument("--integrator", help="re-simulate with another integrator than the recorded one")
+    r.add_argument("--rtol", type=float, help="re-simulate with another rtol")
+    r.add_argument("--atol", type=float, help="re-simulate with another atol")
+    r.add_argument("--tolerance", type=float, default=0.0,
+                   help="exit status 1 when the deviation exceeds this (default 0: bit for bit)")
+    r.set_defaults(fn=cmd_replay)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -281,6 +352,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", default="out/bench", help="directory for scaling.md, .json and .png")
     s.add_argument("--force", action="store_true", help="replace existing report files in --out")
     s.set_defaults(fn=cmd_bench_scaling)
+    _register_replay(sub)
     for name in PLUGINS:
         try:
             mod = importlib.import_module(name)

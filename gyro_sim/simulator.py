@@ -567,14 +567,14 @@ class Simulator:
     def _snapshot_setup(self) -> None:
         """What the compiled outputs take beyond the dynamics kernel's arguments, and their
         scratch arrays: made once, on the first compiled snapshot."""
-        from gyro_sim.integrators.rk4 import loop as fast_loop
+        from gyro_sim import jit
         from gyro_sim.dynamics import outputs as fast_outputs
         from gyro_sim.dynamics.rotations import EULER_SINGULAR_SIN
 
         m = self.model
         n, nv = m.n, len(m.speed_body)
         f64 = np.ascontiguousarray
-        self._snapshot_kernel = fast_loop.Direct(fast_outputs.publication_kernel)
+        self._snapshot_kernel = jit.Direct(fast_outputs.publication_kernel)
         self._snapshot_model = (
             f64(m.base_position, dtype=np.float64), f64(m.down, dtype=np.float64), EULER_SINGULAR_SIN,
             f64(m.speed_body, dtype=np.int64), f64(np.reshape(m.speed_axis, (-1, 3)), dtype=np.float64),

@@ -125,20 +125,18 @@ def kernels() -> dict:
 
 def _c_function_index(module: str, name: str) -> dict:
     """The disk cache index of a kernel compiled as a C function (C_KERNEL...), keyed as
-    `gyro_sim.integrators.rk4.loop.cfunc_with_dependencies` keys it (its module's DEPENDENCIES, if
-    any); {} when it has no valid entry."""
+    `gyro_sim.jit.cfunc_with_dependencies` keys it (its module's DEPENDENCIES); {} when it has
+    no valid entry."""
     import importlib
 
     import numba
     from numba.core.caching import FunctionCache
 
-    from gyro_sim.integrators.rk4 import loop as fast_loop
+    from gyro_sim import jit
 
     m = importlib.import_module(module)
-    files = getattr(m, "DEPENDENCIES", None) if module != "gyro_sim.dynamics.kernel" else None
     saved = numba.config.CACHE_DIR
-    if files:
-        numba.config.CACHE_DIR = str(fast_loop.cache_directory(files))
+    numba.config.CACHE_DIR = str(jit.cache_directory(m.DEPENDENCIES))
     try:
         return FunctionCache(getattr(m, name))._cache_file._load_index()
     finally:
@@ -218,9 +216,9 @@ def filling() -> bool:
 def _lock_path() -> Path:
     """The helper's lock: beside the loops' cache directories (NUMBA_CACHE_DIR, or the package's
     __pycache__, or ~/.cache/gyro_sim)."""
-    from gyro_sim.integrators.rk4 import loop as fast_loop
+    from gyro_sim import jit
 
-    base = fast_loop.cache_directory(()).parent
+    base = jit.cache_directory(()).parent
     base.mkdir(parents=True, exist_ok=True)
     return base / "gyro_sim_warmup.lock"
 
@@ -377,13 +375,12 @@ def fill(integrator: str, out=sys.stdout, parent: int | None = None, background:
             fcntl.flock(lock, fcntl.LOCK_EX)
             if everything_cached(integrator):
                 return
-        import numpy as np
-
         from gyro_sim.dynamics import kernel as fast
         from gyro_sim.dynamics.model import compile_model, initial_state
         from gyro_sim.scene.load import load_scene
         from gyro_sim.integrators import make_integrator
         from gyro_sim.dynamics.system import FastChainODE
+        from gyro_sim.integrators.rk4.loop import ErkMarch
 
         real_kernel = fast.kernel_address
         fast.kernel_address = fast.null_kernel_address  # model_arguments reads it when a system is built
@@ -397,8 +394,7 @@ def fill(integrator: str, out=sys.stdout, parent: int | None = None, background:
         def share():  # on a system with no warm-up: its entry is this process's parent's share
             system = FastChainODE(compile_model(load_scene(WARM_UP_SCENE)))
             y = initial_state(system.model)
-            one = np.zeros((1, 1))  # the rk4 loop (FastChainODE.warm_up runs it): zero steps
-            system.march_explicit_rk(one, one[0], one[0], 0.0, y, 1.0, 0)
+            ErkMarch(system).warm_up(0.0, y)  # the rk4 loop (an RK4 on a compiled system runs it)
             if FIRST_LOOPS.get(integrator) != FIRST_LOOPS["rk4"]:
                 make_integrator(integrator, system).advance(0.0, y.copy(), 0.002)  # the first loop
             system.outputs(0.0, y)  # the publication kernel

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from gyro_sim.dynamics import kernel as fast
-from gyro_sim.integrators.rk4.loop import njit_with_dependencies
+from gyro_sim.jit import njit_with_dependencies
 from gyro_sim.dynamics.model import compile_model, initial_state
 from gyro_sim.scene.load import load_scene
 from gyro_sim.simulator import Simulator
@@ -92,7 +92,7 @@ def best_time(fn, min_time: float = 0.2, repeats: int = 5, batch_time: float = 1
     return best
 
 
-@njit_with_dependencies(Path(fast.__file__), Path(__file__))
+@njit_with_dependencies(*fast.DEPENDENCIES, Path(__file__))
 def _kernel_loop(k, t, y, ydot, args):
     """fast.rhs_kernel at (t, y) k times, inside compiled code."""
     for _ in range(k):

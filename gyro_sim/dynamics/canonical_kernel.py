@@ -30,13 +30,17 @@ from pathlib import Path
 
 import numpy as np
 
+from gyro_sim import jit
 from gyro_sim.dynamics import kernel as fast
-from gyro_sim.integrators.rk4 import loop as fast_loop
 from gyro_sim.dynamics.canonical import CanonicalChain
+from gyro_sim.jit import block2
+
+if jit.compiling():
+    from gyro_sim.jit import address_of, call_address, vector_at
 
 #: the files the kernels compile in (the key of their numba cache directory)
-DEPENDENCIES = (Path(fast.__file__), Path(fast_loop.__file__), Path(__file__))
-_njit = fast_loop.njit_with_dependencies(*DEPENDENCIES)
+DEPENDENCIES = (*fast.DEPENDENCIES, Path(__file__))
+_njit = jit.njit_with_dependencies(*DEPENDENCIES)
 #: arguments of fast.rhs_kernel after (t, y, out): the workspace, the model's 15
 #: (fast.model_arguments), the held inputs' 5 (fast.input_arguments)
 CHAIN_ARGUMENTS = 21
@@ -50,13 +54,7 @@ CFLAG_KERNEL = 3
 CFLAGS_SIZE = 4
 
 
-def _inline(fn):
-    if fast.numba is None:
-        return fn
-    return fast.numba.njit(inline="always", error_model="numpy")(fn)
-
-
-@_inline
+@jit.inline_ir
 def _rates(t, z, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
            inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base, t0, p0, pdot,
            zrow, cflags, cwork):
@@ -286,17 +284,17 @@ def canonical_kernel(t, z, zdot, work, is_hinge, qrow, own_col, col_start, hinge
         zdot[i_kap + i] = fast.rotor_angle_rate(pt, w[k, 0], w[k, 1], w[k, 2], e0, e1, e2)
 
 
-if fast.numba is not None and not fast.numba.config.DISABLE_JIT:
+if jit.compiling():
     @_njit
     def canonical_call(t, z, zdot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
                        first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
                        base, t0, p0, pdot, L_rotor, tau, zrow, cflags, cwork):
         """`canonical_kernel` (same arguments, C-contiguous) through its C function at
         cflags[CFLAG_KERNEL] (`canonical_address`): for compiled loops."""
-        fast.call_address(cflags[CFLAG_KERNEL], (*fast.kernel_addresses(
+        call_address(cflags[CFLAG_KERNEL], (*fast.kernel_addresses(
             t, z, zdot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia,
             lam_speed, torque_body, torque_axis, torque_A, flags, base, t0, p0, pdot, L_rotor, tau),
-            fast.address_of(zrow), fast.address_of(cflags), fast.address_of(cwork), cwork.shape[0]))
+            address_of(zrow), address_of(cflags), address_of(cwork), cwork.shape[0]))
 else:  # plain Python: the field called directly
     def canonical_call(*arguments):
         canonical_kernel(*arguments)
@@ -311,13 +309,10 @@ def _canonical_entry(t, z, zdot, work, is_hinge, qrow, own_col, col_start, hinge
                               inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base, p0, pdot,
                               L_rotor, tau, nwork, n, N, nt)
     f, i = np.float64, np.int64
-    canonical_kernel(t, fast.vector_at(z, size, f), fast.vector_at(zdot, size, f), m[0], m[1], m[2], m[3],
+    canonical_kernel(t, vector_at(z, size, f), vector_at(zdot, size, f), m[0], m[1], m[2], m[3],
                      m[4], m[5], m[6], m[7], m[8], m[9], m[10], m[11], m[12], m[13], m[14], m[15], t0,
-                     h[0], h[1], h[2], h[3], fast.block2(fast.vector_at(zrow, 2 * n, i), 0, n, 2),
-                     fast.vector_at(cflags, CFLAGS_SIZE, i), fast.vector_at(cwork, ncwork, f))
-
-
-_CANONICAL_ENTRY = []
+                     h[0], h[1], h[2], h[3], block2(vector_at(zrow, 2 * n, i), 0, n, 2),
+                     vector_at(cflags, CFLAGS_SIZE, i), vector_at(cwork, ncwork, f))
 
 
 def canonical_address() -> int:
@@ -325,13 +320,10 @@ def canonical_address() -> int:
     addresses of z, zdot and the chain kernel's arrays, t0, the sizes of z, the workspace, n,
     N, nt, then the addresses of zrow, cflags, cwork and cwork's size), compiled or loaded from
     numba's disk cache on the first call; 0 without numba or with NUMBA_DISABLE_JIT."""
-    if fast.numba is None or fast.numba.config.DISABLE_JIT:
+    if not jit.compiling():
         return 0
-    if not _CANONICAL_ENTRY:
-        signature = fast.kernel_signature(*(fast.numba.types.int64,) * 4)
-        _CANONICAL_ENTRY.append(fast_loop.cfunc_with_dependencies(signature, *DEPENDENCIES, _nrt=False)(
-            _canonical_entry))
-    return _CANONICAL_ENTRY[0].address
+    return jit.c_address(_canonical_entry, lambda: fast.kernel_signature(*(jit.numba.types.int64,) * 4),
+                         DEPENDENCIES, _nrt=False)
 
 
 @_njit
@@ -373,8 +365,8 @@ class FastCanonicalChain(CanonicalChain):
         # loaded, when a compiled march first needs it: "fixed" builds a gauss4s it may never run)
         cflags = np.array([self.i_pr.start, self.i_kappa.start, m.size, 0], dtype=np.int64)
         self._extra = (zrow, cflags, canonical_workspace(m, self.size))
-        self._field = fast_loop.Direct(canonical_kernel)
-        self._state = fast_loop.Direct(state_kernel)
+        self._field = jit.Direct(canonical_kernel)
+        self._state = jit.Direct(state_kernel)
 
     def kernel_arguments(self) -> tuple:
         """`canonical_kernel`'s arguments after (t, z, out): the chain kernel's, then zrow,

@@ -2,12 +2,12 @@
 
 numba unboxes every argument of a compiled function at each call from Python (each array
 allocates a meminfo for its view: ~30 ns an array through the compiled entry point,
-`gyro_sim.integrators.rk4.loop.Direct`, more through the dispatcher, which also types every
+`gyro_sim.jit.Direct`, more through the dispatcher, which also types every
 argument): the 24 arguments of :func:`gyro_sim.dynamics.kernel.rhs_kernel` cost ~2-3 us a call,
 more than the kernel's own work on a short chain. Here the kernel's arrays live in one float64
 buffer built once (`pack`: a header of sizes and offsets, the floats, the ints as int64 bit
 patterns, is_hinge as bytes), and :func:`rhs_entry` takes four arguments, `(t, y, ydot, buf)`:
-it cuts the buffer into the kernel's arrays (fast's `block1/2/3`, the views the kernel cuts its
+it cuts the buffer into the kernel's arrays (`gyro_sim.jit.block1/2/3`, the views the kernel cuts its
 workspace with: C-ordered, of the same types as every other caller passes, so the kernel's one
 specialisation serves it) and calls the
 kernel. The results are those of the kernel called with the separate arrays, bit for bit.
@@ -19,8 +19,8 @@ kernel. The results are those of the kernel called with the separate arrays, bit
     rhs_entry(t, y, ydot, buf)             # compiled: y' into ydot, counted in the header
     buf.view(np.int64)[H_NFEV]             # the evaluations counted
 
-Caching as :mod:`gyro_sim.integrators.rk4.loop` (`njit_with_dependencies`): rhs_entry compiles the
-kernel into itself, so its cache is keyed on fast.py and this file.
+Cached as :func:`gyro_sim.jit.njit_with_dependencies` caches: rhs_entry compiles the kernel into
+itself, so its cache is keyed on fast.py's files and this one.
 """
 from __future__ import annotations
 
@@ -28,19 +28,13 @@ from pathlib import Path
 
 import numpy as np
 
+from gyro_sim import jit
 from gyro_sim.dynamics import kernel as fast
-from gyro_sim.integrators.rk4.loop import njit_with_dependencies
-
-try:
-    import numba
-    from numba.core import cgutils, types
-    from numba.extending import intrinsic, overload
-except ImportError:  # pragma: no cover - exercised only where numba is missing
-    numba = None
+from gyro_sim.jit import block1, block2, block3, numba
 
 #: the files whose kernels rhs_entry compiles in (the key of its cache directory)
-DEPENDENCIES = (Path(fast.__file__), Path(__file__))
-_njit = njit_with_dependencies(*DEPENDENCIES)
+DEPENDENCIES = (*fast.DEPENDENCIES, Path(__file__))
+_njit = jit.njit_with_dependencies(*DEPENDENCIES)
 
 # the header, the buffer's first HEADER words read as int64: the sizes, then the word where
 # each block starts (floats, ints as int64, is_hinge as bytes)
@@ -127,35 +121,19 @@ def _buffer(buf):
     return buf
 
 
-if numba is not None:
-    @intrinsic
-    def _vector_at(typingctx, address, size):
-        """The float64 vector of `size` at `address` (an integer), owned elsewhere (no meminfo,
-        no parent): the caller keeps the memory alive."""
-        if not (isinstance(address, types.Integer) and isinstance(size, types.Integer)):
-            return None
-        vector = types.Array(types.float64, 1, "C")
+if jit.compiling():
+    from numba.core import types
+    from numba.extending import overload
 
-        def codegen(context, builder, sig, args):
-            model = context.data_model_manager[vector]
-            item = context.get_constant(types.intp, _WORD)
-            size = context.cast(builder, args[1], sig.args[1], types.intp)
-            data = builder.inttoptr(args[0], context.get_value_type(types.CPointer(types.float64)))
-            value = cgutils.get_null_value(context.get_value_type(vector))  # meminfo, parent: null
-            for name, v in (("nitems", size), ("itemsize", item), ("data", data),
-                            ("shape", cgutils.pack_array(builder, [size])),
-                            ("strides", cgutils.pack_array(builder, [item]))):
-                value = builder.insert_value(value, v, model.get_field_position(name))
-            return value
-
-        return vector(address, size), codegen
+    from gyro_sim.jit import vector_at
 
     @overload(_buffer)
     def _buffer_overload(buf):
         if isinstance(buf, types.Array):
             return lambda buf: buf
         if isinstance(buf, types.Integer):  # its address: its length in its header
-            return lambda buf: _vector_at(buf, _vector_at(buf, HEADER).view(np.int64)[H_WORDS])
+            return lambda buf: vector_at(buf, vector_at(buf, HEADER, np.float64).view(np.int64)[H_WORDS],
+                                         np.float64)
         return None
 
 
@@ -174,8 +152,8 @@ def rhs_entry(t, y, ydot, buf):
     n, N, nt = h[H_N], h[H_NCOL], h[H_NT]
     w0, ha = h[H_WORK], h[H_HINGE_AXIS]
     # the views fast.rhs_kernel cuts its workspace with: C-ordered, uncounted
-    is_hinge = fast.block1(buf.view(np.bool_), _WORD * h[H_IS_HINGE], n)
-    b1, b2, b3 = fast.block1, fast.block2, fast.block3
+    is_hinge = block1(buf.view(np.bool_), _WORD * h[H_IS_HINGE], n)
+    b1, b2, b3 = block1, block2, block3
     fast.rhs_call(
         t, y, ydot, b1(buf, w0, ha - w0), is_hinge, b1(h, h[H_QROW], n), b1(h, h[H_OWN_COL], n),
         b1(h, h[H_COL_START], n + 1), b2(buf, ha, n, 3), b2(buf, h[H_S], n, 3), b1(buf, h[H_MASS], n),
@@ -189,7 +167,7 @@ def entry_point():
     """rhs_entry's compiled entry point for (a float, two float64 C-contiguous vectors, the
     buffer's address as an int64: `entry(t, y, ydot, buf.ctypes.data)`), compiled or loaded
     from the disk cache now: it converts its arguments to these types without checking them
-    (as fast_loop.Direct). Without numba, the plain function (which takes the buffer itself)."""
+    (as gyro_sim.jit.Direct). Without numba, the plain function (which takes the buffer itself)."""
     if numba is None:
         return rhs_entry
     signature = (numba.float64, numba.float64[::1], numba.float64[::1], numba.int64)

@@ -53,9 +53,9 @@ calls from other modules (numba docs, "Cache limitations").
 `available()` tells whether numba imports. Without numba this module still imports (its
 kernels stay plain Python, far too slow to use) and `FastChainODE` raises ImportError.
 Compilation: one signature serves every scene (model differences are array contents and
-flags), ~12 s of CPU the first time, then ~0.3 s from numba's disk cache (`cache=True`:
-`__pycache__` beside this file, a user-wide cache directory if that is not writable, or
-NUMBA_CACHE_DIR); any edit of this file invalidates the cache. The compiled loops of the
+flags), ~12 s of CPU the first time, then ~0.3 s from numba's disk cache, in a directory keyed
+on DEPENDENCIES and gyro_sim/jit.py (`gyro_sim.jit.cache_directory`): any edit of them starts
+an empty one. The compiled loops of the
 other modules do not compile the kernel into themselves: they call it through its C
 function (`rhs_call`, the address in flags[FLAG_KERNEL]), and the kernel calls its rare
 heavy-subtree path through another (`_heavy`, flags[FLAG_HEAVY]), so each is compiled once.
@@ -66,17 +66,20 @@ import math
 
 import numpy as np
 
+from pathlib import Path
+
+from gyro_sim import jit
+from gyro_sim.dynamics import actuators
 from gyro_sim.dynamics.actuators import MAX_SPEED_BAND, STRIBECK_PEAK, STRIBECK_TANH
 from gyro_sim.dynamics.model import Model
+from gyro_sim.jit import block1, block2, block3, numba
 
-try:
-    import numba
-    from numba.core.errors import NumbaError
-except ImportError:  # pragma: no cover - exercised only where numba is missing
-    numba = None
+if jit.compiling():
+    from gyro_sim.jit import address_of, call_address, vector_at
 
-    class NumbaError(Exception):
-        """Stands in for numba's error type where numba is missing (never raised)."""
+#: the files the kernels here compile in (the key of their numba cache directory,
+#: `gyro_sim.jit.cache_directory`): this one and the actuators' constants it reads
+DEPENDENCIES = (Path(__file__), Path(actuators.__file__))
 
 # base kinds, as the kernel sees them
 BASE_FIXED, BASE_MOVING, BASE_FREE = 0, 1, 2
@@ -119,42 +122,26 @@ ACTUATOR_PARAMETERS = 6
 
 def available() -> bool:
     """True if numba imports, i.e. `gyro_sim.dynamics.system.FastChainODE` can be built."""
-    return numba is not None
+    return jit.available()
 
 
-def _njit(fn):
-    """Compiled in nopython mode and cached on disk. IEEE arithmetic (no fastmath: results
-    must equal the numpy reference to round-off); numpy's error model (x / 0 -> inf rather
-    than an exception: non-finite states are caught by the integrators and the Simulator).
-
-    Without numba's reference counting (`_nrt=False`): these kernels allocate nothing and
-    return no array, and counting every array argument and view at every call (an atomic
-    increment and decrement each) cost ~20 % of an evaluation. Only `_njit_alloc` functions
-    (the rare heavy-tip path) count. The options are given explicitly: numba lets a callee
-    inherit `nrt` and `forceinline` from its caller where they are not set.
-    """
-    if numba is None:
-        return fn
-    return numba.njit(cache=True, error_model="numpy", _nrt=False, forceinline=False)(fn)
-
-
-def _njit_inline(fn):
-    """`_njit`, always inlined by LLVM into its callers (`forceinline`): the stages of
-    `rhs_kernel` (the elimination `_aba`/`_aba_classic` included) and the small helpers. A call of a stage passed its ~100 words of array
-    structs on the stack (~15 % of an evaluation); inlined, the arrays' shapes and strides are
-    loaded once. Same operations: the results are bit for bit those of the calls."""
-    if numba is None:
-        return fn
-    return numba.njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)(fn)
-
-
-def _njit_alloc(fn):
-    """`_njit` with numba's reference counting, for the functions that allocate (the heavy-tip
-    path of `_aba`, never taken on chains without a subtree STABLE_ABA_RATIO times heavier
-    than its carrier)."""
-    if numba is None:
-        return fn
-    return numba.njit(cache=True, error_model="numpy", _nrt=True, forceinline=False)(fn)
+#: Compiled in nopython mode (`gyro_sim.jit`'s options), cached by the digest of DEPENDENCIES.
+#: Without numba's reference counting (`_nrt=False`): these kernels allocate nothing and
+#: return no array, and counting every array argument and view at every call (an atomic
+#: increment and decrement each) cost ~20 % of an evaluation. Only `_njit_alloc` functions
+#: (the rare heavy-tip path) count. The options are given explicitly: numba lets a callee
+#: inherit `nrt` and `forceinline` from its caller where they are not set.
+_njit = jit.njit_with_dependencies(*DEPENDENCIES, _nrt=False, forceinline=False)
+#: `_njit`, always inlined by LLVM into its callers (`forceinline`): the stages of
+#: `rhs_kernel` (the elimination `_aba`/`_aba_classic` included) and the small helpers. A call
+#: of a stage passed its ~100 words of array structs on the stack (~15 % of an evaluation);
+#: inlined, the arrays' shapes and strides are loaded once. Same operations: the results are
+#: bit for bit those of the calls.
+_njit_inline = jit.njit_with_dependencies(*DEPENDENCIES, _nrt=False, forceinline=True)
+#: `_njit` with numba's reference counting, for the functions that allocate (the heavy-tip
+#: path of `_aba`, never taken on chains without a subtree STABLE_ABA_RATIO times heavier
+#: than its carrier)
+_njit_alloc = jit.njit_with_dependencies(*DEPENDENCIES, _nrt=True, forceinline=False)
 
 
 # --- small fixed-size helpers (inlined by LLVM) ----------------------------------------------
@@ -1115,69 +1102,6 @@ def _aba_resolve(col_start, S, s_w, W, Dinv, rhs, u, P, udot):
                 A[r] += S[j0 + a, r] * acc
 
 
-def _view_codegen(context, builder, sig, args):
-    """Lowering of `block1/2/3`: the array value of a C-ordered view of work[o:] of the given
-    shape (its fields filled through numba's data model), borrowed: no meminfo, so nothing is
-    counted; valid while `work` is, i.e. during the call that made it."""
-    from numba.core import cgutils
-    from numba.core import types as nbt
-
-    source = context.data_model_manager[sig.args[0]]
-    view = context.data_model_manager[sig.return_type]
-    o, *dims = (context.cast(builder, v, t, nbt.intp) for v, t in zip(args[1:], sig.args[1:]))
-    itemsize = builder.extract_value(args[0], source.get_field_position("itemsize"))
-    data = builder.extract_value(args[0], source.get_field_position("data"))
-    strides = [itemsize]
-    nitems = dims[-1]
-    for d in reversed(dims[1:]):
-        strides.insert(0, builder.mul(strides[0], d))
-    for d in dims[:-1]:
-        nitems = builder.mul(nitems, d)
-    value = cgutils.get_null_value(context.get_value_type(sig.return_type))  # meminfo, parent: null
-    for name, v in (("nitems", nitems), ("itemsize", itemsize), ("data", builder.gep(data, [o])),
-                    ("shape", cgutils.pack_array(builder, dims)),
-                    ("strides", cgutils.pack_array(builder, strides))):
-        value = builder.insert_value(value, v, view.get_field_position(name))
-    return value
-
-
-if numba is not None and not numba.config.DISABLE_JIT:
-    from numba.core import types as _nbt
-    from numba.extending import intrinsic as _intrinsic
-
-    # work[o : o + n m ...] (work contiguous) as a C-ordered (n, m, ...) view. An intrinsic:
-    # numba's reshape calls a C helper (~40 ns, twenty times per evaluation) and as_strided
-    # gives a layout-"A" array (every index scaled by strides loaded at run time), both counted.
-    def _view_typing(work, nd, *ints):
-        """(signature, codegen) of the view of a vector `work` with nd axes (None: not for
-        these argument types)."""
-        if not (isinstance(work, _nbt.Array) and work.ndim == 1
-                and all(isinstance(i, _nbt.Integer) for i in ints)):
-            return None
-        return _nbt.Array(work.dtype, nd, "C")(work, *ints), _view_codegen
-
-    @_intrinsic
-    def block1(typingctx, work, o, n):
-        return _view_typing(work, 1, o, n)
-
-    @_intrinsic
-    def block2(typingctx, work, o, n, m):
-        return _view_typing(work, 2, o, n, m)
-
-    @_intrinsic
-    def block3(typingctx, work, o, n, m, q):
-        return _view_typing(work, 3, o, n, m, q)
-else:  # plain Python: without numba, or NUMBA_DISABLE_JIT (the 80-digit oracle, bench.heavy_tips)
-    def block1(work, o, n):
-        return work[o:o + n]
-
-    def block2(work, o, n, m):
-        return work[o:o + n * m].reshape(n, m)
-
-    def block3(work, o, n, m, q):
-        return work[o:o + n * m * q].reshape(n, m, q)
-
-
 # --- the heavy-subtree path, compiled apart and called through its address ---------------------
 def heavy_subtrees(mass) -> bool:
     """True when `_aba` takes its heavy-subtree path for bodies of these masses (n,): the same
@@ -1195,66 +1119,7 @@ def heavy_subtrees(mass) -> bool:
 HEAVY_ENTRY_ARGUMENTS = 22
 
 
-if numba is not None and not numba.config.DISABLE_JIT:
-    from llvmlite import ir as _llir
-    from numba.core import cgutils as _cgutils
-
-    @_intrinsic
-    def address_of(typingctx, a):
-        """The address (int64) of the first element of the C-contiguous array a (compiled code
-        only; another layout does not compile: the callee reads the items consecutively)."""
-        if not (isinstance(a, _nbt.Array) and a.layout == "C"):
-            return None
-
-        def codegen(context, builder, sig, args):
-            data = context.make_array(sig.args[0])(context, builder, args[0]).data
-            return builder.ptrtoint(data, context.get_value_type(_nbt.int64))
-
-        return _nbt.int64(a), codegen
-
-    @_intrinsic
-    def vector_at(typingctx, address, size, dtype):
-        """The C-contiguous vector of `size` items of `dtype` (a numpy scalar class) at `address`
-        (int64), owned elsewhere (no meminfo, nothing counted): the caller keeps it alive."""
-        if not (isinstance(address, _nbt.Integer) and isinstance(size, _nbt.Integer)
-                and isinstance(dtype, _nbt.NumberClass)):
-            return None
-        vector = _nbt.Array(dtype.dtype, 1, "C")
-
-        def codegen(context, builder, sig, args):
-            model = context.data_model_manager[vector]
-            item = context.get_constant(_nbt.intp, context.get_abi_sizeof(context.get_data_type(dtype.dtype)))
-            n = context.cast(builder, args[1], sig.args[1], _nbt.intp)
-            data = builder.inttoptr(args[0], context.get_value_type(_nbt.CPointer(dtype.dtype)))
-            value = _cgutils.get_null_value(context.get_value_type(vector))
-            for name, v in (("nitems", n), ("itemsize", item), ("data", data),
-                            ("shape", _cgutils.pack_array(builder, [n])),
-                            ("strides", _cgutils.pack_array(builder, [item]))):
-                value = builder.insert_value(value, v, model.get_field_position(name))
-            return value
-
-        return vector(address, size, dtype), codegen
-
-    @_intrinsic
-    def call_address(typingctx, address, args):
-        """Call the C function `void f(...)` at `address` with the tuple `args` (compiled code
-        only), integers passed as int64, floats as double: a call the caller's compilation does
-        not compile in."""
-        if not (isinstance(address, _nbt.Integer) and isinstance(args, _nbt.BaseTuple)
-                and all(isinstance(a, (_nbt.Integer, _nbt.Float)) for a in args)):
-            return None
-        kinds = [_nbt.float64 if isinstance(a, _nbt.Float) else _nbt.int64 for a in args]
-
-        def codegen(context, builder, sig, llargs):
-            fnty = _llir.FunctionType(_llir.VoidType(), [context.get_value_type(k) for k in kinds])
-            fn = builder.inttoptr(llargs[0], fnty.as_pointer())
-            values = [context.cast(builder, v, t, k)
-                      for v, t, k in zip(_cgutils.unpack_tuple(builder, llargs[1], len(args)), args, kinds)]
-            builder.call(fn, values)
-            return context.get_dummy_value()
-
-        return _nbt.void(address, args), codegen
-
+if jit.compiling():
     @_njit_inline
     def _heavy(address, is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
                Ia, pa, Dx, T, G, x):
@@ -1354,20 +1219,9 @@ else:  # plain Python: the heavy path and the kernel called directly
         rhs_kernel(*arguments)
 
 
-_HEAVY_ENTRY = []
-_KERNEL_ENTRY = []
-_NULL_ENTRY = []
 #: `_kernel_entry`'s arguments after t: the addresses of y, ydot and the kernel's 20 arrays (all
 #: but t0), then t0, then the sizes of y, the workspace, n, N, nt
 KERNEL_ADDRESSES, KERNEL_SIZES = 22, 5
-
-
-def _c_address(compiled: list, fn, signature, nrt: bool = False) -> int:
-    """The address of `fn` compiled as a C function of `signature()` (numpy's error model, cached
-    on disk), compiled or loaded on the first call and kept in `compiled` (one element)."""
-    if not compiled:
-        compiled.append(numba.cfunc(signature(), cache=True, error_model="numpy", _nrt=nrt)(fn))
-    return compiled[0].address
 
 
 def kernel_signature(*extra):
@@ -1382,19 +1236,19 @@ def heavy_elimination_address() -> int:
     (`_heavy_entry`), compiled or loaded from numba's disk cache on the first call (12-19 s of
     CPU compiled, measured: less when the kernel's stages are compiled already); 0 without numba or with NUMBA_DISABLE_JIT,
     where `_aba` calls it directly."""
-    if numba is None or numba.config.DISABLE_JIT:
+    if not jit.compiling():
         return 0
-    return _c_address(_HEAVY_ENTRY, _heavy_entry, lambda: numba.types.void(
-        *(numba.types.int64,) * HEAVY_ENTRY_ARGUMENTS), nrt=True)
+    return jit.c_address(_heavy_entry, lambda: numba.types.void(*(numba.types.int64,) * HEAVY_ENTRY_ARGUMENTS),
+                         DEPENDENCIES, _nrt=True)
 
 
 def kernel_address() -> int:
     """The address of `rhs_kernel` compiled as a C function (`_kernel_entry`: t, the arrays'
     addresses, t0, their sizes), compiled or loaded from numba's disk cache on the first call;
     0 without numba or with NUMBA_DISABLE_JIT, where `rhs_call` calls the kernel directly."""
-    if numba is None or numba.config.DISABLE_JIT:
+    if not jit.compiling():
         return 0
-    return _c_address(_KERNEL_ENTRY, _kernel_entry, kernel_signature)
+    return jit.c_address(_kernel_entry, kernel_signature, DEPENDENCIES, _nrt=False)
 
 
 def null_kernel_address() -> int:
@@ -1402,9 +1256,9 @@ def null_kernel_address() -> int:
     compiling the loops and outputs without the dynamics (their code does not depend on the
     kernel they call through flags[FLAG_KERNEL]: gyro_sim.warmup's helper builds its systems on
     it). Never for results. 0 without numba or with NUMBA_DISABLE_JIT."""
-    if numba is None or numba.config.DISABLE_JIT:
+    if not jit.compiling():
         return 0
-    return _c_address(_NULL_ENTRY, _null_entry, kernel_signature)
+    return jit.c_address(_null_entry, kernel_signature, DEPENDENCIES, _nrt=False)
 
 
 @_njit_inline

@@ -24,8 +24,8 @@ the rest lives in a scratch vector the caller keeps (`scratch_size`), so the ker
 without reference counting; the numbers are computed first, then put into the messages' slots
 and checked finite in plain loops.
 
-Its cache is keyed as the loops' of :mod:`gyro_sim.integrators.rk4.loop` (a digest of every file
-whose kernels it compiles in).
+Its cache is keyed on every file whose kernels it compiles in
+(:func:`gyro_sim.jit.njit_with_dependencies`).
 """
 from __future__ import annotations
 
@@ -33,42 +33,23 @@ import math
 
 from pathlib import Path
 
+from gyro_sim import jit
 from gyro_sim.dynamics import kernel as fast
-from gyro_sim.dynamics.kernel import block1, block2, block3
 from gyro_sim.dynamics.kernel import (
     bias_forces, vec_cross, vec_cross_add, dot6, mat_vec, body_positions, body_velocities,
 )
-from gyro_sim.integrators.rk4.loop import cache_directory, njit_with_dependencies
+from gyro_sim.jit import block1, block2, block3
 
-_FILES = (Path(fast.__file__), Path(__file__))
-_njit = njit_with_dependencies(*_FILES)
-
-
-def _njit_options(**options):
-    """A decorator: `_njit` (cached by the digest of _FILES) with numba's options `options`."""
-
-    def decorate(fn):
-        try:
-            import numba
-        except ImportError:  # pragma: no cover - exercised only where numba is missing
-            return fn
-        saved = numba.config.CACHE_DIR
-        numba.config.CACHE_DIR = str(cache_directory(_FILES))
-        try:
-            return numba.njit(cache=True, error_model="numpy", **options)(fn)
-        finally:
-            numba.config.CACHE_DIR = saved
-
-    return decorate
-
-
+#: the files the kernels here compile in (the key of their numba cache directory)
+DEPENDENCIES = (*fast.DEPENDENCIES, Path(__file__))
+_njit = jit.njit_with_dependencies(*DEPENDENCIES)
 #: always inlined by LLVM into its callers (numba's `forceinline`, as fast's stages): a helper
 #: called per body or per value passes no array structs and makes no view. Same operations,
 #: same results bit for bit.
-_njit_inline = _njit_options(forceinline=True)
+_njit_inline = jit.njit_with_dependencies(*DEPENDENCIES, forceinline=True)
 #: without numba's reference counting (as fast.rhs_kernel): for a kernel that allocates nothing
 #: and returns no array, where counting every array argument and view costs ~20 %
-_njit_uncounted = _njit_options(_nrt=False, forceinline=False)
+_njit_uncounted = jit.njit_with_dependencies(*DEPENDENCIES, _nrt=False, forceinline=False)
 
 
 # fast.rhs_kernel's workspace as publication_kernel reads it after the kernel ran (its first

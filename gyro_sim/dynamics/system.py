@@ -28,8 +28,8 @@ from typing import Protocol
 import numpy as np
 
 from gyro_sim.dynamics import reference as dyn
+from gyro_sim import jit
 from gyro_sim.dynamics import kernel as fast, entry as fast_entry, outputs as fast_outputs
-from gyro_sim.integrators.rk4 import loop as fast_loop
 from gyro_sim.dynamics.model import Model, initial_state
 from gyro_sim.dynamics.rotations import EULER_SINGULAR_SIN, quat_rates
 
@@ -165,12 +165,9 @@ class FastChainODE:
         self.rhs = self._make_rhs()
         self._i_q0 = int(model.i_quat[0, 0]) if len(model.sph_bodies) else 0
         self._nq = len(model.sph_bodies)
-        # march_explicit_rk: per tableau (by its A) the kernel's copies of A, B, C and the stages K
-        self._tableaus: dict[int, tuple] = {}
-        self._march = fast_loop.Direct(fast_loop.erk_march)  # bound once: the types stay the same
         # outputs: the Simulator's publication kernel (one compiled specialization for both)
         # with everything wanted, no joint states, no scatter
-        self._outputs = fast_loop.Direct(fast_outputs.publication_kernel)
+        self._outputs = jit.Direct(fast_outputs.publication_kernel)
         nothing, none = np.empty(0), np.empty(0, dtype=np.int64)
         n = model.n
         self._no_publication = (
@@ -184,7 +181,6 @@ class FastChainODE:
             np.ascontiguousarray(np.reshape(model.speed_axis, (-1, 3)), dtype=np.float64),
             np.ascontiguousarray(model.speed_A, dtype=np.float64),
             np.ascontiguousarray(model.speed_rate, dtype=np.float64))
-        self._ys = np.empty(model.size)
 
     # --- inputs ------------------------------------------------------------------------------
     def hold(self, t0: float, p0: np.ndarray | None, hinge_tau, L_rotor) -> None:
@@ -225,7 +221,7 @@ class FastChainODE:
     # --- the ODE -------------------------------------------------------------------------------
     @property
     def nfev(self) -> int:
-        """Evaluations of y' counted (rhs, march_explicit_rk, the compiled loops that add
+        """Evaluations of y' counted (rhs, the compiled loops that add
         theirs); settable (the integrators add to it, reset or restore it)."""
         return int(self._words[fast_entry.H_NFEV])
 
@@ -278,29 +274,6 @@ class FastChainODE:
         fast.rhs_kernel(float(t), y, ydot, *self._args)
         return ydot
 
-    def march_explicit_rk(self, A: np.ndarray, B: np.ndarray, C: np.ndarray, t0: float,
-                          y: np.ndarray, h: float, nsteps: int) -> int:
-        """`nsteps` steps of size h of the explicit Runge-Kutta tableau (A (s, s), B (s,),
-        C (s,)) from (t0, y) in one compiled call (:func:`gyro_sim.integrators.rk4.loop.erk_march`),
-        with the inputs held: y (size,), float64 and contiguous, updated in place and
-        projected after every step. Returns the number of steps that left a finite state
-        (nsteps, or the index of the step that did not; y then holds its result). Counts the
-        rhs evaluations in nfev."""
-        if y.shape != (self.size,) or y.dtype != np.float64 or not y.flags.c_contiguous:
-            raise ValueError(f"y must be a contiguous float64 array of shape ({self.size},)")
-        tableau = self._tableaus.get(id(A))
-        if tableau is None or tableau[0] is not A:  # the kernel's types, checked once per tableau
-            stages = len(B)
-            if np.shape(A) != (stages, stages) or np.shape(C) != (stages,):
-                raise ValueError("A must be (s, s), B and C (s,)")
-            tableau = self._tableaus[id(A)] = (A, *(np.array(x, dtype=np.float64) for x in (A, B, C)),
-                                               np.empty((stages, self.size)))
-        _, A_, B_, C_, K = tableau
-        done = self._march(float(t0), float(h), int(nsteps), y, A_, B_, C_, K,
-                           self._ys, self._i_q0, self._nq, *self._args)
-        self.nfev += len(B_) * min(done + 1, nsteps)
-        return done
-
     def outputs(self, t: float, y: np.ndarray) -> dict[str, np.ndarray]:
         """Every output at (t, y) with the inputs held, in one compiled call
         (:func:`gyro_sim.dynamics.outputs.publication_kernel` with everything wanted, no joint
@@ -334,13 +307,11 @@ class FastChainODE:
 
     def warm_up(self) -> None:
         """Compile the kernels (or load them from the disk cache) by one evaluation at the
-        model's initial state and a march of no step; not counted in nfev."""
+        model's initial state and the outputs; not counted in nfev."""
         y = initial_state(self.model)
         self.rhs(self._ref.t0, y)
         self.project(y)
         self.nfev -= 1
-        one = np.zeros((1, 1))  # any tableau: zero steps compile the loop for every tableau
-        self.march_explicit_rk(one, one[0], one[0], self._ref.t0, y, 1.0, 0)
         if not self.model.stateful:  # a stateful model's outputs come from the numpy reference
             self.outputs(self._ref.t0, y)
 
@@ -383,7 +354,7 @@ def make_system(model: Model, backend: str = "auto") -> ChainODE | FastChainODE:
     try:
         system = FastChainODE(model)
         system.warm_up()
-    except fast.NumbaError as exc:
+    except jit.NumbaError as exc:
         if backend == "numba":
             raise
         warnings.warn(f"numba backend unavailable ({type(exc).__name__}); using numpy",

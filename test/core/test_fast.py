@@ -10,7 +10,7 @@ import copy
 import numpy as np
 import pytest
 
-from gyro_sim import load_scene
+from gyro_sim import jit, load_scene
 from gyro_sim.bench.scenes import spherical_chain
 from gyro_sim.dynamics import reference as dyn
 from gyro_sim.dynamics import kernel as fast
@@ -204,7 +204,7 @@ def test_project_normalises_like_reference():
 
 def test_unavailable_numba_is_reported(monkeypatch):
     assert isinstance(fast.available(), bool)
-    monkeypatch.setattr(fast, "numba", None)
+    monkeypatch.setattr(jit, "numba", None)
     assert not fast.available()
     model = compile_model(load_scene(chain_scene(1, "fixed")))
     with pytest.raises(ImportError):
@@ -250,7 +250,7 @@ def test_make_system_falls_back_without_numba(monkeypatch):
     model = compile_model(load_scene(chain_scene(2, "fixed")))
     with pytest.raises(ValueError, match="backend"):
         make_system(model, "cuda")
-    monkeypatch.setattr(fast, "numba", None)
+    monkeypatch.setattr(jit, "numba", None)
     assert type(make_system(model, "auto")) is ChainODE
     with pytest.raises(ImportError):
         make_system(model, "numba")

@@ -36,7 +36,7 @@ import pytest
 from gyro_sim.integrators.dop853 import kernels as dk
 from gyro_sim.dynamics import kernel as fast
 from gyro_sim.integrators.dop853 import loop as fast_dop853
-from gyro_sim.integrators.rk4 import loop as fast_loop
+from gyro_sim import jit
 from gyro_sim.integrators import IntegrationError
 from gyro_sim.integrators.dop853.driver import DOP853
 from gyro_sim.dynamics.model import compile_model, initial_state
@@ -376,8 +376,8 @@ def test_non_finite_initial_rhs_fails_as_in_python():
 
 def test_loop_cache_is_keyed_on_every_file_it_compiles_in():
     names = {in_package(p) for p in fast_dop853.DEPENDENCIES}
-    assert names == {"dynamics/kernel.py", "integrators/dop853/kernels.py", "integrators/dop853/loop.py"}
-    assert fast_loop.cache_directory(fast_dop853.DEPENDENCIES).name.startswith("fast_loop-")
+    assert names == {"dynamics/kernel.py", "dynamics/actuators.py", "integrators/dop853/kernels.py", "integrators/dop853/loop.py"}
+    assert jit.cache_directory(fast_dop853.DEPENDENCIES).name.startswith("fast_loop-")
 
 
 def test_one_compiled_loop_per_process_and_argument_types():

@@ -17,6 +17,7 @@ from gyro_sim.dynamics import reference as dyn
 from gyro_sim.dynamics import kernel as fast, entry as fast_entry
 from gyro_sim.dynamics.model import compile_model, initial_state
 from gyro_sim.dynamics.system import ChainODE, FastChainODE
+from gyro_sim.integrators.rk4.loop import ErkMarch
 
 from .chains import random_chain
 from .test_fast import BASES, assert_rhs_equal, chain_scene, random_state
@@ -183,7 +184,7 @@ def test_nfev_counts_every_evaluation():
     fst.rhs(0.0, y, out=dyn.Evaluation())
     assert fst.nfev == 5
     A, B, C = np.zeros((4, 4)), np.full(4, 0.25), np.zeros(4)
-    assert fst.march_explicit_rk(A, B, C, 0.0, y.copy(), 1e-3, 5) == 5
+    assert ErkMarch(fst)(A, B, C, 0.0, y.copy(), 1e-3, 5) == 5
     assert fst.nfev == 5 + 4 * 5
     fst.nfev += 7
     assert fst.nfev == 32

@@ -8,6 +8,7 @@ import pytest
 
 from gyro_sim import load_scene
 from gyro_sim.dynamics import kernel as fast
+from gyro_sim import jit
 from gyro_sim.integrators.rk4 import loop as fast_loop
 from gyro_sim.integrators import IntegrationError, make_integrator
 from gyro_sim.integrators.rk4.driver import RK4
@@ -101,16 +102,16 @@ def test_erk_arithmetic_is_the_formula():
 
 
 def test_loop_cache_is_keyed_on_every_file_it_compiles_in(tmp_path):
-    first = fast_loop.cache_directory(fast_loop.DEPENDENCIES)
+    first = jit.cache_directory(fast_loop.DEPENDENCIES)
     assert first.name.startswith("fast_loop-")
     copies = []
     for p in fast_loop.DEPENDENCIES:
         c = tmp_path / p.name
         c.write_bytes(p.read_bytes())
         copies.append(c)
-    assert fast_loop.cache_directory(copies) == first
+    assert jit.cache_directory(copies) == first
     copies[0].write_bytes(copies[0].read_bytes() + b"\n# an edit of fast.py\n")
-    assert fast_loop.cache_directory(copies) != first
+    assert jit.cache_directory(copies) != first
 
 
 def test_step_count_and_last_step_as_the_python_path():

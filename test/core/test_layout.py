@@ -132,6 +132,63 @@ def test_core_does_not_import_the_outer_packages():
             assert not [d for d in deps if d.startswith(outer)], m
 
 
+#: the package's layers, lowest first: a module imports only from its own layer or lower ones.
+#: numba's policy and the common helpers; the model (scenes, the dynamics, the closed forms);
+#: the integrators; the Simulator (and the package's public API, which opens onto it) with the
+#: warm-up of its kernels; messages; logs; the node; the reports and sweeps over all of these;
+#: the views (which measure themselves on the reports' scenes); the command line
+LAYERS = (
+    ("gyro_sim.errors", "gyro_sim.jit", "gyro_sim.paths", "gyro_sim.progress", "gyro_sim.safe_paths"),
+    ("gyro_sim.scene", "gyro_sim.dynamics", "gyro_sim.analytic"),
+    ("gyro_sim.integrators",),
+    ("gyro_sim", "gyro_sim.simulator", "gyro_sim.snapshot", "gyro_sim.warmup"),
+    ("gyro_sim.msgs",),
+    ("gyro_sim.log",),
+    ("gyro_sim.ros",),
+    ("gyro_sim.sweep", "gyro_sim.bench"),
+    ("gyro_sim.viz",),
+    ("gyro_sim.cli",),
+)
+
+
+def layer_of(module: str, layers=LAYERS) -> int:
+    """The index in `layers` of the longest prefix (a whole dotted part) that `module` starts with."""
+    best, rank = -1, None
+    for i, prefixes in enumerate(layers):
+        for p in prefixes:
+            if (module == p or module.startswith(p + ".")) and len(p) > best:
+                best, rank = len(p), i
+    if rank is None:
+        raise KeyError(f"{module} is in no layer")
+    return rank
+
+
+def upward_imports(graph: dict[str, set[str]], layers=LAYERS) -> list[str]:
+    """`a -> b` for every import of a module b of a higher layer than a's."""
+    return sorted(f"{a} -> {b}" for a, deps in graph.items() for b in deps
+                  if layer_of(b, layers) > layer_of(a, layers))
+
+
+def test_upward_import_finder_sees_them():
+    layers = (("p.low",), ("p.high",))
+    graph = {"p.low.a": {"p.high.b"}, "p.high.b": {"p.low.c"}, "p.low.c": set()}
+    assert upward_imports(graph, layers) == ["p.low.a -> p.high.b"]
+    with pytest.raises(KeyError):
+        layer_of("q.other", layers)
+
+
+def test_every_module_has_a_layer():
+    for name in import_graph():
+        layer_of(name)
+
+
+def test_no_module_imports_from_a_higher_layer():
+    """In particular: numba's policy (gyro_sim.jit) imports nothing of the package, the dynamics
+    no integrator, and the log layer neither the node nor the views."""
+    assert upward_imports(import_graph()) == []
+    assert import_graph()["gyro_sim.jit"] == set()
+
+
 def _private_reads(path: Path) -> list[str]:
     """`x._name` where x is not self, cls or super(): another object's private member."""
     found = []

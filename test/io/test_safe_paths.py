@@ -330,7 +330,7 @@ def test_view_save_and_screenshot_publish_both_whole(recorded, tmp_path, capsys,
     final name, and writes the picture under a temporary one until it is complete."""
     pytest.importorskip("rerun", reason="view needs rerun-sdk")
     from gyro_sim.cli import main
-    from gyro_sim.log import commands
+    from gyro_sim.viz import commands
     from gyro_sim.viz import rerun_view
 
     log, _ = recorded

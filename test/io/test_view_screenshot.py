@@ -78,7 +78,7 @@ def _headless_viewers() -> set[int]:
 def test_the_viewer_started_is_the_binary_not_the_python_wrapper():
     """A venv's `rerun` is a Python script that runs the binary as its child: stopping the script
     left the headless viewer running after every screenshot (found after a test run)."""
-    from gyro_sim.log.commands import rerun_binary
+    from gyro_sim.viz.commands import rerun_binary
 
     exe = Path(rerun_binary())
     assert not exe.read_bytes()[:2] == b"#!", f"{exe} is a script"

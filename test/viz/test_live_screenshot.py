@@ -22,7 +22,7 @@ SERIES = [3, 3, 2, 1, 3, 2]
 
 
 def test_screenshot_of_a_live_capture_shows_every_plot_and_the_chain(tmp_path, domain):  # noqa: F811
-    from gyro_sim.log.commands import rerun_binary
+    from gyro_sim.viz.commands import rerun_binary
     from gyro_sim.viz.rerun_view import screenshot
 
     d, env, client = domain

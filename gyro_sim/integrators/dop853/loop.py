@@ -18,11 +18,11 @@ calls the same kernels on the same state.
 
 DOP853 dispatches to it when its system offers `kernel_arguments` and `quaternion_block`
 (the compiled :class:`gyro_sim.dynamics.system.FastChainODE`), through :func:`loop_for`: one
-:class:`gyro_sim.integrators.rk4.loop.Direct` per process and types of the kernel's arguments, so a
+:class:`gyro_sim.jit.Direct` per process and types of the kernel's arguments, so a
 new integrator (a new Simulator) pays numba's type dispatch only once per process.
 
 Caching: the loop inlines fast.py and dop853_kernels.py, so it is cached in a directory keyed
-on all three files (:func:`gyro_sim.integrators.rk4.loop.njit_with_dependencies`).
+on all three files (:func:`gyro_sim.jit.njit_with_dependencies`).
 
 References
 ----------
@@ -39,7 +39,7 @@ import numpy as np
 
 from gyro_sim.integrators.dop853 import kernels as dop853_kernels
 from gyro_sim.dynamics import kernel as fast
-from gyro_sim.integrators.rk4 import loop as fast_loop
+from gyro_sim import jit
 from gyro_sim.integrators.dop853.kernels import (
     C_STIFF, COST_DOP853, COST_RADAU, N_EXTENDED, N_STAGES, NO_HLAMB, auto_clear_attempts,
     auto_costlier, auto_measure, auto_rejection_test, auto_stiffness_test, dop_clip, dop_control,
@@ -48,8 +48,8 @@ from gyro_sim.integrators.dop853.kernels import (
 )
 
 #: the files the loop compiles in (the key of its cache directory)
-DEPENDENCIES = (Path(fast.__file__), Path(dop853_kernels.__file__), Path(__file__))
-_njit = fast_loop.njit_with_dependencies(*DEPENDENCIES)
+DEPENDENCIES = (*fast.DEPENDENCIES, Path(dop853_kernels.__file__), Path(__file__))
+_njit = jit.njit_with_dependencies(*DEPENDENCIES)
 
 # --- what the loop returns in status[0] ----------------------------------------------------
 #: t1 reached
@@ -314,7 +314,7 @@ def _equal(a, b):
     return True
 
 
-_LOOPS: dict[tuple, fast_loop.Direct] = {}
+_LOOPS: dict[tuple, jit.Direct] = {}
 
 
 def _type_key(a) -> tuple:
@@ -327,7 +327,7 @@ def _type_key(a) -> tuple:
     return (type(a),)
 
 
-def loop_for(kernel_arguments: tuple) -> fast_loop.Direct:
+def loop_for(kernel_arguments: tuple) -> jit.Direct:
     """:func:`dop853_advance` called through its compiled entry point, for a system whose
     kernel arguments (`FastChainODE.kernel_arguments()`) have the types of these: one per
     process and combination of types (the first call dispatches, the later ones go straight
@@ -336,5 +336,5 @@ def loop_for(kernel_arguments: tuple) -> fast_loop.Direct:
     key = tuple(_type_key(a) for a in kernel_arguments)
     loop = _LOOPS.get(key)
     if loop is None:
-        loop = _LOOPS[key] = fast_loop.Direct(dop853_advance)
+        loop = _LOOPS[key] = jit.Direct(dop853_advance)
     return loop

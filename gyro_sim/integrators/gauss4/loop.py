@@ -14,9 +14,9 @@ system offers them.
 The workspace `ws` is the tuple `Gauss4.workspace` builds (its order: :data:`WS_FIELDS`), and
 the kernel's arguments `kargs` the tuple `kernel_arguments()` returns: one argument each.
 
-Caching as :mod:`gyro_sim.integrators.rk4.loop`: the march inlines fast.py and gauss_kernels.py, so
-its numba cache lives in a directory keyed on all the files it compiles in
-(`fast_loop.njit_with_dependencies`): an edit of any of them starts an empty one.
+Caching: the march inlines fast.py and gauss_kernels.py, so its numba cache lives in a directory
+keyed on all the files it compiles in (:func:`gyro_sim.jit.njit_with_dependencies`): an edit of
+any of them starts an empty one.
 """
 from __future__ import annotations
 
@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from gyro_sim.dynamics import kernel as fast, canonical_kernel as fast_canonical
+from gyro_sim import jit
 from gyro_sim.integrators.rk4 import loop as fast_loop
 from gyro_sim.integrators.gauss4 import kernels as gk
 from gyro_sim.integrators.gauss4.kernels import (
@@ -40,9 +41,9 @@ from gyro_sim.integrators.gauss4.kernels import (
 )
 
 #: the files the march compiles in (the key of its cache directory)
-DEPENDENCIES = (Path(fast.__file__), Path(gk.__file__), Path(fast_loop.__file__),
+DEPENDENCIES = (*fast.DEPENDENCIES, Path(gk.__file__), Path(fast_loop.__file__),
                 Path(fast_canonical.__file__), Path(__file__))
-_njit = fast_loop.njit_with_dependencies(*DEPENDENCIES)
+_njit = jit.njit_with_dependencies(*DEPENDENCIES)
 
 #: the arrays of the workspace tuple, in order (shapes: n the size, m GMRES_CAP or 0 on the
 #: dense path, nd the size on the dense path or 0): stage increments Z, the predictor's Zp,
@@ -66,7 +67,7 @@ def _field(t, y, out, kargs):
         fast_canonical.canonical_call(t, y, out, *kargs)
 
 
-if fast.numba is not None:
+if jit.available():
     from numba.extending import overload
 
     @overload(_field, inline="always")
@@ -314,12 +315,12 @@ def gauss_march(t0, h, nsteps, y, A, C, D, params, dstate, ws, info, counts, i_q
 
 class GaussMarch:
     """:func:`gauss_march` bound to a FastChainODE `system` (its kernel arguments read at every
-    call: they change with `hold`); called through `fast_loop.Direct` (the types stay the
-    same). Counts the rhs evaluations in `system.nfev`, as `march_explicit_rk` does."""
+    call: they change with `hold`); called through `jit.Direct` (the types stay the
+    same). Counts the rhs evaluations in `system.nfev`, as `gyro_sim.integrators.rk4.loop.ErkMarch` does."""
 
     def __init__(self, system):
         self.system = system
-        self._march = fast_loop.Direct(gauss_march)
+        self._march = jit.Direct(gauss_march)
 
     def __call__(self, t0, y, h, nsteps, A, C, D, params, dstate, ws, info, counts) -> tuple[int, int, int]:
         """(steps done, status, rhs evaluations) of `nsteps` steps (see gauss_march)."""

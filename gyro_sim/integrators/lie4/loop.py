@@ -11,9 +11,9 @@ between two evaluations, and the same steps bit for bit (test/core/test_fast_lie
 system's public `kernel_arguments()` and `quaternion_block()`; `Lie4` uses it when its system
 offers them.
 
-Caching as :mod:`gyro_sim.integrators.rk4.loop`: the march inlines fast.py and lie_kernels.py, so
-its numba cache lives in a directory keyed on all the files it compiles in
-(`fast_loop.njit_with_dependencies`): an edit of any of them starts an empty one.
+Caching: the march inlines fast.py and lie_kernels.py, so its numba cache lives in a directory
+keyed on all the files it compiles in (:func:`gyro_sim.jit.njit_with_dependencies`): an edit of
+any of them starts an empty one.
 """
 from __future__ import annotations
 
@@ -22,12 +22,13 @@ from pathlib import Path
 import numpy as np
 
 from gyro_sim.dynamics import kernel as fast
+from gyro_sim import jit
 from gyro_sim.integrators.rk4 import loop as fast_loop
 from gyro_sim.integrators.lie4 import kernels as lk
 
 #: the files the march compiles in (the key of its cache directory)
-DEPENDENCIES = (Path(fast.__file__), Path(lk.__file__), Path(fast_loop.__file__), Path(__file__))
-_njit = fast_loop.njit_with_dependencies(*DEPENDENCIES)
+DEPENDENCIES = (*fast.DEPENDENCIES, Path(lk.__file__), Path(fast_loop.__file__), Path(__file__))
+_njit = jit.njit_with_dependencies(*DEPENDENCIES)
 
 
 @_njit
@@ -72,8 +73,8 @@ def lie_march(t0, h, nsteps, y, ALPHA, BASE, BETA, C, Y, F, W, V, qi, li, i_q0, 
 class LieMarch:
     """:func:`lie_march` bound to a FastChainODE `system` and a method's coefficients (the
     kernel arguments read at every call: they change with `hold`); called through
-    `fast_loop.Direct` (the types stay the same). Counts the rhs evaluations in
-    `system.nfev`, as `march_explicit_rk` does.
+    `jit.Direct` (the types stay the same). Counts the rhs evaluations in
+    `system.nfev`, as `gyro_sim.integrators.rk4.loop.ErkMarch` does.
 
     qi (nq, 4), li (nl,) int64: the integrator's quaternion blocks and other components, which
     must be the system's `quaternion_block()` (the renormalisation's blocks)."""
@@ -91,7 +92,7 @@ class LieMarch:
         self._BETA = np.array(BETA, dtype=np.float64)
         self._C = np.array(C, dtype=np.float64)
         self._F = np.empty(system.size)
-        self._march = fast_loop.Direct(lie_march)
+        self._march = jit.Direct(lie_march)
 
     def __call__(self, t0, y, h, nsteps, Y, W, V) -> int:
         """Steps completed with a finite state of `nsteps` steps (see lie_march); Y (stages,

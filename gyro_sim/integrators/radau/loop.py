@@ -22,7 +22,7 @@ same state.
 Radau dispatches to it when its system offers `kernel_arguments` and `quaternion_block` (the
 compiled :class:`gyro_sim.dynamics.system.FastChainODE`), has no `jacobian`, and is at most
 DENSE_MAX states (the matrix-free mode steps in Python), through :func:`loop_for`: one
-:class:`gyro_sim.integrators.rk4.loop.Direct` per process and types of the kernel's arguments.
+:class:`gyro_sim.jit.Direct` per process and types of the kernel's arguments.
 
 The integrator's memory between calls (step sizes, the Jacobian and its LU factors, the
 collocation polynomial, where the last call ended) lives in the arrays passed in: `mem`
@@ -30,7 +30,7 @@ collocation polynomial, where the last call ended) lives in the arrays passed in
 return the counts and the status of the call).
 
 Caching: the loop inlines fast.py, radau_kernels.py and dop853_kernels.py, so it is cached in a
-directory keyed on all four files (:func:`gyro_sim.integrators.rk4.loop.njit_with_dependencies`).
+directory keyed on all four files (:func:`gyro_sim.jit.njit_with_dependencies`).
 
 References
 ----------
@@ -47,7 +47,7 @@ import numpy as np
 
 from gyro_sim.integrators.dop853 import kernels as dop853_kernels
 from gyro_sim.dynamics import kernel as fast
-from gyro_sim.integrators.rk4 import loop as fast_loop
+from gyro_sim import jit
 from gyro_sim.integrators.radau import kernels as radau_kernels
 from gyro_sim.integrators.dop853.kernels import (
     COST_RADAU, auto_measure, dop_initial_probe, dop_initial_step,
@@ -63,9 +63,9 @@ from gyro_sim.integrators.radau.kernels import (
 )
 
 #: the files the loop compiles in (the key of its cache directory)
-DEPENDENCIES = (Path(fast.__file__), Path(radau_kernels.__file__), Path(dop853_kernels.__file__),
+DEPENDENCIES = (*fast.DEPENDENCIES, Path(radau_kernels.__file__), Path(dop853_kernels.__file__),
                 Path(__file__))
-_njit = fast_loop.njit_with_dependencies(*DEPENDENCIES)
+_njit = jit.njit_with_dependencies(*DEPENDENCIES)
 
 # --- what the loop returns in flags[F_STATUS] ---------------------------------------------
 #: t1 reached
@@ -451,7 +451,7 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
     flags[F_REASON] = reason
 
 
-_LOOPS: dict[tuple, fast_loop.Direct] = {}
+_LOOPS: dict[tuple, jit.Direct] = {}
 
 
 def _type_key(a) -> tuple:
@@ -464,7 +464,7 @@ def _type_key(a) -> tuple:
     return (type(a),)
 
 
-def loop_for(kernel_arguments: tuple) -> fast_loop.Direct:
+def loop_for(kernel_arguments: tuple) -> jit.Direct:
     """:func:`radau_advance` called through its compiled entry point, for a system whose kernel
     arguments (`FastChainODE.kernel_arguments()`) have the types of these: one per process and
     combination of types (the first call dispatches, the later ones go straight to the entry
@@ -474,5 +474,5 @@ def loop_for(kernel_arguments: tuple) -> fast_loop.Direct:
     key = tuple(_type_key(a) for a in kernel_arguments)
     loop = _LOOPS.get(key)
     if loop is None:
-        loop = _LOOPS[key] = fast_loop.Direct(radau_advance)
+        loop = _LOOPS[key] = jit.Direct(radau_advance)
     return loop

@@ -19,10 +19,12 @@ class RK4(ExplicitRungeKutta, FixedStepIntegrator):
     stepped to exactly).
 
     One implementation, two drivers: the tableau's arithmetic is
-    :mod:`gyro_sim.integrators.rk4.kernels`. On a system that offers `march_explicit_rk` (the
-    compiled :class:`gyro_sim.dynamics.system.FastChainODE`) the n substeps of an `advance` run in
-    one compiled call with this class's tableau; on any other system this class steps in
-    Python (`_step`), calling the same arithmetic between its rhs evaluations.
+    :mod:`gyro_sim.integrators.rk4.kernels`. On a system that offers `kernel_arguments()` and
+    `quaternion_block()` (the compiled :class:`gyro_sim.dynamics.system.FastChainODE`) the n
+    substeps of an `advance` run in one compiled call with this class's tableau
+    (:class:`gyro_sim.integrators.rk4.loop.ErkMarch`, compiled or loaded when this integrator is
+    made); on any other system this class steps in Python (`_step`), calling the same
+    arithmetic between its rhs evaluations.
 
     References
     ----------
@@ -47,7 +49,13 @@ class RK4(ExplicitRungeKutta, FixedStepIntegrator):
         self._K = np.empty((self.n_stages, self.n))
         self._ys = np.empty(self.n)
         self._hA = np.empty_like(self.A)
-        self._march_system = getattr(system, "march_explicit_rk", None)
+        self._march_system = None
+        if callable(getattr(system, "kernel_arguments", None)) and \
+                callable(getattr(system, "quaternion_block", None)):
+            from gyro_sim.integrators.rk4.loop import ErkMarch  # the compiled march (imports the kernel's module)
+
+            self._march_system = ErkMarch(system)
+            self._march_system.warm_up(0.0, np.zeros(self.n))  # not in the first advance
 
     def _march_compiled(self, t0: float, y: np.ndarray, h: float, n: int) -> int | None:
         if self._march_system is None:

@@ -9,108 +9,30 @@ method calls for other systems): no Python between two evaluations. After every 
 quaternions are renormalised (`project`) and the state checked finite, as
 :class:`gyro_sim.integrators.base.FixedStepIntegrator` does.
 
-:class:`gyro_sim.dynamics.system.FastChainODE` offers it as `march_explicit_rk`; the fixed-step
-integrators dispatch to it when their system has it.
+:class:`ErkMarch` binds it to a compiled system (one with `kernel_arguments`, as
+:class:`gyro_sim.dynamics.system.FastChainODE`); the explicit Runge-Kutta methods march with it
+on such a system.
 
-Caching: numba's disk cache keys a kernel on its own file only (numba docs, "Cache
-limitations"), and these loops inline functions of fast.py and rk_kernels.py: cached the
-usual way, a loop would survive an edit of those files and run stale code. So their cache
-lives in a directory named after a digest of all three files (:func:`cache_directory`): an
-edit of any of them starts an empty one. Compiling costs ~0.6 s once per version (the kernel
-itself, its C function, ~12 s: `fast.kernel_address`).
+Caching: these loops inline functions of fast.py and rk_kernels.py, so their cache lives in a
+directory keyed on all of them (:func:`gyro_sim.jit.njit_with_dependencies`): an edit of any
+starts an empty one. Compiling costs ~0.6 s once per version (the kernel itself, its C
+function, ~12 s: `fast.kernel_address`).
 """
 from __future__ import annotations
 
-import hashlib
-import os
 from pathlib import Path
 
+import numpy as np
+
+from gyro_sim import jit
 from gyro_sim.dynamics import kernel as fast
 from gyro_sim.integrators.rk4 import kernels as rk_kernels
 from gyro_sim.integrators.rk4.kernels import erk_stage_state, erk_update
 
-try:
-    import numba
-except ImportError:  # pragma: no cover - exercised only where numba is missing
-    numba = None
-
-def cache_directory(files) -> Path:
-    """Where kernels compiled from `files` (paths) are cached: `fast_loop-<digest of the files>`
-    under NUMBA_CACHE_DIR when set, else under this package's __pycache__ (if writable), else
-    under ~/.cache/gyro_sim."""
-    digest = hashlib.sha256(b"".join(Path(p).read_bytes() for p in files)).hexdigest()[:16]
-    if numba is not None and numba.config.CACHE_DIR:
-        base = Path(numba.config.CACHE_DIR)
-    else:
-        base = Path(__file__).parent / "__pycache__"
-        if not os.access(base if base.exists() else base.parent, os.W_OK):
-            base = Path.home() / ".cache" / "gyro_sim"
-    return base / f"fast_loop-{digest}"
-
-
-def njit_with_dependencies(*files):
-    """A decorator: compiled in nopython mode (IEEE arithmetic, numpy's error model, as
-    gyro_sim.dynamics.kernel), cached on disk in :func:`cache_directory` of `files`, the files of
-    every kernel the function compiles in (its own included): an edit of any starts afresh."""
-
-    def decorate(fn):
-        if numba is None:
-            return fn
-        saved = numba.config.CACHE_DIR
-        numba.config.CACHE_DIR = str(cache_directory(files))  # read when the dispatcher is made
-        try:
-            return numba.njit(cache=True, error_model="numpy")(fn)
-        finally:
-            numba.config.CACHE_DIR = saved
-
-    return decorate
-
-
-def cfunc_with_dependencies(signature, *files, **options):
-    """A decorator: compiled as a C function of `signature` (numba.cfunc: its `address` is what
-    compiled code calls, `gyro_sim.dynamics.kernel.call_address`), in nopython mode with numpy's error
-    model, cached on disk in :func:`cache_directory` of `files` (as `njit_with_dependencies`).
-    Compiles (or loads) when applied: apply it when the function is first needed."""
-
-    def decorate(fn):
-        saved = numba.config.CACHE_DIR
-        numba.config.CACHE_DIR = str(cache_directory(files))  # read when the cache is made
-        try:
-            return numba.cfunc(signature, cache=True, error_model="numpy", **options)(fn)
-        finally:
-            numba.config.CACHE_DIR = saved
-
-    return decorate
-
-
-class Direct:
-    """A compiled kernel called without numba's per-call type dispatch: the first call goes
-    through the dispatcher (compiling or loading), later calls straight to the compiled
-    entry point of that first call's signature (numba resolves the types of every argument on
-    every call otherwise: ~0.3 us an argument, 5-10 us for the kernels here).
-
-    The caller guarantees that every later call passes arguments of the first call's types
-    (dtype, dimensions, C-contiguous arrays; float and int scalars): the entry point converts,
-    it does not check. Without numba, the plain function is called.
-    """
-
-    def __init__(self, kernel):
-        self.kernel = kernel
-        self.entry = None
-
-    def __call__(self, *args):
-        if self.entry is not None:
-            return self.entry(*args)
-        out = self.kernel(*args)
-        if numba is not None:
-            signature = tuple(numba.typeof(a) for a in args)
-            self.entry = self.kernel.overloads[signature].entry_point
-        return out
-
 
 #: the files whose kernels the loops compile in (the key of their cache directory)
-DEPENDENCIES = (Path(fast.__file__), Path(rk_kernels.__file__), Path(__file__))
-_njit = njit_with_dependencies(*DEPENDENCIES)
+DEPENDENCIES = (*fast.DEPENDENCIES, Path(rk_kernels.__file__), Path(__file__))
+_njit = jit.njit_with_dependencies(*DEPENDENCIES)
 
 
 @_njit
@@ -153,3 +75,46 @@ def erk_march(t0, h, nsteps, y, A, B, C, K, ys, i_q0, nq,
         if not finite(y):
             return k
     return nsteps
+
+
+class ErkMarch:
+    """:func:`erk_march` bound to a compiled `system` (its kernel arguments read at every call:
+    they change with `hold`), called through `gyro_sim.jit.Direct` (the types stay the same).
+    Counts the rhs evaluations in `system.nfev`."""
+
+    def __init__(self, system):
+        self.system = system
+        self._i_q0, self._nq = (int(v) for v in system.quaternion_block())
+        self._ys = np.empty(system.size)
+        # per tableau (by its A) the kernel's copies of A, B, C and the stages K
+        self._tableaus: dict[int, tuple] = {}
+        self._march = jit.Direct(erk_march)
+
+    def __call__(self, A: np.ndarray, B: np.ndarray, C: np.ndarray, t0: float, y: np.ndarray, h: float,
+                 nsteps: int) -> int:
+        """`nsteps` steps of size h of the explicit Runge-Kutta tableau (A (s, s), B (s,), C (s,))
+        from (t0, y) in one compiled call, with the inputs held: y (size,), float64 and
+        contiguous, updated in place and projected after every step. Returns the number of
+        steps that left a finite state (nsteps, or the index of the step that did not; y then
+        holds its result)."""
+        size = self.system.size
+        if y.shape != (size,) or y.dtype != np.float64 or not y.flags.c_contiguous:
+            raise ValueError(f"y must be a contiguous float64 array of shape ({size},)")
+        tableau = self._tableaus.get(id(A))
+        if tableau is None or tableau[0] is not A:  # the kernel's types, checked once per tableau
+            stages = len(B)
+            if np.shape(A) != (stages, stages) or np.shape(C) != (stages,):
+                raise ValueError("A must be (s, s), B and C (s,)")
+            tableau = self._tableaus[id(A)] = (A, *(np.array(x, dtype=np.float64) for x in (A, B, C)),
+                                               np.empty((stages, size)))
+        _, A_, B_, C_, K = tableau
+        done = self._march(float(t0), float(h), int(nsteps), y, A_, B_, C_, K,
+                           self._ys, self._i_q0, self._nq, *self.system.kernel_arguments())
+        self.system.nfev += len(B_) * min(done + 1, nsteps)
+        return done
+
+    def warm_up(self, t0: float, y: np.ndarray) -> None:
+        """Compile the loop (or load it from the disk cache) by a march of no step from a copy
+        of y (any tableau: zero steps compile the loop for every tableau)."""
+        one = np.zeros((1, 1))
+        self(one, one[0], one[0], t0, np.array(y, dtype=np.float64), 1.0, 0)
