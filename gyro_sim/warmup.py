@@ -191,6 +191,36 @@ def warm_everything(integrator: str = DEFAULT_INTEGRATOR) -> None:
         sim.advance(0.002)
 
 
+#: how often (s) the node's loader thread looks whether the cache fill has ended
+LOAD_POLL = 1.0
+
+
+def warm_when_filled(sim, poll: float = LOAD_POLL):
+    """Off the physics thread, what a guarded "fixed" may switch to (gyro_sim.integrators.fixed:
+    `guard`, WARM): a daemon thread waits until no helper fills the cache (`filling`), then runs
+    the warm-up of a second Simulator of the same scene and step, which loads (or, if the fill
+    left it out, compiles) every rung into this process; the guard then lets them step. The
+    second Simulator shares nothing with `sim` but the compiled code. Returns the thread."""
+    import threading
+
+    scene, step = sim.scene, sim.integrator.step
+
+    def load():
+        while filling():
+            time.sleep(poll)
+        try:
+            from gyro_sim.simulator import Simulator
+
+            twin = Simulator(scene, integrator="fixed", step=step, backend="numba")
+            twin.integrator.warm_up(twin.time, twin.state)
+        except Exception:  # noqa: BLE001 - the guard keeps the rung back: the run goes on without it
+            pass
+
+    thread = threading.Thread(target=load, name="gyro_sim-load-rungs", daemon=True)
+    thread.start()
+    return thread
+
+
 def filling() -> bool:
     """True while a helper compiles into this cache (the one this process started, or another
     start's: it holds the lock): a start then leaves the methods it may switch to for later

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from gyro_sim.bench.procs import running
+from gyro_sim import warmup
 from gyro_sim.dynamics import kernel as fast
 
 pytestmark = pytest.mark.skipif(not fast.available(), reason="needs numba")
@@ -234,3 +235,20 @@ def test_the_helper_runs_the_gyro_sim_of_its_parent_wherever_it_starts(tmp_path)
             parent.stdout.close()
             parent.stderr.close()
     assert not marker.exists(), "the helper ran the gyro_sim of its working directory"
+
+
+def test_the_node_loads_the_rungs_off_its_physics_thread_once_the_fill_ends(monkeypatch):
+    """warm_when_filled: a thread waits while a helper fills the cache, then loads every rung of
+    "fixed" into the process (the manifest gets them) through a Simulator of its own."""
+    from gyro_sim.integrators import fixed
+    from gyro_sim.simulator import Simulator
+
+    answers = iter([True, True, False])
+    monkeypatch.setattr(warmup, "filling", lambda: next(answers, False))
+    monkeypatch.setattr(fixed, "WARM", set())
+    sim = Simulator("hinge_chain", integrator="fixed", step=1e-3, backend="numba")
+    thread = warmup.warm_when_filled(sim, poll=0.0)
+    thread.join(600)
+    assert not thread.is_alive() and next(answers, None) is None  # it waited through both "filling"
+    assert {"gauss4s", fixed.RESCUE} <= fixed.WARM
+    assert sim.time == 0.0 and sim.integrator.nfev == 0  # the node's own Simulator untouched

@@ -151,6 +151,11 @@ OVER_BUDGET_WATCH = 1.0
 #: retakes (in place of the implicit rung and the rescue, whose cost has no bound): the linearly
 #: implicit Euler step (:class:`LinearlyImplicitEuler`), L-stable, size + 1 evaluations a step
 BUDGET_RUNG = "rosenbrock1"
+#: the methods whose compiled code this process has run (:meth:`SceneFixedStep.warm_up`): numba
+#: has no public "is it compiled?", and a first call compiles, or loads from the cache, in the
+#: calling thread. A guarded "fixed" (the node's) takes no other rung than rk4 and BUDGET_RUNG
+#: (numpy on the compiled rhs: nothing to compile) until its method is here
+WARM: set[str] = set()
 
 
 class WatchdogTrip(IntegrationError):
@@ -322,6 +327,10 @@ class SceneFixedStep(FixedStepIntegrator):
         watchdog's limit, and the sum of their energy errors (each relative to the kinetic
         energy): the drift the budget let through, since the start or the reset.
     credit : the evaluations the budget has left for a burst (negative: over budget).
+    guard : the node sets it: a rung whose compiled code this process has not run yet (not in
+        WARM: the cache fills in the background) is not taken; BUDGET_RUNG steps in its place,
+        and the reason says so. Off: any rung is taken, compiled at its first call if need be.
+    notes : what the guard said, once per rung.
 
     References
     ----------
@@ -378,6 +387,20 @@ class SceneFixedStep(FixedStepIntegrator):
         self._model = model if hasattr(model, "col_sph") else None
         self._y0 = np.empty(self.n)
         self._reset_budget()
+        self.guard = False
+        self.notes: list[str] = []
+        self._compiled = callable(getattr(system, "kernel_arguments", None))  # the numba backend
+
+    def ready(self, name: str) -> bool:
+        """May `name` step now? Not when guarded and its compiled code has not run in this process."""
+        return not (self.guard and self._compiled) or name in ("rk4", BUDGET_RUNG) or name in WARM
+
+    def _unready(self, name: str) -> str:
+        """The reason's words for a rung the guard held back (said once in `notes`)."""
+        words = f"{name} is not compiled yet (the cache fills in the background)"
+        if words not in self.notes:
+            self.notes.append(words)
+        return words
 
     def _reset_budget(self) -> None:
         self.credit = float(BURST_STEPS * EVAL_BUDGET)
@@ -414,6 +437,7 @@ class SceneFixedStep(FixedStepIntegrator):
             for name, m in self.methods.items():
                 m.nfev, m.nsteps, m.njev, m.nlu, m.nrejected = counts[name]
                 m.reset()
+            WARM.update(self.methods)
 
     def _speed(self, y: np.ndarray) -> float:
         return float(np.abs(y[self._speeds]).max()) if len(self._speeds) else 0.0
@@ -461,9 +485,10 @@ class SceneFixedStep(FixedStepIntegrator):
             method, substeps = c.method, c.substeps
             if self.over_budget:
                 self.reason += f"; over the real-time budget ({EVAL_BUDGET} rhs evaluations a step)"
-                if method != "rk4" and self.budget_rung:
-                    method, substeps = BUDGET_RUNG, 1
-                    self.reason = f"{BUDGET_RUNG} in place of {c.label}: {self.reason}"
+            if method != "rk4" and self.budget_rung and (self.over_budget or not self.ready(method)):
+                why = "" if self.ready(method) else f" ({self._unready(method)})"
+                method, substeps = BUDGET_RUNG, 1
+                self.reason = f"{BUDGET_RUNG} in place of {c.label}{why}: {self.reason}"
             self._switch(t0, method, substeps)
             self._retaken = False
             self._last_check = t0
@@ -497,11 +522,20 @@ class SceneFixedStep(FixedStepIntegrator):
                     if self.current == RESCUE:
                         raise
                     after = self.implicit if self.current == "rk4" else RESCUE
-                    if self.over_budget and self.budget_rung and self.current != BUDGET_RUNG:
-                        after = BUDGET_RUNG  # a fixed cost: the ladder's next rungs have none
+                    why = ""
+                    if self.budget_rung and self.current != BUDGET_RUNG and (self.over_budget or not self.ready(after)):
+                        why = "" if self.ready(after) else f" ({self._unready(after)})"
+                        after = BUDGET_RUNG  # a fixed cost, compiled nothing: the ladder's next rungs neither
+                    if not self.ready(after):  # the rescue, not compiled yet
+                        if kept is None:
+                            raise
+                        y[:] = kept[0]
+                        self._keep(kept[1])
+                        self.reason = f"{BUDGET_RUNG}: kept, {self._unready(after)}"
+                        break
                     what = (f"failed ({e.reason})" if self.current != "rk4" or isinstance(e, WatchdogTrip)
                             else "left a non-finite state")
-                    self.reason = f"{after}: {self._label()} {what} at t = {e.t:.6g} s"
+                    self.reason = f"{after}{why}: {self._label()} {what} at t = {e.t:.6g} s"
                     self._switch(t0, after, 1 if after in (RESCUE, BUDGET_RUNG) else self.substeps)
                     self._retaken = True
                     self._next_check = self._hold_until = t0 + CHECK_PERIOD

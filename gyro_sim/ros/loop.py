@@ -78,15 +78,21 @@ FIFO_DEMOTE_AFTER = 1.0
 def warm_up(sim, dt: float) -> None:
     """Run every path the loop uses once (first calls pay for imports, caches, compilation),
     then put the Simulator back in its initial state."""
-    from gyro_sim.warmup import filling
+    from gyro_sim.warmup import filling, warm_when_filled
 
     sim.snapshot()
     integ_warm_up = getattr(sim.integrator, "warm_up", None)
     # "fixed": the methods it may switch to later, compiled (or loaded) now; on a first start
-    # the warm-up helper compiles them into the cache instead, and a switch before it is done
-    # compiles what it needs then
-    if integ_warm_up is not None and not filling():
-        integ_warm_up(sim.time, sim.state)
+    # the warm-up helper compiles them into the cache instead, and a thread of this process
+    # loads them when it is done; until then the guard keeps them back (the physics thread
+    # compiles nothing: docs/performance.md)
+    if hasattr(sim.integrator, "guard"):
+        sim.integrator.guard = True
+    if integ_warm_up is not None:
+        if filling():
+            warm_when_filled(sim)
+        else:
+            integ_warm_up(sim.time, sim.state)
     sim.advance(dt)
     sim.reset()
 

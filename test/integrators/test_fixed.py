@@ -187,3 +187,97 @@ def test_diagnostics_carry_the_drift_let_through_over_budget():
     sim.integrator.budget_calls, sim.integrator.budget_energy_error = 3, -2e-4
     values = dynamics_values(sim.snapshot(bodies=False, wrenches=False, invariants=False))
     assert values[BUDGET_CALLS_KEY] == 3.0 and values[BUDGET_ERROR_KEY] == -2e-4
+
+
+# --- the guard: the physics thread compiles nothing ----------------------------------------------
+def test_warm_up_enters_every_rung_in_the_manifest(monkeypatch):
+    monkeypatch.setattr(fixed, "WARM", set())
+    sim = Simulator("hinge_chain", integrator="fixed", step=STEP)
+    assert not fixed.WARM
+    sim.integrator.warm_up(sim.time, sim.state)
+    assert fixed.WARM == set(sim.integrator.methods) >= {"rk4", "gauss4s", fixed.RESCUE, fixed.BUDGET_RUNG}
+
+
+def test_guarded_fixed_takes_no_rung_this_process_has_not_run(monkeypatch):
+    """Guarded, with nothing in the manifest: the violent step's retakes and stiff choices go to
+    the budget's rung (numpy on the compiled rhs), each rung held back said once; unguarded the
+    same run takes gauss4s and dop853."""
+    scene, moments = abrupt_commands()
+    runs = {}
+    for guard in (True, False):
+        monkeypatch.setattr(fixed, "WARM", set())
+        sim = Simulator(scene, integrator="fixed", step=STEP)
+        sim.integrator.guard = guard
+        sim.advance(CALL)
+        sim.set_axis_moments(moments)
+        for _ in range(10):
+            sim.advance(CALL)
+        assert np.isfinite(sim.state).all()
+        runs[guard] = sim.integrator
+    used = {s[2].split()[0] for s in runs[True].switches}
+    assert used <= {"rk4", fixed.BUDGET_RUNG} and fixed.BUDGET_RUNG in used
+    assert len(runs[True].notes) == len(set(runs[True].notes)) >= 1
+    assert all("not compiled yet" in n for n in runs[True].notes)
+    assert {"gauss4s", fixed.RESCUE} <= {s[2].split()[0] for s in runs[False].switches}
+
+
+COLD_RUN = r'''
+import json, sys, threading
+import numpy as np
+from numba.core import event
+from gyro_sim.bench.extreme import abrupt_commands
+from gyro_sim.simulator import Simulator
+
+compiles = []
+
+
+class Listener(event.Listener):
+    def on_start(self, ev):
+        compiles.append(threading.current_thread().name)
+
+    def on_end(self, ev):
+        pass
+
+
+scene, moments = abrupt_commands()
+sim = Simulator(scene, integrator="fixed", step=1e-3)  # the start: the first step's kernels compiled here
+sim.snapshot()
+sim.advance(0.01)
+sim.integrator.guard = True  # as the node sets it
+event.register("numba:compile", Listener())
+before = len(compiles)
+
+
+def physics():
+    sim.set_axis_moments(moments)
+    for _ in range(30):
+        sim.advance(0.01)
+
+
+thread = threading.Thread(target=physics, name="physics")
+thread.start()
+thread.join()
+json.dump({"physics": compiles[before:].count("physics"), "switches": [s[2] for s in sim.integrator.switches],
+           "finite": bool(np.isfinite(sim.state).all())}, sys.stdout)
+'''
+
+
+@pytest.mark.slow
+def test_no_compile_on_the_physics_thread_through_a_violent_step_on_an_empty_cache(tmp_path):
+    """A process of its own on an empty, private numba cache: the start compiles the first
+    step's kernels; then a thread steps the violent step for 0.3 s, and numba's compile-event
+    listener (which also sees loads from the cache) sees no compile from that thread: the rungs
+    it has not run (gauss4s, dop853) are held back, the budget's rung steps in their place.
+    Unguarded, the same thread compiled gauss4s and dop853 there (53 s of wall time, measured)."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"), GYRO_SIM_BACKGROUND_FILL="0")
+    out = subprocess.run([sys.executable, "-c", COLD_RUN], env=env, capture_output=True, text=True, timeout=900,
+                         cwd=tmp_path)
+    assert out.returncode == 0, out.stderr[-2000:]
+    got = json.loads(out.stdout)
+    assert got["physics"] == 0 and got["finite"]
+    assert fixed.BUDGET_RUNG in got["switches"] and not {"gauss4s", fixed.RESCUE} & set(got["switches"])
