@@ -237,6 +237,7 @@ PLUGINS = (
     "gyro_sim.scene.commands",  # import (an MJCF or URDF model as a scene)
     "gyro_sim.bench.soak",
     "gyro_sim.bench.startup",
+    "gyro_sim.warmup",  # warmup (the kernel cache filled in the foreground)
 )
 
 

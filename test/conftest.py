@@ -8,6 +8,9 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 # rclpy writes a log file per process: keep them out of ~/.ros and out of the tree
 os.environ.setdefault("ROS_LOG_DIR", os.path.join(tempfile.gettempdir(), "gyro_sim_test_ros_log"))
+# no kernel-cache fill left behind by a test's start: it would take the cores from the other
+# tests (the tests of the fill opt in with "1" and a private NUMBA_CACHE_DIR)
+os.environ["GYRO_SIM_BACKGROUND_FILL"] = "0"
 
 #: what a run may leave in the clone: caches of Python, numba and pytest, build metadata, venvs
 _TREE_OWN = {"__pycache__", ".git", ".pytest_cache", ".ci-venv", ".venv", "build", "dist"}
