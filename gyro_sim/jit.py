@@ -91,9 +91,12 @@ def user_cache_root() -> Path:
     and of numba and per CPU (two installs of other versions, or a home shared by two machines,
     do not overwrite each other's entries)."""
     import platform
+    from importlib import metadata
 
-    from gyro_sim import __version__
-
+    try:  # the installed distribution's version (the package itself is above this module)
+        __version__ = metadata.version("gyro_sim")
+    except metadata.PackageNotFoundError:
+        __version__ = "source"
     cpu = platform.machine() or "cpu"
     if numba is not None:
         try:
