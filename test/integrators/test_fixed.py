@@ -49,7 +49,7 @@ def dense_spectral_radius(rhs, t, y):
 def test_the_estimate_follows_the_dense_jacobian_after_a_violent_command():
     """0.12 s into the violent step (bodies at ~3e4 rad/s, a wheel's angle of ~1e5 rad in the
     state): the Krylov estimate agrees with the dense Jacobian's eigenvalues, where one
-    perturbation for the whole state, scaled by |y|, overestimated it 40-fold."""
+    perturbation for the whole state, scaled by |y|, overestimates 40-fold."""
     scene, moments = abrupt_commands()
     sim = Simulator(scene, integrator="dop853", rtol=1e-8, atol=1e-10)
     sim.advance(CALL)
@@ -269,7 +269,7 @@ def test_no_compile_on_the_physics_thread_through_a_violent_step_on_an_empty_cac
     listener sees no compile from that thread (on an empty cache every first call compiles: a
     kernel that thread called first would show): the rungs it has not run (gauss4s, dop853)
     are held back, the budget's rung steps in their place.
-    Unguarded, the same thread compiled gauss4s and dop853 there (53 s of wall time, measured)."""
+    Unguarded, the same thread compiles gauss4s and dop853 there (53 s of wall time, measured)."""
     import json
     import os
     import subprocess
