@@ -150,6 +150,9 @@ VIOLENT_AFTER = 1.0
 VIOLENT_CALL = 1.0 / PUBLISH_RATE
 #: simulated seconds of a node run with the violent step
 VIOLENT_SECONDS = 5.0
+#: wall seconds after which the command is sent again while the node's diagnostics (every 0.1 s
+#: simulated) say it has taken none
+RESEND_AFTER = 0.3
 
 
 def violent_counts(push: float = VIOLENT_PUSH, after: float = VIOLENT_AFTER, factor: float | None = None) -> dict:
@@ -228,12 +231,14 @@ def run_violent_node(workdir: Path, seconds: float = VIOLENT_SECONDS, push: floa
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
+    from diagnostic_msgs.msg import DiagnosticArray
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
 
     from gyro_sim.bench import extreme as ex
-    from gyro_sim.msgs.messages import JOINT_STATES
+    from gyro_sim.msgs.messages import DIAGNOSTICS, JOINT_STATES, RUN_STATUS
     from gyro_sim.ros.commands import command_topic
+    from gyro_sim.ros.discovery import announce_often
 
     _, moments = ex.abrupt_commands()
     stats = workdir / f"stats_violent_{index}.json"
@@ -250,6 +255,14 @@ def run_violent_node(workdir: Path, seconds: float = VIOLENT_SECONDS, push: floa
     env["PYTHONPATH"] = os.pathsep.join([root, env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
     arrivals: list[float] = []
     sent: list[float] = []
+    accepted: list[int] = []  # the node's count of accepted commands, from its /diagnostics
+
+    def on_diagnostics(msg) -> None:
+        for status in msg.status:
+            if status.name.endswith(RUN_STATUS):
+                accepted.extend(int(float(kv.value)) for kv in status.values if kv.key == "commands_accepted")
+
+    announce_often()
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
     proc = None
@@ -257,6 +270,7 @@ def run_violent_node(workdir: Path, seconds: float = VIOLENT_SECONDS, push: floa
         node = rclpy.create_node("gyro_sim_bench_violent", context=context)
         pub = node.create_publisher(Float64MultiArray, command_topic("/"), 10)
         node.create_subscription(JointState, JOINT_STATES, lambda msg: arrivals.append(time.monotonic()), 100)
+        node.create_subscription(DiagnosticArray, DIAGNOSTICS, on_diagnostics, 10)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         log = workdir / f"violent_{index}.log"  # a file, not a pipe nobody reads while the node runs
@@ -265,9 +279,14 @@ def run_violent_node(workdir: Path, seconds: float = VIOLENT_SECONDS, push: floa
         end = time.monotonic() + 3 * seconds + 60
         while proc.poll() is None and time.monotonic() < end:
             executor.spin_once(timeout_sec=0.005)
-            if arrivals and not sent:
+            # once it publishes and its command subscription has matched this publisher; again
+            # while its diagnostics say it has taken none (a command sent before the node's
+            # side of the match is lost: the topic keeps nothing for late subscribers)
+            now = time.monotonic()
+            again = sent and not any(accepted) and now - sent[-1] > RESEND_AFTER
+            if arrivals and pub.get_subscription_count() > 0 and (not sent or again):
                 pub.publish(Float64MultiArray(data=list(moments)))
-                sent.append(time.monotonic())
+                sent.append(now)
         if proc.poll() is None:
             proc.send_signal(signal.SIGINT)
         proc.wait(timeout=30)
@@ -279,7 +298,9 @@ def run_violent_node(workdir: Path, seconds: float = VIOLENT_SECONDS, push: floa
         raise RuntimeError(f"gyro_sim_node failed (violent step, exit {proc.returncode}):\n"
                            f"{log.read_text(errors='replace')[-2000:]}")
     st = json.loads(stats.read_text())
-    after = [t for t in arrivals if sent and t >= sent[0]]
+    if st.get("commands_accepted") != 1:
+        raise RuntimeError(f"the node took {st.get('commands_accepted')} commands, not the violent step's one")
+    after = [t for t in arrivals if sent and t >= sent[-1]]
     gaps = [b - a for a, b in itertools.pairwise(after)]
     span = after[-1] - after[0] if len(after) > 1 else float("nan")
     return {"received": len(after), "rate_Hz": (len(after) - 1) / span if len(after) > 1 else 0.0,
