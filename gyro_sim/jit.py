@@ -189,6 +189,19 @@ class Direct:
         return out
 
 
+def type_key(a) -> tuple:
+    """What numba's type of an argument depends on: dtype, dimensions, layout (as numba.typeof
+    reads it: C if C-contiguous, else F if Fortran-contiguous, else A), writeability of an
+    array; the same of every item of a tuple (a record); the Python type of a scalar. Equal keys:
+    one compiled specialisation serves both (the key of a cache of `Direct` entries)."""
+    if isinstance(a, tuple):
+        return (type(a), *(type_key(x) for x in a))
+    if hasattr(a, "dtype") and hasattr(a, "flags"):
+        layout = "C" if a.flags.c_contiguous else ("F" if a.flags.f_contiguous else "A")
+        return (a.dtype.str, a.ndim, layout, a.flags.writeable)
+    return (type(a),)
+
+
 # --- views and addresses in compiled code -----------------------------------------------------
 def _view_codegen(context, builder, sig, args):
     """Lowering of `block1/2/3`: the array value of a C-ordered view of work[o:] of the given

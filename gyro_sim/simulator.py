@@ -208,16 +208,14 @@ class Simulator:
             return out
         if getattr(self, "_snapshot_kernel", None) is None:
             self._snapshot_setup()
-        o, model, into = self._snapshot_scratch, self._snapshot_model, self._snapshot_nowhere
+        o = self._snapshot_scratch
         J = len(self._joint_names)
         js = self._watch_joints
-        if js is None or js.shape[1] != J:
-            js = self._watch_joints = np.empty((3, J))
+        if js is None or js.position.shape[0] != J:
+            js = self._watch_joints = fo.JointStates(np.empty(J), np.empty(J), np.empty(J))
         self._snapshot_kernel(
             float(t), np.ascontiguousarray(y, dtype=np.float64), o["ydot"], *self.system.kernel_arguments(),
-            *model[:7], int(fo.WANT_INVARIANTS), *model[8:], o["R"], o["w"], o["vO"], o["O"], o["quat"], o["euler"],
-            o["euler_rate"], o["L_speed"], o["wrench_force"], o["wrench_moment"], o["inv"], js[0], js[1], js[2],
-            into.dst, into.joint, into.position, into.quaternion, into.wrench, o["scratch"])
+            self._snapshot_layout, int(fo.WANT_INVARIANTS), self._snapshot_outputs, js, self._snapshot_no_slots)
         return o["inv"].copy()
 
     def _joint_layout(self) -> None:
@@ -525,7 +523,7 @@ class Simulator:
     @property
     def backend(self) -> str:
         """"numba" or "numpy": which dynamics the Simulator runs."""
-        return "numba" if type(self.system).__name__.startswith("Fast") else "numpy"
+        return self.system.backend
 
     def reference_invariants(self) -> dict:
         """The invariants of the state at the last reset (what drifts are measured against)."""
@@ -569,33 +567,24 @@ class Simulator:
         scratch arrays: made once, on the first compiled snapshot."""
         from gyro_sim import jit
         from gyro_sim.dynamics import outputs as fast_outputs
-        from gyro_sim.dynamics.rotations import EULER_SINGULAR_SIN
 
         m = self.model
         n, nv = m.n, len(m.speed_body)
-        f64 = np.ascontiguousarray
         self._snapshot_kernel = jit.Direct(fast_outputs.publication_kernel)
-        self._snapshot_model = (
-            f64(m.base_position, dtype=np.float64), f64(m.down, dtype=np.float64), EULER_SINGULAR_SIN,
-            f64(m.speed_body, dtype=np.int64), f64(np.reshape(m.speed_axis, (-1, 3)), dtype=np.float64),
-            f64(m.speed_A, dtype=np.float64), f64(m.speed_rate, dtype=np.float64), 0, *self._joint_arrays_sources())
+        self._snapshot_layout = fast_outputs.layout(m, *self._joint_arrays_sources())
         self._snapshot_scratch = {
             "ydot": np.zeros(m.size), "R": np.zeros((n, 3, 3)), "w": np.zeros((n, 3)), "vO": np.zeros((n, 3)),
             "O": np.zeros((n, 3)), "quat": np.zeros((n, 4)), "euler": np.zeros((n, 3)), "euler_rate": np.zeros((n, 3)),
             "L_speed": np.zeros(nv), "wrench_force": np.zeros((n, 3)), "wrench_moment": np.zeros((n, 3)),
             "inv": np.zeros(fast_outputs.INV_SIZE), "scratch": np.zeros(fast_outputs.scratch_size(n))}
+        self._snapshot_outputs = fast_outputs.Outputs(*(self._snapshot_scratch[k] for k in fast_outputs.OUTPUT_NAMES))
         J = len(self._joint_names)
         self._snapshot_nowhere = Scatter(np.zeros(0), *(np.zeros((0, *shape), dtype=np.int64)
                                                       for shape in ((3, J), (n, 3), (n, 4), (n, 6))))
-        self._snapshot_inputs = None  # (moments, pdot, L_rotor, tau) of `_held_now`
-        # the kernel's arguments that stay the same objects from call to call: ydot and those of
-        # fast.rhs_kernel before its held inputs (the system's workspace and model, packed once);
-        # the model beyond them; the joint-state entries and the outputs
-        o, model = self._snapshot_scratch, self._snapshot_model
-        self._snapshot_arguments = (
-            (o["ydot"], *self.system.kernel_arguments()[:fast_outputs.HELD_T0]), model[:7],
-            (*model[8:], o["R"], o["w"], o["vO"], o["O"], o["quat"], o["euler"], o["euler_rate"], o["L_speed"],
-             o["wrench_force"], o["wrench_moment"], o["inv"]))
+        self._snapshot_no_slots = self._slots(self._snapshot_nowhere)
+        # the kernel's records with held inputs of the publications' own (`_held_now`)
+        self._snapshot_records = self.system.records_with_own_inputs()
+        self._snapshot_moments = None  # the commanded moments of the inputs held there
         self._snapshot_joints = (np.empty(J), np.empty(J), np.empty(J))  # write_outputs' joint states
         self._snapshot_want = (fast_outputs.WANT_BODIES, fast_outputs.WANT_WRENCHES)
 
@@ -618,23 +607,28 @@ class Simulator:
                 kind.append(fo.JOINT_SPEED_ROTOR), ref.append(i - 3 * n - nh - nt)
         return np.array(kind, dtype=np.int64), np.array(ref, dtype=np.int64)
 
-    def _held_now(self) -> tuple:
-        """(p0, pdot, L_rotor, tau): the inputs fast.rhs_kernel reads after its t0, held from now
-        on (what `system.hold(t, p, *self._inputs())` would leave, without holding: the system
-        keeps the hold of the last advance, and only the held t0 and spins change from one
-        publication to the next; the rest is made again only when the commands change)."""
-        inputs = self._snapshot_inputs
-        if inputs is None or inputs[0] is not self._moments:
-            from gyro_sim.dynamics.outputs import held_inputs
+    def _held_now(self) -> None:
+        """Hold in the publications' own inputs (`_snapshot_records`) from now on what
+        `system.hold(t, p, *self._inputs())` would hold, without holding it in the system (which
+        keeps the hold of the last advance): only t0 and the spins change from one publication
+        to the next; the rest is written again only when the commands change."""
+        from gyro_sim.dynamics.outputs import hold
 
-            _, _, pdot, L, tau = held_inputs(self.model, self._t, None, *self._inputs())
-            inputs = self._snapshot_inputs = (self._moments, pdot, L, tau)
-        p = self._p
-        if p is None:  # no torque rotors
-            p = inputs[1]
-        elif p.dtype != np.float64 or not p.flags.c_contiguous:  # the compiled entry does not convert
-            p = self._p = np.ascontiguousarray(p, dtype=np.float64)
-        return (p, *inputs[1:])
+        inputs = self._snapshot_records[2]
+        if self._snapshot_moments is not self._moments:
+            hold(inputs, self.model, self._t, self._p, *self._inputs())
+            self._snapshot_moments = self._moments
+        else:
+            inputs.t0[0] = self._t
+            if self._p is not None:
+                inputs.p0[:] = self._p
+
+    @staticmethod
+    def _slots(into: Scatter):
+        """The slots of `into` as the compiled outputs take them (fast_outputs.Slots)."""
+        from gyro_sim.dynamics.outputs import Slots
+
+        return Slots(into.dst, into.joint, into.position, into.quaternion, into.wrench)
 
     def _compiled_call(self, want: int, into: Scatter, pos, vel, eff) -> int:
         """fast_outputs.publication_kernel at the current state: the outputs into the scratch
@@ -646,11 +640,14 @@ class Simulator:
         y = self._y
         if y.dtype != np.float64 or not y.flags.c_contiguous:  # the compiled entry does not convert
             y = self._y = np.ascontiguousarray(y, dtype=np.float64)
-        head, middle, tail = self._snapshot_arguments
+        from gyro_sim.dynamics.outputs import JointStates
+
         t = float(self._t)
-        bad = self._snapshot_kernel(t, y, *head, t, *self._held_now(), *middle, want, *tail, pos, vel, eff,
-                                    into.dst, into.joint, into.position, into.quaternion, into.wrench,
-                                    self._snapshot_scratch["scratch"])
+        self._held_now()
+        slots = self._snapshot_no_slots if into is self._snapshot_nowhere else self._slots(into)
+        bad = self._snapshot_kernel(t, y, self._snapshot_scratch["ydot"], *self._snapshot_records,
+                                    self._snapshot_layout, want, self._snapshot_outputs, JointStates(pos, vel, eff),
+                                    slots)
         if self._imus is not None:  # the IMUs read the accelerations this call left, if it made them
             from gyro_sim.dynamics.outputs import WANT_WRENCHES
 

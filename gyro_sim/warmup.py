@@ -471,7 +471,7 @@ def fill(integrator: str, out=sys.stdout, parent: int | None = None, background:
         from gyro_sim.integrators.rk4.loop import ErkMarch
 
         real_kernel = fast.kernel_address
-        fast.kernel_address = fast.null_kernel_address  # model_arguments reads it when a system is built
+        fast.kernel_address = fast.null_kernel_address  # chain_model reads it when a system is built
 
         def step(fn, *args):
             try:

@@ -147,11 +147,12 @@ def accelerations_80(model, y: np.ndarray, t: float = 0.0) -> np.ndarray:
         raise RuntimeError("set NUMBA_DISABLE_JIT=1 before importing numba")
     fast.np, fast.math = _NumpyShim("numpy"), _MathShim("math")
     try:
-        args = [*fast.model_arguments(model), *fast.input_arguments(model, t, None, None, None)]
-        args = [_xarray(a) if isinstance(a, np.ndarray) else a for a in args]
-        work = fast.np.zeros(fast.workspace(model).shape)
+        chain, data, inputs = fast.records(model)
+        fast.hold(inputs, model, t, None, None, None)
+        chain, inputs = (type(r)(*(_xarray(a) for a in r)) for r in (chain, inputs))
+        data = data._replace(work=fast.np.zeros(data.work.shape))
         ydot = fast.np.zeros(y.shape)
-        fast.rhs_kernel(X(t), _xarray(y), ydot, work, *args)
+        fast.rhs_kernel(X(t), _xarray(y), ydot, chain, data, inputs)
     finally:
         fast.np, fast.math = np, math
     return np.array([float(v) for v in ydot[model.i_vel]])

@@ -41,9 +41,8 @@ if jit.compiling():
 #: the files the kernels compile in (the key of their numba cache directory)
 DEPENDENCIES = (*fast.DEPENDENCIES, Path(__file__))
 _njit = jit.njit_with_dependencies(*DEPENDENCIES)
-#: arguments of fast.rhs_kernel after (t, y, out): the workspace, the model's 15
-#: (fast.model_arguments), the held inputs' 5 (fast.input_arguments)
-CHAIN_ARGUMENTS = 21
+#: arguments of fast.rhs_kernel after (t, y, out): its records model, data, inputs
+CHAIN_RECORDS = 3
 #: floats of `cwork` per velocity column (p_rel, p_rel', u) and per body (pi, H, P, M, F: 3 each)
 CWORK_PER_COLUMN = 3
 CWORK_PER_BODY = 15
@@ -55,11 +54,13 @@ CFLAGS_SIZE = 4
 
 
 @jit.inline_ir
-def _rates(t, z, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
-           inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base, t0, p0, pdot,
-           zrow, cflags, cwork):
+def _rates(t, z, model, data, inputs, zrow, cflags, cwork):
     """Positions of z, pi^k, p_rel and the rates u (into y's velocity block in cwork's y and in
     `rate`), then w^k, v(O^k). Returns nothing: everything is left in the workspaces."""
+    (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
+     torque_axis, torque_A, flags, base) = model
+    work = data.work
+    t0, p0, pdot = inputs.t0[0], inputs.p0, inputs.pdot
     base_type, has_lam = flags[0], flags[2] != 0
     i_r0, i_vel, N = flags[3], flags[4], flags[6]
     base_amplitude, base_omega = base[0:3], base[3]
@@ -152,22 +153,22 @@ def _rates(t, z, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, 
     for a in range(6):
         a_base[a] = 0.0
     fast.joint_columns_stage(is_hinge, own_col, base_type, e_w, S)
-    fast.articulated_solve(is_hinge, col_start, S, I6, pb, c, prel, a_base, s_w, U, W, u, Dinv, rate,
-                           Ia, pa, Dx, T, G, x, flags[fast.FLAG_HEAVY])
+    fast.articulated_solve(is_hinge, col_start,
+                           fast.Elimination(S, I6, pb, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x),
+                           prel, rate, flags[fast.FLAG_HEAVY])
     for j in range(N):
         y[i_vel + j] = rate[j]
-    fast.velocities_stage(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, i_vel,
-                          s_w, e_w, w, vO, c)
+    fast.velocities_stage(t, y, model, s_w, e_w, w, vO, c)
 
 
 @_njit
-def canonical_kernel(t, z, zdot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                     first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
-                     base, t0, p0, pdot, L_rotor, tau, zrow, cflags, cwork):
+def canonical_kernel(t, z, zdot, model, data, inputs, zrow, cflags, cwork):
     """z' (size,) at (t, z) into zdot: what canonical.CanonicalChain.rhs computes."""
-    _rates(t, z, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
-           inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base, t0, p0, pdot,
-           zrow, cflags, cwork)
+    _rates(t, z, model, data, inputs, zrow, cflags, cwork)
+    (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
+     torque_axis, torque_A, flags, base) = model
+    work = data.work
+    t0, p0, pdot, tau = inputs.t0[0], inputs.p0, inputs.pdot, inputs.tau
     base_type, has_gravity, has_lam = flags[0], flags[1] != 0, flags[2] != 0
     N = flags[6]
     g0, g1, g2 = base[4], base[5], base[6]
@@ -286,39 +287,33 @@ def canonical_kernel(t, z, zdot, work, is_hinge, qrow, own_col, col_start, hinge
 
 if jit.compiling():
     @_njit
-    def canonical_call(t, z, zdot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                       first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
-                       base, t0, p0, pdot, L_rotor, tau, zrow, cflags, cwork):
+    def canonical_call(t, z, zdot, model, data, inputs, zrow, cflags, cwork):
         """`canonical_kernel` (same arguments, C-contiguous) through its C function at
         cflags[CFLAG_KERNEL] (`canonical_address`): for compiled loops."""
-        call_address(cflags[CFLAG_KERNEL], (*fast.kernel_addresses(
-            t, z, zdot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia,
-            lam_speed, torque_body, torque_axis, torque_A, flags, base, t0, p0, pdot, L_rotor, tau),
-            address_of(zrow), address_of(cflags), address_of(cwork), cwork.shape[0]))
+        call_address(cflags[CFLAG_KERNEL], (t, address_of(z), address_of(zdot), z.shape[0],
+                                            address_of(data.descriptor), address_of(zrow), address_of(cflags),
+                                            address_of(cwork), cwork.shape[0]))
 else:  # plain Python: the field called directly
     def canonical_call(*arguments):
         canonical_kernel(*arguments)
 
 
-def _canonical_entry(t, z, zdot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                     first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base,
-                     p0, pdot, L_rotor, tau, t0, size, nwork, n, N, nt, zrow, cflags, cwork, ncwork):
-    """`canonical_kernel` on the arrays at these addresses (`fast.kernel_arrays`, then zrow (n, 2),
-    cflags, cwork): compiled as a C function (`canonical_address`)."""
-    m, h = fast.kernel_arrays(work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
-                              inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base, p0, pdot,
-                              L_rotor, tau, nwork, n, N, nt)
+def _canonical_entry(t, z, zdot, size, descriptor, zrow, cflags, cwork, ncwork):
+    """`canonical_kernel` on z, zdot (`size` floats at these addresses), the chain's records
+    `descriptor` (an address: `fast.records_at`) describes, then zrow (n, 2), cflags, cwork
+    (`ncwork` floats) at these addresses: compiled as a C function (`canonical_address`)."""
+    model, data, inputs = fast.records_at(descriptor)
     f, i = np.float64, np.int64
-    canonical_kernel(t, vector_at(z, size, f), vector_at(zdot, size, f), m[0], m[1], m[2], m[3],
-                     m[4], m[5], m[6], m[7], m[8], m[9], m[10], m[11], m[12], m[13], m[14], m[15], t0,
-                     h[0], h[1], h[2], h[3], block2(vector_at(zrow, 2 * n, i), 0, n, 2),
-                     vector_at(cflags, CFLAGS_SIZE, i), vector_at(cwork, ncwork, f))
+    n = model.mass.shape[0]
+    canonical_kernel(t, vector_at(z, size, f), vector_at(zdot, size, f), model, data, inputs,
+                     block2(vector_at(zrow, 2 * n, i), 0, n, 2), vector_at(cflags, CFLAGS_SIZE, i),
+                     vector_at(cwork, ncwork, f))
 
 
 def canonical_address() -> int:
     """The address of `canonical_kernel` compiled as a C function (`_canonical_entry`: t, the
-    addresses of z, zdot and the chain kernel's arrays, t0, the sizes of z, the workspace, n,
-    N, nt, then the addresses of zrow, cflags, cwork and cwork's size), compiled or loaded from
+    addresses of z, zdot, their size, the chain's descriptor, then the addresses of zrow, cflags,
+    cwork and cwork's size), compiled or loaded from
     numba's disk cache on the first call; 0 without numba or with NUMBA_DISABLE_JIT."""
     if not jit.compiling():
         return 0
@@ -327,13 +322,11 @@ def canonical_address() -> int:
 
 
 @_njit
-def state_kernel(t, z, y, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                 first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
-                 base, t0, p0, pdot, L_rotor, tau, zrow, cflags, cwork):
+def state_kernel(t, z, y, model, data, inputs, zrow, cflags, cwork):
     """The package's state y (model size) of z at t: what canonical.CanonicalChain.state does."""
-    _rates(t, z, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
-           inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base, t0, p0, pdot,
-           zrow, cflags, cwork)
+    _rates(t, z, model, data, inputs, zrow, cflags, cwork)
+    (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
+     torque_axis, torque_A, flags, base) = model
     i_kap, size = cflags[1], cflags[2]
     i_kap_y = flags[5]
     for i in range(size):

@@ -5,7 +5,7 @@ Kernels only. `rhs_kernel` computes what :meth:`gyro_sim.dynamics.system.ChainOD
 18-19 and 29), but in one compiled call instead of some hundred numpy calls: the numpy path
 costs ~150 us of call overhead per evaluation for any short chain, the kernel a few
 microseconds. :class:`gyro_sim.dynamics.system.FastChainODE` is the ODE system built on it
-(`model_arguments`, `input_arguments` and `workspace` give the kernel's arguments).
+(`records` gives the kernel's records: ChainModel, Workspace, HeldInputs).
 
 Same equations, same velocity basis, state layout and signs as :mod:`gyro_sim.dynamics.model` and
 :mod:`gyro_sim.dynamics.reference` (world components; spherical joints move with the relative
@@ -63,6 +63,7 @@ heavy-subtree path through another (`_heavy`, flags[FLAG_HEAVY]), so each is com
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -80,6 +81,76 @@ if jit.compiling():
 #: the files the kernels here compile in (the key of their numba cache directory,
 #: `gyro_sim.jit.cache_directory`): this one and the actuators' constants it reads
 DEPENDENCIES = (Path(__file__), Path(actuators.__file__))
+
+class ChainModel(NamedTuple):
+    """The chain's constant arrays as every compiled kernel reads them (numba types a module-level
+    NamedTuple of arrays as one record, which caches on disk like its arrays: `chain_model`
+    builds it). The one place the model's arrays are named; n bodies, N velocity columns, nt
+    torque rotors."""
+
+    #: (n,) bool: body k's own joint is a hinge (else spherical)
+    is_hinge: np.ndarray
+    #: (n,) int64: the y index of body k's quaternion (spherical) or of phi_k (hinge)
+    qrow: np.ndarray
+    #: (n,) int64: the first velocity column of body k's own joint
+    own_col: np.ndarray
+    #: (n + 1,) int64: body k's columns are col_start[k]:col_start[k + 1] (a free base's
+    #: translations belong to body 0)
+    col_start: np.ndarray
+    #: (n, 3) hinge axes e^k in body k's frame (eq 50)
+    hinge_axis: np.ndarray
+    #: (n, 3) s^k, the joint point O^{k+1} from O^k in body k's frame
+    s: np.ndarray
+    #: (n,) masses
+    mass: np.ndarray
+    #: (n, 3) m^k c^k, first moments about O^k in body k's frame
+    first_moment: np.ndarray
+    #: (n, 3, 3) inertia operators about O^k (eqs 22, 30)
+    inertia: np.ndarray
+    #: (n, 3) the constant part of the gyrostatic moments (eq 31)
+    lam_speed: np.ndarray
+    #: (nt,) int64: the body of each torque rotor
+    torque_body: np.ndarray
+    #: (nt, 3) torque rotors' axes in their bodies' frames
+    torque_axis: np.ndarray
+    #: (nt,) axial moments of inertia A_i of the torque rotors (eq 29)
+    torque_A: np.ndarray
+    #: (FLAGS_SIZE,) int64: see FLAGS_SIZE
+    flags: np.ndarray
+    #: (7,): moving-base amplitude (3), W = 2 pi f, gravity (3)
+    base: np.ndarray
+
+
+#: the index of `flags` among ChainModel's fields (its address in a descriptor: D_MODEL + this)
+MODEL_FLAGS = list(ChainModel.__annotations__).index("flags")
+
+
+class Workspace(NamedTuple):
+    """What one evaluation writes (`workspace`): the kernel's scratch, and the descriptor by
+    which the kernel's C function finds a model, this workspace and held inputs (`describe`,
+    the one place it is written): a workspace belongs to the model and inputs it describes."""
+
+    #: the float scratch (`scratch_size`), with a stateful model's actuator parameters in its tail
+    work: np.ndarray
+    #: (DESCRIPTOR_SIZE,) int64: the arrays' addresses and sizes, and the evaluations counted
+    descriptor: np.ndarray
+
+
+class HeldInputs(NamedTuple):
+    """The inputs held from t0 on (the zero-order hold of `Simulator.advance`), as the compiled
+    kernels read them (`held_inputs`; written in place by `hold`)."""
+
+    #: (1,): t0, the start of the hold
+    t0: np.ndarray
+    #: (nt,) torque-rotor spins p_i(t0) (eq 29)
+    p0: np.ndarray
+    #: (nt,) their rates L_i / A_i
+    pdot: np.ndarray
+    #: (nt,) the torque rotors' axial torques L_i
+    L_rotor: np.ndarray
+    #: (N,) generalized forces of the columns (hinge commands, eq 51)
+    tau: np.ndarray
+
 
 # base kinds, as the kernel sees them
 BASE_FIXED, BASE_MOVING, BASE_FREE = 0, 1, 2
@@ -102,7 +173,7 @@ WORK_FIXED = 81
 #: (9e-12 at 1e2: test/core/test_heavy_tip.py). Chains whose subtrees all weigh less than this
 #: many times their carriers cannot pass on more and skip the check.
 STABLE_ABA_RATIO = 100.0
-#: flags (`model_arguments`, int64): base type, has gravity, has lambda (rotors), i_r0, i_vel,
+#: flags (`chain_model`, int64): base type, has gravity, has lambda (rotors), i_r0, i_vel,
 #: i_kappa, N, then FLAG_HEAVY: the address of the compiled heavy-subtree elimination
 #: (`heavy_elimination_address`), 0 for a model whose subtrees all weigh at most STABLE_ABA_RATIO
 #: times their carriers (the kernel never takes that path there)
@@ -118,6 +189,15 @@ FLAGS_SIZE = 12
 #: per actuated axis, floats of the workspace's tail of a stateful model: max_speed (inf: none),
 #: coulomb, viscous, static, stribeck_speed (0: no Stribeck term), stick_speed
 ACTUATOR_PARAMETERS = 6
+#: a workspace's descriptor (int64, `describe`): the addresses of the model's arrays (in
+#: ChainModel's order) from D_MODEL, of the scratch at D_WORK, of the held inputs' arrays (in
+#: HeldInputs' order) from D_INPUTS; n, N, nt and the scratch's size; the evaluations counted
+#: (the compiled entry from Python, gyro_sim.dynamics.entry, counts there)
+D_MODEL, D_WORK, D_INPUTS = 0, 15, 16
+D_N, D_NCOL, D_NT, D_NWORK, D_NFEV = 21, 22, 23, 24, 25
+DESCRIPTOR_SIZE = 26
+assert D_WORK - D_MODEL == len(ChainModel.__annotations__) and D_N - D_INPUTS == len(HeldInputs.__annotations__), \
+    "the descriptor's layout (D_*) no longer matches the records' fields"
 
 
 def available() -> bool:
@@ -431,8 +511,7 @@ def body_positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s
 
 
 @_njit_inline
-def body_velocities(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, i_vel,
-                s_w, e_w, w, vO, c):
+def body_velocities(t, y, model, s_w, e_w, w, vO, c):
     """w^k (prefix sums of the joint rates, eqs 50, 53), v(O^k) (eq 34) and the joint bias
     accelerations c^k = S_k' u_k about O^k (dyn.bias_accelerations are their prefix sums about
     the origin):
@@ -440,6 +519,8 @@ def body_velocities(t, y, is_hinge, own_col, base_type, base_amplitude, base_ome
         spherical joint (world-component axes do not turn): c = (0, v(O^k) x w_rel)
         hinge, (e^k)' = w^{k-1} x e^k: c = (w^{k-1} x e^k phi', v(O^k) x e^k phi')
     """
+    is_hinge, own_col, flags, base = model.is_hinge, model.own_col, model.flags, model.base
+    base_type, i_vel, base_amplitude, base_omega = flags[0], flags[4], base[0:3], base[3]
     n = s_w.shape[0]
     wp0, wp1, wp2 = 0.0, 0.0, 0.0  # w^{k-1}
     for k in range(n):
@@ -499,8 +580,7 @@ def _spatial_inertia(k, m, h0, h1, h2, Aw, I6):
 
 
 @_njit_inline
-def bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
-                 torque_A, p, L_rotor, has_gravity, gravity, lam_b, dlam_b, I6, pb):
+def bias_forces(model, R, hk, Aw, w, vO, p, L_rotor, lam_b, dlam_b, I6, pb):
     """Spatial inertias I6 (n, 6, 6) and body forces at zero acceleration pb (n, 6) about O^k,
     as dyn.body_forces with acc = 0 (eqs 36-39, 58; h = m c in world components):
 
@@ -509,6 +589,9 @@ def bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_
     lambda^k = R (lam_speed^k + sum_i A_i p_i e_i) (eq 31), lambda' = R sum_i L_i e_i (eq 29).
     lam_b, dlam_b (n, 3): scratch.
     """
+    mass, lam_speed, torque_body, torque_axis, torque_A = (model.mass, model.lam_speed, model.torque_body,
+                                                           model.torque_axis, model.torque_A)
+    has_lam, has_gravity, gravity = model.flags[2] != 0, model.flags[1] != 0, model.base[4:7]
     n = mass.shape[0]
     if has_lam:
         for k in range(n):
@@ -652,9 +735,33 @@ def _hinge_reflector(e, H):
     return -sg
 
 
+class Elimination(NamedTuple):
+    """The arrays of one articulated-body elimination (`_aba`), views of a workspace: the joint
+    columns S (N, 6), the bodies' inertias IA (n, 6, 6) and bias forces pA (n, 6) (overwritten),
+    the joint bias accelerations c (n, 6), the base's acceleration a_base (6,), the joint
+    offsets s_w (n, 3); U, W (N, 6), u (N,), Dinv (n, 6, 6), Ia (6, 6), pa (6,), Dx, T, G (3, 3),
+    x (6,): scratch."""
+
+    S: np.ndarray
+    IA: np.ndarray
+    pA: np.ndarray
+    c: np.ndarray
+    a_base: np.ndarray
+    s_w: np.ndarray
+    U: np.ndarray
+    W: np.ndarray
+    u: np.ndarray
+    Dinv: np.ndarray
+    Ia: np.ndarray
+    pa: np.ndarray
+    Dx: np.ndarray
+    T: np.ndarray
+    G: np.ndarray
+    x: np.ndarray
+
+
 @_njit_inline
-def _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
-                 Ia, pa, Dx, T, G, x):
+def _aba_classic(is_hinge, col_start, e, tau, udot):
     """`_aba` as Featherstone writes it, the articulated inertias formed: I^a = I^A - U D^-1 U^T.
     Fast, and exact to round-off while no subtree is much heavier than its carrier (see
     STABLE_ABA_RATIO); IA leaves as the articulated inertias. Returns the largest apparent mass
@@ -670,6 +777,7 @@ def _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, D
     (S = (1, 0)) is eliminated in closed form, in scalars: D = J, and only the apparent mass
     M - H^T J^-1 H passes to the parent.
     """
+    S, IA, pA, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x = e
     n = IA.shape[0]
     worst = 0.0  # largest apparent mass passed on / the carrier's own mass
     # backward: I^a = I^A - U D^-1 U^T, p^a = p^A + I^a c + U D^-1 u, to the parent's O^{k-1}
@@ -817,10 +925,10 @@ def _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, D
 
 
 @_njit_inline
-def _aba(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot, Ia, pa, Dx, T, G, x,
-         heavy):
+def _aba(is_hinge, col_start, e, tau, udot, heavy):
     """Articulated-body algorithm: u' (N,) of the closure rows S_j . F_subtree(k(j)) = tau_j
-    (eqs 44, 51, 54; Featherstone 2008, Table 7.1), about each body's O^k in world axes.
+    (eqs 44, 51, 54; Featherstone 2008, Table 7.1), about each body's O^k in world axes; e the
+    Elimination's arrays.
 
     IA (n, 6, 6) and pA (n, 6) enter as the bodies' own inertias and bias forces (both are
     overwritten); c (n, 6): joint bias accelerations; a_base (6,): acceleration of the base at
@@ -835,6 +943,7 @@ def _aba(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udo
     square-root form are two thirds of the kernel's compile time, and no model below
     STABLE_ABA_RATIO ever runs it).
     """
+    IA = e.IA
     n = IA.shape[0]
     after = 0.0
     worst = 0.0
@@ -843,33 +952,30 @@ def _aba(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udo
         if after > worst * IA[k - 1, 3, 3]:
             worst = after / IA[k - 1, 3, 3]
     if worst <= STABLE_ABA_RATIO:  # no subtree can pass on more mass than it has
-        _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
-                     Ia, pa, Dx, T, G, x)
+        _aba_classic(is_hinge, col_start, e, tau, udot)
         return
     # a heavy subtree: what decides is the mass its elimination passes on (an articulated, not a
     # rigid, inertia: a uniform chain of 1000 links passes on about a link's mass at each joint),
     # known only once the classic elimination has run
-    _heavy(heavy, is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
-           Ia, pa, Dx, T, G, x)
+    _heavy(heavy, is_hinge, col_start, e, tau, udot)
 
 
 @_njit_alloc
-def _aba_heavy(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot, Ia, pa, Dx,
-               T, G, x):
+def _aba_heavy(is_hinge, col_start, e, tau, udot):
     """`_aba` where a subtree is more than STABLE_ABA_RATIO times heavier than its carrier:
     `_aba_classic`, and `_aba_stable` from the bodies' own inertias again if the classic
     elimination passed on too much (arguments as `_aba`)."""
+    IA, pA = e.IA, e.pA
     IA0 = IA.copy()
     pA0 = pA.copy()
-    if _aba_classic(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
-                    Ia, pa, Dx, T, G, x) > STABLE_ABA_RATIO:
+    if _aba_classic(is_hinge, col_start, e, tau, udot) > STABLE_ABA_RATIO:
         IA[:] = IA0
         pA[:] = pA0
-        _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot)
+        _aba_stable(is_hinge, col_start, e, tau, udot)
 
 
 @_njit_alloc
-def _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot):
+def _aba_stable(is_hinge, col_start, e, tau, udot):
     """`_aba` for heavy subtrees on light carriers (and any other chain, at ~2.5 x the cost of
     `_aba_classic`).
 
@@ -894,6 +1000,7 @@ def _aba_stable(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Di
     last ~eps x ratio off (test/core/test_heavy_tip.py). The base body's joint with a free base (six columns) is solved with its
     articulated inertia formed, F^T F (nothing passes on from it).
     """
+    S, IA, pA, c, a_base, s_w, U, W, u, Dinv = e.S, e.IA, e.pA, e.c, e.a_base, e.s_w, e.U, e.W, e.u, e.Dinv
     n = IA.shape[0]
     Ia = np.empty((6, 6))
     pa = np.empty(6)
@@ -1121,114 +1228,93 @@ HEAVY_ENTRY_ARGUMENTS = 22
 
 if jit.compiling():
     @_njit_inline
-    def _heavy(address, is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot,
-               Ia, pa, Dx, T, G, x):
+    def _heavy(address, is_hinge, col_start, e, tau, udot):
         """`_aba_heavy` through the address of its compiled entry (`heavy_elimination_address`).
-        Address 0 (a model built without it, `model_arguments` says why that cannot happen with
+        Address 0 (a model built without it, `chain_model` says why that cannot happen with
         heavy subtrees): u' not a number, which the integrators report as a non-finite rhs."""
         if address == 0:
             for j in range(udot.shape[0]):
                 udot[j] = np.nan
             return
         call_address(address, (
-            address_of(is_hinge), address_of(col_start), address_of(S), address_of(IA), address_of(pA),
-            address_of(c), address_of(tau), address_of(a_base), address_of(s_w), address_of(U),
-            address_of(W), address_of(u), address_of(Dinv), address_of(udot), address_of(Ia),
-            address_of(pa), address_of(Dx), address_of(T), address_of(G), address_of(x),
-            IA.shape[0], S.shape[0]))
+            address_of(is_hinge), address_of(col_start), address_of(e.S), address_of(e.IA), address_of(e.pA),
+            address_of(e.c), address_of(tau), address_of(e.a_base), address_of(e.s_w), address_of(e.U),
+            address_of(e.W), address_of(e.u), address_of(e.Dinv), address_of(udot), address_of(e.Ia),
+            address_of(e.pa), address_of(e.Dx), address_of(e.T), address_of(e.G), address_of(e.x),
+            e.IA.shape[0], e.S.shape[0]))
 
     def _heavy_entry(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot, Ia, pa,
                      Dx, T, G, x, n, N):
         """`_aba_heavy` on the arrays at these addresses (C-contiguous, the shapes `_aba` gives
         them for n bodies and N columns): compiled as a C function (`heavy_elimination_address`)."""
         f = np.float64
-        _aba_heavy(vector_at(is_hinge, n, np.bool_), vector_at(col_start, n + 1, np.int64),
-                   block2(vector_at(S, 6 * N, f), 0, N, 6), block3(vector_at(IA, 36 * n, f), 0, n, 6, 6),
-                   block2(vector_at(pA, 6 * n, f), 0, n, 6), block2(vector_at(c, 6 * n, f), 0, n, 6),
-                   vector_at(tau, N, f), vector_at(a_base, 6, f), block2(vector_at(s_w, 3 * n, f), 0, n, 3),
-                   block2(vector_at(U, 6 * N, f), 0, N, 6), block2(vector_at(W, 6 * N, f), 0, N, 6),
-                   vector_at(u, N, f), block3(vector_at(Dinv, 36 * n, f), 0, n, 6, 6), vector_at(udot, N, f),
-                   block2(vector_at(Ia, 36, f), 0, 6, 6), vector_at(pa, 6, f),
-                   block2(vector_at(Dx, 9, f), 0, 3, 3), block2(vector_at(T, 9, f), 0, 3, 3),
-                   block2(vector_at(G, 9, f), 0, 3, 3), vector_at(x, 6, f))
+        e = Elimination(
+            block2(vector_at(S, 6 * N, f), 0, N, 6), block3(vector_at(IA, 36 * n, f), 0, n, 6, 6),
+            block2(vector_at(pA, 6 * n, f), 0, n, 6), block2(vector_at(c, 6 * n, f), 0, n, 6),
+            vector_at(a_base, 6, f), block2(vector_at(s_w, 3 * n, f), 0, n, 3),
+            block2(vector_at(U, 6 * N, f), 0, N, 6), block2(vector_at(W, 6 * N, f), 0, N, 6),
+            vector_at(u, N, f), block3(vector_at(Dinv, 36 * n, f), 0, n, 6, 6),
+            block2(vector_at(Ia, 36, f), 0, 6, 6), vector_at(pa, 6, f),
+            block2(vector_at(Dx, 9, f), 0, 3, 3), block2(vector_at(T, 9, f), 0, 3, 3),
+            block2(vector_at(G, 9, f), 0, 3, 3), vector_at(x, 6, f))
+        _aba_heavy(vector_at(is_hinge, n, np.bool_), vector_at(col_start, n + 1, np.int64), e,
+                   vector_at(tau, N, f), vector_at(udot, N, f))
 
     @_njit_inline
-    def kernel_arrays(work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
-                      inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base, p0, pdot,
-                      L_rotor, tau, nwork, n, N, nt):
-        """The kernel's arrays at these addresses (`rhs_call` passes them), C-contiguous, of the
-        shapes `workspace`, `model_arguments` and `input_arguments` give them: (work and the
-        model's 15), (p0, pdot, L_rotor, tau)."""
+    def records_at(descriptor):
+        """The records a descriptor (`describe`) gives the addresses and sizes of: (ChainModel,
+        Workspace, HeldInputs) of C-contiguous views, of the types every caller passes (so the
+        kernel's one specialisation serves them), owned elsewhere."""
         f, i = np.float64, np.int64
-        return ((vector_at(work, nwork, f), vector_at(is_hinge, n, np.bool_), vector_at(qrow, n, i),
-                 vector_at(own_col, n, i), vector_at(col_start, n + 1, i),
-                 block2(vector_at(hinge_axis, 3 * n, f), 0, n, 3), block2(vector_at(s, 3 * n, f), 0, n, 3),
-                 vector_at(mass, n, f), block2(vector_at(first_moment, 3 * n, f), 0, n, 3),
-                 block3(vector_at(inertia, 9 * n, f), 0, n, 3, 3), block2(vector_at(lam_speed, 3 * n, f), 0, n, 3),
-                 vector_at(torque_body, nt, i), block2(vector_at(torque_axis, 3 * nt, f), 0, nt, 3),
-                 vector_at(torque_A, nt, f), vector_at(flags, FLAGS_SIZE, i), vector_at(base, 7, f)),
-                (vector_at(p0, nt, f), vector_at(pdot, nt, f), vector_at(L_rotor, nt, f), vector_at(tau, N, f)))
+        d = vector_at(descriptor, DESCRIPTOR_SIZE, i)
+        n, N, nt = d[D_N], d[D_NCOL], d[D_NT]
+        a = d[D_MODEL:D_WORK]
+        model = ChainModel(
+            vector_at(a[0], n, np.bool_), vector_at(a[1], n, i), vector_at(a[2], n, i),
+            vector_at(a[3], n + 1, i), block2(vector_at(a[4], 3 * n, f), 0, n, 3),
+            block2(vector_at(a[5], 3 * n, f), 0, n, 3), vector_at(a[6], n, f),
+            block2(vector_at(a[7], 3 * n, f), 0, n, 3), block3(vector_at(a[8], 9 * n, f), 0, n, 3, 3),
+            block2(vector_at(a[9], 3 * n, f), 0, n, 3), vector_at(a[10], nt, i),
+            block2(vector_at(a[11], 3 * nt, f), 0, nt, 3), vector_at(a[12], nt, f),
+            vector_at(a[13], FLAGS_SIZE, i), vector_at(a[14], 7, f))
+        h = d[D_INPUTS:D_N]
+        inputs = HeldInputs(vector_at(h[0], 1, f), vector_at(h[1], nt, f), vector_at(h[2], nt, f),
+                            vector_at(h[3], nt, f), vector_at(h[4], N, f))
+        return model, Workspace(vector_at(d[D_WORK], d[D_NWORK], f), d), inputs
+
+    def _kernel_entry(t, y, ydot, size, descriptor):
+        """`rhs_kernel` on y, ydot (`size` floats at these addresses) and the records `descriptor`
+        (an address) describes: compiled as a C function (`kernel_address`)."""
+        model, data, inputs = records_at(descriptor)
+        rhs_kernel(t, vector_at(y, size, np.float64), vector_at(ydot, size, np.float64), model, data, inputs)
 
     @_njit_inline
-    def kernel_addresses(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                         first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
-                         base, t0, p0, pdot, L_rotor, tau):
-        """What the C entry of the kernel takes (`_kernel_entry`): t, the addresses of y, ydot and
-        the kernel's arrays, t0, then the sizes of y, the workspace, n, N, nt."""
-        return (t, address_of(y), address_of(ydot), address_of(work), address_of(is_hinge), address_of(qrow),
-                address_of(own_col), address_of(col_start), address_of(hinge_axis), address_of(s),
-                address_of(mass), address_of(first_moment), address_of(inertia), address_of(lam_speed),
-                address_of(torque_body), address_of(torque_axis), address_of(torque_A), address_of(flags),
-                address_of(base), address_of(p0), address_of(pdot), address_of(L_rotor), address_of(tau), t0,
-                y.shape[0], work.shape[0], mass.shape[0], tau.shape[0], torque_body.shape[0])
+    def rhs_call(t, y, ydot, model, data, inputs):
+        """`rhs_kernel` (same arguments, y and ydot C-contiguous; `data` the workspace that
+        describes `model` and `inputs`) through its compiled C function at flags[FLAG_KERNEL]:
+        for compiled loops, which then do not compile the kernel in."""
+        call_address(model.flags[FLAG_KERNEL],
+                     (t, address_of(y), address_of(ydot), y.shape[0], address_of(data.descriptor)))
 
-    def _kernel_entry(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                      first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base,
-                      p0, pdot, L_rotor, tau, t0, size, nwork, n, N, nt):
-        """`rhs_kernel` on the arrays at these addresses (`kernel_arrays`): compiled as a C
-        function (`kernel_address`)."""
-        m, h = kernel_arrays(work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
-                             inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base, p0, pdot,
-                             L_rotor, tau, nwork, n, N, nt)
-        rhs_kernel(t, vector_at(y, size, np.float64), vector_at(ydot, size, np.float64), m[0], m[1], m[2], m[3],
-                   m[4], m[5], m[6], m[7], m[8], m[9], m[10], m[11], m[12], m[13], m[14], m[15], t0,
-                   h[0], h[1], h[2], h[3])
-
-    @_njit_inline
-    def rhs_call(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                 first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
-                 base, t0, p0, pdot, L_rotor, tau):
-        """`rhs_kernel` (same arguments, C-contiguous) through its compiled C function at
-        flags[FLAG_KERNEL]: for compiled loops, which then do not compile the kernel in."""
-        call_address(flags[FLAG_KERNEL], kernel_addresses(
-            t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia,
-            lam_speed, torque_body, torque_axis, torque_A, flags, base, t0, p0, pdot, L_rotor, tau))
-
-    def _null_entry(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                    first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base,
-                    p0, pdot, L_rotor, tau, t0, size, nwork, n, N, nt):
+    def _null_entry(t, y, ydot, size, descriptor):
         """`_kernel_entry`'s signature, y' = 0: compiled as a C function (`null_kernel_address`)."""
         v = vector_at(ydot, size, np.float64)
         for k in range(size):
             v[k] = 0.0
 else:  # plain Python: the heavy path and the kernel called directly
-    def _heavy(address, *arrays):
-        _aba_heavy(*arrays)
+    def _heavy(address, is_hinge, col_start, e, tau, udot):
+        _aba_heavy(is_hinge, col_start, e, tau, udot)
 
     def rhs_call(*arguments):
         rhs_kernel(*arguments)
 
 
-#: `_kernel_entry`'s arguments after t: the addresses of y, ydot and the kernel's 20 arrays (all
-#: but t0), then t0, then the sizes of y, the workspace, n, N, nt
-KERNEL_ADDRESSES, KERNEL_SIZES = 22, 5
-
-
 def kernel_signature(*extra):
-    """The numba signature of the kernel's C function (`_kernel_entry`), `extra` argument types
-    after it (fast_canonical's field adds four)."""
+    """The numba signature of the kernel's C function (`_kernel_entry`: t, the addresses of y and
+    ydot, their size, the descriptor's address), `extra` argument types after it (fast_canonical's
+    field adds four)."""
     f, i = numba.types.float64, numba.types.int64
-    return numba.types.void(f, *(i,) * KERNEL_ADDRESSES, f, *(i,) * KERNEL_SIZES, *extra)
+    return numba.types.void(f, i, i, i, i, *extra)
 
 
 def heavy_elimination_address() -> int:
@@ -1316,25 +1402,28 @@ def workspace_views(work, n, N, nt):
 
 
 @_njit
-def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
-                flags, base, t0, p0, pdot, L_rotor, tau):
-    """y' (size,) at (t, y) into ydot: what system.ChainODE.rhs computes.
+def rhs_kernel(t, y, ydot, model, data, inputs):
+    """y' (size,) at (t, y) into ydot: what system.ChainODE.rhs computes, for the ChainModel
+    `model` (`chain_model`), the Workspace `data` (its scratch: n WORK_PER_BODY + N
+    WORK_PER_COLUMN + nt + WORK_FIXED floats; nothing is allocated per call) and the
+    HeldInputs `inputs`.
 
-    work: float workspace of n WORK_PER_BODY + N WORK_PER_COLUMN + nt + WORK_FIXED (`workspace`);
-    nothing is allocated per call.
-    flags (int, FLAGS_SIZE): base type, has gravity, has lambda (rotors), i_r0, i_vel, i_kappa,
-    N, the heavy path's address (FLAG_HEAVY), this kernel's C function's (FLAG_KERNEL: for
-    the compiled loops, `rhs_call`).
-    base (float, 7): moving-base amplitude (3), W = 2 pi f, gravity (3).
+    model.flags (int, FLAGS_SIZE): base type, has gravity, has lambda (rotors), i_r0, i_vel,
+    i_kappa, N, the heavy path's address (FLAG_HEAVY), this kernel's C function's (FLAG_KERNEL:
+    for the compiled loops, `rhs_call`). model.base (float, 7): moving-base amplitude (3),
+    W = 2 pi f, gravity (3).
     Held inputs: torque-rotor spins p_i = p0_i + pdot_i (t - t0) (eq 29), their torques
     L_rotor, the generalized forces tau (N,) of the columns (hinge commands, eq 51).
     A stateful model (flags[FLAG_ACTUATORS]) reads the spins from y instead and applies the
     commands through its actuators' speed cut and friction (`_actuate`).
     """
-    base_type, has_gravity, has_lam = flags[0], flags[1] != 0, flags[2] != 0
+    (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
+     torque_axis, torque_A, flags, base) = model
+    work = data.work
+    t0, p0, pdot, L_rotor, tau = inputs.t0[0], inputs.p0, inputs.pdot, inputs.L_rotor, inputs.tau
+    base_type = flags[0]
     i_r0, i_vel, i_kap, N = flags[3], flags[4], flags[5], flags[6]
-    base_amplitude, base_omega, gravity = base[0:3], base[3], base[4:7]
+    base_amplitude, base_omega = base[0:3], base[3]
     n = mass.shape[0]
     nt = torque_body.shape[0]
     (R, s_w, hk, Aw, e_w, w, vO, c, I6, pb, Dinv, lam_b, dlam_b, S, U, W, u, p,
@@ -1342,16 +1431,14 @@ def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis,
 
     # positions, velocities
     body_positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, hk, Aw, e_w)
-    body_velocities(t, y, is_hinge, own_col, base_type, base_amplitude, base_omega, i_vel, s_w, e_w, w, vO, c)
+    body_velocities(t, y, model, s_w, e_w, w, vO, c)
     L_applied, tau_applied = L_rotor, tau
     if flags[FLAG_ACTUATORS] != 0:  # spins and works are states; the torques applied at this state
-        L_applied, tau_applied = _actuate(y, ydot, work, is_hinge, own_col, torque_body, torque_axis,
-                                          torque_A, flags, L_rotor, tau, R, w, p, n, N, nt, i_vel)
+        L_applied, tau_applied = _actuate(y, ydot, model, data, inputs, R, w, p)
     else:  # bias forces: p_i(t) = p_i(t0) + (L_i / A_i)(t - t0) (eq 29)
         for i in range(nt):
             p[i] = p0[i] + pdot[i] * (t - t0)
-    bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
-                 torque_A, p, L_applied, has_gravity, gravity, lam_b, dlam_b, I6, pb)
+    bias_forces(model, R, hk, Aw, w, vO, p, L_applied, lam_b, dlam_b, I6, pb)
     # ABA
     _joint_columns(is_hinge, own_col, base_type, e_w, S)
     for a in range(6):
@@ -1360,8 +1447,8 @@ def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis,
         sw = -base_omega * base_omega * math.sin(base_omega * t)
         for a in range(3):
             a_base[3 + a] = base_amplitude[a] * sw
-    _aba(is_hinge, col_start, S, I6, pb, c, tau_applied, a_base, s_w, U, W, u, Dinv, ydot[i_vel:i_vel + N],
-         Ia, pa, Dx, T, G, x, flags[FLAG_HEAVY])
+    _aba(is_hinge, col_start, Elimination(S, I6, pb, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x),
+         tau_applied, ydot[i_vel:i_vel + N], flags[FLAG_HEAVY])
     # y'
     if base_type == BASE_FREE:
         for a in range(3):
@@ -1383,12 +1470,15 @@ def rhs_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis,
 
 
 @_njit_inline
-def _actuate(y, ydot, work, is_hinge, own_col, torque_body, torque_axis, torque_A, flags, L_rotor, tau,
-             R, w, p, n, N, nt, i_vel):
+def _actuate(y, ydot, model, data, inputs, R, w, p):
     """A stateful model's applied torques (gyro_sim.dynamics.reference.applied_torques): the
     spins p from y, the rotor torques (nt,) and generalized forces (N,) applied (views of the
     workspace's tail), and y' of the spins (eq 29) and of the works (the motors' power,
     friction's)."""
+    is_hinge, own_col, torque_body, torque_axis, torque_A, flags = (model.is_hinge, model.own_col, model.torque_body,
+                                                                    model.torque_axis, model.torque_A, model.flags)
+    work, L_rotor, tau = data.work, inputs.L_rotor, inputs.tau
+    n, N, nt, i_vel = model.mass.shape[0], flags[6], torque_body.shape[0], flags[4]
     i_spin, i_work = flags[FLAG_I_SPIN], flags[FLAG_I_WORK]
     rotor_at = n * WORK_PER_BODY + N * WORK_PER_COLUMN + nt * WORK_PER_ROTOR + WORK_FIXED
     hinge_at = rotor_at + nt * ACTUATOR_PARAMETERS
@@ -1437,9 +1527,9 @@ def normalize_quaternions(y, i_q0, nq):
             y[i + a] /= nrm
 
 
-# --- the kernel's arguments -------------------------------------------------------------------
-def model_arguments(model: Model) -> tuple:
-    """The model as `rhs_kernel` reads it: the arguments from `is_hinge` to `base` (15 arrays).
+# --- the kernel's records --------------------------------------------------------------------
+def chain_model(model: Model) -> ChainModel:
+    """The model as the compiled kernels read it (see ChainModel).
 
     Per body: the y index of its quaternion (spherical) or of phi_k (hinge) (`qrow`); the first
     velocity column of its own joint (`own_col`); the range of all its columns (`col_start`,
@@ -1474,41 +1564,50 @@ def model_arguments(model: Model) -> tuple:
     def f64(a, shape):
         return np.ascontiguousarray(np.asarray(a, dtype=np.float64).reshape(shape))
 
-    return (
-        np.ascontiguousarray(m.is_hinge, dtype=np.bool_),
-        qrow,
-        own_col,
-        col_start,
-        f64(m.hinge_axis, (n, 3)),
-        f64(m.s, (n, 3)),
-        f64(m.mass, (n,)),
-        f64(m.first_moment, (n, 3)),
-        f64(m.inertia, (n, 3, 3)),
-        f64(np.zeros((n, 3)) if m.lam_speed is None else m.lam_speed, (n, 3)),
-        np.ascontiguousarray(m.torque_body, dtype=np.int64),
-        f64(m.torque_axis, (nt, 3)),
-        f64(m.torque_A, (nt,)),
-        flags,
-        base,
+    return ChainModel(
+        is_hinge=np.ascontiguousarray(m.is_hinge, dtype=np.bool_),
+        qrow=qrow,
+        own_col=own_col,
+        col_start=col_start,
+        hinge_axis=f64(m.hinge_axis, (n, 3)),
+        s=f64(m.s, (n, 3)),
+        mass=f64(m.mass, (n,)),
+        first_moment=f64(m.first_moment, (n, 3)),
+        inertia=f64(m.inertia, (n, 3, 3)),
+        lam_speed=f64(np.zeros((n, 3)) if m.lam_speed is None else m.lam_speed, (n, 3)),
+        torque_body=np.ascontiguousarray(m.torque_body, dtype=np.int64),
+        torque_axis=f64(m.torque_axis, (nt, 3)),
+        torque_A=f64(m.torque_A, (nt,)),
+        flags=flags,
+        base=base,
     )
 
 
-def input_arguments(model: Model, t0: float, p0, hinge_tau, L_rotor) -> tuple:
-    """The held inputs as `rhs_kernel` reads them: (t0, p0 (nt,), pdot = L / A (nt,),
-    L (nt,), tau (N,)); None stands for zeros."""
+def held_inputs(model: Model, t0: float = 0.0, p0=None, hinge_tau=None, L_rotor=None) -> HeldInputs:
+    """New held inputs of `model` (see HeldInputs and `hold`); None stands for zeros."""
+    nt = len(model.torque_body)
+    inputs = HeldInputs(np.zeros(1), np.zeros(nt), np.zeros(nt), np.zeros(nt), np.zeros(model.N))
+    hold(inputs, model, t0, p0, hinge_tau, L_rotor)
+    return inputs
+
+
+def hold(inputs: HeldInputs, model: Model, t0: float, p0, hinge_tau, L_rotor) -> None:
+    """Write into `inputs`, in place: t0, the spins p0 (nt,) at t0, pdot = L / A, the torques
+    L_rotor (nt,), tau (N,) with the hinge moments in the hinges' columns; None stands for
+    zeros."""
     m = model
     nt = len(m.torque_body)
-    p0_ = np.zeros(nt) if p0 is None else np.array(p0, dtype=np.float64).reshape(nt)
-    L = np.zeros(nt) if L_rotor is None else np.array(L_rotor, dtype=np.float64).reshape(nt)
-    pdot = L / m.torque_A if nt else np.zeros(0)
-    tau = np.zeros(m.N)
+    inputs.t0[0] = float(t0)
+    inputs.p0[:] = 0.0 if p0 is None else np.asarray(p0, dtype=np.float64).reshape(nt)
+    inputs.L_rotor[:] = 0.0 if L_rotor is None else np.asarray(L_rotor, dtype=np.float64).reshape(nt)
+    inputs.pdot[:] = inputs.L_rotor / m.torque_A if nt else 0.0
+    inputs.tau[:] = 0.0
     if hinge_tau is not None:
-        tau[m.col_hinge] = hinge_tau  # (51): e^k . L^k = L_k
-    return float(t0), p0_, pdot, L, tau
+        inputs.tau[m.col_hinge] = hinge_tau  # (51): e^k . L^k = L_k
 
 
-def workspace(model: Model) -> np.ndarray:
-    """The float workspace of `rhs_kernel`: n WORK_PER_BODY + N WORK_PER_COLUMN
+def scratch(model: Model) -> np.ndarray:
+    """The float scratch of `rhs_kernel`: n WORK_PER_BODY + N WORK_PER_COLUMN
     + nt WORK_PER_ROTOR + WORK_FIXED (nt torque rotors). A stateful model (`Model.stateful`)
     appends its actuators' parameters, ACTUATOR_PARAMETERS per torque rotor then per body
     (hinges'; zero on spherical bodies), and the scratch of the applied torques (nt + N)."""
@@ -1522,6 +1621,37 @@ def workspace(model: Model) -> np.ndarray:
     hinge[:, 5] = 1.0
     hinge[m.hinge_bodies] = _axis_parameters(act.hinge)
     return np.concatenate((np.zeros(size), _axis_parameters(act.rotor).ravel(), hinge.ravel(), np.zeros(nt + m.N)))
+
+
+def workspace(model: Model, chain: ChainModel, inputs: HeldInputs) -> Workspace:
+    """A new workspace for `chain` (of `model`) and `inputs`: its scratch, and its descriptor of
+    all three (`describe`). The three stay bound: pass them together."""
+    data = Workspace(scratch(model), np.zeros(DESCRIPTOR_SIZE, dtype=np.int64))
+    describe(chain, data, inputs)
+    return data
+
+
+def describe(chain: ChainModel, data: Workspace, inputs: HeldInputs) -> None:
+    """Write into data.descriptor where the kernel's C function finds `chain`, `data` and
+    `inputs` (the one place its layout is written; `records_at` reads it): the arrays'
+    addresses, n, N, nt, the scratch's size; the evaluations counted start at 0. The arrays
+    must be C-contiguous and stay alive and in place as long as the descriptor is used."""
+    arrays = (*chain, data.work, *inputs)
+    if not all(a.flags.c_contiguous for a in arrays):
+        raise ValueError("the kernel's arrays must be C-contiguous")
+    d = data.descriptor
+    d[D_MODEL:D_MODEL + len(chain)] = [a.ctypes.data for a in chain]
+    d[D_WORK] = data.work.ctypes.data
+    d[D_INPUTS:D_INPUTS + len(inputs)] = [a.ctypes.data for a in inputs]
+    d[D_N], d[D_NCOL], d[D_NT] = len(chain.mass), len(inputs.tau), len(chain.torque_body)
+    d[D_NWORK], d[D_NFEV] = len(data.work), 0
+
+
+def records(model: Model) -> tuple[ChainModel, Workspace, HeldInputs]:
+    """(model, data, inputs) of `model` as the compiled kernels take them, bound together, the
+    inputs held at zero from t0 = 0 (`hold` writes others in place)."""
+    chain, inputs = chain_model(model), held_inputs(model)
+    return chain, workspace(model, chain, inputs), inputs
 
 
 def _axis_parameters(limits) -> np.ndarray:

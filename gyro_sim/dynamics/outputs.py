@@ -30,14 +30,18 @@ Its cache is keyed on every file whose kernels it compiles in
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 from pathlib import Path
+
+import numpy as np
 
 from gyro_sim import jit
 from gyro_sim.dynamics import kernel as fast
 from gyro_sim.dynamics.kernel import (
     bias_forces, vec_cross, vec_cross_add, dot6, mat_vec, body_positions, body_velocities,
 )
+from gyro_sim.dynamics.rotations import EULER_SINGULAR_SIN
 from gyro_sim.jit import block1, block2, block3
 
 #: the files the kernels here compile in (the key of their numba cache directory)
@@ -129,23 +133,74 @@ def _euler(Rs, ws, k, down, singular, angs, rates):
     rates[k, 2] = dphi
 
 
-def _held_t0_index() -> int:
-    """Where the held t0 sits among fast.rhs_kernel's arguments after (t, y, ydot)."""
-    import inspect
-
-    kernel = getattr(fast.rhs_kernel, "py_func", fast.rhs_kernel)
-    return list(inspect.signature(kernel).parameters).index("t0") - 3
+#: the held inputs written in place by a caller that holds its own (the Simulator's publications)
+hold = fast.hold
 
 
-#: the held inputs (t0, p0, pdot, L_rotor, tau) start here in the arguments of fast.rhs_kernel
-#: after (t, y, ydot) (FastChainODE.kernel_arguments())
-HELD_T0 = _held_t0_index()
+class Layout(NamedTuple):
+    """What a publication reads of the model beyond the kernel's records (`layout`): base_position
+    (3,), down (3, 3) world_R_down of the Euler angles, singular the Euler singularity threshold
+    (rotations.EULER_SINGULAR_SIN); speed rotors: body (nv,), axis (nv, 3), A (nv,), rate (nv,);
+    joint_kind, joint_ref (J,) int64: what each joint-state entry is (JOINT_*)."""
+
+    base_position: np.ndarray
+    down: np.ndarray
+    singular: float
+    speed_body: np.ndarray
+    speed_axis: np.ndarray
+    speed_A: np.ndarray
+    speed_rate: np.ndarray
+    joint_kind: np.ndarray
+    joint_ref: np.ndarray
 
 
-def held_inputs(model, t0: float, p0, hinge_tau, L_rotor) -> tuple:
-    """(t0, p0, pdot, L_rotor, tau) as fast.rhs_kernel reads them (fast.input_arguments), for a
-    caller that passes the inputs of the kernel itself instead of holding them in the system."""
-    return fast.input_arguments(model, t0, p0, hinge_tau, L_rotor)
+class Outputs(NamedTuple):
+    """Where a publication writes its numbers (see publication_kernel), and its scratch."""
+
+    R: np.ndarray
+    w: np.ndarray
+    vO: np.ndarray
+    O: np.ndarray
+    quat: np.ndarray
+    euler: np.ndarray
+    euler_rate: np.ndarray
+    L_speed: np.ndarray
+    wrench_force: np.ndarray
+    wrench_moment: np.ndarray
+    inv: np.ndarray
+    scratch: np.ndarray
+
+
+#: Outputs' fields (the names of the arrays callers keep by name)
+OUTPUT_NAMES = tuple(Outputs.__annotations__)
+
+
+class JointStates(NamedTuple):
+    """The joint states (J,) a publication writes."""
+
+    position: np.ndarray
+    velocity: np.ndarray
+    effort: np.ndarray
+
+
+class Slots(NamedTuple):
+    """Where a publication also writes its numbers: dst (m,) float64, and the slots of c copies
+    (c = 0: none): at_joint (c, 3, J), at_position (c, n, 3), at_quat (c, n, 4), at_wrench (c, n, 6)."""
+
+    dst: np.ndarray
+    at_joint: np.ndarray
+    at_position: np.ndarray
+    at_quat: np.ndarray
+    at_wrench: np.ndarray
+
+
+def layout(model, joint_kind, joint_ref) -> Layout:
+    """The Layout of `model` (gyro_sim.dynamics.model.Model) with these joint-state entries."""
+    f64 = np.ascontiguousarray
+    return Layout(f64(model.base_position, dtype=np.float64), f64(model.down, dtype=np.float64), EULER_SINGULAR_SIN,
+                  f64(model.speed_body, dtype=np.int64), f64(np.reshape(model.speed_axis, (-1, 3)), dtype=np.float64),
+                  f64(model.speed_A, dtype=np.float64), f64(model.speed_rate, dtype=np.float64),
+                  f64(joint_kind, dtype=np.int64), f64(joint_ref, dtype=np.int64))
 
 
 #: bits of `want` (publication_kernel): the parts computed beyond the joint states
@@ -197,19 +252,16 @@ SCRATCH_PER_BODY, SCRATCH_FIXED = 51, 24
 
 
 @_njit_uncounted
-def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                       first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
-                       base, t0, p0, pdot, L_rotor, tau,
-                       base_position, down, singular, speed_body, speed_axis, speed_A, speed_rate,
-                       want, joint_kind, joint_ref,
-                       R, w, vO, O, quat, euler, euler_rate, L_speed, wrench_force, wrench_moment, inv,
-                       position, velocity, effort, dst, at_joint, at_position, at_quat, at_wrench, scratch):
+def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, states, slots):
     """What one publication asks for at (t, y), in one pass: the joint states always, wrenches,
     poses and invariants when `want` says so; written into the output arrays and, for each
     copy c, into dst at the slots at_...[c] (any flat float64 buffer: the messages' bytes).
+    The records: layout (Layout: base_position ... joint_ref below), outputs (Outputs: R ...
+    inv, scratch), states (JointStates: position, velocity, effort), slots (Slots: dst,
+    at_joint ... at_wrench).
 
-    The arguments up to `tau` are those of fast.rhs_kernel (its y' in ydot when it runs: only
-    for wrenches or speed rotors, which need the accelerations). base_position (3,), down
+    model, data, inputs: fast.rhs_kernel's records (its y' in ydot when it runs: only for
+    wrenches or speed rotors, which need the accelerations). base_position (3,), down
     (3, 3) world_R_down of the Euler angles, singular: the Euler singularity threshold
     (rotations.EULER_SINGULAR_SIN); speed rotors: body (nv,), axis (nv, 3), A (nv,), rate
     (nv,). want: WANT_* bits. joint_kind, joint_ref (J,): what each joint-state entry is
@@ -227,6 +279,14 @@ def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hin
     and the poses and wrenches asked for, are all checked when written: the first field checked,
     wrenches, then poses, then joint states, holding one).
     """
+    base_position, down, singular, speed_body, speed_axis, speed_A, speed_rate, joint_kind, joint_ref = layout
+    R, w, vO, O, quat, euler, euler_rate, L_speed, wrench_force, wrench_moment, inv, scratch = outputs
+    position, velocity, effort = states
+    dst, at_joint, at_position, at_quat, at_wrench = slots
+    (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
+     torque_axis, torque_A, flags, base) = model
+    work = data.work
+    t0, p0, pdot, L_rotor, tau = inputs.t0[0], inputs.p0, inputs.pdot, inputs.L_rotor, inputs.tau
     base_type, has_gravity, has_lam = flags[0], flags[1] != 0, flags[2] != 0
     i_r0, i_vel, i_kap, N = flags[3], flags[4], flags[5], flags[6]
     amp, W, gravity = base[0:3], base[3], base[4:7]
@@ -239,14 +299,12 @@ def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hin
     (R_k, s_w, hk, Aw, e_w, w_k, vO_k, c, _, _, _, lam_b, _, S, _, _, _, p,
      _, _, _, _, _, _, _) = fast.workspace_views(work, n, N, nt)
     if do_wrench or nv > 0:  # the accelerations: u' into ydot; the kinematics, p (29), S as above
-        fast.rhs_call(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                        first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A, flags,
-                        base, t0, p0, pdot, L_rotor, tau)
+        fast.rhs_call(t, y, ydot, model, data, inputs)
     else:
         for i in range(nt):
             p[i] = p0[i] + pdot[i] * (t - t0)  # (29)
         body_positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R_k, s_w, hk, Aw, e_w)
-        body_velocities(t, y, is_hinge, own_col, base_type, amp, W, i_vel, s_w, e_w, w_k, vO_k, c)
+        body_velocities(t, y, model, s_w, e_w, w_k, vO_k, c)
     for k in range(n):  # the outputs' copies
         for a in range(3):
             w[k, a] = w_k[k, a]
@@ -272,8 +330,7 @@ def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hin
     bad = 0
     if do_wrench or nv > 0:
         # body inertias and forces at zero acceleration (as rhs_kernel, which overwrote its own)
-        bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
-                     torque_A, p, L_rotor, has_gravity, gravity, lam_b, dlam_b, I6, pb)
+        bias_forces(model, R, hk, Aw, w, vO, p, L_rotor, lam_b, dlam_b, I6, pb)
         udot = ydot[i_vel:i_vel + N]
         # body accelerations about O^k: A^k = A^{k-1} moved to O^k + c^k + S_k u'_k
         for a in range(6):
@@ -323,8 +380,7 @@ def publication_kernel(t, y, ydot, work, is_hinge, qrow, own_col, col_start, hin
             mat_vec(R[k], speed_axis[i], tmp)
             L_speed[i] = speed_A[i] * (acc[k, 0] * tmp[0] + acc[k, 1] * tmp[1] + acc[k, 2] * tmp[2])
     elif do_inv and has_lam:
-        bias_forces(R, hk, Aw, mass, w, vO, has_lam, lam_speed, torque_body, torque_axis,
-                     torque_A, p, L_rotor, has_gravity, gravity, lam_b, dlam_b, I6, pb)
+        bias_forces(model, R, hk, Aw, w, vO, p, L_rotor, lam_b, dlam_b, I6, pb)
     # joint points
     if do_bodies or do_inv:
         for a in range(3):

@@ -31,7 +31,7 @@ from gyro_sim.dynamics import reference as dyn
 from gyro_sim import jit
 from gyro_sim.dynamics import kernel as fast, entry as fast_entry, outputs as fast_outputs
 from gyro_sim.dynamics.model import Model, initial_state
-from gyro_sim.dynamics.rotations import EULER_SINGULAR_SIN, quat_rates
+from gyro_sim.dynamics.rotations import quat_rates
 
 
 class OdeSystem(Protocol):
@@ -74,6 +74,9 @@ class ChainODE:
     `hold`: the zero-order hold of `Simulator.advance`. Torque-rotor spins are not states:
     p_i(t) = p_i(t0) + (L_i / A_i) (t - t0) (eq 29).
     """
+
+    #: which dynamics this system runs (`make_system`'s backend names)
+    backend = "numpy"
 
     def __init__(self, model: Model):
         self.model = model
@@ -147,6 +150,9 @@ class FastChainODE:
     Raises ImportError if numba is not available (see `gyro_sim.dynamics.kernel.available`).
     """
 
+    #: which dynamics this system runs (`make_system`'s backend names)
+    backend = "numba"
+
     def __init__(self, model: Model):
         if not fast.available():
             raise ImportError("FastChainODE needs numba; use ChainODE")
@@ -155,12 +161,13 @@ class FastChainODE:
         self.data = self._ref.data
         self.size = model.size
         self.quat_index = model.i_quat
-        # the kernel's arrays packed once in one buffer (fast_entry): `rhs` passes it, four
-        # arguments a call; the compiled loops get views of the same buffer
-        inputs = fast.input_arguments(model, self._ref.t0, self._ref.p0, None, None)
-        self._buf = fast_entry.pack(fast.workspace(model), fast.model_arguments(model), inputs)
-        self._words = self._buf.view(np.int64)  # nfev: the word the compiled entry counts in
-        self._args = fast_entry.kernel_arguments(self._buf)
+        # the kernel's records, bound together (the workspace's descriptor finds all three):
+        # `rhs` passes the descriptor's address, four arguments a call; the compiled loops get
+        # the records
+        chain = fast.chain_model(model)
+        inputs = fast.held_inputs(model, self._ref.t0, self._ref.p0, None, None)
+        self._records = (chain, fast.workspace(model, chain, inputs), inputs)
+        self._descriptor = self._records[1].descriptor  # nfev: the word the compiled entry counts in
         self._shape = (model.size,)
         self.rhs = self._make_rhs()
         self._i_q0 = int(model.i_quat[0, 0]) if len(model.sph_bodies) else 0
@@ -170,26 +177,18 @@ class FastChainODE:
         self._outputs = jit.Direct(fast_outputs.publication_kernel)
         nothing, none = np.empty(0), np.empty(0, dtype=np.int64)
         n = model.n
+        self._layout = fast_outputs.layout(model, none, none)  # the model beyond the kernel's records
         self._no_publication = (
-            (none, none), (nothing, nothing, nothing, nothing, np.empty((0, 3, 0), dtype=np.int64),
-                           np.empty((0, n, 3), dtype=np.int64), np.empty((0, n, 4), dtype=np.int64),
-                           np.empty((0, n, 6), dtype=np.int64), np.empty(fast_outputs.scratch_size(n))))
-        self._speed_args = (  # outputs: the model beyond the kernel's arguments
-            np.ascontiguousarray(model.base_position, dtype=np.float64),
-            np.ascontiguousarray(model.down, dtype=np.float64), EULER_SINGULAR_SIN,
-            np.ascontiguousarray(model.speed_body, dtype=np.int64),
-            np.ascontiguousarray(np.reshape(model.speed_axis, (-1, 3)), dtype=np.float64),
-            np.ascontiguousarray(model.speed_A, dtype=np.float64),
-            np.ascontiguousarray(model.speed_rate, dtype=np.float64))
+            fast_outputs.JointStates(nothing, nothing, nothing),
+            fast_outputs.Slots(nothing, np.empty((0, 3, 0), dtype=np.int64), np.empty((0, n, 3), dtype=np.int64),
+                               np.empty((0, n, 4), dtype=np.int64), np.empty((0, n, 6), dtype=np.int64)))
+        self._scratch = np.empty(fast_outputs.scratch_size(n))
 
     # --- inputs ------------------------------------------------------------------------------
     def hold(self, t0: float, p0: np.ndarray | None, hinge_tau, L_rotor) -> None:
         """Hold the inputs from t0 on (the zero-order hold of `Simulator.advance`)."""
         self._ref.hold(t0, p0, hinge_tau, L_rotor)
-        inputs = fast.input_arguments(self.model, t0, p0, hinge_tau, L_rotor)
-        fast_entry.set_inputs(self._buf, inputs)  # in place: the views see them
-        i = fast_entry.T0_ARGUMENT  # the held t0 is a float: a new tuple
-        self._args = (*self._args[:i], inputs[0], *self._args[i + 1:])
+        fast.hold(self._records[2], self.model, t0, p0, hinge_tau, L_rotor)  # in place
 
     @property
     def inputs_version(self) -> int:
@@ -197,11 +196,19 @@ class FastChainODE:
         return self._ref.inputs_version
 
     def kernel_arguments(self) -> tuple:
-        """The arguments of :func:`gyro_sim.dynamics.kernel.rhs_kernel` after (t, y, out), with the
-        inputs held now (`work`, the model's arrays, the held inputs): for compiled loops of
-        other modules that call the kernel directly. Valid until the next `hold` (which
-        writes the new inputs into the same arrays)."""
-        return self._args
+        """The arguments of :func:`gyro_sim.dynamics.kernel.rhs_kernel` after (t, y, out): its
+        records (model, data, inputs), the inputs held now, for compiled loops of other modules
+        that call the kernel. The same objects from call to call (`hold` writes the new inputs
+        into the same arrays)."""
+        return self._records
+
+    def records_with_own_inputs(self) -> tuple:
+        """The kernel's records (as `kernel_arguments`) with held inputs of their own (held at
+        zero; written with gyro_sim.dynamics.outputs.hold) and a workspace for them: for a
+        caller that evaluates the same model under other inputs than those held here."""
+        chain = self._records[0]
+        inputs = fast.held_inputs(self.model)
+        return chain, fast.workspace(self.model, chain, inputs), inputs
 
     def quaternion_block(self) -> tuple[int, int]:
         """(i_q0, nq): the quaternions are y[i_q0 + 4 j : i_q0 + 4 j + 4], j < nq (for
@@ -223,11 +230,11 @@ class FastChainODE:
     def nfev(self) -> int:
         """Evaluations of y' counted (rhs, the compiled loops that add
         theirs); settable (the integrators add to it, reset or restore it)."""
-        return int(self._words[fast_entry.H_NFEV])
+        return int(self._descriptor[fast.D_NFEV])
 
     @nfev.setter
     def nfev(self, value: int) -> None:
-        self._words[fast_entry.H_NFEV] = value
+        self._descriptor[fast.D_NFEV] = value
 
     def _make_rhs(self):
         """`rhs(t, y, out=None)`: y' (size,) at (t, y); with `out`, by the numpy reference, which
@@ -239,12 +246,17 @@ class FastChainODE:
         nfev; its dtype and dimensions are checked here, as the entry point converts without
         checking them. Another y (dtype, layout) goes through numba's dispatcher
         (`_rhs_other`): correct too, but it compiles one more specialization of the kernel."""
-        buf, size, other = self._buf, self.size, self._rhs_other
-        address = buf.ctypes.data  # the entry takes the address; `other` (self) keeps buf alive
+        size, other = self.size, self._rhs_other
+        address = self._descriptor.ctypes.data  # the entry takes the address; `other` (self) keeps it alive
 
         def first(t, y, ydot, address):
             nonlocal entry
             entry = fast_entry.entry_point()
+            if entry is None:  # nothing compiles (NUMBA_DISABLE_JIT): the kernel in Python
+
+                def entry(t, y, ydot, address):
+                    ydot[:] = other(t, y, None)
+
             entry(t, y, ydot, address)
 
         entry = first
@@ -265,13 +277,13 @@ class FastChainODE:
     def _rhs_other(self, t: float, y, out: dyn.Evaluation | None) -> np.ndarray:
         """rhs for what the compiled entry point does not take: outputs (`out`), another dtype
         or layout of y."""
-        self._words[fast_entry.H_NFEV] += 1
+        self._descriptor[fast.D_NFEV] += 1
         if out is not None:
             return self._ref.rhs(t, y, out)
         if np.shape(y) != self._shape:  # the kernel does not check its indices
             raise ValueError(f"y must have shape ({self.size},), got {np.shape(y)}")
         ydot = _empty(self.size)
-        fast.rhs_kernel(float(t), y, ydot, *self._args)
+        fast.rhs_kernel(float(t), y, ydot, *self._records)
         return ydot
 
     def outputs(self, t: float, y: np.ndarray) -> dict[str, np.ndarray]:
@@ -299,10 +311,10 @@ class FastChainODE:
         y = np.ascontiguousarray(y, dtype=np.float64)
         if y.shape != (self.size,):
             raise ValueError(f"y must have shape ({self.size},), got {y.shape}")
-        joints, scatter = self._no_publication
-        self._outputs(float(t), y, out["ydot"], *self._args, *self._speed_args, int(fast_outputs.WANT_ALL),
-                      *joints, out["R"], out["w"], out["vO"], out["O"], out["quat"], out["euler"], out["euler_rate"],
-                      out["L_speed"], out["wrench_force"], out["wrench_moment"], out["inv"], *scatter)
+        states, slots = self._no_publication
+        outputs = fast_outputs.Outputs(*(self._scratch if k == "scratch" else out[k] for k in fast_outputs.OUTPUT_NAMES))
+        self._outputs(float(t), y, out["ydot"], *self._records, self._layout, int(fast_outputs.WANT_ALL), outputs,
+                      states, slots)
         return out
 
     def warm_up(self) -> None:

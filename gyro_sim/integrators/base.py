@@ -471,3 +471,21 @@ class AdaptiveIntegrator(Integrator):
             raise IntegrationError(self.name, "rhs is not finite at the accepted state", t_new,
                                    self.last_step, describe_nonfinite(self._f))
         self._f_new = True
+
+
+class WholeAdvanceLoop:
+    """Mixin: an adaptive method whose whole `advance` may run as one compiled loop, on a system
+    that offers the kernel (its `_loop`, None otherwise, and `_integrate_compiled`)."""
+
+    _loop = None
+
+    @property
+    def compiled(self) -> bool:
+        """Does `advance` (and `advance_detecting`) run the compiled loop?"""
+        return self._loop is not None
+
+    def advance_detecting(self, t0: float, y: np.ndarray, t1: float, te, Y, detection: tuple) -> tuple[float, int]:
+        """For "auto": the compiled loop in its detection mode (see `_integrate_compiled`):
+        y advanced in place from t0 towards t1 > t0, Y filled at te; returns (time reached,
+        reason code or 0)."""
+        return self._integrate_compiled(t0, y, t1, te, Y, detection)

@@ -1,5 +1,5 @@
 """gyro_sim.dynamics.kernel.rhs_kernel allocates nothing per evaluation on the classic elimination:
-everything lives in the workspace `fast.workspace(model)` gives (numba's own allocation
+everything lives in the workspace `fast.records(model)` gives (numba's own allocation
 counters, NUMBA_NRT_STATS, in a subprocess: the switch must be set before numba imports).
 Counted inside one compiled call, so that the boxing of the arguments at the Python boundary
 is not."""
@@ -40,8 +40,7 @@ for name, scene in (("spherical, rotors, gravity", spherical_chain(5, rotors=Tru
                     ("hinges, moving base", moving)):
     model = compile_model(load_scene(scene))
     y = initial_state(model)
-    args = (fast.workspace(model), *fast.model_arguments(model),
-            *fast.input_arguments(model, 0.0, None, None, None))
+    args = fast.records(model)
     ydot = np.empty(model.size)
     repeat(1, 0.0, y, ydot, args)  # compiled or loaded (and numba's runtime started)
     counts = []

@@ -1,7 +1,7 @@
 """The compiled code calls the dynamics through compiled C functions (gyro_sim.dynamics.kernel):
 
 - the heavy-subtree elimination (`_aba_heavy`) through flags[FLAG_HEAVY], which
-  `model_arguments` fills only for a model whose kernel takes that path;
+  `chain_model` fills only for a model whose kernel takes that path;
 - the kernel itself (`rhs_call`) through flags[FLAG_KERNEL], from every compiled loop;
 - FastChainODE.outputs and the Simulator's publications share one specialization of the
   publication kernel;
@@ -40,10 +40,11 @@ def _models():
 def _kernel(model, flags=None):
     """y' at the model's initial state, the inputs held as ChainODE holds them at its start."""
     ref = ChainODE(model)
-    args = [fast.workspace(model), *fast.model_arguments(model),
-            *fast.input_arguments(model, ref.t0, ref.p0, None, None)]
+    chain, data, inputs = fast.records(model)
+    fast.hold(inputs, model, ref.t0, ref.p0, None, None)
     if flags is not None:
-        args[14] = flags
+        chain = chain._replace(flags=flags)
+    args = (chain, data, inputs)
     y = initial_state(model)
     ydot = np.empty_like(y)
     fast.rhs_kernel(0.0, y, ydot, *args)
@@ -57,7 +58,7 @@ def test_heavy_path_is_there_exactly_where_the_kernel_takes_it(name, model):
     was taken), elsewhere the same y' bit for bit (it was not). With it, y' is finite (its
     accuracy against 80 digits: test_heavy_tip), and the numpy reference's to round-off where
     the classic elimination runs."""
-    flags = fast.model_arguments(model)[13]
+    flags = fast.chain_model(model).flags
     heavy = heavy_subtree_ratio(model) > fast.STABLE_ABA_RATIO
     assert (flags[fast.FLAG_HEAVY] != 0) == heavy == fast.heavy_subtrees(model.mass)
     ydot = _kernel(model)
@@ -87,8 +88,8 @@ def _via_call():
 def test_the_kernel_through_its_c_function_is_the_kernel_bit_for_bit():
     call = _via_call()
     for name, model in _models():
-        args = (fast.workspace(model), *fast.model_arguments(model),
-                *fast.input_arguments(model, 0.1, None, None, None))
+        args = fast.records(model)
+        fast.hold(args[2], model, 0.1, None, None, None)
         y = initial_state(model) + 0.01 * np.random.default_rng(1).standard_normal(model.size)
         direct, through = np.empty_like(y), np.empty_like(y)
         fast.rhs_kernel(0.3, y, direct, *args)
@@ -102,7 +103,7 @@ def test_a_strided_array_does_not_compile_into_a_c_call():
     from numba.core.errors import TypingError
 
     model = compile_model(load_scene("hinge_chain"))
-    args = (fast.workspace(model), *fast.model_arguments(model), *fast.input_arguments(model, 0.0, None, None, None))
+    args = fast.records(model)
     y = np.repeat(initial_state(model), 2)[::2]  # the state, every other item of a longer vector
     with pytest.raises(TypingError):
         _via_call()(0.0, y, np.empty(model.size), *args)
@@ -110,10 +111,10 @@ def test_a_strided_array_does_not_compile_into_a_c_call():
 
 def test_the_null_kernel_only_zeroes_the_rate():
     model = compile_model(load_scene("hinge_chain"))
-    args = [fast.workspace(model), *fast.model_arguments(model), *fast.input_arguments(model, 0.0, None, None, None)]
-    flags = args[14].copy()
+    chain, data, inputs = fast.records(model)
+    flags = chain.flags.copy()
     flags[fast.FLAG_KERNEL] = fast.null_kernel_address()
-    args[14] = flags
+    args = (chain._replace(flags=flags), data, inputs)
     y = initial_state(model)
     ydot = np.full_like(y, 7.0)
     _via_call()(0.0, y, ydot, *args)

@@ -1,7 +1,7 @@
-"""FastChainODE.rhs through gyro_sim.dynamics.entry (the kernel's arrays packed in one buffer,
-four arguments a call) against the kernel called directly with the separate arrays of
-`fast.model_arguments` and `fast.input_arguments` (bit for bit: same kernel, same arrays) and
-against the numpy reference ChainODE.rhs (round-off), before and after holds of new inputs.
+"""FastChainODE.rhs through gyro_sim.dynamics.entry (a workspace's descriptor, four arguments a
+call) against the kernel called directly with the records of `fast.records` (bit for bit: same
+kernel, same arrays) and against the numpy reference ChainODE.rhs (round-off), before and after
+holds of new inputs.
 """
 import json
 import os
@@ -27,11 +27,17 @@ pytestmark = pytest.mark.skipif(not fast.available(), reason="numba is not insta
 SEEDS = range(8)
 
 
+def bound(model, held) -> tuple:
+    """(model, data, inputs) of `model` as the kernel takes them, these inputs held."""
+    chain, data, inputs = fast.records(model)
+    fast.hold(inputs, model, *held)
+    return chain, data, inputs
+
+
 def direct(model, t, y, held) -> np.ndarray:
-    """fast.rhs_kernel called with the separate arrays of the model and the held inputs."""
+    """fast.rhs_kernel called directly with the records of the model and the held inputs."""
     ydot = np.empty(model.size)
-    fast.rhs_kernel(float(t), y, ydot, fast.workspace(model), *fast.model_arguments(model),
-                    *fast.input_arguments(model, *held))
+    fast.rhs_kernel(float(t), y, ydot, *bound(model, held))
     return ydot
 
 
@@ -92,40 +98,45 @@ def _hinge_chain_without_rotors():
 @pytest.mark.parametrize("scene", [spherical_chain(1), spherical_chain(3, gravity=False),
                                    _hinge_chain_without_rotors()],
                          ids=["one body, no hinge", "no hinge, no gravity", "hinges only, no rotors"])
-def test_buffers_of_models_with_empty_blocks(scene):
-    """No torque rotor (empty p0, pdot, L, torque arrays) or no hinge: the packed arguments
-    equal the separate ones in shape, dtype, contiguity and value, and rhs matches."""
+def test_records_of_models_with_empty_blocks(scene):
+    """No torque rotor (empty p0, pdot, L, torque arrays) or no hinge: the records' arrays are
+    C-contiguous of the kernel's dtypes, the descriptor gives their addresses and sizes, and
+    rhs matches."""
     model = compile_model(load_scene(scene))
     assert len(model.torque_body) == 0 and (not model.is_hinge.any() or model.is_hinge.all())
     held = (0.25, None, np.full(len(model.hinge_bodies), 0.1) if len(model.hinge_bodies) else None, None)
-    buf = fast_entry.pack(fast.workspace(model), fast.model_arguments(model),
-                          fast.input_arguments(model, *held))
-    packed = fast_entry.kernel_arguments(buf)
-    separate = (fast.workspace(model), *fast.model_arguments(model), *fast.input_arguments(model, *held))
-    assert len(packed) == len(separate) == 21
-    for a, b in zip(packed, separate):
-        if isinstance(b, float):
-            assert a == b
-        else:
-            assert a.shape == b.shape and a.dtype == b.dtype and a.flags.c_contiguous
-            assert np.array_equal(a, b)
+    chain, data, inputs = bound(model, held)
+    arrays = (*chain, data.work, *inputs)
+    assert len(arrays) == 21 and all(a.flags.c_contiguous for a in arrays)
+    assert {a.dtype for a in arrays} == {np.dtype(np.float64), np.dtype(np.int64), np.dtype(np.bool_)}
+    d = data.descriptor
+    assert list(d[fast.D_MODEL:fast.D_N]) == [a.ctypes.data for a in arrays]
+    assert (d[fast.D_N], d[fast.D_NCOL], d[fast.D_NT], d[fast.D_NWORK]) == (model.n, model.N, 0, data.work.size)
     check_case(model, np.random.default_rng(3), holds=1)
 
 
-def test_hold_writes_the_inputs_into_the_buffers():
-    """After a hold, the kernel's arguments (views of the buffers) hold the new inputs, and a
-    hold of no commands zeroes the previous ones."""
+def test_hold_writes_the_inputs_in_place():
+    """After a hold, the kernel's records (the same objects) hold the new inputs, and a hold of
+    no commands zeroes the previous ones."""
     model = compile_model(load_scene(chain_scene(2, "fixed")))
     assert len(model.torque_body) and len(model.hinge_bodies)
     fst = FastChainODE(model)
+    first = fst.kernel_arguments()
     rng = np.random.default_rng(11)
     for h in (random_hold(rng, model), (1.5, None, None, None)):
         fst.hold(*h)
         args = fst.kernel_arguments()
-        want = fast.input_arguments(model, *h)
-        assert args[fast_entry.T0_ARGUMENT] == want[0]
-        for a, b in zip(args[fast_entry.T0_ARGUMENT + 1:], want[1:]):
-            assert np.array_equal(a, b)
+        assert all(a is b for a, b in zip(args, first))
+        t0, p0, hinge_tau, L = h
+        nt = len(model.torque_body)
+        want_L = np.zeros(nt) if L is None else L
+        tau = np.zeros(model.N)
+        if hinge_tau is not None:
+            tau[model.col_hinge] = hinge_tau
+        inputs = args[2]
+        assert inputs.t0[0] == t0 and np.array_equal(inputs.p0, np.zeros(nt) if p0 is None else p0)
+        assert np.array_equal(inputs.L_rotor, want_L) and np.array_equal(inputs.pdot, want_L / model.torque_A)
+        assert np.array_equal(inputs.tau, tau)
 
 
 def test_time_as_int_or_numpy_float():
@@ -154,23 +165,23 @@ def test_entry_checks_length_and_stride():
     """The compiled entry refuses a y not of ydot's length, or not contiguous (whose elements
     its C-ordered type would read at the wrong places)."""
     model = compile_model(load_scene(spherical_chain(2)))
-    buf = fast_entry.pack(fast.workspace(model), fast.model_arguments(model),
-                          fast.input_arguments(model, 0.0, None, None, None))
-    entry = fast_entry.entry_point()  # takes the buffer's address
+    records = fast.records(model)  # kept: the descriptor points into all three
+    data = records[1]
+    entry = fast_entry.entry_point()  # takes the descriptor's address
     y = initial_state(model)
     ydot = np.empty(model.size)
-    entry(0.0, y, ydot, buf.ctypes.data)
+    entry(0.0, y, ydot, data.descriptor.ctypes.data)
     assert np.array_equal(ydot, direct(model, 0.0, y, (0.0, None, None, None)))
     strided = np.zeros(2 * model.size)
     strided[::2] = y
     for bad in (y[:-1], np.concatenate([y, y]), strided[::2]):
         with pytest.raises(ValueError, match="contiguous vector"):
-            entry(0.0, bad, ydot, buf.ctypes.data)
-    assert buf.view(np.int64)[fast_entry.H_NFEV] == 1  # the refused calls not counted
+            entry(0.0, bad, ydot, data.descriptor.ctypes.data)
+    assert data.descriptor[fast.D_NFEV] == 1  # the refused calls not counted
 
 
 def test_nfev_counts_every_evaluation():
-    """FastChainODE.nfev (a word of the buffer the compiled entry counts in): one per rhs call,
+    """FastChainODE.nfev (a word of the descriptor the compiled entry counts in): one per rhs call,
     whichever path (entry point, another dtype, outputs), plus the marches' stages; settable."""
     model = compile_model(load_scene(spherical_chain(2, rotors=True)))
     fst = FastChainODE(model)
@@ -214,8 +225,8 @@ def repeat(m, t, y, ydot, buf):
 
 model = compile_model(load_scene(spherical_chain(3, rotors=True)))
 y = initial_state(model)
-buf = fast_entry.pack(fast.workspace(model), fast.model_arguments(model),
-                      fast.input_arguments(model, 0.0, None, None, None))
+records = fast.records(model)  # kept: the descriptor points into all three
+buf = records[1].descriptor
 ydot = np.empty(model.size)
 repeat(1, 0.0, y, ydot, buf)  # compiled (and numba's runtime started)
 counts = []
@@ -228,7 +239,7 @@ print(json.dumps(counts))
 
 
 def test_entry_views_allocate_nothing():
-    """The views rhs_entry cuts from the buffer allocate nothing: eleven evaluations inside one
+    """The records rhs_entry's C function rebuilds from the descriptor allocate nothing: eleven evaluations inside one
     compiled call count the same allocations as one (the arguments' unboxing at the call;
     numba's own counters, NUMBA_NRT_STATS, set before numba imports: a subprocess)."""
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))

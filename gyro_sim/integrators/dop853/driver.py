@@ -6,16 +6,17 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from gyro_sim.integrators.adaptive_kernels import clip_step
 from gyro_sim.integrators.dop853 import loop as fast_dop853
 from gyro_sim.integrators.dop853.kernels import (
-    CONTROL_SIZE, INITIAL_SIZE, NO_HLAMB, dop_clip, dop_control, dop_dense_coefficients,
+    CONTROL_SIZE, INITIAL_SIZE, NO_HLAMB, dop_control, dop_dense_coefficients,
     dop_dense_eval, dop_error_norm, dop_finite, dop_hlamb, dop_initial_probe, dop_initial_step,
     dop_stage_state, dop_update,
 )
 from gyro_sim.integrators.base import (
     H0_DEFAULT, H0_FRACTION, H0_GROWTH, H0_NEGLIGIBLE, H0_TINY_DERIVATIVES, H0_TINY_FRACTION,
     H0_TINY_STEP, LAST_STEP_STRETCH, MAX_FACTOR, MIN_FACTOR, MIN_STEP_RELATIVE, SAFETY,
-    AdaptiveIntegrator, ExplicitRungeKutta, IntegrationError, describe_nonfinite,
+    AdaptiveIntegrator, ExplicitRungeKutta, IntegrationError, WholeAdvanceLoop, describe_nonfinite,
 )
 
 if TYPE_CHECKING:
@@ -217,7 +218,7 @@ _DOP_D[3, 14] = -0.39177261675615439165231486172e+2
 _DOP_D[3, 15] = -0.14972683625798562581422125276e+3
 
 
-class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
+class DOP853(ExplicitRungeKutta, WholeAdvanceLoop, AdaptiveIntegrator):
     """Explicit Runge-Kutta method of order 8 with error control and dense output.
 
     The Dormand-Prince 8(5,3) pair as in Hairer's dop853.f (HNW I, sec. II.10): 12 stages (the
@@ -351,7 +352,7 @@ class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
         while True:
             if h_abs < min_step:
                 raise self._collapse(t, h_abs, nonfinite)
-            h, t_new = dop_clip(t, h_abs, t1, LAST_STEP_STRETCH)
+            h, t_new = clip_step(t, h_abs, t1, LAST_STEP_STRETCH)
             K[0] = self._f
             for s in range(1, _DOP_N_STAGES):
                 dop_stage_state(y, K, A, s, h, ys)  # ys = y + (sum_j A[s, j] K[j]) h
@@ -371,11 +372,6 @@ class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
         self.error_estimate = error_norm
         self.last_step = self._h = h
         return t_new
-
-    @property
-    def compiled(self) -> bool:
-        """Does `advance` (and `advance_detecting`) run the compiled loop?"""
-        return self._loop is not None
 
     def reset(self) -> None:
         super().reset()
@@ -433,12 +429,6 @@ class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
         else:
             self._integrate_compiled(t0, y, t1, te, Y)
 
-    def advance_detecting(self, t0: float, y: np.ndarray, t1: float, te, Y, detection: tuple) -> tuple[float, int]:
-        """For "auto": the compiled loop in its detection mode (see `_integrate_compiled`):
-        y advanced in place from t0 towards t1, Y filled at te; returns (time reached, reason
-        code or 0)."""
-        return self._integrate_compiled(t0, y, t1, te, Y, detection)
-
     def _integrate_compiled(self, t0: float, y: np.ndarray, t1: float, te, Y,
                             detection: tuple | None = None) -> tuple[float, int]:
         """`_integrate` (the loop of `begin`, `take_step`, `dense`) in one compiled call.
@@ -491,12 +481,13 @@ class DOP853(ExplicitRungeKutta, AdaptiveIntegrator):
     def _call_loop(self, t0: float, y: np.ndarray, t1: float, te, Y, h_mem: float,
                    detection: tuple) -> None:
         """fast_dop853.dop853_advance with this integrator's tableau, options and scratch."""
-        self._loop(t0, t1, y, te, Y, h_mem, self.max_step, self.rtol, self._atol_v,
-                   self.A_ALL, self.C_ALL, self.E5, self.E3, self.D, self.CONTROL, self.INITIAL,
-                   self._i_q0, self._nq,
-                   self._f, self._K, self._ys, self._y_new, self._y_old, self._F, self._bad,
-                   self._trace, self._real, self._status, *detection, self._held, self._held_at,
-                   *self.system.kernel_arguments())
+        self._loop(float(t0), float(t1), y, fast_dop853.Outputs(te, Y),
+                   fast_dop853.Options(float(h_mem), float(self.max_step), float(self.rtol), self._atol_v,
+                                       self._i_q0, self._nq),
+                   fast_dop853.Method(self.A_ALL, self.C_ALL, self.E5, self.E3, self.D, self.CONTROL, self.INITIAL),
+                   fast_dop853.State(self._f, self._K, self._ys, self._y_new, self._y_old, self._F, self._bad,
+                                     self._trace, self._real, self._status, self._held, self._held_at),
+                   fast_dop853.Detection(*detection), *self.system.kernel_arguments())
 
 
 #: the detection arrays of a plain call (fast_dop853.dop853_advance: detect empty, the others

@@ -38,7 +38,15 @@ from __future__ import annotations
 
 import math
 
-from gyro_sim.jit import njit
+from pathlib import Path
+
+from gyro_sim import jit
+from gyro_sim.integrators import adaptive_kernels
+from gyro_sim.integrators.adaptive_kernels import rms_scaled
+
+#: the files these kernels compile in (the key of their numba cache directory)
+DEPENDENCIES = (Path(__file__), Path(adaptive_kernels.__file__))
+njit = jit.njit_with_dependencies(*DEPENDENCIES)
 
 #: stages of a step (the 13th, FSAL, is f at the new state, row N_STAGES of K)
 N_STAGES = 12
@@ -117,17 +125,6 @@ def dop_finite(y):
 
 
 @njit
-def dop_clip(t, h_abs, t1, stretch):
-    """(h, t_new) of a trial step of h_abs from t: to exactly t1 when t + h_abs (1 + stretch)
-    reaches it (dop853.f stretches the step before t1 rather than leave a sliver), else
-    t_new = t + h_abs and h = t_new - t (the step as represented)."""
-    if t + h_abs * (1.0 + stretch) >= t1:
-        return t1 - t, t1
-    t_new = t + h_abs
-    return t_new - t, t_new
-
-
-@njit
 def dop_control(err, finite, h, h_abs, rejected, control):
     """The step-size controller (HNW I, sec. II.4, eq. 4.13, with scipy's constants): given the
     error norm `err` of a trial step h (`finite`: its new state is finite), whose trial size
@@ -159,17 +156,6 @@ def dop_control(err, finite, h, h_abs, rejected, control):
 
 
 @njit
-def _rms_scaled(x, sc):
-    """sqrt(sum_i (x_i / sc_i)^2 / n), 0 for n = 0 (scipy's `norm`: RMS)."""
-    n = x.shape[0]
-    acc = 0.0
-    for i in range(n):
-        v = x[i] / sc[i]
-        acc += v * v
-    return math.sqrt(acc / n) if n else 0.0
-
-
-@njit
 def dop_initial_probe(y0, f0, rtol, atol, span, initial, sc, y1):
     """The starting step size, first half (HNW I, sec. II.4, "starting step size"; scipy's
     select_initial_step): sc = atol + |y0| rtol, d0 = ||y0||, d1 = ||f0|| (RMS norms in sc),
@@ -180,8 +166,8 @@ def dop_initial_probe(y0, f0, rtol, atol, span, initial, sc, y1):
     n = y0.shape[0]
     for i in range(n):
         sc[i] = atol[i] + abs(y0[i]) * rtol
-    d0 = _rms_scaled(y0, sc)
-    d1 = _rms_scaled(f0, sc)
+    d0 = rms_scaled(y0, sc)
+    d1 = rms_scaled(f0, sc)
     h0 = default if d0 < negligible or d1 < negligible else fraction * d0 / d1
     h0 = min(h0, span)
     for i in range(n):

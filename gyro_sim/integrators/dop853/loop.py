@@ -34,41 +34,28 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
+
+from gyro_sim.integrators.adaptive_kernels import (  # what the loop returns in status[S_STATUS] (its reasons)
+    ACCEPTED_RHS_NONFINITE, COLLAPSED, DONE, INITIAL_RHS_NONFINITE, REASON_REJECTED, REASON_STIFF, SWITCH,
+    clip_step,
+)
 from gyro_sim.integrators.dop853 import kernels as dop853_kernels
 from gyro_sim.dynamics import kernel as fast
 from gyro_sim import jit
 from gyro_sim.integrators.dop853.kernels import (
     C_STIFF, COST_DOP853, COST_RADAU, N_EXTENDED, N_STAGES, NO_HLAMB, auto_clear_attempts,
-    auto_costlier, auto_measure, auto_rejection_test, auto_stiffness_test, dop_clip, dop_control,
+    auto_costlier, auto_measure, auto_rejection_test, auto_stiffness_test, dop_control,
     dop_dense_coefficients, dop_dense_eval, dop_error_norm, dop_finite, dop_hlamb,
     dop_initial_probe, dop_initial_step, dop_stage_state, dop_update,
 )
 
 #: the files the loop compiles in (the key of its cache directory)
-DEPENDENCIES = (*fast.DEPENDENCIES, Path(dop853_kernels.__file__), Path(__file__))
+DEPENDENCIES = (*fast.DEPENDENCIES, *dop853_kernels.DEPENDENCIES, Path(__file__))
 _njit = jit.njit_with_dependencies(*DEPENDENCIES)
-
-# --- what the loop returns in status[0] ----------------------------------------------------
-#: t1 reached
-DONE = 0
-#: the step size fell below MIN_STEP_RELATIVE max(|t|, |t1|) (HNW's "step size too small")
-COLLAPSED = 1
-#: the fresh rhs at (t0, y0) is not finite
-INITIAL_RHS_NONFINITE = 2
-#: the rhs at an accepted state (FSAL, or for the dense output) is not finite
-ACCEPTED_RHS_NONFINITE = 3
-#: detection mode: a test asks for a switch at the accepted state real[R_T] < t1 (the reason
-#: in status[S_REASON])
-SWITCH = 4
-
-# --- the reasons of a SWITCH, in status[S_REASON]
-#: dop853.f's test: STIFF_STEPS steps with h |lambda| > STIFF_HLAMB
-REASON_STIFF = 1
-#: REJECT_FRACTION of the last REJECT_WINDOW step attempts rejected
-REASON_REJECTED = 2
 
 #: the order of DOP853's error estimator (the starting step's exponent)
 ORDER_OF_ESTIMATOR = 7
@@ -87,15 +74,74 @@ HELD_AT_SIZE = 2
 H_Y1, H_Y12, H_F12 = range(3)
 
 
+class Outputs(NamedTuple):
+    """The states asked of a call: Y (m, size) at te (m,), sorted within [t0, t1]."""
+
+    te: np.ndarray
+    Y: np.ndarray
+
+
+class Options(NamedTuple):
+    """A call's step-size memory h_mem, its options, and where the state's quaternions are."""
+
+    h_mem: float
+    max_step: float
+    rtol: float
+    #: (size,)
+    atol: np.ndarray
+    i_q0: int
+    nq: int
+
+
+class Method(NamedTuple):
+    """DOP853's constants (the class attributes of gyro_sim.integrators.dop853.driver.DOP853)."""
+
+    #: (16, 16), (16,): the extended tableau
+    A: np.ndarray
+    C: np.ndarray
+    #: (12,)
+    E5: np.ndarray
+    E3: np.ndarray
+    #: (4, 16)
+    D: np.ndarray
+    #: dop853_kernels' CONTROL_SIZE, INITIAL_SIZE
+    control: np.ndarray
+    initial: np.ndarray
+
+
+class State(NamedTuple):
+    """What the loop keeps and returns between calls, and its scratch (see dop853_advance)."""
+
+    f: np.ndarray
+    K: np.ndarray
+    ys: np.ndarray
+    y_new: np.ndarray
+    y_old: np.ndarray
+    F: np.ndarray
+    bad: np.ndarray
+    trace: np.ndarray
+    real: np.ndarray
+    status: np.ndarray
+    held: np.ndarray
+    held_at: np.ndarray
+
+
+class Detection(NamedTuple):
+    """The stiffness detection's state (dop853_kernels), carried from call to call; `detect`
+    empty: off."""
+
+    detect: np.ndarray
+    counters: np.ndarray
+    attempts: np.ndarray
+    window: np.ndarray
+    cost: np.ndarray
+
+
 @_njit
-def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, D, control,
-                   initial, i_q0, nq, f, K, ys, y_new, y_old, F, bad, trace, real, status,
-                   detect, counters, attempts, window, cost, held, held_at,
-                   work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
-                   inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base,
-                   ht0, p0, pdot, L_rotor, tau):
-    """DOP853 from (t0, y) to exactly t1 > t0, y (size,) in place; Y (m, size) the states at
-    te (m,), sorted within [t0, t1].
+def dop853_advance(t0, t1, y, outputs, options, method, state, detection, model, data, inputs):
+    """DOP853 from (t0, y) to exactly t1 > t0, y (size,) in place; outputs.Y (m, size) the
+    states at outputs.te (m,), sorted within [t0, t1]. The records: Outputs, Options, Method,
+    State, Detection (their fields are named below as in the loop).
 
     The call starts with a fresh f = rhs(t0, y) (inputs may have changed since the last call).
     h_mem: the step-size memory of the last call; 0 on the first call after a reset: the
@@ -112,8 +158,8 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
     memory, the error norm and size of the last accepted step, its start; status
     (STATUS_SIZE,) the status (DONE, COLLAPSED, ...), rhs evaluations, accepted and rejected
     steps, outputs filled, whether f = rhs(y_new) is known, whether the last failing step had
-    a non-finite trial, the steps traced, the reason of a SWITCH. The arguments from `work`
-    on are those of fast.rhs_kernel (`ht0` its `t0`, the start of the hold).
+    a non-finite trial, the steps traced, the reason of a SWITCH. model, data, inputs:
+    fast.rhs_kernel's records.
 
     Detection mode (detect not empty), the "auto" method's dop853 phase
     (gyro_sim.integrators.auto.Auto, whose Python loop over DOP853's public single step
@@ -128,6 +174,11 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
     from its end (then a switch may end the call before its first step). Off, these are not
     read (empty or not).
     """
+    te, Y = outputs
+    h_mem, max_step, rtol, atol, i_q0, nq = options
+    A, C, E5, E3, D, control, initial = method
+    f, K, ys, y_new, y_old, F, bad, trace, real, status, held, held_at = state
+    detect, counters, attempts, window, cost = detection
     detecting = detect.shape[0] > 0
     m = te.shape[0]
     nfev = 0
@@ -142,9 +193,7 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
     status[S_NONFINITE] = 0
     status[S_STATUS] = DONE
     status[S_REASON] = 0
-    fast.rhs_call(t0, y, f, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                    first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
-                    flags, base, ht0, p0, pdot, L_rotor, tau)
+    fast.rhs_call(t0, y, f, model, data, inputs)
     nfev += 1
     if not dop_finite(f):
         status[S_STATUS] = INITIAL_RHS_NONFINITE
@@ -152,9 +201,7 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
     elif h_mem <= 0.0:  # the starting step (AdaptiveIntegrator.begin), F[0] and F[1] as scratch
         sc, f1 = F[0], F[1]
         h0, d1 = dop_initial_probe(y, f, rtol, atol, t1 - t0, initial, sc, ys)
-        fast.rhs_call(t0 + h0, ys, f1, work, is_hinge, qrow, own_col, col_start, hinge_axis, s,
-                        mass, first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
-                        flags, base, ht0, p0, pdot, L_rotor, tau)
+        fast.rhs_call(t0 + h0, ys, f1, model, data, inputs)
         nfev += 1
         h_mem = dop_initial_step(f, f1, sc, h0, d1, t1 - t0, max_step, ORDER_OF_ESTIMATOR, initial)
     if detecting and status[S_STATUS] == DONE:  # the last call's last step, if this continues it
@@ -185,13 +232,11 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
                 real[R_T] = t
                 real[R_H] = h_abs
                 break
-            h, t_new = dop_clip(t, h_abs, t1, stretch)
+            h, t_new = clip_step(t, h_abs, t1, stretch)
             K[0, :] = f
             for st in range(1, N_STAGES):
                 dop_stage_state(y, K, A, st, h, ys)
-                fast.rhs_call(t + C[st] * h, ys, K[st], work, is_hinge, qrow, own_col, col_start,
-                                hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-                                torque_axis, torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
+                fast.rhs_call(t + C[st] * h, ys, K[st], model, data, inputs)
                 nfev += 1
             dop_update(y, K, A[N_STAGES, :N_STAGES], h, y_new)
             err = dop_error_norm(K, E5, E3, h, y, y_new, rtol, atol)
@@ -215,9 +260,7 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
         fast.normalize_quaternions(y_new, i_q0, nq)
         status[S_F_NEW] = 0
         if t_new < t1:
-            fast.rhs_call(t_new, y_new, f, work, is_hinge, qrow, own_col, col_start, hinge_axis,
-                            s, mass, first_moment, inertia, lam_speed, torque_body, torque_axis,
-                            torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
+            fast.rhs_call(t_new, y_new, f, model, data, inputs)
             nfev += 1
             if not dop_finite(f):
                 status[S_STATUS] = ACCEPTED_RHS_NONFINITE
@@ -247,9 +290,7 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
             k += 1
         if k > j:
             if status[S_F_NEW] == 0:
-                fast.rhs_call(t, y_new, f, work, is_hinge, qrow, own_col, col_start, hinge_axis,
-                                s, mass, first_moment, inertia, lam_speed, torque_body,
-                                torque_axis, torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
+                fast.rhs_call(t, y_new, f, model, data, inputs)
                 nfev += 1
                 if not dop_finite(f):
                     status[S_STATUS] = ACCEPTED_RHS_NONFINITE
@@ -263,10 +304,7 @@ def dop853_advance(t0, t1, y, te, Y, h_mem, max_step, rtol, atol, A, C, E5, E3, 
                     held_at[H_T] = math.nan
             for st in range(N_STAGES + 1, N_EXTENDED):
                 dop_stage_state(y_old, K, A, st, last_step, ys)
-                fast.rhs_call(t_old + C[st] * last_step, ys, K[st], work, is_hinge, qrow, own_col,
-                                col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed,
-                                torque_body, torque_axis, torque_A, flags, base, ht0, p0, pdot,
-                                L_rotor, tau)
+                fast.rhs_call(t_old + C[st] * last_step, ys, K[st], model, data, inputs)
                 nfev += 1
             dop_dense_coefficients(y_old, y_new, K, D, last_step, F)
             dop_dense_eval(F, y_old, t_old, last_step, te[j:k], Y[j:k])
@@ -317,23 +355,13 @@ def _equal(a, b):
 _LOOPS: dict[tuple, jit.Direct] = {}
 
 
-def _type_key(a) -> tuple:
-    """What numba's type of an argument depends on: dtype, dimensions, layout (as numba.typeof
-    reads it: C if C-contiguous, else F if Fortran-contiguous, else A), writeability of an
-    array; the Python type of a scalar."""
-    if isinstance(a, np.ndarray):
-        layout = "C" if a.flags.c_contiguous else ("F" if a.flags.f_contiguous else "A")
-        return (a.dtype.str, a.ndim, layout, a.flags.writeable)
-    return (type(a),)
-
-
 def loop_for(kernel_arguments: tuple) -> jit.Direct:
     """:func:`dop853_advance` called through its compiled entry point, for a system whose
     kernel arguments (`FastChainODE.kernel_arguments()`) have the types of these: one per
     process and combination of types (the first call dispatches, the later ones go straight
     to the entry point). The caller passes the other arguments with fixed types: float64
     C-contiguous arrays of fixed dimensions, Python floats and ints."""
-    key = tuple(_type_key(a) for a in kernel_arguments)
+    key = jit.type_key(kernel_arguments)
     loop = _LOOPS.get(key)
     if loop is None:
         loop = _LOOPS[key] = jit.Direct(dop853_advance)

@@ -21,6 +21,7 @@ any of them starts an empty one.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -61,7 +62,7 @@ def _field(t, y, out, kargs):
     """out = f(t, y): the chain's kernel (fast.rhs_kernel) for a FastChainODE's arguments, the
     canonical one (fast_canonical.canonical_kernel: gauss4s) for a FastCanonicalChain's, which
     are longer; chosen when the march is compiled for the arguments' types."""
-    if len(kargs) == fast_canonical.CHAIN_ARGUMENTS:
+    if len(kargs) == fast_canonical.CHAIN_RECORDS:
         fast.rhs_call(t, y, out, *kargs)
     else:
         fast_canonical.canonical_call(t, y, out, *kargs)
@@ -72,7 +73,7 @@ if jit.available():
 
     @overload(_field, inline="always")
     def _field_typed(t, y, out, kargs):
-        if len(kargs) == fast_canonical.CHAIN_ARGUMENTS:
+        if len(kargs) == fast_canonical.CHAIN_RECORDS:
             return lambda t, y, out, kargs: fast.rhs_call(t, y, out, *kargs)
         return lambda t, y, out, kargs: fast_canonical.canonical_call(t, y, out, *kargs)
 
@@ -217,13 +218,32 @@ def newton_krylov(t, y, h, C, params, ws, info, counts, kargs):
     return STEP_NOT_CONVERGED
 
 
+class Method(NamedTuple):
+    """Gauss4's coefficients (gyro_sim.integrators.gauss4.driver.Gauss4): A, C, D."""
+
+    A: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+
+
+class State(NamedTuple):
+    """What a march keeps across calls and reports: dstate (gauss_kernels.DST_*), info (3,),
+    counts (COUNT_*)."""
+
+    dstate: np.ndarray
+    info: np.ndarray
+    counts: np.ndarray
+
+
 @_njit
-def substep(t, y, h, A, C, D, params, dstate, ws, info, counts, i_q0, nq, kargs):
+def substep(t, y, h, method, params, state, ws, i_q0, nq, kargs):
     """One (sub)step of size h from (t, y): Gauss4._substep statement for statement. Sets ws's
     hA (gauss_kernels.gauss_scaled), starts Newton from the previous (sub)step's collocation
     polynomial extrapolated (its step in dstate[DST_HPRED], 0: from Z = 0); on success
     y += D . Z (gauss_kernels.gauss_update), its quaternions renormalised, and Z kept as the
-    next predictor's."""
+    next predictor's. method (Method), state (State)."""
+    A, C, D = method
+    dstate, info, counts = state
     Z, Zp, Zs, Zb, ys, y0, Ys, F, Fp, Yp, w, V, H, cs, sn, coef, g, J, M, piv, r, P, hA = ws
     hp = dstate[DST_HPRED]
     if hp > 0.0:
@@ -246,7 +266,7 @@ def substep(t, y, h, A, C, D, params, dstate, ws, info, counts, i_q0, nq, kargs)
 
 
 @_njit
-def gauss_march(t0, h, nsteps, y, A, C, D, params, dstate, ws, info, counts, i_q0, nq, kargs):
+def gauss_march(t0, h, nsteps, y, method, params, state, ws, i_q0, nq, kargs):
     """`nsteps` gauss4 steps of size h from (t0, y), y (size,) in place; step k starts at
     t0 + k h: Gauss4._step statement for statement. A (sub)step whose Newton iteration fails is
     taken again as two halves, down to h / 2^depth (depth = params[PAR_DEPTH]), and the pieces
@@ -260,8 +280,10 @@ def gauss_march(t0, h, nsteps, y, A, C, D, params, dstate, ws, info, counts, i_q
     the last Newton iteration, rate, update norm; counts is incremented; dstate
     (gauss_kernels.DST_*) carries the dense path's matrix and the predictor across calls;
     params as gauss_kernels.PAR_*; ws the workspace (WS_FIELDS); kargs the arguments of
-    fast.rhs_kernel after (t, y, out).
+    fast.rhs_kernel after (t, y, out). method (Method): A, C, D; state (State): dstate, info,
+    counts.
     """
+    dstate, info, counts = state
     Z, Zp, Zs, Zb, ys, y0, Ys, F, Fp, Yp, w, V, H, cs, sn, coef, g, J, M, piv, r, P, hA = ws
     max_depth = int(params[PAR_DEPTH])
     budget = int(params[PAR_BUDGET])
@@ -282,8 +304,7 @@ def gauss_march(t0, h, nsteps, y, A, C, D, params, dstate, ws, info, counts, i_q
             ys[:] = y
             Zs[:, :] = Zp
             hs = dstate[DST_HPRED]
-            status = substep(t + pos * unit, y, h / (1 << depth), A, C, D, params, dstate, ws, info,
-                             counts, i_q0, nq, kargs)
+            status = substep(t + pos * unit, y, h / (1 << depth), method, params, state, ws, i_q0, nq, kargs)
             attempts += 1
             if status != STEP_OK:
                 y[:] = ys
@@ -328,8 +349,9 @@ class GaussMarch:
             raise ValueError(f"y must be a contiguous float64 array of shape ({self.system.size},)")
         i_q0, nq = self.system.quaternion_block()
         before = int(counts[COUNT_RHS])
-        done, status = self._march(float(t0), float(h), int(nsteps), y, A, C, D, params, dstate, ws,
-                                   info, counts, int(i_q0), int(nq), self.system.kernel_arguments())
+        done, status = self._march(float(t0), float(h), int(nsteps), y, Method(A, C, D), params,
+                                   State(dstate, info, counts), ws, int(i_q0), int(nq),
+                                   self.system.kernel_arguments())
         calls = int(counts[COUNT_RHS]) - before
         self.system.nfev += calls
         return int(done), int(status), calls

@@ -18,6 +18,7 @@ any of them starts an empty one.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -31,37 +32,60 @@ DEPENDENCIES = (*fast.DEPENDENCIES, Path(lk.__file__), Path(fast_loop.__file__),
 _njit = jit.njit_with_dependencies(*DEPENDENCIES)
 
 
+class Method(NamedTuple):
+    """CF4's coefficients (lie_kernels): ALPHA (stages, stages), BASE (stages,) int, BETA
+    (3, stages) = (B, BETA1, BETA2), C (stages,)."""
+
+    ALPHA: np.ndarray
+    BASE: np.ndarray
+    BETA: np.ndarray
+    C: np.ndarray
+
+
+class Layout(NamedTuple):
+    """Where the state's parts are: qi (nq, 4) the quaternion blocks, li (nl,) the other
+    components, the quaternions y[i_q0 + 4 j : +4], j < nq (their renormalisation)."""
+
+    qi: np.ndarray
+    li: np.ndarray
+    i_q0: int
+    nq: int
+
+
+class Scratch(NamedTuple):
+    """Y (stages, size), F (size,), W (stages, nq, 3), V (stages, nl)."""
+
+    Y: np.ndarray
+    F: np.ndarray
+    W: np.ndarray
+    V: np.ndarray
+
+
 @_njit
-def lie_march(t0, h, nsteps, y, ALPHA, BASE, BETA, C, Y, F, W, V, qi, li, i_q0, nq,
-              work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
-              inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base,
-              ht0, p0, pdot, L_rotor, tau):
+def lie_march(t0, h, nsteps, y, method, layout, scratch, model, data, inputs):
     """`nsteps` CF4 steps of size h from (t0, y), y (size,) in place; step k starts at
-    t0 + k h. ALPHA (stages, stages), BASE (stages,) int, BETA (3, stages) = (B, BETA1, BETA2),
-    C (stages,): the method's coefficients (lie_kernels); qi (nq, 4), li (nl,): the quaternion
-    blocks and the other components of y. Y (stages, size), F (size,), W (stages, nq, 3),
-    V (stages, nl): scratch.
+    t0 + k h. method (Method): the coefficients; layout (Layout): the quaternion blocks and the
+    other components of y; scratch (Scratch).
 
     After each step: quaternions y[i_q0 + 4 j : +4], j < nq, renormalised; the state checked.
     Returns the number of steps completed with a finite state: nsteps, or k < nsteps when step
-    k left a non-finite state (y is then that state). The arguments from `work` on are those of
-    fast.rhs_kernel (`ht0` its `t0`, the start of the hold).
+    k left a non-finite state (y is then that state). model, data, inputs: fast.rhs_kernel's
+    records.
     """
+    ALPHA, BASE, BETA, C = method
+    qi, li, i_q0, nq = layout
+    Y, F, W, V = scratch
     stages = C.shape[0]
     hALPHA = ALPHA * h
     hBETA = BETA * h
     for k in range(nsteps):
         t = t0 + k * h
         lk.lie_start(y, Y)
-        fast.rhs_call(t, Y[0], F, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                        first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
-                        flags, base, ht0, p0, pdot, L_rotor, tau)
+        fast.rhs_call(t, Y[0], F, model, data, inputs)
         lk.lie_field(Y, F, 0, qi, li, W, V)
         for st in range(1, stages):
             lk.lie_stage(Y, W, V, hALPHA, st, BASE[st], qi, li)
-            fast.rhs_call(t + C[st] * h, Y[st], F, work, is_hinge, qrow, own_col, col_start,
-                            hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-                            torque_axis, torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
+            fast.rhs_call(t + C[st] * h, Y[st], F, model, data, inputs)
             lk.lie_field(Y, F, st, qi, li, W, V)
         lk.lie_update(y, W, V, hBETA, qi, li)
         fast.normalize_quaternions(y, i_q0, nq)
@@ -92,6 +116,8 @@ class LieMarch:
         self._BETA = np.array(BETA, dtype=np.float64)
         self._C = np.array(C, dtype=np.float64)
         self._F = np.empty(system.size)
+        self._method = Method(self._ALPHA, self._BASE, self._BETA, self._C)
+        self._layout = Layout(self._qi, self._li, self._i_q0, self._nq)
         self._march = jit.Direct(lie_march)
 
     def __call__(self, t0, y, h, nsteps, Y, W, V) -> int:
@@ -99,8 +125,7 @@ class LieMarch:
         size), W (stages, nq, 3), V (stages, nl) float64 scratch."""
         if y.shape != (self.system.size,) or y.dtype != np.float64 or not y.flags.c_contiguous:
             raise ValueError(f"y must be a contiguous float64 array of shape ({self.system.size},)")
-        done = self._march(float(t0), float(h), int(nsteps), y, self._ALPHA, self._BASE,
-                           self._BETA, self._C, Y, self._F, W, V, self._qi, self._li, self._i_q0,
-                           self._nq, *self.system.kernel_arguments())
+        done = self._march(float(t0), float(h), int(nsteps), y, self._method, self._layout,
+                           Scratch(Y, self._F, W, V), *self.system.kernel_arguments())
         self.system.nfev += self._C.shape[0] * min(done + 1, nsteps)
         return int(done)

@@ -6,19 +6,20 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from gyro_sim.integrators.adaptive_kernels import clip_step, rms_scaled
 from gyro_sim.integrators.radau import loop as fast_radau
 from gyro_sim.integrators.dop853.kernels import dop_initial_probe, dop_initial_step
 from gyro_sim.integrators.radau.kernels import (
-    CONTROL_SIZE, NEWTON_CONVERGED, NEWTON_DIVERGING, rad_add, rad_clip, rad_control_accepted,
+    CONTROL_SIZE, NEWTON_CONVERGED, NEWTON_DIVERGING, rad_add, rad_control_accepted,
     rad_control_rejected, rad_dense_coefficients, rad_dense_eval, rad_dw_norm, rad_error,
     rad_error_rhs, rad_factor, rad_fd_column, rad_fd_delta, rad_finite, rad_finite_rows,
-    rad_newton_advance, rad_newton_increment, rad_newton_residual, rad_predict, rad_rms_scaled,
+    rad_newton_advance, rad_newton_increment, rad_newton_residual, rad_predict,
     rad_scale, rad_stage_state, rad_transform,
 )
 from gyro_sim.integrators.base import (
     H0_DEFAULT, H0_FRACTION, H0_GROWTH, H0_NEGLIGIBLE, H0_TINY_DERIVATIVES, H0_TINY_FRACTION,
     H0_TINY_STEP, EPS, LAST_STEP_STRETCH, MAX_FACTOR, MIN_FACTOR, MIN_STEP_RELATIVE, SAFETY,
-    AdaptiveIntegrator, IntegrationError, describe_nonfinite,
+    AdaptiveIntegrator, IntegrationError, WholeAdvanceLoop, describe_nonfinite,
 )
 
 if TYPE_CHECKING:
@@ -88,7 +89,7 @@ _RADAU_P = np.array([
 NONFINITE_NONE, NONFINITE_STAGES, NONFINITE_STATE, NONFINITE_ERROR = range(4)
 
 
-class Radau(AdaptiveIntegrator):
+class Radau(WholeAdvanceLoop, AdaptiveIntegrator):
     """Implicit Runge-Kutta method Radau IIA, 3 stages, order 5, for stiff systems.
 
     The algorithm of Hairer and Wanner's radau5 as ported in scipy's Radau [3]: the
@@ -230,11 +231,6 @@ class Radau(AdaptiveIntegrator):
             self.nfev, self.nsteps, self.nrejected, self.njev, self.nlu = counts
             if system_nfev is not None:
                 self.system.nfev = system_nfev
-
-    @property
-    def compiled(self) -> bool:
-        """Does `advance` (and `advance_detecting`) run the compiled loop?"""
-        return self._loop is not None
 
     def load_loop(self) -> None:
         """Compile the loop, or load it from numba's cache, now (the "auto" method, which may
@@ -406,7 +402,7 @@ class Radau(AdaptiveIntegrator):
         """b (n,) becomes (MU_REAL/h I - J)^-1 b; returns its norm in scale."""
         if self.matrix_free:
             b[:] = self._krylov(self.MU_REAL / self._lu_h, b)
-            return rad_rms_scaled(b, scale)
+            return rms_scaled(b, scale)
         return rad_error(self._LU_real, self._piv_real, b, scale)
 
     def begin(self, t0: float, y: np.ndarray, t1: float) -> None:
@@ -436,7 +432,7 @@ class Radau(AdaptiveIntegrator):
         while True:
             if h_abs < min_step:
                 raise self._collapse(t, h_abs, self._describe_nonfinite())
-            h, t_new = rad_clip(t, h_abs, t1, LAST_STEP_STRETCH)
+            h, t_new = clip_step(t, h_abs, t1, LAST_STEP_STRETCH)
             if self._has_sol:
                 rad_predict(self._Qt, self._sol_t, self._sol_h, self._sol_y, t, h, self.C, y, self._Z0)
             else:
@@ -569,12 +565,6 @@ class Radau(AdaptiveIntegrator):
         self.nrejected += st[fr.F_REJECTED]
         self._f_new = st[fr.F_F_NEW] != 0
 
-    def advance_detecting(self, t0: float, y: np.ndarray, t1: float, te, Y, detection: tuple) -> tuple[float, int]:
-        """For "auto": the compiled loop in its detection mode (see `_integrate_compiled`):
-        y advanced in place from t0 towards t1 > t0, Y filled at te; returns (time reached,
-        reason code or 0)."""
-        return self._integrate_compiled(t0, y, t1, te, Y, detection)
-
     def _integrate_compiled(self, t0: float, y: np.ndarray, t1: float, te, Y,
                             detection: tuple | None = None) -> tuple[float, int]:
         """`_integrate` (the loop of `begin`, `take_step`, `dense`, `end`) in one compiled call.
@@ -615,15 +605,18 @@ class Radau(AdaptiveIntegrator):
 
     def _call_loop(self, t0: float, y: np.ndarray, t1: float, te, Y, detection: tuple) -> None:
         """fast_radau.radau_advance with this integrator's method, options, memory, scratch."""
-        self._loop(t0, t1, y, te, Y, self.max_step, self.rtol, self._atol_v, self._newton_tol,
-                   self.C, self.E, self.T, self.TI, self.P, self.MU_REAL, self.MU_COMPLEX,
-                   self.CONTROL, self.INITIAL, FD_REL_STEP, FD_MIN_SCALE, self._i_q0, self._nq,
-                   self._f, self._J, self._LU_real, self._piv_real, self._LU_complex,
-                   self._piv_complex, self._Z0, self._Z, self._W, self._dW, self._F, self._ys,
-                   self._f_real, self._f_complex, self._scale_v, self._delta, self._ZE, self._err,
-                   self._fe, self._y_new, self._y_old, self._y_bad, self._bad, self._Qt,
-                   self._sol_y, self._y_end, self._trace, self._mem, self._flags, *detection,
-                   *self.system.kernel_arguments())
+        fr = fast_radau
+        self._loop(float(t0), float(t1), y, fr.Outputs(te, Y),
+                   fr.Options(float(self.max_step), float(self.rtol), self._atol_v, float(self._newton_tol),
+                              float(FD_REL_STEP), float(FD_MIN_SCALE), self._i_q0, self._nq),
+                   fr.Method(self.C, self.E, self.T, self.TI, self.P, self.MU_REAL, self.MU_COMPLEX,
+                             self.CONTROL, self.INITIAL),
+                   fr.State(self._f, self._J, self._LU_real, self._piv_real, self._LU_complex,
+                            self._piv_complex, self._Z0, self._Z, self._W, self._dW, self._F, self._ys,
+                            self._f_real, self._f_complex, self._scale_v, self._delta, self._ZE, self._err,
+                            self._fe, self._y_new, self._y_old, self._y_bad, self._bad, self._Qt,
+                            self._sol_y, self._y_end, self._trace, self._mem, self._flags),
+                   fr.Detection(*detection), *self.system.kernel_arguments())
 
 
 #: the detection arrays of a plain call (fast_radau.radau_advance: handback empty, the others

@@ -50,8 +50,18 @@ import math
 
 import numpy as np
 
+from pathlib import Path
+
+from gyro_sim import jit
+from gyro_sim.integrators import adaptive_kernels
+from gyro_sim.integrators.adaptive_kernels import rms_scaled
+from gyro_sim.integrators.dop853 import kernels as dop853_kernels
 from gyro_sim.integrators.dop853.kernels import C_WINDOW, COST_DOP853, COST_RADAU
-from gyro_sim.jit import njit
+
+#: the files these kernels compile in (the key of their numba cache directory): dop853's
+#: constants are compiled in too
+DEPENDENCIES = (Path(__file__), Path(adaptive_kernels.__file__), Path(dop853_kernels.__file__))
+njit = jit.njit_with_dependencies(*DEPENDENCIES)
 
 try:
     import numba
@@ -115,17 +125,6 @@ def rad_scale(y, y_new, rtol, atol, sc):
 
 
 @njit
-def rad_rms_scaled(x, sc):
-    """sqrt(sum_i (x_i / sc_i)^2 / n), 0 for n = 0 (scipy's `norm` of x / scale)."""
-    n = x.shape[0]
-    acc = 0.0
-    for i in range(n):
-        v = x[i] / sc[i]
-        acc += v * v
-    return math.sqrt(acc / n) if n else 0.0
-
-
-@njit
 def rad_dw_norm(dW, sc):
     """||dW / sc||_rms over all 3 n components, row after row (scipy: norm(dW / scale))."""
     k, n = dW.shape[0], dW.shape[1]
@@ -135,16 +134,6 @@ def rad_dw_norm(dW, sc):
             v = dW[s, i] / sc[i]
             acc += v * v
     return math.sqrt(acc / (k * n)) if n else 0.0
-
-
-@njit
-def rad_clip(t, h_abs, t1, stretch):
-    """(h, t_new) of a trial step of h_abs from t: to exactly t1 when t + h_abs (1 + stretch)
-    reaches it, else t_new = t + h_abs and h = t_new - t (AdaptiveIntegrator._clip)."""
-    if t + h_abs * (1.0 + stretch) >= t1:
-        return t1 - t, t1
-    t_new = t + h_abs
-    return t_new - t, t_new
 
 
 # --- the Jacobian by forward differences --------------------------------------------------
@@ -403,7 +392,7 @@ def rad_error(LU_real, piv_real, b, scale):
     """The error estimate err = (MU_REAL/h I - J)^-1 b in place of b (n,); returns
     ||err / scale||_rms."""
     rad_lu_solve(LU_real, piv_real, b)
-    return rad_rms_scaled(b, scale)
+    return rms_scaled(b, scale)
 
 
 @njit

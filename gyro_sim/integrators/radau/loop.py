@@ -42,10 +42,15 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
-from gyro_sim.integrators.dop853 import kernels as dop853_kernels
+
+from gyro_sim.integrators.adaptive_kernels import (  # what the loop returns in flags[F_STATUS] (its reasons)
+    ACCEPTED_RHS_NONFINITE, COLLAPSED, DONE, INITIAL_RHS_NONFINITE, NO_STARTING_STEP, REASON_COSTLY,
+    REASON_NONSTIFF, SWITCH, clip_step,
+)
 from gyro_sim.dynamics import kernel as fast
 from gyro_sim import jit
 from gyro_sim.integrators.radau import kernels as radau_kernels
@@ -55,7 +60,7 @@ from gyro_sim.integrators.dop853.kernels import (
 from gyro_sim.integrators.radau.kernels import (
     C_LAST_STEP_STRETCH, C_LU_REUSE_RTOL, C_MIN_FACTOR, C_MIN_STEP_RELATIVE, C_NEWTON_FAIL_FACTOR,
     C_NEWTON_MAXITER, EASY_RHO, EASY_STALE, NEWTON_CONVERGED, NEWTON_DIVERGING, auto_cost_test,
-    auto_nonstiffness_test, auto_spectral_radius, rad_add, rad_clip, rad_control_accepted,
+    auto_nonstiffness_test, auto_spectral_radius, rad_add, rad_control_accepted,
     rad_control_rejected, rad_dense_coefficients, rad_dense_eval, rad_error, rad_error_rhs,
     rad_factor, rad_fd_column, rad_fd_delta, rad_finite, rad_finite_rows, rad_newton_advance,
     rad_newton_increment, rad_newton_residual, rad_predict, rad_scale, rad_stage_state,
@@ -63,30 +68,8 @@ from gyro_sim.integrators.radau.kernels import (
 )
 
 #: the files the loop compiles in (the key of its cache directory)
-DEPENDENCIES = (*fast.DEPENDENCIES, Path(radau_kernels.__file__), Path(dop853_kernels.__file__),
-                Path(__file__))
+DEPENDENCIES = (*fast.DEPENDENCIES, *radau_kernels.DEPENDENCIES, Path(__file__))
 _njit = jit.njit_with_dependencies(*DEPENDENCIES)
-
-# --- what the loop returns in flags[F_STATUS] ---------------------------------------------
-#: t1 reached
-DONE = 0
-#: the step size fell below MIN_STEP_RELATIVE max(|t|, |t1|) (HNW's "step size too small")
-COLLAPSED = 1
-#: the fresh rhs at (t0, y0) is not finite
-INITIAL_RHS_NONFINITE = 2
-#: the rhs at an accepted state is not finite
-ACCEPTED_RHS_NONFINITE = 3
-#: no starting step is representable (|f0| too large against |y0|; mem[M_H]: ||f0|| weighted)
-NO_STARTING_STEP = 4
-#: detection mode: a test asks for a hand-back to dop853 at the accepted state mem[M_T] < t1
-#: (the reason in flags[F_REASON])
-SWITCH = 5
-
-# --- the reasons of a SWITCH, in flags[F_REASON] (after fast_dop853's REASON_STIFF, _REJECTED)
-#: h rho(J) < NONSTIFF_HRHO in the steps needed in a row
-REASON_NONSTIFF = 3
-#: radau costs COST_MARGIN times what dop853 did (or would)
-REASON_COSTLY = 4
 
 #: the order of Radau's error estimator (the starting step's exponent)
 ORDER_OF_ESTIMATOR = 3
@@ -113,9 +96,7 @@ FLAGS_SIZE = 16
 
 @_njit
 def _fd_jacobian(t, y, f, J, fd_rel_step, fd_min_scale, delta, ys, fj,
-                 work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
-                 inertia, lam_speed, torque_body, torque_axis, torque_A, flags_k, base,
-                 ht0, p0, pdot, L_rotor, tau):
+                 model, data, inputs):
     """J (size, size) = d rhs / dy at (t, y) by forward differences around f = rhs(t, y)
     (Radau._jacobian: rad_fd_delta, one rhs evaluation and rad_fd_column a column); delta, ys,
     fj (size,) scratch. Returns the rhs evaluations (size)."""
@@ -124,25 +105,96 @@ def _fd_jacobian(t, y, f, J, fd_rel_step, fd_min_scale, delta, ys, fj,
     ys[:] = y
     for c in range(n):
         ys[c] = y[c] + delta[c]
-        fast.rhs_call(t, ys, fj, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                        first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
-                        flags_k, base, ht0, p0, pdot, L_rotor, tau)
+        fast.rhs_call(t, ys, fj, model, data, inputs)
         rad_fd_column(J, c, fj, f, delta[c])
         ys[c] = y[c]
     return n
 
 
+class Outputs(NamedTuple):
+    """The states asked of a call: Y (m, size) at te (m,), sorted within [t0, t1]."""
+
+    te: np.ndarray
+    Y: np.ndarray
+
+
+class Options(NamedTuple):
+    """A call's options, the forward-difference Jacobian's, and where the state's quaternions are."""
+
+    max_step: float
+    rtol: float
+    atol: np.ndarray
+    newton_tol: float
+    fd_rel_step: float
+    fd_min_scale: float
+    i_q0: int
+    nq: int
+
+
+class Method(NamedTuple):
+    """Radau IIA's constants (the class attributes of gyro_sim.integrators.radau.driver.Radau) and the controller's."""
+
+    C: np.ndarray
+    E: np.ndarray
+    T: np.ndarray
+    TI: np.ndarray
+    P: np.ndarray
+    mu_real: np.ndarray
+    mu_complex: np.ndarray
+    control: np.ndarray
+    initial: np.ndarray
+
+
+class State(NamedTuple):
+    """What the loop keeps between calls (J, its LU factors, the collocation polynomial, mem, flags), and its scratch (see radau_advance)."""
+
+    f: np.ndarray
+    J: np.ndarray
+    LU_real: np.ndarray
+    piv_real: np.ndarray
+    LU_complex: np.ndarray
+    piv_complex: np.ndarray
+    Z0: np.ndarray
+    Z: np.ndarray
+    W: np.ndarray
+    dW: np.ndarray
+    F: np.ndarray
+    ys: np.ndarray
+    f_real: np.ndarray
+    f_complex: np.ndarray
+    scale: np.ndarray
+    delta: np.ndarray
+    ZE: np.ndarray
+    err: np.ndarray
+    fe: np.ndarray
+    y_new: np.ndarray
+    y_old: np.ndarray
+    y_bad: np.ndarray
+    bad: np.ndarray
+    Qt: np.ndarray
+    sol_y: np.ndarray
+    y_end: np.ndarray
+    trace: np.ndarray
+    mem: np.ndarray
+    flags: np.ndarray
+
+
+class Detection(NamedTuple):
+    """The detection mode's state (dop853_kernels, radau_kernels), carried from call to call; `handback` empty: off."""
+
+    counters: np.ndarray
+    window: np.ndarray
+    cost: np.ndarray
+    handback: np.ndarray
+    easy: np.ndarray
+    power: np.ndarray
+
+
 @_njit
-def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, TI, P, mu_real,
-                  mu_complex, control, initial, fd_rel_step, fd_min_scale, i_q0, nq,
-                  f, J, LU_real, piv_real, LU_complex, piv_complex, Z0, Z, W, dW, F, ys, f_real,
-                  f_complex, scale, delta, ZE, err, fe, y_new, y_old, y_bad, bad, Qt, sol_y, y_end,
-                  trace, mem, flags, counters, window, cost, handback, easy, power,
-                  work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
-                  inertia, lam_speed, torque_body, torque_axis, torque_A, flags_k, base,
-                  ht0, p0, pdot, L_rotor, tau):
-    """Radau IIA from (t0, y) to exactly t1 > t0, y (size,) in place; Y (m, size) the states
-    at te (m,), sorted within [t0, t1].
+def radau_advance(t0, t1, y, outputs, options, method, state, detection, model, data, inputs):
+    """Radau IIA from (t0, y) to exactly t1 > t0, y (size,) in place; outputs.Y (m, size) the
+    states at outputs.te (m,), sorted within [t0, t1]. The records: Outputs, Options, Method,
+    State, Detection (their fields are named below as in the loop).
 
     The call starts with a fresh f = rhs(t0, y) (inputs may have changed since the last call);
     with mem[M_H_ABS] = 0 (the first call after a reset) the starting step is selected here
@@ -156,8 +208,8 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
     slots). Scratch, left as the Python driver leaves its own: Z0, Z, W, dW, F (3, size),
     ys, scale, delta, ZE, err, fe, y_new, y_old (size,), f_real (size,), f_complex (size,
     complex); y_bad (size,) and bad (3,): the state or stages of the last non-finite trial.
-    trace (k,): the ends of the first k accepted steps (k may be 0). The arguments from `work`
-    on are those of fast.rhs_kernel (`flags_k` its `flags`, `ht0` its `t0`).
+    trace (k,): the ends of the first k accepted steps (k may be 0). model, data, inputs:
+    fast.rhs_kernel's records.
 
     Detection mode (handback not empty), the "auto" method's radau phase
     (gyro_sim.integrators.auto.Auto, whose Python loop over Radau's public single step
@@ -170,6 +222,12 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
     tests' state: counters, window, cost (dop853_kernels), handback, easy (radau_kernels),
     carried from call to call. Off, these are not read (empty or not).
     """
+    te, Y = outputs
+    max_step, rtol, atol, newton_tol, fd_rel_step, fd_min_scale, i_q0, nq = options
+    C, E, T, TI, P, mu_real, mu_complex, control, initial = method
+    (f, J, LU_real, piv_real, LU_complex, piv_complex, Z0, Z, W, dW, F, ys, f_real, f_complex, scale, delta,
+     ZE, err, fe, y_new, y_old, y_bad, bad, Qt, sol_y, y_end, trace, mem, flags) = state
+    counters, window, cost, handback, easy, power = detection
     detecting = handback.shape[0] > 0
     m = te.shape[0]
     nfev = 0
@@ -203,9 +261,7 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
         Y[j, :] = y
         j += 1
     # --- begin: a fresh rhs, the starting step, is this call a continuation?
-    fast.rhs_call(t0, y, f, work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                    first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
-                    flags_k, base, ht0, p0, pdot, L_rotor, tau)
+    fast.rhs_call(t0, y, f, model, data, inputs)
     nfev += 1
     if not rad_finite(f):
         status = INITIAL_RHS_NONFINITE
@@ -215,9 +271,7 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
             sc, f1 = F[0], F[1]
             h0, d1 = dop_initial_probe(y, f, rtol, atol, t1 - t0, initial, sc, ys)
             if h0 > 0.0:
-                fast.rhs_call(t0 + h0, ys, f1, work, is_hinge, qrow, own_col, col_start,
-                                hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-                                torque_axis, torque_A, flags_k, base, ht0, p0, pdot, L_rotor, tau)
+                fast.rhs_call(t0 + h0, ys, f1, model, data, inputs)
                 nfev += 1
                 h_mem = dop_initial_step(f, f1, sc, h0, d1, t1 - t0, max_step, ORDER_OF_ESTIMATOR,
                                          initial)
@@ -253,10 +307,7 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
         rate = math.nan
         error_norm = math.nan
         if not has_J or recompute_jac:  # the Jacobian at (t, y) (Radau._jacobian)
-            nfev += _fd_jacobian(t, y, f, J, fd_rel_step, fd_min_scale, delta, ys, fe, work,
-                                 is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                                 first_moment, inertia, lam_speed, torque_body, torque_axis,
-                                 torque_A, flags_k, base, ht0, p0, pdot, L_rotor, tau)
+            nfev += _fd_jacobian(t, y, f, J, fd_rel_step, fd_min_scale, delta, ys, fe, model, data, inputs)
             njev += 1
             has_J = True
             has_lu = False
@@ -270,7 +321,7 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
                 t_fail = t
                 h_fail = h_abs
                 break
-            h, t_new = rad_clip(t, h_abs, t1, stretch)
+            h, t_new = clip_step(t, h_abs, t1, stretch)
             if has_sol:
                 rad_predict(Qt, sol_t, sol_h, sol_y, t, h, C, y, Z0)
             else:
@@ -292,10 +343,7 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
                     n_iter = k + 1
                     for st in range(3):
                         rad_stage_state(y, Z, st, ys)
-                        fast.rhs_call(t + h * C[st], ys, F[st], work, is_hinge, qrow, own_col,
-                                        col_start, hinge_axis, s, mass, first_moment, inertia,
-                                        lam_speed, torque_body, torque_axis, torque_A, flags_k,
-                                        base, ht0, p0, pdot, L_rotor, tau)
+                        fast.rhs_call(t + h * C[st], ys, F[st], model, data, inputs)
                         nfev += 1
                     if not rad_finite_rows(F, bad):
                         nonfinite = NONFINITE_STAGES
@@ -314,10 +362,7 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
                 if converged or current_jac:
                     break
                 # failed with an old Jacobian: a new one at (t, y), the same step again
-                nfev += _fd_jacobian(t, y, f, J, fd_rel_step, fd_min_scale, delta, ys, fe, work,
-                                     is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                                     first_moment, inertia, lam_speed, torque_body, torque_axis,
-                                     torque_A, flags_k, base, ht0, p0, pdot, L_rotor, tau)
+                nfev += _fd_jacobian(t, y, f, J, fd_rel_step, fd_min_scale, delta, ys, fe, model, data, inputs)
                 njev += 1
                 has_lu = False
                 current_jac = True
@@ -334,9 +379,7 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
             error_norm = rad_error(LU_real, piv_real, err, scale)
             if rejected and error_norm > 1.0:
                 rad_add(y, err, ys)
-                fast.rhs_call(t, ys, fe, work, is_hinge, qrow, own_col, col_start, hinge_axis,
-                                s, mass, first_moment, inertia, lam_speed, torque_body,
-                                torque_axis, torque_A, flags_k, base, ht0, p0, pdot, L_rotor, tau)
+                fast.rhs_call(t, ys, fe, model, data, inputs)
                 nfev += 1
                 rad_add(fe, ZE, err)
                 error_norm = rad_error(LU_real, piv_real, err, scale)
@@ -375,9 +418,7 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
         has_sol = True
         f_new = False
         if t_new < t1:
-            fast.rhs_call(t_new, y_new, f, work, is_hinge, qrow, own_col, col_start, hinge_axis,
-                            s, mass, first_moment, inertia, lam_speed, torque_body, torque_axis,
-                            torque_A, flags_k, base, ht0, p0, pdot, L_rotor, tau)
+            fast.rhs_call(t_new, y_new, f, model, data, inputs)
             nfev += 1
             if not rad_finite(f):
                 status = ACCEPTED_RHS_NONFINITE
@@ -454,16 +495,6 @@ def radau_advance(t0, t1, y, te, Y, max_step, rtol, atol, newton_tol, C, E, T, T
 _LOOPS: dict[tuple, jit.Direct] = {}
 
 
-def _type_key(a) -> tuple:
-    """What numba's type of an argument depends on: dtype, dimensions, layout (as numba.typeof
-    reads it: C if C-contiguous, else F if Fortran-contiguous, else A), writeability of an
-    array; the Python type of a scalar."""
-    if isinstance(a, np.ndarray):
-        layout = "C" if a.flags.c_contiguous else ("F" if a.flags.f_contiguous else "A")
-        return (a.dtype.str, a.ndim, layout, a.flags.writeable)
-    return (type(a),)
-
-
 def loop_for(kernel_arguments: tuple) -> jit.Direct:
     """:func:`radau_advance` called through its compiled entry point, for a system whose kernel
     arguments (`FastChainODE.kernel_arguments()`) have the types of these: one per process and
@@ -471,7 +502,7 @@ def loop_for(kernel_arguments: tuple) -> jit.Direct:
     point). The caller passes the other arguments with fixed types: float64 (complex128 for
     the complex LU and residual) C-contiguous arrays of fixed dimensions, int64 pivots and
     flags, Python floats, a complex and ints."""
-    key = tuple(_type_key(a) for a in kernel_arguments)
+    key = jit.type_key(kernel_arguments)
     loop = _LOOPS.get(key)
     if loop is None:
         loop = _LOOPS[key] = jit.Direct(radau_advance)

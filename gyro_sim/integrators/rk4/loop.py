@@ -21,6 +21,7 @@ function, ~12 s: `fast.kernel_address`).
 from __future__ import annotations
 
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -44,32 +45,34 @@ def finite(y):
     return True
 
 
+class Tableau(NamedTuple):
+    """An explicit Runge-Kutta tableau: A (s, s), B (s,), C (s,)."""
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+
+
 @_njit
-def erk_march(t0, h, nsteps, y, A, B, C, K, ys, i_q0, nq,
-              work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment,
-              inertia, lam_speed, torque_body, torque_axis, torque_A, flags, base,
-              ht0, p0, pdot, L_rotor, tau):
-    """`nsteps` steps of size h of the explicit tableau (A, B, C) from (t0, y), y (size,) in
+def erk_march(t0, h, nsteps, y, tableau, K, ys, i_q0, nq, model, data, inputs):
+    """`nsteps` steps of size h of the explicit tableau (a Tableau) from (t0, y), y (size,) in
     place; step k starts at t0 + k h. K (stages, size), ys (size,): scratch.
 
     After each step: quaternions y[i_q0 + 4 j : +4], j < nq, renormalised; the state checked.
     Returns the number of steps completed with a finite state: nsteps, or k < nsteps when step
-    k left a non-finite state (y is then that state). The arguments from `work` on are those of
-    fast.rhs_kernel (`ht0` its `t0`, the start of the hold).
+    k left a non-finite state (y is then that state). model, data, inputs: fast.rhs_kernel's
+    records.
     """
+    A, B, C = tableau
     stages = B.shape[0]
     hA = A * h
     hB = B * h
     for k in range(nsteps):
         t = t0 + k * h
-        fast.rhs_call(t, y, K[0], work, is_hinge, qrow, own_col, col_start, hinge_axis, s, mass,
-                        first_moment, inertia, lam_speed, torque_body, torque_axis, torque_A,
-                        flags, base, ht0, p0, pdot, L_rotor, tau)
+        fast.rhs_call(t, y, K[0], model, data, inputs)
         for st in range(1, stages):
             erk_stage_state(y, K, hA, st, ys)
-            fast.rhs_call(t + C[st] * h, ys, K[st], work, is_hinge, qrow, own_col, col_start,
-                            hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-                            torque_axis, torque_A, flags, base, ht0, p0, pdot, L_rotor, tau)
+            fast.rhs_call(t + C[st] * h, ys, K[st], model, data, inputs)
         erk_update(y, K, hB)
         fast.normalize_quaternions(y, i_q0, nq)
         if not finite(y):
@@ -105,12 +108,12 @@ class ErkMarch:
             stages = len(B)
             if np.shape(A) != (stages, stages) or np.shape(C) != (stages,):
                 raise ValueError("A must be (s, s), B and C (s,)")
-            tableau = self._tableaus[id(A)] = (A, *(np.array(x, dtype=np.float64) for x in (A, B, C)),
+            tableau = self._tableaus[id(A)] = (A, Tableau(*(np.array(x, dtype=np.float64) for x in (A, B, C))),
                                                np.empty((stages, size)))
-        _, A_, B_, C_, K = tableau
-        done = self._march(float(t0), float(h), int(nsteps), y, A_, B_, C_, K,
+        _, compiled, K = tableau
+        done = self._march(float(t0), float(h), int(nsteps), y, compiled, K,
                            self._ys, self._i_q0, self._nq, *self.system.kernel_arguments())
-        self.system.nfev += len(B_) * min(done + 1, nsteps)
+        self.system.nfev += len(compiled.B) * min(done + 1, nsteps)
         return done
 
     def warm_up(self, t0: float, y: np.ndarray) -> None:
