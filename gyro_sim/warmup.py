@@ -210,14 +210,15 @@ LOAD_POLL = 1.0
 
 
 def warm_when_filled(sim, poll: float = LOAD_POLL):
-    """Off the physics thread, what a guarded "fixed" may switch to (gyro_sim.integrators.fixed:
-    `guard`, WARM): a daemon thread waits until no helper fills the cache (`filling`), then runs
-    the warm-up of a second Simulator of the same scene and step, which loads (or, if the fill
-    left it out, compiles) every rung into this process; the guard then lets them step. The
-    second Simulator shares nothing with `sim` but the compiled code. Returns the thread."""
+    """Off the physics thread, what `sim`'s integrator may switch to (for a guarded "fixed",
+    gyro_sim.integrators.fixed: `guard`, WARM): a daemon thread waits until no helper fills the
+    cache (`filling`), then runs the warm-up of a second Simulator of the same scene, integrator
+    and step, which loads (or, if the fill left it out, compiles) every method into this
+    process; the guard then lets them step. The second Simulator shares nothing with `sim` but
+    the compiled code. Returns the thread."""
     import threading
 
-    scene, step = sim.scene, sim.integrator.step
+    scene, step, integrator = sim.scene, sim.integrator.step, sim.integrator_name
 
     def load():
         while filling():
@@ -225,7 +226,7 @@ def warm_when_filled(sim, poll: float = LOAD_POLL):
         try:
             from gyro_sim.simulator import Simulator
 
-            twin = Simulator(scene, integrator="fixed", step=step, backend="numba")
+            twin = Simulator(scene, integrator=integrator, step=step, backend="numba")
             twin.integrator.warm_up(twin.time, twin.state)
         except Exception:  # noqa: BLE001 - the guard keeps the rung back: the run goes on without it
             pass
