@@ -150,8 +150,8 @@ VIOLENT_AFTER = 1.0
 VIOLENT_CALL = 1.0 / PUBLISH_RATE
 #: simulated seconds of a node run with the violent step
 VIOLENT_SECONDS = 5.0
-#: wall seconds after which the command is sent again while the node's diagnostics (every 0.1 s
-#: simulated) say it has taken none
+#: the command is sent again when the node's diagnostics (every 0.1 s simulated) still say it has
+#: taken none this many wall seconds after it was sent
 RESEND_AFTER = 0.3
 
 
@@ -255,12 +255,13 @@ def run_violent_node(workdir: Path, seconds: float = VIOLENT_SECONDS, push: floa
     env["PYTHONPATH"] = os.pathsep.join([root, env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
     arrivals: list[float] = []
     sent: list[float] = []
-    accepted: list[int] = []  # the node's count of accepted commands, from its /diagnostics
+    accepted: list[tuple[float, int]] = []  # (arrival, the node's count of accepted commands) from /diagnostics
 
     def on_diagnostics(msg) -> None:
         for status in msg.status:
             if status.name.endswith(RUN_STATUS):
-                accepted.extend(int(float(kv.value)) for kv in status.values if kv.key == "commands_accepted")
+                accepted.extend((time.monotonic(), int(float(kv.value))) for kv in status.values
+                                if kv.key == "commands_accepted")
 
     announce_often()
     context = rclpy.Context()
@@ -283,7 +284,8 @@ def run_violent_node(workdir: Path, seconds: float = VIOLENT_SECONDS, push: floa
             # while its diagnostics say it has taken none (a command sent before the node's
             # side of the match is lost: the topic keeps nothing for late subscribers)
             now = time.monotonic()
-            again = sent and not any(accepted) and now - sent[-1] > RESEND_AFTER
+            since = [n for t, n in accepted if t > sent[-1] + RESEND_AFTER] if sent else []
+            again = bool(since) and not any(n for _, n in accepted)  # reports long after it: none taken
             if arrivals and pub.get_subscription_count() > 0 and (not sent or again):
                 pub.publish(Float64MultiArray(data=list(moments)))
                 sent.append(now)
