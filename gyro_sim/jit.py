@@ -82,8 +82,33 @@ def cache_directory(files) -> Path:
     else:
         base = Path(__file__).parent / "__pycache__"
         if not os.access(base if base.exists() else base.parent, os.W_OK):
-            base = Path.home() / ".cache" / "gyro_sim"
+            base = user_cache_root()
     return base / f"fast_loop-{digest}"
+
+
+def user_cache_root() -> Path:
+    """Where site-packages is read-only: a cache per user, one directory per version of gyro_sim
+    and of numba and per CPU (two installs of other versions, or a home shared by two machines,
+    do not overwrite each other's entries)."""
+    import platform
+    from importlib import metadata
+
+    try:  # the installed distribution's version (the package itself is above this module)
+        __version__ = metadata.version("gyro_sim")
+    except metadata.PackageNotFoundError:
+        __version__ = "source"
+    cpu = platform.machine() or "cpu"
+    if numba is not None:
+        try:
+            import llvmlite.binding as llvm
+
+            cpu = f"{cpu}-{llvm.get_host_cpu_name()}"
+        except (ImportError, RuntimeError):
+            pass
+        key = f"gyro_sim-{__version__}-numba-{numba.__version__}-{cpu}"
+    else:
+        key = f"gyro_sim-{__version__}-{cpu}"
+    return Path.home() / ".cache" / "gyro_sim" / key
 
 
 def _in_cache_of(files, make):

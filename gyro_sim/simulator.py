@@ -336,6 +336,17 @@ class Simulator:
                 L_rotor[m.axis_rotor[sel]] = v[sel]
         return hinge_tau, L_rotor
 
+    def held_rhs(self):
+        """The right-hand side f(t, y) -> (size,) of the chain with the inputs now in force held,
+        as `advance` holds them: for an analysis at the current state (the method choice of the
+        "fixed" integrator). Its calls use the output workspace: outputs are computed afresh after."""
+        hinge_tau, L_rotor = self._inputs()
+        self.system.hold(self._t, self._p, hinge_tau, L_rotor)
+        self._cache = None
+        self._kin_ok = False
+        self._acc_ok = False
+        return self.system.rhs
+
     def advance(self, dt: float) -> None:
         """Integrate `dt` seconds of simulated time with the commands held (zero-order hold)."""
         if not (dt > 0 and math.isfinite(dt)):
@@ -741,7 +752,9 @@ class Simulator:
             return {}
         hl = getattr(integ, "h_lambda", None)
         return {"method": integ.current, "method_reason": integ.reason, "substeps": getattr(integ, "substeps", None),
-                "h_lambda": hl if hl is not None and math.isfinite(hl) else None}
+                "h_lambda": hl if hl is not None and math.isfinite(hl) else None,
+                "budget_calls": getattr(integ, "budget_calls", None),
+                "budget_energy_error": getattr(integ, "budget_energy_error", None)}
 
     # --- IMUs ---------------------------------------------------------------------------------
     @property

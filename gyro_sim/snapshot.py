@@ -59,6 +59,10 @@ class Snapshot:
     method_reason: str | None = None  # why that one (one line)
     substeps: int | None = None  # its substeps of one physics step (a fast-turning body is resolved)
     h_lambda: float | None = None  # the chooser's last estimate of h |lambda| (step x largest |eigenvalue|)
+    #: "fixed" over its real-time budget: calls kept beyond the energy watchdog's limit since the
+    #: reset, and the sum of their energy errors (each relative to the kinetic energy)
+    budget_calls: int | None = None
+    budget_energy_error: float | None = None
     friction_work: float | None = None  # work of actuator friction since reset (J, <= 0); scenes with limits
     saturated_commands: int | None = None  # commanded moments clipped to max_torque since reset
     #: the compiled outputs found every number of the arrays they computed (joint states, poses,
@@ -74,7 +78,8 @@ class Snapshot:
             v = getattr(self, name)
             if v is not None and v.size and not np.all(np.isfinite(v)):
                 return name
-        for name in ("time", "error_estimate", "work", "energy_balance", "h_lambda", "friction_work"):
+        for name in ("time", "error_estimate", "work", "energy_balance", "h_lambda", "friction_work",
+                     "budget_energy_error"):
             v = getattr(self, name)
             if v is not None and not math.isfinite(v):
                 return name

@@ -19,14 +19,25 @@ compiled without it. A cold start (:func:`precompile`) therefore splits the work
   into the same cache.
 
 Later starts load it all (~2 s); where the cache still lacks something they may switch to, the
-helper starts niced from the beginning (``--background``). What the helper has not yet written
-when a run first needs it is compiled by that run itself: the same code either way, so the
-results do not depend on it (only the wait does). The node skips the warm-up of the methods it
-may switch to while the helper fills the cache (`filling`).
+helper starts at the lowest priority from the beginning (``--background``). What the helper
+has not yet written when a run first needs it is compiled by that run itself, outside the
+node's physics thread (the node loads it in a thread of its own once the fill has ended,
+`warm_when_filled`): the same code either way, so the results do not depend on it.
 
-The helper never outlives the process that started it (it checks every PARENT_POLL s and
-ends), and one helper at a time fills a cache: a second one waits for the lock, niced, and
-then compiles only what the first left out.
+**The cache fills once per install.** The helper's background part outlives the process that
+started it: it runs in a session of its own (a Ctrl-C of the start does not reach it), at the
+lowest CPU priority (SCHED_IDLE where Linux has it, and nice 19: it takes only what nothing
+else wants), under a file lock (one helper at a time fills a cache: a second one waits for the
+lock and then compiles only what the first left out), and ends when the fill is done. So
+short runs one after another do not each begin the fill again.
+
+It is off where nobody waits for it and where it would take the cores from other work
+(`background_fill_allowed`): with GYRO_SIM_BACKGROUND_FILL=0 (the test suite sets it; tests
+of the fill opt in with 1 and a private NUMBA_CACHE_DIR), under CI (the CI variable), and in a
+non-interactive start (no terminal on stdin, stdout or stderr: a container build). There the
+helper compiles only the first step's share beside the start and ends with it (it checks every
+PARENT_POLL s), the node compiles the rest before it goes real-time, and ``gyro-sim warmup``
+fills the whole cache in the foreground, with progress.
 """
 from __future__ import annotations
 
@@ -48,8 +59,11 @@ COMPILE_SECONDS = {"fixed": 15, "rk4": 15, "lie4": 15, "auto": 16, "dop853": 16,
 WARM_UP_SCENE = "hinge_chain"
 #: a Lagrange chain (its integrals, eqs 82 and 85, are compiled for its snapshots)
 LAGRANGE_SCENE = "heavy_top"
-#: the helper's niceness once the first step's kernels are in the cache
-HELPER_NICE = 10
+#: the helper's niceness once the first step's kernels are in the cache (the lowest priority;
+#: SCHED_IDLE as well where the system has it)
+HELPER_NICE = 19
+#: "0" in the environment: no background fill; "1": a fill even under CI or without a terminal
+BACKGROUND_VARIABLE = "GYRO_SIM_BACKGROUND_FILL"
 #: the longest wait (s) for the helper's share of the first step (it is there in ~15 s)
 HELPER_WAIT = 600.0
 #: the line the helper prints when the first step's kernels are in the cache
@@ -191,6 +205,37 @@ def warm_everything(integrator: str = DEFAULT_INTEGRATOR) -> None:
         sim.advance(0.002)
 
 
+#: how often (s) the node's loader thread looks whether the cache fill has ended
+LOAD_POLL = 1.0
+
+
+def warm_when_filled(sim, poll: float = LOAD_POLL):
+    """Off the physics thread, what `sim`'s integrator may switch to (for a guarded "fixed",
+    gyro_sim.integrators.fixed: `guard`, WARM): a daemon thread waits until no helper fills the
+    cache (`filling`), then runs the warm-up of a second Simulator of the same scene, integrator
+    and step, which loads (or, if the fill left it out, compiles) every method into this
+    process; the guard then lets them step. The second Simulator shares nothing with `sim` but
+    the compiled code. Returns the thread."""
+    import threading
+
+    scene, step, integrator = sim.scene, sim.integrator.step, sim.integrator_name
+
+    def load():
+        while filling():
+            time.sleep(poll)
+        try:
+            from gyro_sim.simulator import Simulator
+
+            twin = Simulator(scene, integrator=integrator, step=step, backend="numba")
+            twin.integrator.warm_up(twin.time, twin.state)
+        except Exception:  # noqa: BLE001 - the guard keeps the rung back: the run goes on without it
+            pass
+
+    thread = threading.Thread(target=load, name="gyro_sim-load-rungs", daemon=True)
+    thread.start()
+    return thread
+
+
 def filling() -> bool:
     """True while a helper compiles into this cache (the one this process started, or another
     start's: it holds the lock): a start then leaves the methods it may switch to for later
@@ -223,10 +268,42 @@ def _lock_path() -> Path:
     return base / "gyro_sim_warmup.lock"
 
 
-def _start_helper(integrator: str, background: bool = False) -> subprocess.Popen | None:
+def background_fill_allowed() -> bool:
+    """May a start leave a helper filling the cache after it (see the module's docstring)?
+    GYRO_SIM_BACKGROUND_FILL decides when set ("0" or "1"); else not under CI, nor without a
+    terminal on any of stdin, stdout, stderr."""
+    chosen = os.environ.get(BACKGROUND_VARIABLE, "").strip()
+    if chosen in ("0", "1"):
+        return chosen == "1"
+    if os.environ.get("CI", "").strip().lower() not in ("", "0", "false", "no"):
+        return False
+    for stream in (sys.stdin, sys.stdout, sys.stderr):
+        try:
+            if stream is not None and stream.isatty():
+                return True
+        except (AttributeError, ValueError, OSError):  # replaced or closed streams: not a terminal
+            continue
+    return False
+
+
+def _lowest_priority() -> None:
+    """This process at the lowest CPU priority: SCHED_IDLE where Linux has it, and nice 19."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+    except (AttributeError, OSError):
+        pass
+    try:
+        os.nice(HELPER_NICE - os.nice(0))
+    except OSError:
+        pass
+
+
+def _start_helper(integrator: str, background: bool = False, share_only: bool = False) -> subprocess.Popen | None:
     """Start the helper that fills the cache for `integrator` (its stdout a pipe: READY when the
-    first step's share is there; `background`: at a lower priority from its start, when this
-    process needs nothing from it); None where it cannot start."""
+    first step's share is there; `background`: at the lowest priority from its start, when this
+    process needs nothing from it). It runs in a session of its own and outlives this process,
+    unless `share_only`: then it compiles the first step's share only and ends with this
+    process. None where it cannot start."""
     # the gyro_sim this process runs, also as the working directory: `-m` puts the working
     # directory first on sys.path, and a start from a source tree of another version must not
     # fill the cache for that tree's kernels
@@ -235,9 +312,10 @@ def _start_helper(integrator: str, background: bool = False) -> subprocess.Popen
                **{PARENT_VARIABLE: str(os.getpid())})
     try:
         return subprocess.Popen([sys.executable, "-m", "gyro_sim.warmup", "--fill", integrator,
-                                 *(["--background"] if background else [])], env=env, cwd=root,
+                                 *(["--background"] if background else []),
+                                 *(["--share-only"] if share_only else [])], env=env, cwd=root,
                                 stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
-                                text=True)
+                                text=True, start_new_session=not share_only)
     except OSError:
         return None
 
@@ -293,14 +371,19 @@ def precompile(stream=sys.stderr, prog: str = "gyro_sim", integrator: str = DEFA
     return True; otherwise (or without numba) return False at once. Where something else a
     run may need is not cached and `helper`, the helper is started to compile it in the
     background (`filling`); it ends with this process. Compile errors are left to the backend
-    selection of the Simulator, which falls back to numpy when it may."""
+    selection of the Simulator, which falls back to numpy when it may. The helper fills the
+    whole cache and outlives this process where `background_fill_allowed`; elsewhere it
+    compiles only the first step's share beside it (a cold start) and ends with it."""
     global _helper
     ks = kernels()
     if not ks:
         return False
     cold = cache_is_cold(integrator)
     if helper and (cold or not everything_cached(integrator)) and not filling():
-        _helper = _start_helper(integrator, background=not cold)
+        if background_fill_allowed():
+            _helper = _start_helper(integrator, background=not cold)
+        elif cold:
+            _helper = _start_helper(integrator, share_only=True)
     if not cold:
         return False
     from numba.core import event
@@ -345,7 +428,8 @@ def precompile(stream=sys.stderr, prog: str = "gyro_sim", integrator: str = DEFA
 
 
 # --- the helper ------------------------------------------------------------------------------
-def fill(integrator: str, out=sys.stdout, parent: int | None = None, background: bool = False) -> None:
+def fill(integrator: str, out=sys.stdout, parent: int | None = None, background: bool = False,
+         share_only: bool = False) -> None:
     """The helper's work (one at a time per cache), for as long as its parent (`parent`, default
     the process that started it) lives: the first step's kernels other than the dynamics and
     the entry (the rk4 loop, the outputs, the integrator's first loop) on a null kernel, READY on
@@ -357,21 +441,26 @@ def fill(integrator: str, out=sys.stdout, parent: int | None = None, background:
 
     A second helper on the same cache finds the lock taken: it says READY at once (its parent
     compiles the first step itself), waits at a lower priority for the lock, and then compiles
-    only what the first one left out (it ended with its parent). numba writes each cache file
-    under a temporary name and renames it: a helper ended at any moment leaves no torn entry."""
+    only what the first one left out. numba writes each cache file under a temporary name and
+    renames it: a helper ended at any moment leaves no torn entry. With `share_only` it ends
+    after READY, and with its parent (`parent`, default the process that started it) before;
+    otherwise it outlives its parent and ends when the fill is done."""
     import fcntl
 
-    _end_with(os.getppid() if parent is None else parent)
+    if share_only:
+        _end_with(os.getppid() if parent is None else parent)
     if background:
-        os.nice(HELPER_NICE)
+        _lowest_priority()
     with open(_lock_path(), "w") as lock:
         said = False
         try:
             fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:  # another helper fills this cache: wait for it, then fill the rest
             said = _say_ready(out)
+            if share_only:
+                return
             if not background:
-                os.nice(HELPER_NICE)
+                _lowest_priority()
             fcntl.flock(lock, fcntl.LOCK_EX)
             if everything_cached(integrator):
                 return
@@ -402,8 +491,10 @@ def fill(integrator: str, out=sys.stdout, parent: int | None = None, background:
         if not said:
             step(share)
             _say_ready(out)
+            if share_only:
+                return
             if not background:
-                os.nice(HELPER_NICE)
+                _lowest_priority()
         step(warm_everything, integrator)
         step(fast.heavy_elimination_address)
         fast.kernel_address = real_kernel
@@ -433,15 +524,74 @@ def _end_with(parent: int) -> None:
     threading.Thread(target=watch, name="gyro_sim-warmup-parent", daemon=True).start()
 
 
+# --- gyro-sim warmup: the whole fill in the foreground -----------------------------------------
+def foreground_fill(integrator: str = DEFAULT_INTEGRATOR, out=sys.stderr) -> bool:
+    """Every kernel a run with `integrator` may call, compiled (or loaded) into the cache now,
+    with a progress line per part, under the helpers' lock (a helper filling the cache is waited
+    for: what it left, this compiles). False when there was nothing to do."""
+    import fcntl
+
+    from gyro_sim.progress import Progress
+
+    with open(_lock_path(), "w") as lock:
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            out.write("gyro-sim warmup: a background fill holds the cache: waiting for it\n")
+            out.flush()
+            fcntl.flock(lock, fcntl.LOCK_EX)
+        if everything_cached(integrator):
+            return False
+        from gyro_sim.dynamics import kernel as fast
+
+        parts = (("the dynamics kernel", _compile_kernel), ("the first step", lambda: _first_step(integrator)),
+                 (f"every method {integrator} may switch to, the outputs, the Lagrange integrals",
+                  lambda: warm_everything(integrator)),
+                 ("the heavy-subtree path", fast.heavy_elimination_address))
+        progress = Progress("gyro-sim warmup", out)
+        t0 = time.perf_counter()
+        for i, (label, work) in enumerate(parts):
+            progress(i, len(parts), label)
+            work()
+        progress(len(parts), len(parts), f"in {time.perf_counter() - t0:.0f} s")
+        return True
+
+
+def cmd_warmup(args) -> int:
+    """`gyro-sim warmup`: exit 0 (filled, or already full), 1 (a compile failed)."""
+    if not kernels():
+        print("gyro-sim warmup: numba is not installed: nothing to compile (the numpy backend runs)", file=sys.stderr)
+        return 0
+    t0 = time.perf_counter()
+    try:
+        did = foreground_fill(args.integrator)
+    except Exception as exc:  # noqa: BLE001 - one line, not a traceback
+        print(f"gyro-sim warmup: compiling failed ({type(exc).__name__}: {exc})", file=sys.stderr)
+        return 1
+    print(f"gyro-sim warmup: the cache holds every kernel of {args.integrator} "
+          f"({'filled' if did else 'nothing to do'}, {time.perf_counter() - t0:.1f} s)", file=sys.stderr)
+    return 0
+
+
+def register(sub, bench) -> None:
+    """Add `gyro-sim warmup`."""
+    w = sub.add_parser("warmup", help="fill the kernel cache now, in the foreground (a container build, CI)")
+    w.add_argument("--integrator", default=DEFAULT_INTEGRATOR, choices=sorted(LOOPS),
+                   help=f"the integrator whose kernels to compile (default {DEFAULT_INTEGRATOR}, the node's)")
+    w.set_defaults(fn=cmd_warmup)
+
+
 def main(argv=None) -> int:
-    """``python -m gyro_sim.warmup --fill INTEGRATOR [--background]``: the helper (`fill`)."""
+    """``python -m gyro_sim.warmup --fill INTEGRATOR [--background] [--share-only]``: the helper (`fill`)."""
     args = sys.argv[1:] if argv is None else list(argv)
-    background = args[2:] == ["--background"]
-    if len(args) != 2 + background or args[0] != "--fill" or args[1] not in LOOPS:
-        print(f"usage: python -m gyro_sim.warmup --fill {{{','.join(LOOPS)}}} [--background]", file=sys.stderr)
+    flags = args[2:]
+    background, share_only = "--background" in flags, "--share-only" in flags
+    if (len(args) < 2 or args[0] != "--fill" or args[1] not in LOOPS or len(flags) != background + share_only):
+        print(f"usage: python -m gyro_sim.warmup --fill {{{','.join(LOOPS)}}} [--background] [--share-only]",
+              file=sys.stderr)
         return 2
     parent = os.environ.get(PARENT_VARIABLE, "")
-    fill(args[1], parent=int(parent) if parent.isdigit() else None, background=background)
+    fill(args[1], parent=int(parent) if parent.isdigit() else None, background=background, share_only=share_only)
     return 0
 
 

@@ -17,6 +17,9 @@ _OWN_ROS_LOG_DIR = None
 if "ROS_LOG_DIR" not in os.environ:
     _OWN_ROS_LOG_DIR = tempfile.mkdtemp(prefix="gyro_sim-test-ros-log-")
     os.environ["ROS_LOG_DIR"] = _OWN_ROS_LOG_DIR
+# no kernel-cache fill left behind by a test's start: it would take the cores from the other
+# tests (the tests of the fill opt in with "1" and a private NUMBA_CACHE_DIR)
+os.environ["GYRO_SIM_BACKGROUND_FILL"] = "0"
 
 # --- shared by the tests of logs, messages, replay and views: a short recorded run ---------------
 #: hinge_chain has spherical joints, hinges, an actuated rotor: every kind of joint state

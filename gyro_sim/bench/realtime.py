@@ -25,9 +25,22 @@ writes its timing statistics (`stats_file`). Reported per run:
 
 Nobody subscribes in these runs, so without recording the node computes joint states only;
 with recording it also computes wrenches and poses (everything published is recorded).
+
+`--violent` adds the violent step: the hinge chain with the step moments of
+`gyro_sim.bench.extreme.abrupt_commands` (1e3 x each axis's gravity torque), applied for
+VIOLENT_PUSH simulated seconds, so that every run puts in the same energy, then let go:
+
+- counted, deterministically (:func:`violent_counts`, no node): the right-hand-side evaluations
+  and substeps per simulated second that "fixed" spends after the push, against its real-time
+  budget (`gyro_sim.integrators.fixed.EVAL_BUDGET` a physics step), the energy put in, the
+  energy balance, and the drift it reported over budget;
+- measured (:func:`run_violent_node`): the node with "fixed" on the hinge chain, given the
+  command once by this process, which counts the /joint_states it receives from then on (their
+  rate and longest gap, wall time).
 """
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import signal
@@ -123,6 +136,177 @@ def run_node(n: int, record: bool, seconds: float, workdir: Path, index: int = 0
               floor_priority=floor.got_priority,
               floor_misses_scaled=floor_misses * st.get("wall_s", 0.0) / floor_wall if floor_wall > 0 else float("nan"))
     return Run(n, record, st, priority)
+
+
+# --- the violent step ------------------------------------------------------------------------
+#: the violent step starts at this simulated time, after one publication period at rest
+VIOLENT_AT = 0.01
+#: ... and lasts this long in simulated time: the node's default command_timeout, so one
+#: command, timed out by the node in simulated time, puts in the same energy in every run
+VIOLENT_PUSH = 0.5
+#: simulated seconds counted after the push
+VIOLENT_AFTER = 1.0
+#: the node's calls: one publication period (s)
+VIOLENT_CALL = 1.0 / PUBLISH_RATE
+#: simulated seconds of a node run with the violent step
+VIOLENT_SECONDS = 5.0
+#: the command is sent again when the node's diagnostics (every 0.1 s simulated) still say it has
+#: taken none this many wall seconds after it was sent
+RESEND_AFTER = 0.3
+
+
+def violent_counts(push: float = VIOLENT_PUSH, after: float = VIOLENT_AFTER, factor: float | None = None) -> dict:
+    """The violent step offline, as the node steps it ("fixed" at 1 / PHYSICS_RATE, advanced one
+    publication period at a time): the counts per simulated second after the push (and during
+    it), deterministic: they depend on the simulated states only."""
+    import numpy as np
+
+    from gyro_sim.bench import extreme as ex
+    from gyro_sim.integrators import fixed
+    from gyro_sim.simulator import Simulator
+
+    scene, moments = ex.abrupt_commands(ex.ABRUPT_FACTOR if factor is None else factor)
+    sim = Simulator(scene, integrator="fixed", step=1.0 / PHYSICS_RATE)
+    g = sim.integrator
+    e0 = sim.invariants()["energy"]
+    n_calls = round((VIOLENT_AT + push + after) / VIOLENT_CALL)
+    on, off = round(VIOLENT_AT / VIOLENT_CALL), round((VIOLENT_AT + push) / VIOLENT_CALL)
+    marks, methods, worst = {}, set(), 0
+    for i in range(n_calls):
+        if i == on:
+            sim.set_axis_moments(moments)
+        elif i == off:
+            sim.set_axis_moments(np.zeros(len(moments)))
+        if i in (on, off):
+            marks[i] = (g.nfev, g.nsteps)
+        before = g.nfev
+        sim.advance(VIOLENT_CALL)
+        worst = max(worst, g.nfev - before)
+        if i >= off:
+            methods.add(g._label())
+    marks[n_calls] = (g.nfev, g.nsteps)
+    snap = sim.snapshot(bodies=False, wrenches=False)
+    inv = sim.invariants()
+    return {
+        "push_s": push, "after_s": after, "moments_Nm": [float(m) for m in moments],
+        "budget_per_s": fixed.EVAL_BUDGET * PHYSICS_RATE,
+        "evaluations_per_s_after": (marks[n_calls][0] - marks[off][0]) / after,
+        "substeps_per_s_after": (marks[n_calls][1] - marks[off][1]) / after,
+        "evaluations_per_s_push": (marks[off][0] - marks[on][0]) / push,
+        "substeps_per_s_push": (marks[off][1] - marks[on][1]) / push,
+        "most_evaluations_in_a_call": worst,
+        "energy_put_in_J": snap.work, "energy_J": inv["energy"], "energy_start_J": e0,
+        "energy_balance_relative": snap.energy_balance / inv["energy"],
+        "over_budget_calls": g.budget_calls, "over_budget_energy_error": g.budget_energy_error,
+        "methods_after": sorted(methods), "finite": bool(np.isfinite(sim.state).all()),
+    }
+
+
+def violent_table(c: dict) -> str:
+    """The counts of :func:`violent_counts` as Markdown."""
+    return "\n".join([
+        f"Violent step: the hinge chain, moments {', '.join(f'{m:.0f}' for m in c['moments_Nm'])} N m "
+        f"(1e3 x gravity torque) for {c['push_s']:g} s of simulated time, then {c['after_s']:g} s free; "
+        f"\"fixed\" at {PHYSICS_RATE:g} Hz in {1e3 * VIOLENT_CALL:g} ms calls.",
+        "",
+        "| | rhs evaluations / simulated s | substeps / simulated s |",
+        "|---|---:|---:|",
+        f"| during the push | {c['evaluations_per_s_push']:.0f} | {c['substeps_per_s_push']:.0f} |",
+        f"| after it | {c['evaluations_per_s_after']:.0f} | {c['substeps_per_s_after']:.0f} |",
+        f"| budget | {c['budget_per_s']:.0f} | |",
+        "",
+        f"Energy put in {c['energy_put_in_J']:.3g} J; balance (E - E0 - W) / E = {c['energy_balance_relative']:.2g}; "
+        f"most evaluations in one call {c['most_evaluations_in_a_call']}; over budget {c['over_budget_calls']} calls "
+        f"kept past the watchdog, energy error {c['over_budget_energy_error']:.2g} of the kinetic energy; "
+        f"methods after the push: {', '.join(c['methods_after'])}.",
+    ])
+
+
+def run_violent_node(workdir: Path, seconds: float = VIOLENT_SECONDS, push: float = VIOLENT_PUSH, index: int = 0,
+                     node_command=NODE_COMMAND, priority: int = DEFAULT_PRIORITY) -> dict:
+    """The node on the hinge chain with "fixed", given the violent step once (command_timeout =
+    `push`: the node ends it after `push` simulated seconds) by this process as soon as its first
+    /joint_states arrives; the /joint_states received from the command on: count, rate, longest
+    gap (wall time), with the node's own statistics."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+    from diagnostic_msgs.msg import DiagnosticArray
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+
+    from gyro_sim.bench import extreme as ex
+    from gyro_sim.msgs.messages import DIAGNOSTICS, JOINT_STATES, RUN_STATUS
+    from gyro_sim.ros.commands import command_topic
+    from gyro_sim.ros.discovery import announce_often
+
+    _, moments = ex.abrupt_commands()
+    stats = workdir / f"stats_violent_{index}.json"
+    domain = _domain(index)
+    params = ["scene:=hinge_chain", f"physics_rate:={PHYSICS_RATE}", f"publish_rate:={PUBLISH_RATE}",
+              "real_time_factor:=1.0", "integrator:=fixed", f"duration:={seconds}", f"command_timeout:={push}",
+              f"stats_file:={stats}", f"thread_priority:={priority}"]
+    cmd = [*node_command, "--ros-args"]
+    for p in params:
+        cmd += ["-p", p]
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               ROS_LOG_DIR=str(workdir / "ros_log"), OPENBLAS_NUM_THREADS="1")
+    root = str(Path(__file__).resolve().parents[2])
+    env["PYTHONPATH"] = os.pathsep.join([root, env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    arrivals: list[float] = []
+    sent: list[float] = []
+    accepted: list[tuple[float, int]] = []  # (arrival, the node's count of accepted commands) from /diagnostics
+
+    def on_diagnostics(msg) -> None:
+        for status in msg.status:
+            if status.name.endswith(RUN_STATUS):
+                accepted.extend((time.monotonic(), int(float(kv.value))) for kv in status.values
+                                if kv.key == "commands_accepted")
+
+    announce_often()
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
+    proc = None
+    try:
+        node = rclpy.create_node("gyro_sim_bench_violent", context=context)
+        pub = node.create_publisher(Float64MultiArray, command_topic("/"), 10)
+        node.create_subscription(JointState, JOINT_STATES, lambda msg: arrivals.append(time.monotonic()), 100)
+        node.create_subscription(DiagnosticArray, DIAGNOSTICS, on_diagnostics, 10)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        log = workdir / f"violent_{index}.log"  # a file, not a pipe nobody reads while the node runs
+        with open(log, "w") as out:
+            proc = subprocess.Popen(cmd, env=env, stdout=out, stderr=subprocess.STDOUT)
+        end = time.monotonic() + 3 * seconds + 60
+        while proc.poll() is None and time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.005)
+            # once it publishes and its command subscription has matched this publisher; again
+            # while its diagnostics say it has taken none (a command sent before the node's
+            # side of the match is lost: the topic keeps nothing for late subscribers)
+            now = time.monotonic()
+            since = [n for t, n in accepted if t > sent[-1] + RESEND_AFTER] if sent else []
+            again = bool(since) and not any(n for _, n in accepted)  # reports long after it: none taken
+            if arrivals and pub.get_subscription_count() > 0 and (not sent or again):
+                pub.publish(Float64MultiArray(data=list(moments)))
+                sent.append(now)
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=30)
+        executor.shutdown(timeout_sec=1.0)
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+    if proc.returncode != 0 or not stats.exists():
+        raise RuntimeError(f"gyro_sim_node failed (violent step, exit {proc.returncode}):\n"
+                           f"{log.read_text(errors='replace')[-2000:]}")
+    st = json.loads(stats.read_text())
+    if st.get("commands_accepted") != 1:
+        raise RuntimeError(f"the node took {st.get('commands_accepted')} commands, not the violent step's one")
+    after = [t for t in arrivals if sent and t >= sent[-1]]
+    gaps = [b - a for a, b in itertools.pairwise(after)]
+    span = after[-1] - after[0] if len(after) > 1 else float("nan")
+    return {"received": len(after), "rate_Hz": (len(after) - 1) / span if len(after) > 1 else 0.0,
+            "longest_gap_s": max(gaps, default=float("nan")), "wall_s": span, **st}
 
 
 def measure(sizes=DEFAULT_SIZES, seconds: float = DEFAULT_SECONDS, progress=None, node_command=NODE_COMMAND,
@@ -250,8 +434,23 @@ def cmd_bench_realtime(args) -> int:
             f"({backends} dynamics), {seconds:g} s simulated per run\n\n" + table(runs)
             + f"\nMachine load (1-minute average, {os.cpu_count()} cores): {load0:.2f} at the start, "
             f"{os.getloadavg()[0]:.2f} at the end.")
+    rows = [{"n": r.n, "record": r.record, **r.stats} for r in runs]
+    if args.violent:
+        counts = violent_counts()
+        try:
+            with tempfile.TemporaryDirectory(prefix="gyro_sim_violent_") as tmp:
+                v = run_violent_node(Path(tmp), priority=args.thread_priority[0])
+        except RuntimeError as exc:
+            print(f"gyro-sim bench realtime: {exc}", file=sys.stderr)
+            return 1
+        text += ("\n\n" + violent_table(counts) + f"\n\nThe node given it (warm cache): {v['received']} /joint_states "
+                 f"received from the command on in {v['wall_s']:.1f} s: {v['rate_Hz']:.1f} Hz, longest gap "
+                 f"{1e3 * v['longest_gap_s']:.0f} ms; achieved RTF {v.get('real_time_factor_achieved', float('nan')):.3f}, "
+                 f"step p50 / p99 {v.get('step_time_p50_us', float('nan')):.0f} / "
+                 f"{v.get('step_time_p99_us', float('nan')):.0f} us.")
+        rows.append({"violent_counts": counts, "violent_node": v})
     print(text)
-    write_report(args.out, "realtime", text + "\n", [{"n": r.n, "record": r.record, **r.stats} for r in runs],
+    write_report(args.out, "realtime", text + "\n", rows,
                  lambda png: plot(runs, png), force=args.force, json_default=str)
     print(f"in {time.perf_counter() - t0:.0f} s")
     return 0
@@ -267,6 +466,8 @@ def register(sub, bench) -> None:
     r.add_argument("--thread-priority", type=int, nargs="+", default=[DEFAULT_PRIORITY], choices=range(100),
                    metavar="P", help=f"the node's thread_priority, 0-99 (0: normal scheduler); several: a run each "
                    f"(default {DEFAULT_PRIORITY}, the node's)")
+    r.add_argument("--violent", action="store_true",
+                   help=f"add the violent step: its counts, and the node given it ({VIOLENT_SECONDS:g} s run)")
     r.add_argument("--out", default="out/bench", help="directory for realtime.md, realtime.json, realtime.png")
     r.add_argument("--force", action="store_true", help="replace existing report files in --out")
     r.set_defaults(fn=cmd_bench_realtime)

@@ -95,6 +95,10 @@ INVARIANT_KEYS = {
 }
 #: work of the commands and the energy balance E - E(0) - W (gyro_sim.snapshot)
 WORK_KEY = "work_by_commands_J"
+#: "fixed" over its real-time budget (docs/integrators.md): the calls kept beyond the energy
+#: watchdog's limit since the reset, and the sum of their energy errors relative to the kinetic energy
+BUDGET_CALLS_KEY = "integrator_over_budget_calls"
+BUDGET_ERROR_KEY = "integrator_over_budget_energy_error"
 #: scenes with actuator limits: the work of friction (<= 0, counted apart in the balance) and
 #: the commanded moments clipped to their max_torque since the reset
 FRICTION_WORK_KEY = "work_by_friction_J"
@@ -474,6 +478,9 @@ def dynamics_values(snap) -> dict[str, float | str]:
             out["integrator_substeps"] = float(snap.substeps)
         if snap.h_lambda is not None:
             out["stiffness_h_lambda"] = snap.h_lambda
+        if snap.budget_calls is not None:  # "fixed" over its real-time budget: the drift it let through
+            out[BUDGET_CALLS_KEY] = float(snap.budget_calls)
+            out[BUDGET_ERROR_KEY] = snap.budget_energy_error
     for name, value in (snap.invariants or {}).items():
         stem, unit = INVARIANT_KEYS[name]
         v = np.asarray(value, dtype=float)

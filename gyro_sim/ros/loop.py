@@ -71,15 +71,21 @@ def warm_up(sim, dt: float) -> None:
     """Run every path the loop uses once (first calls pay for imports, caches, compilation),
     then put the Simulator back in its initial state. The node calls it before it builds its
     SimLoop, so that the loop's first steps pay for none of it."""
-    from gyro_sim.warmup import filling
+    from gyro_sim.warmup import background_fill_allowed, filling, warm_when_filled
 
     sim.snapshot()
     integ_warm_up = getattr(sim.integrator, "warm_up", None)
-    # "fixed": the methods it may switch to later, compiled (or loaded) now; on a first start
-    # the warm-up helper compiles them into the cache instead, and a switch before it is done
-    # compiles what it needs then
-    if integ_warm_up is not None and not filling():
-        integ_warm_up(sim.time, sim.state)
+    # "fixed": the methods it may switch to later, compiled (or loaded) now; while a background
+    # fill compiles them into the cache instead, a thread of this process loads them when it is
+    # done, and until then the guard keeps them back (the physics thread compiles nothing:
+    # docs/performance.md); without a background fill they are compiled here, before real time
+    if hasattr(sim.integrator, "guard"):
+        sim.integrator.guard = True
+    if integ_warm_up is not None:
+        if filling() and background_fill_allowed():
+            warm_when_filled(sim)
+        else:
+            integ_warm_up(sim.time, sim.state)
     sim.advance(dt)
     sim.reset()
 
