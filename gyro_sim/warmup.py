@@ -75,18 +75,29 @@ PARENT_POLL = 0.2
 PARENT_VARIABLE = "GYRO_SIM_WARMUP_PARENT"
 
 #: the modules holding numba kernels (dispatchers)
-KERNEL_MODULES = ("gyro_sim.dynamics.kernel", "gyro_sim.dynamics.entry", "gyro_sim.integrators.rk4.kernels", "gyro_sim.integrators.rk4.loop", "gyro_sim.dynamics.outputs", "gyro_sim.analytic.lagrange", "gyro_sim.integrators.gauss4.kernels", "gyro_sim.integrators.gauss4.loop",
-                  "gyro_sim.dynamics.canonical_kernel", "gyro_sim.integrators.dop853.kernels", "gyro_sim.integrators.dop853.loop", "gyro_sim.integrators.lie4.kernels", "gyro_sim.integrators.lie4.loop", "gyro_sim.integrators.radau.kernels", "gyro_sim.integrators.radau.loop")
+KERNEL_MODULES = ("gyro_sim.dynamics.kernel", "gyro_sim.dynamics.entry",
+                  "gyro_sim.integrators.rk4.kernels", "gyro_sim.integrators.rk4.loop",
+                  "gyro_sim.dynamics.outputs", "gyro_sim.analytic.lagrange",
+                  "gyro_sim.integrators.gauss4.kernels", "gyro_sim.integrators.gauss4.loop",
+                  "gyro_sim.dynamics.canonical_kernel",
+                  "gyro_sim.integrators.dop853.kernels", "gyro_sim.integrators.dop853.loop",
+                  "gyro_sim.integrators.lie4.kernels", "gyro_sim.integrators.lie4.loop",
+                  "gyro_sim.integrators.radau.kernels", "gyro_sim.integrators.radau.loop")
 #: the kernels compiled as C functions (numba.cfunc: no dispatcher), (module, function): the
 #: dynamics, the canonical field, the heavy-subtree path
-C_KERNEL, C_CANONICAL, C_HEAVY = ("gyro_sim.dynamics.kernel", "_kernel_entry"), ("gyro_sim.dynamics.canonical_kernel", "_canonical_entry"), ("gyro_sim.dynamics.kernel", "_heavy_entry")
+C_KERNEL, C_CANONICAL, C_HEAVY = (("gyro_sim.dynamics.kernel", "_kernel_entry"),
+                                  ("gyro_sim.dynamics.canonical_kernel", "_canonical_entry"),
+                                  ("gyro_sim.dynamics.kernel", "_heavy_entry"))
 #: what every run's first step needs on the numba backend besides its integrator's first loop,
 #: (module, name): the entry of one evaluation from Python, the rk4 loop and the outputs
 #: (FastChainODE.warm_up), the publication kernel (snapshots)
-COMMON_KERNELS = (("gyro_sim.dynamics.entry", "rhs_entry"), ("gyro_sim.integrators.rk4.loop", "erk_march"), ("gyro_sim.dynamics.outputs", "publication_kernel"),
+COMMON_KERNELS = (("gyro_sim.dynamics.entry", "rhs_entry"), ("gyro_sim.integrators.rk4.loop", "erk_march"),
+                  ("gyro_sim.dynamics.outputs", "publication_kernel"),
                   C_KERNEL)
 #: the compiled loop the first step of each integrator runs ("fixed": rk4 on a soft scene, "auto": dop853)
-GAUSS4S = (("gyro_sim.integrators.gauss4.loop", "gauss_march"), ("gyro_sim.dynamics.canonical_kernel", "canonical_kernel"), ("gyro_sim.dynamics.canonical_kernel", "state_kernel"),
+GAUSS4S = (("gyro_sim.integrators.gauss4.loop", "gauss_march"),
+           ("gyro_sim.dynamics.canonical_kernel", "canonical_kernel"),
+           ("gyro_sim.dynamics.canonical_kernel", "state_kernel"),
            C_CANONICAL)
 FIRST_LOOPS = {
     "rk4": (("gyro_sim.integrators.rk4.loop", "erk_march"),),
@@ -102,8 +113,10 @@ FIRST_LOOPS = {
 #: rescue, dop853's Python driver on the kernels; "auto": dop853's and radau's loops)
 LOOPS = {
     **FIRST_LOOPS,
-    "fixed": (("gyro_sim.integrators.rk4.loop", "erk_march"), *GAUSS4S, ("gyro_sim.integrators.dop853.kernels", "dop_update")),
-    "auto": (("gyro_sim.integrators.dop853.loop", "dop853_advance"), ("gyro_sim.integrators.radau.loop", "radau_advance")),
+    "fixed": (("gyro_sim.integrators.rk4.loop", "erk_march"), *GAUSS4S,
+              ("gyro_sim.integrators.dop853.kernels", "dop_update")),
+    "auto": (("gyro_sim.integrators.dop853.loop", "dop853_advance"),
+             ("gyro_sim.integrators.radau.loop", "radau_advance")),
 }
 #: what any run may need beyond its integrator's loops: a Lagrange chain's integrals, the
 #: heavy-subtree path (a chain with a subtree STABLE_ABA_RATIO times heavier than its carrier)

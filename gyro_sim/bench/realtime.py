@@ -323,7 +323,8 @@ def measure(sizes=DEFAULT_SIZES, seconds: float = DEFAULT_SECONDS, progress=None
 
 def table(runs: list[Run]) -> str:
     lines = [
-        "| n | recording | FIFO priority (asked / got) | step p50 (us) | step p99 (us) | publish jitter p50 (us) | publish jitter p99 (us) "
+        "| n | recording | FIFO priority (asked / got) | step p50 (us) | step p99 (us) "
+        "| publish jitter p50 (us) | publish jitter p99 (us) "
         "| CPU share | achieved RTF | deadline misses | of which after waiting for a CPU "
         "| physics thread waiting for a CPU (ms) | host steal (ms) | floor: misses of a bare paced thread beside it "
         "| longest GC pause (us) | load (start / end) |",
@@ -351,7 +352,8 @@ def table(runs: list[Run]) -> str:
     rec = [r for r in runs if r.record]
     if rec:
         lines.append("Recording: " + "; ".join(
-            f"n = {r.n}: {int(r.get('records_written', 0))} records, writer process {r.get('recorder_thread_cpu_s'):.2f} s CPU, "
+            f"n = {r.n}: {int(r.get('records_written', 0))} records, "
+            f"writer process {r.get('recorder_thread_cpu_s'):.2f} s CPU, "
             f"the node's sender thread {r.get('recorder_sender_cpu_s', float('nan')):.2f} s, "
             f"in {r.get('wall_s'):.1f} s" for r in rec) + ".")
     if any(r.priority and not r.get("physics_thread_priority", 0) for r in runs):
@@ -445,7 +447,8 @@ def cmd_bench_realtime(args) -> int:
             return 1
         text += ("\n\n" + violent_table(counts) + f"\n\nThe node given it (warm cache): {v['received']} /joint_states "
                  f"received from the command on in {v['wall_s']:.1f} s: {v['rate_Hz']:.1f} Hz, longest gap "
-                 f"{1e3 * v['longest_gap_s']:.0f} ms; achieved RTF {v.get('real_time_factor_achieved', float('nan')):.3f}, "
+                 f"{1e3 * v['longest_gap_s']:.0f} ms; "
+                 f"achieved RTF {v.get('real_time_factor_achieved', float('nan')):.3f}, "
                  f"step p50 / p99 {v.get('step_time_p50_us', float('nan')):.0f} / "
                  f"{v.get('step_time_p99_us', float('nan')):.0f} us.")
         rows.append({"violent_counts": counts, "violent_node": v})

@@ -18,7 +18,8 @@ auto      dop853, radau while stiff (detected)    8 / 5  adaptive  yes          
 ========  ======================================  =====  ========  ============  ==================
 
 One folder per method, holding its driver, its compiled kernels and its compiled loop; `base.py`
-holds the interface (:class:`Integrator` and its public `advance`, the fixed-step and adaptive bases with the adaptive methods' public single step
+holds the interface (:class:`Integrator` and its public `advance`, the fixed-step and adaptive bases with the
+adaptive methods' public single step
 `begin` / `take_step` / `dense` / `end`), the error-control constants and
 :class:`IntegrationError`. The layout follows scipy's `integrate/_ivp` (`base.py`, `rk.py`,
 `radau.py`); an explicit Runge-Kutta method is data: its tableau `A`, `B`, `C`, `E` and its
@@ -81,7 +82,8 @@ def make_integrator(
 
 __all__ = [
     "INTEGRATORS", "make_integrator", "Integrator", "FixedStepIntegrator", "AdaptiveIntegrator",
-    "ExplicitRungeKutta", "RK4", "Lie4", "Gauss4", "Gauss4S", "SceneFixedStep", "CHECK_PERIOD", "RK4_RETURN", "DOP853", "Radau", "Auto", "IntegrationError",
+    "ExplicitRungeKutta", "RK4", "Lie4", "Gauss4", "Gauss4S", "SceneFixedStep", "CHECK_PERIOD", "RK4_RETURN", "DOP853",
+    "Radau", "Auto", "IntegrationError",
     "StiffnessWarning", "EPS", "SAFETY", "MIN_FACTOR", "MAX_FACTOR", "MIN_RTOL",
     "MIN_STEP_RELATIVE", "LAST_STEP_STRETCH", "STEP_COUNT_SLACK", "MAX_REPORTED_COMPONENTS",
     "NEWTON_MAXITER", "RADAU_SLOW_ITER", "RADAU_SLOW_RATE", "RADAU_KEEP_STEP",

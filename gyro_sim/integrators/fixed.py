@@ -35,7 +35,8 @@ through M(q)^-1 tau). So "fixed" re-estimates h |lambda| at the start of an `adv
 commands then held) when CHECK_PERIOD of simulated time has passed since the last estimate, or,
 at most every MIN_RECHECK, when the commanded values changed or the largest generalised speed
 has moved by more than a factor SPEED_CHANGE (with RECHECK_DIM Krylov vectors: at most 11 rhs
-evaluations, against the 80 that 20 ms of rk4 at 1 kHz take); and switches: to gauss4 above the rk4 limit, back to rk4 below
+evaluations, against the 80 that 20 ms of rk4 at 1 kHz take); and switches: to gauss4 above the rk4 limit, back to rk4
+below
 RK4_RETURN of it (hysteresis: no flapping at the boundary). A speed that grows within one call
 (a huge step moment spins a link up in milliseconds: the estimate at the command saw a chain at
 rest) can still take rk4 past its limit. So a call that fails is taken again from its start one
@@ -346,7 +347,8 @@ class SceneFixedStep(FixedStepIntegrator):
 
     def __init__(self, system, **options):
         super().__init__(system, **options)
-        from gyro_sim.integrators.gauss4.driver import Gauss4  # here: gauss imports this package's base, not the reverse
+        # here: gauss imports this package's base, not the reverse
+        from gyro_sim.integrators.gauss4.driver import Gauss4
         from gyro_sim.integrators.gauss4.gauss4s import Gauss4S
         from gyro_sim.integrators.rk4.driver import RK4
 

@@ -16,7 +16,8 @@ Conventions fixed here (beyond the SPEC's example file):
   mass (docs/theory.md section 6: about the centre of mass the transverse moment is B - m c^2);
 - names are kept as given (printable, no whitespace or ``/``, at most ``MAX_NAME_LENGTH``
   characters: gyro_sim.scene.names), unique over bodies and rotors, and so are the joint-state
-  names they produce and the topic tokens of the bodies' and IMUs' topics (``<body>_psi`` ... for spherical joints, docs/scene-format.md);
+  names they produce and the topic tokens of the bodies' and IMUs' topics (``<body>_psi`` ... for spherical joints,
+  docs/scene-format.md);
 - crafted input is bounded: only a regular file is read (a FIFO, ``/dev/zero`` or another
   device is refused before anything is read from it), of at most ``MAX_SCENE_BYTES``; its
   YAML at most ``MAX_YAML_DEPTH`` levels deep (aliases expanded) and at most
@@ -292,7 +293,7 @@ def _load_without_gc(text: str) -> Any:
     enabled = gc.isenabled()
     gc.disable()
     try:
-        return yaml.load(text, Loader=_SceneYamlLoader)  # noqa: S506 (a SafeLoader)
+        return yaml.load(text, Loader=_SceneYamlLoader)  # a SafeLoader
     finally:
         if enabled:
             gc.enable()

@@ -133,7 +133,8 @@ def register(sub, bench) -> None:
     v.add_argument("--live", action="store_true",
                    help="follow a running gyro_sim node over ROS 2 instead of a log (a viewer window by default)")
     v.add_argument("--namespace", default="", metavar="NS",
-                   help="--live: the node's namespace (topics NS/joint_states, NS/robot_description, ...; default: root)")
+                   help="--live: the node's namespace "
+                        "(topics NS/joint_states, NS/robot_description, ...; default: root)")
     v.add_argument("--serve", action="store_true",
                    help="--live on a machine without a display: serve rerun's web viewer and print the URL to open")
     v.add_argument("--seconds", type=float, metavar="S", help="--live: stop after S wall-clock seconds")

@@ -133,7 +133,8 @@ class LiveView:
         for topic, key, cls in ((M.TF, M.TF, "TFMessage"), (M.DIAGNOSTICS, M.DIAGNOSTICS, "DiagnosticArray")):
             if msgs.get(cls) is not None:  # tf2_msgs is not on PyPI: poses then
                 self._sub(msgs[cls], topic, key)
-        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.description_topic = _topic(namespace, "robot_description")
         node.create_subscription(msgs["String"], self.description_topic, self._on_description, latched)
         # topics found as they appear: one per joint, one per IMU (prefix -> translator key, type)
@@ -323,7 +324,8 @@ def _message_classes() -> dict:
     import importlib
 
     out = {}
-    for pkg, name in (("sensor_msgs", "JointState"), ("geometry_msgs", "PoseArray"), ("geometry_msgs", "WrenchStamped"), ("sensor_msgs", "Imu"),
+    for pkg, name in (("sensor_msgs", "JointState"), ("geometry_msgs", "PoseArray"), ("geometry_msgs", "WrenchStamped"),
+                      ("sensor_msgs", "Imu"),
                       ("std_msgs", "String"), ("tf2_msgs", "TFMessage"),
                       ("diagnostic_msgs", "DiagnosticArray")):
         try:
@@ -403,7 +405,8 @@ def run(namespace: str = "", *, mode: str = "spawn", save: str | None = None, se
             else:
                 rec.spawn(default_blueprint=bp())
         except (RuntimeError, OSError) as exc:
-            raise LiveError(f"the viewer could not be started ({mode}): {str(exc).splitlines()[0] if str(exc) else exc}") from None
+            raise LiveError(f"the viewer could not be started ({mode}): "
+                            f"{str(exc).splitlines()[0] if str(exc) else exc}") from None
 
         live = LiveView(node, rec, namespace, lambda got: rec.send_blueprint(bp(got), make_active=True), rate)
         executor = SingleThreadedExecutor(context=context)

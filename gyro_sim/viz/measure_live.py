@@ -72,7 +72,8 @@ def run_once(n: int, seconds: float, rtf: float, viewer: bool, domain: int) -> d
         live = None
         if viewer:  # the node publishes its description: the viewer waits for it
             err = tmp / "live.err"
-            live = subprocess.Popen([sys.executable, "-m", "gyro_sim.cli", "view", "--live", "--save", str(tmp / "l.rrd")],
+            live = subprocess.Popen([sys.executable, "-m", "gyro_sim.cli", "view", "--live",
+                                     "--save", str(tmp / "l.rrd")],
                                     env=env, stdout=subprocess.DEVNULL, stderr=open(err, "w"))
             _wait_line(err, "waiting for", live, VIEWER_START)
         cpu0, t0 = (_cpu(live.pid), time.monotonic()) if live is not None else (0.0, 0.0)

@@ -16,8 +16,8 @@ Entities (timeline ``sim_time``, a duration: simulated seconds):
 - ``world/links`` (the polyline through O^1 ... O^n and the tip), ``world/base`` (O^1),
   ``world/angular_momentum`` (about O^1, from /diagnostics), ``world/gravity``;
 - ``world/legend``: the scene's name and the arrows' scales;
-- plots: ``plots/euler/<body>`` (psi, theta, phi; psi and phi unwrapped), ``plots/hinge/<body>``, ``plots/rotor_rate/<rotor>``,
-  ``plots/axis_moments/<axis>`` (the commands in force), ``plots/drift/<invariant>`` and
+- plots: ``plots/euler/<body>`` (psi, theta, phi; psi and phi unwrapped), ``plots/hinge/<body>``,
+  ``plots/rotor_rate/<rotor>``, ``plots/axis_moments/<axis>`` (the commands in force), ``plots/drift/<invariant>`` and
   ``plots/balance/energy_balance`` (log10 of the relative drift of the conserved integrals
   and of E - E0 - W: one readable axis for values from 1e-16 to 1),
   ``plots/imu/<imu>/gyro`` and ``plots/imu/<imu>/accel`` (an IMU's angular velocity and
@@ -57,8 +57,8 @@ GRAVITY_LENGTH_FRACTION = 0.3
 GRAVITY_OFFSET_FRACTION = 0.4
 #: drifts at or below this (relative) are drawn at its log10: the floor of double precision
 DRIFT_FLOOR = 1e-16
-#: at most this many bodies get an Euler-angle plot of their own (the first and the last), and at most this many series share a
-#: plot of hinges, rotors or axes (the first ones and the last): more lines are not readable
+#: at most this many bodies get an Euler-angle plot of their own (the first and the last), and at most this many series
+#: share a plot of hinges, rotors or axes (the first ones and the last): more lines are not readable
 EULER_PLOT_BODIES = 2
 #: at most this many IMUs get their plots (angular velocity, specific force)
 IMU_PLOTS = 2
@@ -220,7 +220,8 @@ class Translator:
             self.rec.log(ent, rr.TransformAxes3D(AXES_FRACTION * length), static=True)
             n = float(np.linalg.norm(b.extent))
             if n > 0:
-                self._static(f"{ent}/body", rr.Capsules3D(lengths=[n], radii=[b.radius], quaternions=[quat_z_to(b.extent)],
+                self._static(f"{ent}/body", rr.Capsules3D(lengths=[n], radii=[b.radius],
+                                                           quaternions=[quat_z_to(b.extent)],
                                                            colors=[COLORS["body"]]))
             else:
                 self._static(f"{ent}/body", rr.Ellipsoids3D(half_sizes=[[b.radius] * 3], colors=[COLORS["body"]]))
@@ -231,7 +232,8 @@ class Translator:
                                                                  colors=[COLORS["rotor"]]))
                 z = r.thickness / 2 * 1.05
                 self._static(f"{rent}/spin/marker", rr.LineStrips3D([[[0, 0, z], [r.radius, 0, z]]],
-                                                                    radii=[0.15 * r.thickness + 1e-4], colors=[COLORS["marker"]]))
+                                                                    radii=[0.15 * r.thickness + 1e-4],
+                                                                    colors=[COLORS["marker"]]))
         if chain.gravity is not None and np.linalg.norm(chain.gravity) > 0:
             g = chain.gravity
             self._static("world/gravity", rr.Arrows3D(
@@ -349,7 +351,8 @@ class Translator:
             return
         self._time(t)
         idx = {n: i for i, n in enumerate(names)}
-        bodies = self.chain.body_names if self.chain else sorted({n.rsplit("_", 1)[0] for n in names if n.endswith("_theta")})
+        bodies = (self.chain.body_names if self.chain
+                  else sorted({n.rsplit("_", 1)[0] for n in names if n.endswith("_theta")}))
         spherical = [b for b in bodies if all(f"{b}_{a}" in idx for a in EULER)]
         for b in _pick(spherical, EULER_PLOT_BODIES):
             values = pos[[idx[f"{b}_{a}"] for a in EULER]]

@@ -288,6 +288,7 @@ def test_march_counts_and_last_step():
 
 def test_march_cache_is_keyed_on_every_file_it_compiles_in():
     names = {in_package(p) for p in fast_lie.DEPENDENCIES}
-    assert names == {"dynamics/kernel.py", "dynamics/actuators.py", "integrators/lie4/kernels.py", "integrators/rk4/loop.py",
+    assert names == {"dynamics/kernel.py", "dynamics/actuators.py", "integrators/lie4/kernels.py",
+                     "integrators/rk4/loop.py",
                      "integrators/lie4/loop.py"}
     assert jit.cache_directory(fast_lie.DEPENDENCIES).name.startswith("fast_loop-")

@@ -420,7 +420,8 @@ def test_non_finite_initial_rhs_fails_as_in_python():
 
 def test_loop_cache_is_keyed_on_every_file_it_compiles_in():
     names = {in_package(p) for p in fast_radau.DEPENDENCIES}
-    assert names == {"dynamics/kernel.py", "dynamics/actuators.py", "integrators/radau/kernels.py", "integrators/dop853/kernels.py",
+    assert names == {"dynamics/kernel.py", "dynamics/actuators.py", "integrators/radau/kernels.py",
+                     "integrators/dop853/kernels.py",
                      "integrators/adaptive_kernels.py",
                      "integrators/radau/loop.py"}
     assert jit.cache_directory(fast_radau.DEPENDENCIES).name.startswith("fast_loop-")

@@ -20,13 +20,13 @@ import pytest
 pytest.importorskip("rclpy", reason="the ROS 2 node needs rclpy (pip install '.[ros]')")
 rr = pytest.importorskip("rerun", reason="the view needs rerun-sdk (pip install '.[viz]')")
 
-from sensor_msgs.msg import JointState  # noqa: E402
-from std_msgs.msg import Float64MultiArray  # noqa: E402
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
 
-from gyro_sim.msgs import messages as M  # noqa: E402
-from gyro_sim.log.mcap_log import iter_messages, read_info  # noqa: E402
+from gyro_sim.msgs import messages as M
+from gyro_sim.log.mcap_log import iter_messages, read_info
 
-from .helpers import DISCOVERY_TIMEOUT, Client, NodeProcess, new_domain_id, ros_env, wait_for  # noqa: E402
+from .helpers import DISCOVERY_TIMEOUT, Client, NodeProcess, new_domain_id, ros_env, wait_for
 
 #: these tests share real nodes over DDS, started for the module (seconds each): outside the fast lane
 pytestmark = pytest.mark.slow

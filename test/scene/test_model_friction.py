@@ -41,7 +41,8 @@ PENDULUM_URDF = """<?xml version="1.0"?>
     <dynamics damping="0.05" friction="0.02"/>
   </joint>
   <link name="upper">
-    <inertial><origin xyz="0.15 0 0.01"/><mass value="1.0"/>""" + INERTIA.format(a="1e-3", b="8e-3", c="8.2e-3") + """</inertial>
+    <inertial><origin xyz="0.15 0 0.01"/><mass value="1.0"/>""" + INERTIA.format(a="1e-3", b="8e-3",
+                                                                                  c="8.2e-3") + """</inertial>
   </link>
   <joint name="elbow" type="continuous">
     <parent link="upper"/><child link="fore"/>
@@ -49,7 +50,8 @@ PENDULUM_URDF = """<?xml version="1.0"?>
     <dynamics damping="0.02"/>
   </joint>
   <link name="fore">
-    <inertial><origin xyz="0.12 0.01 0"/><mass value="0.6"/>""" + INERTIA.format(a="5e-4", b="3e-3", c="3.1e-3") + """</inertial>
+    <inertial><origin xyz="0.12 0.01 0"/><mass value="0.6"/>""" + INERTIA.format(a="5e-4", b="3e-3",
+                                                                                  c="3.1e-3") + """</inertial>
   </link>
   <joint name="wheel" type="continuous">
     <parent link="fore"/><child link="wheel_link"/>

@@ -21,13 +21,13 @@ import pytest
 
 mujoco = pytest.importorskip("mujoco", reason="MuJoCo is the optional extra [models]")
 
-from gyro_sim import Simulator  # noqa: E402
-from gyro_sim.cli import main  # noqa: E402
-from gyro_sim.dynamics.model import compile_model, initial_state  # noqa: E402
-from gyro_sim.paths import find_scene, shipped_models  # noqa: E402
-from gyro_sim.scene.load import SceneError, load_scene, parse_yaml  # noqa: E402
-from gyro_sim.scene.mjcf import ModelError, import_model  # noqa: E402
-from test.dynamics.chains import random_chain  # noqa: E402
+from gyro_sim import Simulator
+from gyro_sim.cli import main
+from gyro_sim.dynamics.model import compile_model, initial_state
+from gyro_sim.paths import find_scene, shipped_models
+from gyro_sim.scene.load import SceneError, load_scene, parse_yaml
+from gyro_sim.scene.mjcf import ModelError, import_model
+from test.dynamics.chains import random_chain
 
 #: largest difference allowed between MuJoCo and gyro_sim on the same file (m, rad, rad/s)
 AGREEMENT = 1e-7
@@ -442,7 +442,8 @@ REFUSED = {
     "spring": (bad(joint_attrs='stiffness="2"'), "joint 'pivot': stiffness (a joint spring) is not supported"),
     "damping of a ball joint": (bad(inner=CHILD.format(name="hand", joint="wrist", type="ball", attrs='damping="0.1"')),
                                 "joint 'wrist': damping on a ball joint is not supported"),
-    "armature": (bad(joint_attrs='armature="0.01"'), "joint 'pivot': armature (a reflected rotor inertia) is not supported"),
+    "armature": (bad(joint_attrs='armature="0.01"'),
+                 "joint 'pivot': armature (a reflected rotor inertia) is not supported"),
     "friction loss of a ball joint": (bad(inner=CHILD.format(name="hand", joint="wrist", type="ball",
                                                              attrs='frictionloss="0.1"')),
                                       "joint 'wrist': frictionloss on a ball joint is not supported"),
@@ -471,7 +472,8 @@ REFUSED = {
     "motor on a ball joint": (bad(inner=CHILD.format(name="hand", joint="wrist", type="ball", attrs=""),
                                   extra='<actuator><motor name="twist" joint="wrist" gear="0 0 1"/></actuator>'),
                               "actuator 'twist': drives the ball joint 'wrist'; only hinges take a commanded moment"),
-    "a name no frame can have": (bad(inner=CHILD.format(name="hand", joint="wrist 1", type="hinge", attrs='axis="1 0 0"')),
+    "a name no frame can have": (bad(inner=CHILD.format(name="hand", joint="wrist 1", type="hinge",
+                                                        attrs='axis="1 0 0"')),
                                  "body 'hand' (hinge joint 'wrist 1'): name: must not contain whitespace"),
 }
 
@@ -537,7 +539,8 @@ def test_the_refusals_come_before_anything_runs(tmp_path, capsys):
 
 def test_every_refusal_is_reported_at_once(tmp_path):
     path = write(tmp_path, "bad.xml", bad(joint_attrs='stiffness="0.1" armature="0.01"',
-                                          extra='<tendon><fixed name="cable"><joint joint="pivot" coef="1"/></fixed></tendon>'))
+                                          extra='<tendon><fixed name="cable"><joint joint="pivot" coef="1"/>'
+                                                '</fixed></tendon>'))
     with pytest.raises(SceneError) as info:
         load_scene(path)
     assert len(info.value.errors) == 3

@@ -137,7 +137,8 @@ def test_lock_on_the_command_line_and_bad_locks(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "note: joint 'finger_joint1': locked at 0" in out
     for bad, said in ((["--lock", "nope"], "lock: no joint named 'nope'"),
-                      (["--lock", "finger_joint1=open"], "lock: joint 'finger_joint1': the value must be a finite number"),
+                      (["--lock", "finger_joint1=open"],
+                       "lock: joint 'finger_joint1': the value must be a finite number"),
                       (["--lock", "finger_joint1=nan"], "must be a finite number")):
         assert main(["run", "--scene", str(path), "--duration", "0.01", *bad]) == 2
         err = capsys.readouterr().err.strip().splitlines()

@@ -21,14 +21,14 @@ import pytest
 
 mujoco = pytest.importorskip("mujoco", reason="MuJoCo is the optional extra [models]")
 
-from gyro_sim import Simulator  # noqa: E402
-from gyro_sim.cli import main  # noqa: E402
-from gyro_sim.dynamics.imu import ImuNoise, check_rates  # noqa: E402
-from gyro_sim.dynamics.rotations import quat_to_matrix  # noqa: E402
-from gyro_sim.paths import find_scene  # noqa: E402
-from gyro_sim.scene.load import SceneError, load_scene, parse_yaml  # noqa: E402
-from gyro_sim.scene.mjcf import ModelError, import_model  # noqa: E402
-from gyro_sim.dynamics.imu import DEFAULT_IMU_RATE  # noqa: E402
+from gyro_sim import Simulator
+from gyro_sim.cli import main
+from gyro_sim.dynamics.imu import ImuNoise, check_rates
+from gyro_sim.dynamics.rotations import quat_to_matrix
+from gyro_sim.paths import find_scene
+from gyro_sim.scene.load import SceneError, load_scene, parse_yaml
+from gyro_sim.scene.mjcf import ModelError, import_model
+from gyro_sim.dynamics.imu import DEFAULT_IMU_RATE
 
 #: gyro_sim's IMU readings against MuJoCo's sensordata at the same state: the two compute the
 #: same kinematics and forward dynamics by different algorithms (MuJoCo's CRB and RNE,

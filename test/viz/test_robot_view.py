@@ -51,7 +51,8 @@ def test_the_live_view_draws_the_log_views_entities(scene_path, tmp_path):
     for x, y in zip(live.bodies, log.bodies):
         numbers.append((np.r_[x.extent, x.radius], np.r_[y.extent, y.radius]))
         for r, q in zip(x.rotors, y.rotors):
-            numbers.append((np.r_[r.position, r.axis, r.radius, r.thickness], np.r_[q.position, q.axis, q.radius, q.thickness]))
+            numbers.append((np.r_[r.position, r.axis, r.radius, r.thickness],
+                            np.r_[q.position, q.axis, q.radius, q.thickness]))
     for a, b in numbers:  # the URDF's numbers are the scene's, through its roll-pitch-yaw (round-off)
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
     drawn = {}

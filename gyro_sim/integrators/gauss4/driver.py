@@ -17,14 +17,28 @@ Measured (compiled, h = 1 ms, `Simulator.advance` in 10 ms calls; "before": the
 Krylov-only iteration this replaced; rhs evaluations a step are exact counts, times are CPU on
 the shared 2-core machine under a load of 3-4 and vary by 30 %):
 
-| case (size) | before | after |
-|---|---|---|
-| heavy tip, mass ratio 1e6 (21), compiled | fails at t = 0.087 s ("diverging") | 0.1 s; 1e-9 energy until the whip at t = 0.0874 s, which is retaken down to h / 2^12 (worst step 7244 evaluations); the energy jumps 40x there (see below) |
-| heavy tip 1e6, numpy backend | fails at the first step (rhs round-off 6e-8: "not converged") | 0.1 s; measured floor ~1e4 units; energy within 0.5 % |
-| step moments 1e3 x gravity torque (19) | fails at t = 0.01 s | 0.05 s; rates reach 3e3-3e4 rad/s (3-30 rad a step): 39 of 40 steps retaken, 1000 evaluations and ~3.4 ms a step (not real time) |
-| double gyroscope 1e3 rad/s (15), 3 s | 43 evaluations a step, energy 9.5e-10 | 48 a step (a new Jacobian pair every step: the bodies turn 1 rad), ~70 us, energy 9.5e-10 |
-| double gyroscope 1e4 rad/s, 3 s | fails at the first step ("not converged in 8 iterations") | 109 a step, ~130 us, energy 1.3e-7 |
-| heavy top 1e2 / 1e3 / 1e4 rad/s (7), 3 s | 16 / 38 / 94 a step | 17 / 32 / 60 a step, energy 8e-15 / 5e-14 / 1e-9 |
+Per case (size), before and after:
+
+- heavy tip, mass ratio 1e6 (21), compiled
+    before: fails at t = 0.087 s ("diverging")
+    after: 0.1 s; 1e-9 energy until the whip at t = 0.0874 s, which is retaken down to h / 2^12 (worst step 7244
+    evaluations); the energy jumps 40x there (see below)
+- heavy tip 1e6, numpy backend
+    before: fails at the first step (rhs round-off 6e-8: "not converged")
+    after: 0.1 s; measured floor ~1e4 units; energy within 0.5 %
+- step moments 1e3 x gravity torque (19)
+    before: fails at t = 0.01 s
+    after: 0.05 s; rates reach 3e3-3e4 rad/s (3-30 rad a step): 39 of 40 steps retaken, 1000 evaluations and ~3.4 ms
+    a step (not real time)
+- double gyroscope 1e3 rad/s (15), 3 s
+    before: 43 evaluations a step, energy 9.5e-10
+    after: 48 a step (a new Jacobian pair every step: the bodies turn 1 rad), ~70 us, energy 9.5e-10
+- double gyroscope 1e4 rad/s, 3 s
+    before: fails at the first step ("not converged in 8 iterations")
+    after: 109 a step, ~130 us, energy 1.3e-7
+- heavy top 1e2 / 1e3 / 1e4 rad/s (7), 3 s
+    before: 16 / 38 / 94 a step
+    after: 17 / 32 / 60 a step, energy 8e-15 / 5e-14 / 1e-9
 
 Long runs (spin sweep, 1e5 steps): the double gyroscope at 1e3 rad/s still shows the energy
 error growing as t^2 (to 1.0e-6 at 100 s) -- the before and after solvers give the same
@@ -284,7 +298,8 @@ class Gauss4(FixedStepIntegrator):
               "J": np.zeros((2, nd, nd)), "M": np.zeros((2 * nd, 2 * nd)),
               "piv": np.zeros(2 * nd, dtype=np.int64), "r": np.zeros(2 * nd), "P": np.zeros((2, 2)),
               "hA": np.zeros((2, 2))}
-        from gyro_sim.integrators.gauss4.loop import WS_FIELDS  # the compiled march's workspace order (numba-free import)
+        # the compiled march's workspace order (numba-free import)
+        from gyro_sim.integrators.gauss4.loop import WS_FIELDS
 
         self._ws = tuple(ws[k] for k in WS_FIELDS)
         self._wsd = ws
@@ -317,7 +332,8 @@ class Gauss4(FixedStepIntegrator):
         self.use_compiled = True
         self._compiled = None
         if has_kernel:
-            from gyro_sim.integrators.gauss4 import loop as fast_gauss  # the compiled march (imports the kernel's module)
+            # the compiled march (imports the kernel's module)
+            from gyro_sim.integrators.gauss4 import loop as fast_gauss
 
             # compiled (or loaded from numba's disk cache, ~0.1 s) by the first march: the node
             # runs one before real time (its warm-up); "fixed" builds a gauss4s it may never run

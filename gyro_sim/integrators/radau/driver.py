@@ -211,8 +211,8 @@ class Radau(WholeAdvanceLoop, AdaptiveIntegrator):
         memory reset, the counters kept), so that its code is compiled, or loaded from numba's
         cache, now rather than in the middle of a real-time run: the compiled loop if the
         system has one and `loop`, else the public single step (the Python driver's kernels;
-        loop=False: what "auto" drives where the loop is not compiled). A failure to step is ignored: the code is compiled all
-        the same."""
+        loop=False: what "auto" drives where the loop is not compiled). A failure to step is ignored: the code is
+        compiled all the same."""
         counts = (self.nfev, self.nsteps, self.nrejected, self.njev, self.nlu)
         system_nfev = getattr(self.system, "nfev", None)
         span = WARM_UP_SPAN * max(1.0, abs(t0))

@@ -8,9 +8,9 @@ simplified Newton iteration, the error estimate and step control (accepted and r
 steps), the collocation polynomial as dense output at the requested times and as the next
 Newton start, the renormalisation of the quaternions of every accepted state and output,
 the finite checks. It calls the articulated-body kernel :func:`gyro_sim.dynamics.kernel.rhs_kernel`
-(through its compiled C function, `fast.rhs_call`) and the arithmetic of :mod:`gyro_sim.integrators.radau.kernels` (the starting step that of
-:mod:`gyro_sim.integrators.dop853.kernels`), the very functions the Python driver calls between its
-rhs evaluations on other systems: the two drivers give the same bits.
+(through its compiled C function, `fast.rhs_call`) and the arithmetic of :mod:`gyro_sim.integrators.radau.kernels`
+(the starting step that of :mod:`gyro_sim.integrators.dop853.kernels`), the very functions the Python driver calls
+between its rhs evaluations on other systems: the two drivers give the same bits.
 
 Its detection mode runs the "auto" method's radau phase
 (:class:`gyro_sim.integrators.auto.Auto`): rho(J) whenever the Jacobian is refreshed,
@@ -146,7 +146,8 @@ class Method(NamedTuple):
 
 
 class State(NamedTuple):
-    """What the loop keeps between calls (J, its LU factors, the collocation polynomial, mem, flags), and its scratch (see radau_advance)."""
+    """What the loop keeps between calls (J, its LU factors, the collocation polynomial, mem, flags), and its scratch
+    (see radau_advance)."""
 
     f: np.ndarray
     J: np.ndarray
