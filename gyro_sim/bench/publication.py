@@ -117,6 +117,19 @@ def _env(workdir: Path) -> dict:
     return env
 
 
+class _NullNode:
+    """The node as gyro_sim.ros.outputs.Outputs uses it, with stand-in publishers that are
+    listened to and send nothing (no rclpy)."""
+
+    def get_fully_qualified_name(self):
+        from gyro_sim.msgs import messages as M
+
+        return M.NAMESPACE
+
+    def create_publisher(self, cls, topic, qos, **kwargs):
+        return SimpleNamespace(get_subscription_count=lambda: 1, publish=lambda data: None)
+
+
 def _simulator(n: int):
     from gyro_sim.simulator import Simulator
     from gyro_sim.bench.scenes import spherical_chain
@@ -295,15 +308,8 @@ def isolated(n: int, repeats: int = 300) -> dict[str, float]:
     from gyro_sim.msgs import messages as M
     from gyro_sim.ros.outputs import Outputs
 
-    class _Node:
-        def get_fully_qualified_name(self):
-            return M.NAMESPACE
-
-        def create_publisher(self, cls, topic, qos, **kwargs):
-            return SimpleNamespace(get_subscription_count=lambda: 1, publish=lambda data: None)
-
     sim = _simulator(n)
-    out = Outputs(_Node(), sim, SimpleNamespace(publish_wrenches=True, publish_poses=True))
+    out = Outputs(_NullNode(), sim, SimpleNamespace(publish_wrenches=True, publish_poses=True))
     out.prepare_state(0, sim)
     out.prepare_state(0, sim)
     frame = _frame(out)
@@ -368,18 +374,11 @@ def recorder_costs(n: int, publications: int = 300, workdir: str | None = None) 
     from gyro_sim.ros.outputs import Outputs
     from gyro_sim.ros.recorder import LiveRecorder
 
-    class _Node:
-        def get_fully_qualified_name(self):
-            return M.NAMESPACE
-
-        def create_publisher(self, cls, topic, qos, **kwargs):
-            return SimpleNamespace(get_subscription_count=lambda: 1, publish=lambda data: None)
-
     sim = _simulator(n)
     run = M.Status("gyro_sim: run", {"real_time_factor": 1.0})
     with tempfile.TemporaryDirectory(prefix="gyro_sim_rec_", dir=workdir) as tmp:
         recorder = LiveRecorder(str(Path(tmp) / "rec.mcap"), scene=sim.scene, params={"bench": "recorder"})
-        out = Outputs(_Node(), sim, SimpleNamespace(publish_wrenches=True, publish_poses=True), recorder=recorder)
+        out = Outputs(_NullNode(), sim, SimpleNamespace(publish_wrenches=True, publish_poses=True), recorder=recorder)
         hand, adv, records = [], [], 0
         try:
             out.prepare_state(0, sim)  # the first call learns the joint names, the second makes the frame
