@@ -15,7 +15,7 @@ publication runs what the node runs right after the physics steps, timed (prepar
 record: the total), then the parts of prepare again on their own on the same state (kernel,
 snapshot, bytes: the caches warm from prepare, so their sum may be below prepare):
 
-- kernel: the compiled outputs call alone (`Simulator._outputs_compiled`);
+- kernel: the compiled outputs call alone (`gyro_sim.dynamics.backends.CompiledOutputs.outputs`);
 - snapshot: what prepare_state asks of the Simulator, minus the kernel: `Simulator.write_outputs`
   (the numbers into the frame and their finite check, no Snapshot) without diagnostics,
   `Simulator.snapshot` with them;
@@ -154,9 +154,9 @@ def _kernel(sim, out, diag: bool) -> None:
             | (getattr(fo, "WANT_INVARIANTS", 0) if diag else 0))
     frame = _frame(out)
     try:
-        sim._outputs_compiled(want, None if frame is None else frame.scatter, fresh=False)
+        sim._outputs.outputs(want, None if frame is None else frame.scatter, fresh=False)
     except TypeError:  # before the publication kernel: one call computed everything
-        sim._outputs_compiled()
+        sim._outputs.outputs()
 
 
 def _bytes(sim, out, snap, t_ns: int, run) -> None:
@@ -326,15 +326,15 @@ def isolated(n: int, repeats: int = 300) -> dict[str, float]:
     res = {}
     scatter = None if frame is None else frame.scatter
     if hasattr(fo, "WANT_BODIES"):
-        res["kernel, joint states"] = med(lambda: sim._outputs_compiled(0, None, fresh=False))
-        res["kernel, + wrenches, poses"] = med(lambda: sim._outputs_compiled(
+        res["kernel, joint states"] = med(lambda: sim._outputs.outputs(0, None, fresh=False))
+        res["kernel, + wrenches, poses"] = med(lambda: sim._outputs.outputs(
             fo.WANT_BODIES | fo.WANT_WRENCHES, scatter, fresh=False))
         res["snapshot"] = med(lambda: sim.snapshot(invariants=False, into=scatter))
         if hasattr(sim, "write_outputs"):
             res["write_outputs"] = med(lambda: sim.write_outputs(scatter))
         res["bytes"] = med(lambda: frame.messages(1))
     else:
-        res["kernel, + wrenches, poses"] = med(lambda: sim._outputs_compiled())
+        res["kernel, + wrenches, poses"] = med(lambda: sim._outputs.outputs())
         res["snapshot"] = med(lambda: sim.snapshot(invariants=False))
         snap = sim.snapshot(invariants=False)
         res["bytes"] = med(lambda: out.publication.messages(snap, 1))

@@ -103,7 +103,8 @@ def test_node_outputs_are_the_builders_bytes_and_refuse_non_finite_numbers(backe
         assert [b[2] for b in batch] == want
     bad = sim.state
     bad[sim.model.i_vel.start + 1] = np.nan  # a joint rate: every output of the bodies past it
-    sim._y, sim._cache, sim._kin_ok = bad, None, False  # a state the integrator would refuse
+    sim._y = bad  # a state the integrator would refuse
+    sim._outputs.moved(sim.time, bad, sim._p, sim._moments)
     with pytest.raises(SimulationError, match="non-finite (position|velocity)"):
         out.prepare_state(M.time_ns(sim.time), sim)
 
