@@ -293,8 +293,7 @@ class Simulator:
             raise ValueError(f"dt must be a positive finite number, got {dt!r}")
         if self._reference is None:  # the drifts' reference is the reset state: keep it before moving
             self._reference = self.invariants()
-        # the integrator's evaluations and the energy watchdog's overwrite the outputs' workspaces
-        self._outputs.moved(self._t, self._y, self._p, self._moments)
+        self._outputs.stale()  # the integrator's evaluations and the energy watchdog's overwrite its workspaces
         hinge_tau, L_rotor = self._inputs()
         self.system.hold(self._t, self._p, hinge_tau, L_rotor)
         try:

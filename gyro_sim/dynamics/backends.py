@@ -106,6 +106,11 @@ class NumpyOutputs(_State):
         self.moments = moments
         self._cache = None
 
+    def stale(self) -> None:
+        """The workspaces were written by others (an integration under way): nothing holds."""
+        self._cache = None
+        self._kin_ok = False
+
     def _evaluate(self) -> dyn.Evaluation:
         """One dynamics evaluation at the current state, with everything outputs need."""
         if self._cache is None:
@@ -246,14 +251,16 @@ class CompiledOutputs(_State):
 
     def moved(self, t: float, y: np.ndarray, p, moments: np.ndarray) -> None:
         """A new state (and commands): nothing computed holds."""
-        if y.dtype != np.float64 or not y.flags.c_contiguous:  # the compiled entry does not convert
-            y = np.ascontiguousarray(y, dtype=np.float64)
-        self.t, self.y, self.p, self.moments = float(t), y, p, moments
+        self.t, self.y, self.p, self.moments = t, y, p, moments
         self._acc_ok = False
 
     def commanded(self, moments: np.ndarray) -> None:
         """New commands at the same state."""
         self.moments = moments
+        self._acc_ok = False
+
+    def stale(self) -> None:
+        """The scratch was written by others (the watchdog's calls during an integration)."""
         self._acc_ok = False
 
     def _setup(self) -> None:
@@ -314,10 +321,13 @@ class CompiledOutputs(_State):
         returns the index in fo.NONFINITE_FIELDS of a field found not finite (0: none)."""
         if self.kernel is None:
             self._setup()
+        y = self.y
+        if y.dtype != np.float64 or not y.flags.c_contiguous:  # the compiled entry does not convert
+            y = self.y = np.ascontiguousarray(y, dtype=np.float64)
         self._held_now()
         slots = self._no_slots if into is None else fo.Slots(into.dst, into.joint, into.position, into.quaternion,
                                                             into.wrench)
-        bad = self.kernel(self.t, self.y, self.scratch["ydot"], *self._records, self._layout, want, self._outputs,
+        bad = self.kernel(float(self.t), y, self.scratch["ydot"], *self._records, self._layout, want, self._outputs,
                           states, slots)
         self._acc_ok = bool(want & fo.WANT_WRENCHES or len(self.model.speed_body))
         return bad
