@@ -141,7 +141,7 @@ def _remove_unpublished() -> None:
         _UNPUBLISHED.discard(tmp)
 
 
-class AtomicOutput:
+class AtomicOutput(contextlib.AbstractContextManager):
     """One output written under a temporary name and published when complete (module docstring).
 
     Parameters
@@ -239,9 +239,6 @@ class AtomicOutput:
         """Remove the temporary file (nothing is published)."""
         if not self.published:
             self._remove_tmp()
-
-    def __enter__(self) -> "AtomicOutput":
-        return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
         if exc_type is None:

@@ -9,10 +9,8 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from gyro_sim.errors import GyroSimError
-from gyro_sim.dynamics import reference as dyn
 from gyro_sim.dynamics import invariants as inv
 from gyro_sim.dynamics.model import compile_model, initial_state
-from gyro_sim.dynamics.rotations import matrices_to_euler, omegas_to_euler_rates
 from gyro_sim.scene.records import Scene
 from gyro_sim.snapshot import Scatter, Snapshot
 
@@ -117,16 +115,17 @@ class Simulator:
             raise ActuatorError(f"{m.actuators.terms[0]}: integrator {integrator!r} does not take speed-dependent "
                              f"actuator terms (friction, max_speed); use one of {', '.join(STATEFUL_INTEGRATORS)}")
         self._joint_layout()
-        # snapshots from compiled code when the system has it (the numba backend)
-        # (a stateful model's outputs, its applied torques, come from the numpy reference)
-        self._compiled_outputs = None if m.stateful else getattr(self.system, "outputs", None)
+        # every output of a state from one compiled call on the numba backend; a stateful model's
+        # outputs (its applied torques) from the numpy reference
+        from gyro_sim.dynamics.backends import CompiledOutputs, NumpyOutputs
+
+        outputs = CompiledOutputs if self.system.backend == "numba" and not m.stateful else NumpyOutputs
+        self._outputs = outputs(m, self.system, self._joint_index, self._inputs)
         self._watched = self._watched_energy()
         self._watch_last = None
-        self._watch_joints = None
         if self._watched is not None and getattr(self.integrator, "monitor", False) is None:
             self.integrator.monitor = self._energy_error  # "fixed": its energy watchdog
         self._imus = None  # the IMUs (gyro_sim.dynamics.imu.ImuSet), when the scene has some
-        self._acc_ok = False  # the compiled scratch holds the accelerations of the current state
         if scene.imus:
             from gyro_sim.dynamics.imu import DEFAULT_IMU_RATE, ImuSet
 
@@ -152,7 +151,7 @@ class Simulator:
         """The index in the compiled invariants of the energy whose balance the exact motion keeps
         ("energy", or "jacobi" with speed rotors: gyro_sim.dynamics.invariants.balanced_energy),
         None when none is kept (a moving base). On the numpy backend the same numbers come from the numpy
-        invariants (`_invariants_at`)."""
+        invariants (NumpyOutputs.energies)."""
         from gyro_sim.dynamics import outputs as fast_outputs
 
         if self._balanced == "energy":
@@ -181,46 +180,15 @@ class Simulator:
 
         last = self._watch_last  # the previous call's end is usually this one's start
         v0 = last[2] if last is not None and last[0] == t0 and np.array_equal(last[1], y0) \
-            else self._invariants_at(t0, y0)
-        v1 = self._invariants_at(t1, y1)
+            else self._outputs.energies(t0, y0)
+        v1 = self._outputs.energies(t1, y1)
         self._watch_last = (t1, y1.copy(), v1)
         scale = max(v0[INV_KINETIC], v1[INV_KINETIC], 1e-300)
         return float((v1[self._watched] - v0[self._watched] - work) / scale)
 
-    def _invariants_at(self, t: float, y: np.ndarray) -> np.ndarray:
-        """The compiled invariants (fast_outputs.INV_*) at (t, y) with the inputs the system
-        holds (those of the call under way: no new hold), computing nothing else but the joint
-        states (fast_outputs.publication_kernel with WANT_INVARIANTS); a new array. On the numpy
-        backend the energies (INV_ENERGY, INV_KINETIC, INV_POTENTIAL, INV_JACOBI) from the
-        numpy invariants, the rest zero."""
-        from gyro_sim.dynamics import outputs as fo
-
-        if self._compiled_outputs is None:  # numpy backend: the reference invariants, own workspace
-            d = getattr(self, "_watch_data", None)
-            if d is None:
-                d = self._watch_data = dyn.Data(self.model)
-            dyn.positions(self.model, d, t, y)
-            dyn.velocities(self.model, d, t, y[self.model.i_vel])
-            v = inv.invariants(self.model, d, self.system.spins(t, y), t)
-            out = np.zeros(fo.INV_SIZE)
-            out[fo.INV_ENERGY], out[fo.INV_KINETIC], out[fo.INV_POTENTIAL] = v["energy"], v["kinetic"], v["potential"]
-            out[fo.INV_JACOBI] = v.get("jacobi", 0.0)
-            return out
-        if getattr(self, "_snapshot_kernel", None) is None:
-            self._snapshot_setup()
-        o = self._snapshot_scratch
-        J = len(self._joint_names)
-        js = self._watch_joints
-        if js is None or js.position.shape[0] != J:
-            js = self._watch_joints = fo.JointStates(np.empty(J), np.empty(J), np.empty(J))
-        self._snapshot_kernel(
-            float(t), np.ascontiguousarray(y, dtype=np.float64), o["ydot"], *self.system.kernel_arguments(),
-            self._snapshot_layout, int(fo.WANT_INVARIANTS), self._snapshot_outputs, js, self._snapshot_no_slots)
-        return o["inv"].copy()
-
     def _joint_layout(self) -> None:
         """The joint-state entries in order (docs/scene-format.md, "Joint states"): their names, and where each entry's
-        position, velocity and effort come from in the sources of `_joint_arrays`: the Euler
+        position, velocity and effort come from (gyro_sim.dynamics.backends.joint_sources): the Euler
         angles of every body (3 n, zero effort), the hinges, the torque rotors, the speed rotors."""
         m = self.model
         n, nh, nt = m.n, len(m.hinge_bodies), len(m.torque_body)
@@ -251,20 +219,6 @@ class Simulator:
         same tuple for the simulator's life."""
         return self._snapshot_names[0]
 
-    def _joint_arrays(self, euler, rates, kdot_t, L_v, hinge_tau, L_rotor):
-        """position, velocity, effort (J,) of the joint states from their sources (see
-        `_joint_layout`): euler, rates (n, 3); kdot_t (nt,) torque-rotor angle rates; L_v (nv,)
-        speed-rotor motor torques; the held commands (None: zero)."""
-        m = self.model
-        nh, nt = len(m.hinge_bodies), len(m.torque_body)
-        u = self._y[m.i_vel]
-        pos = np.concatenate((euler.ravel(), self._y[m.i_phi], self._y[m.i_kappa], m.speed_rate * self._t))
-        vel = np.concatenate((rates.ravel(), u[m.col_hinge], kdot_t, m.speed_rate))
-        eff = np.concatenate((np.zeros(3 * m.n), np.zeros(nh) if hinge_tau is None else hinge_tau,
-                              np.zeros(nt) if L_rotor is None else L_rotor, L_v))
-        i = self._joint_index
-        return pos[i], vel[i], eff[i]
-
     # --- state -----------------------------------------------------------------------------
     def reset(self) -> None:
         """Back to the scene's initial state, commands zero."""
@@ -274,9 +228,7 @@ class Simulator:
         self._p = m.torque_p0.copy() if len(m.torque_body) else None
         self._moments = np.zeros(len(m.axis_names))
         self._saturated = 0  # commanded values clipped to their max_torque since the reset
-        self._cache = None
-        self._kin_ok = False
-        self._acc_ok = False
+        self._outputs.moved(self._t, self._y, self._p, self._moments)
         self._watch_last = None
         self.integrator.reset()
         self._work = 0.0
@@ -318,8 +270,7 @@ class Simulator:
         if self._axis_max_torque is not None:
             self._saturated += int(np.count_nonzero(np.abs(v) > self._axis_max_torque))
         self._moments = v.copy()
-        self._cache = None  # reactions and efforts depend on the commands
-        self._acc_ok = False
+        self._outputs.commanded(self._moments)  # reactions and efforts depend on the commands
 
     def _inputs(self):
         """The held inputs (hinge moments (nh,), rotor torques (nt,), or None) from the commanded
@@ -353,7 +304,7 @@ class Simulator:
             raise ValueError(f"dt must be a positive finite number, got {dt!r}")
         if self._reference is None:  # the drifts' reference is the reset state: keep it before moving
             self._reference = self.invariants()
-        self._acc_ok = False  # the energy watchdog's calls overwrite the compiled scratch
+        self._outputs.stale()  # the integrator's evaluations and the energy watchdog's overwrite its workspaces
         hinge_tau, L_rotor = self._inputs()
         self.system.hold(self._t, self._p, hinge_tau, L_rotor)
         try:
@@ -363,7 +314,8 @@ class Simulator:
             raise SimulationError(f"t = {self._t:.6g} s: {exc}; state kept at t = {self._t:.6g} s") from exc
         if not np.all(np.isfinite(y)):
             self.integrator.reset()
-            raise SimulationError(f"t = {self._t:.6g} s: the state became non-finite; state kept at t = {self._t:.6g} s")
+            raise SimulationError(f"t = {self._t:.6g} s: the state became non-finite; "
+                                  f"state kept at t = {self._t:.6g} s")
         if self.model.stateful:  # the works are states, integrated with the motion
             self._work = float(y[self.model.i_work][0])
         elif len(self._axis_angle) and np.any(self._moments):
@@ -372,106 +324,28 @@ class Simulator:
         self._p = self.system.spins(self._t + dt, y)
         self._t += dt
         self._y = y
-        self._cache = None
-        self._kin_ok = False
-        self._acc_ok = False
+        self._outputs.moved(self._t, self._y, self._p, self._moments)
 
     # --- outputs (computed on request only) ------------------------------------------------
-    def _evaluate(self) -> dyn.Evaluation:
-        """One dynamics evaluation at the current state, with everything outputs need."""
-        if self._cache is None:
-            hinge_tau, L_rotor = self._inputs()
-            self.system.hold(self._t, self._p, hinge_tau, L_rotor)
-            ev = dyn.Evaluation()
-            self.system.rhs(self._t, self._y, out=ev)
-            self._cache = ev
-            self._kin_ok = True  # the evaluation left the current state's kinematics in data
-        return self._cache
-
-    def _kinematics(self) -> dyn.Data:
-        """Positions and velocities of the current state in the output workspace, computed once
-        per state (outputs asked together share them; advance() and reset() invalidate)."""
-        d = self.system.data
-        if not self._kin_ok:
-            dyn.positions(self.model, d, self._t, self._y)
-            dyn.velocities(self.model, d, self._t, self._y[self.model.i_vel])
-            self._kin_ok = True
-        return d
-
-    # On the numba backend every output comes from one compiled call (FastChainODE.outputs),
-    # the snapshot's and these alike (a log re-simulates bit for bit against any of them); the
-    # numpy reference (`_..._numpy`) is what the compiled outputs are tested against.
+    # Every output comes from the backend the Simulator holds (gyro_sim.dynamics.backends): on
+    # the numba backend one compiled call, the snapshot's and these alike (a log re-simulates bit
+    # for bit against any of them); the numpy reference is what the compiled outputs are tested
+    # against.
     def body_states(self) -> list[BodyState]:
         """Pose and velocity of every body."""
-        if self._compiled_outputs is None:
-            return self._body_states_numpy()
-        o = self._outputs_compiled()
-        return [BodyState(name, o["O"][k], o["R"][k], o["quat"][k], o["w"][k], o["vO"][k])
-                for k, name in enumerate(self.model.names)]
-
-    def _body_states_numpy(self) -> list[BodyState]:
-        from gyro_sim.dynamics.rotations import matrix_to_quat
-
-        m = self.model
-        d = self._kinematics()
-        q = np.empty((m.n, 4))
-        if len(m.sph_bodies):
-            qs = self._y[m.i_quat]
-            q[m.sph_bodies] = qs / np.linalg.norm(qs, axis=1, keepdims=True)
-        for k in m.hinge_bodies:
-            q[k] = matrix_to_quat(d.R[k])
-        return [
-            BodyState(name, d.O[k].copy(), d.R[k].copy(), q[k], d.w[k].copy(), d.vO[k].copy())
-            for k, name in enumerate(m.names)
-        ]
-
-    def _euler(self, d: dyn.Data) -> tuple[np.ndarray, np.ndarray]:
-        """Euler angles and rates (n, 3) of every body (output only)."""
-        euler = matrices_to_euler(d.R, self.model.down)
-        return euler, omegas_to_euler_rates(euler, d.w, self.model.down)
+        O, R, q, w, vO = self._outputs.bodies()
+        return [BodyState(name, O[k], R[k], q[k], w[k], vO[k]) for k, name in enumerate(self.model.names)]
 
     def joint_states(self) -> JointStates:
         """Euler angles of spherical joints, hinge angles, rotor angles (docs/scene-format.md); the same
-        numbers as `snapshot()` (compiled on the numba backend), which logs re-simulate against."""
-        if self._compiled_outputs is not None:
-            pos, vel, eff = self._joint_arrays_compiled(self._outputs_compiled())
-        else:
-            pos, vel, eff = self._joint_arrays_numpy()
+        numbers as `snapshot()`, which logs re-simulate against."""
+        pos, vel, eff = self._outputs.joint_arrays()
         return JointStates(list(self._joint_names), pos.tolist(), vel.tolist(), eff.tolist())
-
-    def _joint_arrays_numpy(self):
-        """The joint states' arrays from the numpy reference."""
-        m = self.model
-        ev = self._evaluate() if len(m.speed_body) else None
-        d = self._kinematics()
-        hinge_tau, L_rotor = self._inputs()
-        euler, rates = self._euler(d)
-        kdot_t = dyn.torque_rotor_rates(m, d, self._p) if len(m.torque_body) else np.zeros(0)  # (18-19)
-        L_v = np.zeros(0)
-        if len(m.speed_body):  # the motor keeps kappa_i' constant: L_i = A_i (w' . e_i)
-            e_v = dyn.matvec(d.R[m.speed_body], m.speed_axis)
-            L_v = m.speed_A * np.einsum("ni,ni->n", ev.acc_w[m.speed_body], e_v)
-        if m.stateful:  # the torques applied at this state: motors after saturation and cut, friction
-            self._evaluate()
-            a = self.system.data.applied
-            hinge_tau, L_rotor = a.hinge_motor + a.hinge_friction, a.rotor_motor + a.rotor_friction
-        return self._joint_arrays(euler, rates, kdot_t, L_v, hinge_tau, L_rotor)
 
     def wrenches(self) -> list[Wrench]:
         """R^k (eq 40) and L^k (eq 48) at every joint, in the body's own frame."""
-        if self._compiled_outputs is None:
-            return self._wrenches_numpy()
-        o = self._outputs_compiled()
-        return [Wrench(name, name, o["wrench_force"][k], o["wrench_moment"][k])
-                for k, name in enumerate(self.model.names)]
-
-    def _wrenches_numpy(self) -> list[Wrench]:
-        ev = self._evaluate()
-        d = self.system.data
-        R, L = dyn.reactions(self.model, d, ev.f_ang, ev.f_lin)
-        Rt = d.R.transpose(0, 2, 1)
-        R_b, L_b = dyn.matvec(Rt, R), dyn.matvec(Rt, L)
-        return [Wrench(name, name, R_b[k], L_b[k]) for k, name in enumerate(self.model.names)]
+        force, moment = self._outputs.wrenches()
+        return [Wrench(name, name, force[k], moment[k]) for k, name in enumerate(self.model.names)]
 
     def invariants(self) -> dict[str, float]:
         """Energy (eq 33 + gravity potential), vertical momentum about O^1, and what else applies.
@@ -480,16 +354,10 @@ class Simulator:
         "lagrange_82" (eq 82, = -vertical_momentum) and "lagrange_85" (eq 85, = 2 (energy - const),
         see :func:`gyro_sim.analytic.lagrange.physical_invariants`).
         """
-        if self._compiled_outputs is None:
-            return self._invariants_numpy()
-        return self._invariants_compiled(self._outputs_compiled())
-
-    def _invariants_numpy(self) -> dict[str, float]:
-        d = self._kinematics()
-        out = inv.invariants(self.model, d, self._p, self._t)
-        if self._lagrange is not None:
-            self._add_lagrange(out, *self._euler(d))
-        return out
+        now, euler = self._outputs.invariants(self._lagrange is not None)
+        if euler is not None:
+            self._add_lagrange(now, *euler)
+        return now
 
     def _add_lagrange(self, out: dict, euler, rates) -> None:
         """The paper's own integrals of a Lagrange chain, from the Euler angles and rates."""
@@ -540,139 +408,16 @@ class Simulator:
         (`gyro_sim.dynamics.outputs.publication_kernel`), else from the numpy reference; both
         agree to round-off. `into`: also write the joint states, poses and wrenches into the
         slots of a Scatter (the parts it has slots for must be asked)."""
-        if self._compiled_outputs is not None:
-            return self._snapshot_compiled(bodies, wrenches, invariants, into)
-        snap = self._snapshot_numpy(bodies, wrenches, invariants)
-        if into is not None:
+        parts = self._outputs.parts(bodies, wrenches, invariants, self._lagrange is not None, into)
+        kw = parts.arrays
+        if invariants:
+            if parts.euler is not None:
+                self._add_lagrange(parts.invariants, *parts.euler)
+            kw.update(self._invariant_parts(parts.invariants))
+        snap = self._snapshot(parts.position, parts.velocity, parts.effort, kw, arrays_checked=parts.checked)
+        if into is not None and not parts.written:
             into.write(snap)
         return snap
-
-    def _snapshot_numpy(self, bodies: bool = True, wrenches: bool = True, invariants: bool = True) -> Snapshot:
-        pos, vel, eff = self._joint_arrays_numpy()
-        kw = {}
-        if bodies:
-            states = self._body_states_numpy()
-            kw["body_position"] = np.array([b.position for b in states])
-            kw["body_quaternion"] = np.array([b.quaternion for b in states])
-        if wrenches:
-            ws = self._wrenches_numpy()
-            kw["wrench_force"] = np.array([w.force for w in ws])
-            kw["wrench_moment"] = np.array([w.moment for w in ws])
-        if invariants:
-            kw.update(self._invariant_parts(self._invariants_numpy()))
-        return self._snapshot(pos, vel, eff, kw)
-
-    def _snapshot_setup(self) -> None:
-        """What the compiled outputs take beyond the dynamics kernel's arguments, and their
-        scratch arrays: made once, on the first compiled snapshot."""
-        from gyro_sim import jit
-        from gyro_sim.dynamics import outputs as fast_outputs
-
-        m = self.model
-        n, nv = m.n, len(m.speed_body)
-        self._snapshot_kernel = jit.Direct(fast_outputs.publication_kernel)
-        self._snapshot_layout = fast_outputs.layout(m, *self._joint_arrays_sources())
-        self._snapshot_scratch = {
-            "ydot": np.zeros(m.size), "R": np.zeros((n, 3, 3)), "w": np.zeros((n, 3)), "vO": np.zeros((n, 3)),
-            "O": np.zeros((n, 3)), "quat": np.zeros((n, 4)), "euler": np.zeros((n, 3)), "euler_rate": np.zeros((n, 3)),
-            "L_speed": np.zeros(nv), "wrench_force": np.zeros((n, 3)), "wrench_moment": np.zeros((n, 3)),
-            "inv": np.zeros(fast_outputs.INV_SIZE), "scratch": np.zeros(fast_outputs.scratch_size(n))}
-        self._snapshot_outputs = fast_outputs.Outputs(*(self._snapshot_scratch[k] for k in fast_outputs.OUTPUT_NAMES))
-        J = len(self._joint_names)
-        self._snapshot_nowhere = Scatter(np.zeros(0), *(np.zeros((0, *shape), dtype=np.int64)
-                                                      for shape in ((3, J), (n, 3), (n, 4), (n, 6))))
-        self._snapshot_no_slots = self._slots(self._snapshot_nowhere)
-        # the kernel's records with held inputs of the publications' own (`_held_now`)
-        self._snapshot_records = self.system.records_with_own_inputs()
-        self._snapshot_moments = None  # the commanded moments of the inputs held there
-        self._snapshot_joints = (np.empty(J), np.empty(J), np.empty(J))  # write_outputs' joint states
-        self._snapshot_want = (fast_outputs.WANT_BODIES, fast_outputs.WANT_WRENCHES)
-
-    def _joint_arrays_sources(self) -> tuple[np.ndarray, np.ndarray]:
-        """The joint-state entries for the compiled outputs: (kind, ref) (J,) int64, kind one of
-        fast_outputs.JOINT_* (the sources of `_joint_layout`, decoded)."""
-        from gyro_sim.dynamics import outputs as fo
-
-        m = self.model
-        n, nh, nt = m.n, len(m.hinge_bodies), len(m.torque_body)
-        kind, ref = [], []
-        for i in self._joint_index.tolist():
-            if i < 3 * n:
-                kind.append(fo.JOINT_EULER), ref.append(i)
-            elif i < 3 * n + nh:
-                kind.append(fo.JOINT_HINGE), ref.append(int(m.hinge_bodies[i - 3 * n]))
-            elif i < 3 * n + nh + nt:
-                kind.append(fo.JOINT_TORQUE_ROTOR), ref.append(i - 3 * n - nh)
-            else:
-                kind.append(fo.JOINT_SPEED_ROTOR), ref.append(i - 3 * n - nh - nt)
-        return np.array(kind, dtype=np.int64), np.array(ref, dtype=np.int64)
-
-    def _held_now(self) -> None:
-        """Hold in the publications' own inputs (`_snapshot_records`) from now on what
-        `system.hold(t, p, *self._inputs())` would hold, without holding it in the system (which
-        keeps the hold of the last advance): only t0 and the spins change from one publication
-        to the next; the rest is written again only when the commands change."""
-        from gyro_sim.dynamics.outputs import hold
-
-        inputs = self._snapshot_records[2]
-        if self._snapshot_moments is not self._moments:
-            hold(inputs, self.model, self._t, self._p, *self._inputs())
-            self._snapshot_moments = self._moments
-        else:
-            inputs.t0[0] = self._t
-            if self._p is not None:
-                inputs.p0[:] = self._p
-
-    @staticmethod
-    def _slots(into: Scatter):
-        """The slots of `into` as the compiled outputs take them (fast_outputs.Slots)."""
-        from gyro_sim.dynamics.outputs import Slots
-
-        return Slots(into.dst, into.joint, into.position, into.quaternion, into.wrench)
-
-    def _compiled_call(self, want: int, into: Scatter, pos, vel, eff) -> int:
-        """fast_outputs.publication_kernel at the current state: the outputs into the scratch
-        arrays, the joint states into pos, vel, eff (J,), the numbers also into the slots of
-        `into`; returns its index in NONFINITE_FIELDS of a field found not finite (0:
-        none)."""
-        if getattr(self, "_snapshot_kernel", None) is None:
-            self._snapshot_setup()
-        y = self._y
-        if y.dtype != np.float64 or not y.flags.c_contiguous:  # the compiled entry does not convert
-            y = self._y = np.ascontiguousarray(y, dtype=np.float64)
-        from gyro_sim.dynamics.outputs import JointStates
-
-        t = float(self._t)
-        self._held_now()
-        slots = self._snapshot_no_slots if into is self._snapshot_nowhere else self._slots(into)
-        bad = self._snapshot_kernel(t, y, self._snapshot_scratch["ydot"], *self._snapshot_records,
-                                    self._snapshot_layout, want, self._snapshot_outputs, JointStates(pos, vel, eff),
-                                    slots)
-        if self._imus is not None:  # the IMUs read the accelerations this call left, if it made them
-            from gyro_sim.dynamics.outputs import WANT_WRENCHES
-
-            self._acc_ok = bool(want & WANT_WRENCHES or len(self.model.speed_body))
-        return bad
-
-    def _outputs_compiled(self, want: int | None = None, into: Scatter | None = None, fresh: bool = True) -> dict:
-        """The outputs of the current state from one compiled call
-        (fast_outputs.publication_kernel): the arrays of FastChainODE.outputs by name, and the
-        joint states "position", "velocity", "effort" (new arrays), "nonfinite" (0, or the index in
-        fast_outputs.NONFINITE_FIELDS of a field found not finite). want: WANT_* bits
-        (None: every part); into: a Scatter to write into as well. fresh=False: the other arrays
-        are the Simulator's scratch, valid until the next call."""
-        from gyro_sim.dynamics import outputs as fo
-
-        if getattr(self, "_snapshot_kernel", None) is None:
-            self._snapshot_setup()
-        J = len(self._joint_names)
-        pos, vel, eff = np.empty(J), np.empty(J), np.empty(J)
-        bad = self._compiled_call(int(fo.WANT_ALL if want is None else want),
-                                  self._snapshot_nowhere if into is None else into, pos, vel, eff)
-        o = self._snapshot_scratch
-        out = {k: v.copy() for k, v in o.items() if k != "scratch"} if fresh else dict(o)
-        out.update(position=pos, velocity=vel, effort=eff, nonfinite=bad)
-        return out
 
     def write_outputs(self, into: Scatter, *, bodies: bool = True, wrenches: bool = True) -> str | None:
         """The joint states, and the poses (`bodies`) and wrenches asked for, of the current state
@@ -680,50 +425,10 @@ class Simulator:
         diagnostics: gyro_sim.ros.outputs); the slots `into` has must be asked. Returns None when
         every number written is finite, else the field `Snapshot.nonfinite` names (the slots
         then hold what was found: not to be sent). Same numbers as `snapshot(into=...)`."""
-        if self._compiled_outputs is None:
-            return self.snapshot(bodies=bodies, wrenches=wrenches, invariants=False, into=into).nonfinite()
-        if getattr(self, "_snapshot_kernel", None) is None:
-            self._snapshot_setup()
-        want_bodies, want_wrenches = self._snapshot_want
-        want = (want_bodies if bodies else 0) | (want_wrenches if wrenches else 0)
-        if self._compiled_call(want, into, *self._snapshot_joints) or not math.isfinite(self._t):
-            # the name Snapshot.nonfinite gives (its order of the fields), from a snapshot of the state
-            return self.snapshot(bodies=bodies, wrenches=wrenches, invariants=False).nonfinite() or "time"
-        return None
-
-    def _joint_arrays_compiled(self, o: dict):
-        return o["position"], o["velocity"], o["effort"]
-
-    def _snapshot_compiled(self, bodies: bool, wrenches: bool, invariants: bool, into: Scatter | None = None) -> Snapshot:
-        from gyro_sim.dynamics import outputs as fo
-
-        want = (fo.WANT_BODIES if bodies else 0) | (fo.WANT_WRENCHES if wrenches else 0)
-        if invariants:
-            want |= fo.WANT_INVARIANTS | (fo.WANT_EULER_ALL if self._lagrange is not None else 0)
-        o = self._outputs_compiled(want, into, fresh=False)
-        kw = {}
-        if bodies:
-            kw["body_position"], kw["body_quaternion"] = o["O"].copy(), o["quat"].copy()
-        if wrenches:
-            kw["wrench_force"], kw["wrench_moment"] = o["wrench_force"].copy(), o["wrench_moment"].copy()
-        if invariants:
-            kw.update(self._invariant_parts(self._invariants_compiled(o)))
-        return self._snapshot(o["position"], o["velocity"], o["effort"], kw, arrays_checked=o["nonfinite"] == 0)
-
-    def _invariants_compiled(self, o: dict) -> dict:
-        """The invariants (as gyro_sim.dynamics.invariants.invariants) from the compiled outputs."""
-        m, v = self.model, o["inv"]
-        now = {"energy": float(v[0]), "kinetic": float(v[1]), "potential": float(v[2])}
-        if m.lam_speed is not None:
-            now["jacobi"] = float(v[3])
-        now["angular_momentum_O1"] = v[5:8].copy()
-        now["vertical_momentum"] = float(v[4])
-        if m.free:
-            now["linear_momentum"] = v[8:11].copy()
-            now["angular_momentum"] = v[11:14].copy()
-        if self._lagrange is not None:
-            self._add_lagrange(now, o["euler"], o["euler_rate"])
-        return now
+        if self._outputs.write(into, bodies, wrenches) and math.isfinite(self._t):
+            return None
+        # the name Snapshot.nonfinite gives (its order of the fields), from a snapshot of the state
+        return self.snapshot(bodies=bodies, wrenches=wrenches, invariants=False).nonfinite() or "time"
 
     def _invariant_parts(self, now: dict) -> dict:
         """The snapshot's invariants, drifts since the reset, work and energy balance."""
@@ -782,22 +487,7 @@ class Simulator:
         agree to round-off."""
         if self._imus is None:
             return []
-        if self._compiled_outputs is None:
-            ev = self._evaluate()
-            d = self.system.data
-            a_s = ev.acc_v + dyn.cross(ev.acc_w, d.O)  # about O^k
-            return self._imus.read(self._t, d.R, d.w, d.vO, ev.acc_w, a_s)
-        from gyro_sim.dynamics.imu import compiled_accelerations
-
-        if getattr(self, "_snapshot_kernel", None) is None:
-            self._snapshot_setup()
-        if not self._acc_ok:
-            from gyro_sim.dynamics.outputs import WANT_WRENCHES
-
-            self._compiled_call(WANT_WRENCHES, self._snapshot_nowhere, *self._snapshot_joints)
-        o = self._snapshot_scratch
-        alpha, a_s = compiled_accelerations(o["scratch"], self.model.n)
-        return self._imus.read(self._t, o["R"], o["w"], o["vO"], alpha, a_s)
+        return self._imus.read(self._t, *self._outputs.accelerations())
 
     def linearize(self, y: np.ndarray | None = None, spins: np.ndarray | None = None, *, method: str = "complex",
                   rotor_angles: bool = False, chart: str = "world", frame_rate=None):

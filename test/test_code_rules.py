@@ -1,6 +1,6 @@
 """Rules of the code read from the source with `ast`: no compiled function takes more than
 MAX_COMPILED_PARAMETERS parameters (the kernel's records, model, data, inputs, take the place
-of its arrays), and no two functions of the core have the same body.
+of its arrays), and no two functions of the package have the same body: each has one home.
 """
 from __future__ import annotations
 
@@ -19,8 +19,6 @@ COMPILING = ("njit", "_njit", "_njit_inline", "_njit_alloc", "_njit_uncounted", 
 C_ENTRIES = ("_kernel_entry", "_null_entry", "_canonical_entry", "_heavy_entry")
 #: the C entry over the addresses of the heavy-subtree elimination's arrays (scalars only)
 C_ENTRY_ASIDE = {"gyro_sim/dynamics/kernel.py:_heavy_entry"}
-#: the ROS-free core, whose functions are checked for duplicate bodies
-CORE = ("jit.py", "simulator.py", "snapshot.py", "scene/", "dynamics/", "analytic/", "integrators/")
 
 
 def _functions(root: Path = ROOT):
@@ -51,25 +49,34 @@ def long_compiled(root: Path = ROOT) -> dict[str, int]:
     return out
 
 
+def _trivial(statement) -> bool:
+    """A `pass`, a constant (a docstring, `...`), or a `return` of nothing or of a constant."""
+    if isinstance(statement, ast.Pass):
+        return True
+    if isinstance(statement, ast.Expr):
+        return isinstance(statement.value, ast.Constant)
+    return isinstance(statement, ast.Return) and (statement.value is None or isinstance(statement.value, ast.Constant))
+
+
 def body_hash(node) -> str | None:
-    """A digest of a function's parameters and body, its docstring left out (None: a body of
-    one statement, a `pass`, a `return` of a name or a constant, or a docstring only)."""
+    """A digest of a function's parameters and body, its docstring left out (None: an empty
+    body, or one trivial statement: `pass`, `...`, a `return` of nothing or of a constant)."""
     body = node.body
     if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
         body = body[1:]
-    if len(body) <= 1:
+    if not body or (len(body) == 1 and _trivial(body[0])):
         return None
     text = ast.dump(node.args) + ast.dump(ast.Module(body=body, type_ignores=[]))
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def duplicate_bodies(root: Path = ROOT, within=CORE) -> list[list[str]]:
-    """Groups of functions (under `within`) whose parameters and bodies are the same."""
+def duplicate_bodies(root: Path = ROOT) -> list[list[str]]:
+    """Groups of functions (anywhere under root) whose parameters and bodies are the same."""
     seen: dict[str, list[str]] = {}
     for path, node in _functions(root):
         rel = path.relative_to(root).as_posix()
         h = body_hash(node)
-        if h is not None and rel.startswith(within):
+        if h is not None:
             seen.setdefault(h, []).append(f"{rel}:{node.name}")
     return [v for v in seen.values() if len(v) > 1]
 
@@ -82,9 +89,16 @@ def test_the_checks_see_what_they_look_for(tmp_path):
         "def plain(a, b, c, d, e, f, g, h, i, j, k, l, m):\n    x = 1\n    return x + a\n\n"
         "@jit.inline_ir\ndef short(a):\n    '''doc'''\n    x = 1\n    return x + a\n")
     (pkg / "dynamics" / "b.py").write_text("def twin(a):\n    '''other doc'''\n    x = 1\n    return x + a\n")
+    (pkg / "ros").mkdir()
+    (pkg / "ros" / "c.py").write_text(
+        "class A:\n    def __enter__(self):\n        return self\n\n    def stop(self):\n        pass\n\n"
+        "    def size(self):\n        return 0\n\n\n"
+        "class B:\n    def __enter__(self):\n        return self\n\n    def stop(self):\n        pass\n\n"
+        "    def size(self):\n        return 0\n")
     assert long_compiled(pkg) == {"gyro_sim/dynamics/a.py:long": 13}
     assert sorted(map(sorted, duplicate_bodies(pkg))) == [["dynamics/a.py:long", "dynamics/a.py:plain"],
-                                                         ["dynamics/a.py:short", "dynamics/b.py:twin"]]
+                                                         ["dynamics/a.py:short", "dynamics/b.py:twin"],
+                                                         ["ros/c.py:__enter__", "ros/c.py:__enter__"]]
 
 
 def test_no_compiled_function_takes_more_than_twelve_parameters():
@@ -92,5 +106,5 @@ def test_no_compiled_function_takes_more_than_twelve_parameters():
     assert {k: v for k, v in long_compiled().items() if k not in C_ENTRY_ASIDE} == {}
 
 
-def test_no_two_functions_of_the_core_have_the_same_body():
+def test_no_two_functions_of_the_package_have_the_same_body():
     assert duplicate_bodies() == []

@@ -15,7 +15,7 @@ publication runs what the node runs right after the physics steps, timed (prepar
 record: the total), then the parts of prepare again on their own on the same state (kernel,
 snapshot, bytes: the caches warm from prepare, so their sum may be below prepare):
 
-- kernel: the compiled outputs call alone (`Simulator._outputs_compiled`);
+- kernel: the compiled outputs call alone (`gyro_sim.dynamics.backends.CompiledOutputs.outputs`);
 - snapshot: what prepare_state asks of the Simulator, minus the kernel: `Simulator.write_outputs`
   (the numbers into the frame and their finite check, no Snapshot) without diagnostics,
   `Simulator.snapshot` with them;
@@ -117,6 +117,19 @@ def _env(workdir: Path) -> dict:
     return env
 
 
+class _NullNode:
+    """The node as gyro_sim.ros.outputs.Outputs uses it, with stand-in publishers that are
+    listened to and send nothing (no rclpy)."""
+
+    def get_fully_qualified_name(self):
+        from gyro_sim.msgs import messages as M
+
+        return M.NAMESPACE
+
+    def create_publisher(self, cls, topic, qos, **kwargs):
+        return SimpleNamespace(get_subscription_count=lambda: 1, publish=lambda data: None)
+
+
 def _simulator(n: int):
     from gyro_sim.simulator import Simulator
     from gyro_sim.bench.scenes import spherical_chain
@@ -141,9 +154,9 @@ def _kernel(sim, out, diag: bool) -> None:
             | (getattr(fo, "WANT_INVARIANTS", 0) if diag else 0))
     frame = _frame(out)
     try:
-        sim._outputs_compiled(want, None if frame is None else frame.scatter, fresh=False)
+        sim._outputs.outputs(want, None if frame is None else frame.scatter, fresh=False)
     except TypeError:  # before the publication kernel: one call computed everything
-        sim._outputs_compiled()
+        sim._outputs.outputs()
 
 
 def _bytes(sim, out, snap, t_ns: int, run) -> None:
@@ -295,15 +308,8 @@ def isolated(n: int, repeats: int = 300) -> dict[str, float]:
     from gyro_sim.msgs import messages as M
     from gyro_sim.ros.outputs import Outputs
 
-    class _Node:
-        def get_fully_qualified_name(self):
-            return M.NAMESPACE
-
-        def create_publisher(self, cls, topic, qos, **kwargs):
-            return SimpleNamespace(get_subscription_count=lambda: 1, publish=lambda data: None)
-
     sim = _simulator(n)
-    out = Outputs(_Node(), sim, SimpleNamespace(publish_wrenches=True, publish_poses=True))
+    out = Outputs(_NullNode(), sim, SimpleNamespace(publish_wrenches=True, publish_poses=True))
     out.prepare_state(0, sim)
     out.prepare_state(0, sim)
     frame = _frame(out)
@@ -320,15 +326,15 @@ def isolated(n: int, repeats: int = 300) -> dict[str, float]:
     res = {}
     scatter = None if frame is None else frame.scatter
     if hasattr(fo, "WANT_BODIES"):
-        res["kernel, joint states"] = med(lambda: sim._outputs_compiled(0, None, fresh=False))
-        res["kernel, + wrenches, poses"] = med(lambda: sim._outputs_compiled(
+        res["kernel, joint states"] = med(lambda: sim._outputs.outputs(0, None, fresh=False))
+        res["kernel, + wrenches, poses"] = med(lambda: sim._outputs.outputs(
             fo.WANT_BODIES | fo.WANT_WRENCHES, scatter, fresh=False))
         res["snapshot"] = med(lambda: sim.snapshot(invariants=False, into=scatter))
         if hasattr(sim, "write_outputs"):
             res["write_outputs"] = med(lambda: sim.write_outputs(scatter))
         res["bytes"] = med(lambda: frame.messages(1))
     else:
-        res["kernel, + wrenches, poses"] = med(lambda: sim._outputs_compiled())
+        res["kernel, + wrenches, poses"] = med(lambda: sim._outputs.outputs())
         res["snapshot"] = med(lambda: sim.snapshot(invariants=False))
         snap = sim.snapshot(invariants=False)
         res["bytes"] = med(lambda: out.publication.messages(snap, 1))
@@ -368,18 +374,11 @@ def recorder_costs(n: int, publications: int = 300, workdir: str | None = None) 
     from gyro_sim.ros.outputs import Outputs
     from gyro_sim.ros.recorder import LiveRecorder
 
-    class _Node:
-        def get_fully_qualified_name(self):
-            return M.NAMESPACE
-
-        def create_publisher(self, cls, topic, qos, **kwargs):
-            return SimpleNamespace(get_subscription_count=lambda: 1, publish=lambda data: None)
-
     sim = _simulator(n)
     run = M.Status("gyro_sim: run", {"real_time_factor": 1.0})
     with tempfile.TemporaryDirectory(prefix="gyro_sim_rec_", dir=workdir) as tmp:
         recorder = LiveRecorder(str(Path(tmp) / "rec.mcap"), scene=sim.scene, params={"bench": "recorder"})
-        out = Outputs(_Node(), sim, SimpleNamespace(publish_wrenches=True, publish_poses=True), recorder=recorder)
+        out = Outputs(_NullNode(), sim, SimpleNamespace(publish_wrenches=True, publish_poses=True), recorder=recorder)
         hand, adv, records = [], [], 0
         try:
             out.prepare_state(0, sim)  # the first call learns the joint names, the second makes the frame

@@ -48,6 +48,7 @@ The writer is thread-safe (one lock around the MCAP writer).
 from __future__ import annotations
 
 import array
+import contextlib
 import json
 import math
 import os
@@ -203,7 +204,7 @@ class _PackedChunkIndexes:
         self.heads, self.items = array.array("q"), array.array("I")
 
 
-class LogWriter:
+class LogWriter(contextlib.AbstractContextManager):
     """Write a gyro_sim log (module docstring). A context manager; `close` is idempotent.
 
     Parameters
@@ -479,9 +480,6 @@ class LogWriter:
     def _check_open(self) -> None:
         if self._closed:
             raise LogError(f"log {self.path} is closed")
-
-    def __enter__(self) -> "LogWriter":
-        return self
 
     def __exit__(self, *exc) -> None:
         self.close()

@@ -88,7 +88,7 @@ class LogRecorder:
         self.writer, self.sim = writer, sim
         self.publication = M.Publication([b.name for b in sim.scene.bodies], hardware_id=sim.scene.name)
         self.channels: dict[str, int] = {}
-        self.offset_ns = 0
+        self.time = M.NodeTime(sim)  # the log time
         self.messages = 0
         self.period_ns = M.time_ns(diagnostics_period)
         self._next_diag_ns = 0
@@ -99,9 +99,6 @@ class LogRecorder:
 
             self.imu_ticks = ImuTicks(sim.imu_rates)
 
-    def now_ns(self) -> int:
-        return self.offset_ns + M.time_ns(self.sim.time)
-
     def _write(self, topic: str, msgtype: str, t_ns: int, data: bytes) -> None:
         ch = self.channels.get(topic)
         if ch is None:
@@ -111,7 +108,7 @@ class LogRecorder:
 
     def publish(self, run: M.Status | None = None):
         """Every output of the simulator now, on its topic; returns the Snapshot."""
-        t = self.now_ns()
+        t = self.time.ns
         diag = t >= self._next_diag_ns
         snap = self.sim.snapshot(invariants=diag)
         if diag:
@@ -133,17 +130,17 @@ class LogRecorder:
 
     def command(self, values: Sequence[float]) -> None:
         """The command taking effect for the next step (log it, then call set_axis_moments)."""
-        self._write(M.AXIS_MOMENTS, M.COMMAND_TYPE, self.now_ns(), M.axis_moments(values))
+        self._write(M.AXIS_MOMENTS, M.COMMAND_TYPE, self.time.ns, M.axis_moments(values))
 
     def event(self, text: str) -> None:
-        self._write(M.EVENTS, M.STRING_TYPE, self.now_ns(), M.string(text))
+        self._write(M.EVENTS, M.STRING_TYPE, self.time.ns, M.string(text))
 
     def reset(self) -> None:
         """Log a reset event, reset the simulator; log time goes on from here."""
-        t = self.now_ns()
+        t = self.time.ns
         self.event("reset")
         self.sim.reset()
-        self.offset_ns = t
+        self.time.offset_ns = t
         self._next_diag_ns = t
         self.sim.reference_invariants()
 
@@ -252,7 +249,7 @@ def record_run(sim, path, *, duration: float, chunk: float = 0.01, publish_rate:
         si = 0
         current = None
         for i in range(steps + 1):
-            t_ns = r.now_ns()
+            t_ns = r.time.ns
             tw = _time.perf_counter()
             if t_ns + tol_ns >= next_pub:
                 elapsed = _time.perf_counter() - wall0

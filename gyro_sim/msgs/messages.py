@@ -291,6 +291,19 @@ def time_ns(t: float) -> int:
     return int(round(t * NS_PER_S))
 
 
+class NodeTime:
+    """The time of the stamps and log times of a run, in integer ns: the node time of the last
+    reset (`offset_ns`) plus the simulator's time since (which a reset takes back to zero)."""
+
+    def __init__(self, sim):
+        self.sim = sim
+        self.offset_ns = 0
+
+    @property
+    def ns(self) -> int:
+        return self.offset_ns + time_ns(self.sim.time)
+
+
 def stamp_ns(st) -> int:
     """Integer nanoseconds of a builtin_interfaces/Time (dict or object)."""
     if isinstance(st, Mapping):

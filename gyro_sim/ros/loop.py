@@ -122,7 +122,7 @@ class SimLoop:
         self.recording = RecordWatch(recorder, outputs, clock) if recorder is not None else None
         self.requests = Mailbox()
         self.steps = 0  # physics steps since start (all resets included)
-        self.offset_ns = 0  # node time (ns) of the last reset
+        self.time = M.NodeTime(sim)  # node time: that of the last reset + the Simulator's
         self.paused = False
         self.failure: str | None = None
         self.crash: str | None = None  # traceback of an unexpected error that ended the loop
@@ -157,7 +157,7 @@ class SimLoop:
     @property
     def node_ns(self) -> int:
         """Node time in integer ns: the stamps and log times (offset of the last reset + Simulator time)."""
-        return self.offset_ns + M.time_ns(self.sim.time)
+        return self.time.ns
 
     @property
     def node_time(self) -> float:
@@ -168,7 +168,7 @@ class SimLoop:
     def _handle(self, req: Request) -> str:
         if isinstance(req, Reset):
             self.commands.discard(self.node_ns)  # received before the reset: logged before it, never applied
-            self.offset_ns = self.node_ns
+            self.time.offset_ns = self.node_ns
             self.sim.reset()
             self.failure = None
             self.publications.restart(reset=True)

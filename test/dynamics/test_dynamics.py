@@ -46,8 +46,11 @@ def test_speed_rotor_jacobi_integral():
 def _momenta(sim):
     """Total linear momentum and angular momentum about O^1 (fixed), from the state."""
     m = sim.model
-    d = sim._kinematics()
-    from gyro_sim.dynamics.reference import cross, lam, matvec
+    from gyro_sim.dynamics.reference import Data, cross, lam, matvec, positions, velocities
+
+    d = Data(m)
+    positions(m, d, sim.time, sim.state)
+    velocities(m, d, sim.time, sim.state[m.i_vel])
 
     lam_w, _ = lam(m, d, sim._p, None)
     ang = matvec(d.J, d.w) + cross(d.h, d.v_o)

@@ -339,8 +339,8 @@ def test_imus_reuse_the_evaluation_of_the_outputs():
     sim.advance(0.1)
     sim.snapshot()
     calls = []
-    kernel = sim._snapshot_kernel
-    sim._snapshot_kernel = lambda *args: calls.append(1) or kernel(*args)
+    kernel = sim._outputs.kernel
+    sim._outputs.kernel = lambda *args: calls.append(1) or kernel(*args)
     sim.imus()
     assert calls == []
     sim.advance(0.01)

@@ -99,7 +99,7 @@ def log(tmp_path_factory):
     with LogWriter(path, scene=scene, params=run_params(sim, advance_dt=0.01, publish_rate=100, source="test")) as w:
         r = LogRecorder(w, sim, diagnostics_period=0.03)
         for i in range(12):
-            t_ns = r.now_ns()
+            t_ns = r.time.ns
             r.publish()
             for topic, msg in expected_messages(sim, t_ns).items():
                 written.setdefault(topic, []).append((t_ns, msg))
@@ -110,9 +110,9 @@ def log(tmp_path_factory):
                 r.command(cmd)
                 sim.set_axis_moments(cmd)
                 written.setdefault(M.AXIS_MOMENTS, []).append(
-                    (r.now_ns(), {"layout": {"dim": [], "data_offset": 0}, "data": cmd}))
+                    (r.time.ns, {"layout": {"dim": [], "data_offset": 0}, "data": cmd}))
             if i == 9:
-                t = r.now_ns()
+                t = r.time.ns
                 r.reset()
                 written.setdefault(M.EVENTS, []).append((t, {"data": "reset"}))
             sim.advance(0.01)

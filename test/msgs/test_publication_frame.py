@@ -74,6 +74,23 @@ def test_snapshot_into_gives_the_same_numbers_as_without(backend):
     assert a.invariants.keys() == b.invariants.keys()
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_write_outputs_writes_the_snapshots_numbers_and_names_a_non_finite_one(backend):
+    sim = driven("hinge_chain", backend)
+    pub = M.Publication(sim.model.names)
+    names = sim.snapshot().joint_names
+    written, snapped = (pub.frame(names, wrenches=True, poses=True, tf=True) for _ in range(2))
+    assert sim.write_outputs(written.scatter) is None
+    sim.snapshot(into=snapped.scatter)
+    assert written.scatter.dst.tobytes() == snapped.scatter.dst.tobytes()
+    bad = sim.state
+    bad[sim.model.i_vel.start + 1] = np.nan  # a joint rate: every output of the bodies past it
+    sim._y = bad  # a state the integrator would refuse
+    sim._outputs.moved(sim.time, bad, sim._p, sim._moments)
+    name = sim.write_outputs(written.scatter)
+    assert name in ("position", "velocity") and name == sim.snapshot(invariants=False).nonfinite()
+
+
 class _Node:
     """What ros.outputs.Outputs asks of an rclpy node, without ROS: publishers nobody reads."""
 
@@ -103,7 +120,8 @@ def test_node_outputs_are_the_builders_bytes_and_refuse_non_finite_numbers(backe
         assert [b[2] for b in batch] == want
     bad = sim.state
     bad[sim.model.i_vel.start + 1] = np.nan  # a joint rate: every output of the bodies past it
-    sim._y, sim._cache, sim._kin_ok = bad, None, False  # a state the integrator would refuse
+    sim._y = bad  # a state the integrator would refuse
+    sim._outputs.moved(sim.time, bad, sim._p, sim._moments)
     with pytest.raises(SimulationError, match="non-finite (position|velocity)"):
         out.prepare_state(M.time_ns(sim.time), sim)
 

@@ -148,7 +148,7 @@ def test_loop_timeout_zeroes_moments_and_reset_restarts():
     loop.requests.post(Reset())
     run_until(loop, lambda: len(out.states) > n + 2)
     t_reset = [t for t, e in out.events if e == "reset"][0]
-    assert loop.offset_ns == t_reset
+    assert loop.time.offset_ns == t_reset
     ref = Simulator(find_scene("hinge_chain"), integrator="rk4", step=0.004)
     after = [s for s in out.states if s[0] > t_reset][0]
     for _ in range(round((after[0] - t_reset) / 4e6)):
@@ -576,7 +576,7 @@ def test_the_loop_times_commands_and_reports_the_latency_in_its_diagnostics():
     def advance_and_receive(dt):
         advance(dt)
         if not arrived and loop.steps % 2 == 0:
-            arrived.append((clock.t, loop.offset_ns * 1e-9 + loop.sim.time))
+            arrived.append((clock.t, loop.time.offset_ns * 1e-9 + loop.sim.time))
             loop.submit_command(b"computing", [0.0, 0.02, 0.0])
 
     loop.sim.advance = advance_and_receive
