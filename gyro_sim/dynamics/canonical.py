@@ -150,7 +150,7 @@ class CanonicalChain:
 
     def momenta(self, t: float, y: np.ndarray) -> np.ndarray:
         """z (size,) of the package's state y at time t."""
-        m, d = self.model, self.data
+        m = self.model
         z = np.empty(self.size)
         q = y[m.i_quat]
         if m.free:

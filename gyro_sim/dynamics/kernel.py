@@ -997,7 +997,8 @@ def _aba_stable(is_hinge, col_start, e, tau, udot):
 
     so the factor passed to the parent is R22 N^T: no subtraction at all. Then one step of
     iterative refinement with the residual of the inverse dynamics (`_aba_resolve`) takes the
-    last ~eps x ratio off (test/dynamics/test_heavy_tip.py). The base body's joint with a free base (six columns) is solved with its
+    last ~eps x ratio off (test/dynamics/test_heavy_tip.py). The base body's joint with a free base
+    (six columns) is solved with its
     articulated inertia formed, F^T F (nothing passes on from it).
     """
     S, IA, pA, c, a_base, s_w, U, W, u, Dinv = e.S, e.IA, e.pA, e.c, e.a_base, e.s_w, e.U, e.W, e.u, e.Dinv
@@ -1320,7 +1321,8 @@ def kernel_signature(*extra):
 def heavy_elimination_address() -> int:
     """The address of `_aba_heavy` compiled as a C function of HEAVY_ENTRY_ARGUMENTS int64s
     (`_heavy_entry`), compiled or loaded from numba's disk cache on the first call (12-19 s of
-    CPU compiled, measured: less when the kernel's stages are compiled already); 0 without numba or with NUMBA_DISABLE_JIT,
+    CPU compiled, measured: less when the kernel's stages are compiled already); 0 without numba or with
+    NUMBA_DISABLE_JIT,
     where `_aba` calls it directly."""
     if not jit.compiling():
         return 0

@@ -312,7 +312,8 @@ class FastChainODE:
         if y.shape != (self.size,):
             raise ValueError(f"y must have shape ({self.size},), got {y.shape}")
         states, slots = self._no_publication
-        outputs = fast_outputs.Outputs(*(self._scratch if k == "scratch" else out[k] for k in fast_outputs.OUTPUT_NAMES))
+        outputs = fast_outputs.Outputs(*(self._scratch if k == "scratch" else out[k]
+                                         for k in fast_outputs.OUTPUT_NAMES))
         self._outputs(float(t), y, out["ydot"], *self._records, self._layout, int(fast_outputs.WANT_ALL), outputs,
                       states, slots)
         return out
