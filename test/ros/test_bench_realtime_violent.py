@@ -9,6 +9,7 @@ import pytest
 pytest.importorskip("rclpy", reason="the violent step's node run needs the ROS 2 node (pip install '.[ros]')")
 
 
+@pytest.mark.slow
 def test_the_node_publishes_through_the_violent_step(tmp_path):
     """Counts, not rates: the command was taken once, the node ran its simulated time with "fixed"
     (no simulation error), and /joint_states kept arriving after it."""

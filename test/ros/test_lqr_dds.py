@@ -32,6 +32,7 @@ ROOT = Path(__file__).resolve().parents[2]
 SECONDS = 20.0
 
 
+@pytest.mark.slow
 def test_the_lqr_example_holds_the_pendulum_up_over_dds(tmp_path):
     domain = new_domain_id()
     client = Client(domain)

@@ -104,6 +104,7 @@ def test_a_public_model_moves_as_in_mujoco(name):
     assert moved > 0.01  # the comparison is of a motion
 
 
+@pytest.mark.slow
 def test_z1_with_damping_and_dry_friction_loads_and_its_damping_agrees(tmp_path):
     """Z1 declares damping and dry friction on every joint: both imported; with the dry
     friction taken out of the file (MuJoCo's is a constraint, off in the judge) the damped arm
