@@ -293,9 +293,7 @@ class Simulator:
         "fixed" integrator). Its calls use the output workspace: outputs are computed afresh after."""
         hinge_tau, L_rotor = self._inputs()
         self.system.hold(self._t, self._p, hinge_tau, L_rotor)
-        self._cache = None
-        self._kin_ok = False
-        self._acc_ok = False
+        self._outputs.stale()  # the rhs's calls write the workspaces the outputs read
         return self.system.rhs
 
     def advance(self, dt: float) -> None:
