@@ -202,10 +202,10 @@ def link_poses(robot: RobotDescription, bodies: Mapping[str, tuple[np.ndarray, n
 
 def link_transforms(robot: RobotDescription, sim) -> tuple[list[str], np.ndarray, np.ndarray]:
     """The links' world poses from a Simulator's state: names, positions (n, 3), quaternions
-    (n, 4; w, x, y, z)."""
-    bodies = {b.name: (b.position, b.rotation) for b in sim.body_states()}
-    js = sim.joint_states()
-    poses = link_poses(robot, bodies, dict(zip(js.name, js.position)))
+    (n, 4; w, x, y, z), from one output call: the bodies' poses and the joint states together."""
+    s = sim.snapshot(wrenches=False, invariants=False)
+    bodies = {name: (s.body_position[k], quat_to_matrix(s.body_quaternion[k])) for k, name in enumerate(s.body_names)}
+    poses = link_poses(robot, bodies, dict(zip(s.joint_names, s.position)))
     names = [name for name, _, _ in poses]
     positions = np.array([p for _, p, _ in poses])
     quaternions = np.array([matrix_to_quat(R) for _, _, R in poses])
