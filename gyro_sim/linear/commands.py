@@ -9,6 +9,8 @@ import time
 
 import numpy as np
 
+from gyro_sim.linear.linearize import CHARTS, DISCRETE_METHODS, EQUILIBRIUM_TOL
+
 LINEARIZE_EXAMPLES = """examples:
   gyro-sim linearize rw_pendulum
   gyro-sim linearize rw_pendulum --discrete 0.01 --json
@@ -28,9 +30,9 @@ def register(sub, bench) -> None:
     g.add_argument("--keyframe", metavar="K", help="models only: the keyframe of the state")
     g.add_argument("--state", metavar="FILE", help="YAML: body name -> the scene's `initial` keys for that body")
     p.add_argument("--discrete", type=float, metavar="H", help="also the model of one step of H seconds")
-    p.add_argument("--method", default="zoh", choices=("zoh", "rk4", "gauss4", "gauss4s"),
+    p.add_argument("--method", default="zoh", choices=DISCRETE_METHODS,
                    help="the step of --discrete: zoh (exact, input held), or a fixed-step integrator's")
-    p.add_argument("--chart", default="world", choices=("world", "body", "frame"),
+    p.add_argument("--chart", default="world", choices=CHARTS,
                    help="rotations: world (rotation vectors in world axes), body (co-rotating with a steady spin) "
                         "or frame (seen from a frame turning at --frame-rate)")
     p.add_argument("--frame-rate", type=float, nargs=3, metavar=("WX", "WY", "WZ"),
@@ -144,7 +146,8 @@ def text(r: dict) -> str:
         lines.append(f"verdict: {r['verdict']} (largest real part {r['largest_real_part']:.6g}; "
                      f"|real part| <= {r['tolerance']:.2g} counts as zero)")
     else:
-        lines.append(f"verdict: none, not an equilibrium (max |f0| = {r['equilibrium_residual']:.3g} > 1e-9): "
+        lines.append(f"verdict: none, not an equilibrium (max |f0| = {r['equilibrium_residual']:.3g} "
+                     f"> {EQUILIBRIUM_TOL:g}): "
                      "the eigenvalues depend on the chart; try --chart body for a steady spin, "
                      "--chart frame for a precession")
     lines.append(f"controllability rank: {r['controllability_rank']} of {r['states']}")
