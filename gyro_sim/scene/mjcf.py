@@ -44,7 +44,6 @@ ignored and listed in :attr:`ImportedModel.notes`. This module raises :class:`Mo
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import math
 import os
 import re
@@ -111,7 +110,6 @@ class ImportedModel:
     commands: tuple[Command, ...]  # the model's actuators
     notes: tuple[str, ...]  # what was left out or approximated (contacts, limits, sensors...), one line each
     where: dict[str, str] = field(default_factory=dict)  # scene key path -> model element
-    locked: tuple[tuple[str, float], ...] = ()  # the joints welded (name, value), in the file's order
     robot: RobotDescription | None = None  # a URDF's own description and link frames (None: MJCF)
 
     def describe(self, errors: Sequence[str]) -> list[str]:
@@ -233,7 +231,7 @@ def import_model(path: str | os.PathLike, keyframe: str | None = None,
     importer = _Importer(mujoco, model, path, kind, gazebo, sites)
     importer.notes += notes
     importer.locked = locked
-    return dataclasses.replace(importer.run(keyframe), locked=tuple(locked.items()))
+    return importer.run(keyframe)
 
 
 def parse_locks(lock: Mapping[str, float | None] | Sequence[str], path: str | None = None) -> dict[str, float | None]:
