@@ -71,9 +71,9 @@ def run_point(scene_map: dict[str, Any], run: dict[str, Any], measures: tuple[st
     else:
         up = np.array([0.0, 0.0, 1.0])
     want = set(measures)
-    from gyro_sim.sweep.spec import STATIC_MEASURES
+    from gyro_sim.sweep.spec import simulates
 
-    if want <= set(STATIC_MEASURES):
+    if not simulates(want):
         n = 0  # only the initial state is measured
     row_eig = _eigen_columns(sim) if "eigenvalues" in want else {}
     axes0 = _axes(sim) if want & {"max_tilt", "max_deviation"} else None

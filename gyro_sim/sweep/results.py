@@ -137,9 +137,9 @@ def summary(sweep, rows: list[dict], stats: dict[str, Any], check, largest_rows)
         lines.append(f"- random: {sweep.draws} draws, seed {sweep.seed}")
         for k, (dist, args) in sweep.axes.items():
             lines.append(f"  - `{k}`: {dist} {args}")
-    from gyro_sim.sweep.spec import STATIC_MEASURES
+    from gyro_sim.sweep.spec import simulates
 
-    if set(sweep.measures) <= set(STATIC_MEASURES):
+    if not simulates(sweep.measures):
         lines.append("- run: none, a linearisation at each point's initial state")
     else:
         lines.append(f"- run: {run['integrator']}"

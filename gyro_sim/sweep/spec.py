@@ -67,6 +67,12 @@ MAX_POINTS = 200_000
 MAX_GRID_VALUES = 10_000
 MAX_FILE_BYTES = 1_000_000
 
+
+def simulates(measures) -> bool:
+    """Whether measures need a run: not when every one is taken at the initial state."""
+    return not set(measures) <= set(STATIC_MEASURES)
+
+
 _SEGMENT = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)((?:\[\d+\])*)")
 _INDEX = re.compile(r"\[(\d+)\]")
 
