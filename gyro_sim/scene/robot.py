@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gyro_sim.dynamics.rotations import matrix_to_quat, quat_to_matrix
+from gyro_sim.dynamics.rotations import axis_angle_matrix, matrix_to_quat, quat_to_matrix
 from gyro_sim.scene.gazebo import rpy_quaternion
 
 __all__ = ["LinkFrame", "RobotDescription", "describe_robot", "link_poses", "link_transforms"]
@@ -55,10 +55,6 @@ class RobotDescription:
     links: tuple[LinkFrame, ...]
 
 
-def _quat_matrix(q: np.ndarray) -> np.ndarray:
-    return quat_to_matrix(np.asarray(q, dtype=float))
-
-
 def _origin(joint: ET.Element) -> tuple[np.ndarray, np.ndarray]:
     """A joint's <origin>: (xyz, R)."""
     origin = joint.find("origin")
@@ -67,7 +63,7 @@ def _origin(joint: ET.Element) -> tuple[np.ndarray, np.ndarray]:
     if origin is not None:
         xyz = np.array([float(v) for v in (origin.get("xyz") or "0 0 0").split()])
         rpy = np.array([float(v) for v in (origin.get("rpy") or "0 0 0").split()])
-    return xyz, _quat_matrix(rpy_quaternion(rpy))
+    return xyz, quat_to_matrix(np.asarray(rpy_quaternion(rpy), dtype=float))
 
 
 def _axis(joint: ET.Element) -> np.ndarray:
@@ -76,16 +72,11 @@ def _axis(joint: ET.Element) -> np.ndarray:
     return a / np.linalg.norm(a)
 
 
-def _turn(axis: np.ndarray, angle: float) -> np.ndarray:
-    half = 0.5 * angle
-    return _quat_matrix(np.concatenate([[math.cos(half)], math.sin(half) * axis]))
-
-
 def _motion(joint: ET.Element, value: float) -> tuple[np.ndarray, np.ndarray]:
     """The child's displacement in the joint frame at `value`: (translation, rotation)."""
     if joint.get("type") == "prismatic":
         return value * _axis(joint), np.eye(3)
-    return np.zeros(3), _turn(_axis(joint), value)
+    return np.zeros(3), axis_angle_matrix(_axis(joint), value)
 
 
 def _reference(root: ET.Element, locked: Mapping[str, float]) -> tuple[dict, dict, str]:
@@ -193,7 +184,7 @@ def link_poses(robot: RobotDescription, bodies: Mapping[str, tuple[np.ndarray, n
         O, R = bodies[link.body]
         p, Rl = link.position, link.rotation
         if link.rotor is not None:
-            turn = _turn(link.axis, angles[link.rotor])
+            turn = axis_angle_matrix(link.axis, angles[link.rotor])
             p = link.anchor + turn @ (p - link.anchor)
             Rl = turn @ Rl
         out.append((link.name, O + R @ p, R @ Rl))
