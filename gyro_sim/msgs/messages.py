@@ -349,8 +349,14 @@ def _wrench_stamped(w: CdrWriter, t_ns: int, frame: str, wrench) -> CdrWriter:
 
 def _poses_xyzw(snap, what: str) -> np.ndarray:
     """(n, 7) position and quaternion x, y, z, w of every body (the geometry_msgs order)."""
-    p = _finite(snap.body_position, f"{what}.position")
-    q = _finite(snap.body_quaternion, f"{what}.orientation")
+    return _xyzw(snap.body_position, snap.body_quaternion, f"{what}.position", f"{what}.orientation")
+
+
+def _xyzw(positions, quaternions, p_what: str, q_what: str) -> np.ndarray:
+    """(n, 7) positions (n, 3) and quaternions (n, 4; w, x, y, z) as geometry_msgs orders them
+    (x, y, z, w), each refused if not finite (named `p_what`, `q_what`)."""
+    p = _finite(positions, p_what)
+    q = _finite(quaternions, q_what)
     return np.concatenate([p, q[:, 1:], q[:, :1]], axis=1)
 
 
@@ -374,9 +380,8 @@ def tf_message(snap, t_ns: int) -> bytes:
 def frames_tf_message(names: Sequence[str], positions, quaternions, t_ns: int) -> bytes:
     """tf2_msgs/TFMessage: world -> each named frame at its position (n, 3) and quaternion (n, 4;
     w, x, y, z): a URDF robot's link frames (gyro_sim.scene.robot). Refuses a non-finite number."""
-    p = _finite(np.asarray(positions, dtype=float), "tf.translation")
-    q = _finite(np.asarray(quaternions, dtype=float), "tf.rotation")
-    return bytes(_tf_message(CdrWriter(), names, np.concatenate([p, q[:, 1:], q[:, :1]], axis=1), t_ns))
+    return bytes(_tf_message(CdrWriter(), names, _xyzw(positions, quaternions, "tf.translation", "tf.rotation"),
+                             t_ns))
 
 
 def _tf_message(w: CdrWriter, body_names, poses, t_ns: int) -> CdrWriter:
