@@ -86,7 +86,7 @@ STARTED_TIMEOUT = 1.0
 #: longest wait of the executor (s): how soon a signal is acted on
 SPIN_PERIOD = 0.1
 #: the largest share of the interpreter the executor thread takes while callbacks keep coming:
-#: after each callback it sleeps (1 / share - 1) times the time it took, leaving the
+#: after each callback it sleeps (1 / share - 1) times the CPU time it took, leaving the
 #: interpreter to the physics thread, so a flood of commands cannot starve the physics loop
 EXECUTOR_SHARE = 0.2
 
@@ -194,7 +194,10 @@ class GyroSimNode(Node):
             + (f" = {choice}" if (choice := method_choice(self.sim, cfg)) else "")
             + f", {self.sim.backend} dynamics), "
             f"publish {cfg.publish_rate:g} Hz, "
-            f"real-time factor {cfg.real_time_factor:g}, {self.loop.pacing.per_chunk} steps per wake-up"
+            + (f"lock-step: one period of {cfg.steps_per_publish} steps per command on ~/axis_moments, "
+               f"waiting for the first" if cfg.lockstep else
+               f"real-time factor {cfg.real_time_factor:g}, {self.loop.pacing.per_chunk} steps per wake-up"
+               + ("; holding the initial state until the first command" if cfg.hold == "until_command" else ""))
             + (f"; recording to {cfg.record}" if cfg.record else "")
         )
         if demo is not None:
@@ -509,10 +512,13 @@ def _main(argv, shutdown: Shutdown) -> int:
             while not shutdown.requested.is_set() and not node.loop.finished.is_set():
                 if node.loop.thread.ident is not None and not node.loop.thread.is_alive():
                     break  # never without `finished`; a guard: nothing here waits on a dead thread
-                t0 = time.monotonic()
+                t0 = time.thread_time()
                 executor.spin_once(timeout_sec=SPIN_PERIOD)
-                busy = time.monotonic() - t0
-                if busy < 0.5 * SPIN_PERIOD:  # it ran a callback
+                # the CPU the callback took, not the wall time of the call: that includes the
+                # wait for it (up to a control period at 1 kHz), which slept 4x as long again
+                # and let the subscription's queue overflow (commands lost)
+                busy = time.thread_time() - t0
+                if busy > 0.0:
                     time.sleep(busy * (1.0 / EXECUTOR_SHARE - 1.0))
         except Exception as exc:  # noqa: BLE001 - the log is closed below whatever happened
             why = resource_error(exc)
