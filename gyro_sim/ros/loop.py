@@ -437,6 +437,7 @@ class SimLoop:
             "commands_accepted": c.accepted,
             "commands_rejected": c.rejected,
             "commands_superseded": c.superseded,
+            "commands_per_wall_s": c.accepted / wall if wall > 0 else math.nan,
             "commands_timed": self.commands.latency.run.n,
             "command_latency_p50_us": l50,
             "command_latency_p99_us": l99,

@@ -507,7 +507,7 @@ def _main(argv, shutdown: Shutdown) -> int:
                 node.loop.start()
                 if node.loop.started.wait(STARTED_TIMEOUT):  # how the physics thread is scheduled
                     log = node.get_logger().info if node.loop.pacing.priority or not node.config.thread_priority \
-                        or node.config.real_time_factor <= 0 else node.get_logger().warning
+                        or node.config.real_time_factor <= 0 or node.config.lockstep else node.get_logger().warning
                     log(f"physics thread: {node.loop.pacing.scheduling}")
             while not shutdown.requested.is_set() and not node.loop.finished.is_set():
                 if node.loop.thread.ident is not None and not node.loop.thread.is_alive():
@@ -551,9 +551,11 @@ def _main(argv, shutdown: Shutdown) -> int:
 
 
 def _summary_line(stats: dict, cfg) -> None:
+    target = (f"lock-step, {stats['commands_per_wall_s']:.0f} commands per wall second" if cfg.lockstep
+              else f"target {cfg.real_time_factor:g}")
     print(
         f"gyro_sim_node: simulated {stats['node_time_s']:.3f} s in {stats['wall_s']:.3f} s wall "
-        f"(real-time factor {stats['real_time_factor_achieved']:.3f}, target {cfg.real_time_factor:g}), "
+        f"(real-time factor {stats['real_time_factor_achieved']:.3f}, {target}), "
         f"step time p50 {stats['step_time_p50_us']:.0f} us / p99 {stats['step_time_p99_us']:.0f} us, "
         f"{stats['deadline_misses']} deadline misses, CPU {100 * stats['cpu_share']:.0f} %"
     )
