@@ -30,7 +30,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from gyro_sim.bench.realtime import NODE_COMMAND, _domain
+from gyro_sim.bench.realtime import NODE_COMMAND
 
 DEFAULT_RATES = (100.0, 500.0, 1000.0)
 MODES = ("realtime", "lockstep")
@@ -41,6 +41,11 @@ EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "lqr_balance.py"
 UPRIGHT = 0.01
 SETTLE = 1.0
 SCENE = "rw_pendulum"
+
+
+def _domain(i: int) -> int:
+    """230..259: apart from the tests' domains (50..199) and `bench realtime`'s (200..229)."""
+    return 230 + (os.getpid() * 7 + i) % 30
 
 
 def _env(workdir: Path, domain: int) -> dict:
@@ -74,9 +79,9 @@ def run_loop(rate: float, mode: str, seconds: float, workdir: Path, index: int =
     angles: list[tuple[float, float]] = []
 
     def on_joints(msg) -> None:
-        names = list(msg.name)
+        names, stamp = list(msg.name), msg.header.stamp
         if "pendulum" in names:
-            angles.append((msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec, msg.position[names.index("pendulum")]))
+            angles.append((stamp.sec + 1e-9 * stamp.nanosec, msg.position[names.index("pendulum")]))
 
     announce_often()
     context = rclpy.Context()

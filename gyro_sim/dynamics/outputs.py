@@ -276,7 +276,7 @@ def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, s
     allocates nothing: compiled without reference counting, as fast.rhs_kernel).
 
     A stateful model (flags[FLAG_ACTUATORS]: friction, max_speed) reads its spins from y and
-    publishes as efforts the torques applied at this state, the kernel's (`fast._actuate`:
+    publishes as efforts the torques applied at this state, the kernel's (`fast.actuate`:
     commands after the speed cut, plus friction), as the numpy reference does.
 
     Returns 0, or the index in NONFINITE_FIELDS of a field found not finite (the joint states,
@@ -306,7 +306,7 @@ def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, s
     if do_wrench or nv > 0:  # the accelerations: u' into ydot; the kinematics, p (29), S as above
         fast.rhs_call(t, y, ydot, model, data, inputs)
     else:
-        if not stateful:  # a stateful model's spins are states: `fast._actuate` reads them from y
+        if not stateful:  # a stateful model's spins are states: `fast.actuate` reads them from y
             for i in range(nt):
                 p[i] = p0[i] + pdot[i] * (t - t0)  # (29)
         body_positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R_k, s_w, hk, Aw, e_w)
@@ -314,7 +314,7 @@ def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, s
     L_applied, tau_applied = L_rotor, tau
     if stateful:  # the torques applied at this state (motors after the speed cut, friction): the
         # kernel's own computation, again after rhs_call (the same numbers, written again)
-        L_applied, tau_applied = fast._actuate(y, ydot, model, data, inputs, R_k, w_k, p)
+        L_applied, tau_applied = fast.actuate(y, ydot, model, data, inputs, R_k, w_k, p)
     for k in range(n):  # the outputs' copies
         for a in range(3):
             w[k, a] = w_k[k, a]

@@ -413,7 +413,9 @@ def help_text() -> str:
             "name or an invalid value stops the node at start (exit 2).\n\n"
             "example:\n"
             "  gyro_sim_node --ros-args --params-file config/params.yaml -p record:=live.mcap -p duration:=20.0\n"
-            "  gyro_sim_node --ros-args --params-file config/params.yaml -p demo:=true -p record:=auto\n\n"
+            "  gyro_sim_node --ros-args --params-file config/params.yaml -p demo:=true -p record:=auto\n"
+            "  gyro_sim_node --ros-args -p scene:=rw_pendulum -p lockstep:=true   (one control period per\n"
+            "      command on ~/axis_moments: a controller of any speed closes the loop exactly)\n\n"
             "parameters (name, type, default, range, meaning):\n")
     lines = ["  " + "  ".join(r[c].ljust(widths[c]) for c in range(4)) + "  " + r[4] for r in rows]
     return head + "\n".join(line.rstrip() for line in lines) + "\n"

@@ -131,7 +131,7 @@ def test_a_reset_discards_the_commands_waiting_and_publishes_the_reset_state():
 def test_a_full_queue_rejects_commands():
     out = Outputs()
     loop, cfg = make(out)
-    for k in range(LOCKSTEP_QUEUE):
+    for _ in range(LOCKSTEP_QUEUE):
         assert loop.submit_command(b"u", [0.0, 0.0]) is None
     assert "already waiting" in loop.submit_command(b"u", [0.0, 0.0])
     assert loop.commands.counters.rejected == 1 and loop.commands.waiting == LOCKSTEP_QUEUE
