@@ -14,6 +14,8 @@ angle. Reported per run, from the node's stats_file:
 - command latency p50 / p99: from the node's receipt of a command to the physics step that
   applies it (in real time it includes the wait for the next step's wall deadline: at most
   one control period when the controller answers within it);
+- the commands the controller sent (its own count, printed when it stops) and those the node
+  took (a command lost on the way, or superseded before a step took it, moves nothing);
 - in lock-step, commands per wall second (each one control period: the loop's own pace);
 - the pendulum's largest |angle| from 1 s of simulated time on.
 
@@ -24,6 +26,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -118,7 +121,9 @@ def run_loop(rate: float, mode: str, seconds: float, workdir: Path, index: int =
                            f"{node_log.read_text(errors='replace')[-2000:]}")
     st = json.loads(stats.read_text())
     settled = [abs(a) for t, a in angles if t >= SETTLE]
-    st.update(mode=mode, rate=rate, joint_states_received=len(angles),
+    # the controller's own count, printed when it stops ("lqr_balance: N commands; ...")
+    said = re.search(r"lqr_balance: (\d+) commands", ctrl_log.read_text(errors="replace"))
+    st.update(mode=mode, rate=rate, joint_states_received=len(angles), commands_sent=int(said[1]) if said else None,
               max_angle_after_settle=max(settled) if settled else math.nan)
     return st
 
@@ -140,8 +145,9 @@ def _f(v, fmt: str) -> str:
 
 def table(runs: list[dict]) -> str:
     lines = ["| mode | rate (Hz) | achieved RTF | step p50 (us) | step p99 (us) | command latency p50 (us) "
-             "| command latency p99 (us) | deadline misses | commands / wall s | max abs(angle) after 1 s (rad) |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             "| command latency p99 (us) | deadline misses | commands sent / taken | commands / wall s "
+             "| max abs(angle) after 1 s (rad) |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in runs:
         lock = r["mode"] == "lockstep"
         lines.append(
@@ -149,6 +155,7 @@ def table(runs: list[dict]) -> str:
             f"| {_f(r.get('step_time_p50_us'), '.0f')} | {_f(r.get('step_time_p99_us'), '.0f')} "
             f"| {_f(r.get('command_latency_p50_us'), '.0f')} | {_f(r.get('command_latency_p99_us'), '.0f')} "
             f"| {'-' if lock else int(r.get('deadline_misses', 0))} "
+            f"| {r.get('commands_sent') if r.get('commands_sent') is not None else '-'} / {r.get('commands_accepted')} "
             f"| {_f(r.get('commands_per_wall_s'), '.0f') if lock else '-'} "
             f"| {_f(r.get('max_angle_after_settle'), '.4f')} |")
     return "\n".join(lines)

@@ -57,6 +57,7 @@ from gyro_sim.simulator import Simulator
 from gyro_sim.msgs.messages import decode_axis_moments
 from gyro_sim.ros.loop import Pause, Reset, SimLoop, warm_up
 from gyro_sim.ros.outputs import Outputs, node_topics
+from gyro_sim.ros.pacing import ShareLimit
 from gyro_sim.ros.params import PARAMETERS, ParameterError, validate
 
 #: bytes in a megabyte (record_queue_mb)
@@ -85,10 +86,13 @@ SWITCH_INTERVAL = 5e-4
 STARTED_TIMEOUT = 1.0
 #: longest wait of the executor (s): how soon a signal is acted on
 SPIN_PERIOD = 0.1
-#: the largest share of the interpreter the executor thread takes while callbacks keep coming:
-#: after each callback it sleeps (1 / share - 1) times the CPU time it took, leaving the
-#: interpreter to the physics thread, so a flood of commands cannot starve the physics loop
+#: the largest share of the interpreter the executor thread takes on average while callbacks
+#: keep coming (gyro_sim.ros.pacing.ShareLimit): beyond, it sleeps, leaving the interpreter to
+#: the physics thread, so a flood of commands cannot starve the physics loop
 EXECUTOR_SHARE = 0.2
+#: CPU seconds the executor may run beyond its share before it sleeps: commands at a steady
+#: 1 kHz are taken as they come (a sleep after each one let the subscription's queue overflow)
+EXECUTOR_BURST = 0.005
 
 
 def descriptor(p) -> ParameterDescriptor:
@@ -500,6 +504,7 @@ def _main(argv, shutdown: Shutdown) -> int:
         sys.setswitchinterval(SWITCH_INTERVAL)
         executor = SingleThreadedExecutor()
         executor.add_node(node)
+        share = ShareLimit(EXECUTOR_SHARE, EXECUTOR_BURST)
         spin_error = None
         try:
             shutdown.start_done()
@@ -514,12 +519,9 @@ def _main(argv, shutdown: Shutdown) -> int:
                     break  # never without `finished`; a guard: nothing here waits on a dead thread
                 t0 = time.thread_time()
                 executor.spin_once(timeout_sec=SPIN_PERIOD)
-                # the CPU the callback took, not the wall time of the call: that includes the
-                # wait for it (up to a control period at 1 kHz), which slept 4x as long again
-                # and let the subscription's queue overflow (commands lost)
-                busy = time.thread_time() - t0
-                if busy > 0.0:
-                    time.sleep(busy * (1.0 / EXECUTOR_SHARE - 1.0))
+                pause = share.after(time.thread_time() - t0)  # its CPU, not the wait for a callback
+                if pause > 0.0:
+                    time.sleep(pause)
         except Exception as exc:  # noqa: BLE001 - the log is closed below whatever happened
             why = resource_error(exc)
             spin_error = why or f"{type(exc).__name__}: {exc}"

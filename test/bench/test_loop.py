@@ -30,7 +30,7 @@ def test_bench_loop_writes_a_row_per_mode_and_rate(tmp_path):
     lock = next(run for run in runs if run["mode"] == "lockstep")
     # lock-step: 200 periods, each of one command; the pendulum upright (the same run every time)
     assert lock["steps"] == 2000 and lock["commands_superseded"] == 0 and lock["commands_accepted"] >= 200
-    assert lock["max_angle_after_settle"] < 0.01 and float(rows[1][8]) > 0  # commands per wall second
+    assert lock["max_angle_after_settle"] < 0.01 and float(rows[1][9]) > 0  # commands per wall second
     assert all(run["node_time_s"] == pytest.approx(2.0) for run in runs)
 
 
