@@ -163,3 +163,33 @@ def test_hold_until_command_holds_the_initial_state_then_runs_in_real_time():
 def test_refused(params, message):
     with pytest.raises(ParameterError, match=message):
         validate({**PARAMS, **params})
+
+
+def test_paused_no_period_advances_and_the_commands_wait_in_order():
+    from gyro_sim.ros.loop import Pause
+
+    out = Outputs()
+    loop, cfg = make(out)
+    th = threading.Thread(target=loop._run, daemon=True)
+    th.start()
+    try:
+        loop.submit_command(M.axis_moments([0.0, 0.01]), [0.0, 0.01])
+        t0 = time.monotonic()
+        while len(out.states) < 2 and time.monotonic() - t0 < 30:  # the initial state, the first period
+            time.sleep(0.002)
+        assert loop.request(Pause(True), timeout=10)[0]
+        n = len(out.states)
+        assert n == 2
+        sent = [[0.0, 0.02], [0.0, 0.03]]
+        for u in sent:
+            loop.submit_command(M.axis_moments(u), u)
+        time.sleep(0.3)  # paused: nothing advances, nothing more is logged
+        assert len(out.states) == n and loop.commands.waiting == 2 and len(out.commands) == 1
+        assert loop.request(Pause(False), timeout=10)[0]
+        t0 = time.monotonic()
+        while len(out.states) < 4 and time.monotonic() - t0 < 30:
+            time.sleep(0.002)
+    finally:
+        loop._stop.set()
+        th.join(10)
+    assert [s[2] for s in out.states[2:]] == sent and [t for t, _ in out.commands] == [0, 10_000_000, 20_000_000]
