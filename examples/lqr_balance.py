@@ -112,7 +112,7 @@ def main(argv=None) -> int:
     import time
 
     import rclpy
-    from rclpy.executors import ExternalShutdownException
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from sensor_msgs.msg import Imu, JointState
     from std_msgs.msg import Float64MultiArray
 
@@ -143,10 +143,12 @@ def main(argv=None) -> int:
 
     node.create_subscription(Imu, f"{args.sim_node}/imu/{ctrl.imu}", lambda m: answer("imu", m), 10)
     node.create_subscription(JointState, "/joint_states", lambda m: answer("joints", m), 10)
+    executor = SingleThreadedExecutor()  # made once: rclpy.spin_once(node) adds and removes the node each call
+    executor.add_node(node)
     end = time.monotonic() + args.duration if args.duration > 0 else None
     try:
         while rclpy.ok() and (end is None or time.monotonic() < end):
-            rclpy.spin_once(node, timeout_sec=0.1)
+            executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
