@@ -211,6 +211,9 @@ def validate(values: dict) -> NodeConfig:
         problems.append(f"hold: unknown {v['hold']!r}; valid: {', '.join(HOLDS)}")
     if not {"lockstep", "demo"} & bad and v["lockstep"] and v["demo"]:
         problems.append("demo: not with lockstep (the demo's commands would advance the lock-step node by themselves)")
+    elif not {"hold", "demo"} & bad and v["hold"] == "until_command" and v["demo"]:
+        problems.append("demo: not with hold until_command (the demo drives until a command comes, the hold waits "
+                        "for one: the demo would never run)")
     if "integrator" not in bad and v["integrator"] not in INTEGRATORS:
         problems.append(f"integrator: unknown {v['integrator']!r}; valid: {', '.join(INTEGRATORS)}")
     if "backend" not in bad:

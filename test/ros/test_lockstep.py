@@ -159,6 +159,8 @@ def test_hold_until_command_holds_the_initial_state_then_runs_in_real_time():
 
 
 @pytest.mark.parametrize("params, message", [({"demo": True}, "demo: not with lockstep"),
+                                             ({"lockstep": False, "hold": "until_command", "demo": True},
+                                              "demo: not with hold until_command"),
                                              ({"lockstep": False, "hold": "later"}, "hold: unknown 'later'")])
 def test_refused(params, message):
     with pytest.raises(ParameterError, match=message):
