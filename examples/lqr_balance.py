@@ -2,11 +2,16 @@
 
 A ROS 2 node to copy: it takes the pendulum's angle and the wheel's rate from /joint_states,
 the pendulum's rate from the IMU's gyro (with its noise and bias), and publishes the wheel
-torque on the simulator's ~/axis_moments each time a joint state arrives (the publish rate).
+torque on the simulator's ~/axis_moments once for each publication (the publish rate): when
+the joint state and the IMU message of one stamp have both arrived, in either order.
 
-    gyro_sim_node --ros-args -p scene:=rw_pendulum          # shell 1: the simulator
-    python examples/lqr_balance.py                           # shell 2: this controller
-    gyro-sim view --live                                     # shell 3: watch it
+    gyro_sim_node --ros-args -p scene:=rw_pendulum -p hold:=until_command   # shell 1: the simulator
+    python examples/lqr_balance.py                                          # shell 2: this controller
+    gyro-sim view --live                                                    # shell 3: watch it
+
+`hold:=until_command` keeps the pendulum at its initial state until this controller's first
+command, however late it starts. With `-p lockstep:=true` instead the simulator advances one
+control period per command: the loop is closed exactly whatever the machine's load.
 
 The design (`LqrBalancer.design`), in the model's own names (docs/linearization.md):
 
@@ -107,7 +112,7 @@ def main(argv=None) -> int:
     import time
 
     import rclpy
-    from rclpy.executors import ExternalShutdownException
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from sensor_msgs.msg import Imu, JointState
     from std_msgs.msg import Float64MultiArray
 
@@ -117,28 +122,33 @@ def main(argv=None) -> int:
     log = node.get_logger()
     log.info(f"K = {np.array2string(ctrl.K, precision=4)}, closed-loop spectral radius {ctrl.closed_loop_radius:.4f}")
     pub = node.create_publisher(Float64MultiArray, f"{args.sim_node}/axis_moments", 10)
-    gyro = {"x": None}
-    handling = []  # wall seconds from a joint state's receipt to its command's publication
+    latest = {"joints": None, "imu": None}  # the last of each not yet answered
+    handling = []  # wall seconds from a publication's receipt (its second message) to the command
 
-    def on_imu(msg: Imu) -> None:
-        gyro["x"] = msg.angular_velocity.x
+    def stamp(msg) -> tuple[int, int]:
+        return msg.header.stamp.sec, msg.header.stamp.nanosec
 
-    def on_joints(msg: JointState) -> None:
+    def answer(kind: str, msg) -> None:
         t0 = time.perf_counter()
-        if gyro["x"] is None:
-            return
-        i, j = msg.name.index("pendulum"), msg.name.index("wheel")
+        latest[kind] = msg
+        joints, imu = latest["joints"], latest["imu"]
+        if joints is None or imu is None or stamp(joints) != stamp(imu):
+            return  # one publication's two messages, answered once, whichever came first
+        latest["joints"] = latest["imu"] = None
+        i, j = joints.name.index("pendulum"), joints.name.index("wheel")
         out = Float64MultiArray()
-        out.data = ctrl.command(msg.position[i], gyro["x"], msg.velocity[j])
+        out.data = ctrl.command(joints.position[i], imu.angular_velocity.x, joints.velocity[j])
         pub.publish(out)
         handling.append(time.perf_counter() - t0)
 
-    node.create_subscription(Imu, f"{args.sim_node}/imu/{ctrl.imu}", on_imu, 10)
-    node.create_subscription(JointState, "/joint_states", on_joints, 10)
+    node.create_subscription(Imu, f"{args.sim_node}/imu/{ctrl.imu}", lambda m: answer("imu", m), 10)
+    node.create_subscription(JointState, "/joint_states", lambda m: answer("joints", m), 10)
+    executor = SingleThreadedExecutor()  # made once: rclpy.spin_once(node) adds and removes the node each call
+    executor.add_node(node)
     end = time.monotonic() + args.duration if args.duration > 0 else None
     try:
         while rclpy.ok() and (end is None or time.monotonic() < end):
-            rclpy.spin_once(node, timeout_sec=0.1)
+            executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

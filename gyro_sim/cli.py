@@ -224,6 +224,7 @@ BENCH_EXAMPLES = """examples:
   gyro-sim bench accuracy --quick --out out/bench
   gyro-sim bench stability --quick
   gyro-sim bench realtime --quick
+  gyro-sim bench loop --rates 100 1000
 
 Each writes <report>.md and <report>.png to --out (default out/bench)."""
 
@@ -237,6 +238,7 @@ PLUGINS = (
     "gyro_sim.bench.accuracy",
     "gyro_sim.bench.stability",
     "gyro_sim.bench.realtime",
+    "gyro_sim.bench.loop",  # bench loop (a controller over DDS)
     "gyro_sim.bench.publication",
     "gyro_sim.sweep.commands",  # sweep (many runs on Dask)
     "gyro_sim.scene.commands",  # import (an MJCF or URDF model as a scene)

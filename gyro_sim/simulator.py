@@ -115,11 +115,11 @@ class Simulator:
             raise ActuatorError(f"{m.actuators.terms[0]}: integrator {integrator!r} does not take speed-dependent "
                              f"actuator terms (friction, max_speed); use one of {', '.join(STATEFUL_INTEGRATORS)}")
         self._joint_layout()
-        # every output of a state from one compiled call on the numba backend; a stateful model's
-        # outputs (its applied torques) from the numpy reference
+        # every output of a state from one compiled call on the numba backend (a stateful model's
+        # applied torques too), from the numpy reference on the numpy backend
         from gyro_sim.dynamics.backends import CompiledOutputs, NumpyOutputs
 
-        outputs = CompiledOutputs if self.system.backend == "numba" and not m.stateful else NumpyOutputs
+        outputs = CompiledOutputs if self.system.backend == "numba" else NumpyOutputs
         self._outputs = outputs(m, self.system, self._joint_index, self._inputs)
         self._watched = self._watched_energy()
         self._watch_last = None

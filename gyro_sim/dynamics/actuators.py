@@ -23,7 +23,7 @@ state: a scene that has them carries the torque rotors' absolute spins p_i and t
 applied torques in its state vector (`gyro_sim.dynamics.model`, `i_spin`, `i_work`), and
 the dynamics evaluates the torques at every stage: the numpy reference
 (`gyro_sim.dynamics.reference.applied_torques`) and the compiled kernel
-(`gyro_sim.dynamics.kernel._actuate`, its parameters in the workspace's tail). A scene
+(`gyro_sim.dynamics.kernel.actuate`, its parameters in the workspace's tail). A scene
 without them takes the held-input path unchanged.
 """
 from __future__ import annotations

@@ -236,8 +236,8 @@ class NumpyOutputs(_State):
 
 class CompiledOutputs(_State):
     """The outputs from one compiled call (fo.publication_kernel) into scratch arrays of its own,
-    under held inputs of its own (the system keeps the hold of the last advance); not for a
-    stateful model (its applied torques come from the numpy reference).
+    under held inputs of its own (the system keeps the hold of the last advance); a stateful
+    model's efforts are the torques applied at the state, as the numpy reference's.
 
     model, system (FastChainODE: `kernel_arguments`, `records_with_own_inputs`), joint_index,
     inputs : as NumpyOutputs

@@ -53,6 +53,9 @@ DRAWS_PER_SAMPLE = 12
 #: most samples drawn in one block when a caller skips ahead (memory bound; the sequence is the
 #: same whatever the block size)
 DRAW_BLOCK = 65536
+#: samples drawn at once when `ImuNoise.at` is asked one sample after another (a publication's
+#: IMU sample: one draw per DRAW_AHEAD samples instead of one per sample)
+DRAW_AHEAD = 256
 #: publish_rate / rate within this relative tolerance of a whole number counts as one
 RATIO_RTOL = 1e-9
 #: the rate of a scene's IMUs that give none, until `Simulator.set_imu_default_rate` (Hz): the
@@ -145,8 +148,9 @@ class ImuNoise:
         """Back to before the first sample: the generator seeded again, the bias zero."""
         self._generator = np.random.Generator(np.random.PCG64(self.seed))
         self._bias = np.zeros(6)
-        self._index = -1
+        self._index = -1  # the last sample given
         self._last = np.zeros(6)
+        self._ahead = np.zeros((0, 6))  # drawn and not given yet: samples _index + 1, ...
 
     def _draw(self, count: int) -> np.ndarray:
         """The noise (count, 6) of the next `count` samples, drawn in one block: the bias summed
@@ -158,23 +162,32 @@ class ImuNoise:
         steps[1:] = draws[:, 6:] * self.walk
         bias = np.cumsum(steps, axis=0)[1:]
         self._bias = bias[-1]
-        self._index += count
         return bias + self.white * draws[:, :6]
+
+    def _next(self, count: int, least: int = 1) -> np.ndarray:
+        """The next samples, at most `count` (at least one): those drawn ahead first, else a new
+        block of max(least, count) (at most DRAW_BLOCK), the rest kept ahead."""
+        if not len(self._ahead):
+            self._ahead = self._draw(min(max(count, least), DRAW_BLOCK))
+        out, self._ahead = self._ahead[:count], self._ahead[count:]
+        self._index += len(out)
+        return out
 
     def at(self, index: int) -> np.ndarray:
         """The noise (6,) of sample `index` (gyro x y z, accelerometer x y z): the samples up to it
-        are drawn in order; an index already passed gives the last one drawn again (a new copy)."""
+        are drawn in order (DRAW_AHEAD at a time when asked one by one: the same numbers); an
+        index already passed gives the last one drawn again (a new copy)."""
         if self.silent or index <= self._index:
             return self._last.copy()
         while self._index < index:
-            self._last = self._draw(min(index - self._index, DRAW_BLOCK))[-1]
+            self._last = self._next(index - self._index, DRAW_AHEAD)[-1]
         return self._last.copy()
 
     def record(self, count: int) -> np.ndarray:
         """The noise (count, 6) of the next `count` samples, the numbers `at` gives one by one."""
         blocks = []
         while count > 0:
-            blocks.append(self._draw(min(count, DRAW_BLOCK)))
+            blocks.append(self._next(count))
             count -= len(blocks[-1])
         if blocks:
             self._last = blocks[-1][-1]

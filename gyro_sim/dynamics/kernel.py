@@ -1417,7 +1417,7 @@ def rhs_kernel(t, y, ydot, model, data, inputs):
     Held inputs: torque-rotor spins p_i = p0_i + pdot_i (t - t0) (eq 29), their torques
     L_rotor, the generalized forces tau (N,) of the columns (hinge commands, eq 51).
     A stateful model (flags[FLAG_ACTUATORS]) reads the spins from y instead and applies the
-    commands through its actuators' speed cut and friction (`_actuate`).
+    commands through its actuators' speed cut and friction (`actuate`).
     """
     (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
      torque_axis, torque_A, flags, base) = model
@@ -1436,7 +1436,7 @@ def rhs_kernel(t, y, ydot, model, data, inputs):
     body_velocities(t, y, model, s_w, e_w, w, vO, c)
     L_applied, tau_applied = L_rotor, tau
     if flags[FLAG_ACTUATORS] != 0:  # spins and works are states; the torques applied at this state
-        L_applied, tau_applied = _actuate(y, ydot, model, data, inputs, R, w, p)
+        L_applied, tau_applied = actuate(y, ydot, model, data, inputs, R, w, p)
     else:  # bias forces: p_i(t) = p_i(t0) + (L_i / A_i)(t - t0) (eq 29)
         for i in range(nt):
             p[i] = p0[i] + pdot[i] * (t - t0)
@@ -1472,7 +1472,7 @@ def rhs_kernel(t, y, ydot, model, data, inputs):
 
 
 @_njit_inline
-def _actuate(y, ydot, model, data, inputs, R, w, p):
+def actuate(y, ydot, model, data, inputs, R, w, p):
     """A stateful model's applied torques (gyro_sim.dynamics.reference.applied_torques): the
     spins p from y, the rotor torques (nt,) and generalized forces (N,) applied (views of the
     workspace's tail), and y' of the spins (eq 29) and of the works (the motors' power,

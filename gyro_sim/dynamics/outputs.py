@@ -275,6 +275,10 @@ def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, s
     moment); c = 0 writes none. scratch: float64 (scratch_size(n),), overwritten (this kernel
     allocates nothing: compiled without reference counting, as fast.rhs_kernel).
 
+    A stateful model (flags[FLAG_ACTUATORS]: friction, max_speed) reads its spins from y and
+    publishes as efforts the torques applied at this state, the kernel's (`fast.actuate`:
+    commands after the speed cut, plus friction), as the numpy reference does.
+
     Returns 0, or the index in NONFINITE_FIELDS of a field found not finite (the joint states,
     and the poses and wrenches asked for, are all checked when written: the first field checked,
     wrenches, then poses, then joint states, holding one).
@@ -298,13 +302,19 @@ def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, s
     # the kernel leaves them there when it runs, else they are computed here into the same views
     (R_k, s_w, hk, Aw, e_w, w_k, vO_k, c, _, _, _, lam_b, _, S, _, _, _, p,
      _, _, _, _, _, _, _) = fast.workspace_views(work, n, N, nt)
+    stateful = flags[fast.FLAG_ACTUATORS] != 0
     if do_wrench or nv > 0:  # the accelerations: u' into ydot; the kinematics, p (29), S as above
         fast.rhs_call(t, y, ydot, model, data, inputs)
     else:
-        for i in range(nt):
-            p[i] = p0[i] + pdot[i] * (t - t0)  # (29)
+        if not stateful:  # a stateful model's spins are states: `fast.actuate` reads them from y
+            for i in range(nt):
+                p[i] = p0[i] + pdot[i] * (t - t0)  # (29)
         body_positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R_k, s_w, hk, Aw, e_w)
         body_velocities(t, y, model, s_w, e_w, w_k, vO_k, c)
+    L_applied, tau_applied = L_rotor, tau
+    if stateful:  # the torques applied at this state (motors after the speed cut, friction): the
+        # kernel's own computation, again after rhs_call (the same numbers, written again)
+        L_applied, tau_applied = fast.actuate(y, ydot, model, data, inputs, R_k, w_k, p)
     for k in range(n):  # the outputs' copies
         for a in range(3):
             w[k, a] = w_k[k, a]
@@ -330,7 +340,7 @@ def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, s
     bad = 0
     if do_wrench or nv > 0:
         # body inertias and forces at zero acceleration (as rhs_kernel, which overwrote its own)
-        bias_forces(model, R, hk, Aw, w, vO, p, L_rotor, lam_b, dlam_b, I6, pb)
+        bias_forces(model, R, hk, Aw, w, vO, p, L_applied, lam_b, dlam_b, I6, pb)
         udot = ydot[i_vel:i_vel + N]
         # body accelerations about O^k: A^k = A^{k-1} moved to O^k + c^k + S_k u'_k
         for a in range(6):
@@ -380,7 +390,7 @@ def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, s
             mat_vec(R[k], speed_axis[i], tmp)
             L_speed[i] = speed_A[i] * (acc[k, 0] * tmp[0] + acc[k, 1] * tmp[1] + acc[k, 2] * tmp[2])
     elif do_inv and has_lam:
-        bias_forces(model, R, hk, Aw, w, vO, p, L_rotor, lam_b, dlam_b, I6, pb)
+        bias_forces(model, R, hk, Aw, w, vO, p, L_applied, lam_b, dlam_b, I6, pb)
     # joint points
     if do_bodies or do_inv:
         for a in range(3):
@@ -425,7 +435,7 @@ def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, s
             position[j], velocity[j], effort[j] = euler[k, a], euler_rate[k, a], 0.0
         elif kind == JOINT_HINGE:
             col = own_col[ref]
-            position[j], velocity[j], effort[j] = y[qrow[ref]], y[i_vel + col], tau[col]
+            position[j], velocity[j], effort[j] = y[qrow[ref]], y[i_vel + col], tau_applied[col]
         elif kind == JOINT_TORQUE_ROTOR:
             k = torque_body[ref]
             ax0, ax1, ax2 = torque_axis[ref, 0], torque_axis[ref, 1], torque_axis[ref, 2]
@@ -434,7 +444,7 @@ def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, s
             e2 = R[k, 2, 0] * ax0 + R[k, 2, 1] * ax1 + R[k, 2, 2] * ax2
             position[j] = y[i_kap + ref]
             velocity[j] = p[ref] - (w[k, 0] * e0 + w[k, 1] * e1 + w[k, 2] * e2)  # (18-19)
-            effort[j] = L_rotor[ref]
+            effort[j] = L_applied[ref]
         else:
             position[j], velocity[j], effort[j] = speed_rate[ref] * t, speed_rate[ref], L_speed[ref]
     for c in range(at_joint.shape[0]):

@@ -289,7 +289,7 @@ class FastChainODE:
     def outputs(self, t: float, y: np.ndarray) -> dict[str, np.ndarray]:
         """Every output at (t, y) with the inputs held, in one compiled call
         (:func:`gyro_sim.dynamics.outputs.publication_kernel` with everything wanted, no joint
-        states: the Simulator's specialization of it); not for a stateful model (ValueError);
+        states: the Simulator's specialization of it);
         new arrays, by name:
 
         ydot (size,) y' (u' and the torque-rotor angle rates in it), R (n, 3, 3) world_R_body,
@@ -299,9 +299,6 @@ class FastChainODE:
         body k's frame, inv (fast_outputs.INV_SIZE,) energy, kinetic, potential, jacobi,
         vertical momentum, H_O1 (3), P (3), L about the centre of mass (3). Not counted in nfev.
         """
-        if self.model.stateful:
-            raise ValueError("the compiled outputs hold the inputs: a model with speed-dependent actuator terms "
-                             "takes its outputs from the numpy reference, rhs(t, y, out=...)")
         m, n = self.model, self.model.n
         out = {"ydot": np.empty(self.size), "R": np.empty((n, 3, 3)), "w": np.empty((n, 3)),
                "vO": np.empty((n, 3)), "O": np.empty((n, 3)), "quat": np.empty((n, 4)),
@@ -325,8 +322,7 @@ class FastChainODE:
         self.rhs(self._ref.t0, y)
         self.project(y)
         self.nfev -= 1
-        if not self.model.stateful:  # a stateful model's outputs come from the numpy reference
-            self.outputs(self._ref.t0, y)
+        self.outputs(self._ref.t0, y)
 
     def project(self, y: np.ndarray) -> None:
         """Renormalise the quaternions of y (size,) in place."""

@@ -468,16 +468,26 @@ def imu(reading, t_ns: int) -> bytes:
     orientation (x, y, z, w) of the IMU frame in the world, covariance 0 (exact: no noise model);
     angular velocity and linear acceleration (specific force) in the IMU frame, covariances
     diagonal with the white noise's per-sample variance (0 for a noise-free IMU)."""
-    q = _finite(reading.orientation, f"imu {reading.name}.orientation")
-    gyro = _finite(reading.angular_velocity, f"imu {reading.name}.angular_velocity")
-    accel = _finite(reading.linear_acceleration, f"imu {reading.name}.linear_acceleration")
-    variances = _finite([reading.angular_velocity_variance, reading.linear_acceleration_variance],
-                        f"imu {reading.name}.covariance")
+    q = np.asarray(reading.orientation, dtype=float)
+    gyro, accel = reading.angular_velocity, reading.linear_acceleration
+    block = np.concatenate((q[1:], q[:1], _ZEROS9, gyro, _EYE9 * reading.angular_velocity_variance, accel,
+                            _EYE9 * reading.linear_acceleration_variance))
+    if not np.all(np.isfinite(block)):  # one check of the whole block; the field named when one fails
+        _finite(q, f"imu {reading.name}.orientation")
+        _finite(gyro, f"imu {reading.name}.angular_velocity")
+        _finite(accel, f"imu {reading.name}.linear_acceleration")
+        _finite([reading.angular_velocity_variance, reading.linear_acceleration_variance],
+                f"imu {reading.name}.covariance")
     w = CdrWriter()
     w.header(t_ns, reading.name)
-    w.f64_block(np.concatenate((q[1:], q[:1], np.zeros(9), gyro, np.eye(3).ravel() * variances[0], accel,
-                                np.eye(3).ravel() * variances[1])))
+    w.f64_block(block)
     return bytes(w)
+
+
+#: the constant parts of an Imu message's block: the orientation's covariance (zero: exact), and
+#: the identity the other covariances are a variance times
+_ZEROS9 = np.zeros(9)
+_EYE9 = np.eye(3).ravel()
 
 
 def imu_messages(readings, t_ns: int, namespace: str = NAMESPACE) -> list[tuple[str, str, bytes]]:

@@ -11,7 +11,13 @@ in wall time: the later of the moment the physics thread sets the command on the
 (just before computing the step) and the step's wall deadline (the wall time its node time is
 paced to: the thread computes up to one wake-up ahead, so a step computed early still starts,
 as the outside sees it, at its deadline). Superseded commands, the demo's, and those received
-while the loop was not running (before its start, paused) are not timed."""
+while the loop was not running (before its start, paused) are not timed.
+
+In lock-step (`lockstep`) every good command is kept, in the order received, in a queue of at
+most LOCKSTEP_QUEUE: the physics thread takes the oldest (`next_command`) and applies it to a
+whole control period; none is superseded. A command that finds the queue full is rejected
+(logged as an event, never applied), so the commands applied are exactly those logged."""
+
 from __future__ import annotations
 
 import collections
@@ -27,6 +33,9 @@ from gyro_sim.log.resim import COMMAND_TIMEOUT_EVENT
 from gyro_sim.msgs import messages as M
 from gyro_sim.ros.demo import DEMO_RATE
 from gyro_sim.ros.pacing import Samples
+
+#: most commands waiting in lock-step (each one control period): beyond, a command is rejected
+LOCKSTEP_QUEUE = 1000
 
 
 def check_command(values, n_axes: int) -> str | None:
@@ -63,12 +72,17 @@ class CommandPath:
     due : node time (s) -> the wall time (clock units) at which a step starting then is due;
         None when nothing is paced (real_time_factor 0)
     window : how many of the last latencies the live percentiles take
+    lockstep : keep every good command in a queue, taken one per control period (`next_command`)
     """
 
     def __init__(self, n_axes: int, out, node_ns: Callable[[], int], timeout: float, dt: float, demo=None,
                  clock: Callable[[], float] = time.monotonic, due: Callable[[float], float] | None = None,
-                 window: int = 2000):
+                 window: int = 2000, lockstep: bool = False):
         self.n_axes, self.out, self._node_ns = n_axes, out, node_ns
+        self.lockstep = lockstep
+        #: lock-step: the good commands received and not yet taken, oldest first (as _latest's items)
+        self._queue: collections.deque = collections.deque()
+        self._arrived = threading.Condition(threading.Lock())
         self._clock, self._due = clock, due
         #: receipt to the step that applies it (wall s), per command from outside that a step applied
         self.latency = Samples(window=window)
@@ -98,6 +112,8 @@ class CommandPath:
         received = self._clock()
         with self._submit_lock:
             reason = check_command(values, self.n_axes)
+            if reason is None and self.lockstep and len(self._queue) >= LOCKSTEP_QUEUE:
+                reason = f"lock-step: {LOCKSTEP_QUEUE} commands already waiting"
             if reason is None:
                 self._demo_stopped = True
             return self._submit(raw, values, reason, received)
@@ -107,7 +123,13 @@ class CommandPath:
             seq = self.counters.accepted + 1
             self._received.append((seq, raw))  # before it is the latest: a step taking it finds it here
             self.counters.accepted = seq
-            self._latest = (seq, raw, tuple(float(v) for v in values), received)
+            item = (seq, raw, tuple(float(v) for v in values), received)
+            with self._arrived:
+                if self.lockstep:
+                    self._queue.append(item)
+                else:
+                    self._latest = item
+                self._arrived.notify()
         else:
             self.counters.rejected += 1
             self.counters.last_reject_reason = reason
@@ -115,6 +137,29 @@ class CommandPath:
         return reason
 
     # --- in the physics thread -------------------------------------------------------------------
+    def next_command(self, timeout: float) -> bool:
+        """Lock-step: make the oldest command waiting the latest (the next step takes it); False
+        when none came within `timeout` wall seconds."""
+        with self._arrived:
+            if not self._queue:
+                self._arrived.wait(timeout)
+            if not self._queue:
+                return False
+            self._latest = self._queue.popleft()
+            return True
+
+    def wait_any(self, timeout: float) -> bool:
+        """Whether a good command has come (waiting up to `timeout` wall seconds for one)."""
+        with self._arrived:
+            if self._latest is None and not self._queue:
+                self._arrived.wait(timeout)
+            return self._latest is not None or bool(self._queue)
+
+    @property
+    def waiting(self) -> int:
+        """Lock-step: commands received and not yet taken."""
+        return len(self._queue)
+
     def time_from_now(self) -> None:
         """The loop runs from now (its start, a resume): commands received before now waited for
         it, not for a step, and are applied untimed."""
@@ -185,14 +230,23 @@ class CommandPath:
     def discard(self, t_ns: int) -> None:
         """At a reset (logged just after this): the commands received before it are logged at
         `t_ns` and never applied after it; the timeout starts again with the next command."""
-        latest = self._latest
-        if latest is not None:
-            self._taken_seq = latest[0]
-            self._log_received(t_ns, latest[0])
+        with self._submit_lock:
+            last = self._last_received()
+            self._queue.clear()
+        if last is not None:
+            self._taken_seq = last
+            self._log_received(t_ns, last)
         self._last_step = None
+
+    def _last_received(self) -> int | None:
+        """The sequence number of the last good command received (None: none yet)."""
+        if self._queue:
+            return self._queue[-1][0]
+        return None if self._latest is None else self._latest[0]
 
     def log_remaining(self, t_ns: int) -> None:
         """The loop ends: the commands received and never taken, logged at `t_ns`."""
-        latest = self._latest
-        if latest is not None and self._received:
-            self._log_received(t_ns, latest[0])
+        with self._submit_lock:
+            last = self._last_received()
+        if last is not None and self._received:
+            self._log_received(t_ns, last)

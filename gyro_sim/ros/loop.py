@@ -48,6 +48,7 @@ backwards; the log carries a "reset" event at that time.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
 import time
@@ -65,6 +66,10 @@ __all__ = ["SimLoop", "warm_up", "check_command", "Pause", "Reset"]
 
 #: longest sleep while paused or stopped (s): how fast requests are served then
 IDLE_PERIOD = 0.05
+#: wall seconds between two publications of the held initial state while the node waits for its
+#: first command (`hold:=until_command`, lock-step): for a controller started after the node,
+#: which missed the first (DDS does not keep it for late subscribers); DDS only, not recorded
+HOLD_REPEAT = 1.0
 
 
 def warm_up(sim, dt: float) -> None:
@@ -112,12 +117,17 @@ class SimLoop:
         self.clock = clock
         self.dt = config.dt
         self.per_publish = config.steps_per_publish
-        self.pacing = LoopPacing(config, clock=clock, sleep=sleep, run_delay=run_delay)
+        #: lock-step: one control period per command, no wall deadline (paced as real_time_factor 0)
+        self.lockstep = bool(getattr(config, "lockstep", False))
+        paced = dataclasses.replace(config, real_time_factor=0.0) if self.lockstep else config
+        self.pacing = LoopPacing(paced, clock=clock, sleep=sleep, run_delay=run_delay)
         pacer = self.pacing.pacer
         self.commands = CommandPath(len(sim.axis_names), outputs, lambda: self.node_ns, config.command_timeout,
                                     self.dt, demo, clock=clock, due=pacer.deadline if pacer.rtf > 0 else None,
-                                    window=int(2 * config.physics_rate))
-        self.publications = Publications(outputs, config, clock=clock)
+                                    window=int(2 * config.physics_rate), lockstep=self.lockstep)
+        self.publications = Publications(outputs, paced, clock=clock)
+        #: the run waits for its first command (lock-step, hold until_command); cleared when it came
+        self.holding = bool(getattr(config, "waits_for_command", False))
         recorder = getattr(outputs, "recorder", None)
         self.recording = RecordWatch(recorder, outputs, clock) if recorder is not None else None
         self.requests = Mailbox()
@@ -177,6 +187,8 @@ class SimLoop:
             republish = getattr(self.out, "publish_robot_description", None)
             if republish is not None:  # the robot is back at its initial pose: said to late joiners too
                 republish()
+            if self.lockstep:  # the controller answers the reset state: published now (same node time)
+                self._send(self._prepare())
             self.pacing.restart(self.node_time)
             return f"reset to the initial state at node time {self.node_time:.6f} s"
         if isinstance(req, Pause):
@@ -201,7 +213,10 @@ class SimLoop:
             self.pacing.begin(self.node_time)
             self.commands.time_from_now()
             self.publications.idle_from_now()
-            self._send(self._prepare())
+            first = self._prepare()
+            self._send(first)
+            if self.holding:
+                self._hold(first)
             while not self._stop.is_set():
                 if self.recording is not None and self.recording.check(self.node_ns):
                     self._idle_diagnostics(force=True)
@@ -216,6 +231,9 @@ class SimLoop:
                     continue
                 if self._done():
                     break
+                if self.lockstep:
+                    self._period()
+                    continue
                 self._chunk()
                 batch = self._prepare() if self.steps % self.per_publish == 0 and self.failure is None else None
                 demoted = self.pacing.wait(self.node_time)
@@ -238,15 +256,45 @@ class SimLoop:
                 self.started.set()
                 self.finished.set()
 
+    def _hold(self, first: list | None) -> None:
+        """Hold the initial state (published) until the first command arrives: its publication
+        again every HOLD_REPEAT wall seconds (DDS only), the requests served, idle diagnostics;
+        then the run's clocks start from now."""
+        repeat = getattr(self.out, "publish", None)
+        next_repeat = self.clock() + HOLD_REPEAT
+        while not self._stop.is_set() and not self.commands.wait_any(IDLE_PERIOD):
+            self.requests.serve(self._handle)
+            if self.recording is not None and self.recording.check(self.node_ns):
+                return
+            self._idle_diagnostics()
+            if repeat is not None and first is not None and self.clock() >= next_repeat:
+                next_repeat = self.clock() + HOLD_REPEAT
+                repeat(first)
+        self.holding = False
+        if not self._stop.is_set():
+            self.pacing.begin(self.node_time)
+            self.commands.time_from_now()
+            self.publications.restart()
+
+    def _period(self) -> None:
+        """Lock-step: the oldest command waiting applied to one control period, then its
+        publication at once; with none waiting, the requests and diagnostics are served."""
+        if not self.commands.next_command(IDLE_PERIOD):
+            self._idle_diagnostics()
+            return
+        self._chunk(self.per_publish)
+        self._send(self._prepare() if self.failure is None else None)
+
     def _done(self) -> bool:
         d = self.config.duration
         return d > 0 and self.node_time >= d - 0.5 * self.dt
 
-    def _chunk(self) -> None:
+    def _chunk(self, steps: int | None = None) -> None:
+        """`steps` physics steps (default: one wake-up's), each taking the latest command."""
         t0 = time.perf_counter()
         n = 0
         try:
-            for _ in range(self.pacing.per_chunk):
+            for _ in range(self.pacing.per_chunk if steps is None else steps):
                 self.commands.take(self.sim, self.node_ns, self.steps)
                 self.sim.advance(self.dt)
                 self.steps += 1
@@ -287,6 +335,11 @@ class SimLoop:
         l50, l99 = self.commands.latency.window_percentiles(50, 99)
         rtf = float("nan") if (self.paused or self.failure) else pacing.rate.window_rtf(self.node_time)
         state = "stopped: simulation error" if self.failure else ("paused" if self.paused else "running")
+        if state == "running" and self.holding:
+            state = "holding the initial state until a command"
+        elif state == "running" and self.lockstep and not self.commands.waiting:
+            state = "lock-step: waiting for a command"
+
         values = {
             "state": state,
             "node_time_s": self.node_time,
@@ -384,6 +437,7 @@ class SimLoop:
             "commands_accepted": c.accepted,
             "commands_rejected": c.rejected,
             "commands_superseded": c.superseded,
+            "commands_per_wall_s": c.accepted / wall if wall > 0 else math.nan,
             "commands_timed": self.commands.latency.run.n,
             "command_latency_p50_us": l50,
             "command_latency_p99_us": l99,

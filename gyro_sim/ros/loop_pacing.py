@@ -103,6 +103,8 @@ class LoopPacing:
         wanted = int(self.config.thread_priority)
         if self.rtf > 0:
             self.priority, self.scheduling = realtime_priority(wanted)
+        elif getattr(self.config, "lockstep", False):
+            self.scheduling = "normal scheduler (lock-step: paced by the commands, no wall deadline)"
         else:
             self.scheduling = "normal scheduler (real_time_factor 0: as fast as possible, never sleeping)"
 

@@ -57,6 +57,7 @@ from gyro_sim.simulator import Simulator
 from gyro_sim.msgs.messages import decode_axis_moments
 from gyro_sim.ros.loop import Pause, Reset, SimLoop, warm_up
 from gyro_sim.ros.outputs import Outputs, node_topics
+from gyro_sim.ros.pacing import ShareLimit
 from gyro_sim.ros.params import PARAMETERS, ParameterError, validate
 
 #: bytes in a megabyte (record_queue_mb)
@@ -79,16 +80,23 @@ LAPACK_ROOM = 128 << 20
 START_ROOM = 640 << 20
 
 #: GIL switch interval (s) while the node runs: bounds how long the physics thread, woken at
-#: its deadline, waits for the executor thread (Python's default is 5 ms)
-SWITCH_INTERVAL = 5e-4
+#: its deadline or back from a publish (which releases the interpreter), waits for the executor
+#: thread (Python's default is 5 ms). With a controller answering every publication at 1 kHz
+#: (`gyro-sim bench loop --rates 1000 --modes realtime`, three pairs of runs in turn, 2 cores),
+#: 0.1 ms against 0.5 ms: command latency p99 1807 / 1395 / 776 us against 7277 / 3450 / 1190 us,
+#: deadline misses 296 / 83 / 38 against 977 / 368 / 116
+SWITCH_INTERVAL = 1e-4
 #: longest wait (s) for the physics thread to say how it is scheduled (it does so first thing)
 STARTED_TIMEOUT = 1.0
 #: longest wait of the executor (s): how soon a signal is acted on
 SPIN_PERIOD = 0.1
-#: the largest share of the interpreter the executor thread takes while callbacks keep coming:
-#: after each callback it sleeps (1 / share - 1) times the time it took, leaving the
-#: interpreter to the physics thread, so a flood of commands cannot starve the physics loop
+#: the largest share of the interpreter the executor thread takes on average while callbacks
+#: keep coming (gyro_sim.ros.pacing.ShareLimit): beyond, it sleeps, leaving the interpreter to
+#: the physics thread, so a flood of commands cannot starve the physics loop
 EXECUTOR_SHARE = 0.2
+#: CPU seconds the executor may run beyond its share before it sleeps: commands at a steady
+#: 1 kHz are taken as they come (a sleep after each one let the subscription's queue overflow)
+EXECUTOR_BURST = 0.005
 
 
 def descriptor(p) -> ParameterDescriptor:
@@ -194,7 +202,10 @@ class GyroSimNode(Node):
             + (f" = {choice}" if (choice := method_choice(self.sim, cfg)) else "")
             + f", {self.sim.backend} dynamics), "
             f"publish {cfg.publish_rate:g} Hz, "
-            f"real-time factor {cfg.real_time_factor:g}, {self.loop.pacing.per_chunk} steps per wake-up"
+            + (f"lock-step: one period of {cfg.steps_per_publish} steps per command on ~/axis_moments, "
+               f"waiting for the first" if cfg.lockstep else
+               f"real-time factor {cfg.real_time_factor:g}, {self.loop.pacing.per_chunk} steps per wake-up"
+               + ("; holding the initial state until the first command" if cfg.hold == "until_command" else ""))
             + (f"; recording to {cfg.record}" if cfg.record else "")
         )
         if demo is not None:
@@ -497,6 +508,7 @@ def _main(argv, shutdown: Shutdown) -> int:
         sys.setswitchinterval(SWITCH_INTERVAL)
         executor = SingleThreadedExecutor()
         executor.add_node(node)
+        share = ShareLimit(EXECUTOR_SHARE, EXECUTOR_BURST)
         spin_error = None
         try:
             shutdown.start_done()
@@ -504,16 +516,16 @@ def _main(argv, shutdown: Shutdown) -> int:
                 node.loop.start()
                 if node.loop.started.wait(STARTED_TIMEOUT):  # how the physics thread is scheduled
                     log = node.get_logger().info if node.loop.pacing.priority or not node.config.thread_priority \
-                        or node.config.real_time_factor <= 0 else node.get_logger().warning
+                        or node.config.real_time_factor <= 0 or node.config.lockstep else node.get_logger().warning
                     log(f"physics thread: {node.loop.pacing.scheduling}")
             while not shutdown.requested.is_set() and not node.loop.finished.is_set():
                 if node.loop.thread.ident is not None and not node.loop.thread.is_alive():
                     break  # never without `finished`; a guard: nothing here waits on a dead thread
-                t0 = time.monotonic()
+                t0 = time.thread_time()
                 executor.spin_once(timeout_sec=SPIN_PERIOD)
-                busy = time.monotonic() - t0
-                if busy < 0.5 * SPIN_PERIOD:  # it ran a callback
-                    time.sleep(busy * (1.0 / EXECUTOR_SHARE - 1.0))
+                pause = share.after(time.thread_time() - t0)  # its CPU, not the wait for a callback
+                if pause > 0.0:
+                    time.sleep(pause)
         except Exception as exc:  # noqa: BLE001 - the log is closed below whatever happened
             why = resource_error(exc)
             spin_error = why or f"{type(exc).__name__}: {exc}"
@@ -545,9 +557,11 @@ def _main(argv, shutdown: Shutdown) -> int:
 
 
 def _summary_line(stats: dict, cfg) -> None:
+    target = (f"lock-step, {stats['commands_per_wall_s']:.0f} commands per wall second" if cfg.lockstep
+              else f"target {cfg.real_time_factor:g}")
     print(
         f"gyro_sim_node: simulated {stats['node_time_s']:.3f} s in {stats['wall_s']:.3f} s wall "
-        f"(real-time factor {stats['real_time_factor_achieved']:.3f}, target {cfg.real_time_factor:g}), "
+        f"(real-time factor {stats['real_time_factor_achieved']:.3f}, {target}), "
         f"step time p50 {stats['step_time_p50_us']:.0f} us / p99 {stats['step_time_p99_us']:.0f} us, "
         f"{stats['deadline_misses']} deadline misses, CPU {100 * stats['cpu_share']:.0f} %"
     )

@@ -317,3 +317,28 @@ class Floor:
         if self._thread is not None:
             self._thread.join(5.0)
         return self.pacer.misses
+
+
+class ShareLimit:
+    """The largest share of the interpreter a thread takes on average (the node's executor, so
+    that a flood of commands cannot starve the physics thread), with bursts allowed.
+
+    The thread's CPU time is counted against an allowance of `share` times the wall time
+    passed; once it is more than `burst` CPU seconds over, `after` says how long to sleep for
+    the allowance to catch up. Commands at a steady 1 kHz (~0.1-0.2 ms of CPU each) stay within
+    it and are never delayed; a flood is held to `share` on average.
+    """
+
+    def __init__(self, share: float, burst: float, clock=time.monotonic):
+        self.share, self.burst, self.clock = float(share), float(burst), clock
+        self.over = 0.0  # CPU seconds taken beyond the allowance
+        self._last = clock()
+
+    def after(self, cpu: float) -> float:
+        """The thread took `cpu` CPU seconds since the last call: how long it should sleep now."""
+        now = self.clock()
+        self.over = max(0.0, self.over + cpu - self.share * (now - self._last))
+        self._last = now
+        if self.over <= self.burst:
+            return 0.0
+        return self.over / self.share

@@ -17,6 +17,9 @@ from gyro_sim.errors import GyroSimError
 MAX_PHYSICS_RATE = 100_000.0
 #: relative tolerance on physics_rate / publish_rate being a whole number of steps
 RATIO_TOLERANCE = 1e-9
+#: the values of `hold`: none (run from the start), until_command (the initial state held until
+#: the first command)
+HOLDS = ("none", "until_command")
 #: default of record_queue_mb (MB waiting for the log writer before publications are dropped)
 RECORD_QUEUE_MB = 64.0
 
@@ -76,6 +79,13 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("demo", bool, False,
               "drive every actuated axis with built-in sines scaled to the scene (recorded as commands are) "
               "until a command arrives on ~/axis_moments"),
+    Parameter("lockstep", bool, False,
+              "advance one control period (1/publish_rate) per command received on ~/axis_moments, then publish: "
+              "simulated time goes at the controller's pace (real_time_factor not used); the initial state is "
+              "published first, then the node waits for a command"),
+    Parameter("hold", str, "none",
+              "none | until_command: hold the initial state (published, time not running) until the first command "
+              "arrives on ~/axis_moments, then run"),
     Parameter("thread_priority", float, 50.0,
               "SCHED_FIFO priority (1-99) of the physics thread while pacing in real time, where the system allows "
               "it (as ros2_control's thread_priority); 0 = the normal scheduler", 0.0, 99.0),
@@ -105,6 +115,8 @@ class NodeConfig:
     thread_priority: float = 0.0
     record_queue_mb: float = RECORD_QUEUE_MB
     demo: bool = False
+    lockstep: bool = False
+    hold: str = "none"
     frame_prefix: str = ""
     lock: str = ""
     package_path: str = ""
@@ -113,6 +125,11 @@ class NodeConfig:
     def dt(self) -> float:
         """The physics step (simulated s)."""
         return 1.0 / self.physics_rate
+
+    @property
+    def waits_for_command(self) -> bool:
+        """The run starts at the first command (lock-step, or hold until_command)."""
+        return self.lockstep or self.hold == "until_command"
 
     @property
     def steps_per_publish(self) -> int:
@@ -190,6 +207,13 @@ def validate(values: dict) -> NodeConfig:
                 f"publish_rate: physics_rate / publish_rate = {ratio:g} must be a whole number of physics steps "
                 f"(with physics_rate {v['physics_rate']:g}: e.g. publish_rate {lo:g} or {hi:g})"
             )
+    if "hold" not in bad and v["hold"] not in HOLDS:
+        problems.append(f"hold: unknown {v['hold']!r}; valid: {', '.join(HOLDS)}")
+    if not {"lockstep", "demo"} & bad and v["lockstep"] and v["demo"]:
+        problems.append("demo: not with lockstep (the demo's commands would advance the lock-step node by themselves)")
+    elif not {"hold", "demo"} & bad and v["hold"] == "until_command" and v["demo"]:
+        problems.append("demo: not with hold until_command (the demo drives until a command comes, the hold waits "
+                        "for one: the demo would never run)")
     if "integrator" not in bad and v["integrator"] not in INTEGRATORS:
         problems.append(f"integrator: unknown {v['integrator']!r}; valid: {', '.join(INTEGRATORS)}")
     if "backend" not in bad:
@@ -392,7 +416,9 @@ def help_text() -> str:
             "name or an invalid value stops the node at start (exit 2).\n\n"
             "example:\n"
             "  gyro_sim_node --ros-args --params-file config/params.yaml -p record:=live.mcap -p duration:=20.0\n"
-            "  gyro_sim_node --ros-args --params-file config/params.yaml -p demo:=true -p record:=auto\n\n"
+            "  gyro_sim_node --ros-args --params-file config/params.yaml -p demo:=true -p record:=auto\n"
+            "  gyro_sim_node --ros-args -p scene:=rw_pendulum -p lockstep:=true   (one control period per\n"
+            "      command on ~/axis_moments: a controller of any speed closes the loop exactly)\n\n"
             "parameters (name, type, default, range, meaning):\n")
     lines = ["  " + "  ".join(r[c].ljust(widths[c]) for c in range(4)) + "  " + r[4] for r in rows]
     return head + "\n".join(line.rstrip() for line in lines) + "\n"

@@ -364,3 +364,18 @@ def test_imus_reuse_the_evaluation_of_the_outputs():
     sim.imus()
     sim.imus()
     assert evaluations == [1]
+
+
+def test_noise_drawn_ahead_is_the_noise_drawn_sample_by_sample():
+    """`at` draws DRAW_AHEAD samples at once when asked one after another: the same numbers as a
+    record of them, across block boundaries, mixed with records, and again after a reset."""
+    from gyro_sim.dynamics.imu import DRAW_AHEAD
+
+    n = 3 * DRAW_AHEAD + 17
+    whole = ImuNoise(1e-3, 1e-4, 1e-2, 1e-3, RATE, seed=9).record(n + 50)
+    noise = ImuNoise(1e-3, 1e-4, 1e-2, 1e-3, RATE, seed=9)
+    for _ in range(2):
+        got = [noise.at(i) for i in range(n)]
+        assert np.array_equal(np.array(got), whole[:n])
+        assert np.array_equal(noise.record(50), whole[n:])  # what was drawn ahead first, then new draws
+        noise.reset()

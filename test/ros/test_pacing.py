@@ -594,3 +594,23 @@ def test_the_loop_times_commands_and_reports_the_latency_in_its_diagnostics():
     s = loop.summary()
     assert s["commands_timed"] == 2 and s["commands_accepted"] == 2
     assert s["command_latency_max_us"] == pytest.approx(1e6 * max(asleep, mid), rel=1e-9)
+
+
+def test_the_executors_share_lets_a_steady_1khz_through_and_holds_a_flood_to_its_share():
+    from gyro_sim.ros.pacing import ShareLimit
+
+    clock = FakeClock()
+    limit = ShareLimit(0.2, 0.005, clock=clock)
+    for _ in range(10_000):  # a command every ms, 0.15 ms of CPU each: never a sleep
+        clock.t += 1e-3
+        assert limit.after(1.5e-4) == 0.0
+    cpu = wall = 0.0
+    t0 = clock.t
+    for _ in range(100_000):  # back to back, 0.1 ms each: held to the share on average
+        clock.t += 1e-4
+        cpu += 1e-4
+        pause = limit.after(1e-4)
+        clock.t += pause
+    wall = clock.t - t0
+    assert cpu / wall == pytest.approx(0.2, rel=0.01)
+    assert limit.over <= 0.005 + 1e-4
