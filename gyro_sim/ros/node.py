@@ -58,6 +58,7 @@ from gyro_sim.msgs.messages import decode_axis_moments
 from gyro_sim.ros.loop import Pause, Reset, SimLoop, warm_up
 from gyro_sim.ros.outputs import Outputs, node_topics
 from gyro_sim.ros.params import PARAMETERS, ParameterError, validate
+from gyro_sim.ros import start_signal_line
 
 #: bytes in a megabyte (record_queue_mb)
 MEGABYTE = 1 << 20
@@ -326,7 +327,7 @@ class Shutdown:
                 stream.flush()
             except (OSError, ValueError):
                 pass
-        os.write(2, f"gyro_sim_node: {name} during start-up: not started (nothing recorded)\n".encode())
+        os.write(2, (start_signal_line(name) + "\n").encode())
         os._exit(0)
 
     def hold_if_giving_up(self) -> None:
