@@ -40,10 +40,16 @@ def matvec(A: np.ndarray, x: np.ndarray) -> np.ndarray:
     return (A @ x[..., None])[..., 0]
 
 
+#: the chain's axis reversed, for the axes `rcumsum` takes (0, or -2: the bodies before (3,))
+_REVERSED = {0: (slice(None, None, -1),), -2: (Ellipsis, slice(None, None, -1), slice(None))}
+
+
 def rcumsum(a: np.ndarray, axis: int = 0) -> np.ndarray:
-    """Suffix sums over the chain (its axis `axis`): out[k] = sum_{p >= k} a[p] (the sums of eq 48)."""
-    a = np.flip(a, axis)
-    return np.flip(np.cumsum(a, axis=axis), axis)
+    """Suffix sums over the chain (its axis `axis`, 0 or -2): out[k] = sum_{p >= k} a[p] (the
+    sums of eq 48): prefix sums of the reversed view, reversed (np.flip's views, without its
+    per-call axis checks: this runs several times per evaluation)."""
+    rev = _REVERSED[axis]
+    return a[rev].cumsum(axis)[rev]
 
 
 class Data:
@@ -102,8 +108,8 @@ def positions(model: Model, data: Data, t: float, y: np.ndarray) -> None:
     A_w = R @ model.inertia @ np.swapaxes(R, -1, -2)
     O = data.O
     m = model.mass
-    OO = np.einsum("...ni,...nj->...nij", O, O)
-    Oh = np.einsum("...ni,...nj->...nij", O, hk)
+    OO = O[..., :, None] * O[..., None, :]  # outer products: one product per entry
+    Oh = O[..., :, None] * hk[..., None, :]
     dd = np.einsum("...ni,...ni->...n", O, O)
     dh = np.einsum("...ni,...ni->...n", O, hk)
     data.J = (
