@@ -31,13 +31,23 @@ else wants), under a file lock (one helper at a time fills a cache: a second one
 lock and then compiles only what the first left out), and ends when the fill is done. So
 short runs one after another do not each begin the fill again.
 
-It is off where nobody waits for it and where it would take the cores from other work
+**The node does not wait for it.** On a cold cache the node (backend "auto") starts the helper
+with ``--whole`` (`start_deferred`): at the lowest priority from the start, it compiles the
+whole first step, the dynamics kernel and its entry included, says READY, then fills the rest.
+Meanwhile the node steps on the numpy reference, which compiles nothing, where a physics step
+of its scene fits there (gyro_sim.ros.node: NUMPY_STEP_SHARE; otherwise it says so in one line
+and compiles first, as before); a thread of the node waits for READY, loads the kernels into
+the process (`load_when_compiled`) and the physics thread switches to them at a step boundary,
+recorded in the log so that re-simulation switches at the same step (gyro_sim.log.resim:
+DYNAMICS_EVENT).
+
+The fill is the same with or without a terminal (a launch file, systemd and a container start
+as a shell does). It is off where it would take the cores from other work
 (`background_fill_allowed`): with GYRO_SIM_BACKGROUND_FILL=0 (the test suite sets it; tests
-of the fill opt in with 1 and a private NUMBA_CACHE_DIR), under CI (the CI variable), and in a
-non-interactive start (no terminal on stdin, stdout or stderr: a container build). There the
-helper compiles only the first step's share beside the start and ends with it (it checks every
-PARENT_POLL s), the node compiles the rest before it goes real-time, and ``gyro-sim warmup``
-fills the whole cache in the foreground, with progress.
+of the fill opt in with 1 and a private NUMBA_CACHE_DIR) and under CI (the CI variable). There
+the helper compiles only the first step's share beside the start and ends with it (it checks
+every PARENT_POLL s), the node compiles the rest before it goes real-time, and ``gyro-sim
+warmup`` fills the whole cache in the foreground, with progress.
 """
 from __future__ import annotations
 
@@ -62,7 +72,7 @@ LAGRANGE_SCENE = "heavy_top"
 #: the helper's niceness once the first step's kernels are in the cache (the lowest priority;
 #: SCHED_IDLE as well where the system has it)
 HELPER_NICE = 19
-#: "0" in the environment: no background fill; "1": a fill even under CI or without a terminal
+#: "0" in the environment: no background fill; "1": a fill even under CI
 BACKGROUND_VARIABLE = "GYRO_SIM_BACKGROUND_FILL"
 #: the longest wait (s) for the helper's share of the first step (it is there in ~15 s)
 HELPER_WAIT = 600.0
