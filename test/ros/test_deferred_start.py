@@ -82,3 +82,30 @@ def test_a_cold_start_without_a_terminal_steps_on_numpy_then_switches_and_resimu
     res = resimulate(log)
     assert res.switches == 1 and res.compared > 0
     assert res.max_deviation == 0.0, res.report()
+
+
+def test_a_scene_too_slow_on_numpy_for_its_rate_is_said_in_one_line_and_compiled_first(monkeypatch, capsys):
+    """Where a physics step on numpy takes more than NUMPY_STEP_SHARE of the step, the node
+    says so in one line and steps on the compiled kernels from the start (the compile done
+    before real time, as without a background compile)."""
+    from types import SimpleNamespace
+
+    from gyro_sim import Simulator, warmup
+    from gyro_sim.ros import node as node_module
+
+    compiled = []
+    monkeypatch.setattr(warmup, "_deferred", object())
+    monkeypatch.setattr(warmup, "precompile", lambda *a, **kw: compiled.append(kw["integrator"]) or True)
+    monkeypatch.setattr(node_module, "numpy_step_cost", lambda sim, dt: 0.95 * dt)
+    cfg = SimpleNamespace(scene="hinge_chain", integrator="fixed", rtol=1e-8, atol=1e-10, dt=1e-3, backend="auto")
+    stub = SimpleNamespace(sim=Simulator("hinge_chain", integrator="fixed", step=1e-3, backend="numpy"))
+    node_module.GyroSimNode._numpy_or_compiled(stub, cfg)
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 1 and "more than 90% of the 1 ms step: compiling the kernels before real time" in lines[0]
+    assert compiled == ["fixed"] and not warmup.deferred() and stub.sim.backend == "numba"
+    monkeypatch.setattr(warmup, "_deferred", object())
+    monkeypatch.setattr(node_module, "numpy_step_cost", lambda sim, dt: 0.5 * dt)
+    stub.sim = Simulator("hinge_chain", integrator="fixed", step=1e-3, backend="numpy")
+    node_module.GyroSimNode._numpy_or_compiled(stub, cfg)
+    assert stub.sim.backend == "numpy" and warmup.deferred() and compiled == ["fixed"]
+    assert capsys.readouterr().err == ""
