@@ -59,7 +59,7 @@ setup(
     entry_points={
         "console_scripts": [
             "gyro-sim = gyro_sim.cli:main",
-            "gyro_sim_node = gyro_sim.ros.node:main",
+            "gyro_sim_node = gyro_sim.ros.start:main",
         ],
     },
 )

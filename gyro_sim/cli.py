@@ -11,10 +11,12 @@ import argparse
 import sys
 import time
 from pathlib import Path
+from typing import Callable
 
 
-from gyro_sim.log.mcap_log import DEFAULT_FLUSH_PERIOD
-from gyro_sim.safe_paths import end_after_interrupt, interrupt_behind
+# light on purpose: main's first statement sets what a signal does, and everything heavy
+# (numpy, numba, the subcommands' modules) is imported after it
+from gyro_sim.safe_paths import end_after_interrupt, exit_on_signals, interrupt_behind
 from gyro_sim.progress import Progress  # cmd_run, cmd_bench_scaling
 
 
@@ -324,6 +326,8 @@ def _register_replay(sub) -> None:
 def build_parser() -> argparse.ArgumentParser:
     import importlib
 
+    from gyro_sim.log.mcap_log import DEFAULT_FLUSH_PERIOD
+
     ap = argparse.ArgumentParser(prog="gyro-sim", description="Chains of gyrostats: offline runs, logs and reports.",
                                  epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", title="commands", metavar="COMMAND")
@@ -435,7 +439,18 @@ def _interrupted(args, exc: KeyboardInterrupt) -> int:
     return 1
 
 
+def _interrupted_line(argv) -> Callable[[str], str]:
+    """The line of an interrupt before the command runs (`_interrupted`'s, its name guessed
+    from the command line: the first word that is not an option)."""
+    words = sys.argv[1:] if argv is None else list(argv)
+    cmd = next((" " + w for w in words if not w.startswith("-")), "")
+    return lambda name: (f"gyro-sim{cmd}: interrupted ({name}) before finishing; no output is left half-written "
+                         "under its name")
+
+
 def main(argv=None) -> int:
+    # a signal during the imports and the parser's construction: one line and exit 1, as later
+    exit_on_signals(_interrupted_line(argv), 1)
     ap = build_parser()
     args = ap.parse_args(argv)
     if args.fn is None:  # `gyro-sim` or `gyro-sim bench` alone: what there is to choose from

@@ -40,7 +40,7 @@ import secrets
 import signal
 import threading
 from pathlib import Path
-from typing import Iterable, Iterator
+from typing import Callable, Iterable, Iterator
 
 from gyro_sim.errors import GyroSimError
 
@@ -275,6 +275,27 @@ class Interrupted(KeyboardInterrupt):
     @property
     def name(self) -> str:
         return signal.Signals(self.signum).name
+
+
+def exit_on_signals(line: Callable[[str], str], code: int,
+                    signums: Iterable[int] = (signal.SIGINT, signal.SIGTERM)) -> None:
+    """From now until a later handler replaces it, each of `signums` ends the process at once
+    with ``line(name)`` (name: "SIGINT"...) on stderr and exit status `code`: for a console
+    script's first statement, before its imports, when nothing has been created yet that an
+    exit could leave behind. os._exit: an import cut half-way has nothing to unwind, and no
+    KeyboardInterrupt can surface from inside it as a traceback. Main thread only (elsewhere
+    nothing is done)."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+
+    def handler(signum, frame):
+        try:
+            os.write(2, (line(signal.Signals(signum).name) + "\n").encode())
+        finally:
+            os._exit(code)
+
+    for s in signums:
+        signal.signal(s, handler)
 
 
 @contextlib.contextmanager

@@ -90,7 +90,8 @@ class Simulator:
         self.integrator_name = integrator
         from gyro_sim.integrators import make_integrator
 
-        self.integrator = make_integrator(integrator, self.system, rtol=rtol, atol=atol, step=step)
+        self._integrator_options = {"rtol": rtol, "atol": atol, "step": step}
+        self.integrator = make_integrator(integrator, self.system, **self._integrator_options)
         from gyro_sim.analytic.lagrange import LagrangeChain
 
         self._lagrange = LagrangeChain.from_scene(scene)  # None unless a chain of Lagrange gyroscopes
@@ -115,16 +116,8 @@ class Simulator:
             raise ActuatorError(f"{m.actuators.terms[0]}: integrator {integrator!r} does not take speed-dependent "
                              f"actuator terms (friction, max_speed); use one of {', '.join(STATEFUL_INTEGRATORS)}")
         self._joint_layout()
-        # every output of a state from one compiled call on the numba backend (a stateful model's
-        # applied torques too), from the numpy reference on the numpy backend
-        from gyro_sim.dynamics.backends import CompiledOutputs, NumpyOutputs
-
-        outputs = CompiledOutputs if self.system.backend == "numba" else NumpyOutputs
-        self._outputs = outputs(m, self.system, self._joint_index, self._inputs)
         self._watched = self._watched_energy()
-        self._watch_last = None
-        if self._watched is not None and getattr(self.integrator, "monitor", False) is None:
-            self.integrator.monitor = self._energy_error  # "fixed": its energy watchdog
+        self._bind_backend()
         self._imus = None  # the IMUs (gyro_sim.dynamics.imu.ImuSet), when the scene has some
         if scene.imus:
             from gyro_sim.dynamics.imu import DEFAULT_IMU_RATE, ImuSet
@@ -132,6 +125,34 @@ class Simulator:
             self._imus = ImuSet(scene, {b.name: k for k, b in enumerate(scene.bodies)}, scene.gravity,
                                 DEFAULT_IMU_RATE)
         self.reset()
+
+    def _bind_backend(self) -> None:
+        """The outputs of the system's backend, and the "fixed" integrator's energy watchdog."""
+        from gyro_sim.dynamics.backends import CompiledOutputs, NumpyOutputs
+
+        # every output of a state from one compiled call on the numba backend (a stateful model's
+        # applied torques too), from the numpy reference on the numpy backend
+        outputs = CompiledOutputs if self.system.backend == "numba" else NumpyOutputs
+        self._outputs = outputs(self.model, self.system, self._joint_index, self._inputs)
+        self._watch_last = None
+        if self._watched is not None and getattr(self.integrator, "monitor", False) is None:
+            self.integrator.monitor = self._energy_error  # "fixed": its energy watchdog
+
+    def switch_backend(self, backend: str) -> None:
+        """From the next `advance` on, step on `backend` ("numba" or "numpy"; make_system's
+        names), the state, time, commands, work and drift reference kept: a new system of that
+        backend, and a new integrator of the same method and options over it, reset (as after a
+        `reset`: a "fixed" integrator chooses its method afresh at the next step). The same call
+        at the same step gives the same run: the node records it, re-simulation repeats it
+        (gyro_sim.log.resim). On "numba" its kernels are compiled or loaded here when this
+        process has not run them yet."""
+        from gyro_sim.dynamics.system import make_system
+        from gyro_sim.integrators import make_integrator
+
+        self.system = make_system(self.model, backend)
+        self.integrator = make_integrator(self.integrator_name, self.system, **self._integrator_options)
+        self._bind_backend()
+        self._outputs.moved(self._t, self._y, self._p, self._moments)
 
     def _axis_limits(self) -> np.ndarray | None:
         """max_torque of every actuated axis (na,), +inf where none; None when no axis has one."""

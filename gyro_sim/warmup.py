@@ -31,13 +31,23 @@ else wants), under a file lock (one helper at a time fills a cache: a second one
 lock and then compiles only what the first left out), and ends when the fill is done. So
 short runs one after another do not each begin the fill again.
 
-It is off where nobody waits for it and where it would take the cores from other work
+**The node does not wait for it.** On a cold cache the node (backend "auto") starts the helper
+with ``--whole`` (`start_deferred`): at the lowest priority from the start, it compiles the
+whole first step, the dynamics kernel and its entry included, says READY, then fills the rest.
+Meanwhile the node steps on the numpy reference, which compiles nothing, where a physics step
+of its scene fits there (gyro_sim.ros.node: NUMPY_STEP_SHARE; otherwise it says so in one line
+and compiles first, as before); a thread of the node waits for READY, loads the kernels into
+the process (`load_when_compiled`) and the physics thread switches to them at a step boundary,
+recorded in the log so that re-simulation switches at the same step (gyro_sim.log.resim:
+DYNAMICS_EVENT).
+
+The fill is the same with or without a terminal (a launch file, systemd and a container start
+as a shell does). It is off where it would take the cores from other work
 (`background_fill_allowed`): with GYRO_SIM_BACKGROUND_FILL=0 (the test suite sets it; tests
-of the fill opt in with 1 and a private NUMBA_CACHE_DIR), under CI (the CI variable), and in a
-non-interactive start (no terminal on stdin, stdout or stderr: a container build). There the
-helper compiles only the first step's share beside the start and ends with it (it checks every
-PARENT_POLL s), the node compiles the rest before it goes real-time, and ``gyro-sim warmup``
-fills the whole cache in the foreground, with progress.
+of the fill opt in with 1 and a private NUMBA_CACHE_DIR) and under CI (the CI variable). There
+the helper compiles only the first step's share beside the start and ends with it (it checks
+every PARENT_POLL s), the node compiles the rest before it goes real-time, and ``gyro-sim
+warmup`` fills the whole cache in the foreground, with progress.
 """
 from __future__ import annotations
 
@@ -62,7 +72,7 @@ LAGRANGE_SCENE = "heavy_top"
 #: the helper's niceness once the first step's kernels are in the cache (the lowest priority;
 #: SCHED_IDLE as well where the system has it)
 HELPER_NICE = 19
-#: "0" in the environment: no background fill; "1": a fill even under CI or without a terminal
+#: "0" in the environment: no background fill; "1": a fill even under CI
 BACKGROUND_VARIABLE = "GYRO_SIM_BACKGROUND_FILL"
 #: the longest wait (s) for the helper's share of the first step (it is there in ~15 s)
 HELPER_WAIT = 600.0
@@ -282,21 +292,14 @@ def _lock_path() -> Path:
 
 
 def background_fill_allowed() -> bool:
-    """May a start leave a helper filling the cache after it (see the module's docstring)?
-    GYRO_SIM_BACKGROUND_FILL decides when set ("0" or "1"); else not under CI, nor without a
-    terminal on any of stdin, stdout, stderr."""
+    """May a start leave a helper compiling into the cache beside it and after it (see the
+    module's docstring)? GYRO_SIM_BACKGROUND_FILL decides when set ("0" or "1"); else yes, but
+    not under CI. The same with or without a terminal: a launch file, systemd or a container
+    start as a shell does."""
     chosen = os.environ.get(BACKGROUND_VARIABLE, "").strip()
     if chosen in ("0", "1"):
         return chosen == "1"
-    if os.environ.get("CI", "").strip().lower() not in ("", "0", "false", "no"):
-        return False
-    for stream in (sys.stdin, sys.stdout, sys.stderr):
-        try:
-            if stream is not None and stream.isatty():
-                return True
-        except (AttributeError, ValueError, OSError):  # replaced or closed streams: not a terminal
-            continue
-    return False
+    return os.environ.get("CI", "").strip().lower() in ("", "0", "false", "no")
 
 
 def _lowest_priority() -> None:
@@ -311,12 +314,15 @@ def _lowest_priority() -> None:
         pass
 
 
-def _start_helper(integrator: str, background: bool = False, share_only: bool = False) -> subprocess.Popen | None:
+def _start_helper(integrator: str, background: bool = False, share_only: bool = False,
+                  whole: bool = False) -> subprocess.Popen | None:
     """Start the helper that fills the cache for `integrator` (its stdout a pipe: READY when the
     first step's share is there; `background`: at the lowest priority from its start, when this
     process needs nothing from it). It runs in a session of its own and outlives this process,
     unless `share_only`: then it compiles the first step's share only and ends with this
-    process. None where it cannot start."""
+    process. `whole`: the first step whole (the dynamics kernel and its entry too: this
+    process compiles nothing, it steps on numpy meanwhile) before READY. None where it cannot
+    start."""
     # the gyro_sim this process runs, also as the working directory: `-m` puts the working
     # directory first on sys.path, and a start from a source tree of another version must not
     # fill the cache for that tree's kernels
@@ -326,16 +332,17 @@ def _start_helper(integrator: str, background: bool = False, share_only: bool = 
     try:
         return subprocess.Popen([sys.executable, "-m", "gyro_sim.warmup", "--fill", integrator,
                                  *(["--background"] if background else []),
-                                 *(["--share-only"] if share_only else [])], env=env, cwd=root,
+                                 *(["--share-only"] if share_only else []),
+                                 *(["--whole"] if whole else [])], env=env, cwd=root,
                                 stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
                                 text=True, start_new_session=not share_only)
     except OSError:
         return None
 
 
-def _wait_ready(helper: subprocess.Popen) -> None:
-    """Wait until the helper says READY, ends, or HELPER_WAIT s pass."""
-    end = time.monotonic() + HELPER_WAIT
+def _wait_ready(helper: subprocess.Popen, timeout: float = HELPER_WAIT) -> None:
+    """Wait until the helper says READY, ends, or `timeout` s pass."""
+    end = time.monotonic() + timeout
     while time.monotonic() < end:
         ready, _, _ = select.select([helper.stdout], [], [], max(0.0, end - time.monotonic()))
         if not ready:
@@ -440,9 +447,90 @@ def precompile(stream=sys.stderr, prog: str = "gyro_sim", integrator: str = DEFA
     return True
 
 
+# --- a start that steps on numpy while the kernels compile -----------------------------------
+#: the helper compiling the whole first step while this process steps on the numpy reference
+#: (`start_deferred`); None: none
+_deferred: subprocess.Popen | None = None
+
+
+def start_deferred(integrator: str = DEFAULT_INTEGRATOR, stream=sys.stderr, prog: str = "gyro_sim") -> bool:
+    """Where the cache is cold for the first step of a run with `integrator` and a background
+    fill is allowed (`background_fill_allowed`), start the helper compiling that first step
+    whole, then everything else a run may switch to, at the lowest CPU priority (it takes no
+    CPU the caller wants), say so in one line and return True: the caller steps on the numpy
+    reference, which compiles nothing, until `wait_deferred` says the kernels are in the cache,
+    then loads them off its physics thread and switches at a step boundary (the node:
+    gyro_sim.ros.loop). False, with nothing started, where the cache is warm, numba is missing,
+    the fill is not allowed, or no helper can start."""
+    global _helper, _deferred
+    if not kernels() or not background_fill_allowed() or not cache_is_cold(integrator):
+        return False
+    helper = _start_helper(integrator, background=True, whole=True)
+    if helper is None:
+        return False
+    _helper = _deferred = helper
+    seconds = COMPILE_SECONDS.get(integrator, max(COMPILE_SECONDS.values()))
+    stream.write(f"{prog}: compiling the dynamics in the background (about {seconds} s of CPU, at the lowest "
+                 f"priority); the run steps on the numpy reference until then\n")
+    stream.flush()
+    return True
+
+
+def deferred() -> bool:
+    """Whether this process started a helper that compiles its first step (`start_deferred`)."""
+    return _deferred is not None
+
+
+def stop_deferring() -> None:
+    """This process compiles its first step itself after all (the helper goes on filling)."""
+    global _deferred
+    _deferred = None
+
+
+def wait_deferred(integrator: str = DEFAULT_INTEGRATOR, timeout: float = HELPER_WAIT) -> bool:
+    """Wait until the helper of `start_deferred` has the first step of `integrator` in the cache:
+    True then (loading it compiles nothing), False if it ended (or `timeout` s passed) without."""
+    helper = _deferred
+    if helper is not None:
+        _wait_ready(helper, timeout)
+    return not cache_is_cold(integrator)
+
+
+def load_when_compiled(sim, then):
+    """Off the physics thread: a daemon thread waits for the helper of `start_deferred`
+    (`wait_deferred`), loads the first step's kernels into this process by a twin Simulator of
+    `sim`'s scene, integrator and step on numba (built, a snapshot, one step; its "fixed"
+    guarded: it takes no rung the cache does not hold yet; it shares nothing with `sim` but the
+    compiled code), and calls ``then("numba")``: `sim`'s owner switches at its next step
+    boundary, and that step compiles nothing. Nothing is called if the helper ended without
+    the kernels (the run stays on numpy). Returns the thread."""
+    import threading
+
+    scene, step, integrator = sim.scene, sim.integrator.step, sim.integrator_name
+
+    def load():
+        if not wait_deferred(integrator):
+            return
+        try:
+            from gyro_sim.simulator import Simulator
+
+            twin = Simulator(scene, integrator=integrator, step=step, backend="numba")
+            if hasattr(twin.integrator, "guard"):
+                twin.integrator.guard = True
+            twin.snapshot()
+            twin.advance(step)
+        except Exception:  # noqa: BLE001 - the run stays on numpy
+            return
+        then("numba")
+
+    thread = threading.Thread(target=load, name="gyro_sim-load-kernels", daemon=True)
+    thread.start()
+    return thread
+
+
 # --- the helper ------------------------------------------------------------------------------
 def fill(integrator: str, out=sys.stdout, parent: int | None = None, background: bool = False,
-         share_only: bool = False) -> None:
+         share_only: bool = False, whole: bool = False) -> None:
     """The helper's work (one at a time per cache), for as long as its parent (`parent`, default
     the process that started it) lives: the first step's kernels other than the dynamics and
     the entry (the rk4 loop, the outputs, the integrator's first loop) on a null kernel, READY on
@@ -457,7 +545,9 @@ def fill(integrator: str, out=sys.stdout, parent: int | None = None, background:
     only what the first one left out. numba writes each cache file under a temporary name and
     renames it: a helper ended at any moment leaves no torn entry. With `share_only` it ends
     after READY, and with its parent (`parent`, default the process that started it) before;
-    otherwise it outlives its parent and ends when the fill is done."""
+    otherwise it outlives its parent and ends when the fill is done. With `whole`, its first
+    share is the whole first step, the dynamics kernel and its entry included (its parent
+    steps on numpy until READY: `start_deferred`)."""
     import fcntl
 
     if share_only:
@@ -469,13 +559,15 @@ def fill(integrator: str, out=sys.stdout, parent: int | None = None, background:
         try:
             fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:  # another helper fills this cache: wait for it, then fill the rest
-            said = _say_ready(out)
+            said = not whole and _say_ready(out)  # (whole: READY once the first step is cached)
             if share_only:
                 return
             if not background:
                 _lowest_priority()
             fcntl.flock(lock, fcntl.LOCK_EX)
             if everything_cached(integrator):
+                if whole:
+                    _say_ready(out)
                 return
         from gyro_sim.dynamics import kernel as fast
         from gyro_sim.dynamics.model import compile_model, initial_state
@@ -485,7 +577,6 @@ def fill(integrator: str, out=sys.stdout, parent: int | None = None, background:
         from gyro_sim.integrators.rk4.loop import ErkMarch
 
         real_kernel = fast.kernel_address
-        fast.kernel_address = fast.null_kernel_address  # chain_model reads it when a system is built
 
         def step(fn, *args):
             try:
@@ -502,12 +593,18 @@ def fill(integrator: str, out=sys.stdout, parent: int | None = None, background:
             system.outputs(0.0, y)  # the publication kernel
 
         if not said:
-            step(share)
+            if whole:  # the real kernel, then everything the first step runs
+                step(_compile_kernel)
+                step(_first_step, integrator)
+            else:
+                fast.kernel_address = fast.null_kernel_address  # chain_model reads it when a system is built
+                step(share)
             _say_ready(out)
             if share_only:
                 return
             if not background:
                 _lowest_priority()
+        fast.kernel_address = fast.null_kernel_address  # the rest on a kernel that only zeroes y'
         step(warm_everything, integrator)
         step(fast.heavy_elimination_address)
         fast.kernel_address = real_kernel
@@ -595,16 +692,19 @@ def register(sub, bench) -> None:
 
 
 def main(argv=None) -> int:
-    """``python -m gyro_sim.warmup --fill INTEGRATOR [--background] [--share-only]``: the helper (`fill`)."""
+    """``python -m gyro_sim.warmup --fill INTEGRATOR [--background] [--share-only] [--whole]``: the
+    helper (`fill`)."""
     args = sys.argv[1:] if argv is None else list(argv)
     flags = args[2:]
-    background, share_only = "--background" in flags, "--share-only" in flags
-    if (len(args) < 2 or args[0] != "--fill" or args[1] not in LOOPS or len(flags) != background + share_only):
-        print(f"usage: python -m gyro_sim.warmup --fill {{{','.join(LOOPS)}}} [--background] [--share-only]",
+    background, share_only, whole = "--background" in flags, "--share-only" in flags, "--whole" in flags
+    if (len(args) < 2 or args[0] != "--fill" or args[1] not in LOOPS
+            or len(flags) != background + share_only + whole):
+        print(f"usage: python -m gyro_sim.warmup --fill {{{','.join(LOOPS)}}} [--background] [--share-only] [--whole]",
               file=sys.stderr)
         return 2
     parent = os.environ.get(PARENT_VARIABLE, "")
-    fill(args[1], parent=int(parent) if parent.isdigit() else None, background=background, share_only=share_only)
+    fill(args[1], parent=int(parent) if parent.isdigit() else None, background=background, share_only=share_only,
+         whole=whole)
     return 0
 
 

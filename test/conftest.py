@@ -37,6 +37,42 @@ def gyro_sim(*args, timeout=120, **kw):
                           capture_output=True, text=True, timeout=timeout, env=dict(os.environ), **kw)
 
 
+def catches(pid: int, signum: int) -> bool:
+    """Whether process `pid` has a handler of its own for `signum` (its SigCgt mask in /proc):
+    for SIGTERM, which Python leaves at the system's default, the moment the package's first
+    statement has run."""
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            mask = next(int(line.split()[1], 16) for line in f if line.startswith("SigCgt:"))
+    except (OSError, StopIteration):
+        return False
+    return bool(mask >> (signum - 1) & 1)
+
+
+def signal_during_start(cmd: list[str], env: dict, signum: int, delay: float, timeout: float = 120.0):
+    """Start `cmd`, wait until its own SIGTERM handler is there (`catches`: its first statement
+    ran; before it the interpreter's own start is the system's business), `delay` s more, send
+    `signum`; (exit status, stdout, stderr) once it has ended (killed after `timeout` s: status
+    None)."""
+    import signal as _signal
+    import time
+
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        end = time.monotonic() + timeout
+        while not catches(proc.pid, _signal.SIGTERM) and proc.poll() is None and time.monotonic() < end:
+            time.sleep(0.001)
+        time.sleep(delay)
+        if proc.poll() is None:
+            proc.send_signal(signum)
+        out, err = proc.communicate(timeout=timeout)
+        return proc.returncode, out, err
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, err = proc.communicate()
+        return None, out, err
+
+
 @pytest.fixture(scope="session")
 def recorded(tmp_path_factory):
     """(path, RunRecord) of a 0.4 s hinge_chain run with commands, published at 50 Hz."""

@@ -338,3 +338,31 @@ def test_a_signal_while_a_sweep_prepares_its_workers_is_not_swallowed(tmp_path, 
     monkeypatch.setattr(load, "load_scene", _class_created_under_a_signal)
     with pytest.raises(KeyboardInterrupt):
         prepare_scene(sweep, sweep.points[0])
+
+
+# --- the start: imports, the parser, the first compile ---------------------------------------------
+#: seconds after the entry point's first statement (main's): the subcommands' imports take a few
+#: tenths of a second, the scene and the Simulator's start (kernels loaded) about a second more
+START_DELAYS = (0.0, 0.005, 0.02, 0.05, 0.1, 0.2, 0.35, 0.5, 0.8, 1.2, 2.0)
+#: as the console script `gyro-sim` calls it (pip's wrapper imports gyro_sim.cli, then calls main)
+CONSOLE_SCRIPT = "import sys; from gyro_sim.cli import main; sys.exit(main())"
+
+
+@pytest.mark.slow
+def test_a_signal_anywhere_in_the_start_of_a_command_ends_it_with_one_line():
+    """A SIGINT or SIGTERM from the entry point's first statement on (the imports of the
+    subcommands, the parser, the scene, the kernels' load, the run): exit 1 and the command's
+    one line, as a later interrupt gives, never a traceback."""
+    from test.conftest import signal_during_start
+
+    cmd = [sys.executable, "-c", CONSOLE_SCRIPT, "run", "--scene", "hinge_chain", "--duration", "600"]
+    failures = []
+    for delay in START_DELAYS:
+        for sig in SIGNALS:
+            code, out, err = signal_during_start(cmd, dict(os.environ), sig, delay)
+            said = [line for line in err.splitlines() if "interrupted" in line]  # (a cold cache's line before)
+            ok = (code == 1 and "Traceback" not in err and len(said) == 1
+                  and said[0].startswith(f"gyro-sim run: interrupted ({sig.name})"))
+            if not ok:
+                failures.append(f"{sig.name} after {delay} s: exit {code}: {err[-600:]}")
+    assert not failures, "\n".join(failures)

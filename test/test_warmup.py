@@ -289,10 +289,11 @@ def test_a_background_fill_outlives_its_parent_in_a_session_of_its_own_at_the_lo
     ({"GYRO_SIM_BACKGROUND_FILL": "0"}, True, False),
     ({"GYRO_SIM_BACKGROUND_FILL": "1", "CI": "true"}, False, True),
     ({"CI": "true"}, True, False),
-    ({}, False, False),
+    ({}, False, True),
     ({}, True, True),
 ])
-def test_background_fill_is_off_under_ci_in_tests_and_without_a_terminal(monkeypatch, variables, tty, allowed):
+def test_background_fill_is_off_under_ci_and_in_tests_and_the_same_with_or_without_a_terminal(monkeypatch, variables,
+                                                                                              tty, allowed):
     import io
 
     for name in ("GYRO_SIM_BACKGROUND_FILL", "CI"):

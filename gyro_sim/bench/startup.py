@@ -82,11 +82,15 @@ SETTLE = 3.5
 NODE_READY = "physics thread:"
 #: how often (s) the subscriber's participant announces itself
 ANNOUNCE_PERIOD = 0.2
+#: the window (wall s from the first /joint_states) over which the node's real-time factor is
+#: measured: simulated time (the messages' stamps) over the wall time they came in
+RTF_WINDOW = 10.0
 
 
 #: the subscriber, run with the measured environment's Python: "ready" once subscribed, then
 #: "first <time.monotonic()>" at the first message (or "none" after argv[1] s); "ready" gives
-#: its time.monotonic() too
+#: its time.monotonic() too. With a window argv[3] > 0 it listens that many seconds more and
+#: then says "rtf <simulated s / wall s> <messages>": the stamps' span over the arrivals'
 SUBSCRIBER = r"""
 import sys, time
 import rclpy
@@ -97,12 +101,20 @@ from sensor_msgs.msg import JointState
 rclpy.init()
 node = Node("gyro_sim_startup_probe")
 got = []
-node.create_subscription(JointState, sys.argv[2], lambda m: got.append(time.monotonic()), qos_profile_sensor_data)
+node.create_subscription(JointState, sys.argv[2],
+                         lambda m: got.append((time.monotonic(), m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec)),
+                         qos_profile_sensor_data)
 print(f"ready {time.monotonic()!r}", flush=True)
 end = time.monotonic() + float(sys.argv[1])
 while not got and time.monotonic() < end:
     rclpy.spin_once(node, timeout_sec=0.05)
-print(f"first {got[0]!r}" if got else "none", flush=True)
+print(f"first {got[0][0]!r}" if got else "none", flush=True)
+window = float(sys.argv[3]) if len(sys.argv) > 3 else 0.0
+if got and window > 0:
+    while got[-1][0] < got[0][0] + window:
+        rclpy.spin_once(node, timeout_sec=0.05)
+    last = [g for g in got if g[0] <= got[0][0] + window][-1]
+    print(f"rtf {(last[1] - got[0][1]) / (last[0] - got[0][0])!r} {len(got)}", flush=True)
 node.destroy_node()
 rclpy.try_shutdown()
 """
@@ -243,6 +255,40 @@ def child_env(venv: Path, cache: Path, scratch: Path) -> dict:
     return env
 
 
+def cache_fills(cache: Path) -> list[int]:
+    """The processes whose environment names `cache` as their NUMBA_CACHE_DIR: the cache fill
+    a measured start left behind (gyro_sim.warmup), in a session of its own."""
+    mark = f"NUMBA_CACHE_DIR={cache}".encode()
+    out = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit() or int(entry.name) == os.getpid():
+            continue
+        try:
+            if mark in (entry / "environ").read_bytes().split(b"\0"):
+                out.append(int(entry.name))
+        except OSError:
+            pass
+    return out
+
+
+def wait_cache_fills(cache: Path, timeout: float) -> None:
+    """Until the cache fill of `cache` has ended (StartupError after `timeout` s)."""
+    end = time.monotonic() + timeout
+    while cache_fills(cache):
+        if time.monotonic() > end:
+            raise StartupError(f"the cache fill still runs after {timeout:.0f} s")
+        time.sleep(1.0)
+
+
+def end_cache_fills(cache: Path) -> None:
+    """SIGKILL the cache fill of `cache` (`cache_fills`): the next case runs without it."""
+    for pid in cache_fills(cache):
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except OSError:
+            pass
+
+
 def process_cpu(pid: int) -> float:
     """CPU seconds (user + system) a running process has used so far (Linux /proc)."""
     with open(f"/proc/{pid}/stat") as f:
@@ -283,26 +329,75 @@ def _read_line(proc: subprocess.Popen, what: str) -> str:
     return line.strip()
 
 
+class Terminal:
+    """A pseudo-terminal for a measured process: its stdin and stdout, and its controlling
+    terminal (as a start typed in a shell has); what the process writes on it is read and
+    dropped, so that it never blocks on a full terminal."""
+
+    def __init__(self):
+        import pty
+        import threading
+
+        self.master, self.slave = pty.openpty()
+        self._reader = threading.Thread(target=self._drain, name="gyro_sim-bench-pty", daemon=True)
+        self._reader.start()
+
+    def _drain(self) -> None:
+        while True:
+            try:
+                if not os.read(self.master, 4096):
+                    return
+            except OSError:
+                return
+
+    @staticmethod
+    def take_as_controlling() -> None:
+        """In the child (preexec_fn, after setsid): its stdin, the terminal, becomes its
+        controlling terminal."""
+        import fcntl
+        import termios
+
+        fcntl.ioctl(0, termios.TIOCSCTTY, 0)
+
+    def popen_options(self) -> dict:
+        return {"stdin": self.slave, "stdout": self.slave, "preexec_fn": self.take_as_controlling}
+
+    def close(self) -> None:
+        for fd in (self.slave, self.master):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+
 def first_message(python: str, node_cmd: list[str], env: dict, topic: str = TOPIC,
                   timeout: float = CASE_TIMEOUT, cwd: Path | None = None,
-                  announce_period: float | None = ANNOUNCE_PERIOD, settle: float = SETTLE) -> Timing:
+                  announce_period: float | None = ANNOUNCE_PERIOD, settle: float = SETTLE,
+                  terminal: bool = False, rtf_window: float = 0.0) -> Timing:
     """Start a subscriber to `topic` (and wait until it is subscribed, and `settle` s more), then
     `node_cmd`: the wall seconds from the node's start to the first message received, and the
     node's CPU seconds then. The node is stopped afterwards (SIGINT, then SIGKILL). StartupError
     if the node ends or says nothing on `topic` within `timeout` s. The subscriber's participant
-    announces itself every `announce_period` s (None: as the environment says)."""
+    announces itself every `announce_period` s (None: as the environment says). The node runs
+    in a session of its own, its stdin /dev/null (no terminal: a launch file, systemd, CI), or
+    with `terminal` on a pseudo-terminal of its own (a start typed in a shell: `Terminal`).
+    With `rtf_window` > 0, extra["rtf"]: the real-time factor of the node's first `rtf_window`
+    s of publications (the stamps' span over their arrivals')."""
     node = None
+    term = Terminal() if terminal else None
     with tempfile.TemporaryFile("w+") as node_err, tempfile.TemporaryDirectory(prefix="gyro_sim_probe_") as tmp:
         sub_env = with_profile(env, Path(tmp), announce_period) if announce_period else env
-        sub = subprocess.Popen([python, "-c", SUBSCRIBER, str(timeout), topic], env=sub_env, stdout=subprocess.PIPE,
-                               stderr=subprocess.DEVNULL, text=True, start_new_session=True, cwd=cwd)
+        sub = subprocess.Popen([python, "-c", SUBSCRIBER, str(timeout), topic, repr(rtf_window)], env=sub_env,
+                               stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, start_new_session=True,
+                               cwd=cwd)
         try:
             if not _read_line(sub, "the subscriber").startswith("ready"):
                 raise StartupError("the subscriber did not start")
             time.sleep(settle)
             t0 = time.monotonic()
-            node = subprocess.Popen(node_cmd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                    stderr=node_err, start_new_session=True, cwd=cwd)
+            where = term.popen_options() if term is not None else {"stdin": subprocess.DEVNULL,
+                                                                    "stdout": subprocess.DEVNULL}
+            node = subprocess.Popen(node_cmd, env=env, stderr=node_err, start_new_session=True, cwd=cwd, **where)
             while not select.select([sub.stdout], [], [], POLL)[0]:
                 if node.poll() is not None:
                     node_err.seek(0)
@@ -313,12 +408,20 @@ def first_message(python: str, node_cmd: list[str], env: dict, topic: str = TOPI
             cpu = process_cpu(node.pid) if node.poll() is None else float("nan")
             if not line.startswith("first "):
                 raise StartupError(f"no {topic} message within {timeout:g} s")
-            return Timing(float(line.split()[1]) - t0, cpu)
+            timing = Timing(float(line.split()[1]) - t0, cpu)
+            if rtf_window > 0:
+                said = _read_line(sub, "the subscriber").split()
+                if said[:1] != ["rtf"] or node.poll() is not None:
+                    raise StartupError(f"the node ended within {rtf_window:g} s of its first {topic}")
+                timing.extra.update(rtf=float(said[1]), rtf_messages=int(said[2]), rtf_window=rtf_window)
+            return timing
         finally:
             for p in (node, sub):
                 if p is not None:
                     stop(p)
             sub.stdout.close()
+            if term is not None:
+                term.close()
 
 
 def with_profile(env: dict, directory: Path, period: float) -> dict:
@@ -422,21 +525,47 @@ def worker_first_point(python: str, env: dict, scene: str = RUN_SCENE, horizon: 
 
 
 #: the cases, in the order they run: (key, label)
-CASES = (("node", f"`gyro_sim_node` (default scene), to the first {TOPIC} a subscriber receives"),
+CASES = (("node", f"`gyro_sim_node` (default scene) without a terminal, to the first {TOPIC} a subscriber receives"),
+         ("node_tty", f"`gyro_sim_node` (default scene) from a terminal, to the first {TOPIC} a subscriber receives"),
          ("run", f"`gyro-sim run --scene {RUN_SCENE} --duration {RUN_DURATION:g}`, to its end"),
          ("worker", "a Dask worker's first sweep point (dop853), from the worker's start"),
          ("rclpy", f"for comparison: a minimal rclpy node publishing JointState, to the first {TOPIC} received"),
          ("late", f"a subscriber started {SETTLE:g} s after the node runs, from its subscription to its first {TOPIC}"))
 
 
+def scripts(venv: Path, source: Path | None) -> dict:
+    """The command lines of the console scripts measured: the venv's installed ones, or with
+    `source` the entry points that tree's setup.py names, called by the venv's Python as pip's
+    wrapper calls them (the tree on PYTHONPATH, set by `measure`)."""
+    names = ("gyro_sim_node", "gyro-sim")
+    if source is None:
+        return {name: [str(script_of(venv, name))] for name in names}
+    import re
+
+    setup = (source / "setup.py").read_text()
+    out = {}
+    for name in names:
+        found = re.search(rf'"{re.escape(name)} = ([\w.]+):(\w+)"', setup)
+        if found is None:
+            raise StartupError(f"{source / 'setup.py'} names no console script {name}")
+        module, func = found.groups()
+        out[name] = [str(python_of(venv)), "-c", f"import sys; sys.argv[0] = {name!r}; from {module} import {func}; "
+                                                 f"sys.exit({func}())"]
+    return out
+
+
 def measure(venv: Path, parts, say, timeout: float = CASE_TIMEOUT, warm_starts: int = 1,
-            announce_period: float | None = ANNOUNCE_PERIOD) -> dict:
+            announce_period: float | None = ANNOUNCE_PERIOD, source: Path | None = None,
+            rtf_window: float = RTF_WINDOW) -> dict:
     """Every case of `parts` cold (a new empty cache) then warm (the same cache again,
     `warm_starts` times: the median start, with every wall time in its ``walls``), each run
     from a scratch directory (not a source tree, whose gyro_sim `python -m` would find first).
     `announce_period`: the node case's subscriber's (`first_message`); None: Fast DDS's default
-    for every process (the node's own shorter period, gyro_sim.ros.discovery, turned off)."""
+    for every process (the node's own shorter period, gyro_sim.ros.discovery, turned off).
+    `source`: a source tree measured in `venv` without installing it (`scripts`). The node
+    cases also give the real-time factor of the first `rtf_window` s of publications."""
     python = str(python_of(venv))
+    run = scripts(venv, source)
     results: dict[str, dict] = {}
     with tempfile.TemporaryDirectory(prefix="gyro_sim_startup_") as tmp:
         scratch = Path(tmp)
@@ -446,30 +575,40 @@ def measure(venv: Path, parts, say, timeout: float = CASE_TIMEOUT, warm_starts: 
             cache = scratch / f"cache_{key}"
             cache.mkdir()
             env = child_env(venv, cache, scratch)
+            if source is not None:
+                env["PYTHONPATH"] = str(source)
             if not announce_period:  # Fast DDS's default for every process, the node's own period too
                 env = with_profile(env, scratch, FAST_DDS_ANNOUNCE_PERIOD)
-            for temp, starts in (("cold", 1), ("warm", warm_starts)):
-                timings = []
-                for i in range(starts):
-                    say(f"{key}, {temp}" + (f" {i + 1}/{starts}" if starts > 1 else "") + " ...")
-                    if key in ("node", "rclpy"):
-                        cmd = [str(script_of(venv, "gyro_sim_node"))] if key == "node" else [python, "-c", MINIMAL_NODE]
-                        t = first_message(python, cmd, env, timeout=timeout, cwd=scratch,
-                                          announce_period=announce_period)
-                    elif key == "late":
-                        t = late_subscriber(python, [str(script_of(venv, "gyro_sim_node"))], env, timeout=timeout,
-                                            cwd=scratch)
-                    elif key == "run":
-                        t = timed_run([str(script_of(venv, "gyro-sim")), "run", "--scene", RUN_SCENE, "--duration",
-                                       str(RUN_DURATION)], env, timeout=timeout, cwd=scratch)
-                    else:
-                        t = worker_first_point(python, env, timeout=timeout, cwd=scratch)
-                    say(f"{key}, {temp}: {t.wall:.1f} s, CPU {t.cpu:.1f} s")
-                    timings.append(t)
-                t = sorted(timings, key=lambda t: t.wall)[(len(timings) - 1) // 2]
-                if starts > 1:
-                    t = Timing(t.wall, t.cpu, dict(t.extra, walls=[u.wall for u in timings]))
-                results.setdefault(key, {})[temp] = asdict(t)
+            try:
+                for temp, starts in (("cold", 1), ("warm", warm_starts)):
+                    if temp == "warm":  # a later start: once the first start's fill has ended
+                        wait_cache_fills(cache, timeout)
+                    timings = []
+                    for i in range(starts):
+                        say(f"{key}, {temp}" + (f" {i + 1}/{starts}" if starts > 1 else "") + " ...")
+                        if key in ("node", "node_tty", "rclpy"):
+                            cmd = run["gyro_sim_node"] if key != "rclpy" else [python, "-c", MINIMAL_NODE]
+                            t = first_message(python, cmd, env, timeout=timeout, cwd=scratch,
+                                              announce_period=announce_period, terminal=key == "node_tty",
+                                              rtf_window=rtf_window if key != "rclpy" else 0.0)
+                        elif key == "late":
+                            t = late_subscriber(python, run["gyro_sim_node"], env, timeout=timeout,
+                                                cwd=scratch)
+                        elif key == "run":
+                            t = timed_run([*run["gyro-sim"], "run", "--scene", RUN_SCENE, "--duration",
+                                           str(RUN_DURATION)], env, timeout=timeout, cwd=scratch)
+                        else:
+                            t = worker_first_point(python, env, timeout=timeout, cwd=scratch)
+                        say(f"{key}, {temp}: {t.wall:.1f} s, CPU {t.cpu:.1f} s"
+                            + (f", real-time factor {t.extra['rtf']:.3f} over the first {rtf_window:g} s"
+                               if "rtf" in t.extra else ""))
+                        timings.append(t)
+                    t = sorted(timings, key=lambda t: t.wall)[(len(timings) - 1) // 2]
+                    if starts > 1:
+                        t = Timing(t.wall, t.cpu, dict(t.extra, walls=[u.wall for u in timings]))
+                    results.setdefault(key, {})[temp] = asdict(t)
+            finally:  # what a start left filling this cache does not run into the next case
+                end_cache_fills(cache)
     return results
 
 
@@ -491,7 +630,19 @@ def table(results: dict, before: dict, command: str, day: str, announce_period: 
             spread = f" (median of {len(walls)}: {min(walls):.1f} to {max(walls):.1f})" if walls else ""
             lines.append(f"| {label} | {c['wall']:.1f} | {_seconds(c['cpu'])} | {w['wall']:.1f}{spread} "
                          f"| {_seconds(w['cpu'])} |")
-    if {"node", "rclpy", "late"} & set(results):
+    starts = [(key, where) for key, where in (("node", "without a terminal"), ("node_tty", "from a terminal"))
+              if "rtf" in results.get(key, {}).get("cold", {}).get("extra", {})]
+    if starts:
+        window = results[starts[0][0]]["cold"]["extra"].get("rtf_window", RTF_WINDOW)
+        lines += ["", f"The node's start, to its first {TOPIC} and its real-time factor over the {window:g} s after "
+                      "it (simulated time over wall time):", "",
+                  f"| start | cold: first {TOPIC} (s) | cold: real-time factor | warm: first {TOPIC} (s) "
+                  "| warm: real-time factor |", "|---|---:|---:|---:|---:|"]
+        for key, where in starts:
+            c, w = results[key]["cold"], results[key]["warm"]
+            lines.append(f"| {where} | {c['wall']:.1f} | {c['extra']['rtf']:.3f} | {w['wall']:.1f} "
+                         f"| {w['extra'].get('rtf', float('nan')):.3f} |")
+    if {"node", "node_tty", "rclpy", "late"} & set(results):
         lines += ["", (f"The node's subscriber announced itself every {announce_period:g} s, the node every "
                        f"{ANNOUNCE_PERIOD_NODE:g} s." if announce_period else
                        f"Every process announced itself every {FAST_DDS_ANNOUNCE_PERIOD:g} s (Fast DDS's "
@@ -536,11 +687,18 @@ def cmd_bench_startup(args) -> int:
         return 2
     made: Path | None = None  # a venv this command creates (removed unless kept and complete)
     keep = False
+    source_path = None  # a source tree measured in --venv without installing it
     if args.venv:
         venv = Path(args.venv)
         if not python_of(venv).is_file():
             print(f"{prog}: {venv} is not a virtual environment (no bin/python)", file=sys.stderr)
             return 2
+        if args.source:
+            source_path = source_tree(args.source)
+            if source_path is None:
+                print(f"{prog}: {args.source} is not a gyro_sim source tree (no setup.py, package.xml, gyro_sim/)",
+                      file=sys.stderr)
+                return 2
     else:
         source = source_tree(args.source)
         if source is None:
@@ -563,7 +721,7 @@ def cmd_bench_startup(args) -> int:
             keep = bool(args.keep_venv)
         before = machine()
         results = measure(venv, args.parts, say, timeout=args.timeout, warm_starts=args.warm_starts,
-                          announce_period=args.announce_period or None)
+                          announce_period=args.announce_period or None, source=source_path)
         after = machine()
     except StartupError as exc:
         print(f"{prog}: {exc}", file=sys.stderr)
@@ -592,7 +750,8 @@ def cmd_bench_startup(args) -> int:
 def register(sub, bench) -> None:
     """Add `gyro-sim bench startup`."""
     s = bench.add_parser("startup", help="time to the first output of a fresh install, cold and warm (minutes)")
-    s.add_argument("--source", help="the gyro_sim source tree to install (default: the one this gyro_sim runs from)")
+    s.add_argument("--source", help="the gyro_sim source tree to install (default: the one this gyro_sim runs from); "
+                                    "with --venv, measured in that venv as it is, not installed (PYTHONPATH)")
     where = s.add_mutually_exclusive_group()
     where.add_argument("--keep-venv", metavar="DIR", help="install into DIR (new or empty) and keep it")
     where.add_argument("--venv", metavar="DIR", help="measure in this installed venv (no install)")

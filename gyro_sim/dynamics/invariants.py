@@ -71,13 +71,13 @@ def invariants(model: Model, data: Data, p: np.ndarray | None, t: float) -> dict
     P = lin.sum(axis=0)
     O1 = data.O[0]
     up = -model.down[:, 2]
-    H_O1 = L - np.cross(O1, P)  # angular momentum about O^1, rotors included
+    H_O1 = L - cross(O1, P)  # angular momentum about O^1, rotors included
     out["angular_momentum_O1"] = H_O1
     out["vertical_momentum"] = float(up @ H_O1)  # (79)
     if model.free:
         rc = h.sum(axis=0) / m.sum()
         out["linear_momentum"] = P
-        out["angular_momentum"] = L - np.cross(rc, P)
+        out["angular_momentum"] = L - cross(rc, P)
     return out
 
 

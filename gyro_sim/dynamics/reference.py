@@ -40,10 +40,16 @@ def matvec(A: np.ndarray, x: np.ndarray) -> np.ndarray:
     return (A @ x[..., None])[..., 0]
 
 
+#: the chain's axis reversed, for the axes `rcumsum` takes (0, or -2: the bodies before (3,))
+_REVERSED = {0: (slice(None, None, -1),), -2: (Ellipsis, slice(None, None, -1), slice(None))}
+
+
 def rcumsum(a: np.ndarray, axis: int = 0) -> np.ndarray:
-    """Suffix sums over the chain (its axis `axis`): out[k] = sum_{p >= k} a[p] (the sums of eq 48)."""
-    a = np.flip(a, axis)
-    return np.flip(np.cumsum(a, axis=axis), axis)
+    """Suffix sums over the chain (its axis `axis`, 0 or -2): out[k] = sum_{p >= k} a[p] (the
+    sums of eq 48): prefix sums of the reversed view, reversed (np.flip's views, without its
+    per-call axis checks: this runs several times per evaluation)."""
+    rev = _REVERSED[axis]
+    return a[rev].cumsum(axis)[rev]
 
 
 class Data:
@@ -59,6 +65,7 @@ class Data:
         self.rotor_incidence[model.torque_body, np.arange(len(model.torque_body))] = 1.0
         self.hinge_K = np.array([_skew(model.hinge_axis[k]) for k in model.hinge_bodies]).reshape(-1, 3, 3)
         self.hinge_K2 = self.hinge_K @ self.hinge_K
+        self.sph_axes = np.tile(EYE3, (len(model.sph_bodies), 1))  # a spherical joint's unit motions (joint_columns)
 
 
 def _skew(a: np.ndarray) -> np.ndarray:
@@ -94,16 +101,16 @@ def positions(model: Model, data: Data, t: float, y: np.ndarray) -> None:
     else:
         O1 = model.base_position
     s_w = matvec(R, model.s)
-    data.O = O1 + np.cumsum(s_w, axis=-2) - s_w
+    data.O = O1 + s_w.cumsum(-2) - s_w
     hk = matvec(R, model.first_moment)  # m^k c^k, world components
     data.h = model.mass[:, None] * data.O + hk  # first moments about the origin
     data.e_w = matvec(R[..., model.hinge_bodies, :, :], model.hinge_axis[model.hinge_bodies])  # hinge axes
     # inertia about the origin: J_O^k (rotated) shifted from O^k to the origin
-    A_w = R @ model.inertia @ np.swapaxes(R, -1, -2)
+    A_w = R @ model.inertia @ R.swapaxes(-1, -2)
     O = data.O
     m = model.mass
-    OO = np.einsum("...ni,...nj->...nij", O, O)
-    Oh = np.einsum("...ni,...nj->...nij", O, hk)
+    OO = O[..., :, None] * O[..., None, :]  # outer products: one product per entry
+    Oh = O[..., :, None] * hk[..., None, :]
     dd = np.einsum("...ni,...ni->...n", O, O)
     dh = np.einsum("...ni,...ni->...n", O, hk)
     data.J = (
@@ -111,7 +118,7 @@ def positions(model: Model, data: Data, t: float, y: np.ndarray) -> None:
         + m[:, None, None] * (dd[..., None, None] * EYE3 - OO)
         + (2.0 * dh)[..., None, None] * EYE3
         - Oh
-        - np.swapaxes(Oh, -1, -2)
+        - Oh.swapaxes(-1, -2)
     )
 
 
@@ -124,9 +131,9 @@ def velocities(model: Model, data: Data, t: float, u: np.ndarray) -> None:
         wrel[..., model.sph_bodies, :] = u[..., model.col_sph]
     if len(model.hinge_bodies):
         wrel[..., model.hinge_bodies, :] = data.e_w * u[..., model.col_hinge][..., None]  # (50): e^k phi_k'
-    w = np.cumsum(wrel, axis=-2)
+    w = wrel.cumsum(-2)
     O = data.O
-    v_o = np.cumsum(cross(O, wrel), axis=-2)  # velocity of the body point at the origin
+    v_o = cross(O, wrel).cumsum(-2)  # velocity of the body point at the origin
     if model.free:
         v_o += u[..., model.col_base][..., None, :]
     elif model.moving:
@@ -192,8 +199,8 @@ def bias_accelerations(model: Model, data: Data, t: float) -> tuple[np.ndarray, 
     da = cross(data.w_parent, data.wrel)
     da[..., model.sph_bodies, :] = 0.0  # spherical joints: world-component axes do not turn
     dv = cross(data.vO, data.wrel) + cross(data.O, da)
-    acc_w = np.cumsum(da, axis=-2)
-    acc_v = np.cumsum(dv, axis=-2)
+    acc_w = da.cumsum(-2)
+    acc_v = dv.cumsum(-2)
     if model.moving:
         acc_v += base_motion(model, t)[2]
     return acc_w, acc_v
@@ -202,7 +209,7 @@ def bias_accelerations(model: Model, data: Data, t: float) -> tuple[np.ndarray, 
 def joint_columns(model: Model, data: Data) -> tuple[np.ndarray, np.ndarray]:
     """Unit motions S_j (angular, linear-at-origin) of every velocity column, (N, 3) each."""
     Sa = np.zeros(data.R.shape[:-3] + (model.N, 3), dtype=data.R.dtype)
-    Sa[..., model.col_sph.ravel(), :] = np.tile(EYE3, (len(model.sph_bodies), 1))
+    Sa[..., model.col_sph.ravel(), :] = data.sph_axes
     Sa[..., model.col_hinge, :] = data.e_w
     Sb = cross(data.O[..., model.col_body, :], Sa)
     if model.free:
@@ -257,7 +264,7 @@ def accelerations_from(model: Model, data: Data, Sa, Sb, udot, acc_w0, acc_v0):
     # summed over each body's columns along the bodies' axis, moved first for np.add.at
     np.add.at(np.moveaxis(da, -2, 0), model.col_body, np.moveaxis(Sa * udot[..., None], -2, 0))
     np.add.at(np.moveaxis(dv, -2, 0), model.col_body, np.moveaxis(Sb * udot[..., None], -2, 0))
-    return acc_w0 + np.cumsum(da, axis=-2), acc_v0 + np.cumsum(dv, axis=-2)
+    return acc_w0 + da.cumsum(-2), acc_v0 + dv.cumsum(-2)
 
 
 class Applied:

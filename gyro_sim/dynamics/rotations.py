@@ -26,7 +26,7 @@ _Q = np.array([2, 0, 1])
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Row-wise cross product of (..., 3) arrays (np.cross is several times slower on small stacks)."""
-    return a.take(_P, axis=-1) * b.take(_Q, axis=-1) - a.take(_Q, axis=-1) * b.take(_P, axis=-1)
+    return a.take(_P, -1) * b.take(_Q, -1) - a.take(_Q, -1) * b.take(_P, -1)
 
 
 def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -33,6 +33,12 @@ TOPIC_TYPES = {M.JOINT_STATES: "sensor_msgs/msg/JointState", M.EVENTS: "std_msgs
 COMMANDS_TYPE = "std_msgs/msg/Float64MultiArray"
 #: the node's event when command_timeout passes without a good command: moments back to zero
 COMMAND_TIMEOUT_EVENT = "command timeout"
+#: the node's event when its dynamics switch backend at a step boundary ("dynamics: numba from
+#: here ..."): a start on a cold cache steps on numpy while the kernels compile in the
+#: background (gyro_sim.warmup.start_deferred); re-simulation switches at the same boundary
+DYNAMICS_EVENT = "dynamics: "
+#: the backends a DYNAMICS_EVENT may name
+DYNAMICS_BACKENDS = ("numba", "numpy")
 
 
 @dataclass
@@ -48,6 +54,7 @@ class Resimulation:
     commands: int = 0
     rejected: int = 0  # logged commands the simulator refuses (wrong length, non-finite)
     resets: int = 0
+    switches: int = 0  # backend switches repeated (DYNAMICS_EVENT)
     steps: int = 0
     sim_time: float = 0.0
     integrator: str = ""
@@ -56,7 +63,9 @@ class Resimulation:
     def report(self) -> str:
         lines = [
             f"re-simulated {self.sim_time:.6g} s ({plural(self.steps, 'step')} of the recorded size, "
-            f"{plural(self.commands, 'command')}, {plural(self.resets, 'reset')}) with {self.integrator}",
+            f"{plural(self.commands, 'command')}, {plural(self.resets, 'reset')}"
+            + (f", the dynamics' backend switched {self.switches} time{'s' if self.switches != 1 else ''} as recorded"
+               if self.switches else "") + f") with {self.integrator}",
             f"compared {plural(self.compared, 'joint-state message')}"
             + (f" and {plural(self.imu_compared, 'IMU message')}" if self.imu_compared else "")
             + (f" ({self.off_boundary} off the step boundaries, skipped)" if self.off_boundary else ""),
@@ -80,8 +89,11 @@ def resimulate(path: str | os.PathLike, *, integrator: str | None = None, rtol: 
     p = info.params
     scene = info.scene()
     name = integrator or p["integrator"]
+    # the backend the run started on ("dynamics": numpy when it started before its kernels were
+    # compiled; a DYNAMICS_EVENT then says where it switched); a log without it: as any run
     sim = Simulator(scene, integrator=name, rtol=p["rtol"] if rtol is None else rtol,
-                    atol=p["atol"] if atol is None else atol, step=p["step"])
+                    atol=p["atol"] if atol is None else atol, step=p["step"],
+                    backend="numpy" if p.get("dynamics") == "numpy" else "auto")
     dt = float(p["advance_dt"])
     names = info.topic_names(path)
     cmd_topic = p.get("commands_topic", names.axis_moments)
@@ -196,6 +208,16 @@ def _replay(path, sim, out: Resimulation, dt: float, cmd_topic: str, topics, end
                 out.resets += 1
             elif event.startswith(COMMAND_TIMEOUT_EVENT):
                 sim.set_axis_moments([0.0] * len(sim.axis_names))
+            elif event.startswith(DYNAMICS_EVENT):
+                backend = event[len(DYNAMICS_EVENT):].split(" ", 1)[0]
+                if backend not in DYNAMICS_BACKENDS:
+                    raise LogError(f"{path}: {topic} at log time {t / 1e9:.9g} s: a switch to an unknown backend "
+                                   f"{backend[:40]!r}")
+                if here_ns != t:
+                    raise LogError(f"{path}: {topic} at log time {t / 1e9:.9g} s: a backend switch off the step "
+                                   "boundaries")
+                sim.switch_backend(backend)
+                out.switches += 1
     out.sim_time = (offset + M.time_ns(sim.time)) / 1e9
 
 

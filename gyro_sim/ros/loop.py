@@ -138,6 +138,8 @@ class SimLoop:
         self.crash: str | None = None  # traceback of an unexpected error that ended the loop
         self.out_of_memory = False  # a MemoryError ended the loop
         self.finished = threading.Event()
+        #: a backend to switch to at the next step boundary (`promote`, from another thread)
+        self._promotion: str | None = None
         #: set by the thread once its scheduling is known (pacing.priority, pacing.scheduling)
         self.started = threading.Event()
         self._stop = threading.Event()
@@ -151,6 +153,11 @@ class SimLoop:
     def request(self, request: Request, timeout: float = 2.0) -> tuple[bool, str]:
         """Ask the loop for a reset (`Reset()`) or a pause change (`Pause(paused)`); wait until it is done."""
         return self.requests.ask(request, timeout)
+
+    def promote(self, backend: str) -> None:
+        """Step on `backend` from the next step boundary on (its kernels loaded in this process
+        already: gyro_sim.warmup.load_when_compiled); the physics thread switches and records it."""
+        self._promotion = backend
 
     def start(self) -> None:
         """Start the physics thread (the start-up's objects frozen first: `loop_pacing.freeze_start_up`)."""
@@ -295,6 +302,8 @@ class SimLoop:
         n = 0
         try:
             for _ in range(self.pacing.per_chunk if steps is None else steps):
+                if self._promotion is not None:
+                    self._switch()
                 self.commands.take(self.sim, self.node_ns, self.steps)
                 self.sim.advance(self.dt)
                 self.steps += 1
@@ -303,6 +312,23 @@ class SimLoop:
             self._fail(exc)
         if n:
             self.pacing.steps_took(time.perf_counter() - t0, n)
+
+    def _switch(self) -> None:
+        """The backend switch `promote` asked for, at this step boundary (before its command is
+        taken), said in an event that re-simulation repeats at the same boundary
+        (gyro_sim.log.resim: DYNAMICS_EVENT); "fixed" guarded again (its other rungs are loaded
+        by `warm_up`'s thread when the cache's fill has ended)."""
+        from gyro_sim.log.resim import DYNAMICS_EVENT
+
+        backend, self._promotion = self._promotion, None
+        before = self.sim.backend
+        if backend == before:
+            return
+        self.sim.switch_backend(backend)
+        if hasattr(self.sim.integrator, "guard"):  # its other rungs: loaded by `warm_up`'s thread
+            self.sim.integrator.guard = True
+        self.out.event(self.node_ns, f"{DYNAMICS_EVENT}{backend} from here ({before} until now, while its kernels "
+                                     f"compiled)")
 
     def _fail(self, exc: SimulationError) -> None:
         self.failure = str(exc)

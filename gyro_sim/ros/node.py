@@ -59,6 +59,7 @@ from gyro_sim.ros.loop import Pause, Reset, SimLoop, warm_up
 from gyro_sim.ros.outputs import Outputs, node_topics
 from gyro_sim.ros.pacing import ShareLimit
 from gyro_sim.ros.params import PARAMETERS, ParameterError, validate
+from gyro_sim.ros import start_signal_line
 
 #: bytes in a megabyte (record_queue_mb)
 MEGABYTE = 1 << 20
@@ -78,6 +79,13 @@ LAPACK_ROOM = 128 << 20
 #: Fast DDS waits forever for a logging thread it could not start; with 40-100 MB it aborts or
 #: crashes); a whole start ran under limits of 1100 MB and failed (threads, libraries) at 1000 MB
 START_ROOM = 640 << 20
+
+#: a start on a cold cache steps on the numpy reference while its kernels compile in the
+#: background (gyro_sim.warmup.start_deferred) where one physics step on numpy takes at most this
+#: share of the step (the rest: publications, commands, the executor); else it compiles first
+NUMPY_STEP_SHARE = 0.9
+#: physics steps timed on the numpy reference to decide it (their median; after one untimed)
+NUMPY_TIMED_STEPS = 20
 
 #: GIL switch interval (s) while the node runs: bounds how long the physics thread, woken at
 #: its deadline or back from a publish (which releases the interpreter), waits for the executor
@@ -111,6 +119,21 @@ def descriptor(p) -> ParameterDescriptor:
     return d
 
 
+def numpy_step_cost(sim, dt: float, steps: int = NUMPY_TIMED_STEPS) -> float:
+    """The median CPU time (s) of this thread for one physics step of `dt` of `sim`, from
+    `steps` timed after one untimed; `sim` is reset after. CPU time, not wall time: what the
+    step costs, not how much of the processor other processes take at this moment (the physics
+    thread runs at a real-time priority where it may)."""
+    sim.advance(dt)
+    times = []
+    for _ in range(steps):
+        t0 = time.thread_time()
+        sim.advance(dt)
+        times.append(time.thread_time() - t0)
+    sim.reset()
+    return sorted(times)[len(times) // 2]
+
+
 def log_params(sim, cfg, topics=None) -> dict:
     """The log's run parameters: the re-simulation contract of gyro_sim.log.record (one advance of
     1/physics_rate per step), plus the node's own parameters and names (`topics`: its
@@ -120,9 +143,11 @@ def log_params(sim, cfg, topics=None) -> dict:
 
     topics = topics or ROOT_TOPICS
     own = {k: v for k, v in cfg.as_dict().items() if k not in ("publish_rate", "duration")}
+    # dynamics: the backend the run starts on (numpy while its kernels compile: the switch is an
+    # event, gyro_sim.log.resim.DYNAMICS_EVENT)
     return run_params(sim, advance_dt=cfg.dt, publish_rate=cfg.publish_rate, source="gyro_sim_node",
                       duration=cfg.duration or None, commands_topic=topics.axis_moments,
-                      namespace=topics.namespace, node=topics.node, **own)
+                      namespace=topics.namespace, node=topics.node, dynamics=sim.backend, **own)
 
 
 def method_choice(sim, cfg) -> str:
@@ -169,9 +194,14 @@ class GyroSimNode(Node):
             from gyro_sim.ros.recorder import create_log_file
 
             log_file = create_log_file(cfg.record, cfg.overwrite, what="record")
+        from gyro_sim import warmup
+
         try:
+            # a cold cache: the numpy reference until the kernels compiled in the background are loaded
             self.sim = Simulator(cfg.scene, integrator=cfg.integrator, rtol=cfg.rtol, atol=cfg.atol, step=cfg.dt,
-                                 backend=cfg.backend)
+                                 backend="numpy" if warmup.deferred() else cfg.backend)
+            if warmup.deferred():
+                self._numpy_or_compiled(cfg)
             if log_file is not None:
                 from gyro_sim.ros.recorder import LiveRecorder
 
@@ -186,6 +216,8 @@ class GyroSimNode(Node):
                 demo = Demo.for_scene(self.sim, cfg.dt)
             warm_up(self.sim, cfg.dt)  # every path the loop takes, run once: its first steps pay for none
             self.loop = SimLoop(self.sim, cfg, self.outputs, demo=demo)
+            if warmup.deferred():
+                warmup.load_when_compiled(self.sim, self.loop.promote)
             self.outputs.publish_robot_description()
         except BaseException:  # nothing recorded yet: the file created is removed
             if self.recorder is not None:
@@ -215,6 +247,23 @@ class GyroSimNode(Node):
         self.stiffness_note = stiffness_note(self.sim, cfg)
         if self.stiffness_note:
             self.get_logger().warning(self.stiffness_note)
+
+    def _numpy_or_compiled(self, cfg) -> None:
+        """Keep the numpy Simulator if a physics step on it fits NUMPY_STEP_SHARE of the step;
+        else say so in one line and compile the kernels now, before real time (as without a
+        background compile), and step on them from the start."""
+        from gyro_sim import warmup
+
+        cost = numpy_step_cost(self.sim, cfg.dt)
+        if cost <= NUMPY_STEP_SHARE * cfg.dt:
+            return
+        warmup.stop_deferring()
+        print(f"gyro_sim_node: a physics step takes {cost * 1e6:.0f} us on the numpy reference, more than "
+              f"{NUMPY_STEP_SHARE:.0%} of the {cfg.dt * 1e3:g} ms step: compiling the kernels before real time "
+              "instead", file=sys.stderr, flush=True)
+        warmup.precompile(sys.stderr, prog="gyro_sim_node", integrator=cfg.integrator, helper=False)
+        self.sim = Simulator(cfg.scene, integrator=cfg.integrator, rtol=cfg.rtol, atol=cfg.atol, step=cfg.dt,
+                             backend=cfg.backend)
 
     def on_command(self, raw: bytes) -> None:
         """Bounded work: decode (no rclpy message objects), check, keep as the latest."""
@@ -337,7 +386,7 @@ class Shutdown:
                 stream.flush()
             except (OSError, ValueError):
                 pass
-        os.write(2, f"gyro_sim_node: {name} during start-up: not started (nothing recorded)\n".encode())
+        os.write(2, (start_signal_line(name) + "\n").encode())
         os._exit(0)
 
     def hold_if_giving_up(self) -> None:

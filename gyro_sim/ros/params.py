@@ -427,7 +427,8 @@ def help_text() -> str:
 def preflight(argv, stream_out=None, stream_err=None) -> int | None:
     """What gyro_sim_node does before it starts rclpy: `--help` -> print the parameters, 0;
     an unknown parameter or an unreadable params file -> one line each on stderr, 2; else
-    compile the numba kernels if their cache is cold (saying so) and return None (go on)."""
+    compile the numba kernels if their cache is cold (saying so), or with backend "auto" start
+    their compile in the background (gyro_sim.warmup.start_deferred), and return None (go on)."""
     import sys
 
     out = stream_out or sys.stdout
@@ -450,8 +451,13 @@ def preflight(argv, stream_out=None, stream_err=None) -> int | None:
     if unknown:
         err.write("".join(f"gyro_sim_node: {line}\n" for line in unknown))
         return 2
-    if values.get("backend", "auto") != "numpy":
-        from gyro_sim.warmup import precompile
+    backend = values.get("backend", "auto")
+    if backend != "numpy":
+        from gyro_sim.warmup import precompile, start_deferred
 
-        precompile(err, prog="gyro_sim_node", integrator=str(values.get("integrator", "fixed")))
+        integrator = str(values.get("integrator", "fixed"))
+        # "auto" on a cold cache: the kernels compile in the background while the run steps on
+        # numpy (gyro_sim.ros.node checks that the scene fits); else compiled here, now
+        if backend != "auto" or not start_deferred(integrator, err, "gyro_sim_node"):
+            precompile(err, prog="gyro_sim_node", integrator=integrator)
     return None

@@ -224,9 +224,51 @@ def test_the_command_prints_the_table_and_writes_the_json(tmp_path, monkeypatch,
                         lambda v, parts, say, timeout, **kw: asked.append((v, parts, kw)) or figures)
     out = tmp_path / "startup.json"
     assert main(["bench", "startup", "--venv", str(venv), "--parts", "run", "--json", str(out)]) == 0
-    assert asked == [(venv, ["run"], {"warm_starts": 1, "announce_period": startup.ANNOUNCE_PERIOD})]
+    assert asked == [(venv, ["run"], {"warm_starts": 1, "announce_period": startup.ANNOUNCE_PERIOD, "source": None})]
     printed = capsys.readouterr().out
     assert "| `gyro-sim run --scene hinge_chain --duration 2`, to its end | 17.5 | 14.2 | 1.5 | 1.0 |" in printed
     data = json.loads(out.read_text())
     assert data["results"] == figures and data["command"] == f"gyro-sim bench startup --venv {venv} --parts run"
     assert main(["bench", "startup", "--venv", str(venv), "--json", str(out)]) == 2  # kept without --force
+
+
+def test_the_node_starts_show_their_real_time_factor_with_and_without_a_terminal():
+    results = {"node": {"cold": {"wall": 3.25, "cpu": 2.0, "extra": {"rtf": 0.9991, "rtf_window": 10.0}},
+                        "warm": {"wall": 1.0, "cpu": 0.9, "extra": {"rtf": 1.0004, "rtf_window": 10.0}}},
+               "node_tty": {"cold": {"wall": 3.5, "cpu": 2.0, "extra": {"rtf": 0.995, "rtf_window": 10.0}},
+                            "warm": {"wall": 1.1, "cpu": 0.9, "extra": {"rtf": 1.0, "rtf_window": 10.0}}}}
+    text = startup.table(results, {"cores": 2, "load": 1.5}, "c", "2026-11-29")
+    lines = text.splitlines()
+    assert "| without a terminal | 3.2 | 0.999 | 1.0 | 1.000 |" in lines
+    assert "| from a terminal | 3.5 | 0.995 | 1.1 | 1.000 |" in lines
+    assert "over the 10 s after it" in text
+
+
+def test_a_source_tree_is_measured_with_the_entry_points_its_setup_names(tmp_path):
+    (tmp_path / "setup.py").write_text('"gyro_sim_node = pkg.start:main",\n"gyro-sim = pkg.cli:main",\n')
+    run = startup.scripts(tmp_path / "venv", tmp_path)
+    assert run["gyro_sim_node"][0] == str(tmp_path / "venv" / "bin" / "python")
+    assert run["gyro_sim_node"][1:] == ["-c", "import sys; sys.argv[0] = 'gyro_sim_node'; from pkg.start import main; "
+                                              "sys.exit(main())"]
+    assert "from pkg.cli import main" in run["gyro-sim"][2]
+    (tmp_path / "setup.py").write_text("")
+    with pytest.raises(startup.StartupError, match="names no console script gyro_sim_node"):
+        startup.scripts(tmp_path / "venv", tmp_path)
+
+
+@pytest.mark.slow
+def test_a_start_from_a_terminal_has_one_and_a_start_without_has_none(tmp_path):
+    """The two starts the bench times: on a pseudo-terminal that is the process's controlling
+    terminal, and with stdin /dev/null in a session of its own."""
+    pytest.importorskip("rclpy")
+    pytest.importorskip("sensor_msgs.msg")
+    script = tmp_path / "fake_node.py"
+    said = tmp_path / "tty"
+    script.write_text(f"import os, sys\nopen({str(said)!r}, 'a').write(str(sys.stdin.isatty()) + "
+                      f"str(os.isatty(0) and os.tcgetpgrp(0) == os.getpgrp()) + '\\n')\n" + FAKE_NODE)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(startup.DOMAIN_BASE + os.getpid() % startup.DOMAIN_SPAN),
+               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_LOG_DIR=str(tmp_path))
+    for terminal in (True, False):
+        startup.first_message(sys.executable, [sys.executable, str(script)], env, timeout=TIMEOUT, settle=0,
+                              terminal=terminal)
+    assert said.read_text().splitlines() == ["TrueTrue", "FalseFalse"]

@@ -111,3 +111,54 @@ def test_run_records_zero_commands_and_resimulates(tmp_path):
     assert info.message_count > 0
     res = resimulate(path)
     assert res.compared == 11 and res.max_deviation == 0.0
+
+
+def _switching_log(path, switch_at: int, event: str | None = None, event_at: int | None = None) -> None:
+    """A node-style log of hinge_chain under "fixed" at 1 kHz that starts on numpy ("dynamics":
+    numpy) and switches to numba after `switch_at` steps, said by the node's event (or `event`)
+    at that step boundary (or at `event_at`'s: a log that misplaces it)."""
+    from gyro_sim.log.resim import DYNAMICS_EVENT
+
+    scene = load_scene(SCENE)
+    sim = Simulator(scene, integrator="fixed", step=1e-3, backend="numpy")
+    dt = 1e-3
+    params = run_params(sim, advance_dt=dt, publish_rate=100, source="test", dynamics=sim.backend)
+    with LogWriter(path, scene=scene, params=params) as w:
+        r = LogRecorder(w, sim)
+        for i in range(120):
+            if i % 10 == 0:
+                r.publish()
+            if i == (switch_at if event_at is None else event_at):
+                r.event(event or f"{DYNAMICS_EVENT}numba from here (numpy until now, while its kernels compiled)")
+            if i == switch_at:
+                sim.switch_backend("numba")
+            if i in (0, 50):
+                r.command([0.002, 0.03 - 0.001 * i, -0.02])
+                sim.set_axis_moments([0.002, 0.03 - 0.001 * i, -0.02])
+            sim.advance(dt)
+        r.publish()
+
+
+def test_a_switch_of_backend_in_the_log_is_repeated_at_its_step(tmp_path):
+    """The node's start on numpy, then on the compiled kernels (gyro_sim.warmup.start_deferred):
+    re-simulation starts on the recorded backend and switches at the event's step boundary:
+    bit for bit. A log whose event says one step later than the run switched is not
+    reproduced (the two backends differ in rounding): the event is what decides."""
+    path = tmp_path / "switch.mcap"
+    _switching_log(path, 43)
+    res = resimulate(path)
+    assert res.switches == 1 and res.compared == 13
+    assert res.max_deviation == 0.0, res.report()
+    assert "switched 1 time as recorded" in res.report()
+    misplaced = tmp_path / "misplaced.mcap"
+    _switching_log(misplaced, 43, event_at=44)
+    assert resimulate(misplaced).max_deviation > 0.0
+
+
+def test_a_switch_to_an_unknown_backend_is_refused(tmp_path):
+    from gyro_sim.log.mcap_log import LogError
+
+    path = tmp_path / "bad.mcap"
+    _switching_log(path, 20, event="dynamics: cuda from here")
+    with pytest.raises(LogError, match="unknown backend 'cuda'"):
+        resimulate(path)

@@ -37,8 +37,9 @@ def ros_env(domain_id: int, log_dir: Path) -> dict:
 
 
 def node_command(*params: str, params_file: str | None = None, remaps: tuple[str, ...] = ()) -> list[str]:
-    """`python -m gyro_sim.ros.node --ros-args [--params-file F] -p a:=b ... [-r from:=to ...]`"""
-    cmd = [sys.executable, "-m", "gyro_sim.ros.node", "--ros-args"]
+    """`python -m gyro_sim.ros.start --ros-args [--params-file F] -p a:=b ... [-r from:=to ...]`: the
+    console script's entry point"""
+    cmd = [sys.executable, "-m", "gyro_sim.ros.start", "--ros-args"]
     if params_file:
         cmd += ["--params-file", str(params_file)]
     for p in params:

@@ -68,7 +68,7 @@ def test_setup_installs_the_launch_file():
 def test_the_node_is_the_console_script_with_the_shipped_parameters(monkeypatch):
     declared, node = _built(monkeypatch)
     assert node.kwargs["package"] == "gyro_sim" and node.kwargs["name"] == "gyro_sim"
-    assert "gyro_sim_node = gyro_sim.ros.node:main" in (ROOT / "setup.py").read_text()
+    assert "gyro_sim_node = gyro_sim.ros.start:main" in (ROOT / "setup.py").read_text()
     assert node.kwargs["executable"] == "gyro_sim_node"
     assert Path(declared["params_file"]) == ROOT / "config" / "params.yaml"
     params_file, overrides = node.kwargs["parameters"]
