@@ -76,7 +76,7 @@ def invariants_of_state(model: Model, t: float, y: np.ndarray, L_rotor=None) -> 
     d = dyn.Data(model)
     dyn.positions(model, d, t, y)
     dyn.velocities(model, d, t, y[model.i_vel])
-    return inv.invariants(model, d, spins_at(model, t, L_rotor), t)
+    return inv.invariants(model, d, spins_at(model, t, L_rotor), t, y)
 
 
 def split_moments(model: Model, moments) -> tuple[np.ndarray | None, np.ndarray | None]:
