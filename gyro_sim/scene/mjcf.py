@@ -333,30 +333,67 @@ def _lock_joints(mujoco: Any, spec: Any, m0: Any, path: str, locks: dict[str, fl
         notes.append(f"joint {name!r}: locked at {value:g} (its body welded to its parent)")
     if errors:
         return errors
-    for actuator in [spec.actuators[a] for a in removed_a]:
-        notes.append(f"actuator {actuator.name or '(unnamed)'!r}: left out with the joint it drives "
-                     f"{actuator.target!r} (locked)")
-        spec.delete(actuator)
+    actuators, all_tendons = list(spec.actuators), list(spec.tendons)  # by the compiled model's ids
+    for a in removed_a:
+        notes.append(f"actuator {actuators[a].name or '(unnamed)'!r}: left out with the joint it drives "
+                     f"{actuators[a].target!r} (locked)")
     for equality in list(spec.equalities):
         if equality.type == mujoco.mjtEq.mjEQ_JOINT and (equality.name1 in locked or equality.name2 in locked):
             notes.append(f"equality {equality.name or '(unnamed)'!r}: left out with the locked "
                          f"joint {equality.name1 if equality.name1 in locked else equality.name2!r}")
             spec.delete(equality)
+    tendons = _locked_tendons(mujoco, m0, set(joints.values()))
+    for t in tendons:  # a tendon on locked joints only moves nothing: it goes, with what acts on it
+        name = all_tendons[t].name
+        shown = repr(name) if name else f"#{t}"
+        for a in range(m0.nu):
+            if int(m0.actuator_trntype[a]) == int(mujoco.mjtTrn.mjTRN_TENDON) and int(m0.actuator_trnid[a][0]) == t:
+                notes.append(f"actuator {actuators[a].name or '(unnamed)'!r}: left out with the tendon "
+                             f"{shown} it drives")
+                removed_a.append(a)
+        for sensor in list(spec.sensors):
+            if name and sensor.objtype == obj.mjOBJ_TENDON and sensor.objname == name:
+                notes.append(f"sensor {sensor.name or '(unnamed)'!r}: left out with the tendon {shown}")
+                spec.delete(sensor)
+        notes.append(f"tendon {shown}: left out, its joints are all locked")
+    removed_a = sorted(set(removed_a))
+    for a in removed_a:
+        spec.delete(actuators[a])
+    for t in tendons:
+        spec.delete(all_tendons[t])
     for sensor in list(spec.sensors):
         if sensor.objtype == obj.mjOBJ_JOINT and sensor.objname in locked:
             notes.append(f"sensor {sensor.name or '(unnamed)'!r}: left out with the locked joint "
                          f"{sensor.objname!r}")
             spec.delete(sensor)
+    # the joints first, then the keyframes' entries (MuJoCo 4.0's MjSpec.delete checks the
+    # keyframes' sizes against the joints still there)
+    for name in joints:
+        spec.delete(spec.joint(name))
+    removed_v = [int(m0.jnt_dofadr[j]) for j in joints.values()]
     for k in spec.keys:
         if len(k.qpos) == m0.nq:
             k.qpos = np.delete(np.asarray(k.qpos), removed_q)
         if len(k.qvel) == m0.nv:
-            k.qvel = np.delete(np.asarray(k.qvel), [int(m0.jnt_dofadr[j]) for j in joints.values()])
+            k.qvel = np.delete(np.asarray(k.qvel), removed_v)
+        if len(k.act) == m0.na and m0.na and removed_a:
+            k.act = np.delete(np.asarray(k.act), [int(m0.actuator_actadr[a]) for a in removed_a
+                                                  if int(m0.actuator_actadr[a]) >= 0])
         if len(k.ctrl) == m0.nu and removed_a:
             k.ctrl = np.delete(np.asarray(k.ctrl), removed_a)
-    for name in joints:
-        spec.delete(spec.joint(name))
     return errors
+
+
+def _locked_tendons(mujoco: Any, m0: Any, joints: set[int]) -> list[int]:
+    """The tendons of `m0` (fixed tendons) whose every joint is among the locked `joints`."""
+    out = []
+    for t in range(m0.ntendon):
+        first, count = int(m0.tendon_adr[t]), int(m0.tendon_num[t])
+        wraps = range(first, first + count)
+        if count and all(int(m0.wrap_type[w]) == int(mujoco.mjtWrap.mjWRAP_JOINT)
+                         and int(m0.wrap_objid[w]) in joints for w in wraps):
+            out.append(t)
+    return out
 
 
 @contextlib.contextmanager
@@ -505,6 +542,8 @@ class _Importer:
         self.errors: list[str] = []
         self.notes: list[str] = []
         self.friction: dict[int, dict[str, float]] = {}  # hinge joint -> its scene friction
+        self.armature: dict[int, float] = {}  # hinge joint -> its armature (kg m^2)
+        self.spring: dict[int, dict[str, float]] = {}  # hinge joint -> its scene spring
         self.locked: dict[str, float] = {}  # joints welded (gyro_sim.scene.mjcf._lock_joints)
 
     # --- names
@@ -579,9 +618,16 @@ class _Importer:
                 self.fail(self.joint(j), "slide joints are not supported (chains of ball and "
                                          f"hinge joints only); weld it where it is with {lock}")
                 continue
-            stiff = m.jnt_stiffness[j] != 0.0 or np.any(getattr(m, "jnt_stiffnesspoly", np.zeros((m.njnt, 1)))[j])
-            if springs and stiff:
-                self.fail(self.joint(j), "stiffness (a joint spring) is not supported")
+            if springs and np.any(getattr(m, "jnt_stiffnesspoly", np.zeros((m.njnt, 1)))[j]):
+                self.fail(self.joint(j), "stiffnesspoly (a nonlinear spring) is not supported; a "
+                                         "linear stiffness is")
+            elif springs and m.jnt_stiffness[j] != 0.0:
+                if kind == int(mj.mjtJoint.mjJNT_HINGE):  # docs/models.md, "Armature and springs"
+                    self.spring[j] = {"stiffness": _tidy(m.jnt_stiffness[j]),
+                                      "reference": _tidy(m.qpos_spring[m.jnt_qposadr[j]])}
+                else:
+                    self.fail(self.joint(j), f"stiffness on a {('free', 'ball')[kind]} joint is not "
+                                             "supported (a spring acts on a hinge's axis)")
             if dampers and np.any(getattr(m, "dof_dampingpoly", np.zeros((m.nv, 1)))[dofs]):
                 self.fail(self.joint(j), "dampingpoly (a nonlinear damper) is not supported; "
                                          "a linear damping is")
@@ -598,9 +644,11 @@ class _Importer:
                 self.fail(self.joint(j), f"frictionloss on a {('free', 'ball')[kind]} joint is "
                                          "not supported (friction acts on a hinge's or rotor's axis)")
             if np.any(m.dof_armature[dofs]):
-                self.fail(self.joint(j), "armature (a reflected rotor inertia) is not supported; "
-                                         "model the rotor as a body on a hinge: it becomes a "
-                                         "gyrostat rotor")
+                if kind == int(mj.mjtJoint.mjJNT_HINGE):  # docs/models.md, "Armature and springs"
+                    self.armature[j] = _tidy(m.dof_armature[dofs][0])
+                else:
+                    self.fail(self.joint(j), f"armature on a {('free', 'ball')[kind]} joint is not "
+                                             "supported (a reflected inertia on a hinge's axis is)")
             if kind == int(mj.mjtJoint.mjJNT_HINGE) and m.qpos0[m.jnt_qposadr[j]] != 0.0:
                 self.fail(self.joint(j), f"ref = {m.qpos0[m.jnt_qposadr[j]]:g}: a reference angle "
                                          "is not supported (the hinge angle is MuJoCo's qpos)")
@@ -707,6 +755,8 @@ class _Importer:
             return "it carries moving bodies"
         if g.mass <= 0.0:
             return "massless"
+        if g.joint in self.armature or g.joint in self.spring:
+            return "its joint has armature or stiffness (a rotor's axis takes friction only)"
         a = g.axis / np.linalg.norm(g.axis)
         r = g.com - g.origin
         off = float(np.linalg.norm(r - (r @ a) * a))
@@ -810,6 +860,10 @@ class _Importer:
                 body["joint"] = {"type": "hinge", "axis": _vec(G_parent.T @ g.axis)}
                 if g.joint in self.friction:
                     body["joint"]["friction"] = self.friction[g.joint]
+                if g.joint in self.armature:
+                    body["joint"]["armature"] = self.armature[g.joint]
+                if g.joint in self.spring:
+                    body["joint"]["spring"] = self.spring[g.joint]
             else:
                 body["joint"] = {"type": "spherical"}
             body["mass"] = _tidy(g.mass)
