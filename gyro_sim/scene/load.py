@@ -140,7 +140,8 @@ class SceneError(GyroSimError, ValueError):
 
 def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None,
                package_path: Sequence[str | os.PathLike] = (),
-               lock: Mapping[str, float | None] | Sequence[str] = ()) -> Scene:
+               lock: Mapping[str, float | None] | Sequence[str] = (),
+               balance_inertia: bool = False) -> Scene:
     """Load and validate a scene.
 
     Parameters
@@ -162,6 +163,10 @@ def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None,
         Models only: joints welded where they are, their bodies merged into their parents: a
         mapping joint name -> value (rad or m; None: the keyframe's value, else the reference
         position), or ``"NAME"`` / ``"NAME=VALUE"`` strings (docs/models.md, "Locked joints").
+    balance_inertia : bool, optional
+        Models only: a moving body's inertia outside the triangle inequality takes MuJoCo's
+        balanced one (docs/models.md, "Inertias outside the triangle inequality") instead of
+        being refused.
 
     Returns
     -------
@@ -189,7 +194,8 @@ def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None,
                 raise SceneError([str(exc)], path) from None
         if is_model_path(path):  # MJCF or URDF: its scene mapping, refusals naming elements
             try:
-                model = import_model(path, keyframe, package_path=package_path, lock=lock)
+                model = import_model(path, keyframe, package_path=package_path, lock=lock,
+                                     balance_inertia=balance_inertia)
             except ModelError as exc:
                 raise SceneError(exc.errors, path) from None
             data = model.mapping
@@ -197,6 +203,9 @@ def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None,
             data = _read_yaml(path)
     else:
         raise SceneError([f"scene: must be a file path or a mapping (got {_describe(source)})"])
+    if balance_inertia and model is None:
+        raise SceneError(["balance_inertia: only an MJCF or URDF model's inertias are balanced (a "
+                          "scene file's inertia must obey the triangle inequality)"], path)
     if lock and model is None:
         raise SceneError(["lock: only the joints of an MJCF or URDF model are locked (a scene "
                           "file's chain is written as it moves)"], path)

@@ -169,7 +169,8 @@ def _mat(a: np.ndarray) -> list[list[float]]:
 # ----------------------------------------------------------------------------- reading
 def import_model(path: str | os.PathLike, keyframe: str | None = None,
                  package_path: Sequence[str | os.PathLike] = (),
-                 lock: Mapping[str, float | None] | Sequence[str] = ()) -> ImportedModel:
+                 lock: Mapping[str, float | None] | Sequence[str] = (),
+                 balance_inertia: bool = False) -> ImportedModel:
     """Read an MJCF or URDF model as a scene mapping (module docstring, docs/models.md).
 
     Parameters
@@ -181,11 +182,15 @@ def import_model(path: str | os.PathLike, keyframe: str | None = None,
         (:mod:`gyro_sim.scene.packages`)
     lock : joints welded where they are: a mapping joint name -> value (rad or m; None: the
         keyframe's value, else the reference position), or a sequence of names
+    balance_inertia : a moving body's inertia that breaks the triangle inequality A + B >= C
+        of its principal moments is replaced by MuJoCo's balanced one (the three set to their
+        mean, MuJoCo's ``balanceinertia``) with a note, instead of refused
 
     Raises
     ------
     ModelError
-        Listing every element that cannot be mapped (or why the file cannot be read).
+        Listing every element that cannot be mapped (or why the file cannot be read), all
+        at once.
     """
     path = os.fspath(path)
     try:
@@ -206,29 +211,29 @@ def import_model(path: str | os.PathLike, keyframe: str | None = None,
     sites: list[tuple[GazeboImu, str]] = []
     resolver = PackageResolver(path, [os.fspath(p) for p in package_path])
     notes: list[str] = []
+    errors: list[str] = []  # every problem found, said together (one refusal)
+    locked: dict[str, float] = {}
     with caught_warnings(mujoco) as warned:
         try:
             spec = mujoco.MjSpec.from_file(path)
-            errors = _prepare_meshes(spec, path, resolver, notes)
-            if errors:
-                raise ModelError(errors, path)
-            locked: dict[str, float] = {}
-            if lock:
-                locks = parse_locks(lock, path)
-                errors = _lock_joints(mujoco, spec, spec.compile(), path, locks, keyframe, locked, notes)
-                if errors:
-                    raise ModelError(errors, path)
+            locks = parse_locks(lock, path) if lock else {}
+            static = _static_bodies(spec, set(locks))
+            errors += _prepare_assets(spec, path, resolver, notes, static)
+            errors += _balance_inertias(spec, path, static, balance_inertia, notes)
+            if locks:
+                errors += _lock_joints(mujoco, spec, spec.compile(), path, locks, keyframe, locked, notes)
             if kind == "URDF":
                 gazebo = read_gazebo_sensors(path)
                 sites = _gazebo_sites(spec, gazebo)
             model = spec.compile()
         except ValueError as exc:  # MuJoCo's parse and compile errors
             if isinstance(exc, ModelError):
-                raise
+                raise ModelError(errors + exc.errors, path) from None
             text = "; ".join(line.strip() for line in str(exc).splitlines() if line.strip())
-            raise ModelError([f"{path}: MuJoCo cannot read it: {text}"], path) from None
+            raise ModelError(errors + [f"{path}: MuJoCo cannot read it: {text}"], path) from None
     notes = resolver.notes() + notes + [f"MuJoCo: {w}" for w in dict.fromkeys(warned)]
     importer = _Importer(mujoco, model, path, kind, gazebo, sites)
+    importer.errors += errors
     importer.notes += notes
     importer.locked = locked
     return importer.run(keyframe)
@@ -292,9 +297,7 @@ def _lock_joints(mujoco: Any, spec: Any, m0: Any, path: str, locks: dict[str, fl
             errors.append(f"{path}: lock: joint {name!r} shares its body with other joints; "
                           "only a body's only joint is locked")
         else:
-            joints[name] = j
-    if errors:
-        return errors
+            joints[name] = j  # the others are said, and these locked all the same (one refusal)
     removed_q: list[int] = []
     removed_a: list[int] = []
     for name, j in sorted(joints.items(), key=lambda item: item[1]):
@@ -331,8 +334,6 @@ def _lock_joints(mujoco: Any, spec: Any, m0: Any, path: str, locks: dict[str, fl
                                                       int(mujoco.mjtTrn.mjTRN_JOINTINPARENT))]
         locked[name] = value
         notes.append(f"joint {name!r}: locked at {value:g} (its body welded to its parent)")
-    if errors:
-        return errors
     actuators, all_tendons = list(spec.actuators), list(spec.tendons)  # by the compiled model's ids
     for a in removed_a:
         notes.append(f"actuator {actuators[a].name or '(unnamed)'!r}: left out with the joint it drives "
@@ -413,11 +414,31 @@ def caught_warnings(mujoco: Any):
 MUJOCO_MESHES = (".stl", ".obj", ".msh")
 
 
-def _prepare_meshes(spec: Any, path: str, resolver: PackageResolver, notes: list[str]) -> list[str]:
-    """Every mesh file of `spec` resolved (``package://``, ``file://``, relative paths:
-    :mod:`gyro_sim.scene.packages`) to an absolute path; a mesh that cannot be found or read
-    is left out with its geoms and one note, unless a body's mass comes from it: then an
-    error naming the body and the file. The errors."""
+def _static_bodies(spec: Any, locked: set[str]) -> set[str]:
+    """The names of the bodies welded to the world: neither they nor a body above them has a
+    joint other than the `locked` ones (the world included, as "world")."""
+    out: set[str] = set()
+
+    def visit(body: Any, static: bool) -> None:
+        static = static and all(j.name in locked and j.name for j in body.joints)
+        if static:
+            out.add(body.name)
+        for child in body.bodies:
+            visit(child, static)
+
+    visit(spec.worldbody, True)
+    return out
+
+
+def _prepare_assets(spec: Any, path: str, resolver: PackageResolver, notes: list[str],
+                    static: set[str]) -> list[str]:
+    """Every mesh and texture file of `spec` resolved (``package://``, ``file://``, relative
+    paths: :mod:`gyro_sim.scene.packages`) to an absolute path. A mesh that cannot be found or
+    read is left out with its geoms and one note, unless a moving body's mass comes from it:
+    then an error naming the body and the file (a body welded to the world, `static`, needs no
+    mass: a note). A texture that cannot be found is left out with a note (nothing moves by
+    it). The errors; the meshes they name are left out too, so that the rest is still
+    checked."""
     import mujoco
 
     model_dir = os.path.dirname(os.path.abspath(path))
@@ -426,36 +447,108 @@ def _prepare_meshes(spec: Any, path: str, resolver: PackageResolver, notes: list
     always = from_geoms == mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_TRUE
     never = from_geoms == mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
     errors = []
+    kind = "link" if _kind(path) == "URDF" else "body"
     for mesh in list(spec.meshes):
         if not mesh.file:
             continue  # vertices given inline
-        file, shown = resolver.resolve(mesh.file, base)
-        if file is None:
-            why = f"package {shown[len('package://'):].partition('/')[0]!r} not found"
-        elif not os.path.isfile(file):
-            why = f"no such file ({file})"
-        elif os.path.splitext(file)[1].lower() not in MUJOCO_MESHES:
-            why = f"MuJoCo reads {', '.join(MUJOCO_MESHES)} meshes only"
-        else:
+        file, shown, why = _asset_file(resolver, mesh.file, base, MUJOCO_MESHES, "meshes")
+        if why is None:
             mesh.file = file
             continue
         geoms = [g for g in spec.geoms if g.meshname == mesh.name]
         bodies = list(dict.fromkeys(g.parent.name for g in geoms))
-        needs = [b for b in bodies if b and b != "world" and not never
+        needs = [b for b in bodies if b and b not in static and not never
                  and (always or not spec.body(b).explicitinertial)]
-        kind = "link" if _kind(path) == "URDF" else "body"
         for b in needs:
             errors.append(f"{path}: {kind} {b!r}: its mass would come from the mesh {shown}, "
                           f"which cannot be read: {why}; give the {kind} an inertial or the "
                           "mesh (--package-path DIR)")
-        if needs:
-            continue
         for g in geoms:
             spec.delete(g)
         spec.delete(mesh)
+        if needs:
+            continue
         on = f" (on {', '.join(repr(b) for b in bodies)})" if bodies else ""
-        notes.append(f"mesh {shown}{on}: left out, {why}; the motion does not need it "
-                     "(masses and inertias are given)")
+        fixed = [b for b in bodies if b in static and not never and (always or not spec.body(b).explicitinertial)]
+        why_not = ("masses and inertias are given" if not fixed else
+                   f"{', '.join(repr(b) for b in fixed)} welded to the world need{'s' if len(fixed) == 1 else ''} "
+                   "no mass")
+        notes.append(f"mesh {shown}{on}: left out, {why}; the motion does not need it ({why_not})")
+    texture_dir = os.path.join(model_dir, spec.texturedir) if spec.texturedir else model_dir
+    for texture in list(spec.textures):
+        if not texture.file:
+            continue  # builtin
+        file, shown, why = _asset_file(resolver, texture.file, texture_dir, None, "textures")
+        if why is None:
+            texture.file = file
+            continue
+        name = texture.name
+        for material in spec.materials:
+            material.textures = ["" if t == name else t for t in material.textures]
+        spec.delete(texture)
+        notes.append(f"texture {shown}: left out, {why}; nothing moves by it")
+    return errors
+
+
+def _asset_file(resolver: PackageResolver, uri: str, base: str, suffixes: Sequence[str] | None,
+                what: str) -> tuple[str | None, str, str | None]:
+    """(the file, how to show it, None) of an asset's `uri`, or (None, shown, why it cannot be
+    read)."""
+    file, shown = resolver.resolve(uri, base)
+    if file is None:
+        return None, shown, f"package {shown[len('package://'):].partition('/')[0]!r} not found"
+    if not os.path.isfile(file):
+        return None, shown, f"no such file ({file})"
+    if suffixes is not None and os.path.splitext(file)[1].lower() not in suffixes:
+        return None, shown, f"MuJoCo reads {', '.join(suffixes)} {what} only"
+    return file, shown, None
+
+
+def _principal_moments(body: Any) -> np.ndarray | None:
+    """A body's explicit principal moments of inertia (ascending), None without an inertial."""
+    if not body.explicitinertial:
+        return None
+    full = np.asarray(body.fullinertia, dtype=float)
+    if np.all(np.isfinite(full)):
+        xx, yy, zz, xy, xz, yz = full
+        return np.linalg.eigvalsh(np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]]))
+    return np.sort(np.asarray(body.inertia, dtype=float))
+
+
+#: principal moments A <= B <= C break the triangle inequality when A + B < C (1 - this)
+TRIANGLE_SLACK = 1e-12
+
+
+def _balance_inertias(spec: Any, path: str, static: set[str], balance: bool, notes: list[str]) -> list[str]:
+    """Bodies whose explicit inertia breaks the triangle inequality A + B >= C of its
+    principal moments (docs/models.md, "Inertias outside the triangle inequality"), which
+    MuJoCo refuses: on a body welded to the world (`static`) the three moments are set to
+    their mean with a note (nothing moves by it); on a moving body too when `balance`
+    (``--balance-inertia``: MuJoCo's balanceinertia), else an error naming the body. The
+    errors (their bodies are balanced all the same, so that the rest is still checked)."""
+    errors = []
+    kind = "link" if _kind(path) == "URDF" else "body"
+    for body in spec.bodies:
+        moments = _principal_moments(body)
+        if moments is None or moments[0] + moments[1] >= moments[2] * (1.0 - TRIANGLE_SLACK):
+            continue
+        shown = ", ".join(f"{x:.6g}" for x in moments)
+        mean = float(np.mean(moments))
+        if body.name in static or balance:
+            why = "welded to the world, it moves nothing" if body.name in static else "--balance-inertia"
+            notes.append(f"{kind} {body.name!r}: principal moments ({shown}) break A + B >= C; set to "
+                         f"their mean {mean:.6g} ({why})")
+        else:
+            errors.append(f"{path}: {kind} {body.name!r}: principal moments of inertia ({shown}) break "
+                          "the triangle inequality A + B >= C (no mass distribution has them; MuJoCo "
+                          "refuses them); --balance-inertia sets them to their mean, as MuJoCo's "
+                          "balanceinertia does")
+        # MuJoCo's balanceinertia: the principal frame kept, the three moments their mean
+        full = np.asarray(body.fullinertia, dtype=float)
+        if np.all(np.isfinite(full)):
+            body.fullinertia = [mean, mean, mean, 0.0, 0.0, 0.0]
+        else:
+            body.inertia = [mean, mean, mean]
     return errors
 
 
@@ -586,14 +679,22 @@ class _Importer:
         friction = not flags & int(dsbl.mjDSBL_FRICTIONLOSS)
         for t in range(m.ntendon):
             name = self._name(obj.mjOBJ_TENDON, t)
+            wraps = range(int(m.tendon_adr[t]), int(m.tendon_adr[t]) + int(m.tendon_num[t]))
+            joints = [int(m.wrap_objid[w]) for w in wraps if int(m.wrap_type[w]) == int(mj.mjtWrap.mjWRAP_JOINT)]
+            hint = ""
+            if joints and len(joints) == len(wraps) and all(self.lockable(j) for j in joints):
+                hint = ("; --lock its joints (" + ", ".join(repr(self.joint_name(j)) for j in joints)
+                        + ") to weld them: the tendon goes with them")
             self.fail(f"tendon {name!r}" if name else f"tendon #{t}",
-                      "tendons are not supported (a chain of rigid bodies and rotors only)")
+                      "tendons are not supported (a chain of rigid bodies and rotors only)" + hint)
         if m.neq and not flags & int(dsbl.mjDSBL_EQUALITY):
             for e in range(m.neq):
                 name = self._name(obj.mjOBJ_EQUALITY, e)
+                coupled = [int(j) for j in (m.eq_obj1id[e], m.eq_obj2id[e]) if j >= 0]
+                lockable = int(m.eq_type[e]) == int(mj.mjtEq.mjEQ_JOINT) and all(self.lockable(j) for j in coupled)
                 self.fail(f"equality {name!r}" if name else f"equality #{e}",
-                          "equality constraints are not supported (an open chain only); "
-                          "--lock the joints it couples to weld them")
+                          "equality constraints are not supported (an open chain only)"
+                          + ("; --lock the joints it couples to weld them" if lockable else ""))
         for f in range(m.nflex):
             name = self._name(obj.mjOBJ_FLEX, f)
             self.fail(f"flex {name!r}" if name else f"flex #{f}",
@@ -614,9 +715,9 @@ class _Importer:
             kind = int(m.jnt_type[j])
             dofs = range(m.jnt_dofadr[j], m.jnt_dofadr[j] + (6 if kind == 0 else 3 if kind == 1 else 1))
             if kind == int(mj.mjtJoint.mjJNT_SLIDE):
-                lock = f"--lock {self.joint_name(j)}" if self.joint_name(j) else "--lock JOINT"
-                self.fail(self.joint(j), "slide joints are not supported (chains of ball and "
-                                         f"hinge joints only); weld it where it is with {lock}")
+                how = (f"weld it where it is with --lock {self.joint_name(j)}" if self.lockable(j) else
+                       "--lock cannot weld it (only a body's only, named hinge or slide joint is locked)")
+                self.fail(self.joint(j), f"slide joints are not supported (chains of ball and hinge joints only); {how}")
                 continue
             if springs and np.any(getattr(m, "jnt_stiffnesspoly", np.zeros((m.njnt, 1)))[j]):
                 self.fail(self.joint(j), "stiffnesspoly (a nonlinear spring) is not supported; a "
@@ -704,7 +805,7 @@ class _Importer:
         for b in range(1, m.nbody):
             if m.body_weldid[b] == b:
                 j = int(m.body_jntadr[b])
-                out[b] = _Group(root=b, joint=j, kind=kinds[int(m.jnt_type[j])],
+                out[b] = _Group(root=b, joint=j, kind=kinds.get(int(m.jnt_type[j]), "slide"),
                                 parent=int(m.body_weldid[m.body_parentid[b]]), members=[])
         static = []
         for b in range(1, m.nbody):
@@ -793,12 +894,12 @@ class _Importer:
         top = [g for g in groups.values() if g.parent == 0]
         if not top:
             self.fail("worldbody", "no body has a joint: nothing moves")
+            self.raise_errors()
         elif len(top) > 1:
             self.fail("worldbody", f"{len(top)} moving bodies hang from the world ("
                       + ", ".join(repr(self.body_name(g.root)) for g in top)
-                      + "); one chain only (branching trees are not supported; weld the other "
-                        "chains' joints with --lock JOINT)")
-        self.raise_errors()
+                      + "); one chain only (branching trees are not supported"
+                      + self.weld_hint(groups, top, "chains") + ")")
         chain, rotors = [top[0]], {}
         while True:
             current = chain[-1]
@@ -813,8 +914,7 @@ class _Importer:
                           f"{len(rest)} moving children ("
                           + ", ".join(repr(self.body_name(c.root)) for c in rest)
                           + "): a chain only, branching trees are not supported"
-                          + (f" ({why})" if why else "") + "; weld the other branches' joints with "
-                          "--lock JOINT")
+                          + (f" ({why})" if why else "") + self.weld_hint(groups, rest, "branches"))
                 break
             if not rest:
                 break
@@ -823,6 +923,33 @@ class _Importer:
             if g.kind == "free":
                 self.fail(self.joint(g.joint), "a free joint only on the chain's first body")
         return chain, rotors
+
+    def lockable(self, j: int) -> bool:
+        """Whether --lock welds joint `j` (_lock_joints): a named hinge or slide, its body's
+        only joint."""
+        m, jt = self.m, self.mj.mjtJoint
+        return bool(self.joint_name(j)) and int(m.jnt_type[j]) in (int(jt.mjJNT_HINGE), int(jt.mjJNT_SLIDE)) \
+            and int(m.body_jntnum[m.jnt_bodyid[j]]) == 1
+
+    def weld_hint(self, groups: dict[int, _Group], parts: list[_Group], what: str) -> str:
+        """How to weld all but one of `parts` (subtrees) with --lock, naming their joints; or
+        why --lock cannot (it is never suggested where it would be refused)."""
+        m = self.m
+        joints: list[int] = []
+        todo = list(parts)
+        while todo:
+            g = todo.pop()
+            for b in g.members:
+                joints += range(int(m.body_jntadr[b]), int(m.body_jntadr[b]) + int(m.body_jntnum[b]))
+            todo += [groups[c] for c in g.children]
+        joints.sort()
+        stuck = [j for j in joints if not self.lockable(j)]
+        if stuck:
+            return (f"; --lock cannot weld {', '.join(self.joint(j) for j in stuck[:5])}"
+                    f"{' ...' if len(stuck) > 5 else ''} (only a body's only hinge or slide joint is locked)")
+        names = [self.joint_name(j) for j in joints]
+        shown = ", ".join(repr(n) for n in names[:8]) + (" ..." if len(names) > 8 else "")
+        return f"; weld all {what} but one with --lock JOINT (their joints: {shown})"
 
     def scene_name(self, g: _Group, as_hinge: bool) -> str:
         """The scene name of a group (module docstring): joint first for hinges and rotors."""
@@ -836,7 +963,7 @@ class _Importer:
         if self.gazebo is not None:
             for element, why in self.gazebo.errors:
                 self.fail(element, why)
-        self.raise_errors()
+        # the structure is checked too before anything is refused: one refusal says it all
         groups = self.groups()
         self.measure(groups)
         chain, rotors = self.chain(groups)
