@@ -466,10 +466,14 @@ def _prepare_assets(spec: Any, path: str, resolver: PackageResolver, notes: list
         for g in geoms:
             spec.delete(g)
         spec.delete(mesh)
+        fixed = [b for b in bodies if b in static and b != "world" and not never
+                 and (always or not spec.body(b).explicitinertial)]
+        for b in needs + fixed:  # a stand-in mass: what is welded to the world moves nothing, and
+            body = spec.body(b)  # a moving body is refused all the same (the rest is still checked)
+            body.explicitinertial, body.mass, body.inertia = True, 1.0, [1.0, 1.0, 1.0]
         if needs:
             continue
         on = f" (on {', '.join(repr(b) for b in bodies)})" if bodies else ""
-        fixed = [b for b in bodies if b in static and not never and (always or not spec.body(b).explicitinertial)]
         why_not = ("masses and inertias are given" if not fixed else
                    f"{', '.join(repr(b) for b in fixed)} welded to the world need{'s' if len(fixed) == 1 else ''} "
                    "no mass")
@@ -717,7 +721,8 @@ class _Importer:
             if kind == int(mj.mjtJoint.mjJNT_SLIDE):
                 how = (f"weld it where it is with --lock {self.joint_name(j)}" if self.lockable(j) else
                        "--lock cannot weld it (only a body's only, named hinge or slide joint is locked)")
-                self.fail(self.joint(j), f"slide joints are not supported (chains of ball and hinge joints only); {how}")
+                self.fail(self.joint(j), "slide joints are not supported (chains of ball and hinge joints "
+                                         f"only); {how}")
                 continue
             if springs and np.any(getattr(m, "jnt_stiffnesspoly", np.zeros((m.njnt, 1)))[j]):
                 self.fail(self.joint(j), "stiffnesspoly (a nonlinear spring) is not supported; a "

@@ -100,7 +100,7 @@ def test_spring_pendulum_oscillates_at_the_closed_form_frequency(backend):
     omega = math.sqrt(STIFFNESS / (I_HINGE + ARMATURE))
     e0 = 0.5 * STIFFNESS * AMPLITUDE ** 2
     assert sim.invariants()["energy"] == pytest.approx(e0, rel=1e-15)
-    for step in range(8):
+    for _ in range(8):
         sim.advance(0.37)
         t = sim.time
         phi, rate = sim.joint_states().position[0], sim.joint_states().velocity[0]

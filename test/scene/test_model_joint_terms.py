@@ -56,7 +56,9 @@ GRIPPER = """<mujoco model="gripper">
       </body>
     </body>
   </worldbody>
-  <tendon><fixed name="grip"><joint joint="left_slide" coef="0.5"/><joint joint="right_slide" coef="0.5"/></fixed></tendon>
+  <tendon>
+    <fixed name="grip"><joint joint="left_slide" coef="0.5"/><joint joint="right_slide" coef="0.5"/></fixed>
+  </tendon>
   <equality><joint name="mimic" joint1="left_slide" joint2="right_slide"/></equality>
   <actuator>
     <motor name="lift" joint="shoulder" gear="2"/>
