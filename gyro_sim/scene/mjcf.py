@@ -35,11 +35,15 @@ as given; a noise's standard deviation per sample sigma becomes the density sigm
 (the default publish rate when none is given). Every other sensor is named in a note.
 
 A hinge's or rotor's joint damping and frictionloss become its `friction` (viscous and
-Coulomb). Everything the equations of gyro_sim cannot express (slide joints, tendons, equality
-constraints, springs, armature, a ball joint's damping, servos, branching trees, ...) is
-refused with one line naming the element; contacts, joint limits and control ranges are
-ignored and listed in :attr:`ImportedModel.notes`. This module raises :class:`ModelError`;
-``gyro_sim.scene.load.load_scene`` turns it into a ``SceneError``.
+Coulomb); a hinge's armature and its spring (stiffness, springref) its `armature` and
+`spring` (docs/models.md, "Armature and joint springs"). Everything the equations of gyro_sim
+cannot express (slide joints, tendons, equality constraints, a ball joint's damping, spring or
+armature, servos, branching trees, an inertia outside the triangle inequality on a moving body
+unless ``balance_inertia``, ...) is refused, one line per element and every problem of the
+file in one refusal; contacts, joint limits and control ranges are ignored and listed in
+:attr:`ImportedModel.notes`, as are missing meshes and textures that no moving body's mass
+needs. This module raises :class:`ModelError`; ``gyro_sim.scene.load.load_scene`` turns it
+into a ``SceneError``.
 """
 from __future__ import annotations
 
