@@ -163,3 +163,20 @@ def test_lock_trims_keyframes_and_drops_a_tendon_of_locked_joints(tmp_path):
                     atol=1e-12, backend="numpy")
     sim.advance(d.time)
     assert abs(sim.joint_states().position[0] - d.qpos[0]) < AGREEMENT
+
+
+def test_a_scene_with_joint_terms_exported_by_peers_comes_back_the_same(tmp_path):
+    """The accuracy report's MJCF (gyro_sim.bench.peers) writes a hinge's armature and spring
+    as MuJoCo's armature, stiffness and springref: imported back, the same terms."""
+    from test.dynamics.test_joint_terms import with_joint_terms
+    from test.dynamics.test_kernel import chain_scene
+    from test.scene.test_model_import import exported
+
+    scene = with_joint_terms(chain_scene(2, "fixed", n=4, speed_rotors=False), 3)
+    hinges = {b["name"]: b["joint"] for b in scene["bodies"] if b["joint"]["type"] == "hinge"}
+    assert hinges
+    back = {b["name"]: b["joint"] for b in import_model(exported(scene, tmp_path)).mapping["bodies"]}
+    for name, joint in hinges.items():
+        assert back[name]["armature"] == pytest.approx(joint["armature"], rel=1e-12)
+        assert back[name]["spring"]["stiffness"] == pytest.approx(joint["spring"]["stiffness"], rel=1e-12)
+        assert back[name]["spring"]["reference"] == pytest.approx(joint["spring"]["reference"], rel=1e-12)
