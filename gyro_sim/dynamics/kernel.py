@@ -30,6 +30,8 @@ Pipeline of one evaluation (`rhs_kernel`), all about O^k in world axes:
     velocities   y, t     -> w^k, v(O^k), joint biases c^k = S_k' u_k         (eqs 34, 50, 53)
     bias forces  w, v, t  -> spatial inertias, forces at u' = 0               (eqs 29, 31, 36-39, 58)
     ABA          I, p, c  -> u'                                               (eqs 44, 51, 54)
+                 (a hinge's armature added to its D_k, its spring's moment to its tau: eq 51a,
+                 docs/theory.md section 10)
     y'           u', w    -> quaternion rates, phi', u', rotor angle rates    (eqs 18-19)
 
 Nothing is allocated per evaluation (test/dynamics/test_kernel_alloc.py): every intermediate lives in
