@@ -64,6 +64,7 @@ def test_kernel_equals_reference(seed, base, heavy):
     model = compile_model(load_scene(scene))
     if model.armature is None:
         pytest.skip("this chain has no hinge")
+    assert fast.heavy_subtrees(model.mass) == heavy  # the kernel's heavy-subtree path, or not
     rng = np.random.default_rng(seed)
     ref, comp = ChainODE(model), FastChainODE(model)
     tau = rng.normal(size=len(model.hinge_bodies))
@@ -176,3 +177,51 @@ def test_gauss4s_keeps_the_energy_of_a_spring_chain():
         sim.advance(0.1)
         worst = max(worst, abs(sim.invariants()["energy"] - e0))
     assert worst <= 1e-8 * max(1.0, abs(e0))
+
+
+_STABLE_WITH_ARMATURE = """
+import sys
+import numpy as np
+sys.path.insert(0, sys.argv[1])
+from gyro_sim.dynamics import kernel as fast
+fast.STABLE_ABA_RATIO = -1.0  # every elimination takes the square-root form (plain Python)
+from gyro_sim import load_scene
+from gyro_sim.dynamics.model import compile_model, initial_state
+from gyro_sim.dynamics.system import ChainODE
+from test.dynamics.test_joint_terms import with_joint_terms
+from test.dynamics.test_kernel import chain_scene
+worst = 0.0
+for base in ("fixed", "free", "moving"):
+    for seed in range(2):
+        rng = np.random.default_rng(seed)
+        model = compile_model(load_scene(with_joint_terms(chain_scene(seed, base, n=5), seed)))
+        chain, data, inputs = fast.records(model)
+        y = initial_state(model) + rng.normal(size=model.size) * 0.2
+        tau = rng.normal(size=len(model.hinge_bodies)) if len(model.hinge_bodies) else None
+        ref = ChainODE(model)
+        ref.hold(0.0, ref.spins(0.0), tau, None)
+        fast.hold(inputs, model, 0.0, ref.spins(0.0), tau, None)
+        out = np.zeros(model.size)
+        fast.rhs_kernel(0.2, y, out, chain, data, inputs)
+        want = ref.rhs(0.2, y)
+        worst = max(worst, float(np.abs(out - want).max() / np.abs(want).max()))
+print(worst)
+"""
+
+
+@pytest.mark.slow
+def test_the_square_root_elimination_takes_the_armature(tmp_path):
+    """`_aba_stable` (its factor passed on gains the row sqrt(a D0 / D) U / D0, W scales by
+    D0 / D, the refinement's residual counts a phi''), forced on every chain in plain Python
+    (numba off, the switch-over ratio below zero), against the numpy reference."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    env = dict(os.environ, NUMBA_DISABLE_JIT="1", PYTHONPATH=str(root))
+    run = subprocess.run([sys.executable, "-c", _STABLE_WITH_ARMATURE, str(root)], env=env, cwd=tmp_path,
+                         capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr
+    assert float(run.stdout.strip().splitlines()[-1]) <= 1e-12
