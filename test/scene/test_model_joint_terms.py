@@ -14,7 +14,7 @@ from gyro_sim import Simulator
 from gyro_sim.dynamics.model import initial_state
 from gyro_sim.scene.load import load_scene
 from gyro_sim.scene.mjcf import import_model
-from test.scene.test_menagerie_models import mujoco_model as welded_model
+from test.scene.test_armature_models import mujoco_model as welded_model
 from test.scene.test_model_import import AGREEMENT, MUJOCO_STEP, write
 
 #: a three-link arm: springs (one with a springref), armatures and a damper, under gravity
@@ -154,7 +154,7 @@ def test_lock_trims_keyframes_and_drops_a_tendon_of_locked_joints(tmp_path):
     # joints deleted and their bodies moved there
     bare = GRIPPER.split("<actuator>")[0] + GRIPPER[GRIPPER.index("</sensor>") + len("</sensor>"):]
     judged = write(tmp_path, "bare.xml", bare)
-    m, key = welded_model(judged, {"left_slide": 0.03, "right_slide": 0.03})
+    m, (key, _) = welded_model(judged, {"left_slide": 0.03, "right_slide": 0.03})
     d = mujoco.MjData(m)
     d.qpos[:] = key
     d.qvel[:] = 0.1
