@@ -46,6 +46,7 @@ SCENE_SECTIONS = {
     "`base.motion`": ("MOTION_KEYS", "base.motion"),
     "`bodies[k]`": ("BODY_KEYS", "bodies[0]"),
     "`bodies[k].joint`": ("JOINT_KEYS", "bodies[0].joint"),
+    "`bodies[k].joint.spring`": ("SPRING_KEYS", "bodies[1].joint.spring"),
     "`bodies[k].inertia`": ("INERTIA_KEYS", "bodies[0].inertia"),
     "`bodies[k].rotors[i]`": ("ROTOR_KEYS", "bodies[0].rotors[0]"),
     "`friction`": ("FRICTION_KEYS", "bodies[0].rotors[0].friction"),
@@ -80,7 +81,7 @@ def documented_sections(path: Path) -> dict[str, set[str]]:
 
 def valid_scene() -> dict:
     """A scene holding every level of the format once: a moving base, one spherical body with
-    an inertia, a rotor, an initial state and a visual."""
+    an inertia, a rotor, an initial state and a visual, and a hinge with a spring."""
     return {
         "name": "every level",
         "gravity": [0.0, 0.0, -9.81],
@@ -96,6 +97,14 @@ def valid_scene() -> dict:
                         "transverse_inertia": 1e-4, "mode": "torque", "friction": {"viscous": 1e-6}}],
             "initial": {"euler": [0.0, 0.5, 0.0]},
             "visual": {"radius": 0.02},
+            "next_joint": [0.0, 0.0, 0.2],
+        }, {
+            "name": "arm",
+            "joint": {"type": "hinge", "axis": [1.0, 0.0, 0.0], "armature": 0.01,
+                      "spring": {"stiffness": 2.0, "reference": 0.1}},
+            "mass": 0.5,
+            "com": [0.0, 0.0, 0.1],
+            "inertia": {"axial": 0.001, "transverse": 0.009},
         }],
         "imus": [{"name": "imu", "body": "top"}],
     }

@@ -12,7 +12,8 @@ test/oracles/pin_chain.py, which checks gyro_sim against Pinocchio):
 - every rotor is a child body on a ``hinge`` joint about its axis e_i through its centre
   h_i, inertia B_i 1 + (A_i - B_i) e_i e_i^T; its joint velocity is kappa_i' = p_i - w . e_i;
 - commanded axis moments are generalised forces (`qfrc_applied`) on the hinge and rotor
-  joints; no contacts, no damping, no armature.
+  joints; no contacts, no damping; a hinge's armature and spring are MuJoCo's `armature`,
+  `stiffness` and `springref` (docs/models.md, "Armature and joint springs").
 
 MuJoCo cannot hold a speed rotor's kappa_i' constant (a rheonomic constraint: only an
 actuator that approximately tracks it) nor move the base along a prescribed path with the
@@ -20,6 +21,8 @@ exact accelerations (a mocap body has no dynamics): such scenes are skipped, wit
 reason, by :func:`mujoco_unsupported`.
 """
 from __future__ import annotations
+
+import math
 
 import contextlib
 import time
@@ -76,7 +79,7 @@ def invariants_of_state(model: Model, t: float, y: np.ndarray, L_rotor=None) -> 
     d = dyn.Data(model)
     dyn.positions(model, d, t, y)
     dyn.velocities(model, d, t, y[model.i_vel])
-    return inv.invariants(model, d, spins_at(model, t, L_rotor), t)
+    return inv.invariants(model, d, spins_at(model, t, L_rotor), t, y)
 
 
 def split_moments(model: Model, moments) -> tuple[np.ndarray | None, np.ndarray | None]:
@@ -172,7 +175,11 @@ def mjcf(scene: Scene, timestep: float, integrator: str) -> str:
         else:
             axis = np.asarray(b.joint.axis, dtype=float)
             axis = axis / np.linalg.norm(axis)
-            lines.append(f'{indent}  <joint name="joint:{b.name}" type="hinge" axis="{_vec(axis)}"/>')
+            terms = f' armature="{float(b.joint.armature)!r}"' if b.joint.armature else ""
+            if b.joint.spring is not None:  # springref in the compiler's default unit, degrees
+                terms += (f' stiffness="{float(b.joint.spring.stiffness)!r}" '
+                          f'springref="{math.degrees(b.joint.spring.reference)!r}"')
+            lines.append(f'{indent}  <joint name="joint:{b.name}" type="hinge" axis="{_vec(axis)}"{terms}/>')
         c = np.asarray(b.com, dtype=float)
         I_c = np.asarray(b.inertia, dtype=float) - b.mass * ((c @ c) * np.eye(3) - np.outer(c, c))
         lines.append(f'{indent}  <inertial pos="{_vec(c)}" mass="{float(b.mass)!r}" '

@@ -141,7 +141,7 @@ class NumpyOutputs(_State):
             d = self._watch_data = dyn.Data(self.model)
         dyn.positions(self.model, d, t, y)
         dyn.velocities(self.model, d, t, y[self.model.i_vel])
-        v = inv.invariants(self.model, d, self.system.spins(t, y), t)
+        v = inv.invariants(self.model, d, self.system.spins(t, y), t, y)
         out = np.zeros(fo.INV_SIZE)
         out[fo.INV_ENERGY], out[fo.INV_KINETIC], out[fo.INV_POTENTIAL] = v["energy"], v["kinetic"], v["potential"]
         out[fo.INV_JACOBI] = v.get("jacobi", 0.0)
@@ -202,7 +202,7 @@ class NumpyOutputs(_State):
         """The invariants (gyro_sim.dynamics.invariants.invariants), and the Euler angles and
         rates (n, 3) when `euler` is asked (else None)."""
         d = self.kinematics()
-        return inv.invariants(self.model, d, self.p, self.t), (self._euler(d) if euler else None)
+        return inv.invariants(self.model, d, self.p, self.t, self.y), (self._euler(d) if euler else None)
 
     def parts(self, bodies: bool, wrenches: bool, invariants: bool, euler: bool, into=None) -> Parts:
         """What a snapshot shows, the parts asked (`euler`: the Euler angles with the

@@ -160,6 +160,8 @@ class CanonicalChain:
         self._positions(t, q, z)
         Hk, Pk = self._subtree(t, y[m.i_vel])
         p_rel = self._relative(Hk, Pk)
+        if m.armature is not None:  # a hinge's momentum gains its armature's a phi'
+            p_rel[m.col_hinge] += m.armature * y[m.i_vel][m.col_hinge]
         pi, p_phi, p_r = self._to_absolute(p_rel)
         if m.free:
             z[self.i_pr] = p_r
@@ -252,6 +254,8 @@ class CanonicalChain:
             dp[m.col_hinge] = np.einsum("ni,ni->n", de, Hk[hb]) + np.einsum("ni,ni->n", e, G[hb])
             if self.ode.hinge_tau is not None:
                 dp[m.col_hinge] += self.ode.hinge_tau  # (51)
+            if m.spring is not None:
+                dp[m.col_hinge] += dyn.spring_moments(m, self._y)
         # canonical momenta's rates: the rates of `_to_absolute`'s map, whose hinge rows carry
         # e_l . p_rel(k'), so also - e_l' . p_rel(k')
         dpi, dpphi, _ = self._to_absolute(dp)

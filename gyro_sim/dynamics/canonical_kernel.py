@@ -58,7 +58,7 @@ def _rates(t, z, model, data, inputs, zrow, cflags, cwork):
     """Positions of z, pi^k, p_rel and the rates u (into y's velocity block in cwork's y and in
     `rate`), then w^k, v(O^k). Returns nothing: everything is left in the workspaces."""
     (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-     torque_axis, torque_A, flags, base) = model
+     torque_axis, torque_A, flags, base, armature, spring) = model
     work = data.work
     t0, p0, pdot = inputs.t0[0], inputs.p0, inputs.pdot
     base_type, has_lam = flags[0], flags[2] != 0
@@ -154,7 +154,7 @@ def _rates(t, z, model, data, inputs, zrow, cflags, cwork):
         a_base[a] = 0.0
     fast.joint_columns_stage(is_hinge, own_col, base_type, e_w, S)
     fast.articulated_solve(is_hinge, col_start,
-                           fast.Elimination(S, I6, pb, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x),
+                           fast.Elimination(S, I6, pb, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x, armature),
                            prel, rate, flags[fast.FLAG_HEAVY])
     for j in range(N):
         y[i_vel + j] = rate[j]
@@ -166,7 +166,7 @@ def canonical_kernel(t, z, zdot, model, data, inputs, zrow, cflags, cwork):
     """z' (size,) at (t, z) into zdot: what canonical.CanonicalChain.rhs computes."""
     _rates(t, z, model, data, inputs, zrow, cflags, cwork)
     (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-     torque_axis, torque_A, flags, base) = model
+     torque_axis, torque_A, flags, base, armature, spring) = model
     work = data.work
     t0, p0, pdot, tau = inputs.t0[0], inputs.p0, inputs.pdot, inputs.tau
     base_type, has_gravity, has_lam = flags[0], flags[1] != 0, flags[2] != 0
@@ -230,6 +230,8 @@ def canonical_kernel(t, z, zdot, model, data, inputs, zrow, cflags, cwork):
             # (50): e' = w^{k-1} x e
             d0, d1, d2 = a1 * e2 - a2 * e1, a2 * e0 - a0 * e2, a0 * e1 - a1 * e0
             dprel[jc] = (d0 * H0 + d1 * H1 + d2 * H2) + (e0 * G0 + e1 * G1 + e2 * G2) + tau[jc]  # (51)
+            if flags[fast.FLAG_SPRINGS] != 0:  # the spring's moment -k (phi - phi_ref)
+                dprel[jc] += -spring[k, 0] * (z[zrow[k, 0]] - spring[k, 1])
         else:
             dprel[jc], dprel[jc + 1], dprel[jc + 2] = G0, G1, G2
     if base_type == fast.BASE_FREE:
@@ -326,7 +328,7 @@ def state_kernel(t, z, y, model, data, inputs, zrow, cflags, cwork):
     """The package's state y (model size) of z at t: what canonical.CanonicalChain.state does."""
     _rates(t, z, model, data, inputs, zrow, cflags, cwork)
     (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-     torque_axis, torque_A, flags, base) = model
+     torque_axis, torque_A, flags, base, armature, spring) = model
     i_kap, size = cflags[1], cflags[2]
     i_kap_y = flags[5]
     for i in range(size):

@@ -1,6 +1,7 @@
 """First integrals and other monitors of the motion, from the state alone.
 
-- energy: T + V, T by eq (33) summed over the chain, V = -g . sum m^k r_c^k.
+- energy: T + V, T by eq (33) summed over the chain, V = -g . sum m^k r_c^k; the hinges'
+  armatures add 1/2 a phi'^2 to T, their springs 1/2 k (phi - phi_ref)^2 to V.
   Conserved with a fixed base, no speed rotors and zero commands.
 - angular_momentum_O1: the angular momentum vector about O^1 (3,), world frame.
 - vertical_momentum: angular momentum about the vertical through O^1 (eq 79), component along
@@ -17,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gyro_sim.dynamics.reference import Data, cross, lam, matvec
+from gyro_sim.dynamics.reference import Data, cross, joint_energy, lam, matvec
 from gyro_sim.dynamics.model import Model
 
 
@@ -49,8 +50,9 @@ def conserved(model: Model) -> tuple[str, ...]:
     return tuple(names)
 
 
-def invariants(model: Model, data: Data, p: np.ndarray | None, t: float) -> dict:
-    """All monitors of the current kinematics in `data` (positions and velocities filled)."""
+def invariants(model: Model, data: Data, p: np.ndarray | None, t: float, y: np.ndarray | None = None) -> dict:
+    """All monitors of the current kinematics in `data` (positions and velocities filled) of
+    state y (needed only for the hinges' armatures and springs)."""
     m, h, J, w, v = model.mass, data.h, data.J, data.w, data.v_o
     lam_w, _ = lam(model, data, p, None)
     ang = matvec(J, w) + cross(h, v)  # angular momentum about the origin, lambda excluded
@@ -64,6 +66,9 @@ def invariants(model: Model, data: Data, p: np.ndarray | None, t: float) -> dict
     if p is not None:
         T += 0.5 * float(np.sum(model.torque_A * p**2))
     V = 0.0 if model.gravity is None else -float(model.gravity @ h.sum(axis=0))
+    if model.armature is not None or model.spring is not None:
+        T_joint, V_joint = joint_energy(model, y)
+        T, V = T + T_joint, V + V_joint
     out = {"energy": T + V, "kinetic": T, "potential": V}
     if model.lam_speed is not None:
         out["jacobi"] = T + V - lam_speed_dot - float(np.sum(model.speed_A * model.speed_rate**2))

@@ -30,6 +30,8 @@ Pipeline of one evaluation (`rhs_kernel`), all about O^k in world axes:
     velocities   y, t     -> w^k, v(O^k), joint biases c^k = S_k' u_k         (eqs 34, 50, 53)
     bias forces  w, v, t  -> spatial inertias, forces at u' = 0               (eqs 29, 31, 36-39, 58)
     ABA          I, p, c  -> u'                                               (eqs 44, 51, 54)
+                 (a hinge's armature added to its D_k, its spring's moment to its tau: eq 51a,
+                 docs/theory.md section 10)
     y'           u', w    -> quaternion rates, phi', u', rotor angle rates    (eqs 18-19)
 
 Nothing is allocated per evaluation (test/dynamics/test_kernel_alloc.py): every intermediate lives in
@@ -119,6 +121,12 @@ class ChainModel(NamedTuple):
     flags: np.ndarray
     #: (7,): moving-base amplitude (3), W = 2 pi f, gravity (3)
     base: np.ndarray
+    #: (n,) the hinges' armatures (reflected rotor inertias added to D_k of the elimination;
+    #: zero on spherical bodies and on hinges without one)
+    armature: np.ndarray
+    #: (n, 2) the hinges' springs: stiffness k, reference angle (the moment -k (phi - phi_ref)
+    #: is read only with flags[FLAG_SPRINGS])
+    spring: np.ndarray
 
 
 #: the index of `flags` among ChainModel's fields (its address in a descriptor: D_MODEL + this)
@@ -185,7 +193,10 @@ FLAG_KERNEL = 8
 #: friction, max_speed), whose spins and works are states at flags[FLAG_I_SPIN],
 #: flags[FLAG_I_WORK] and whose parameters sit in the workspace's tail (`workspace`)
 FLAG_ACTUATORS, FLAG_I_SPIN, FLAG_I_WORK = 9, 10, 11
-FLAGS_SIZE = 12
+#: flags[FLAG_SPRINGS]: 1 for a model with hinge springs, whose moments are added to the
+#: generalized forces in the workspace's last N floats (`scratch`)
+FLAG_SPRINGS = 12
+FLAGS_SIZE = 13
 #: per actuated axis, floats of the workspace's tail of a stateful model: max_speed (inf: none),
 #: coulomb, viscous, static, stribeck_speed (0: no Stribeck term), stick_speed
 ACTUATOR_PARAMETERS = 6
@@ -193,9 +204,9 @@ ACTUATOR_PARAMETERS = 6
 #: ChainModel's order) from D_MODEL, of the scratch at D_WORK, of the held inputs' arrays (in
 #: HeldInputs' order) from D_INPUTS; n, N, nt and the scratch's size; the evaluations counted
 #: (the compiled entry from Python, gyro_sim.dynamics.entry, counts there)
-D_MODEL, D_WORK, D_INPUTS = 0, 15, 16
-D_N, D_NCOL, D_NT, D_NWORK, D_NFEV = 21, 22, 23, 24, 25
-DESCRIPTOR_SIZE = 26
+D_MODEL, D_WORK, D_INPUTS = 0, 17, 18
+D_N, D_NCOL, D_NT, D_NWORK, D_NFEV = 23, 24, 25, 26, 27
+DESCRIPTOR_SIZE = 28
 assert D_WORK - D_MODEL == len(ChainModel.__annotations__) and D_N - D_INPUTS == len(HeldInputs.__annotations__), \
     "the descriptor's layout (D_*) no longer matches the records' fields"
 
@@ -351,13 +362,16 @@ def _spd_inverse(D, nk):
 
 
 @_njit
-def _joint_projection(S, U, D, W, j0, nk):
-    """The joint's articulated projection from U = I^A S (rows j0 .. j0+nk): D = S^T U, its
-    inverse in place, and W = U D^-1 (what both forms of the elimination need)."""
+def _joint_projection(S, U, D, W, j0, nk, armature):
+    """The joint's articulated projection from U = I^A S (rows j0 .. j0+nk): D = S^T U (plus
+    a hinge's armature, its own diagonal of the mass matrix), its inverse in place, and
+    W = U D^-1 (what both forms of the elimination need)."""
     for a in range(nk):
         for b in range(a, nk):
             D[a, b] = dot6(S[j0 + a], U[j0 + b])
             D[b, a] = D[a, b]
+    if nk == 1:
+        D[0, 0] += armature
     _spd_inverse(D, nk)
     for a in range(nk):
         for r in range(6):
@@ -740,7 +754,7 @@ class Elimination(NamedTuple):
     columns S (N, 6), the bodies' inertias IA (n, 6, 6) and bias forces pA (n, 6) (overwritten),
     the joint bias accelerations c (n, 6), the base's acceleration a_base (6,), the joint
     offsets s_w (n, 3); U, W (N, 6), u (N,), Dinv (n, 6, 6), Ia (6, 6), pa (6,), Dx, T, G (3, 3),
-    x (6,): scratch."""
+    x (6,): scratch; armature (n,): each hinge's, added to its D (zero elsewhere)."""
 
     S: np.ndarray
     IA: np.ndarray
@@ -758,6 +772,7 @@ class Elimination(NamedTuple):
     T: np.ndarray
     G: np.ndarray
     x: np.ndarray
+    armature: np.ndarray
 
 
 @_njit_inline
@@ -777,7 +792,7 @@ def _aba_classic(is_hinge, col_start, e, tau, udot):
     (S = (1, 0)) is eliminated in closed form, in scalars: D = J, and only the apparent mass
     M - H^T J^-1 H passes to the parent.
     """
-    S, IA, pA, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x = e
+    S, IA, pA, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x, armature = e
     n = IA.shape[0]
     worst = 0.0  # largest apparent mass passed on / the carrier's own mass
     # backward: I^a = I^A - U D^-1 U^T, p^a = p^A + I^a c + U D^-1 u, to the parent's O^{k-1}
@@ -842,7 +857,7 @@ def _aba_classic(is_hinge, col_start, e, tau, udot):
                                + IA[k, r, 3] * S[j, 3] + IA[k, r, 4] * S[j, 4] + IA[k, r, 5] * S[j, 5])
                 u[j] = tau[j] - (S[j, 0] * pA[k, 0] + S[j, 1] * pA[k, 1] + S[j, 2] * pA[k, 2]
                                  + S[j, 3] * pA[k, 3] + S[j, 4] * pA[k, 4] + S[j, 5] * pA[k, 5])
-            _joint_projection(S, U, Dinv[k], W, j0, nk)
+            _joint_projection(S, U, Dinv[k], W, j0, nk, armature[k])
             if k == 0:
                 continue
             for r in range(6):
@@ -1002,17 +1017,18 @@ def _aba_stable(is_hinge, col_start, e, tau, udot):
     articulated inertia formed, F^T F (nothing passes on from it).
     """
     S, IA, pA, c, a_base, s_w, U, W, u, Dinv = e.S, e.IA, e.pA, e.c, e.a_base, e.s_w, e.U, e.W, e.u, e.Dinv
+    armature = e.armature
     n = IA.shape[0]
     Ia = np.empty((6, 6))
     pa = np.empty(6)
     K = np.empty((6, 6))
-    St = np.zeros((12, 6))  # stacked factors: own (6 rows), child (up to 5 rows)
-    Fc = np.zeros((5, 6))  # the child's factor, moved to this body's O^k
+    St = np.zeros((12, 6))  # stacked factors: own (6 rows), child (up to 6 rows)
+    Fc = np.zeros((6, 6))  # the child's factor, moved to this body's O^k
     v = np.empty(12)
     H = np.empty((3, 3))
     Ri = np.empty((3, 3))  # R11^-1
     G = np.empty((3, 5))  # R11^-1 R12
-    z = np.empty(5)
+    z = np.empty(6)
     nc = 0
     pb = pA.copy()  # the bodies' own bias forces, for the residual
     acc_body = np.empty((n, 6))  # A^k, for the residual
@@ -1038,7 +1054,7 @@ def _aba_stable(is_hinge, col_start, e, tau, udot):
             for j in range(j0, j1):
                 for r in range(6):
                     U[j, r] = dot6(Ia[r], S[j])
-            _joint_projection(S, U, D, W, j0, nk)
+            _joint_projection(S, U, D, W, j0, nk, 0.0)
             continue
         # the stacked factor [F_own; F_child] in joint axes Q (columns 0..2 times H for a hinge)
         sigma = 1.0
@@ -1089,6 +1105,19 @@ def _aba_stable(is_hinge, col_start, e, tau, udot):
                         W[j, 3 + b - 2] += g
                 else:
                     W[j, 3 + b] += g
+        # a hinge's armature a: D = D0 + a (D0 = R11^2, the body's own), W = U / D is the W
+        # above (U / D0) times D0 / D, and I^a = I^A - U U^T / D gains the row sqrt(a D0 / D) W
+        # (U / D0) on top of R22 N^T: I^a = N R22^T R22 N^T + (a / (D0 D)) U U^T
+        rows = m2
+        if hinge and armature[k] != 0.0:
+            D0 = St[0, 0] * St[0, 0]
+            Dk = D0 + armature[k]
+            D[0, 0] = 1.0 / Dk
+            scale = math.sqrt(armature[k] * D0 / Dk)
+            for r in range(6):
+                Ia[m2, r] = scale * W[j0, r]
+                W[j0, r] *= D0 / Dk
+            rows = m2 + 1
         if k == 0:
             continue
         # the factor passed on: R22 N^T, N = Q[:, nk:] ((6 - nk) rows, in world axes)
@@ -1111,15 +1140,15 @@ def _aba_stable(is_hinge, col_start, e, tau, udot):
             for a in range(nk):
                 acc += W[j0 + a, r] * u[j0 + a]
             pa[r] = acc
-        for b in range(m2):
+        for b in range(rows):
             z[b] = dot6(Ia[b], c[k])
-        for b in range(m2):
+        for b in range(rows):
             for r in range(6):
                 pa[r] += Ia[b, r] * z[b]
         # the factor moved to O^{k-1} = O^k - s^{k-1}: rows (f_ang, f_lin) X = (f_ang + s x f_lin, f_lin)
         d = s_w[k - 1]
-        nc = m2
-        for b in range(m2):
+        nc = rows
+        for b in range(rows):
             fl0, fl1, fl2 = Ia[b, 3], Ia[b, 4], Ia[b, 5]
             Fc[b, 0] = Ia[b, 0] + (d[1] * fl2 - d[2] * fl1)
             Fc[b, 1] = Ia[b, 1] + (d[2] * fl0 - d[0] * fl2)
@@ -1166,6 +1195,8 @@ def _aba_stable(is_hinge, col_start, e, tau, udot):
     for k in range(n - 1, -1, -1):
         for j in range(col_start[k], col_start[k + 1]):
             res[j] = tau[j] - dot6(S[j], F[k])
+            if armature[k] != 0.0 and col_start[k + 1] - col_start[k] == 1:
+                res[j] -= armature[k] * udot[j]
         if k > 0:
             vec_cross_add(s_w[k - 1], F[k, 3:], F[k - 1, :3])
             for r in range(6):
@@ -1224,7 +1255,7 @@ def heavy_subtrees(mass) -> bool:
 
 
 #: `_heavy_entry`'s arguments: the addresses of `_aba_heavy`'s 20 arrays, then n and N
-HEAVY_ENTRY_ARGUMENTS = 22
+HEAVY_ENTRY_ARGUMENTS = 23
 
 
 if jit.compiling():
@@ -1242,10 +1273,10 @@ if jit.compiling():
             address_of(e.c), address_of(tau), address_of(e.a_base), address_of(e.s_w), address_of(e.U),
             address_of(e.W), address_of(e.u), address_of(e.Dinv), address_of(udot), address_of(e.Ia),
             address_of(e.pa), address_of(e.Dx), address_of(e.T), address_of(e.G), address_of(e.x),
-            e.IA.shape[0], e.S.shape[0]))
+            address_of(e.armature), e.IA.shape[0], e.S.shape[0]))
 
     def _heavy_entry(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot, Ia, pa,
-                     Dx, T, G, x, n, N):
+                     Dx, T, G, x, armature, n, N):
         """`_aba_heavy` on the arrays at these addresses (C-contiguous, the shapes `_aba` gives
         them for n bodies and N columns): compiled as a C function (`heavy_elimination_address`)."""
         f = np.float64
@@ -1257,7 +1288,7 @@ if jit.compiling():
             vector_at(u, N, f), block3(vector_at(Dinv, 36 * n, f), 0, n, 6, 6),
             block2(vector_at(Ia, 36, f), 0, 6, 6), vector_at(pa, 6, f),
             block2(vector_at(Dx, 9, f), 0, 3, 3), block2(vector_at(T, 9, f), 0, 3, 3),
-            block2(vector_at(G, 9, f), 0, 3, 3), vector_at(x, 6, f))
+            block2(vector_at(G, 9, f), 0, 3, 3), vector_at(x, 6, f), vector_at(armature, n, f))
         _aba_heavy(vector_at(is_hinge, n, np.bool_), vector_at(col_start, n + 1, np.int64), e,
                    vector_at(tau, N, f), vector_at(udot, N, f))
 
@@ -1277,7 +1308,8 @@ if jit.compiling():
             block2(vector_at(a[7], 3 * n, f), 0, n, 3), block3(vector_at(a[8], 9 * n, f), 0, n, 3, 3),
             block2(vector_at(a[9], 3 * n, f), 0, n, 3), vector_at(a[10], nt, i),
             block2(vector_at(a[11], 3 * nt, f), 0, nt, 3), vector_at(a[12], nt, f),
-            vector_at(a[13], FLAGS_SIZE, i), vector_at(a[14], 7, f))
+            vector_at(a[13], FLAGS_SIZE, i), vector_at(a[14], 7, f), vector_at(a[15], n, f),
+            block2(vector_at(a[16], 2 * n, f), 0, n, 2))
         h = d[D_INPUTS:D_N]
         inputs = HeldInputs(vector_at(h[0], 1, f), vector_at(h[1], nt, f), vector_at(h[2], nt, f),
                             vector_at(h[3], nt, f), vector_at(h[4], N, f))
@@ -1420,7 +1452,7 @@ def rhs_kernel(t, y, ydot, model, data, inputs):
     commands through its actuators' speed cut and friction (`actuate`).
     """
     (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-     torque_axis, torque_A, flags, base) = model
+     torque_axis, torque_A, flags, base, armature, spring) = model
     work = data.work
     t0, p0, pdot, L_rotor, tau = inputs.t0[0], inputs.p0, inputs.pdot, inputs.L_rotor, inputs.tau
     base_type = flags[0]
@@ -1440,6 +1472,10 @@ def rhs_kernel(t, y, ydot, model, data, inputs):
     else:  # bias forces: p_i(t) = p_i(t0) + (L_i / A_i)(t - t0) (eq 29)
         for i in range(nt):
             p[i] = p0[i] + pdot[i] * (t - t0)
+    if flags[FLAG_SPRINGS] != 0:  # the springs' moments -k (phi - phi_ref) join the hinges'
+        with_springs = block1(work, work.shape[0] - N, N)
+        _spring_moments(y, model, tau_applied, with_springs)
+        tau_applied = with_springs
     bias_forces(model, R, hk, Aw, w, vO, p, L_applied, lam_b, dlam_b, I6, pb)
     # ABA
     _joint_columns(is_hinge, own_col, base_type, e_w, S)
@@ -1449,7 +1485,7 @@ def rhs_kernel(t, y, ydot, model, data, inputs):
         sw = -base_omega * base_omega * math.sin(base_omega * t)
         for a in range(3):
             a_base[3 + a] = base_amplitude[a] * sw
-    _aba(is_hinge, col_start, Elimination(S, I6, pb, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x),
+    _aba(is_hinge, col_start, Elimination(S, I6, pb, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x, armature),
          tau_applied, ydot[i_vel:i_vel + N], flags[FLAG_HEAVY])
     # y'
     if base_type == BASE_FREE:
@@ -1519,6 +1555,17 @@ def actuate(y, ydot, model, data, inputs, R, w, p):
     return L_applied, tau_applied
 
 
+@_njit_inline
+def _spring_moments(y, model, tau, out):
+    """out (N,): the generalized forces tau with the hinges' spring moments -k (phi - phi_ref)
+    added (gyro_sim.dynamics.reference.spring_moments)."""
+    for j in range(tau.shape[0]):
+        out[j] = tau[j]
+    for k in range(model.mass.shape[0]):
+        if model.is_hinge[k]:
+            out[model.own_col[k]] += -model.spring[k, 0] * (y[model.qrow[k]] - model.spring[k, 1])
+
+
 @_njit
 def normalize_quaternions(y, i_q0, nq):
     """Quaternions y[i_q0 + 4 j : i_q0 + 4 j + 4], j < nq, to unit length in place."""
@@ -1554,7 +1601,7 @@ def chain_model(model: Model) -> ChainModel:
     heavy = heavy_elimination_address() if heavy_subtrees(m.mass) else 0
     flags = np.array([base_type, m.gravity is not None, has_lam, m.i_r0.start, m.i_vel.start,
                       m.i_kappa.start, m.N, heavy, kernel_address(), int(m.stateful), m.i_spin.start,
-                      m.i_work.start], dtype=np.int64)
+                      m.i_work.start, m.spring is not None], dtype=np.int64)
     base = np.zeros(7)
     if m.base_amplitude is not None:
         base[0:3] = m.base_amplitude
@@ -1562,6 +1609,12 @@ def chain_model(model: Model) -> ChainModel:
     if m.gravity is not None:
         base[4:7] = m.gravity
     nt = len(m.torque_body)
+    armature = np.zeros(n)
+    spring = np.zeros((n, 2))
+    if m.armature is not None:
+        armature[m.hinge_bodies] = m.armature
+    if m.spring is not None:
+        spring[m.hinge_bodies] = m.spring
 
     def f64(a, shape):
         return np.ascontiguousarray(np.asarray(a, dtype=np.float64).reshape(shape))
@@ -1582,6 +1635,8 @@ def chain_model(model: Model) -> ChainModel:
         torque_A=f64(m.torque_A, (nt,)),
         flags=flags,
         base=base,
+        armature=armature,
+        spring=spring,
     )
 
 
@@ -1612,17 +1667,20 @@ def scratch(model: Model) -> np.ndarray:
     """The float scratch of `rhs_kernel`: n WORK_PER_BODY + N WORK_PER_COLUMN
     + nt WORK_PER_ROTOR + WORK_FIXED (nt torque rotors). A stateful model (`Model.stateful`)
     appends its actuators' parameters, ACTUATOR_PARAMETERS per torque rotor then per body
-    (hinges'; zero on spherical bodies), and the scratch of the applied torques (nt + N)."""
+    (hinges'; zero on spherical bodies), and the scratch of the applied torques (nt + N). A model
+    with hinge springs appends N floats for the generalized forces with their moments."""
     m, nt = model, len(model.torque_body)
     size = m.n * WORK_PER_BODY + m.N * WORK_PER_COLUMN + nt * WORK_PER_ROTOR + WORK_FIXED
+    springs = np.zeros(m.N if m.spring is not None else 0)
     if not m.stateful:
-        return np.zeros(size)
+        return np.zeros(size + len(springs))
     act = m.actuators
     hinge = np.zeros((m.n, ACTUATOR_PARAMETERS))
     hinge[:, 0] = np.inf
     hinge[:, 5] = 1.0
     hinge[m.hinge_bodies] = _axis_parameters(act.hinge)
-    return np.concatenate((np.zeros(size), _axis_parameters(act.rotor).ravel(), hinge.ravel(), np.zeros(nt + m.N)))
+    return np.concatenate((np.zeros(size), _axis_parameters(act.rotor).ravel(), hinge.ravel(), np.zeros(nt + m.N),
+                           springs))
 
 
 def workspace(model: Model, chain: ChainModel, inputs: HeldInputs) -> Workspace:

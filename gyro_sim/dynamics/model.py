@@ -89,6 +89,9 @@ class Model:
     actuators: Actuators | None = None
     i_spin: slice = field(default_factory=lambda: slice(0, 0))  # absolute spins p_i of the torque rotors
     i_work: slice = field(default_factory=lambda: slice(0, 0))  # work of the motors, of friction (J)
+    # the hinges' joint terms (docs/theory.md, "Armature and joint springs"), None without any:
+    armature: np.ndarray | None = None  # (nh,) reflected rotor inertias on M's hinge diagonal
+    spring: np.ndarray | None = None  # (nh, 2) stiffness, reference angle: moment -k (phi - ref)
 
     @property
     def stateful(self) -> bool:
@@ -194,6 +197,10 @@ def compile_model(scene: Scene) -> Model:
     def arr(x, shape):
         return np.array(x, dtype=float).reshape(shape)
 
+    hinges = [bodies[k].joint for k in hin]
+    armature = np.array([j.armature for j in hinges], dtype=float)
+    spring = np.array([(j.spring.stiffness, j.spring.reference) if j.spring is not None else (0.0, 0.0)
+                       for j in hinges], dtype=float).reshape(nh, 2)
     g = None if scene.gravity is None else np.array(scene.gravity, dtype=float)
     nu = None if g is None or not np.any(g) else g / np.linalg.norm(g)
     base = scene.base
@@ -244,6 +251,8 @@ def compile_model(scene: Scene) -> Model:
         actuators=actuators,
         i_spin=i_spin,
         i_work=i_work,
+        armature=armature if np.any(armature) else None,
+        spring=spring if np.any(spring[:, 0]) else None,
     )
 
 

@@ -288,7 +288,7 @@ def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, s
     position, velocity, effort = states
     dst, at_joint, at_position, at_quat, at_wrench = slots
     (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-     torque_axis, torque_A, flags, base) = model
+     torque_axis, torque_A, flags, base, armature, spring) = model
     work = data.work
     t0, p0, pdot, L_rotor, tau = inputs.t0[0], inputs.p0, inputs.pdot, inputs.L_rotor, inputs.tau
     base_type, has_gravity, has_lam = flags[0], flags[1] != 0, flags[2] != 0
@@ -495,6 +495,13 @@ def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, s
         T += 0.5 * torque_A[i] * p[i] * p[i]
     if has_gravity:
         V = -(gravity[0] * hsum[0] + gravity[1] * hsum[1] + gravity[2] * hsum[2])
+    for k in range(n):  # the hinges' armatures 1/2 a phi'^2, springs 1/2 k (phi - phi_ref)^2
+        if is_hinge[k] and armature[k] != 0.0:
+            rate = y[i_vel + own_col[k]]
+            T += 0.5 * armature[k] * rate * rate
+        if is_hinge[k] and flags[fast.FLAG_SPRINGS] != 0:
+            stretch = y[qrow[k]] - spring[k, 1]
+            V += 0.5 * spring[k, 0] * stretch * stretch
     inv[INV_ENERGY], inv[INV_KINETIC], inv[INV_POTENTIAL] = T + V, T, V
     inv[INV_JACOBI] = T + V - lam_dot - spin2
     vec_cross(O[0], P, tmp)  # H_O1 = L - O^1 x P

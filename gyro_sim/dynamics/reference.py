@@ -225,7 +225,10 @@ def mass_matrix(model: Model, data: Data, Sa: np.ndarray, Sb: np.ndarray) -> np.
     F_ang = matvec(JC, Sa) + cross(hC, Sb)
     F_lin = mC[:, None] * Sb + cross(Sa, hC)
     Mfull = Sa @ F_ang.T + Sb @ F_lin.T
-    return np.where(model.col_upper, Mfull, Mfull.T)
+    M = np.where(model.col_upper, Mfull, Mfull.T)
+    if model.armature is not None:  # a reflected rotor inertia on its hinge's own diagonal
+        M[model.col_hinge, model.col_hinge] += model.armature
+    return M
 
 
 def mass_times(model: Model, data: Data, Sa: np.ndarray, Sb: np.ndarray, udot: np.ndarray) -> np.ndarray:
@@ -234,7 +237,10 @@ def mass_times(model: Model, data: Data, Sa: np.ndarray, Sb: np.ndarray, udot: n
     acc_w, acc_v = accelerations_from(model, data, Sa, Sb, udot, 0.0, 0.0)
     f_ang = matvec(data.J, acc_w) + cross(data.h, acc_v)
     f_lin = model.mass[:, None] * acc_v + cross(acc_w, data.h)
-    return project_subtree(model, Sa, Sb, f_ang, f_lin)
+    out = project_subtree(model, Sa, Sb, f_ang, f_lin)
+    if model.armature is not None:
+        out[..., model.col_hinge] += model.armature * udot[..., model.col_hinge]
+    return out
 
 
 def project_subtree(model: Model, Sa, Sb, f_ang, f_lin) -> np.ndarray:
@@ -347,7 +353,29 @@ def closure(model: Model, data: Data, t: float, y: np.ndarray, hinge_tau: np.nda
     rhs = -project_subtree(model, Sa, Sb, f_ang, f_lin)
     if hinge_tau is not None:
         rhs[..., model.col_hinge] += hinge_tau  # (51): e^k . L^k = L_k
+    if model.spring is not None:
+        rhs[..., model.col_hinge] += spring_moments(model, y)
     return rhs, (Sa, Sb, lam_w, dlam_w, acc_w0, acc_v0)
+
+
+def spring_moments(model: Model, y: np.ndarray) -> np.ndarray:
+    """The hinges' spring moments -k (phi - phi_ref) (nh,) at y (a stack of states too), added
+    to the commanded moment of eq (51) (docs/theory.md, "Armature and joint springs")."""
+    k, ref = model.spring[:, 0], model.spring[:, 1]
+    return -k * (y[..., model.i_phi] - ref)
+
+
+def joint_energy(model: Model, y: np.ndarray) -> tuple[float, float]:
+    """What the hinges' joint terms add to the energy at y: the armatures' kinetic energy
+    1/2 a phi'^2 and the springs' potential 1/2 k (phi - phi_ref)^2 (zero without them)."""
+    T = V = 0.0
+    if model.armature is not None:
+        rate = y[model.i_vel][model.col_hinge]
+        T = 0.5 * float(np.sum(model.armature * rate * rate))
+    if model.spring is not None:
+        stretch = y[model.i_phi] - model.spring[:, 1]
+        V = 0.5 * float(np.sum(model.spring[:, 0] * stretch * stretch))
+    return T, V
 
 
 def fill_evaluation(model: Model, data: Data, udot: np.ndarray, parts: tuple, out: Evaluation) -> None:

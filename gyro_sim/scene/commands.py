@@ -53,13 +53,18 @@ def add_model_options(parser) -> None:
                         help="models only: weld JOINT at VALUE (rad or m; default its keyframe or "
                              "reference position), its body merged into its parent (repeatable: a "
                              "gripper's fingers, a target's slides)")
+    parser.add_argument("--balance-inertia", action="store_true",
+                        help="models only: a moving body's inertia outside the triangle inequality "
+                             "A + B >= C takes MuJoCo's balanced one (its principal moments set to "
+                             "their mean) instead of being refused (docs/models.md)")
 
 
 def model_options(args) -> dict:
     """`load_scene`'s and `import_model`'s keyword arguments from a command's options."""
     return {"keyframe": getattr(args, "keyframe", None),
             "package_path": list(getattr(args, "package_path", None) or []),
-            "lock": list(getattr(args, "lock", None) or [])}
+            "lock": list(getattr(args, "lock", None) or []),
+            "balance_inertia": bool(getattr(args, "balance_inertia", False))}
 
 
 def node_model_options(values: dict) -> dict:

@@ -48,7 +48,7 @@ from gyro_sim.scene.mjcf import ModelError, import_model, is_model_path
 from gyro_sim.scene.names import name_problem, topic_token
 from gyro_sim.scene.records import (
     BASE_TYPES, DEFAULT_STICK_SPEED, JOINT_TYPES, ROTOR_MODES, Base, Body, Friction, Imu, Initial, Joint,
-    Limits, Rotor, Scene,
+    Limits, Rotor, Scene, Spring,
 )
 
 __all__ = ["SceneError", "load_scene", "parse_yaml"]
@@ -86,6 +86,7 @@ BOUNDS = {
     "max_torque": (1e9, "N m"), "max_speed": (1e7, "rad/s"), "coulomb": (1e9, "N m"),
     "viscous": (1e9, "N m s/rad"), "static": (1e9, "N m"), "stribeck_speed": (1e7, "rad/s"),
     "stick_speed": (1e7, "rad/s"),
+    "armature": (1e12, "kg m^2"), "stiffness": (1e12, "N m/rad"), "reference": (1e6, "rad"),
 }
 #: bound of any other number (unit vectors before normalisation, quaternions)
 GENERIC_BOUND = 1e15
@@ -97,7 +98,10 @@ BASE_TYPE_KEYS = {"fixed": ("type", "position"), "moving": ("type", "position", 
 MOTION_KEYS = ("type", "amplitude", "frequency")
 BODY_KEYS = ("name", "joint", "mass", "com", "inertia", "inertia_com", "next_joint", "rotors",
              "initial", "visual")
-JOINT_KEYS = ("type", "axis", "max_torque", "friction")
+JOINT_KEYS = ("type", "axis", "max_torque", "friction", "armature", "spring")
+#: a hinge's terms a spherical joint does not take (docs/scene-format.md)
+HINGE_ONLY_KEYS = ("armature", "spring")
+SPRING_KEYS = ("stiffness", "reference")
 #: a hinge's limits (JOINT_KEYS) and a torque rotor's (ROTOR_KEYS)
 HINGE_LIMIT_KEYS = ("max_torque", "friction")
 ROTOR_LIMIT_KEYS = ("max_torque", "max_speed", "friction")
@@ -136,7 +140,8 @@ class SceneError(GyroSimError, ValueError):
 
 def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None,
                package_path: Sequence[str | os.PathLike] = (),
-               lock: Mapping[str, float | None] | Sequence[str] = ()) -> Scene:
+               lock: Mapping[str, float | None] | Sequence[str] = (),
+               balance_inertia: bool = False) -> Scene:
     """Load and validate a scene.
 
     Parameters
@@ -158,6 +163,10 @@ def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None,
         Models only: joints welded where they are, their bodies merged into their parents: a
         mapping joint name -> value (rad or m; None: the keyframe's value, else the reference
         position), or ``"NAME"`` / ``"NAME=VALUE"`` strings (docs/models.md, "Locked joints").
+    balance_inertia : bool, optional
+        Models only: a moving body's inertia outside the triangle inequality takes MuJoCo's
+        balanced one (docs/models.md, "Inertias outside the triangle inequality") instead of
+        being refused.
 
     Returns
     -------
@@ -185,7 +194,8 @@ def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None,
                 raise SceneError([str(exc)], path) from None
         if is_model_path(path):  # MJCF or URDF: its scene mapping, refusals naming elements
             try:
-                model = import_model(path, keyframe, package_path=package_path, lock=lock)
+                model = import_model(path, keyframe, package_path=package_path, lock=lock,
+                                     balance_inertia=balance_inertia)
             except ModelError as exc:
                 raise SceneError(exc.errors, path) from None
             data = model.mapping
@@ -193,6 +203,9 @@ def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None,
             data = _read_yaml(path)
     else:
         raise SceneError([f"scene: must be a file path or a mapping (got {_describe(source)})"])
+    if balance_inertia and model is None:
+        raise SceneError(["balance_inertia: only an MJCF or URDF model's inertias are balanced (a "
+                          "scene file's inertia must obey the triangle inequality)"], path)
     if lock and model is None:
         raise SceneError(["lock: only the joints of an MJCF or URDF model are locked (a scene "
                           "file's chain is written as it moves)"], path)
@@ -764,6 +777,9 @@ def _joint(ch: _Checker, value: Any, path: str) -> Joint | None:
             if joint.get(key) is not None:
                 ch.fail(_at(path, key), "not allowed for a spherical joint (only a hinge carries "
                                         "a commanded moment)")
+        for key in HINGE_ONLY_KEYS:
+            if joint.get(key) is not None:
+                ch.fail(_at(path, key), "not allowed for a spherical joint (a hinge's term)")
         return Joint(type=kind)
     if kind == "hinge":
         limits = _limits(ch, joint, path, HINGE_LIMIT_KEYS)
@@ -771,10 +787,27 @@ def _joint(ch: _Checker, value: Any, path: str) -> Joint | None:
             ch.fail(_at(path, "axis"), "required for a hinge (its axis in the parent's frame)")
             return None
         axis = ch.unit(joint, "axis", path)
-        if axis is None or limits is False:
+        armature = ch.scalar(joint, "armature", path, default=0.0, minimum=0.0)
+        spring = _spring(ch, joint.get("spring"), _at(path, "spring"))
+        if axis is None or limits is False or armature is None or spring is False:
             return None
-        return Joint(type=kind, axis=_readonly(axis), limits=limits)
+        return Joint(type=kind, axis=_readonly(axis), limits=limits, armature=armature, spring=spring)
     return None
+
+
+def _spring(ch: _Checker, value: Any, path: str) -> Spring | None | bool:
+    """A hinge's spring (SPRING_KEYS): a Spring, None when absent, False after reporting."""
+    if value is None:
+        return None
+    spring = ch.mapping(value, path, SPRING_KEYS, required=("stiffness",))
+    if spring is None:
+        return False
+    bad = len(ch.errors)
+    stiffness = ch.scalar(spring, "stiffness", path, minimum=0.0)
+    reference = ch.scalar(spring, "reference", path, default=0.0)
+    if len(ch.errors) > bad or stiffness is None or reference is None:
+        return False
+    return Spring(stiffness=stiffness, reference=reference)
 
 
 def _limits(ch: _Checker, mapping: Mapping, path: str, keys: Sequence[str]) -> Limits | None | bool:

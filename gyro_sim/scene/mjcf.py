@@ -35,11 +35,15 @@ as given; a noise's standard deviation per sample sigma becomes the density sigm
 (the default publish rate when none is given). Every other sensor is named in a note.
 
 A hinge's or rotor's joint damping and frictionloss become its `friction` (viscous and
-Coulomb). Everything the equations of gyro_sim cannot express (slide joints, tendons, equality
-constraints, springs, armature, a ball joint's damping, servos, branching trees, ...) is
-refused with one line naming the element; contacts, joint limits and control ranges are
-ignored and listed in :attr:`ImportedModel.notes`. This module raises :class:`ModelError`;
-``gyro_sim.scene.load.load_scene`` turns it into a ``SceneError``.
+Coulomb); a hinge's armature and its spring (stiffness, springref) its `armature` and
+`spring` (docs/models.md, "Armature and joint springs"). Everything the equations of gyro_sim
+cannot express (slide joints, tendons, equality constraints, a ball joint's damping, spring or
+armature, servos, branching trees, an inertia outside the triangle inequality on a moving body
+unless ``balance_inertia``, ...) is refused, one line per element and every problem of the
+file in one refusal; contacts, joint limits and control ranges are ignored and listed in
+:attr:`ImportedModel.notes`, as are missing meshes and textures that no moving body's mass
+needs. This module raises :class:`ModelError`; ``gyro_sim.scene.load.load_scene`` turns it
+into a ``SceneError``.
 """
 from __future__ import annotations
 
@@ -169,7 +173,8 @@ def _mat(a: np.ndarray) -> list[list[float]]:
 # ----------------------------------------------------------------------------- reading
 def import_model(path: str | os.PathLike, keyframe: str | None = None,
                  package_path: Sequence[str | os.PathLike] = (),
-                 lock: Mapping[str, float | None] | Sequence[str] = ()) -> ImportedModel:
+                 lock: Mapping[str, float | None] | Sequence[str] = (),
+                 balance_inertia: bool = False) -> ImportedModel:
     """Read an MJCF or URDF model as a scene mapping (module docstring, docs/models.md).
 
     Parameters
@@ -181,11 +186,15 @@ def import_model(path: str | os.PathLike, keyframe: str | None = None,
         (:mod:`gyro_sim.scene.packages`)
     lock : joints welded where they are: a mapping joint name -> value (rad or m; None: the
         keyframe's value, else the reference position), or a sequence of names
+    balance_inertia : a moving body's inertia that breaks the triangle inequality A + B >= C
+        of its principal moments is replaced by MuJoCo's balanced one (the three set to their
+        mean, MuJoCo's ``balanceinertia``) with a note, instead of refused
 
     Raises
     ------
     ModelError
-        Listing every element that cannot be mapped (or why the file cannot be read).
+        Listing every element that cannot be mapped (or why the file cannot be read), all
+        at once.
     """
     path = os.fspath(path)
     try:
@@ -206,29 +215,29 @@ def import_model(path: str | os.PathLike, keyframe: str | None = None,
     sites: list[tuple[GazeboImu, str]] = []
     resolver = PackageResolver(path, [os.fspath(p) for p in package_path])
     notes: list[str] = []
+    errors: list[str] = []  # every problem found, said together (one refusal)
+    locked: dict[str, float] = {}
     with caught_warnings(mujoco) as warned:
         try:
             spec = mujoco.MjSpec.from_file(path)
-            errors = _prepare_meshes(spec, path, resolver, notes)
-            if errors:
-                raise ModelError(errors, path)
-            locked: dict[str, float] = {}
-            if lock:
-                locks = parse_locks(lock, path)
-                errors = _lock_joints(mujoco, spec, spec.compile(), path, locks, keyframe, locked, notes)
-                if errors:
-                    raise ModelError(errors, path)
+            locks = parse_locks(lock, path) if lock else {}
+            static = _static_bodies(spec, set(locks))
+            errors += _prepare_assets(spec, path, resolver, notes, static)
+            errors += _balance_inertias(spec, path, static, balance_inertia, notes)
+            if locks:
+                errors += _lock_joints(mujoco, spec, spec.compile(), path, locks, keyframe, locked, notes)
             if kind == "URDF":
                 gazebo = read_gazebo_sensors(path)
                 sites = _gazebo_sites(spec, gazebo)
             model = spec.compile()
         except ValueError as exc:  # MuJoCo's parse and compile errors
             if isinstance(exc, ModelError):
-                raise
+                raise ModelError(errors + exc.errors, path) from None
             text = "; ".join(line.strip() for line in str(exc).splitlines() if line.strip())
-            raise ModelError([f"{path}: MuJoCo cannot read it: {text}"], path) from None
+            raise ModelError(errors + [f"{path}: MuJoCo cannot read it: {text}"], path) from None
     notes = resolver.notes() + notes + [f"MuJoCo: {w}" for w in dict.fromkeys(warned)]
     importer = _Importer(mujoco, model, path, kind, gazebo, sites)
+    importer.errors += errors
     importer.notes += notes
     importer.locked = locked
     return importer.run(keyframe)
@@ -292,9 +301,7 @@ def _lock_joints(mujoco: Any, spec: Any, m0: Any, path: str, locks: dict[str, fl
             errors.append(f"{path}: lock: joint {name!r} shares its body with other joints; "
                           "only a body's only joint is locked")
         else:
-            joints[name] = j
-    if errors:
-        return errors
+            joints[name] = j  # the others are said, and these locked all the same (one refusal)
     removed_q: list[int] = []
     removed_a: list[int] = []
     for name, j in sorted(joints.items(), key=lambda item: item[1]):
@@ -331,32 +338,67 @@ def _lock_joints(mujoco: Any, spec: Any, m0: Any, path: str, locks: dict[str, fl
                                                       int(mujoco.mjtTrn.mjTRN_JOINTINPARENT))]
         locked[name] = value
         notes.append(f"joint {name!r}: locked at {value:g} (its body welded to its parent)")
-    if errors:
-        return errors
-    for actuator in [spec.actuators[a] for a in removed_a]:
-        notes.append(f"actuator {actuator.name or '(unnamed)'!r}: left out with the joint it drives "
-                     f"{actuator.target!r} (locked)")
-        spec.delete(actuator)
+    actuators, all_tendons = list(spec.actuators), list(spec.tendons)  # by the compiled model's ids
+    for a in removed_a:
+        notes.append(f"actuator {actuators[a].name or '(unnamed)'!r}: left out with the joint it drives "
+                     f"{actuators[a].target!r} (locked)")
     for equality in list(spec.equalities):
         if equality.type == mujoco.mjtEq.mjEQ_JOINT and (equality.name1 in locked or equality.name2 in locked):
             notes.append(f"equality {equality.name or '(unnamed)'!r}: left out with the locked "
                          f"joint {equality.name1 if equality.name1 in locked else equality.name2!r}")
             spec.delete(equality)
+    tendons = _locked_tendons(mujoco, m0, set(joints.values()))
+    for t in tendons:  # a tendon on locked joints only moves nothing: it goes, with what acts on it
+        name = all_tendons[t].name
+        shown = repr(name) if name else f"#{t}"
+        for a in range(m0.nu):
+            if int(m0.actuator_trntype[a]) == int(mujoco.mjtTrn.mjTRN_TENDON) and int(m0.actuator_trnid[a][0]) == t:
+                notes.append(f"actuator {actuators[a].name or '(unnamed)'!r}: left out with the tendon "
+                             f"{shown} it drives")
+                removed_a.append(a)
+        for sensor in list(spec.sensors):
+            if name and sensor.objtype == obj.mjOBJ_TENDON and sensor.objname == name:
+                notes.append(f"sensor {sensor.name or '(unnamed)'!r}: left out with the tendon {shown}")
+                spec.delete(sensor)
+        notes.append(f"tendon {shown}: left out, its joints are all locked")
+    removed_a = sorted(set(removed_a))
+    for a in removed_a:
+        spec.delete(actuators[a])
+    for t in tendons:
+        spec.delete(all_tendons[t])
     for sensor in list(spec.sensors):
         if sensor.objtype == obj.mjOBJ_JOINT and sensor.objname in locked:
             notes.append(f"sensor {sensor.name or '(unnamed)'!r}: left out with the locked joint "
                          f"{sensor.objname!r}")
             spec.delete(sensor)
+    # the joints first, then the keyframes' entries (MuJoCo 4.0's MjSpec.delete checks the
+    # keyframes' sizes against the joints still there)
+    for name in joints:
+        spec.delete(spec.joint(name))
+    removed_v = [int(m0.jnt_dofadr[j]) for j in joints.values()]
     for k in spec.keys:
         if len(k.qpos) == m0.nq:
             k.qpos = np.delete(np.asarray(k.qpos), removed_q)
         if len(k.qvel) == m0.nv:
-            k.qvel = np.delete(np.asarray(k.qvel), [int(m0.jnt_dofadr[j]) for j in joints.values()])
+            k.qvel = np.delete(np.asarray(k.qvel), removed_v)
+        if len(k.act) == m0.na and m0.na and removed_a:
+            k.act = np.delete(np.asarray(k.act), [int(m0.actuator_actadr[a]) for a in removed_a
+                                                  if int(m0.actuator_actadr[a]) >= 0])
         if len(k.ctrl) == m0.nu and removed_a:
             k.ctrl = np.delete(np.asarray(k.ctrl), removed_a)
-    for name in joints:
-        spec.delete(spec.joint(name))
     return errors
+
+
+def _locked_tendons(mujoco: Any, m0: Any, joints: set[int]) -> list[int]:
+    """The tendons of `m0` (fixed tendons) whose every joint is among the locked `joints`."""
+    out = []
+    for t in range(m0.ntendon):
+        first, count = int(m0.tendon_adr[t]), int(m0.tendon_num[t])
+        wraps = range(first, first + count)
+        if count and all(int(m0.wrap_type[w]) == int(mujoco.mjtWrap.mjWRAP_JOINT)
+                         and int(m0.wrap_objid[w]) in joints for w in wraps):
+            out.append(t)
+    return out
 
 
 @contextlib.contextmanager
@@ -376,11 +418,31 @@ def caught_warnings(mujoco: Any):
 MUJOCO_MESHES = (".stl", ".obj", ".msh")
 
 
-def _prepare_meshes(spec: Any, path: str, resolver: PackageResolver, notes: list[str]) -> list[str]:
-    """Every mesh file of `spec` resolved (``package://``, ``file://``, relative paths:
-    :mod:`gyro_sim.scene.packages`) to an absolute path; a mesh that cannot be found or read
-    is left out with its geoms and one note, unless a body's mass comes from it: then an
-    error naming the body and the file. The errors."""
+def _static_bodies(spec: Any, locked: set[str]) -> set[str]:
+    """The names of the bodies welded to the world: neither they nor a body above them has a
+    joint other than the `locked` ones (the world included, as "world")."""
+    out: set[str] = set()
+
+    def visit(body: Any, static: bool) -> None:
+        static = static and all(j.name in locked and j.name for j in body.joints)
+        if static:
+            out.add(body.name)
+        for child in body.bodies:
+            visit(child, static)
+
+    visit(spec.worldbody, True)
+    return out
+
+
+def _prepare_assets(spec: Any, path: str, resolver: PackageResolver, notes: list[str],
+                    static: set[str]) -> list[str]:
+    """Every mesh and texture file of `spec` resolved (``package://``, ``file://``, relative
+    paths: :mod:`gyro_sim.scene.packages`) to an absolute path. A mesh that cannot be found or
+    read is left out with its geoms and one note, unless a moving body's mass comes from it:
+    then an error naming the body and the file (a body welded to the world, `static`, needs no
+    mass: a note). A texture that cannot be found is left out with a note (nothing moves by
+    it). The errors; the meshes they name are left out too, so that the rest is still
+    checked."""
     import mujoco
 
     model_dir = os.path.dirname(os.path.abspath(path))
@@ -389,36 +451,112 @@ def _prepare_meshes(spec: Any, path: str, resolver: PackageResolver, notes: list
     always = from_geoms == mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_TRUE
     never = from_geoms == mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
     errors = []
+    kind = "link" if _kind(path) == "URDF" else "body"
     for mesh in list(spec.meshes):
         if not mesh.file:
             continue  # vertices given inline
-        file, shown = resolver.resolve(mesh.file, base)
-        if file is None:
-            why = f"package {shown[len('package://'):].partition('/')[0]!r} not found"
-        elif not os.path.isfile(file):
-            why = f"no such file ({file})"
-        elif os.path.splitext(file)[1].lower() not in MUJOCO_MESHES:
-            why = f"MuJoCo reads {', '.join(MUJOCO_MESHES)} meshes only"
-        else:
+        file, shown, why = _asset_file(resolver, mesh.file, base, MUJOCO_MESHES, "meshes")
+        if why is None:
             mesh.file = file
             continue
         geoms = [g for g in spec.geoms if g.meshname == mesh.name]
         bodies = list(dict.fromkeys(g.parent.name for g in geoms))
-        needs = [b for b in bodies if b and b != "world" and not never
+        needs = [b for b in bodies if b and b not in static and not never
                  and (always or not spec.body(b).explicitinertial)]
-        kind = "link" if _kind(path) == "URDF" else "body"
         for b in needs:
             errors.append(f"{path}: {kind} {b!r}: its mass would come from the mesh {shown}, "
                           f"which cannot be read: {why}; give the {kind} an inertial or the "
                           "mesh (--package-path DIR)")
-        if needs:
-            continue
         for g in geoms:
             spec.delete(g)
         spec.delete(mesh)
+        fixed = [b for b in bodies if b in static and b != "world" and not never
+                 and (always or not spec.body(b).explicitinertial)]
+        for b in needs + fixed:  # a stand-in mass: what is welded to the world moves nothing, and
+            body = spec.body(b)  # a moving body is refused all the same (the rest is still checked)
+            body.explicitinertial, body.mass, body.inertia = True, 1.0, [1.0, 1.0, 1.0]
+        if needs:
+            continue
         on = f" (on {', '.join(repr(b) for b in bodies)})" if bodies else ""
-        notes.append(f"mesh {shown}{on}: left out, {why}; the motion does not need it "
-                     "(masses and inertias are given)")
+        why_not = ("masses and inertias are given" if not fixed else
+                   f"{', '.join(repr(b) for b in fixed)} welded to the world need{'s' if len(fixed) == 1 else ''} "
+                   "no mass")
+        notes.append(f"mesh {shown}{on}: left out, {why}; the motion does not need it ({why_not})")
+    texture_dir = os.path.join(model_dir, spec.texturedir) if spec.texturedir else model_dir
+    for texture in list(spec.textures):
+        if not texture.file:
+            continue  # builtin
+        file, shown, why = _asset_file(resolver, texture.file, texture_dir, None, "textures")
+        if why is None:
+            texture.file = file
+            continue
+        name = texture.name
+        for material in spec.materials:
+            material.textures = ["" if t == name else t for t in material.textures]
+        spec.delete(texture)
+        notes.append(f"texture {shown}: left out, {why}; nothing moves by it")
+    return errors
+
+
+def _asset_file(resolver: PackageResolver, uri: str, base: str, suffixes: Sequence[str] | None,
+                what: str) -> tuple[str | None, str, str | None]:
+    """(the file, how to show it, None) of an asset's `uri`, or (None, shown, why it cannot be
+    read)."""
+    file, shown = resolver.resolve(uri, base)
+    if file is None:
+        return None, shown, f"package {shown[len('package://'):].partition('/')[0]!r} not found"
+    if not os.path.isfile(file):
+        return None, shown, f"no such file ({file})"
+    if suffixes is not None and os.path.splitext(file)[1].lower() not in suffixes:
+        return None, shown, f"MuJoCo reads {', '.join(suffixes)} {what} only"
+    return file, shown, None
+
+
+def _principal_moments(body: Any) -> np.ndarray | None:
+    """A body's explicit principal moments of inertia (ascending), None without an inertial."""
+    if not body.explicitinertial:
+        return None
+    full = np.asarray(body.fullinertia, dtype=float)
+    if np.all(np.isfinite(full)):
+        xx, yy, zz, xy, xz, yz = full
+        return np.linalg.eigvalsh(np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]]))
+    return np.sort(np.asarray(body.inertia, dtype=float))
+
+
+#: principal moments A <= B <= C break the triangle inequality when A + B < C (1 - this)
+TRIANGLE_SLACK = 1e-12
+
+
+def _balance_inertias(spec: Any, path: str, static: set[str], balance: bool, notes: list[str]) -> list[str]:
+    """Bodies whose explicit inertia breaks the triangle inequality A + B >= C of its
+    principal moments (docs/models.md, "Inertias outside the triangle inequality"), which
+    MuJoCo refuses: on a body welded to the world (`static`) the three moments are set to
+    their mean with a note (nothing moves by it); on a moving body too when `balance`
+    (``--balance-inertia``: MuJoCo's balanceinertia), else an error naming the body. The
+    errors (their bodies are balanced all the same, so that the rest is still checked)."""
+    errors = []
+    kind = "link" if _kind(path) == "URDF" else "body"
+    for body in spec.bodies:
+        moments = _principal_moments(body)
+        if moments is None or moments[0] + moments[1] >= moments[2] * (1.0 - TRIANGLE_SLACK):
+            continue
+        shown = ", ".join(f"{x:.6g}" for x in moments)
+        mean = float(np.mean(moments))
+        if body.name in static or balance:
+            why = "welded to the world, it moves nothing" if body.name in static else "--balance-inertia"
+            notes.append(f"{kind} {body.name!r}: principal moments ({shown}) break A + B >= C; set to "
+                         f"their mean {mean:.6g} ({why})")
+        else:
+            errors.append(f"{path}: {kind} {body.name!r}: principal moments of inertia ({shown}) break "
+                          "the triangle inequality A + B >= C (no mass distribution has them; MuJoCo "
+                          "refuses them); --balance-inertia sets them to their mean, as MuJoCo's "
+                          "balanceinertia does")
+        # MuJoCo's balanceinertia: the principal frame kept, the three moments their mean
+        full = np.asarray(body.fullinertia, dtype=float)
+        if np.all(np.isfinite(full)):
+            body.fullinertia = [mean, mean, mean, 0.0, 0.0, 0.0]
+        else:
+            body.inertia = [mean, mean, mean]
     return errors
 
 
@@ -505,6 +643,8 @@ class _Importer:
         self.errors: list[str] = []
         self.notes: list[str] = []
         self.friction: dict[int, dict[str, float]] = {}  # hinge joint -> its scene friction
+        self.armature: dict[int, float] = {}  # hinge joint -> its armature (kg m^2)
+        self.spring: dict[int, dict[str, float]] = {}  # hinge joint -> its scene spring
         self.locked: dict[str, float] = {}  # joints welded (gyro_sim.scene.mjcf._lock_joints)
 
     # --- names
@@ -547,14 +687,22 @@ class _Importer:
         friction = not flags & int(dsbl.mjDSBL_FRICTIONLOSS)
         for t in range(m.ntendon):
             name = self._name(obj.mjOBJ_TENDON, t)
+            wraps = range(int(m.tendon_adr[t]), int(m.tendon_adr[t]) + int(m.tendon_num[t]))
+            joints = [int(m.wrap_objid[w]) for w in wraps if int(m.wrap_type[w]) == int(mj.mjtWrap.mjWRAP_JOINT)]
+            hint = ""
+            if joints and len(joints) == len(wraps) and all(self.lockable(j) for j in joints):
+                hint = ("; --lock its joints (" + ", ".join(repr(self.joint_name(j)) for j in joints)
+                        + ") to weld them: the tendon goes with them")
             self.fail(f"tendon {name!r}" if name else f"tendon #{t}",
-                      "tendons are not supported (a chain of rigid bodies and rotors only)")
+                      "tendons are not supported (a chain of rigid bodies and rotors only)" + hint)
         if m.neq and not flags & int(dsbl.mjDSBL_EQUALITY):
             for e in range(m.neq):
                 name = self._name(obj.mjOBJ_EQUALITY, e)
+                coupled = [int(j) for j in (m.eq_obj1id[e], m.eq_obj2id[e]) if j >= 0]
+                lockable = int(m.eq_type[e]) == int(mj.mjtEq.mjEQ_JOINT) and all(self.lockable(j) for j in coupled)
                 self.fail(f"equality {name!r}" if name else f"equality #{e}",
-                          "equality constraints are not supported (an open chain only); "
-                          "--lock the joints it couples to weld them")
+                          "equality constraints are not supported (an open chain only)"
+                          + ("; --lock the joints it couples to weld them" if lockable else ""))
         for f in range(m.nflex):
             name = self._name(obj.mjOBJ_FLEX, f)
             self.fail(f"flex {name!r}" if name else f"flex #{f}",
@@ -575,13 +723,21 @@ class _Importer:
             kind = int(m.jnt_type[j])
             dofs = range(m.jnt_dofadr[j], m.jnt_dofadr[j] + (6 if kind == 0 else 3 if kind == 1 else 1))
             if kind == int(mj.mjtJoint.mjJNT_SLIDE):
-                lock = f"--lock {self.joint_name(j)}" if self.joint_name(j) else "--lock JOINT"
-                self.fail(self.joint(j), "slide joints are not supported (chains of ball and "
-                                         f"hinge joints only); weld it where it is with {lock}")
+                how = (f"weld it where it is with --lock {self.joint_name(j)}" if self.lockable(j) else
+                       "--lock cannot weld it (only a body's only, named hinge or slide joint is locked)")
+                self.fail(self.joint(j), "slide joints are not supported (chains of ball and hinge joints "
+                                         f"only); {how}")
                 continue
-            stiff = m.jnt_stiffness[j] != 0.0 or np.any(getattr(m, "jnt_stiffnesspoly", np.zeros((m.njnt, 1)))[j])
-            if springs and stiff:
-                self.fail(self.joint(j), "stiffness (a joint spring) is not supported")
+            if springs and np.any(getattr(m, "jnt_stiffnesspoly", np.zeros((m.njnt, 1)))[j]):
+                self.fail(self.joint(j), "stiffnesspoly (a nonlinear spring) is not supported; a "
+                                         "linear stiffness is")
+            elif springs and m.jnt_stiffness[j] != 0.0:
+                if kind == int(mj.mjtJoint.mjJNT_HINGE):  # docs/models.md, "Armature and springs"
+                    self.spring[j] = {"stiffness": _tidy(m.jnt_stiffness[j]),
+                                      "reference": _tidy(m.qpos_spring[m.jnt_qposadr[j]])}
+                else:
+                    self.fail(self.joint(j), f"stiffness on a {('free', 'ball')[kind]} joint is not "
+                                             "supported (a spring acts on a hinge's axis)")
             if dampers and np.any(getattr(m, "dof_dampingpoly", np.zeros((m.nv, 1)))[dofs]):
                 self.fail(self.joint(j), "dampingpoly (a nonlinear damper) is not supported; "
                                          "a linear damping is")
@@ -598,9 +754,11 @@ class _Importer:
                 self.fail(self.joint(j), f"frictionloss on a {('free', 'ball')[kind]} joint is "
                                          "not supported (friction acts on a hinge's or rotor's axis)")
             if np.any(m.dof_armature[dofs]):
-                self.fail(self.joint(j), "armature (a reflected rotor inertia) is not supported; "
-                                         "model the rotor as a body on a hinge: it becomes a "
-                                         "gyrostat rotor")
+                if kind == int(mj.mjtJoint.mjJNT_HINGE):  # docs/models.md, "Armature and springs"
+                    self.armature[j] = _tidy(m.dof_armature[dofs][0])
+                else:
+                    self.fail(self.joint(j), f"armature on a {('free', 'ball')[kind]} joint is not "
+                                             "supported (a reflected inertia on a hinge's axis is)")
             if kind == int(mj.mjtJoint.mjJNT_HINGE) and m.qpos0[m.jnt_qposadr[j]] != 0.0:
                 self.fail(self.joint(j), f"ref = {m.qpos0[m.jnt_qposadr[j]]:g}: a reference angle "
                                          "is not supported (the hinge angle is MuJoCo's qpos)")
@@ -656,7 +814,7 @@ class _Importer:
         for b in range(1, m.nbody):
             if m.body_weldid[b] == b:
                 j = int(m.body_jntadr[b])
-                out[b] = _Group(root=b, joint=j, kind=kinds[int(m.jnt_type[j])],
+                out[b] = _Group(root=b, joint=j, kind=kinds.get(int(m.jnt_type[j]), "slide"),
                                 parent=int(m.body_weldid[m.body_parentid[b]]), members=[])
         static = []
         for b in range(1, m.nbody):
@@ -707,6 +865,8 @@ class _Importer:
             return "it carries moving bodies"
         if g.mass <= 0.0:
             return "massless"
+        if g.joint in self.armature or g.joint in self.spring:
+            return "its joint has armature or stiffness (a rotor's axis takes friction only)"
         a = g.axis / np.linalg.norm(g.axis)
         r = g.com - g.origin
         off = float(np.linalg.norm(r - (r @ a) * a))
@@ -743,12 +903,12 @@ class _Importer:
         top = [g for g in groups.values() if g.parent == 0]
         if not top:
             self.fail("worldbody", "no body has a joint: nothing moves")
+            self.raise_errors()
         elif len(top) > 1:
             self.fail("worldbody", f"{len(top)} moving bodies hang from the world ("
                       + ", ".join(repr(self.body_name(g.root)) for g in top)
-                      + "); one chain only (branching trees are not supported; weld the other "
-                        "chains' joints with --lock JOINT)")
-        self.raise_errors()
+                      + "); one chain only (branching trees are not supported"
+                      + self.weld_hint(groups, top, "chains") + ")")
         chain, rotors = [top[0]], {}
         while True:
             current = chain[-1]
@@ -763,8 +923,7 @@ class _Importer:
                           f"{len(rest)} moving children ("
                           + ", ".join(repr(self.body_name(c.root)) for c in rest)
                           + "): a chain only, branching trees are not supported"
-                          + (f" ({why})" if why else "") + "; weld the other branches' joints with "
-                          "--lock JOINT")
+                          + (f" ({why})" if why else "") + self.weld_hint(groups, rest, "branches"))
                 break
             if not rest:
                 break
@@ -773,6 +932,33 @@ class _Importer:
             if g.kind == "free":
                 self.fail(self.joint(g.joint), "a free joint only on the chain's first body")
         return chain, rotors
+
+    def lockable(self, j: int) -> bool:
+        """Whether --lock welds joint `j` (_lock_joints): a named hinge or slide, its body's
+        only joint."""
+        m, jt = self.m, self.mj.mjtJoint
+        return bool(self.joint_name(j)) and int(m.jnt_type[j]) in (int(jt.mjJNT_HINGE), int(jt.mjJNT_SLIDE)) \
+            and int(m.body_jntnum[m.jnt_bodyid[j]]) == 1
+
+    def weld_hint(self, groups: dict[int, _Group], parts: list[_Group], what: str) -> str:
+        """How to weld all but one of `parts` (subtrees) with --lock, naming their joints; or
+        why --lock cannot (it is never suggested where it would be refused)."""
+        m = self.m
+        joints: list[int] = []
+        todo = list(parts)
+        while todo:
+            g = todo.pop()
+            for b in g.members:
+                joints += range(int(m.body_jntadr[b]), int(m.body_jntadr[b]) + int(m.body_jntnum[b]))
+            todo += [groups[c] for c in g.children]
+        joints.sort()
+        stuck = [j for j in joints if not self.lockable(j)]
+        if stuck:
+            return (f"; --lock cannot weld {', '.join(self.joint(j) for j in stuck[:5])}"
+                    f"{' ...' if len(stuck) > 5 else ''} (only a body's only hinge or slide joint is locked)")
+        names = [self.joint_name(j) for j in joints]
+        shown = ", ".join(repr(n) for n in names[:8]) + (" ..." if len(names) > 8 else "")
+        return f"; weld all {what} but one with --lock JOINT (their joints: {shown})"
 
     def scene_name(self, g: _Group, as_hinge: bool) -> str:
         """The scene name of a group (module docstring): joint first for hinges and rotors."""
@@ -786,7 +972,7 @@ class _Importer:
         if self.gazebo is not None:
             for element, why in self.gazebo.errors:
                 self.fail(element, why)
-        self.raise_errors()
+        # the structure is checked too before anything is refused: one refusal says it all
         groups = self.groups()
         self.measure(groups)
         chain, rotors = self.chain(groups)
@@ -810,6 +996,10 @@ class _Importer:
                 body["joint"] = {"type": "hinge", "axis": _vec(G_parent.T @ g.axis)}
                 if g.joint in self.friction:
                     body["joint"]["friction"] = self.friction[g.joint]
+                if g.joint in self.armature:
+                    body["joint"]["armature"] = self.armature[g.joint]
+                if g.joint in self.spring:
+                    body["joint"]["spring"] = self.spring[g.joint]
             else:
                 body["joint"] = {"type": "spherical"}
             body["mass"] = _tidy(g.mass)

@@ -71,12 +71,24 @@ class Rotor:
 
 
 @dataclass(frozen=True, eq=False)
+class Spring:
+    """A hinge's torsion spring: the moment -stiffness (phi - reference) about its axis."""
+
+    stiffness: float  # N m/rad
+    reference: float = 0.0  # rad: the angle where the spring is relaxed
+
+
+@dataclass(frozen=True, eq=False)
 class Joint:
     """The joint at O^k between body k-1 (or the base) and body k."""
 
     type: str  # "spherical" | "hinge"
     axis: np.ndarray | None = None  # hinge only: (3,) unit axis in the parent's frame
     limits: Limits | None = None  # hinge only (max_torque, friction)
+    #: hinge only: a reflected rotor inertia (kg m^2) on the joint's own diagonal of the mass
+    #: matrix (MuJoCo's armature, docs/theory.md "Armature and joint springs")
+    armature: float = 0.0
+    spring: Spring | None = None  # hinge only
 
 
 @dataclass(frozen=True, eq=False)

@@ -439,11 +439,15 @@ REFUSED = {
     "equality": (bad(inner=CHILD.format(name="arm", joint="elbow", type="hinge", attrs='axis="1 0 0"'),
                      extra='<equality><joint name="coupling" joint1="pivot" joint2="elbow"/></equality>'),
                  "equality 'coupling': equality constraints are not supported"),
-    "spring": (bad(joint_attrs='stiffness="2"'), "joint 'pivot': stiffness (a joint spring) is not supported"),
+    "spring on a ball joint": (bad(inner=CHILD.format(name="hand", joint="wrist", type="ball", attrs='stiffness="2"')),
+                               "joint 'wrist': stiffness on a ball joint is not supported"),
+    "nonlinear spring": (bad(joint_attrs='stiffness="2 0.5"'),
+                         "joint 'pivot': stiffnesspoly (a nonlinear spring) is not supported"),
     "damping of a ball joint": (bad(inner=CHILD.format(name="hand", joint="wrist", type="ball", attrs='damping="0.1"')),
                                 "joint 'wrist': damping on a ball joint is not supported"),
-    "armature": (bad(joint_attrs='armature="0.01"'),
-                 "joint 'pivot': armature (a reflected rotor inertia) is not supported"),
+    "armature on a ball joint": (bad(inner=CHILD.format(name="hand", joint="wrist", type="ball",
+                                                        attrs='armature="0.01"')),
+                                 "joint 'wrist': armature on a ball joint is not supported"),
     "friction loss of a ball joint": (bad(inner=CHILD.format(name="hand", joint="wrist", type="ball",
                                                              attrs='frictionloss="0.1"')),
                                       "joint 'wrist': frictionloss on a ball joint is not supported"),
@@ -538,7 +542,8 @@ def test_the_refusals_come_before_anything_runs(tmp_path, capsys):
 
 
 def test_every_refusal_is_reported_at_once(tmp_path):
-    path = write(tmp_path, "bad.xml", bad(joint_attrs='stiffness="0.1" armature="0.01"',
+    path = write(tmp_path, "bad.xml", bad(inner=CHILD.format(name="hand", joint="wrist", type="ball",
+                                                             attrs='stiffness="0.1" armature="0.01"'),
                                           extra='<tendon><fixed name="cable"><joint joint="pivot" coef="1"/>'
                                                 '</fixed></tendon>'))
     with pytest.raises(SceneError) as info:

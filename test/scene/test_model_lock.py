@@ -91,7 +91,10 @@ def test_a_gripper_left_unlocked_is_refused_suggesting_lock(tmp_path):
         f"{path}: joint 'finger_joint1': slide joints are not supported (chains of ball and hinge "
         "joints only); weld it where it is with --lock finger_joint1",
         f"{path}: joint 'finger_joint2': slide joints are not supported (chains of ball and hinge "
-        "joints only); weld it where it is with --lock finger_joint2"]
+        "joints only); weld it where it is with --lock finger_joint2",
+        f"{path}: body 'link2': 2 moving children ('left_finger', 'right_finger'): a chain only, "
+        "branching trees are not supported; weld all branches but one with --lock JOINT (their "
+        "joints: 'finger_joint1', 'finger_joint2')"]
 
 
 def test_locked_fingers_move_as_in_mujoco_without_them(tmp_path):
@@ -136,13 +139,24 @@ def test_lock_on_the_command_line_and_bad_locks(tmp_path, capsys):
                  "--lock", "finger_joint2"]) == 0
     out = capsys.readouterr().out
     assert "note: joint 'finger_joint1': locked at 0" in out
-    for bad, said in ((["--lock", "nope"], "lock: no joint named 'nope'"),
-                      (["--lock", "finger_joint1=open"],
+    for bad, said in ((["--lock", "finger_joint1=open"],
                        "lock: joint 'finger_joint1': the value must be a finite number"),
                       (["--lock", "finger_joint1=nan"], "must be a finite number")):
         assert main(["run", "--scene", str(path), "--duration", "0.01", *bad]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and said in err[0], err
+    # a joint that is not there is said with every other problem of the file (the fingers,
+    # not locked, are slide joints), in one refusal
+    assert main(["run", "--scene", str(path), "--duration", "0.01", "--lock", "nope"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "lock: no joint named 'nope'" in err[1] and "(5 errors)" in err[0], err
+    said = "\n".join(err[2:])
+    for element in ("equality #0", "joint 'finger_joint1': slide", "joint 'finger_joint2': slide",
+                    "body 'link2': 2 moving children"):
+        assert element in said, said
+    # and what each suggests, --lock the fingers, is what then loads
+    assert main(["run", "--scene", str(path), "--duration", "0.01", "--lock", "finger_joint1",
+                 "--lock", "finger_joint2"]) == 0
     with pytest.raises(SceneError, match="lock: only the joints of an MJCF or URDF model are locked"):
         load_scene("hinge_chain", lock=["arm3"])
 
