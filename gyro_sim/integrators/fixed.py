@@ -154,6 +154,10 @@ IMPLICIT_PRIOR = 12
 #: of CPU at the cost above (~140 ms in the rescue's Python driver): the heavy tip's whips (up to
 #: 56,000 evaluations of the rescue each) pass at full accuracy
 BURST_STEPS = 150
+#: "fixed", in place of an implicit rung the budget cannot pay for: rk4 in the substeps that
+#: bring h |lambda| below this fraction of its limit (at most MAX_SUBSTEPS), closer to the limit
+#: than RK4_SAFETY: the watchdog still sees every call
+BUDGET_RK4_SAFETY = 0.9
 #: "fixed": the most a rung below (the implicit rung, the rescue) may be expected to cost in one
 #: call beyond the call's share of the budget (rhs evaluations), however much credit is left: a
 #: call whose rungs below are expected to cost more keeps the budget's ways (rk4 in its most
@@ -542,7 +546,8 @@ class SceneFixedStep(FixedStepIntegrator):
                 # rk4 in the substeps that make it stable, where MAX_SUBSTEPS do (within the budget)
                 if dear:  # not tried again before the scene is soft (the estimate chooses rk4)
                     self._barred.add(method)
-                k = max(c.substeps, math.ceil(c.substeps * c.h_lambda / (RK4_SAFETY * RK4_IMAG_LIMIT)))
+                need = c.substeps * c.h_lambda / (BUDGET_RK4_SAFETY * RK4_IMAG_LIMIT)
+                k = max(c.substeps, math.ceil(need)) if need <= MAX_SUBSTEPS else MAX_SUBSTEPS + 1
                 method, substeps = ("rk4", k) if k <= MAX_SUBSTEPS else (BUDGET_RUNG, 1)
                 self.reason = f"{Choice(method, substeps, '', 0.0).label} in place of {c.label}{why}: {self.reason}"
         self._switch(t0, method, substeps)
@@ -593,8 +598,10 @@ class SceneFixedStep(FixedStepIntegrator):
                         m.march(t0, y, t1)
                     self._learn(m, before, t0, t1)
                     if self.monitor is not None and self.current != RESCUE:
-                        if last or self.current == BUDGET_RUNG:
+                        if last:
                             self._report(t0, y, t1)
+                        elif self.current == BUDGET_RUNG:
+                            self._report(t0, y, t1, retake=True)
                         else:
                             self._watch(t0, y, t1)
                     break
@@ -617,7 +624,15 @@ class SceneFixedStep(FixedStepIntegrator):
                             else "left a non-finite state")
                     why = ""
                     ladder = [self.implicit, RESCUE] if self.current == "rk4" else [RESCUE]
-                    if self.current == BUDGET_RUNG:  # it broke down (not its energy: that is reported)
+                    if self.current == BUDGET_RUNG and refused is not None:  # past OVER_BUDGET_WATCH
+                        k = 4 * self.substeps  # again in 4 x its substeps, where the call's share pays for them
+                        if (self.n + 1) * k * round((t1 - t0) / self.step) > income:  # within the call's share
+                            y[:] = refused
+                            self._keep(e.error)
+                            self.reason = f"{self._label()}: kept, {what} at t = {e.t:.6g} s (more substeps beyond the budget)"
+                            break
+                        after = BUDGET_RUNG
+                    elif self.current == BUDGET_RUNG:  # it broke down (not its energy: that is reported)
                         after, k = RESCUE, 1  # within one burst
                     elif self.budget_rung and self.current == "rk4" and 1 < self.substeps < MAX_SUBSTEPS:
                         after, k = "rk4", MAX_SUBSTEPS  # a fast body: rk4 again in its most substeps (within the budget)
@@ -677,10 +692,13 @@ class SceneFixedStep(FixedStepIntegrator):
             return
         raise WatchdogTrip(self.current, err, t0, self.step / self.substeps, t1 - t0)
 
-    def _report(self, t0: float, y: np.ndarray, t1: float) -> None:
-        """A call of the budget's rung, kept whatever its energy error (the budget chose it: no
-        rescue retakes it): that error counted when beyond the watchdog's limit."""
+    def _report(self, t0: float, y: np.ndarray, t1: float, retake: bool = False) -> None:
+        """A call of the budget's rung: its energy error counted when beyond the watchdog's limit.
+        No rescue retakes it (the budget chose it); `retake`: an error past OVER_BUDGET_WATCH
+        raises WatchdogTrip, for the same rung in more substeps."""
         err = self.monitor(t0, self._y0, t1, y)
+        if retake and abs(err) > OVER_BUDGET_WATCH * (t1 - t0):
+            raise WatchdogTrip(self.current, err, t0, self.step / self.substeps, t1 - t0)
         if abs(err) > ENERGY_WATCH * (t1 - t0):
             self._keep(err)
 

@@ -117,17 +117,18 @@ def test_over_budget_the_watchdog_reports_instead_of_retaking():
 
 def test_over_budget_a_stiff_call_takes_rk4_in_the_substeps_that_make_it_stable():
     """h w = 5: stiff for rk4 at the step (the choice says gauss4). Over budget the call goes to
-    rk4 in ceil(5 / (RK4_SAFETY x RK4_IMAG_LIMIT)) = 4 substeps (h w = 1.25 each, stable),
-    16 evaluations a step: within the budget, where gauss4's cost has no bound. Its result is
-    rk4's on the rotation: |y| = |R(1.25 i)|^40, R rk4's stability polynomial."""
+    rk4 in ceil(5 / (BUDGET_RK4_SAFETY x RK4_IMAG_LIMIT)) = 2 substeps (h w = 2.5 each, inside
+    rk4's region, |h w| <= 2 sqrt 2), 8 evaluations a step: within the budget, where gauss4's
+    cost has no bound. Its result is rk4's on the rotation: |y| = |R(2.5 i)|^20, R rk4's
+    stability polynomial."""
     sys_ = Rotation(5000.0)
     integ = fixed.SceneFixedStep(sys_, step=STEP)
     over_budget(integ)
     y = integ.advance(0.0, np.array([1.0, 0.0]), CALL)
-    assert (integ.current, integ.substeps) == ("rk4", 4) and "in place of gauss4" in integ.reason
-    assert integ.methods["rk4"].nfev == 10 * 4 * 4 and integ.methods["gauss4"].nfev == 0
-    z = 1.25j
-    assert np.hypot(*y) == pytest.approx(abs(1 + z + z**2 / 2 + z**3 / 6 + z**4 / 24) ** 40, rel=1e-9)
+    assert (integ.current, integ.substeps) == ("rk4", 2) and "in place of gauss4" in integ.reason
+    assert integ.methods["rk4"].nfev == 10 * 2 * 4 and integ.methods["gauss4"].nfev == 0
+    z = 2.5j
+    assert np.hypot(*y) == pytest.approx(abs(1 + z + z**2 / 2 + z**3 / 6 + z**4 / 24) ** 20, rel=1e-9)
 
 
 def test_over_budget_a_call_beyond_rk4s_substeps_takes_the_fixed_cost_rung():
