@@ -59,13 +59,18 @@ re-simulation makes the same switches bit for bit.
 That ladder has no bound on its cost: on a violent command (moments of 1e3 x gravity torque on
 the hinge chain) it takes dop853 at 7,000-20,000 evaluations a 10 ms call. So "fixed"
 keeps to a real-time budget, counted in rhs evaluations (EVAL_BUDGET a physics step on
-average, bursts of BURST_STEPS' worth: a credit). Over it, rk4 takes what it can at its
-substeps and the watchdog reports instead of retaking (up to OVER_BUDGET_WATCH), a stiff call
-or a retake goes to BUDGET_RUNG (:class:`LinearlyImplicitEuler`: L-stable, a fixed cost of
-size + 1 evaluations a step), and the rescue may spend one burst at most, past which the
-budget rung's result is kept. The calls kept and their energy errors are counted
-(`budget_calls`, `budget_energy_error`: the node's /diagnostics). docs/integrators.md
-states the policy and its measured counts.
+average, bursts of BURST_STEPS' worth: a credit), and tries a rung below only where the call
+can pay what it is expected to cost (`_implicit_cost`, `_rescue_cost`: at most the credit and
+CALL_BURST beyond the call's share). New commands choose the substeps from the rates they
+reach within the call (`_rate_ahead`); rk4 in substeps that fails is taken again in
+MAX_SUBSTEPS first; a stiff call the budget cannot pay the implicit rung for takes rk4 in the
+substeps that make it stable (BUDGET_RK4_SAFETY), else BUDGET_RUNG
+(:class:`LinearlyImplicitEuler`: L-stable, a fixed cost of size + 1 evaluations a step),
+whose calls no rescue retakes; a rung that failed waits until the scene is soft again. Over
+budget, the watchdog reports instead of retaking (up to OVER_BUDGET_WATCH). The calls kept and
+their energy errors are counted (`budget_calls`, `budget_energy_error`: the node's
+/diagnostics). docs/integrators.md states the policy, docs/performance.md its measured counts
+on the violent family.
 """
 from __future__ import annotations
 
@@ -158,6 +163,8 @@ BURST_STEPS = 150
 #: bring h |lambda| below this fraction of its limit (at most MAX_SUBSTEPS), closer to the limit
 #: than RK4_SAFETY: the watchdog still sees every call
 BUDGET_RK4_SAFETY = 0.9
+#: ... in at most this many substeps (4 evaluations each: 384 a step, within EVAL_BUDGET)
+BUDGET_MAX_SUBSTEPS = 96
 #: "fixed": the most a rung below (the implicit rung, the rescue) may be expected to cost in one
 #: call beyond the call's share of the budget (rhs evaluations), however much credit is left: a
 #: call whose rungs below are expected to cost more keeps the budget's ways (rk4 in its most
@@ -547,8 +554,8 @@ class SceneFixedStep(FixedStepIntegrator):
                 if dear:  # not tried again before the scene is soft (the estimate chooses rk4)
                     self._barred.add(method)
                 need = c.substeps * c.h_lambda / (BUDGET_RK4_SAFETY * RK4_IMAG_LIMIT)
-                k = max(c.substeps, math.ceil(need)) if need <= MAX_SUBSTEPS else MAX_SUBSTEPS + 1
-                method, substeps = ("rk4", k) if k <= MAX_SUBSTEPS else (BUDGET_RUNG, 1)
+                k = max(c.substeps, math.ceil(need)) if need <= BUDGET_MAX_SUBSTEPS else BUDGET_MAX_SUBSTEPS + 1
+                method, substeps = ("rk4", k) if k <= BUDGET_MAX_SUBSTEPS else (BUDGET_RUNG, 1)
                 self.reason = f"{Choice(method, substeps, '', 0.0).label} in place of {c.label}{why}: {self.reason}"
         self._switch(t0, method, substeps)
         self._retaken = False
@@ -574,7 +581,8 @@ class SceneFixedStep(FixedStepIntegrator):
         call's start or, under new commands, by its end: the largest) by about RESCUE_TURN rad
         each, RESCUE_STAGES evaluations a step."""
         lam = self.h_lambda * self.substeps / self.step if math.isfinite(self.h_lambda) else 0.0
-        fastest = max(lam, self._body_rate(self._y0), self._ahead[1] if self._ahead[0] and self._ahead[0][0] == t0 else 0.0)
+        ahead = self._ahead[1] if self._ahead[0] and self._ahead[0][0] == t0 else 0.0
+        fastest = max(lam, self._body_rate(self._y0), ahead)
         return RESCUE_STAGES * span * fastest / RESCUE_TURN
 
     def _march(self, t0: float, y: np.ndarray, t1: float) -> None:
@@ -629,13 +637,14 @@ class SceneFixedStep(FixedStepIntegrator):
                         if (self.n + 1) * k * round((t1 - t0) / self.step) > income:  # within the call's share
                             y[:] = refused
                             self._keep(e.error)
-                            self.reason = f"{self._label()}: kept, {what} at t = {e.t:.6g} s (more substeps beyond the budget)"
+                            self.reason = (f"{self._label()}: kept, {what} at t = {e.t:.6g} s "
+                                           "(more substeps beyond the budget)")
                             break
                         after = BUDGET_RUNG
                     elif self.current == BUDGET_RUNG:  # it broke down (not its energy: that is reported)
                         after, k = RESCUE, 1  # within one burst
                     elif self.budget_rung and self.current == "rk4" and 1 < self.substeps < MAX_SUBSTEPS:
-                        after, k = "rk4", MAX_SUBSTEPS  # a fast body: rk4 again in its most substeps (within the budget)
+                        after, k = "rk4", MAX_SUBSTEPS  # a fast body: rk4 again in its most substeps
                     elif not self.budget_rung:
                         after, k = ladder[0], 1 if ladder[0] == RESCUE else self.substeps
                     else:
@@ -654,7 +663,8 @@ class SceneFixedStep(FixedStepIntegrator):
                             # the rungs below cost more than the budget has: the result kept, its error reported
                             y[:] = refused
                             self._keep(e.error)
-                            self.reason = f"{self._label()}: kept, {what} at t = {e.t:.6g} s (the rungs below beyond the budget)"
+                            self.reason = (f"{self._label()}: kept, {what} at t = {e.t:.6g} s "
+                                           "(the rungs below beyond the budget)")
                             break
                         else:  # the budget's rung: a fixed cost, compiled nothing (the ladder's next rungs neither)
                             unready = [r for r in ladder if not self.ready(r)]
@@ -726,11 +736,11 @@ class LinearlyImplicitEuler(FixedStepIntegrator):
     and it damps the motion it cannot resolve instead. Order 1. J by forward differences, each
     column perturbing its component by JVP_REL_STEP of its size: size + 1 rhs evaluations and
     one LU a step, whatever the state: a fixed cost, in numpy on the compiled rhs (nothing to
-    compile). "fixed" steps with it only over its real-time budget, where rk4 would need more
-    substeps than the budget allows: the violent step of `gyro-sim bench realtime` pushed for
-    1.5 s (1.3e11 J, bodies at 1e6 rad/s: 1,000 rad a physics step) keeps its energy balance to
-    6e-4 there at one step a millisecond, where rk4, gauss4s and dop853 cost 1e5-1e6
-    evaluations a call.
+    compile). "fixed" steps with it only where its real-time budget cannot pay for better: the
+    violent step of `gyro-sim bench realtime` pushed for 1.5 s (1.3e11 J, the wheel at 7.5e7
+    rad/s, the links' nutation beyond rk4 in 64 substeps) keeps its energy balance to 1e-3
+    there at one step a millisecond, where gauss4s and dop853 cost 2e4-1e5 evaluations a
+    call.
 
     References
     ----------

@@ -267,7 +267,7 @@ class Listener(event.Listener):
         pass
 
 
-sim = Simulator(mass_ratio_chain(1e6), integrator="fixed", step=1e-3)  # the start: its first step's kernels compiled here
+sim = Simulator(mass_ratio_chain(1e6), integrator="fixed", step=1e-3)  # the start: its first step compiled
 sim.snapshot()
 sim.advance(0.01)
 sim.integrator.guard = True  # as the node sets it
