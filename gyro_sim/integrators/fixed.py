@@ -168,11 +168,11 @@ BUDGET_MAX_SUBSTEPS = 96
 #: "fixed": the most a rung below (the implicit rung, the rescue) may be expected to cost in one
 #: call beyond the call's share of the budget (rhs evaluations), however much credit is left: a
 #: call whose rungs below are expected to cost more keeps the budget's ways (rk4 in its most
-#: substeps, its own result with its error reported, the budget's rung). About 40 ms of the
+#: substeps, its own result with its error reported, the budget's rung). About 30 ms of the
 #: rescue's CPU (2.2-3.3 us an evaluation in its Python driver, the hinge chain, 2 cores), what
 #: the node's pacer makes up once in a run (MAX_CATCH_UP: 20 ms a wake-up); the heavy tip's
 #: whips after its first, expected below it, pass at full accuracy
-CALL_BURST = 16_000
+CALL_BURST = 12_000
 #: "fixed", over its budget: a call whose energy error is below this (relative to the kinetic
 #: energy, per simulated second) is kept and its error reported, not retaken; above it the call
 #: is retaken by the budget's rung, then by the rescue within one burst, and past that the budget
