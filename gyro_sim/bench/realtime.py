@@ -54,7 +54,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from gyro_sim.ros.pacing import Floor
+from gyro_sim.ros.pacing import Floor, chunk_steps
 
 DEFAULT_SIZES = (2, 10, 20, 50, 100)
 QUICK_SIZES = (2,)
@@ -160,8 +160,10 @@ VIOLENT_SCENES = ("hinge_chain", "free_chain_rotors")
 VIOLENT_PUSH = 0.5
 #: simulated seconds counted after the push
 VIOLENT_AFTER = 1.0
-#: the node's calls: one publication period (s)
-VIOLENT_CALL = 1.0 / PUBLISH_RATE
+#: the publication period (s): a repeated command comes again this often
+VIOLENT_PERIOD = 1.0 / PUBLISH_RATE
+#: the node's calls (s): as many physics steps as it takes a wake-up (`pacing.chunk_steps`: 2 ms)
+VIOLENT_CALL = chunk_steps(round(PHYSICS_RATE / PUBLISH_RATE), 1.0 / PHYSICS_RATE, 1.0) / PHYSICS_RATE
 #: simulated seconds of a node run with a violent command
 VIOLENT_SECONDS = 5.0
 #: the command is sent again when the node's diagnostics (every 0.1 s simulated) still say it has
@@ -194,9 +196,9 @@ def violent_family(scenes=VIOLENT_SCENES, factors=VIOLENT_FACTORS) -> list[Viole
 
 
 def violent_counts(case: ViolentCase | None = None, after: float = VIOLENT_AFTER) -> dict:
-    """A violent case offline, as the node steps it ("fixed" at 1 / PHYSICS_RATE, advanced one
-    publication period at a time, the command set at the call it takes effect, again at every
-    call when repeated): the counts per simulated second of the whole run, of the push and
+    """A violent case offline, as the node steps it ("fixed" at 1 / PHYSICS_RATE, advanced
+    VIOLENT_CALL at a time as the node's wake-ups do, the command set at the call it takes
+    effect, again at every call when repeated): the counts per simulated second of the whole run, of the push and
     after it, deterministic: they depend on the simulated states only. A simulation error ends
     the run and is reported (`error`)."""
     import numpy as np
@@ -261,7 +263,7 @@ def violent_table(counts: list[dict], nodes: list[dict | None] | None = None) ->
     nodes = nodes or [None] * len(counts)
     lines = [
         f"The violent family: step moments of a multiple of each axis's gravity torque, from t = {VIOLENT_AT:g} s, "
-        f"held (one command) or sent again every {1e3 * VIOLENT_CALL:g} ms; \"fixed\" at {PHYSICS_RATE:g} Hz in "
+        f"held (one command) or sent again every {1e3 * VIOLENT_PERIOD:g} ms; \"fixed\" at {PHYSICS_RATE:g} Hz in "
         f"{1e3 * VIOLENT_CALL:g} ms calls, counted over the push and {VIOLENT_AFTER:g} s after it; budget "
         f"{counts[0]['budget_per_s']:,.0f} rhs evaluations per simulated s.",
         "",
@@ -331,7 +333,7 @@ def run_violent_node(workdir: Path, seconds: float = VIOLENT_SECONDS, case: Viol
     arrivals: list[float] = []
     sent: list[float] = []
     accepted: list[tuple[float, int]] = []  # (arrival, the node's count of accepted commands) from /diagnostics
-    pushes = round(case.push / VIOLENT_CALL)  # publications while a repeated command lasts
+    pushes = round(case.push / VIOLENT_PERIOD)  # publications while a repeated command lasts
 
     def on_diagnostics(msg) -> None:
         for status in msg.status:
@@ -363,7 +365,7 @@ def run_violent_node(workdir: Path, seconds: float = VIOLENT_SECONDS, case: Viol
             now = time.monotonic()
             since = [n for t, n in accepted if t > sent[-1] + RESEND_AFTER] if sent else []
             again = bool(since) and not any(n for _, n in accepted)  # reports long after it: none taken
-            due = (case.repeated and sent and now >= sent[-1] + VIOLENT_CALL
+            due = (case.repeated and sent and now >= sent[-1] + VIOLENT_PERIOD
                    and sum(t >= sent[0] for t in arrivals) < pushes)
             if arrivals and pub.get_subscription_count() > 0 and (not sent or again or due):
                 pub.publish(Float64MultiArray(data=list(moments)))
