@@ -210,15 +210,19 @@ def flat_disc_top(gap: float = 1e-9) -> dict[str, Any]:
 ABRUPT_FACTOR = 1e3
 
 
-def abrupt_commands(factor: float = ABRUPT_FACTOR) -> tuple[dict[str, Any], list[float]]:
-    """config/hinge_chain.yaml and step axis moments of `factor` x each axis's gravity torque.
+def abrupt_commands(factor: float = ABRUPT_FACTOR, scene: str = "hinge_chain") -> tuple[dict[str, Any], list[float]]:
+    """A shipped straight chain (config/hinge_chain.yaml by default) and step axis moments of
+    `factor` x each axis's gravity torque.
 
-    Returns (scene mapping, moments in the scene's axis order: wheel2, arm3, arm4). The
-    gravity torque of a hinge is m g times the horizontal lever of the subtree's centre of
-    mass at rest along its body axis (sum of m c over the subtree); for the wheel, the gravity
-    torque of the body carrying it (arm2's subtree). Signs alternate, so the chain twists.
+    Returns (scene mapping, moments in the scene's axis order: for the hinge chain wheel2, arm3,
+    arm4; each body's hinge, then its actuated rotors, in chain order). The gravity torque of a
+    hinge is m g times the horizontal lever of the subtree's centre of mass at rest along its
+    body axis (sum of m c over the subtree); for a rotor, the gravity torque of the body carrying
+    it (its subtree). A scene without gravity (a free chain in space) gets the torque of G (the
+    shipped scenes' gravity) all the same: the size of its commands. Signs alternate, so the
+    chain twists.
     """
-    sd = load_dict("hinge_chain")
+    sd = load_dict(scene)
     bodies = sd["bodies"]
 
     def subtree_moment(k: int) -> float:  # sum m^q |r_com^q - O^k| along a straight chain
@@ -231,8 +235,12 @@ def abrupt_commands(factor: float = ABRUPT_FACTOR) -> tuple[dict[str, Any], list
             offset += b.get("next_joint", [0.0, 0.0, 0.0])[2]
         return total * G
 
-    moments = [factor * subtree_moment(1), -factor * subtree_moment(2), factor * subtree_moment(3)]
-    sd["name"] = f"hinge chain, step moments {factor:g} x gravity torque"
+    levers = []
+    for k, b in enumerate(bodies):
+        levers += [subtree_moment(k)] * ((b["joint"]["type"] == "hinge")
+                                         + sum(bool(r.get("actuated")) for r in b.get("rotors", ())))
+    moments = [(-1) ** i * factor * m for i, m in enumerate(levers)]
+    sd["name"] = f"{scene.replace('_', ' ')}, step moments {factor:g} x gravity torque"
     return sd, [float(m) for m in moments]
 
 

@@ -26,17 +26,20 @@ writes its timing statistics (`stats_file`). Reported per run:
 Nobody subscribes in these runs, so without recording the node computes joint states only;
 with recording it also computes wrenches and poses (everything published is recorded).
 
-`--violent` adds the violent step: the hinge chain with the step moments of
-`gyro_sim.bench.extreme.abrupt_commands` (1e3 x each axis's gravity torque), applied for
-VIOLENT_PUSH simulated seconds, so that every run puts in the same energy, then let go:
+`--violent` adds the violent step, `--violent-family` the violent family instead: step moments
+of `gyro_sim.bench.extreme.abrupt_commands` (1e2, 1e3 and 1e4 x each axis's gravity torque) on
+the hinge chain and free_chain_rotors, held for 0.5 s or 1.5 s of simulated time (one command,
+ended by the node's command_timeout in simulated time, so every run puts in the same energy) or
+sent again every publication period for 1.5 s, as a controller gone wrong would send it (the
+violent step: 1e3 x on the hinge chain held for 0.5 s). For each case:
 
 - counted, deterministically (:func:`violent_counts`, no node): the right-hand-side evaluations
-  and substeps per simulated second that "fixed" spends after the push, against its real-time
-  budget (`gyro_sim.integrators.fixed.EVAL_BUDGET` a physics step), the energy put in, the
-  energy balance, and the drift it reported over budget;
-- measured (:func:`run_violent_node`): the node with "fixed" on the hinge chain, given the
-  command once by this process, which counts the /joint_states it receives from then on (their
-  rate and longest gap, wall time).
+  and substeps per simulated second that "fixed" spends, during the push and after it, against
+  its real-time budget (`gyro_sim.integrators.fixed.EVAL_BUDGET` a physics step), the most in
+  one call, the energy put in, the energy balance, and the drift it reported over budget;
+- measured (:func:`run_violent_node`): the node with "fixed" on the case's scene, given the
+  command by this process, which counts the /joint_states it receives from then on (their rate
+  and longest gap, wall time), with the node's achieved real-time factor and step times.
 """
 from __future__ import annotations
 
@@ -51,7 +54,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from gyro_sim.ros.pacing import Floor
+from gyro_sim.ros.pacing import Floor, chunk_steps
 
 DEFAULT_SIZES = (2, 10, 20, 50, 100)
 QUICK_SIZES = (2,)
@@ -138,96 +141,166 @@ def run_node(n: int, record: bool, seconds: float, workdir: Path, index: int = 0
     return Run(n, record, st, priority)
 
 
-# --- the violent step ------------------------------------------------------------------------
-#: the violent step starts at this simulated time, after one publication period at rest
+# --- the violent family ----------------------------------------------------------------------
+#: a violent command starts at this simulated time, after one publication period at rest
 VIOLENT_AT = 0.01
-#: ... and lasts this long in simulated time: the node's default command_timeout, so one
-#: command, timed out by the node in simulated time, puts in the same energy in every run
+#: the family: step moments of these multiples of each axis's gravity torque
+#: (`gyro_sim.bench.extreme.abrupt_commands`) ...
+VIOLENT_FACTORS = (1e2, 1e3, 1e4)
+#: ... held for these simulated seconds (one command, ended by the node's command_timeout in
+#: simulated time, so every run puts in the same energy) ...
+VIOLENT_PUSHES = (0.5, 1.5)
+#: ... and, as a controller gone wrong sends it, the same command again every publication
+#: period for this long (the node's command_timeout then ends it REPEAT_TIMEOUT after the last)
+VIOLENT_REPEATED = 1.5
+REPEAT_TIMEOUT = 0.05
+#: the scenes: every shipped chain whose actuated axes no max_torque saturates
+VIOLENT_SCENES = ("hinge_chain", "free_chain_rotors")
+#: the push of the single violent step (`--violent` without the family: 1e3 x for VIOLENT_PUSH)
 VIOLENT_PUSH = 0.5
 #: simulated seconds counted after the push
 VIOLENT_AFTER = 1.0
-#: the node's calls: one publication period (s)
-VIOLENT_CALL = 1.0 / PUBLISH_RATE
-#: simulated seconds of a node run with the violent step
+#: the publication period (s): a repeated command comes again this often
+VIOLENT_PERIOD = 1.0 / PUBLISH_RATE
+#: the node's calls (s): as many physics steps as it takes a wake-up (`pacing.chunk_steps`: 2 ms)
+VIOLENT_CALL = chunk_steps(round(PHYSICS_RATE / PUBLISH_RATE), 1.0 / PHYSICS_RATE, 1.0) / PHYSICS_RATE
+#: simulated seconds of a node run with a violent command
 VIOLENT_SECONDS = 5.0
 #: the command is sent again when the node's diagnostics (every 0.1 s simulated) still say it has
 #: taken none this many wall seconds after it was sent
 RESEND_AFTER = 0.3
 
 
-def violent_counts(push: float = VIOLENT_PUSH, after: float = VIOLENT_AFTER, factor: float | None = None) -> dict:
-    """The violent step offline, as the node steps it ("fixed" at 1 / PHYSICS_RATE, advanced one
-    publication period at a time): the counts per simulated second after the push (and during
-    it), deterministic: they depend on the simulated states only."""
+@dataclass(frozen=True)
+class ViolentCase:
+    """One case of the family: a scene, the step moments' multiple of its gravity torques, how
+    long (simulated s) they last, and whether they come as one command or again every
+    publication period."""
+
+    scene: str = "hinge_chain"
+    factor: float = 1e3
+    push: float = VIOLENT_PUSH
+    repeated: bool = False
+
+    @property
+    def label(self) -> str:
+        how = f"sent at {PUBLISH_RATE:g} Hz for" if self.repeated else "held"
+        return f"{self.scene}, {self.factor:.0e} x gravity torque {how} {self.push:g} s"
+
+
+def violent_family(scenes=VIOLENT_SCENES, factors=VIOLENT_FACTORS) -> list[ViolentCase]:
+    """Every case: per scene and factor, the command held for each of VIOLENT_PUSHES, then sent
+    at the publish rate for VIOLENT_REPEATED."""
+    return [ViolentCase(sc, f, p, r) for sc in scenes for f in factors
+            for p, r in [*((p, False) for p in VIOLENT_PUSHES), (VIOLENT_REPEATED, True)]]
+
+
+def violent_counts(case: ViolentCase | None = None, after: float = VIOLENT_AFTER) -> dict:
+    """A violent case offline, as the node steps it ("fixed" at 1 / PHYSICS_RATE, advanced
+    VIOLENT_CALL at a time as the node's wake-ups do, the command set at the call it takes
+    effect, again at every call when repeated): the counts per simulated second of the whole run, of the push and
+    after it, deterministic: they depend on the simulated states only. A simulation error ends
+    the run and is reported (`error`)."""
     import numpy as np
 
     from gyro_sim.bench import extreme as ex
     from gyro_sim.integrators import fixed
-    from gyro_sim.simulator import Simulator
+    from gyro_sim.simulator import Simulator, SimulationError
 
-    scene, moments = ex.abrupt_commands(ex.ABRUPT_FACTOR if factor is None else factor)
+    case = case or ViolentCase()
+    scene, moments = ex.abrupt_commands(case.factor, case.scene)
     sim = Simulator(scene, integrator="fixed", step=1.0 / PHYSICS_RATE)
     g = sim.integrator
     e0 = sim.invariants()["energy"]
-    n_calls = round((VIOLENT_AT + push + after) / VIOLENT_CALL)
-    on, off = round(VIOLENT_AT / VIOLENT_CALL), round((VIOLENT_AT + push) / VIOLENT_CALL)
-    marks, methods, worst = {}, set(), 0
+    n_calls = round((VIOLENT_AT + case.push + after) / VIOLENT_CALL)
+    on, off = round(VIOLENT_AT / VIOLENT_CALL), round((VIOLENT_AT + case.push) / VIOLENT_CALL)
+    marks, methods, worst, error = {}, set(), 0, None
     for i in range(n_calls):
-        if i == on:
+        if i == on or (case.repeated and on < i < off):
             sim.set_axis_moments(moments)
         elif i == off:
             sim.set_axis_moments(np.zeros(len(moments)))
         if i in (on, off):
             marks[i] = (g.nfev, g.nsteps)
         before = g.nfev
-        sim.advance(VIOLENT_CALL)
+        try:
+            sim.advance(VIOLENT_CALL)
+        except SimulationError as exc:
+            error = str(exc)
+            break
         worst = max(worst, g.nfev - before)
         if i >= off:
             methods.add(g._label())
-    marks[n_calls] = (g.nfev, g.nsteps)
+    span = sim.time - VIOLENT_AT
+    marks.setdefault(off, (g.nfev, g.nsteps))
+    end = (g.nfev, g.nsteps)
     snap = sim.snapshot(bodies=False, wrenches=False)
     inv = sim.invariants()
+    balance = None if snap.energy_balance is None else snap.energy_balance / inv["energy"]
     return {
-        "push_s": push, "after_s": after, "moments_Nm": [float(m) for m in moments],
+        "case": case.label, "scene": case.scene, "factor": case.factor, "push_s": case.push,
+        "repeated": case.repeated, "after_s": after, "moments_Nm": [float(m) for m in moments],
         "budget_per_s": fixed.EVAL_BUDGET * PHYSICS_RATE,
-        "evaluations_per_s_after": (marks[n_calls][0] - marks[off][0]) / after,
-        "substeps_per_s_after": (marks[n_calls][1] - marks[off][1]) / after,
-        "evaluations_per_s_push": (marks[off][0] - marks[on][0]) / push,
-        "substeps_per_s_push": (marks[off][1] - marks[on][1]) / push,
-        "most_evaluations_in_a_call": worst,
+        "evaluations_per_s": (end[0] - marks[on][0]) / span, "substeps_per_s": (end[1] - marks[on][1]) / span,
+        "evaluations_per_s_push": (marks[off][0] - marks[on][0]) / case.push,
+        "evaluations_per_s_after": (end[0] - marks[off][0]) / after,
+        "substeps_per_s_push": (marks[off][1] - marks[on][1]) / case.push,
+        "substeps_per_s_after": (end[1] - marks[off][1]) / after,
+        "most_evaluations_in_a_call": worst, "simulated_s": sim.time,
         "energy_put_in_J": snap.work, "energy_J": inv["energy"], "energy_start_J": e0,
-        "energy_balance_relative": snap.energy_balance / inv["energy"],
+        "energy_balance_relative": balance,
         "over_budget_calls": g.budget_calls, "over_budget_energy_error": g.budget_energy_error,
-        "methods_after": sorted(methods), "finite": bool(np.isfinite(sim.state).all()),
+        "methods_after": sorted(methods), "finite": bool(np.isfinite(sim.state).all()), "error": error,
     }
 
 
-def violent_table(c: dict) -> str:
-    """The counts of :func:`violent_counts` as Markdown."""
-    return "\n".join([
-        f"Violent step: the hinge chain, moments {', '.join(f'{m:.0f}' for m in c['moments_Nm'])} N m "
-        f"(1e3 x gravity torque) for {c['push_s']:g} s of simulated time, then {c['after_s']:g} s free; "
-        f"\"fixed\" at {PHYSICS_RATE:g} Hz in {1e3 * VIOLENT_CALL:g} ms calls.",
-        "",
-        "| | rhs evaluations / simulated s | substeps / simulated s |",
-        "|---|---:|---:|",
-        f"| during the push | {c['evaluations_per_s_push']:.0f} | {c['substeps_per_s_push']:.0f} |",
-        f"| after it | {c['evaluations_per_s_after']:.0f} | {c['substeps_per_s_after']:.0f} |",
-        f"| budget | {c['budget_per_s']:.0f} | |",
-        "",
-        f"Energy put in {c['energy_put_in_J']:.3g} J; balance (E - E0 - W) / E = {c['energy_balance_relative']:.2g}; "
-        f"most evaluations in one call {c['most_evaluations_in_a_call']}; over budget {c['over_budget_calls']} calls "
-        f"kept past the watchdog, energy error {c['over_budget_energy_error']:.2g} of the kinetic energy; "
-        f"methods after the push: {', '.join(c['methods_after'])}.",
-    ])
+def _g(x, fmt: str = ".2g") -> str:
+    return "-" if x is None else format(x, fmt)
 
 
-def run_violent_node(workdir: Path, seconds: float = VIOLENT_SECONDS, push: float = VIOLENT_PUSH, index: int = 0,
-                     node_command=NODE_COMMAND, priority: int = DEFAULT_PRIORITY) -> dict:
-    """The node on the hinge chain with "fixed", given the violent step once (command_timeout =
-    `push`: the node ends it after `push` simulated seconds) by this process as soon as its first
-    /joint_states arrives; the /joint_states received from the command on: count, rate, longest
-    gap (wall time), with the node's own statistics."""
+def violent_table(counts: list[dict], nodes: list[dict | None] | None = None) -> str:
+    """The counts of :func:`violent_counts` (and the node's runs, where measured) as Markdown."""
+    nodes = nodes or [None] * len(counts)
+    lines = [
+        f"The violent family: step moments of a multiple of each axis's gravity torque, from t = {VIOLENT_AT:g} s, "
+        f"held (one command) or sent again every {1e3 * VIOLENT_PERIOD:g} ms; \"fixed\" at {PHYSICS_RATE:g} Hz in "
+        f"{1e3 * VIOLENT_CALL:g} ms calls, counted over the push and {VIOLENT_AFTER:g} s after it; budget "
+        f"{counts[0]['budget_per_s']:,.0f} rhs evaluations per simulated s.",
+        "",
+        "| case | rhs evaluations / simulated s (push; after) | substeps / simulated s | most in a call "
+        "| energy put in (J) | (E - E0 - W) / E | calls kept over budget (their energy error) | methods after "
+        "| /joint_states | RTF | step p50 / p99 (us) | longest gap (ms) |",
+        "|---|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|",
+    ]
+    for c, v in zip(counts, nodes):
+        if c["error"]:
+            row = f"| {c['case']} | simulation error at t = {c['simulated_s']:.2f} s: {c['error'][:80]} | | | | | | "
+        else:
+            row = (f"| {c['case']} | {c['evaluations_per_s']:,.0f} ({c['evaluations_per_s_push']:,.0f}; "
+                   f"{c['evaluations_per_s_after']:,.0f}) | {c['substeps_per_s']:,.0f} "
+                   f"| {c['most_evaluations_in_a_call']:,} | {c['energy_put_in_J']:.3g} "
+                   f"| {_g(c['energy_balance_relative'])} | {c['over_budget_calls']} "
+                   f"({c['over_budget_energy_error']:.2g}) | {', '.join(c['methods_after'])} ")
+        if v is None:
+            row += "| | | | |"
+        elif "failed" in v:
+            row += f"| node failed: {v['failed'][:80]} | | | |"
+        else:
+            row += (f"| {v['rate_Hz']:.1f} Hz | {v.get('real_time_factor_achieved', float('nan')):.3f} "
+                    f"| {v.get('step_time_p50_us', float('nan')):.0f} / {v.get('step_time_p99_us', float('nan')):.0f} "
+                    f"| {1e3 * v['longest_gap_s']:.0f} |")
+        lines.append(row)
+    return "\n".join(lines)
+
+
+def run_violent_node(workdir: Path, seconds: float = VIOLENT_SECONDS, case: ViolentCase | None = None, index: int = 0,
+                     node_command=NODE_COMMAND, priority: int = DEFAULT_PRIORITY, record: Path | None = None) -> dict:
+    """The node on the case's scene with "fixed", given the case's command by this process as
+    soon as its first /joint_states arrives: held, once (command_timeout = the push: the node
+    ends it after the push in simulated time), or repeated at the publish rate (wall time)
+    until the node has published the push's worth of /joint_states (command_timeout
+    REPEAT_TIMEOUT). The /joint_states received from the command on: count, rate, longest gap
+    (wall time), with the node's own statistics. `record`: the node's log there."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
@@ -240,12 +313,16 @@ def run_violent_node(workdir: Path, seconds: float = VIOLENT_SECONDS, push: floa
     from gyro_sim.ros.commands import command_topic
     from gyro_sim.ros.discovery import announce_often
 
-    _, moments = ex.abrupt_commands()
+    case = case or ViolentCase()
+    _, moments = ex.abrupt_commands(case.factor, case.scene)
     stats = workdir / f"stats_violent_{index}.json"
     domain = _domain(index)
-    params = ["scene:=hinge_chain", f"physics_rate:={PHYSICS_RATE}", f"publish_rate:={PUBLISH_RATE}",
-              "real_time_factor:=1.0", "integrator:=fixed", f"duration:={seconds}", f"command_timeout:={push}",
+    timeout = REPEAT_TIMEOUT if case.repeated else case.push
+    params = [f"scene:={case.scene}", f"physics_rate:={PHYSICS_RATE}", f"publish_rate:={PUBLISH_RATE}",
+              "real_time_factor:=1.0", "integrator:=fixed", f"duration:={seconds}", f"command_timeout:={timeout}",
               f"stats_file:={stats}", f"thread_priority:={priority}"]
+    if record is not None:
+        params.append(f"record:={record}")
     cmd = [*node_command, "--ros-args"]
     for p in params:
         cmd += ["-p", p]
@@ -256,6 +333,7 @@ def run_violent_node(workdir: Path, seconds: float = VIOLENT_SECONDS, push: floa
     arrivals: list[float] = []
     sent: list[float] = []
     accepted: list[tuple[float, int]] = []  # (arrival, the node's count of accepted commands) from /diagnostics
+    pushes = round(case.push / VIOLENT_PERIOD)  # publications while a repeated command lasts
 
     def on_diagnostics(msg) -> None:
         for status in msg.status:
@@ -267,6 +345,7 @@ def run_violent_node(workdir: Path, seconds: float = VIOLENT_SECONDS, push: floa
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
     proc = None
+    log = workdir / f"violent_{index}.log"  # a file, not a pipe nobody reads while the node runs
     try:
         node = rclpy.create_node("gyro_sim_bench_violent", context=context)
         pub = node.create_publisher(Float64MultiArray, command_topic("/"), 10)
@@ -274,19 +353,21 @@ def run_violent_node(workdir: Path, seconds: float = VIOLENT_SECONDS, push: floa
         node.create_subscription(DiagnosticArray, DIAGNOSTICS, on_diagnostics, 10)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
-        log = workdir / f"violent_{index}.log"  # a file, not a pipe nobody reads while the node runs
         with open(log, "w") as out:
             proc = subprocess.Popen(cmd, env=env, stdout=out, stderr=subprocess.STDOUT)
         end = time.monotonic() + 3 * seconds + 60
         while proc.poll() is None and time.monotonic() < end:
-            executor.spin_once(timeout_sec=0.005)
+            executor.spin_once(timeout_sec=0.002 if case.repeated else 0.005)
             # once it publishes and its command subscription has matched this publisher; again
             # while its diagnostics say it has taken none (a command sent before the node's
-            # side of the match is lost: the topic keeps nothing for late subscribers)
+            # side of the match is lost: the topic keeps nothing for late subscribers); a
+            # repeated command every publication period while the push lasts
             now = time.monotonic()
             since = [n for t, n in accepted if t > sent[-1] + RESEND_AFTER] if sent else []
             again = bool(since) and not any(n for _, n in accepted)  # reports long after it: none taken
-            if arrivals and pub.get_subscription_count() > 0 and (not sent or again):
+            due = (case.repeated and sent and now >= sent[-1] + VIOLENT_PERIOD
+                   and sum(t >= sent[0] for t in arrivals) < pushes)
+            if arrivals and pub.get_subscription_count() > 0 and (not sent or again or due):
                 pub.publish(Float64MultiArray(data=list(moments)))
                 sent.append(now)
         if proc.poll() is None:
@@ -297,16 +378,16 @@ def run_violent_node(workdir: Path, seconds: float = VIOLENT_SECONDS, push: floa
     finally:
         rclpy.try_shutdown(context=context)
     if proc.returncode != 0 or not stats.exists():
-        raise RuntimeError(f"gyro_sim_node failed (violent step, exit {proc.returncode}):\n"
+        raise RuntimeError(f"gyro_sim_node failed ({case.label}, exit {proc.returncode}):\n"
                            f"{log.read_text(errors='replace')[-2000:]}")
     st = json.loads(stats.read_text())
-    if st.get("commands_accepted") != 1:
+    if not case.repeated and st.get("commands_accepted") != 1:
         raise RuntimeError(f"the node took {st.get('commands_accepted')} commands, not the violent step's one")
-    after = [t for t in arrivals if sent and t >= sent[-1]]
+    after = [t for t in arrivals if sent and t >= sent[0]]
     gaps = [b - a for a, b in itertools.pairwise(after)]
     span = after[-1] - after[0] if len(after) > 1 else float("nan")
     return {"received": len(after), "rate_Hz": (len(after) - 1) / span if len(after) > 1 else 0.0,
-            "longest_gap_s": max(gaps, default=float("nan")), "wall_s": span, **st}
+            "longest_gap_s": max(gaps, default=float("nan")), "wall_s": span, "sent": len(sent), **st}
 
 
 def measure(sizes=DEFAULT_SIZES, seconds: float = DEFAULT_SECONDS, progress=None, node_command=NODE_COMMAND,
@@ -437,21 +518,20 @@ def cmd_bench_realtime(args) -> int:
             + f"\nMachine load (1-minute average, {os.cpu_count()} cores): {load0:.2f} at the start, "
             f"{os.getloadavg()[0]:.2f} at the end.")
     rows = [{"n": r.n, "record": r.record, **r.stats} for r in runs]
-    if args.violent:
-        counts = violent_counts()
-        try:
-            with tempfile.TemporaryDirectory(prefix="gyro_sim_violent_") as tmp:
-                v = run_violent_node(Path(tmp), priority=args.thread_priority[0])
-        except RuntimeError as exc:
-            print(f"gyro-sim bench realtime: {exc}", file=sys.stderr)
-            return 1
-        text += ("\n\n" + violent_table(counts) + f"\n\nThe node given it (warm cache): {v['received']} /joint_states "
-                 f"received from the command on in {v['wall_s']:.1f} s: {v['rate_Hz']:.1f} Hz, longest gap "
-                 f"{1e3 * v['longest_gap_s']:.0f} ms; "
-                 f"achieved RTF {v.get('real_time_factor_achieved', float('nan')):.3f}, "
-                 f"step p50 / p99 {v.get('step_time_p50_us', float('nan')):.0f} / "
-                 f"{v.get('step_time_p99_us', float('nan')):.0f} us.")
-        rows.append({"violent_counts": counts, "violent_node": v})
+    if args.violent or args.violent_family:
+        cases = violent_family(tuple(args.violent_scenes)) if args.violent_family else [ViolentCase()]
+        counts, nodes = [], []
+        with tempfile.TemporaryDirectory(prefix="gyro_sim_violent_") as tmp:
+            for i, case in enumerate(cases):
+                counts.append(violent_counts(case))
+                try:
+                    nodes.append(run_violent_node(Path(tmp), case=case, index=i, priority=args.thread_priority[0]))
+                except RuntimeError as exc:  # said in the table: a case the node did not get through
+                    nodes.append({"failed": " ".join(str(exc).split())})
+        text += ("\n\n" + violent_table(counts, nodes) + "\n\nThe node given each (warm cache, "
+                 f"{os.cpu_count()} cores, {VIOLENT_SECONDS:g} s runs): the /joint_states received from the "
+                 "command on, their rate and longest gap in wall time; the node's achieved RTF and step times.")
+        rows.append({"violent_counts": counts, "violent_node": nodes})
     print(text)
     write_report(args.out, "realtime", text + "\n", rows,
                  lambda png: plot(runs, png), force=args.force, json_default=str)
@@ -470,7 +550,13 @@ def register(sub, bench) -> None:
                    metavar="P", help=f"the node's thread_priority, 0-99 (0: normal scheduler); several: a run each "
                    f"(default {DEFAULT_PRIORITY}, the node's)")
     r.add_argument("--violent", action="store_true",
-                   help=f"add the violent step: its counts, and the node given it ({VIOLENT_SECONDS:g} s run)")
+                   help=f"add the violent step (1e3 x gravity torque for {VIOLENT_PUSH:g} s on the hinge chain): its "
+                   f"counts, and the node given it ({VIOLENT_SECONDS:g} s run)")
+    r.add_argument("--violent-family", action="store_true",
+                   help="add the violent family instead: 1e2, 1e3, 1e4 x gravity torque held 0.5 s and 1.5 s, and "
+                   f"sent at {PUBLISH_RATE:g} Hz for {VIOLENT_REPEATED:g} s, on each of --violent-scenes")
+    r.add_argument("--violent-scenes", nargs="+", default=list(VIOLENT_SCENES), choices=VIOLENT_SCENES,
+                   help=f"the family's scenes (default {' '.join(VIOLENT_SCENES)})")
     r.add_argument("--out", default="out/bench", help="directory for realtime.md, realtime.json, realtime.png")
     r.add_argument("--force", action="store_true", help="replace existing report files in --out")
     r.set_defaults(fn=cmd_bench_realtime)

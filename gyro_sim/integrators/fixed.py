@@ -59,13 +59,18 @@ re-simulation makes the same switches bit for bit.
 That ladder has no bound on its cost: on a violent command (moments of 1e3 x gravity torque on
 the hinge chain) it takes dop853 at 7,000-20,000 evaluations a 10 ms call. So "fixed"
 keeps to a real-time budget, counted in rhs evaluations (EVAL_BUDGET a physics step on
-average, bursts of BURST_STEPS' worth: a credit). Over it, rk4 takes what it can at its
-substeps and the watchdog reports instead of retaking (up to OVER_BUDGET_WATCH), a stiff call
-or a retake goes to BUDGET_RUNG (:class:`LinearlyImplicitEuler`: L-stable, a fixed cost of
-size + 1 evaluations a step), and the rescue may spend one burst at most, past which the
-budget rung's result is kept. The calls kept and their energy errors are counted
-(`budget_calls`, `budget_energy_error`: the node's /diagnostics). docs/integrators.md
-states the policy and its measured counts.
+average, bursts of BURST_STEPS' worth: a credit), and tries a rung below only where the call
+can pay what it is expected to cost (`_implicit_cost`, `_rescue_cost`: at most the credit and
+CALL_BURST beyond the call's share). New commands choose the substeps from the rates they
+reach within the call (`_rate_ahead`); rk4 in substeps that fails is taken again in
+MAX_SUBSTEPS first; a stiff call the budget cannot pay the implicit rung for takes rk4 in the
+substeps that make it stable (BUDGET_RK4_SAFETY), else BUDGET_RUNG
+(:class:`LinearlyImplicitEuler`: L-stable, a fixed cost of size + 1 evaluations a step),
+whose calls no rescue retakes; a rung that failed waits until the scene is soft again. Over
+budget, the watchdog reports instead of retaking (up to OVER_BUDGET_WATCH). The calls kept and
+their energy errors are counted (`budget_calls`, `budget_energy_error`: the node's
+/diagnostics). docs/integrators.md states the policy, docs/performance.md its measured counts
+on the violent family.
 """
 from __future__ import annotations
 
@@ -128,6 +133,12 @@ RESCUE = "dop853"
 #: at rtol 1e-8, 7.9e-8 at 1e-10, `gyro-sim bench stability --cases abrupt`)
 RESCUE_RTOL = 1e-10
 RESCUE_ATOL = 1e-12
+#: the rescue's evaluations a step (dop853's stages, its FSAL evaluation saved) and the turn of
+#: the fastest motion in one of its steps at RESCUE_RTOL: on the hinge chain through the violent
+#: steps it took 4,500 steps (54,212 evaluations) for 10 ms at |lambda| = 1.5e5 (0.33 rad a
+#: step), 1,470 steps (17,653) for 10 ms with links at 2.1e4 rad/s (0.14 rad a step)
+RESCUE_STAGES = 12
+RESCUE_TURN = 0.14
 #: "fixed": the energy watchdog's limit on a call's energy error, relative to the kinetic
 #: energy, per simulated second of the call (1e-5 for the node's 10 ms calls; rk4 at 1 ms on the
 #: shipped scenes stays below 4.2e-7 a call, config/chain_4.yaml the highest)
@@ -138,11 +149,30 @@ ENERGY_WATCH = 1e-3
 #: period, leaving the rest to the outputs, the publications and a second process on the core.
 #: rk4 at MAX_SUBSTEPS (256 a step) and its re-estimates fit in it with room to pay back a burst.
 EVAL_BUDGET = 400
+#: "fixed": the implicit rung's evaluations a substep expected before its first call, in units of
+#: size + 1 (its Jacobian's): on the hinge chain (size 19) through the violent steps gauss4s took
+#: 101 a substep where it converged and up to 245 where its iteration failed; after a call,
+#: taken or failed, what that call took
+IMPLICIT_PRIOR = 12
 #: "fixed": the burst the budget allows, in physics steps' worth of EVAL_BUDGET: a call may
 #: overspend (a retake, the rescue) while the credit lasts. 150 steps = 60,000 evaluations, ~66 ms
 #: of CPU at the cost above (~140 ms in the rescue's Python driver): the heavy tip's whips (up to
 #: 56,000 evaluations of the rescue each) pass at full accuracy
 BURST_STEPS = 150
+#: "fixed", in place of an implicit rung the budget cannot pay for: rk4 in the substeps that
+#: bring h |lambda| below this fraction of its limit (at most MAX_SUBSTEPS), closer to the limit
+#: than RK4_SAFETY: the watchdog still sees every call
+BUDGET_RK4_SAFETY = 0.9
+#: ... in at most this many substeps (4 evaluations each: 384 a step, within EVAL_BUDGET)
+BUDGET_MAX_SUBSTEPS = 96
+#: "fixed": the most a rung below (the implicit rung, the rescue) may be expected to cost in one
+#: call beyond the call's share of the budget (rhs evaluations), however much credit is left: a
+#: call whose rungs below are expected to cost more keeps the budget's ways (rk4 in its most
+#: substeps, its own result with its error reported, the budget's rung). About 30 ms of the
+#: rescue's CPU (2.2-3.3 us an evaluation in its Python driver, the hinge chain, 2 cores), what
+#: the node's pacer makes up once in a run (MAX_CATCH_UP: 20 ms a wake-up); the heavy tip's
+#: whips after its first, expected below it, pass at full accuracy
+CALL_BURST = 12_000
 #: "fixed", over its budget: a call whose energy error is below this (relative to the kinetic
 #: energy, per simulated second) is kept and its error reported, not retaken; above it the call
 #: is retaken by the budget's rung, then by the rescue within one burst, and past that the budget
@@ -411,6 +441,9 @@ class SceneFixedStep(FixedStepIntegrator):
         self.budget_calls = 0
         self.budget_energy_error = 0.0
         self._retaken = False  # the method now is a rung below the last choice
+        self._implicit_rate = 0.0  # the implicit rung's evaluations a substep in its last call
+        self._barred: set[str] = set()  # rungs that failed (the implicit) or overspent (the rescue) since rk4
+        self._ahead = (None, 0.0)  # (t0, inputs seen, inputs now) -> the body rate ahead (`_rate_ahead`)
 
     def reset(self) -> None:
         super().reset()
@@ -445,17 +478,34 @@ class SceneFixedStep(FixedStepIntegrator):
     def _speed(self, y: np.ndarray) -> float:
         return float(np.abs(y[self._speeds]).max()) if len(self._speeds) else 0.0
 
-    def _due(self, t0: float, y: np.ndarray) -> bool:
+    def _due(self, t0: float, y: np.ndarray, t1: float) -> bool:
         if t0 >= self._next_check or (self.over_budget and self._retaken):
             return True  # over budget, a rung below the choice is left for a new choice
+        if self.over_budget and self.current not in ("rk4", BUDGET_RUNG):
+            return True  # over budget, a rung whose cost has no bound is left at once
         if t0 < self._hold_until:  # a rung down after a failure: kept until the next check
             return False
+        changed = getattr(self.system, "inputs_version", 0) != self._inputs_seen
         if t0 < self._last_check + MIN_RECHECK:
-            return False
-        if getattr(self.system, "inputs_version", 0) != self._inputs_seen:
+            # new commands that spin a body up faster than the substeps now resolve: at once
+            return changed and substeps_for(self.step, self._rate_ahead(t0, y, t1), self.substeps) > self.substeps
+        if changed:
             return True
         v, seen = self._speed(y), self._speed_seen
         return v > SPEED_CHANGE * seen or v * SPEED_CHANGE < seen
+
+    def _rate_ahead(self, t0: float, y: np.ndarray, t1: float) -> float:
+        """Under new commands: the largest body rate now or by the call's end (at most
+        CHECK_PERIOD ahead) at the accelerations of its start (a step moment spins a chain at
+        rest up within one call: the rate now would choose no substeps). One rhs evaluation
+        (none on a system that is not a chain)."""
+        if self._model is None:
+            return 0.0
+        key = (t0, self._inputs_seen, getattr(self.system, "inputs_version", 0))
+        if self._ahead[0] != key:
+            f = np.asarray(self._counted_rhs(t0, y), dtype=float)
+            self._ahead = (key, max(self._body_rate(y), self._body_rate(y + min(t1 - t0, CHECK_PERIOD) * f)))
+        return self._ahead[1]
 
     def _body_rate(self, y: np.ndarray) -> float:
         return body_rate_bound(self._model, y) if self._model is not None else 0.0
@@ -478,70 +528,159 @@ class SceneFixedStep(FixedStepIntegrator):
         self._check_fev += 1
         return self._rhs(t, y)
 
+    def _choose(self, t0: float, y: np.ndarray, t1: float, left: float, income: float) -> None:
+        """A new Choice at t0 for the call to t1, within the budget: `left` is what the call may
+        cost (the credit and the call's share of the budget, in rk4 evaluations)."""
+        omega = self._body_rate(y)
+        if self.current and getattr(self.system, "inputs_version", 0) != self._inputs_seen:
+            omega = self._rate_ahead(t0, y, t1)  # new commands: the rates they reach within the call
+        dim = RECHECK_DIM if self.current else KRYLOV_DIM
+        c = _choice(self._counted_rhs, t0, y, self.step, self.current or "rk4", dim, omega,
+                    self.substeps, self.implicit)
+        self.reason, self.h_lambda = c.reason, c.h_lambda
+        method, substeps = c.method, c.substeps
+        if method == "rk4":
+            self._barred.clear()  # the scene is soft again: the ladder's rungs may be tried
+        if self.over_budget:
+            self.reason += f"; over the real-time budget ({EVAL_BUDGET} rhs evaluations a step)"
+        if method != "rk4" and self.budget_rung:
+            dear = method in self._barred or self._implicit_cost(c.substeps, t1 - t0) > min(left, CALL_BURST + income)
+            if self.over_budget or dear or not self.ready(method):
+                why = f" ({self._unready(method)})" if not self.ready(method) else (
+                    f" ({method} failed or was beyond the budget here: not again before the scene is soft)"
+                    if method in self._barred else
+                    f" (its call would cost more than the budget's {max(left, 0.0):.0f} left)" if dear else "")
+                # rk4 in the substeps that make it stable, where MAX_SUBSTEPS do (within the budget)
+                if dear:  # not tried again before the scene is soft (the estimate chooses rk4)
+                    self._barred.add(method)
+                need = c.substeps * c.h_lambda / (BUDGET_RK4_SAFETY * RK4_IMAG_LIMIT)
+                k = max(c.substeps, math.ceil(need)) if need <= BUDGET_MAX_SUBSTEPS else BUDGET_MAX_SUBSTEPS + 1
+                method, substeps = ("rk4", k) if k <= BUDGET_MAX_SUBSTEPS else (BUDGET_RUNG, 1)
+                self.reason = f"{Choice(method, substeps, '', 0.0).label} in place of {c.label}{why}: {self.reason}"
+        self._switch(t0, method, substeps)
+        self._retaken = False
+        self._last_check = t0
+        self._next_check = t0 + CHECK_PERIOD
+        self._inputs_seen = getattr(self.system, "inputs_version", 0)
+        self._speed_seen = self._speed(y)
+
+    def _implicit_cost(self, substeps: int, span: float) -> float:
+        """The implicit rung's expected evaluations for `span` in `substeps` a step:
+        its evaluations a substep in its last call taken (IMPLICIT_PRIOR x (size + 1) before)."""
+        per = self._implicit_rate if self._implicit_rate > 0 else IMPLICIT_PRIOR * (self.n + 1)
+        return per * substeps * max(1, round(span / self.step))
+
+    def _learn(self, m, before: int, t0: float, t1: float) -> None:
+        """After a call of the implicit rung (taken or failed): its evaluations a substep."""
+        if m is self.methods[self.implicit]:
+            self._implicit_rate = (m.nfev - before) / (self.substeps * max(1, round((t1 - t0) / self.step)))
+
+    def _rescue_cost(self, t0: float, span: float) -> float:
+        """The rescue's expected evaluations for a call from t0 of `span`: at RESCUE_RTOL its steps
+        turn the fastest motion (|lambda| of the last estimate, the fastest body's rate at the
+        call's start or, under new commands, by its end: the largest) by about RESCUE_TURN rad
+        each, RESCUE_STAGES evaluations a step."""
+        lam = self.h_lambda * self.substeps / self.step if math.isfinite(self.h_lambda) else 0.0
+        ahead = self._ahead[1] if self._ahead[0] and self._ahead[0][0] == t0 else 0.0
+        fastest = max(lam, self._body_rate(self._y0), ahead)
+        return RESCUE_STAGES * span * fastest / RESCUE_TURN
+
     def _march(self, t0: float, y: np.ndarray, t1: float) -> None:
         used = self.nfev
-        if self._due(t0, y):
-            dim = RECHECK_DIM if self.current else KRYLOV_DIM
-            c = _choice(self._counted_rhs, t0, y, self.step, self.current or "rk4", dim, self._body_rate(y),
-                        self.substeps, self.implicit)
-            self.reason, self.h_lambda = c.reason, c.h_lambda
-            method, substeps = c.method, c.substeps
-            if self.over_budget:
-                self.reason += f"; over the real-time budget ({EVAL_BUDGET} rhs evaluations a step)"
-            if method != "rk4" and self.budget_rung and (self.over_budget or not self.ready(method)):
-                why = "" if self.ready(method) else f" ({self._unready(method)})"
-                method, substeps = BUDGET_RUNG, 1
-                self.reason = f"{BUDGET_RUNG} in place of {c.label}{why}: {self.reason}"
-            self._switch(t0, method, substeps)
-            self._retaken = False
-            self._last_check = t0
-            self._next_check = t0 + CHECK_PERIOD
-            self._inputs_seen = getattr(self.system, "inputs_version", 0)
-            self._speed_seen = self._speed(y)
+        income = (t1 - t0) / self.step * EVAL_BUDGET  # the call's share of the budget
+        left = self.credit + income  # what the call may cost
+        if self._due(t0, y, t1):
+            self._choose(t0, y, t1, left, income)
         m = self.methods[self.current]
         self._y0[:] = y
-        kept = None  # over budget: the budget rung's finite result the watchdog refused, and its error
+        last = False  # the budget rung after the rescue overspent: its result is kept, its error reported
         try:
             while True:
                 try:
-                    self._plain.limit = BURST_STEPS * EVAL_BUDGET if kept is not None else math.inf
+                    if self.current == RESCUE:  # one burst of its own evaluations (a larger system has no budget rung)
+                        self._plain.limit = BURST_STEPS * EVAL_BUDGET if self.budget_rung else math.inf
+                    before = m.nfev
                     if m.adaptive:
                         y[:] = m.advance(t0, y, t1)
                     else:
                         m.march(t0, y, t1)
+                    self._learn(m, before, t0, t1)
                     if self.monitor is not None and self.current != RESCUE:
-                        self._watch(t0, y, t1)
+                        if last:
+                            self._report(t0, y, t1)
+                        elif self.current == BUDGET_RUNG:
+                            self._report(t0, y, t1, retake=True)
+                        else:
+                            self._watch(t0, y, t1)
                     break
                 except IntegrationError as e:  # the call again from its start, one rung down
-                    if isinstance(e, RescueOverspent) and kept is not None:  # the budget rung's result, reported
-                        y[:] = kept[0]
-                        self._keep(kept[1])
-                        self.reason = f"{BUDGET_RUNG}: kept over budget, the rescue overspent at t = {e.t:.6g} s"
-                        self._switch(t0, BUDGET_RUNG, 1)
-                        break
-                    if isinstance(e, WatchdogTrip) and self.current == BUDGET_RUNG:
-                        kept = (y.copy(), e.error)
+                    refused = y.copy() if isinstance(e, WatchdogTrip) else None  # a finite state, not accurate
                     y[:] = self._y0
-                    if self.current == RESCUE:
+                    self._learn(m, before, t0, t1)
+                    if self.budget_rung and (self.current == self.implicit or isinstance(e, RescueOverspent)):
+                        self._barred.add(self.current)  # not again until the scene is soft (rk4 chosen)
+                    if last or (self.current == RESCUE and not isinstance(e, RescueOverspent)):
                         raise
-                    after = self.implicit if self.current == "rk4" else RESCUE
-                    why = ""
-                    if self.budget_rung and self.current != BUDGET_RUNG and (self.over_budget or not self.ready(after)):
-                        why = "" if self.ready(after) else f" ({self._unready(after)})"
-                        after = BUDGET_RUNG  # a fixed cost, compiled nothing: the ladder's next rungs neither
-                    if not self.ready(after):  # the rescue, not compiled yet
-                        if kept is None:
-                            raise
-                        y[:] = kept[0]
-                        self._keep(kept[1])
-                        self.reason = f"{BUDGET_RUNG}: kept, {self._unready(after)}"
-                        break
+                    if isinstance(e, RescueOverspent) and self.budget_rung:  # the budget rung's result, reported
+                        self.reason = f"{BUDGET_RUNG}: kept, the rescue overspent at t = {e.t:.6g} s"
+                        self._switch(t0, BUDGET_RUNG, 1)
+                        self._retaken = True
+                        self._next_check = self._hold_until = t1
+                        m, last = self.methods[BUDGET_RUNG], True
+                        continue
                     what = (f"failed ({e.reason})" if self.current != "rk4" or isinstance(e, WatchdogTrip)
                             else "left a non-finite state")
-                    self.reason = f"{after}{why}: {self._label()} {what} at t = {e.t:.6g} s"
-                    self._switch(t0, after, 1 if after in (RESCUE, BUDGET_RUNG) else self.substeps)
+                    why = ""
+                    ladder = [self.implicit, RESCUE] if self.current == "rk4" else [RESCUE]
+                    if self.current == BUDGET_RUNG and refused is not None:  # past OVER_BUDGET_WATCH
+                        k = 4 * self.substeps  # again in 4 x its substeps, where the call's share pays for them
+                        if (self.n + 1) * k * round((t1 - t0) / self.step) > income:  # within the call's share
+                            y[:] = refused
+                            self._keep(e.error)
+                            self.reason = (f"{self._label()}: kept, {what} at t = {e.t:.6g} s "
+                                           "(more substeps beyond the budget)")
+                            break
+                        after = BUDGET_RUNG
+                    elif self.current == BUDGET_RUNG:  # it broke down (not its energy: that is reported)
+                        after, k = RESCUE, 1  # within one burst
+                    elif self.budget_rung and self.current == "rk4" and 1 < self.substeps < MAX_SUBSTEPS:
+                        after, k = "rk4", MAX_SUBSTEPS  # a fast body: rk4 again in its most substeps
+                    elif not self.budget_rung:
+                        after, k = ladder[0], 1 if ladder[0] == RESCUE else self.substeps
+                    else:
+                        # the first rung below that is compiled, has not failed here since the scene
+                        # was soft, and whose expected cost the call can pay (its share of the budget
+                        # at least, over budget too)
+                        affordable = [r for r in ladder if self.ready(r) and r not in self._barred and (
+                            self._implicit_cost(self.substeps, t1 - t0) if r == self.implicit
+                            else self._rescue_cost(t0, t1 - t0)) <= min(CALL_BURST + income, max(left, income))]
+                        if affordable:
+                            after = affordable[0]
+                            k = 1 if after == RESCUE else self.substeps
+                        elif self.current == "rk4" and self.substeps < MAX_SUBSTEPS:
+                            after, k = "rk4", MAX_SUBSTEPS  # rk4 again in its most substeps (within the budget)
+                        elif refused is not None and abs(e.error) <= OVER_BUDGET_WATCH * (t1 - t0):
+                            # the rungs below cost more than the budget has: the result kept, its error reported
+                            y[:] = refused
+                            self._keep(e.error)
+                            self.reason = (f"{self._label()}: kept, {what} at t = {e.t:.6g} s "
+                                           "(the rungs below beyond the budget)")
+                            break
+                        else:  # the budget's rung: a fixed cost, compiled nothing (the ladder's next rungs neither)
+                            unready = [r for r in ladder if not self.ready(r)]
+                            why = f" ({self._unready(unready[0])})" if unready else ""
+                            after, k = BUDGET_RUNG, 1
+                    if not self.ready(after):  # nowhere further down
+                        raise
+                    self.reason = (f"{Choice(after, k, '', 0.0).label}{why}: {self._label()} {what} "
+                                   f"at t = {e.t:.6g} s")
+                    fast = self.substeps > 1  # a body that needed substeps: the rescue's cost follows its pace
+                    self._switch(t0, after, k)
                     self._retaken = True
-                    self._next_check = self._hold_until = t0 + CHECK_PERIOD
+                    # a rung down is kept until the next check; the budget's rung, and the rescue
+                    # of a fast body, for this call only
+                    once = after == BUDGET_RUNG or (after == RESCUE and fast)
+                    self._next_check = self._hold_until = t1 if once else t0 + CHECK_PERIOD
                     m = self.methods[after]
         finally:
             ms = self.methods.values()
@@ -563,12 +702,22 @@ class SceneFixedStep(FixedStepIntegrator):
             return
         raise WatchdogTrip(self.current, err, t0, self.step / self.substeps, t1 - t0)
 
+    def _report(self, t0: float, y: np.ndarray, t1: float, retake: bool = False) -> None:
+        """A call of the budget's rung: its energy error counted when beyond the watchdog's limit.
+        No rescue retakes it (the budget chose it); `retake`: an error past OVER_BUDGET_WATCH
+        raises WatchdogTrip, for the same rung in more substeps."""
+        err = self.monitor(t0, self._y0, t1, y)
+        if retake and abs(err) > OVER_BUDGET_WATCH * (t1 - t0):
+            raise WatchdogTrip(self.current, err, t0, self.step / self.substeps, t1 - t0)
+        if abs(err) > ENERGY_WATCH * (t1 - t0):
+            self._keep(err)
+
     def _keep(self, err: float) -> None:
         """A call kept over budget beyond the watchdog's limit: its energy error counted."""
         self.budget_calls += 1
         self.budget_energy_error += err
 
-    def _spend(self, t0: float, t1: float, evaluations: int) -> None:
+    def _spend(self, t0: float, t1: float, evaluations: float) -> None:
         """The budget's bookkeeping of a call: EVAL_BUDGET a physics step comes in (up to the
         burst), what the call evaluated goes out. Over budget from a negative credit until the
         credit is whole again (no flapping at zero)."""
@@ -587,11 +736,11 @@ class LinearlyImplicitEuler(FixedStepIntegrator):
     and it damps the motion it cannot resolve instead. Order 1. J by forward differences, each
     column perturbing its component by JVP_REL_STEP of its size: size + 1 rhs evaluations and
     one LU a step, whatever the state: a fixed cost, in numpy on the compiled rhs (nothing to
-    compile). "fixed" steps with it only over its real-time budget, where rk4 would need more
-    substeps than the budget allows: the violent step of `gyro-sim bench realtime` pushed for
-    1.5 s (1.3e11 J, bodies at 1e6 rad/s: 1,000 rad a physics step) keeps its energy balance to
-    6e-4 there at one step a millisecond, where rk4, gauss4s and dop853 cost 1e5-1e6
-    evaluations a call.
+    compile). "fixed" steps with it only where its real-time budget cannot pay for better: the
+    violent step of `gyro-sim bench realtime` pushed for 1.5 s (1.3e11 J, the wheel at 7.5e7
+    rad/s, the links' nutation beyond rk4 in 64 substeps) keeps its energy balance to 1e-3
+    there at one step a millisecond, where gauss4s and dop853 cost 2e4-1e5 evaluations a
+    call.
 
     References
     ----------

@@ -115,11 +115,27 @@ def test_over_budget_the_watchdog_reports_instead_of_retaking():
     assert fixed.ENERGY_WATCH * CALL < abs(expect) < fixed.OVER_BUDGET_WATCH * CALL
 
 
-def test_over_budget_a_stiff_call_takes_the_fixed_cost_rung():
-    """h w = 5: stiff for rk4 (the choice says gauss4). Over budget the call goes to the linearly
-    implicit Euler step at one step a physics step (size + 1 = 3 evaluations each), which damps
-    |y| (L-stable) rather than let it grow."""
+def test_over_budget_a_stiff_call_takes_rk4_in_the_substeps_that_make_it_stable():
+    """h w = 5: stiff for rk4 at the step (the choice says gauss4). Over budget the call goes to
+    rk4 in ceil(5 / (BUDGET_RK4_SAFETY x RK4_IMAG_LIMIT)) = 2 substeps (h w = 2.5 each, inside
+    rk4's region, |h w| <= 2 sqrt 2), 8 evaluations a step: within the budget, where gauss4's
+    cost has no bound. Its result is rk4's on the rotation: |y| = |R(2.5 i)|^20, R rk4's
+    stability polynomial."""
     sys_ = Rotation(5000.0)
+    integ = fixed.SceneFixedStep(sys_, step=STEP)
+    over_budget(integ)
+    y = integ.advance(0.0, np.array([1.0, 0.0]), CALL)
+    assert (integ.current, integ.substeps) == ("rk4", 2) and "in place of gauss4" in integ.reason
+    assert integ.methods["rk4"].nfev == 10 * 2 * 4 and integ.methods["gauss4"].nfev == 0
+    z = 2.5j
+    assert np.hypot(*y) == pytest.approx(abs(1 + z + z**2 / 2 + z**3 / 6 + z**4 / 24) ** 20, rel=1e-9)
+
+
+def test_over_budget_a_call_beyond_rk4s_substeps_takes_the_fixed_cost_rung():
+    """h w = 500: rk4 would need 354 substeps (more than MAX_SUBSTEPS). Over budget the call goes
+    to the linearly implicit Euler step at one step a physics step (size + 1 = 3 evaluations
+    each), which damps |y| (L-stable) rather than let it grow."""
+    sys_ = Rotation(5e5)
     integ = fixed.SceneFixedStep(sys_, step=STEP)
     over_budget(integ)
     y = integ.advance(0.0, np.array([1.0, 0.0]), CALL)
@@ -128,19 +144,31 @@ def test_over_budget_a_stiff_call_takes_the_fixed_cost_rung():
     assert np.hypot(*y) < 1.0
 
 
-def test_over_budget_the_rescue_is_bounded_and_the_fixed_cost_result_kept(monkeypatch):
-    """Over budget, a call the budget's rung takes with an energy error past OVER_BUDGET_WATCH
-    goes to the rescue, which may spend one burst; past it the budget rung's result is kept, its
-    error reported. What a call costs has a bound: here dop853 would need ~1e6 evaluations for the
-    1e5 rad the call turns."""
-    sys_ = Rotation(1e7)
+def test_the_budget_rungs_call_is_kept_and_its_error_reported_never_retaken():
+    """Over budget, a call of the budget's rung that breaks the energy balance (by half here) is
+    kept and its error counted: no rescue is run (its cost would have no bound)."""
+    sys_ = Rotation(5e5)
     integ = fixed.SceneFixedStep(sys_, step=STEP)
-    integ.monitor = lambda t0, y0, t1, y1: 0.5  # every call breaks the balance by half
+    integ.monitor = lambda t0, y0, t1, y1: 0.5
     over_budget(integ)
     y = integ.advance(0.0, np.array([1.0, 0.0]), CALL)
-    rescue = integ.methods[fixed.RESCUE]
+    assert integ.current == fixed.BUDGET_RUNG and integ.methods[fixed.RESCUE].nfev == 0
+    assert integ.budget_calls == 1 and integ.budget_energy_error == 0.5
+    assert np.isfinite(y).all()
+
+
+def test_the_rescue_is_bounded_and_the_fixed_cost_result_kept(monkeypatch):
+    """Under budget, rk4 blows up (h w = 1e4), gauss4 breaks the energy balance (every call by
+    half here) and the rescue is taken: it may spend one burst of evaluations, past which the call
+    is taken by the budget's rung, kept, and its error reported. What a call costs has a bound:
+    dop853 would need ~1e6 evaluations for the 1e5 rad the call turns."""
+    monkeypatch.setattr(fixed, "_choice", lambda *a, **k: fixed.Choice("rk4", 1, "forced", 0.0))
+    sys_ = Rotation(1e7)
+    integ = fixed.SceneFixedStep(sys_, step=STEP)
+    integ.monitor = lambda t0, y0, t1, y1: 0.5
+    y = integ.advance(0.0, np.array([1.0, 0.0]), CALL)
+    assert [s[2] for s in integ.switches] == ["gauss4", fixed.RESCUE, fixed.BUDGET_RUNG]
     assert integ._plain.count == fixed.BURST_STEPS * fixed.EVAL_BUDGET + 1  # the evaluation that stopped it
-    assert rescue.nfev <= fixed.BURST_STEPS * fixed.EVAL_BUDGET + 1
     assert integ.current == fixed.BUDGET_RUNG and "rescue overspent" in integ.reason
     assert integ.budget_calls == 1 and integ.budget_energy_error == 0.5
     assert np.isfinite(y).all()
@@ -199,17 +227,17 @@ def test_warm_up_enters_every_rung_in_the_manifest(monkeypatch):
 
 
 def test_guarded_fixed_takes_no_rung_this_process_has_not_run(monkeypatch):
-    """Guarded, with nothing in the manifest: the violent step's retakes and stiff choices go to
-    the budget's rung (numpy on the compiled rhs), each rung held back said once; unguarded the
-    same run takes gauss4s and dop853."""
-    scene, moments = abrupt_commands()
+    """Guarded, with nothing in the manifest: the heavy tip's first whip (rk4 blows up near
+    t = 0.087 s) is retaken by the budget's rung (numpy on the compiled rhs), each rung held back
+    said once; unguarded the same run takes gauss4s and dop853."""
+    from gyro_sim.bench.extreme import mass_ratio_chain
+
+    scene = mass_ratio_chain(1e6)
     runs = {}
     for guard in (True, False):
         monkeypatch.setattr(fixed, "WARM", set())
         sim = Simulator(scene, integrator="fixed", step=STEP)
         sim.integrator.guard = guard
-        sim.advance(CALL)
-        sim.set_axis_moments(moments)
         for _ in range(10):
             sim.advance(CALL)
         assert np.isfinite(sim.state).all()
@@ -225,7 +253,7 @@ COLD_RUN = r'''
 import json, sys, threading
 import numpy as np
 from numba.core import event
-from gyro_sim.bench.extreme import abrupt_commands
+from gyro_sim.bench.extreme import mass_ratio_chain
 from gyro_sim.simulator import Simulator
 
 compiles = []
@@ -239,8 +267,7 @@ class Listener(event.Listener):
         pass
 
 
-scene, moments = abrupt_commands()
-sim = Simulator(scene, integrator="fixed", step=1e-3)  # the start: the first step's kernels compiled here
+sim = Simulator(mass_ratio_chain(1e6), integrator="fixed", step=1e-3)  # the start: its first step compiled
 sim.snapshot()
 sim.advance(0.01)
 sim.integrator.guard = True  # as the node sets it
@@ -249,8 +276,7 @@ before = len(compiles)
 
 
 def physics():
-    sim.set_axis_moments(moments)
-    for _ in range(30):
+    for _ in range(29):  # through the first whip (t = 0.087 s)
         sim.advance(0.01)
 
 
@@ -263,13 +289,13 @@ json.dump({"physics": compiles[before:].count("physics"), "switches": [s[2] for 
 
 
 @pytest.mark.slow
-def test_no_compile_on_the_physics_thread_through_a_violent_step_on_an_empty_cache(tmp_path):
+def test_no_compile_on_the_physics_thread_through_a_whip_on_an_empty_cache(tmp_path):
     """A process of its own on an empty, private numba cache: the start compiles the first
-    step's kernels; then a thread steps the violent step for 0.3 s, and numba's compile-event
-    listener sees no compile from that thread (on an empty cache every first call compiles: a
-    kernel that thread called first would show): the rungs it has not run (gauss4s, dop853)
-    are held back, the budget's rung steps in their place.
-    Unguarded, the same thread compiles gauss4s and dop853 there (53 s of wall time, measured)."""
+    step's kernels; then a thread steps the heavy tip through its first whip, and numba's
+    compile-event listener sees no compile from that thread (on an empty cache every first call
+    compiles: a kernel that thread called first would show): the rungs it has not run (gauss4s,
+    dop853) are held back, the budget's rung steps in their place. Unguarded, the same run takes
+    both (test_guarded_fixed_takes_no_rung_this_process_has_not_run)."""
     import json
     import os
     import subprocess
