@@ -125,6 +125,11 @@ class Simulator:
         self._watch_last = None
         if self._watched is not None and getattr(self.integrator, "monitor", False) is None:
             self.integrator.monitor = self._energy_error  # "fixed": its energy watchdog
+        self._coulomb = None  # the hinges' exact Coulomb friction, stepped (gyro_sim.integrators.coulomb)
+        if m.actuators is not None and m.actuators.exact is not None:
+            from gyro_sim.integrators.coulomb import CoulombStepping
+
+            self._coulomb = CoulombStepping(m, self.system, self.integrator, step)
         self._imus = None  # the IMUs (gyro_sim.dynamics.imu.ImuSet), when the scene has some
         if scene.imus:
             from gyro_sim.dynamics.imu import DEFAULT_IMU_RATE, ImuSet
@@ -132,6 +137,8 @@ class Simulator:
             self._imus = ImuSet(scene, {b.name: k for k, b in enumerate(scene.bodies)}, scene.gravity,
                                 DEFAULT_IMU_RATE)
         self.reset()
+        if self._coulomb is not None:
+            self._coulomb.warm_up(self._t, self._y, *self._inputs(), self._p)
 
     def _axis_limits(self) -> np.ndarray | None:
         """max_torque of every actuated axis (na,), +inf where none; None when no axis has one."""
@@ -168,6 +175,8 @@ class Simulator:
         moving = len(self._axis_angle) and np.any(self._moments)
         if self.model.stateful:  # the applied torques' work is a state: the motors', friction's
             moving = True
+        held = self._coulomb is not None and np.any(self._coulomb.torque)  # exact friction's held moments
+        moving = moving or held
         if self._watched is None or (moving and self._balanced != "energy"):
             return 0.0
         if self.model.stateful:
@@ -175,7 +184,8 @@ class Simulator:
             work = float(np.sum(y1[w] - y0[w]))
         else:
             i = self._axis_angle
-            work = float(self._inputs_moments() @ (y1[i] - y0[i])) if moving else 0.0
+            work = float(self._inputs_moments() @ (y1[i] - y0[i])) if len(i) and np.any(self._moments) else 0.0
+            work += self._coulomb.held(y0, y1) if held else 0.0
         from gyro_sim.dynamics.outputs import INV_KINETIC
 
         last = self._watch_last  # the previous call's end is usually this one's start
@@ -231,6 +241,8 @@ class Simulator:
         self._outputs.moved(self._t, self._y, self._p, self._moments)
         self._watch_last = None
         self.integrator.reset()
+        if self._coulomb is not None:
+            self._coulomb.reset()
         self._work = 0.0
         self._reference = None  # invariants of the reset state (taken by the first advance or snapshot)
         if self._imus is not None:
@@ -306,7 +318,10 @@ class Simulator:
         hinge_tau, L_rotor = self._inputs()
         self.system.hold(self._t, self._p, hinge_tau, L_rotor)
         try:
-            y = self.integrator.advance(self._t, self._y, self._t + dt)
+            if self._coulomb is not None:  # the smooth motion between the friction's stick/slip steps
+                y = self._coulomb.advance(self._t, self._y, self._t + dt, hinge_tau, L_rotor)
+            else:
+                y = self.integrator.advance(self._t, self._y, self._t + dt)
         except (FloatingPointError, np.linalg.LinAlgError, ArithmeticError) as exc:
             self.integrator.reset()  # its step-size memory is meaningless after a failure
             raise SimulationError(f"t = {self._t:.6g} s: {exc}; state kept at t = {self._t:.6g} s") from exc
@@ -315,7 +330,7 @@ class Simulator:
             raise SimulationError(f"t = {self._t:.6g} s: the state became non-finite; "
                                   f"state kept at t = {self._t:.6g} s")
         if self.model.stateful:  # the works are states, integrated with the motion
-            self._work = float(y[self.model.i_work][0])
+            self._work = float(y[self.model.i_work][0]) - (0.0 if self._coulomb is None else self._coulomb.held_work)
         elif len(self._axis_angle) and np.any(self._moments):
             i = self._axis_angle
             self._work += float(self._inputs_moments() @ (y[i] - self._y[i]))
@@ -378,7 +393,8 @@ class Simulator:
     def friction_work(self) -> float:
         """Work done by friction since the last reset (J, <= 0: the energy dissipated), the
         integral of friction torque x relative speed; 0 without friction."""
-        return float(self._y[self.model.i_work][1]) if self.model.stateful else 0.0
+        exact = 0.0 if self._coulomb is None else self._coulomb.work  # the hinges' exact Coulomb friction
+        return (float(self._y[self.model.i_work][1]) if self.model.stateful else 0.0) + exact
 
     @property
     def saturated_commands(self) -> int:
