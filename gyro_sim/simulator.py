@@ -125,9 +125,9 @@ class Simulator:
         self._watch_last = None
         if self._watched is not None and getattr(self.integrator, "monitor", False) is None:
             self.integrator.monitor = self._energy_error  # "fixed": its energy watchdog
-        self._coulomb = None  # the hinges' exact Coulomb friction, stepped (gyro_sim.integrators.coulomb)
+        self._coulomb = None  # the hinges' exact Coulomb friction, stepped (gyro_sim.integrators.coulomb.driver)
         if m.actuators is not None and m.actuators.exact is not None:
-            from gyro_sim.integrators.coulomb import CoulombStepping
+            from gyro_sim.integrators.coulomb.driver import CoulombStepping
 
             self._coulomb = CoulombStepping(m, self.system, self.integrator, step)
         self._imus = None  # the IMUs (gyro_sim.dynamics.imu.ImuSet), when the scene has some

@@ -1,7 +1,7 @@
 """`gyro-sim bench friction`: robots with dry joint friction (MJCF `frictionloss`, URDF
 `<dynamics friction>`), as published: evaluations of y' and CPU seconds per simulated second,
 models x integrators x durations, for the exact Coulomb friction of
-:mod:`gyro_sim.integrators.coulomb` and, with `--regularised`, for the same friction written as
+:mod:`gyro_sim.integrators.coulomb.driver` and, with `--regularised`, for the same friction written as
 the regularised law (`stick_speed` 1e-4 rad/s, linear below it: the stiff ODE).
 
 With `--node`, each model also runs in the node (`gyro_sim_node`, its default integrator "fixed",
@@ -62,7 +62,8 @@ def register(sub, bench) -> None:
                    help="also the friction as the regularised law (stick_speed 1e-4), over --regularised-duration")
     p.add_argument("--regularised-duration", type=float, default=REGULARISED_DURATION, metavar="S",
                    help=f"simulated seconds of a regularised run (default {REGULARISED_DURATION:g})")
-    p.add_argument("--node", action="store_true", help="also each model in the node (fixed, 1 kHz): its real-time factor")
+    p.add_argument("--node", action="store_true",
+                   help="also each model in the node (fixed, 1 kHz): its real-time factor")
     p.add_argument("--node-seconds", type=float, default=NODE_SECONDS, metavar="S",
                    help=f"simulated seconds of a node run (default {NODE_SECONDS:g})")
     p.add_argument("--out", default="out/bench", help="directory for friction.md and .json")
@@ -110,24 +111,27 @@ def run_node(path: Path, seconds: float, workdir: Path, index: int) -> dict:
     import os
     import subprocess
 
-    from gyro_sim.bench.realtime import NODE_COMMAND, PHYSICS_RATE, PUBLISH_RATE, _domain
+    from gyro_sim.bench.realtime import NODE_COMMAND, PHYSICS_RATE, PUBLISH_RATE
 
     stats = workdir / f"stats_{index}.json"
     params = [f"scene:={path.resolve()}", f"physics_rate:={PHYSICS_RATE}", f"publish_rate:={PUBLISH_RATE}",
               "real_time_factor:=1.0", f"duration:={seconds}", f"stats_file:={stats}"]
     cmd = [*NODE_COMMAND, "--ros-args", *[a for p in params for a in ("-p", p)]]
-    env = dict(os.environ, ROS_DOMAIN_ID=str(_domain(index)), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+    env = dict(os.environ, ROS_DOMAIN_ID=str(200 + (os.getpid() * 17 + index) % 30),
+               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
                ROS_LOG_DIR=str(workdir / "ros_log"), OPENBLAS_NUM_THREADS="1")
     root = str(Path(__file__).resolve().parents[2])
     env["PYTHONPATH"] = os.pathsep.join([root, env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
     done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=3 * seconds + 120)
     if done.returncode != 0 or not stats.exists():
-        raise RuntimeError(f"gyro_sim_node failed on {path.name} (exit {done.returncode}):\n{(done.stdout + done.stderr)[-2000:]}")
+        said = (done.stdout + done.stderr)[-2000:]
+        raise RuntimeError(f"gyro_sim_node failed on {path.name} (exit {done.returncode}):\n{said}")
     return json.loads(stats.read_text())
 
 
 def node_table(runs: dict) -> str:
-    head = ("| model | integrator | simulated s | real-time factor | step p50 (us) | step p99 (us) | deadline misses |\n"
+    head = ("| model | integrator | simulated s | real-time factor | step p50 (us) | step p99 (us) "
+            "| deadline misses |\n"
             "|---|---|---:|---:|---:|---:|---:|\n")
     return head + "\n".join(
         f"| {name} | fixed | {st['node_time_s']:.3g} | {st['real_time_factor_achieved']:.3f} | "
@@ -155,14 +159,16 @@ def cmd_bench_friction(args) -> int:
     for name, scene in scenes.items():
         for integrator in args.integrators:
             for duration in durations:
-                rows.append({"model": name, "law": "exact", "integrator": integrator, **measure(scene, integrator, duration)})
+                rows.append({"model": name, "law": "exact", "integrator": integrator,
+                             **measure(scene, integrator, duration)})
                 print(_row(rows[-1]), flush=True)
             if args.regularised:
                 rows.append({"model": name, "law": "regularised", "integrator": integrator,
                              **measure(regularised(scene), integrator, args.regularised_duration)})
                 print(_row(rows[-1]), flush=True)
     md = ("# Robots with dry joint friction\n\n"
-          f"{time.strftime('%Y-%m-%d')}, `gyro-sim bench friction` (durations {' '.join(f'{d:g}' for d in durations)} s): "
+          f"{time.strftime('%Y-%m-%d')}, `gyro-sim bench friction` "
+          f"(durations {' '.join(f'{d:g}' for d in durations)} s): "
           "evaluations of y' and CPU seconds of the process per simulated second, `Simulator.advance"
           f"({STEP:g})` as the node calls it.\n\n" + table(rows) + "\n")
     runs = {}

@@ -34,7 +34,7 @@ class Friction:
 
     A hinge's friction with neither `stick_speed` nor the Stribeck term written is exact Coulomb
     friction (`exact`): its viscous part stays in F, its coulomb is the bound of a stick/slip
-    torque that the time-stepping of :mod:`gyro_sim.integrators.coulomb` solves.
+    torque that the time-stepping of :mod:`gyro_sim.integrators.coulomb.driver` solves.
     """
 
     coulomb: float = 0.0  # N m

@@ -1,4 +1,4 @@
-"""Exact Coulomb friction of hinges (gyro_sim.integrators.coulomb) against closed forms: stick and
+"""Exact Coulomb friction of hinges (gyro_sim.integrators.coulomb.driver) against closed forms: stick and
 slip are exact in the hard-friction limit, the energy dissipated is the friction's work; the
 regularised law stays where a scene asks for it."""
 from __future__ import annotations
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from gyro_sim import Simulator
-from gyro_sim.integrators.coulomb import box_lcp
+from gyro_sim.integrators.coulomb.driver import box_lcp
 from gyro_sim.scene.load import load_scene
 
 #: the braked wheel: axial inertia J about a vertical hinge (gravity along it: no moment)
@@ -32,7 +32,8 @@ def arm() -> dict:
     """A rod on a horizontal hinge (y), its centre of mass at z = L at angle 0, started at
     ANGLE = pi/2 (horizontal): gravity's moment about the hinge is +M G L there."""
     return {"name": "held arm", "gravity": [0.0, 0.0, -G], "base": {"type": "fixed", "position": [0.0, 0.0, 0.0]},
-            "bodies": [{"name": "arm", "joint": {"type": "hinge", "axis": [0.0, 1.0, 0.0], "friction": {"coulomb": HOLD}},
+            "bodies": [{"name": "arm",
+                        "joint": {"type": "hinge", "axis": [0.0, 1.0, 0.0], "friction": {"coulomb": HOLD}},
                         "mass": M, "com": [0.0, 0.0, L], "inertia": {"axial": 0.002, "transverse": 0.08},
                         "initial": {"angle": ANGLE, "rate": 0.0}}]}
 

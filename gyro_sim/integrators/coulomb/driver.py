@@ -33,45 +33,16 @@ work of friction is the mean moment lambda / h times each step's change of angle
 from __future__ import annotations
 
 import math
-from pathlib import Path
-
 import numpy as np
 
 from gyro_sim import jit
-from gyro_sim.dynamics import kernel as fast
 from gyro_sim.integrators.base import STEP_COUNT_SLACK
+from gyro_sim.integrators.coulomb.kernels import responses
 
 #: iterations of the block principal pivoting before the single-pivot rule (Murty's)
 FULL_PIVOT_ITERATIONS = 8
 #: a complementarity condition is met to this fraction of the problem's speed scale
 LCP_TOL = 1e-12
-
-DEPENDENCIES = (*fast.DEPENDENCIES, Path(__file__))
-_njit = jit.njit_with_dependencies(*DEPENDENCIES)
-
-
-@_njit
-def responses(t, y, cols, i_vel, out, ydot, model, data, inputs):
-    """The generalised accelerations' responses (N, nf) `out` at (t, y) to a unit moment on each
-    velocity column `cols[j]`, by one evaluation of the kernel with the moments held and one with
-    each unit moment added (the accelerations are affine in them); returns nothing. ydot (size,)
-    holds y' with the moments held. model, data, inputs: the kernel's records."""
-    size = y.shape[0]
-    N = out.shape[0]
-    base = np.empty(N)
-    fast.rhs_call(t, y, ydot, model, data, inputs)
-    for i in range(N):
-        base[i] = ydot[i_vel + i]
-    other = np.empty(size)
-    for j in range(cols.shape[0]):
-        c = cols[j]
-        held = inputs.tau[c]
-        inputs.tau[c] = held + 1.0
-        fast.rhs_call(t, y, other, model, data, inputs)
-        inputs.tau[c] = held
-        for i in range(N):
-            out[i, j] = other[i_vel + i] - base[i]
-
 
 def box_lcp(W: np.ndarray, b: np.ndarray, c: np.ndarray, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The impulses lambda (n,) with |lambda_i| <= c_i, v = b + W lambda, v_i = 0 where |lambda_i| <
