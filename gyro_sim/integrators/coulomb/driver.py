@@ -115,6 +115,7 @@ class CoulombStepping:
     def reset(self) -> None:
         self.work = self.held_work = 0.0
         self.torque = np.zeros(len(self.axes))
+        self._holding = np.zeros(len(self.axes))  # the moments that held the stuck axes in the last impulse step
         self.impulse_steps = 0
 
     def warm_up(self, t: float, y: np.ndarray, hinge_tau, L_rotor, p) -> None:
@@ -143,7 +144,7 @@ class CoulombStepping:
             t = t0 + k * h
             t_end = t1 if k == n - 1 else t0 + (k + 1) * h
             v0 = y[self.vel]
-            torque = -self.mu * np.sign(v0)
+            torque = np.where(v0 != 0.0, -self.mu * np.sign(v0), self._holding)
             if held_torque is None or not np.array_equal(torque, held_torque):
                 tau = base.copy()
                 tau[self.axes] += torque
@@ -192,6 +193,7 @@ class CoulombStepping:
         b = y[self.vel] - W @ held
         guess = np.where(v0 == 0.0, 0, np.where(y[self.vel] > 0.0, -1, 1)).astype(np.int64)
         lam, stuck = box_lcp(W, b, h * self.mu, guess)
+        self._holding = np.where(stuck, lam / h, 0.0)
         du = R @ (lam - held)
         out = y.copy()
         out[self.i_vel:self.i_vel + self.model.N] += du
