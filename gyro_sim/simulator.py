@@ -120,16 +120,18 @@ class Simulator:
         from gyro_sim.dynamics.backends import CompiledOutputs, NumpyOutputs
 
         outputs = CompiledOutputs if self.system.backend == "numba" and not m.stateful else NumpyOutputs
-        self._outputs = outputs(m, self.system, self._joint_index, self._inputs)
-        self._watched = self._watched_energy()
-        self._watch_last = None
-        if self._watched is not None and getattr(self.integrator, "monitor", False) is None:
-            self.integrator.monitor = self._energy_error  # "fixed": its energy watchdog
         self._coulomb = None  # the hinges' exact Coulomb friction, stepped (gyro_sim.integrators.coulomb.driver)
         if m.actuators is not None and m.actuators.exact is not None:
             from gyro_sim.integrators.coulomb.driver import CoulombStepping
 
             self._coulomb = CoulombStepping(m, self.system, self.integrator, step)
+        # the outputs' inputs: the commands, and the exact friction's mean moment over the last step
+        self._outputs = outputs(m, self.system, self._joint_index,
+                                self._inputs if self._coulomb is None else self._inputs_with_friction)
+        self._watched = self._watched_energy()
+        self._watch_last = None
+        if self._watched is not None and getattr(self.integrator, "monitor", False) is None:
+            self.integrator.monitor = self._energy_error  # "fixed": its energy watchdog
         self._imus = None  # the IMUs (gyro_sim.dynamics.imu.ImuSet), when the scene has some
         if scene.imus:
             from gyro_sim.dynamics.imu import DEFAULT_IMU_RATE, ImuSet
@@ -299,6 +301,15 @@ class Simulator:
                 L_rotor[m.axis_rotor[sel]] = v[sel]
         return hinge_tau, L_rotor
 
+    def _inputs_with_friction(self):
+        """The held inputs of the commands (`_inputs`) with the hinges' exact Coulomb friction
+        moments of the last step added (their mean over it): what the outputs (effort,
+        accelerations, reactions, IMUs) see."""
+        hinge_tau, L_rotor = self._inputs()
+        hinge_tau = np.zeros(len(self.model.hinge_bodies)) if hinge_tau is None else hinge_tau.copy()
+        hinge_tau[self._coulomb.axes] += self._coulomb.applied
+        return hinge_tau, L_rotor
+
     def held_rhs(self):
         """The right-hand side f(t, y) -> (size,) of the chain with the inputs now in force held,
         as `advance` holds them: for an analysis at the current state (the method choice of the
@@ -337,7 +348,8 @@ class Simulator:
         self._p = self.system.spins(self._t + dt, y)
         self._t += dt
         self._y = y
-        self._outputs.moved(self._t, self._y, self._p, self._moments)
+        # with exact friction a new moments object: the outputs hold the friction's new moments
+        self._outputs.moved(self._t, self._y, self._p, self._moments if self._coulomb is None else self._moments.copy())
 
     # --- outputs (computed on request only) ------------------------------------------------
     # Every output comes from the backend the Simulator holds (gyro_sim.dynamics.backends): on

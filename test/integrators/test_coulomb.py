@@ -72,8 +72,8 @@ def test_a_braked_wheel_decelerates_at_mu_over_j_and_rests_from_w0_j_over_mu(int
 @pytest.mark.parametrize("integrator", ["auto", "fixed"])
 def test_friction_holds_against_gravity_until_a_ramped_moment_breaks_it_loose(integrator):
     """Gravity's moment M G L is below the bound: the arm stays at rest, angle and rate exactly
-    0. A commanded moment ramped up from 0 breaks it loose in the first step where
-    |command + M G L| > mu, and not before."""
+    0, its effort (the moment applied: command and friction) -M G L. A commanded moment ramped up
+    from 0 breaks it loose in the first step where |command + M G L| > mu, and not before."""
     sim = Simulator(arm(), integrator=integrator, step=STEP, backend="auto")
     ramp = 2.0  # N m/s
     breaks = HOLD - M * G * L  # the command at which it slips
@@ -85,6 +85,8 @@ def test_friction_holds_against_gravity_until_a_ramped_moment_breaks_it_loose(in
         js = sim.joint_states()
         if command + M * G * L <= HOLD:
             assert js.position[0] == ANGLE and js.velocity[0] == 0.0, command
+            # what holds it is in the effort (command + friction): gravity's moment, balanced
+            assert js.effort[0] == pytest.approx(-M * G * L, rel=1e-9)
         elif moved_at is None:
             moved_at = command
             assert js.velocity[0] > 0.0

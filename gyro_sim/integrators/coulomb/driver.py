@@ -86,7 +86,8 @@ class CoulombStepping:
 
     Attributes: `work` (J), the work of the exact friction since the reset; `held_work`, the part
     of the moments held during the smooth steps that a stateful model's motor work counted (to
-    take back out); `torque` (nf,), the friction moments held in the last step; `impulse_steps`,
+    take back out); `torque` (nf,), the friction moments held in the last smooth step; `applied`
+    (nf,), their mean over the last step (with its impulses); `impulse_steps`,
     the steps solved with impulses; `axes` (nf,), the hinges (model order) with exact friction.
     """
 
@@ -115,6 +116,7 @@ class CoulombStepping:
     def reset(self) -> None:
         self.work = self.held_work = 0.0
         self.torque = np.zeros(len(self.axes))
+        self.applied = np.zeros(len(self.axes))  # the friction moments' mean over the last step
         self._holding = np.zeros(len(self.axes))  # the moments that held the stuck axes in the last impulse step
         self.impulse_steps = 0
 
@@ -158,6 +160,7 @@ class CoulombStepping:
             if np.all(np.sign(v_plus) == np.sign(v0)):
                 # every axis slipped the whole step one way, or stayed exactly at rest: exact
                 self.work += self.held(y, y_plus)
+                self.applied = torque
                 y = y_plus
                 continue
             y = self._impulses(t_end, y, y_plus, h, torque, v0)
@@ -194,6 +197,7 @@ class CoulombStepping:
         guess = np.where(v0 == 0.0, 0, np.where(y[self.vel] > 0.0, -1, 1)).astype(np.int64)
         lam, stuck = box_lcp(W, b, h * self.mu, guess)
         self._holding = np.where(stuck, lam / h, 0.0)
+        self.applied = lam / h
         du = R @ (lam - held)
         out = y.copy()
         out[self.i_vel:self.i_vel + self.model.N] += du
