@@ -10,9 +10,10 @@ ODE as stiff as mu / (I stick_speed). Here it is solved per step of size h (the 
 `step`), as the time-stepping schemes of MuJoCo and Drake do, on the velocity level:
 
 1. the integrator the user chose advances the smooth motion over [t, t + h] with each axis's
-   friction held as a constant moment: -mu sgn(phi'(t)) where the axis slips at t, 0 where it
-   is at rest (phi'(t) = 0). While every slipping axis keeps its sign over the step, that is
-   the exact motion (to the integrator's tolerance) and the step is kept as it is;
+   friction held as a constant moment: -mu sgn(phi'(t)) where the axis slips at t; where it is
+   at rest (phi'(t) = 0), the moment that held it in the last step. While every slipping axis
+   keeps its sign over the step and every axis at rest stays exactly at rest, that is the exact
+   motion (to the integrator's tolerance) and the step is kept as it is;
 2. otherwise (an axis at rest, or one whose speed crossed zero) the friction impulses
    lambda (the step's mean friction moment times h) are solved at t + h from the box-constrained
    linear complementarity problem
@@ -27,12 +28,14 @@ ODE as stiff as mu / (I stick_speed). Here it is solved per step of size h (the 
 
 So a slip is exact to the integrator's tolerance, the moment of sticking is found to within one
 step, and a stuck axis stays at rest exactly while |required moment| <= mu. The impulse step is
-first order in h where it acts (a transition, or a stuck axis coupled to a moving one). The
+first order in h at a transition; a stuck axis coupled to a moving one, held over the smooth
+step by its last holding moment, moves by O(h^2) within it, which the impulse takes back. The
 work of friction is the mean moment lambda / h times each step's change of angle.
 """
 from __future__ import annotations
 
 import math
+
 import numpy as np
 
 from gyro_sim import jit
@@ -43,6 +46,7 @@ from gyro_sim.integrators.coulomb.kernels import responses
 FULL_PIVOT_ITERATIONS = 8
 #: a complementarity condition is met to this fraction of the problem's speed scale
 LCP_TOL = 1e-12
+
 
 def box_lcp(W: np.ndarray, b: np.ndarray, c: np.ndarray, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The impulses lambda (n,) with |lambda_i| <= c_i, v = b + W lambda, v_i = 0 where |lambda_i| <
