@@ -17,6 +17,7 @@ import pytest
 mujoco = pytest.importorskip("mujoco", reason="MuJoCo is the optional extra [models]")
 
 from gyro_sim import Simulator
+from gyro_sim.simulator import SimulationError
 from gyro_sim.scene.load import SceneError, load_scene
 from gyro_sim.scene.mjcf import ModelError, import_model
 from test.scene.test_public_models import mujoco_judge
@@ -224,6 +225,20 @@ def test_published_arms_with_dry_friction_cost_few_evaluations():
         sim = Simulator(load_scene(path), integrator="auto")
         sim.advance(0.2)
         assert sim.system.nfev / 0.2 < 2e5, (path.name, sim.system.nfev)
+
+
+def test_a_failed_advance_keeps_the_state_and_the_friction_work():
+    """Z1's damping is stiff for rk4 at 1 ms: the state leaves the finite within 0.05 s. The
+    advance that fails raises SimulationError and keeps the time, the state and the friction's
+    work of the last good one."""
+    sim = Simulator(load_scene(Path(__file__).parent / "models" / "example_robot_data" / "z1.urdf"),
+                    integrator="rk4", step=1e-3)
+    with pytest.raises(SimulationError):
+        for _ in range(200):
+            kept = (sim.time, sim.state, sim.friction_work)
+            sim.advance(1e-3)
+    assert sim.time == kept[0] and np.array_equal(sim.state, kept[1]) and sim.friction_work == kept[2]
+    assert kept[2] < 0.0
 
 
 def test_what_has_no_scene_key_is_refused_in_one_line(tmp_path):

@@ -145,6 +145,15 @@ class CoulombStepping:
         h = span / n
         y = np.array(y0, dtype=float)
         base = self._zero_tau if hinge_tau is None else np.asarray(hinge_tau, dtype=float)
+        kept = (self.work, self.held_work, self.torque, self.applied, self._holding, self.impulse_steps)
+        try:
+            return self._steps(t0, t1, n, h, y, base, L_rotor)
+        except BaseException:  # the caller keeps its state: so does the friction's account
+            self.work, self.held_work, self.torque, self.applied, self._holding, self.impulse_steps = kept
+            raise
+
+    def _steps(self, t0: float, t1: float, n: int, h: float, y: np.ndarray, base: np.ndarray, L_rotor) -> np.ndarray:
+        """`advance`'s n steps of size h from (t0, y) (y is advanced in place or replaced)."""
         held_torque = None
         for k in range(n):
             t = t0 + k * h
