@@ -121,7 +121,7 @@ class Simulator:
 
         outputs = CompiledOutputs if self.system.backend == "numba" and not m.stateful else NumpyOutputs
         self._coulomb = None  # the hinges' exact Coulomb friction, stepped (gyro_sim.integrators.coulomb.driver)
-        if m.actuators is not None and m.actuators.exact is not None:
+        if m.actuators is not None and m.actuators.exact:
             from gyro_sim.integrators.coulomb.driver import CoulombStepping
 
             self._coulomb = CoulombStepping(m, self.system, self.integrator, step)
@@ -306,8 +306,12 @@ class Simulator:
         moments of the last step added (their mean over it): what the outputs (effort,
         accelerations, reactions, IMUs) see."""
         hinge_tau, L_rotor = self._inputs()
-        hinge_tau = np.zeros(len(self.model.hinge_bodies)) if hinge_tau is None else hinge_tau.copy()
-        hinge_tau[self._coulomb.axes] += self._coulomb.applied
+        m, c = self.model, self._coulomb
+        hinge_tau = np.zeros(len(m.hinge_bodies)) if hinge_tau is None else hinge_tau.copy()
+        hinge_tau[c.axes] += c.applied[:c.nh]
+        if len(c.rotors):
+            L_rotor = np.zeros(len(m.torque_body)) if L_rotor is None else L_rotor.copy()
+            L_rotor[c.rotors] += c.applied[c.nh:]
         return hinge_tau, L_rotor
 
     def held_rhs(self):

@@ -82,7 +82,8 @@ def regularised(scene):
         return dataclasses.replace(limits, friction=dataclasses.replace(limits.friction,
                                                                         stick_speed=DEFAULT_STICK_SPEED))
 
-    bodies = tuple(dataclasses.replace(b, joint=dataclasses.replace(b.joint, limits=law(b.joint.limits)))
+    bodies = tuple(dataclasses.replace(b, joint=dataclasses.replace(b.joint, limits=law(b.joint.limits)),
+                                       rotors=tuple(dataclasses.replace(r, limits=law(r.limits)) for r in b.rotors))
                    for b in scene.bodies)
     return dataclasses.replace(scene, bodies=bodies)
 

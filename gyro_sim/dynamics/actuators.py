@@ -70,8 +70,8 @@ class AxisLimits:
 
     @classmethod
     def of(cls, limits: list[Limits | None], exact: bool = False) -> "AxisLimits":
-        """The arrays of `limits`; with `exact` (hinges) a friction that is `Friction.exact` puts
-        its coulomb in `exact` instead of F."""
+        """The arrays of `limits`; with `exact` a friction that is `Friction.exact` puts its
+        coulomb in `exact` instead of F."""
         n = len(limits)
         a = {k: np.zeros(n) for k in ("coulomb", "viscous", "static", "stribeck_speed")}
         max_torque, max_speed, stick = np.full(n, np.inf), np.full(n, np.inf), np.ones(n)
@@ -148,6 +148,6 @@ class Actuators:
         return self.rotor.speed_dependent or self.hinge.speed_dependent
 
     @property
-    def exact(self) -> np.ndarray | None:
-        """The bounds (nh,) of the hinges' exact Coulomb friction, None without any."""
-        return self.hinge.exact
+    def exact(self) -> bool:
+        """Whether some hinge or torque rotor has exact Coulomb friction (`AxisLimits.exact`)."""
+        return self.hinge.exact is not None or self.rotor.exact is not None

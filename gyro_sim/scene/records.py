@@ -32,9 +32,9 @@ class Friction:
     F(w) = coulomb sgn(w) + viscous w                              (otherwise)
     and F(w) = F(stick_speed) w / stick_speed for |w| < stick_speed; the torque is -F(w).
 
-    A hinge's friction with neither `stick_speed` nor the Stribeck term written is exact Coulomb
-    friction (`exact`): its viscous part stays in F, its coulomb is the bound of a stick/slip
-    torque that the time-stepping of :mod:`gyro_sim.integrators.coulomb.driver` solves.
+    A friction with neither `stick_speed` nor the Stribeck term written is exact Coulomb friction
+    (`exact`): its viscous part stays in F, its coulomb is the bound of a stick/slip torque that
+    the time-stepping of :mod:`gyro_sim.integrators.coulomb.driver` solves.
     """
 
     coulomb: float = 0.0  # N m
@@ -45,7 +45,7 @@ class Friction:
 
     @property
     def exact(self) -> bool:
-        """Whether, on a hinge, its Coulomb part is exact (neither stick_speed nor Stribeck written)."""
+        """Whether its Coulomb part is exact (neither stick_speed nor Stribeck written)."""
         return self.stick_speed is None and self.stribeck_speed is None and self.coulomb > 0.0
 
 

@@ -110,10 +110,10 @@ def test_a_stick_speed_keeps_the_regularised_law():
     """A hinge friction with stick_speed (or a Stribeck term) written is the regularised F(w) of
     docs/scene-format.md: no stick/slip stepping, the model's friction a state-dependent term."""
     sim = Simulator(wheel(stick_speed=1e-3), integrator="auto", backend="numpy")
-    assert sim.model.actuators.exact is None and sim.model.stateful
+    assert not sim.model.actuators.exact and sim.model.stateful
     exact = Simulator(wheel(), integrator="auto", backend="numpy")
-    assert exact.model.actuators.exact is not None and not exact.model.stateful
-    assert list(exact.model.actuators.exact) == [MU]
+    assert exact.model.actuators.exact and not exact.model.stateful
+    assert list(exact.model.actuators.hinge.exact) == [MU]
 
 
 def test_the_box_lcp_meets_its_complementarity_conditions():
@@ -184,3 +184,36 @@ def test_friction_inside_a_free_chain_keeps_its_momenta():
         assert np.max(np.abs(now[name] - start[name])) < 1e-6 * np.max(np.abs(start[name])), name
     lost = now["energy"] - start["energy"]
     assert lost < -0.01 and abs(lost - sim.friction_work) < 1e-5 * abs(lost)
+
+
+@pytest.mark.parametrize("carrier", ["held", "free"])
+@pytest.mark.parametrize("integrator", ["fixed", "auto"])
+def test_a_wheel_braked_on_its_bearing_rests_from_w0_jeff_over_mu(carrier, integrator):
+    """A torque rotor's exact Coulomb friction: its spin relative to the carrier falls at
+    mu / J_eff (J_eff = A on a held carrier; A C / (A + C) on a free one, whose angular momentum
+    is kept), it stops in the step holding w0 J_eff / mu and stays at rest; the energy lost is
+    the friction's work, on a free carrier the kinetic energy of the relative spin."""
+    from test.dynamics.test_actuators import OMEGA0, effective_inertia, relative_spin, wheel_scene
+
+    mu = 0.11
+    sim = Simulator(wheel_scene(carrier, friction={"coulomb": mu}), integrator=integrator, step=STEP)
+    J = effective_inertia(carrier)
+    stop = OMEGA0 * J / mu
+    start = sim.invariants()
+    stopped_at = None
+    while sim.time < stop + 0.2:
+        sim.advance(STEP)
+        w = relative_spin(sim)
+        if sim.time < stop:
+            assert w == pytest.approx(OMEGA0 - mu / J * sim.time, abs=1e-9)
+        elif stopped_at is None:
+            stopped_at = sim.time
+        else:
+            assert abs(w) < 1e-12
+    assert stop <= stopped_at < stop + STEP
+    now = sim.invariants()
+    lost = now["energy"] - start["energy"]
+    assert lost == pytest.approx(sim.friction_work, rel=1e-9)
+    if carrier == "free":
+        assert lost == pytest.approx(-0.5 * J * OMEGA0 ** 2, rel=1e-9)
+        assert np.allclose(now["angular_momentum_O1"], start["angular_momentum_O1"], rtol=0, atol=1e-12)

@@ -98,30 +98,38 @@ class CoulombStepping:
     def __init__(self, model, system, integrator, step: float):
         m = model
         self.model, self.system, self.integrator, self.h = m, system, integrator, float(step)
-        bound = m.actuators.exact
-        self.axes = np.flatnonzero(bound > 0.0)
-        self.mu = bound[self.axes]
+        act = m.actuators
+        hinge = np.zeros(len(m.hinge_bodies)) if act.hinge.exact is None else act.hinge.exact
+        rotor = np.zeros(len(m.torque_body)) if act.rotor.exact is None else act.rotor.exact
+        self.axes = np.flatnonzero(hinge > 0.0)  # hinges (model order) with exact friction
+        self.rotors = np.flatnonzero(rotor > 0.0)  # torque rotors with exact friction
+        self.nh = len(self.axes)
+        self.mu = np.concatenate((hinge[self.axes], rotor[self.rotors]))
         self.cols = np.ascontiguousarray(m.col_hinge[self.axes], dtype=np.int64)
         self.i_vel = m.i_vel.start
         self.vel = self.i_vel + self.cols
-        self.ang = m.i_phi.start + self.axes
-        nh = len(m.hinge_bodies)
-        self._zero_tau = np.zeros(nh)
+        index = np.arange(m.size)
+        self.i_kappa = index[m.i_kappa][self.rotors]  # the rotors' angles kappa_i; their rates are kappa_i'
+        self.ang = np.concatenate((m.i_phi.start + self.axes, self.i_kappa)).astype(np.intp)
+        self.inv_A = 1.0 / m.torque_A[self.rotors]
+        self._zero_tau = np.zeros(len(m.hinge_bodies))
+        self._zero_L = np.zeros(len(m.torque_body))
         # positions other than hinge angles (free base, quaternions, rotor angles): moved by the
         # change of their rates, one more evaluation; a fixed base of hinges moves by u directly
-        index = np.arange(m.size)
         self._others = np.concatenate((index[m.i_r0], m.i_quat.ravel(), index[m.i_kappa])).astype(np.intp)
         self._compiled = hasattr(system, "kernel_arguments")
-        self._response = np.zeros((m.N, len(self.axes)))
+        self._response = np.zeros((m.N, len(self.mu)))
         self._ydot = np.empty(m.size)
         self._direct = jit.Direct(responses) if self._compiled else None
         self.reset()
 
     def reset(self) -> None:
         self.work = self.held_work = 0.0
-        self.torque = np.zeros(len(self.axes))
-        self.applied = np.zeros(len(self.axes))  # the friction moments' mean over the last step
-        self._holding = np.zeros(len(self.axes))  # the moments that held the stuck axes in the last impulse step
+        nf = len(self.mu)
+        self.torque = np.zeros(nf)
+        self.applied = np.zeros(nf)  # the friction moments' mean over the last step
+        self._holding = np.zeros(nf)  # the moments that held the stuck axes in the last impulse step
+        self._rest = np.zeros(nf, dtype=bool)  # the axes the last step left at rest
         self.impulse_steps = 0
 
     def warm_up(self, t: float, y: np.ndarray, hinge_tau, L_rotor, p) -> None:
@@ -131,6 +139,24 @@ class CoulombStepping:
             self.system.hold(t, p, self._zero_tau if hinge_tau is None else hinge_tau, L_rotor)
             self._responses(t, np.ascontiguousarray(y, dtype=np.float64))
             self.system.nfev = nfev
+
+    def speeds(self, t: float, y: np.ndarray) -> np.ndarray:
+        """The friction axes' speeds (nf,) at (t, y) with the inputs held: the hinges' phi', the
+        rotors' kappa_i' (eqs 18-19, one evaluation of y')."""
+        v = y[self.vel]
+        if len(self.rotors):
+            v = np.concatenate((v, self.system.rhs(t, y)[self.i_kappa]))
+        return v
+
+    def _hold(self, t: float, y: np.ndarray, tau: np.ndarray, L_rotor: np.ndarray, p=None) -> None:
+        """Hold the moments tau (nh,) and rotor torques L_rotor (nt,) from t on; the spins at t are
+        kept (or p)."""
+        s = self.system
+        if not len(self.rotors):  # the spins' hold (p0 at t0, rate L / A) does not change
+            t_hold, p_hold = s.held[:2]
+            s.hold(t_hold, p_hold, tau, L_rotor)
+            return
+        s.hold(t, s.spins(t, y) if p is None else p, tau, L_rotor)
 
     def held(self, y0: np.ndarray, y1: np.ndarray) -> float:
         """The work of the friction moments held in the last smooth step from y0 to y1 (J)."""
@@ -144,78 +170,120 @@ class CoulombStepping:
         n = max(1, math.ceil(span / self.h - STEP_COUNT_SLACK))
         h = span / n
         y = np.array(y0, dtype=float)
-        base = self._zero_tau if hinge_tau is None else np.asarray(hinge_tau, dtype=float)
-        kept = (self.work, self.held_work, self.torque, self.applied, self._holding, self.impulse_steps)
+        base = (self._zero_tau if hinge_tau is None else np.asarray(hinge_tau, dtype=float),
+                self._zero_L if L_rotor is None else np.asarray(L_rotor, dtype=float))
+        kept = (self.work, self.held_work, self.torque, self.applied, self._holding, self._rest, self.impulse_steps)
         try:
-            return self._steps(t0, t1, n, h, y, base, L_rotor)
+            return self._steps(t0, t1, n, h, y, base)
         except BaseException:  # the caller keeps its state: so does the friction's account
-            self.work, self.held_work, self.torque, self.applied, self._holding, self.impulse_steps = kept
+            self.work, self.held_work, self.torque, self.applied, self._holding, self._rest, self.impulse_steps = kept
             raise
 
-    def _steps(self, t0: float, t1: float, n: int, h: float, y: np.ndarray, base: np.ndarray, L_rotor) -> np.ndarray:
+    def _steps(self, t0: float, t1: float, n: int, h: float, y: np.ndarray, base: tuple) -> np.ndarray:
         """`advance`'s n steps of size h from (t0, y) (y is advanced in place or replaced)."""
         held_torque = None
+        v0 = self.speeds(t0, y)
         for k in range(n):
             t = t0 + k * h
             t_end = t1 if k == n - 1 else t0 + (k + 1) * h
-            v0 = y[self.vel]
+            v0 = np.where(self._rest, 0.0, v0)  # at rest: a rotor's kappa' to round-off
             torque = np.where(v0 != 0.0, -self.mu * np.sign(v0), self._holding)
             if held_torque is None or not np.array_equal(torque, held_torque):
-                tau = base.copy()
-                tau[self.axes] += torque
-                t_hold, p_hold = self.system.held[:2]  # the hold's start and spins stay
-                self.system.hold(t_hold, p_hold, tau, L_rotor)
+                self._hold(t, y, *self._with(base, torque))
                 held_torque = torque
             self.torque = torque
             y_plus = self.integrator.advance(t, y, t_end)
-            v_plus = y_plus[self.vel]
+            v_plus = self.speeds(t_end, y_plus)
             self.held_work += self.held(y, y_plus)
             if np.all(np.sign(v_plus) == np.sign(v0)):
                 # every axis slipped the whole step one way, or stayed exactly at rest: exact
                 self.work += self.held(y, y_plus)
                 self.applied = torque
-                y = y_plus
+                self._rest = v_plus == 0.0
+                y, v0 = y_plus, v_plus
                 continue
-            y = self._impulses(t_end, y, y_plus, h, torque, v0)
+            y = self._impulses(t_end, y, y_plus, h, torque, v0, self._with(base, torque))
+            v0 = self.speeds(t_end, y)
         return y
 
+    def _with(self, base: tuple, torque: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The commands `base` (hinge moments, rotor torques) with the friction moments added."""
+        tau, L = base[0].copy(), base[1].copy()
+        tau[self.axes] += torque[:self.nh]
+        L[self.rotors] += torque[self.nh:]
+        return tau, L
+
     def _responses(self, t: float, y: np.ndarray) -> None:
-        """self._response (N, nf) at (t, y) and self._ydot = y' with the moments held."""
-        s = self.system
-        if self._compiled:
+        """self._response (N, nf) at (t, y): the generalised accelerations' responses to a unit
+        moment on each friction axis; and self._ydot = y' with the moments held."""
+        s, m = self.system, self.model
+        if self._compiled:  # the hinges' in one compiled call
             self._direct(float(t), y, self.cols, self.i_vel, self._response, self._ydot, *s.kernel_arguments())
-            s.nfev += len(self.axes) + 1
-            return
-        m, held = self.model, s.held
-        self._ydot[:] = s.rhs(t, y)
-        for j, axis in enumerate(self.axes):
-            tau = held[2].copy()
-            tau[axis] += 1.0
-            s.hold(held[0], held[1], tau, held[3])
+            s.nfev += self.nh + 1
+        else:
+            self._ydot[:] = s.rhs(t, y)
+        held = s.held
+        for j in range(len(self.mu)):
+            if j < self.nh and self._compiled:
+                continue
+            tau, L = held[2].copy(), (self._zero_L if held[3] is None else held[3]).copy()
+            if j < self.nh:
+                tau[self.axes[j]] += 1.0
+                s.hold(held[0], held[1], tau, held[3])
+            else:  # a rotor's torque changes its spin's rate: held from t, its spin at t kept
+                L[self.rotors[j - self.nh]] += 1.0
+                s.hold(t, s.spins(t, y), tau, L)
             self._response[:, j] = s.rhs(t, y)[m.i_vel] - self._ydot[m.i_vel]
-        s.hold(*held)
+        if len(self.rotors) or not self._compiled:
+            s.hold(*held)
+
+    def _delassus(self, t: float, y: np.ndarray) -> np.ndarray:
+        """W (nf, nf): the friction axes' speed changes per unit impulse on each, at (t, y):
+        a hinge's phi' by the responses; a rotor's kappa_i' = p_i - omega . e_i by its spin (1 / A_i
+        of its own impulse) and its carrier's angular velocity (the change of kappa_i' at the
+        velocities moved by each response: one evaluation each)."""
+        R = self._response
+        W = np.empty((len(self.mu), len(self.mu)))
+        W[:self.nh] = R[self.cols]
+        if len(self.rotors):
+            moved = np.array(y)
+            u = moved[self.i_vel:self.i_vel + self.model.N]
+            for j in range(len(self.mu)):
+                u[:] = y[self.i_vel:self.i_vel + self.model.N] + R[:, j]
+                W[self.nh:, j] = self.system.rhs(t, moved)[self.i_kappa] - self._ydot[self.i_kappa]
+            W[self.nh:, self.nh:] += np.diag(self.inv_A)
+        return 0.5 * (W + W.T)
 
     def _impulses(self, t: float, y0: np.ndarray, y: np.ndarray, h: float, torque: np.ndarray,
-                  v0: np.ndarray) -> np.ndarray:
-        """The step's friction impulses solved at (t, y), the smooth step's end from y0; the
-        corrected state (a new array, or y itself)."""
+                  v0: np.ndarray, held_inputs: tuple) -> np.ndarray:
+        """The step's friction impulses solved at (t, y), the smooth step's end from y0 (with
+        the moments `held_inputs` held over it); the corrected state (a new array)."""
         self.impulse_steps += 1
+        m = self.model
         y = np.ascontiguousarray(y)
         self._responses(t, y)
+        W = self._delassus(t, y)
         R = self._response
-        W = R[self.cols]
-        W = 0.5 * (W + W.T)
+        v = np.concatenate((y[self.vel], self._ydot[self.i_kappa]))
         held = h * torque
-        b = y[self.vel] - W @ held
-        guess = np.where(v0 == 0.0, 0, np.where(y[self.vel] > 0.0, -1, 1)).astype(np.int64)
+        b = v - W @ held
+        guess = np.where(v0 == 0.0, 0, np.where(v > 0.0, -1, 1)).astype(np.int64)
         lam, stuck = box_lcp(W, b, h * self.mu, guess)
         self._holding = np.where(stuck, lam / h, 0.0)
+        self._rest = stuck
         self.applied = lam / h
-        du = R @ (lam - held)
+        impulse = lam - held
+        du = R @ impulse
         out = y.copy()
-        out[self.i_vel:self.i_vel + self.model.N] += du
-        out[self.vel[stuck]] = 0.0
-        m = self.model
+        out[self.i_vel:self.i_vel + m.N] += du
+        out[self.vel[stuck[:self.nh]]] = 0.0
+        if len(self.rotors):  # the rotors' spins take their impulses (A_i dp_i = impulse)
+            p = self.system.spins(t, y).copy()
+            p[self.rotors] += impulse[self.nh:] * self.inv_A
+            if m.stateful:
+                out[m.i_spin] = p
+            else:
+                self._hold(t, out, *held_inputs, p=p)
         if len(m.hinge_bodies):
             out[m.i_phi] += 0.5 * h * du[m.col_hinge]
         if self._others.size:  # the other positions by the change of their rates over half a step
