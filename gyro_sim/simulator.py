@@ -120,7 +120,7 @@ class Simulator:
         from gyro_sim.dynamics.backends import CompiledOutputs, NumpyOutputs
 
         outputs = CompiledOutputs if self.system.backend == "numba" and not m.stateful else NumpyOutputs
-        self._coulomb = None  # the hinges' exact Coulomb friction, stepped (gyro_sim.integrators.coulomb.driver)
+        self._coulomb = None  # exact Coulomb friction of hinges and rotors (gyro_sim.integrators.coulomb.driver)
         if m.actuators is not None and m.actuators.exact:
             from gyro_sim.integrators.coulomb.driver import CoulombStepping
 
@@ -302,7 +302,7 @@ class Simulator:
         return hinge_tau, L_rotor
 
     def _inputs_with_friction(self):
-        """The held inputs of the commands (`_inputs`) with the hinges' exact Coulomb friction
+        """The held inputs of the commands (`_inputs`) with the exact Coulomb friction of hinges and rotors
         moments of the last step added (their mean over it): what the outputs (effort,
         accelerations, reactions, IMUs) see."""
         hinge_tau, L_rotor = self._inputs()
@@ -409,7 +409,7 @@ class Simulator:
     def friction_work(self) -> float:
         """Work done by friction since the last reset (J, <= 0: the energy dissipated), the
         integral of friction torque x relative speed; 0 without friction."""
-        exact = 0.0 if self._coulomb is None else self._coulomb.work  # the hinges' exact Coulomb friction
+        exact = 0.0 if self._coulomb is None else self._coulomb.work  # the exact Coulomb friction of hinges and rotors
         return (float(self._y[self.model.i_work][1]) if self.model.stateful else 0.0) + exact
 
     @property

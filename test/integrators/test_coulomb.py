@@ -1,4 +1,4 @@
-"""Exact Coulomb friction of hinges (gyro_sim.integrators.coulomb.driver) against closed forms: stick and
+"""Exact Coulomb friction of hinges and rotors (gyro_sim.integrators.coulomb.driver) against closed forms: stick and
 slip are exact in the hard-friction limit, the energy dissipated is the friction's work; the
 regularised law stays where a scene asks for it."""
 from __future__ import annotations

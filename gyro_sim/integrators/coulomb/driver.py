@@ -1,19 +1,20 @@
-"""Exact Coulomb friction of hinges: stick and slip by time-stepping (docs/integrators.md,
-"Coulomb friction: stick and slip").
+"""Exact Coulomb friction of hinges and torque rotors: stick and slip by time-stepping
+(docs/integrators.md, "Coulomb friction: stick and slip").
 
-A hinge whose friction is `exact` (:attr:`gyro_sim.scene.records.Friction.exact`: a `coulomb`
+An axis whose friction is `exact` (:attr:`gyro_sim.scene.records.Friction.exact`: a `coulomb`
 with neither `stick_speed` nor a Stribeck term written; MJCF `frictionloss`, URDF `<dynamics
-friction>`) has a friction torque tau_f in [-mu, mu] that opposes the slip phi' while the
-joint slips (tau_f = -mu sgn phi') and holds it while it sticks (phi' = 0, |tau_f| <= mu). It is
-not a function of the state, and the regularised law (linear below `stick_speed`) makes the
-ODE as stiff as mu / (I stick_speed). Here it is solved per step of size h (the Simulator's
-`step`), as the time-stepping schemes of MuJoCo and Drake do, on the velocity level:
+friction>`) has a friction torque tau_f in [-mu, mu] that opposes its slip w (a hinge's phi', a
+rotor's spin relative to its carrier kappa_i', eqs 18-19) while it slips (tau_f = -mu sgn w)
+and holds it while it sticks (w = 0, |tau_f| <= mu). It is not a function of the state, and the
+regularised law (linear below `stick_speed`) makes the ODE as stiff as mu / (I stick_speed).
+Here it is solved per step of size h (the Simulator's `step`), as the time-stepping schemes of
+MuJoCo and Drake do, on the velocity level:
 
 1. the integrator the user chose advances the smooth motion over [t, t + h] with each axis's
-   friction held as a constant moment: -mu sgn(phi'(t)) where the axis slips at t; where it is
-   at rest (phi'(t) = 0), the moment that held it in the last step. While every slipping axis
-   keeps its sign over the step and every axis at rest stays exactly at rest, that is the exact
-   motion (to the integrator's tolerance) and the step is kept as it is;
+   friction held as a constant moment (a hinge moment, a rotor torque): -mu sgn(w(t)) where the
+   axis slips at t; where the last step left it at rest, the moment that held it then. While
+   every slipping axis keeps its sign over the step and every axis at rest stays exactly at
+   rest, that is the exact motion (to the integrator's tolerance) and the step is kept as it is;
 2. otherwise (an axis at rest, or one whose speed crossed zero) the friction impulses
    lambda (the step's mean friction moment times h) are solved at t + h from the box-constrained
    linear complementarity problem
@@ -21,10 +22,12 @@ ODE as stiff as mu / (I stick_speed). Here it is solved per step of size h (the 
    with b the axes' speeds without friction over the step (the smooth step's speeds minus
    W h tau_f held) and W = (M^-1)_FF the joint-space inverse mass of the friction axes, found as
    the responses of the accelerations to unit moments on the axes (one rhs evaluation each:
-   the accelerations are affine in the moments). An axis whose bound holds sticks (v_i = 0,
+   the accelerations are affine in the moments; a rotor's row adds its own spin's 1 / A_i and
+   its carrier's response along its axis). An axis whose bound holds sticks (v_i = 0,
    exactly); the others slip against +-h mu_i. The velocities take the change
-   M^-1 (lambda - h tau_f), the positions half a step of it (exact for a constant moment over
-   the step), and an axis at rest throughout keeps its angle exactly.
+   M^-1 (lambda - h tau_f) (a rotor's spin its impulse / A_i), the positions half a step of it
+   (exact for a constant moment over the step), and an axis at rest throughout keeps its angle
+   exactly.
 
 So a slip is exact to the integrator's tolerance, the moment of sticking is found to within one
 step, and a stuck axis stays at rest exactly while |required moment| <= mu. The impulse step is
@@ -85,7 +88,7 @@ def box_lcp(W: np.ndarray, b: np.ndarray, c: np.ndarray, state: np.ndarray) -> t
 
 
 class CoulombStepping:
-    """Advances a Simulator's state with its hinges' exact Coulomb friction (the module's scheme)
+    """Advances a Simulator's state with the exact Coulomb friction of its hinges and rotors (the module's scheme)
     by steps of at most `step`, the smooth motion between by `integrator` on `system`.
 
     Attributes: `work` (J), the work of the exact friction since the reset; `held_work`, the part
