@@ -10,7 +10,8 @@ process and ROS domain of its own): its achieved real-time factor and step time 
 its `stats_file`.
 
 Each run: a Simulator of the model at its initial state (no command: the arm falls under
-gravity, its joints sticking and slipping), one step taken first (compiles or loads the kernels:
+gravity, its joints sticking and slipping; with `--push`, a moment on every axis over the first
+PUSH_SECONDS, then none), one step taken first (compiles or loads the kernels:
 not counted), then `Simulator.advance(STEP)` called until the duration, as the node calls it.
 Evaluations are counted by the system (`nfev`, the friction's impulse steps included) and do
 not depend on the machine; CPU is the process's time. The regularised law is run for
@@ -33,6 +34,8 @@ DURATIONS = (1.0,)
 QUICK_DURATIONS = (0.2,)
 REGULARISED_DURATION = 0.01
 NODE_SECONDS = 10.0
+#: `--push`: how long the moment is held (simulated s)
+PUSH_SECONDS = 0.1
 #: the vendored public models, where the package runs from its repository (test/scene/models)
 MODELS = ("robosuite/xarm7.xml", "robosuite/jaco.xml", "example_robot_data/z1.urdf")
 
@@ -62,6 +65,9 @@ def register(sub, bench) -> None:
                    help="also the friction as the regularised law (stick_speed 1e-4), over --regularised-duration")
     p.add_argument("--regularised-duration", type=float, default=REGULARISED_DURATION, metavar="S",
                    help=f"simulated seconds of a regularised run (default {REGULARISED_DURATION:g})")
+    p.add_argument("--push", type=float, default=0.0, metavar="NM",
+                   help=f"a moment on every axis over the first {PUSH_SECONDS:g} s, then none (default 0: "
+                        "the arm as it starts)")
     p.add_argument("--node", action="store_true",
                    help="also each model in the node (fixed, 1 kHz): its real-time factor")
     p.add_argument("--node-seconds", type=float, default=NODE_SECONDS, metavar="S",
@@ -88,17 +94,21 @@ def regularised(scene):
     return dataclasses.replace(scene, bodies=bodies)
 
 
-def measure(scene, integrator: str, duration: float) -> dict:
-    """One run (see the module): evaluations and CPU seconds per simulated second."""
+def measure(scene, integrator: str, duration: float, push: float = 0.0) -> dict:
+    """One run (see the module): evaluations and CPU seconds per simulated second; `push` N m on
+    every axis over the first PUSH_SECONDS."""
     from gyro_sim.simulator import SimulationError, Simulator
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # auto's switches: the figures say what they cost
         sim = Simulator(scene, integrator=integrator, step=STEP)
+        sim.set_axis_moments([push] * len(sim.axis_names))
         sim.advance(STEP)
         nfev, cpu = sim.system.nfev, time.process_time()
         failed = None
         for _ in range(round(duration / STEP)):
+            if push and sim.time >= PUSH_SECONDS and sim.axis_moments.any():
+                sim.set_axis_moments([0.0] * len(sim.axis_names))
             try:
                 sim.advance(STEP)
             except SimulationError as exc:  # a method unstable on the scene: said, not counted
@@ -166,15 +176,16 @@ def cmd_bench_friction(args) -> int:
         for integrator in args.integrators:
             for duration in durations:
                 rows.append({"model": name, "law": "exact", "integrator": integrator,
-                             **measure(scene, integrator, duration)})
+                             **measure(scene, integrator, duration, args.push)})
                 print(_row(rows[-1]), flush=True)
             if args.regularised:
                 rows.append({"model": name, "law": "regularised", "integrator": integrator,
-                             **measure(regularised(scene), integrator, args.regularised_duration)})
+                             **measure(regularised(scene), integrator, args.regularised_duration, args.push)})
                 print(_row(rows[-1]), flush=True)
     md = ("# Robots with dry joint friction\n\n"
           f"{time.strftime('%Y-%m-%d')}, `gyro-sim bench friction` "
-          f"(durations {' '.join(f'{d:g}' for d in durations)} s): "
+          f"(durations {' '.join(f'{d:g}' for d in durations)} s"
+          + (f", {args.push:g} N m on every axis for the first {PUSH_SECONDS:g} s" if args.push else "") + "): "
           "evaluations of y' and CPU seconds of the process per simulated second, `Simulator.advance"
           f"({STEP:g})` as the node calls it.\n\n" + table(rows) + "\n")
     runs = {}
