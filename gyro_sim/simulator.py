@@ -116,6 +116,11 @@ class Simulator:
             raise ActuatorError(f"{m.actuators.terms[0]}: integrator {integrator!r} does not take speed-dependent "
                              f"actuator terms (friction, max_speed); use one of {', '.join(STATEFUL_INTEGRATORS)}")
         self._joint_layout()
+        self._coulomb = None  # exact Coulomb friction of hinges and rotors (gyro_sim.integrators.coulomb.driver)
+        if m.actuators is not None and m.actuators.exact:
+            from gyro_sim.integrators.coulomb.driver import CoulombStepping
+
+            self._coulomb = CoulombStepping(m, self.system, self.integrator, step)
         self._watched = self._watched_energy()
         self._bind_backend()
         self._imus = None  # the IMUs (gyro_sim.dynamics.imu.ImuSet), when the scene has some
@@ -125,15 +130,19 @@ class Simulator:
             self._imus = ImuSet(scene, {b.name: k for k, b in enumerate(scene.bodies)}, scene.gravity,
                                 DEFAULT_IMU_RATE)
         self.reset()
+        if self._coulomb is not None:
+            self._coulomb.warm_up(self._t, self._y, *self._inputs(), self._p)
 
     def _bind_backend(self) -> None:
         """The outputs of the system's backend, and the "fixed" integrator's energy watchdog."""
         from gyro_sim.dynamics.backends import CompiledOutputs, NumpyOutputs
 
         # every output of a state from one compiled call on the numba backend (a stateful model's
-        # applied torques too), from the numpy reference on the numpy backend
+        # applied torques too), from the numpy reference on the numpy backend; its inputs: the
+        # commands, and the exact friction's mean moment over the last step
         outputs = CompiledOutputs if self.system.backend == "numba" else NumpyOutputs
-        self._outputs = outputs(self.model, self.system, self._joint_index, self._inputs)
+        self._outputs = outputs(self.model, self.system, self._joint_index,
+                                self._inputs if self._coulomb is None else self._inputs_with_friction)
         self._watch_last = None
         if self._watched is not None and getattr(self.integrator, "monitor", False) is None:
             self.integrator.monitor = self._energy_error  # "fixed": its energy watchdog
@@ -151,6 +160,8 @@ class Simulator:
 
         self.system = make_system(self.model, backend)
         self.integrator = make_integrator(self.integrator_name, self.system, **self._integrator_options)
+        if self._coulomb is not None:
+            self._coulomb.bind(self.system, self.integrator)
         self._bind_backend()
         self._outputs.moved(self._t, self._y, self._p, self._moments)
 
@@ -189,6 +200,8 @@ class Simulator:
         moving = len(self._axis_angle) and np.any(self._moments)
         if self.model.stateful:  # the applied torques' work is a state: the motors', friction's
             moving = True
+        held = self._coulomb is not None and np.any(self._coulomb.torque)  # exact friction's held moments
+        moving = moving or held
         if self._watched is None or (moving and self._balanced != "energy"):
             return 0.0
         if self.model.stateful:
@@ -196,7 +209,8 @@ class Simulator:
             work = float(np.sum(y1[w] - y0[w]))
         else:
             i = self._axis_angle
-            work = float(self._inputs_moments() @ (y1[i] - y0[i])) if moving else 0.0
+            work = float(self._inputs_moments() @ (y1[i] - y0[i])) if len(i) and np.any(self._moments) else 0.0
+            work += self._coulomb.held(y0, y1) if held else 0.0
         from gyro_sim.dynamics.outputs import INV_KINETIC
 
         last = self._watch_last  # the previous call's end is usually this one's start
@@ -252,6 +266,8 @@ class Simulator:
         self._outputs.moved(self._t, self._y, self._p, self._moments)
         self._watch_last = None
         self.integrator.reset()
+        if self._coulomb is not None:
+            self._coulomb.reset()
         self._work = 0.0
         self._reference = None  # invariants of the reset state (taken by the first advance or snapshot)
         if self._imus is not None:
@@ -308,6 +324,19 @@ class Simulator:
                 L_rotor[m.axis_rotor[sel]] = v[sel]
         return hinge_tau, L_rotor
 
+    def _inputs_with_friction(self):
+        """The held inputs of the commands (`_inputs`) with the exact Coulomb friction of hinges and rotors
+        moments of the last step added (their mean over it): what the outputs (effort,
+        accelerations, reactions, IMUs) see."""
+        hinge_tau, L_rotor = self._inputs()
+        m, c = self.model, self._coulomb
+        hinge_tau = np.zeros(len(m.hinge_bodies)) if hinge_tau is None else hinge_tau.copy()
+        hinge_tau[c.axes] += c.applied[:c.nh]
+        if len(c.rotors):
+            L_rotor = np.zeros(len(m.torque_body)) if L_rotor is None else L_rotor.copy()
+            L_rotor[c.rotors] += c.applied[c.nh:]
+        return hinge_tau, L_rotor
+
     def held_rhs(self):
         """The right-hand side f(t, y) -> (size,) of the chain with the inputs now in force held,
         as `advance` holds them: for an analysis at the current state (the method choice of the
@@ -327,7 +356,10 @@ class Simulator:
         hinge_tau, L_rotor = self._inputs()
         self.system.hold(self._t, self._p, hinge_tau, L_rotor)
         try:
-            y = self.integrator.advance(self._t, self._y, self._t + dt)
+            if self._coulomb is not None:  # the smooth motion between the friction's stick/slip steps
+                y = self._coulomb.advance(self._t, self._y, self._t + dt, hinge_tau, L_rotor)
+            else:
+                y = self.integrator.advance(self._t, self._y, self._t + dt)
         except (FloatingPointError, np.linalg.LinAlgError, ArithmeticError) as exc:
             self.integrator.reset()  # its step-size memory is meaningless after a failure
             raise SimulationError(f"t = {self._t:.6g} s: {exc}; state kept at t = {self._t:.6g} s") from exc
@@ -336,14 +368,15 @@ class Simulator:
             raise SimulationError(f"t = {self._t:.6g} s: the state became non-finite; "
                                   f"state kept at t = {self._t:.6g} s")
         if self.model.stateful:  # the works are states, integrated with the motion
-            self._work = float(y[self.model.i_work][0])
+            self._work = float(y[self.model.i_work][0]) - (0.0 if self._coulomb is None else self._coulomb.held_work)
         elif len(self._axis_angle) and np.any(self._moments):
             i = self._axis_angle
             self._work += float(self._inputs_moments() @ (y[i] - self._y[i]))
         self._p = self.system.spins(self._t + dt, y)
         self._t += dt
         self._y = y
-        self._outputs.moved(self._t, self._y, self._p, self._moments)
+        # with exact friction a new moments object: the outputs hold the friction's new moments
+        self._outputs.moved(self._t, self._y, self._p, self._moments if self._coulomb is None else self._moments.copy())
 
     # --- outputs (computed on request only) ------------------------------------------------
     # Every output comes from the backend the Simulator holds (gyro_sim.dynamics.backends): on
@@ -399,7 +432,8 @@ class Simulator:
     def friction_work(self) -> float:
         """Work done by friction since the last reset (J, <= 0: the energy dissipated), the
         integral of friction torque x relative speed; 0 without friction."""
-        return float(self._y[self.model.i_work][1]) if self.model.stateful else 0.0
+        exact = 0.0 if self._coulomb is None else self._coulomb.work  # the exact Coulomb friction of hinges and rotors
+        return (float(self._y[self.model.i_work][1]) if self.model.stateful else 0.0) + exact
 
     @property
     def saturated_commands(self) -> int:

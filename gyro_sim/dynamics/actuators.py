@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gyro_sim.errors import GyroSimError
-from gyro_sim.scene.records import Limits
+from gyro_sim.scene.records import DEFAULT_STICK_SPEED, Limits
 
 class ActuatorError(GyroSimError, ValueError):
     """A scene's actuator terms that the method asked for does not take (one line naming the
@@ -65,13 +65,18 @@ class AxisLimits:
     stribeck_speed: np.ndarray
     stick_speed: np.ndarray
     saturates: bool  # some max_torque is finite
-    speed_dependent: bool  # some friction or max_speed
+    speed_dependent: bool  # some friction in F, or max_speed
+    exact: np.ndarray | None = None  # (n,) bounds of exact Coulomb friction; None: no axis has one
 
     @classmethod
-    def of(cls, limits: list[Limits | None]) -> "AxisLimits":
+    def of(cls, limits: list[Limits | None], exact: bool = False) -> "AxisLimits":
+        """The arrays of `limits`; with `exact` a friction that is `Friction.exact` puts its
+        coulomb in `exact` instead of F."""
         n = len(limits)
         a = {k: np.zeros(n) for k in ("coulomb", "viscous", "static", "stribeck_speed")}
         max_torque, max_speed, stick = np.full(n, np.inf), np.full(n, np.inf), np.ones(n)
+        bound = np.zeros(n)
+        dependent = False
         for i, lim in enumerate(limits):
             if lim is None:
                 continue
@@ -80,13 +85,20 @@ class AxisLimits:
             if lim.max_speed is not None:
                 max_speed[i] = lim.max_speed
             f = lim.friction
+            dependent = dependent or lim.max_speed is not None
             if f is not None:
-                a["coulomb"][i], a["viscous"][i], stick[i] = f.coulomb, f.viscous, f.stick_speed
+                a["coulomb"][i], a["viscous"][i] = f.coulomb, f.viscous
+                stick[i] = DEFAULT_STICK_SPEED if f.stick_speed is None else f.stick_speed
                 if f.stribeck_speed is not None:
                     a["static"][i], a["stribeck_speed"][i] = f.static, f.stribeck_speed
+                if exact and f.exact:  # what stays in F: the viscous part
+                    bound[i], a["coulomb"][i] = f.coulomb, 0.0
+                    dependent = dependent or f.viscous > 0.0
+                else:
+                    dependent = True
         return cls(max_torque=max_torque, max_speed=max_speed, stick_speed=stick,
-                   saturates=bool(np.any(np.isfinite(max_torque))),
-                   speed_dependent=any(lim is not None and lim.speed_dependent for lim in limits), **a)
+                   saturates=bool(np.any(np.isfinite(max_torque))), speed_dependent=dependent,
+                   exact=bound if np.any(bound) else None, **a)
 
     def saturate(self, command: np.ndarray) -> np.ndarray:
         """The commands clipped to +-max_torque (a new array)."""
@@ -134,3 +146,8 @@ class Actuators:
     def speed_dependent(self) -> bool:
         """Whether any applied torque depends on the state (friction, max_speed)."""
         return self.rotor.speed_dependent or self.hinge.speed_dependent
+
+    @property
+    def exact(self) -> bool:
+        """Whether some hinge or torque rotor has exact Coulomb friction (`AxisLimits.exact`)."""
+        return self.hinge.exact is not None or self.rotor.exact is not None

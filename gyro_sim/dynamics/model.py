@@ -276,7 +276,7 @@ def _actuators(scene: Scene) -> Actuators | None:
                         terms.append(f"{r.name}.{key}")
     if all(lim is None for lim in rotor + hinge):
         return None
-    return Actuators(AxisLimits.of(rotor), AxisLimits.of(hinge), tuple(terms))
+    return Actuators(AxisLimits.of(rotor, exact=True), AxisLimits.of(hinge, exact=True), tuple(terms))
 
 
 def initial_state(model: Model) -> np.ndarray:

@@ -96,6 +96,11 @@ class ChainODE:
             self.inputs_version += 1
         self.t0, self.p0, self.hinge_tau, self.L_rotor = t0, p0, hinge_tau, L_rotor
 
+    @property
+    def held(self) -> tuple:
+        """The arguments of the last `hold`: (t0, p0, hinge_tau, L_rotor)."""
+        return self.t0, self.p0, self.hinge_tau, self.L_rotor
+
     def spins(self, t: float, y: np.ndarray | None = None) -> np.ndarray | None:
         """Absolute torque-rotor spins p_i(t) (eq 29 integrated over the hold); in a stateful
         model (`Model.stateful`) they are states: those of y (the held p0 without y)."""
@@ -194,6 +199,11 @@ class FastChainODE:
     def inputs_version(self) -> int:
         """Counts the holds whose commanded values differ from the last (ChainODE's)."""
         return self._ref.inputs_version
+
+    @property
+    def held(self) -> tuple:
+        """The arguments of the last `hold`: (t0, p0, hinge_tau, L_rotor) (ChainODE's)."""
+        return self._ref.held
 
     def kernel_arguments(self) -> tuple:
         """The arguments of :func:`gyro_sim.dynamics.kernel.rhs_kernel` after (t, y, out): its

@@ -47,7 +47,7 @@ from gyro_sim.errors import GyroSimError
 from gyro_sim.scene.mjcf import ModelError, import_model, is_model_path
 from gyro_sim.scene.names import name_problem, topic_token
 from gyro_sim.scene.records import (
-    BASE_TYPES, DEFAULT_STICK_SPEED, JOINT_TYPES, ROTOR_MODES, Base, Body, Friction, Imu, Initial, Joint,
+    BASE_TYPES, JOINT_TYPES, ROTOR_MODES, Base, Body, Friction, Imu, Initial, Joint,
     Limits, Rotor, Scene, Spring,
 )
 
@@ -836,7 +836,7 @@ def _friction(ch: _Checker, value: Any, path: str) -> Friction | None:
     viscous = ch.scalar(friction, "viscous", path, default=0.0, minimum=0.0)
     static = ch.scalar(friction, "static", path, default=None, minimum=0.0)
     stribeck = ch.scalar(friction, "stribeck_speed", path, default=None, minimum=0.0, strict=True)
-    stick = ch.scalar(friction, "stick_speed", path, default=DEFAULT_STICK_SPEED, minimum=0.0, strict=True)
+    stick = ch.scalar(friction, "stick_speed", path, default=None, minimum=0.0, strict=True)
     if (friction.get("static") is None) != (friction.get("stribeck_speed") is None):
         given, missing = ("static", "stribeck_speed") if friction.get("static") is not None \
             else ("stribeck_speed", "static")
@@ -846,7 +846,7 @@ def _friction(ch: _Checker, value: Any, path: str) -> Friction | None:
         ch.fail(_at(path, "static"), f"must be >= coulomb ({coulomb:g}), the friction at speed "
                                      f"(got {static:g})")
         return None
-    if any(v is None for v in (coulomb, viscous, stick)):
+    if any(v is None for v in (coulomb, viscous)) or (friction.get("stick_speed") is not None and stick is None):
         return None
     return Friction(coulomb=coulomb, viscous=viscous, static=static, stribeck_speed=stribeck,
                     stick_speed=stick)

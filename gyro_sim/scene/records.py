@@ -31,13 +31,22 @@ class Friction:
            + coulomb tanh(10 w / b) + viscous w                    (b = stribeck_speed given)
     F(w) = coulomb sgn(w) + viscous w                              (otherwise)
     and F(w) = F(stick_speed) w / stick_speed for |w| < stick_speed; the torque is -F(w).
+
+    A friction with neither `stick_speed` nor the Stribeck term written is exact Coulomb friction
+    (`exact`): its viscous part stays in F, its coulomb is the bound of a stick/slip torque that
+    the time-stepping of :mod:`gyro_sim.integrators.coulomb.driver` solves.
     """
 
     coulomb: float = 0.0  # N m
     viscous: float = 0.0  # N m s/rad
     static: float | None = None  # N m, peak of the Stribeck term (with stribeck_speed)
     stribeck_speed: float | None = None  # rad/s
-    stick_speed: float = DEFAULT_STICK_SPEED  # rad/s
+    stick_speed: float | None = None  # rad/s; None: not written (DEFAULT_STICK_SPEED where regularised)
+
+    @property
+    def exact(self) -> bool:
+        """Whether its Coulomb part is exact (neither stick_speed nor Stribeck written)."""
+        return self.stick_speed is None and self.stribeck_speed is None and self.coulomb > 0.0
 
 
 @dataclass(frozen=True, eq=False)
