@@ -31,6 +31,7 @@ from oracles.tree_closed_forms import (
     PlanarTree,
     Segment,
     Spacecraft,
+    Wheel,
     bar,
     flapping_hub_offset,
     flapping_rate_squared,
@@ -187,3 +188,18 @@ def test_mrp_matrix_is_a_rotation_about_the_mrp_axis():
     K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
     rodrigues_NB = np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K  # rotates B's axes into N
     np.testing.assert_allclose(BN, rodrigues_NB.T, atol=1e-15)
+
+
+def test_a_balanced_wheel_adds_its_relative_spin():
+    """(c.1)'s wheel terms against the hub and the wheel as two rigid bodies: the carrier (the
+    hub less the locked wheel) turning at omega, the wheel at omega + Omega g."""
+    g, Js, Jt = np.array([0.0, 0.6, 0.8]), 0.05, 0.03
+    hub_inertia = np.array([[10.0, 0.3, -0.2], [0.3, 12.0, 0.1], [-0.2, 0.1, 8.0]])
+    sc = Spacecraft(100.0, tuple(map(tuple, hub_inertia)), (), (Wheel(tuple(g), Js),))
+    w, speed, sigma = np.array([0.1, -0.3, 0.2]), 40.0, np.array([0.1, 0.2, -0.3])
+    _, H, E = spacecraft_integrals(sc, np.zeros(3), np.zeros(3), sigma, w, (), (), (speed,))
+    wheel = Jt * np.eye(3) + (Js - Jt) * np.outer(g, g)
+    carrier, w_wheel = hub_inertia - wheel, w + speed * g
+    NB = mrp_dcm_BN(sigma).T
+    np.testing.assert_allclose(H, NB @ (carrier @ w + wheel @ w_wheel), rtol=1e-14)
+    np.testing.assert_allclose(E, 0.5 * w @ carrier @ w + 0.5 * w_wheel @ wheel @ w_wheel, rtol=1e-14)
