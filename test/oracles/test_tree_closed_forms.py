@@ -78,8 +78,8 @@ def test_antisymmetric_mode_is_one_pendulum_on_a_fixed_hinge(name):
     k = int(np.argmin(abs(w2 - omega_a ** 2)))
     shape = shapes[:, k] / shapes[1, k]
     np.testing.assert_allclose(shape, [0.0, 1.0, -1.0], atol=1e-8)
-    alone = PlanarTree((PlanarBody(p.mass, p.inertia - p.mass * p.com ** 2, (1,), (Segment(p.com, (1,), -np.pi / 2),)),),
-                       g=p.g)
+    one = PlanarBody(p.mass, p.inertia - p.mass * p.com ** 2, (1,), (Segment(p.com, (1,), -np.pi / 2),))
+    alone = PlanarTree((one,), g=p.g)
     np.testing.assert_allclose(omega_a, alone.frequencies(np.zeros(1))[0], rtol=1e-8)
     # the symmetric modes move the hub and both pendulums alike
     for j in set(range(3)) - {k}:
