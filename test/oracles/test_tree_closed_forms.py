@@ -26,7 +26,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # test/: the oracl
 from oracles.tree_closed_forms import (
     FreeHubPanels,
     HubPendulums,
-    Panel,
     PlanarBody,
     PlanarTree,
     Segment,
@@ -39,6 +38,7 @@ from oracles.tree_closed_forms import (
     hub_pendulum_frequencies,
     hub_pendulums_tree,
     mrp_dcm_BN,
+    planar_spacecraft,
     pinwheel_hub_angle,
     pinwheel_rate_squared,
     point_mass,
@@ -152,16 +152,6 @@ def test_flapping_deployment_follows_the_closed_form():
     energy = PANELS.stiffness * beta0 ** 2
     np.testing.assert_allclose(qd[:, 3] ** 2, flapping_rate_squared(beta, energy, PANELS), atol=1e-9)
     assert np.ptp(q[:, 1]) > 0.05
-
-
-def planar_spacecraft(p: FreeHubPanels, mirror: bool) -> Spacecraft:
-    """Part b's hub and panels in Basilisk's terms: the plane is x-y, hinge axes along z."""
-    inertia = ((p.inertia + 0.7, 0.0, 0.0), (0.0, p.inertia, 0.0), (0.0, 0.0, 2.1))  # only S's y axis counts
-    one = Panel(p.mass, inertia, p.com, p.stiffness, (p.hinge, 0.0, 0.0), ((-1, 0, 0), (0, 0, 1), (0, 1, 0)))
-    two_frame = ((1, 0, 0), (0, 0, -1), (0, 1, 0)) if mirror else ((1, 0, 0), (0, 0, 1), (0, -1, 0))
-    two = Panel(p.mass, inertia, p.com, p.stiffness, (-p.hinge, 0.0, 0.0), two_frame)
-    hub_inertia = ((5.0, 0.0, 0.0), (0.0, 6.0, 0.0), (0.0, 0.0, p.hub_inertia))
-    return Spacecraft(p.hub_mass, hub_inertia, (one, two), ())
 
 
 @pytest.mark.parametrize("mirror", [False, True], ids=["pinwheel", "flapping"])

@@ -483,3 +483,15 @@ def spacecraft_integrals(sc: Spacecraft, r_BN_N, v_BN_N, sigma_BN, omega_BN_B, t
         H = H + NB @ (wheel.Js * speed * g)
         E += wheel.Js * speed * (g @ w) + 0.5 * wheel.Js * speed * speed
     return P, H, float(E)
+
+
+def planar_spacecraft(p: FreeHubPanels, mirror: bool, beta0: float = 0.0) -> Spacecraft:
+    """Part b's hub and panels in Basilisk's terms (part c): the plane is B's x-y, the hinge axes
+    along z (the second panel's along -z if `mirror`), the hub's angle theta about z.
+    Panel i's Basilisk angle is beta_i; both start at rest at beta0."""
+    inertia = ((p.inertia + 0.7, 0.0, 0.0), (0.0, p.inertia, 0.0), (0.0, 0.0, 2.1))  # only S's y axis counts
+    one = Panel(p.mass, inertia, p.com, p.stiffness, (p.hinge, 0.0, 0.0), ((-1, 0, 0), (0, 0, 1), (0, 1, 0)), beta0)
+    two_frame = ((1, 0, 0), (0, 0, -1), (0, 1, 0)) if mirror else ((1, 0, 0), (0, 0, 1), (0, -1, 0))
+    two = Panel(p.mass, inertia, p.com, p.stiffness, (-p.hinge, 0.0, 0.0), two_frame, beta0)
+    hub_inertia = ((5.0, 0.0, 0.0), (0.0, 6.0, 0.0), (0.0, 0.0, p.hub_inertia))
+    return Spacecraft(p.hub_mass, hub_inertia, (one, two), ())
