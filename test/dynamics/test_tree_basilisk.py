@@ -7,7 +7,8 @@ test/oracles/tree_closed_forms.py: the case a tree of gyrostats will be compared
   from Basilisk's states, stay constant to Basilisk's RK4 accuracy, the residual shrinks as
   the fourth power of the step, and they are Basilisk's own totals to round-off.
 - The pinwheel deployment from rest (planar): the hub's angle follows (b.2) of the panels'
-  angle, the panels' rate (b.3).
+  angle, the panels' rate (b.3); the flapping one: the hub's offset follows (b.4), the
+  panels' rate (b.5).
 
 Runs where Basilisk (PyPI: bsk) is installed.
 """
@@ -29,6 +30,8 @@ from oracles.tree_closed_forms import (
     Panel,
     Spacecraft,
     Wheel,
+    flapping_hub_offset,
+    flapping_rate_squared,
     pinwheel_hub_angle,
     pinwheel_rate_squared,
     planar_spacecraft,
@@ -51,7 +54,7 @@ SPACECRAFT = Spacecraft(
                   theta=-0.2, theta_dot=-0.4)),
     wheels=(Wheel((1.0, 0.0, 0.0), 0.08, 300.0), Wheel((0.0, 1.0, 0.0), 0.08, -200.0),
             Wheel((0.0, 0.0, 1.0), 0.08, 100.0)),
-    sigma_BN=(0.1, -0.2, 0.05), omega_BN_B=(0.15, -0.3, 0.25), r_BN_N=(10.0, -5.0, 2.0), v_BN_N=(0.3, 0.1, -0.2))
+    sigma_BN=(0.1, -0.2, 0.05), omega_BN_B=(0.15, -0.3, 0.25), r_CN_N=(10.0, -5.0, 2.0), v_CN_N=(0.3, 0.1, -0.2))
 DURATION = 30.0
 
 
@@ -97,6 +100,24 @@ def test_pinwheel_deployment_turns_the_hub_as_the_closed_form_says():
     np.testing.assert_allclose(tr.omega_BN_B[:, :2], 0.0, atol=1e-12)
     hub_angle = 4 * np.arctan(tr.sigma_BN[:, 2])
     assert np.ptp(hub_angle) > 0.1
-    np.testing.assert_allclose(hub_angle, pinwheel_hub_angle(beta, beta0, PLANAR), atol=1e-9)
+    # measured at 5 ms: 3e-13 rad on the angle, 1.1e-10 on the rate squared (at 10 ms: 4.8e-12, 1.8e-9)
+    np.testing.assert_allclose(hub_angle, pinwheel_hub_angle(beta, beta0, PLANAR), atol=1e-11)
     rate2 = pinwheel_rate_squared(beta, PLANAR.stiffness * beta0 ** 2, PLANAR)
     np.testing.assert_allclose(tr.theta_dot[:, 0] ** 2, rate2, atol=1e-9)
+
+
+def test_flapping_deployment_moves_the_hub_as_the_closed_form_says():
+    beta0 = 1.1
+    tr = run(planar_spacecraft(PLANAR, mirror=True, beta0=beta0), 6.0, 0.005)
+    beta = tr.theta[:, 0]
+    assert np.ptp(beta) > 2.0
+    np.testing.assert_allclose(tr.theta[:, 1], beta, atol=1e-12)
+    np.testing.assert_allclose(tr.sigma_BN, 0.0, atol=1e-12)  # mirror images: no rotation
+    np.testing.assert_allclose(tr.r_BN_N[:, [0, 2]], 0.0, atol=1e-12)
+    assert np.ptp(tr.r_BN_N[:, 1]) > 0.1
+    # Basilisk starts the centre of mass at the origin, where the hub is with the panels at 0: (b.4)
+    np.testing.assert_allclose(tr.r_BN_N[0, 1], flapping_hub_offset(beta0, 0.0, PLANAR), rtol=1e-14)
+    # measured at 5 ms: 1.7e-13 m, 2.4e-13 on the rate squared
+    np.testing.assert_allclose(tr.r_BN_N[:, 1] - tr.r_BN_N[0, 1], flapping_hub_offset(beta, beta0, PLANAR), atol=1e-11)
+    rate2 = flapping_rate_squared(beta, PLANAR.stiffness * beta0 ** 2, PLANAR)
+    np.testing.assert_allclose(tr.theta_dot[:, 0] ** 2, rate2, atol=1e-11)

@@ -47,8 +47,8 @@ def run(sc: Spacecraft, duration: float, dt: float) -> Trajectory:
     hub.hub.mHub = sc.hub_mass
     hub.hub.r_BcB_B = [[0.0], [0.0], [0.0]]
     hub.hub.IHubPntBc_B = [list(row) for row in sc.hub_inertia]
-    hub.hub.r_CN_NInit = [[x] for x in sc.r_BN_N]
-    hub.hub.v_CN_NInit = [[x] for x in sc.v_BN_N]
+    hub.hub.r_CN_NInit = [[x] for x in sc.r_CN_N]
+    hub.hub.v_CN_NInit = [[x] for x in sc.v_CN_N]
     hub.hub.sigma_BNInit = [[x] for x in sc.sigma_BN]
     hub.hub.omega_BN_BInit = [[x] for x in sc.omega_BN_B]
     panels = []

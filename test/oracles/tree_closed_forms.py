@@ -437,7 +437,8 @@ class Wheel:
 @dataclass(frozen=True)
 class Spacecraft:
     """The hub (its centre of mass at B; inertia about it, the wheels included as if locked),
-    its panels and wheels, and the hub's initial state."""
+    its panels and wheels, and the initial state: the hub's attitude and rate, and the position
+    and velocity of the whole spacecraft's centre of mass C (Basilisk's r_CN_NInit, v_CN_NInit)."""
 
     hub_mass: float
     hub_inertia: tuple  # 3x3, about B, hub axes
@@ -445,8 +446,8 @@ class Spacecraft:
     wheels: tuple[Wheel, ...]
     sigma_BN: tuple = (0.0, 0.0, 0.0)
     omega_BN_B: tuple = (0.0, 0.0, 0.0)
-    r_BN_N: tuple = (0.0, 0.0, 0.0)
-    v_BN_N: tuple = (0.0, 0.0, 0.0)
+    r_CN_N: tuple = (0.0, 0.0, 0.0)  # the whole spacecraft's centre of mass, as Basilisk starts it
+    v_CN_N: tuple = (0.0, 0.0, 0.0)
 
 
 def mrp_dcm_BN(sigma) -> np.ndarray:
