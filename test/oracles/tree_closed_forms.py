@@ -413,7 +413,9 @@ def free_hub_tree(p: FreeHubPanels, mirror: bool) -> PlanarTree:
 
 @dataclass(frozen=True)
 class Panel:
-    """A hinged rigid panel in Basilisk's terms (hingedRigidBodyStateEffector)."""
+    """A hinged rigid panel in Basilisk's terms (hingedRigidBodyStateEffector). S must be a
+    principal frame of the panel: Basilisk's hinge equation keeps IPntS_S's diagonal only, so
+    with products of inertia its motion does not conserve (c.1)."""
 
     mass: float
     inertia: tuple  # IPntS_S, 3x3 about its centre of mass, S axes
