@@ -320,7 +320,10 @@ def run_violent_node(workdir: Path, seconds: float = VIOLENT_SECONDS, case: Viol
     timeout = REPEAT_TIMEOUT if case.repeated else case.push
     params = [f"scene:={case.scene}", f"physics_rate:={PHYSICS_RATE}", f"publish_rate:={PUBLISH_RATE}",
               "real_time_factor:=1.0", "integrator:=fixed", f"duration:={seconds}", f"command_timeout:={timeout}",
-              f"stats_file:={stats}", f"thread_priority:={priority}"]
+              f"stats_file:={stats}", f"thread_priority:={priority}",
+              # the node's time starts with the command: a command lost before the subscription
+              # matched, and sent again, finds the scene where the case starts, however loaded
+              "hold:=until_command"]
     if record is not None:
         params.append(f"record:={record}")
     cmd = [*node_command, "--ros-args"]
