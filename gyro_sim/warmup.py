@@ -92,7 +92,8 @@ KERNEL_MODULES = ("gyro_sim.dynamics.kernel", "gyro_sim.dynamics.entry",
                   "gyro_sim.dynamics.canonical_kernel",
                   "gyro_sim.integrators.dop853.kernels", "gyro_sim.integrators.dop853.loop",
                   "gyro_sim.integrators.lie4.kernels", "gyro_sim.integrators.lie4.loop",
-                  "gyro_sim.integrators.radau.kernels", "gyro_sim.integrators.radau.loop")
+                  "gyro_sim.integrators.radau.kernels", "gyro_sim.integrators.radau.loop",
+                  "gyro_sim.integrators.coulomb.kernels")
 #: the kernels compiled as C functions (numba.cfunc: no dispatcher), (module, function): the
 #: dynamics, the canonical field, the heavy-subtree path
 C_KERNEL, C_CANONICAL, C_HEAVY = (("gyro_sim.dynamics.kernel", "_kernel_entry"),
@@ -219,13 +220,27 @@ def warm_everything(integrator: str = DEFAULT_INTEGRATOR) -> None:
     all of its methods)."""
     from gyro_sim.simulator import Simulator
 
-    for scene in (WARM_UP_SCENE, LAGRANGE_SCENE):  # heavy_top: a Lagrange chain (eqs 82, 85)
+    # heavy_top: a Lagrange chain (eqs 82, 85); a hinge with exact Coulomb friction: its responses
+    for scene in (WARM_UP_SCENE, LAGRANGE_SCENE, _with_exact_friction(WARM_UP_SCENE)):
         sim = Simulator(scene, integrator=integrator if integrator in LOOPS else "rk4", backend="numba")
         sim.snapshot(bodies=False, wrenches=False)
         warm = getattr(sim.integrator, "warm_up", None)
         if warm is not None:
             warm(sim.time, sim.state)
         sim.advance(0.002)
+
+
+def _with_exact_friction(name: str):
+    """The shipped scene `name` with exact Coulomb friction on its first hinge (a mapping for
+    load_scene): what compiles gyro_sim.integrators.coulomb's kernels."""
+    import copy
+
+    from gyro_sim.scene.load import load_scene
+
+    source = copy.deepcopy(load_scene(name).source)
+    hinge = next(b for b in source["bodies"] if b.get("joint", {}).get("type") == "hinge")
+    hinge["joint"]["friction"] = {"coulomb": 1e-3}
+    return source
 
 
 #: how often (s) the node's loader thread looks whether the cache fill has ended
