@@ -568,4 +568,4 @@ class Simulator:
         if spins is None:
             spins = y[m.i_spin] if m.stateful else self._p
         return linearize(m, self._t, y, spins, self._moments, method=method, rotor_angles=rotor_angles, chart=chart,
-                         frame_rate=frame_rate)
+                         frame_rate=frame_rate, controls=self._controls)
