@@ -1581,7 +1581,8 @@ def servo_moments(y, model, tau, out):
         gear = model.servo[k, 0]
         if model.is_hinge[k] and gear != 0.0:
             col = model.own_col[k]
-            force = tau[col] + model.servo[k, 1] * (gear * y[model.qrow[k]]) + model.servo[k, 2] * (gear * y[i_vel + col])
+            force = (tau[col] + model.servo[k, 1] * (gear * y[model.qrow[k]])
+                     + model.servo[k, 2] * (gear * y[i_vel + col]))
             out[col] = gear * min(max(force, model.servo[k, 3]), model.servo[k, 4])
 
 

@@ -9,8 +9,8 @@ torque-rotor angles kappa_i (nt, only with `rotor_angles=True`)], where the posi
 the order of the velocity columns: the free base's point O^1 (3), the rotation vector of each
 spherical body (3) and each hinge angle (1). The inputs are the commanded axis moments in
 command order (`Simulator.axis_names`), then the servos' controls (`Simulator.control_names`:
-A is then the closed loop of the servos, B's last columns act on their controls). The work accumulators of a scene with friction are
-left out: they feed nothing back.
+A is then the closed loop of the servos, B's last columns act on their controls). The work
+accumulators of a scene with friction are left out: they feed nothing back.
 
 Three charts of the rotations:
 
@@ -392,6 +392,29 @@ class TangentField:
             scale[2 * N + nt:] = np.maximum(1.0, np.abs(self.y0[m.i_kappa]))
         return FD_STEP * scale, FD_STEP * np.maximum(1.0, np.abs(self.m0))
 
+    def _servo_notes(self) -> list[str]:
+        """The servos whose control or force is clipped at the point (a flat side, or a kink)."""
+        m, out = self.model, []
+        if m.servo is None:
+            return out
+        controls = self.m0[self.na:]
+        hinge_tau, _ = self._inputs(np.zeros(len(self.m0)))
+        gear, b1, b2 = m.servo[:, 0], m.servo[:, 1], m.servo[:, 2]
+        y = self.y0
+        force = (hinge_tau[m.servo_hinge] + b1 * (gear * y[m.i_phi][m.servo_hinge])
+                 + b2 * (gear * y[m.i_vel][m.col_hinge[m.servo_hinge]]))  # before its clip
+        for name, c, (_, _, c_low, c_high), f, (_, _, _, f_low, f_high) in zip(
+                m.servo_names, controls, m.servo_input, force, m.servo):
+            if not c_low < c < c_high and np.isfinite(c_low):
+                out.append(f"{name}: control {c:g} at or beyond its ctrl_range [{c_low:g}, {c_high:g}]: clipped, "
+                           "its column of B is that of the side inside" if c in (c_low, c_high) else
+                           f"{name}: control {c:g} beyond its ctrl_range [{c_low:g}, {c_high:g}]: clipped, "
+                           "its column of B is zero")
+            if not f_low < f < f_high:
+                out.append(f"{name}: force {f:g} at or beyond its force_range [{f_low:g}, {f_high:g}]: "
+                           "clipped, the servo's terms of A and B are those of the side the clip takes")
+        return out
+
     def notes(self) -> tuple[str, ...]:
         """Where the model is one-sided or time-varying at the point."""
         m, out = self.model, []
@@ -404,6 +427,7 @@ class TangentField:
                            "saturated, its column of B is zero")
             elif c == mx:
                 out.append(f"{name}: command at max_torque {mx:g}: not differentiable; the unsaturated side is used")
+        out += self._servo_notes()
         act = m.actuators
         if act is None or not m.stateful:
             return tuple(out)
@@ -607,8 +631,8 @@ def linearize(model: Model, t: float, y: np.ndarray, spins: np.ndarray | None, m
               method: str = "complex", rotor_angles: bool = False, chart: str = "world",
               frame_rate=None, controls: np.ndarray | None = None) -> Linearization:
     """The linear model of `model` at time t, state y (the model's layout), torque-rotor spins
-    (nt,), commanded axis moments (na,) and servo controls (nsv,; None: zero). method: "complex" (exact, the complex step) or "fd"
-    (central differences, the steps in `fd_steps`)."""
+    (nt,), commanded axis moments (na,) and servo controls (nsv,; None: zero). method:
+    "complex" (exact, the complex step) or "fd" (central differences, the steps in `fd_steps`)."""
     if method not in METHODS:
         raise LinearizationError(f"method: {method!r} is not one of {', '.join(METHODS)}")
     nt = len(model.torque_body)
@@ -630,7 +654,8 @@ def linearize(model: Model, t: float, y: np.ndarray, spins: np.ndarray | None, m
     f0, z0, A, B, C, D = (_complex_step if method == "complex" else _central)(fld, nx, nu)
     evaluations = 1 + (nx + nu) * (1 if method == "complex" else 2)
     return Linearization(A=A, B=B, f0=f0, C=C, D=D, z0=z0, state_names=fld.layout.state_names,
-                         input_names=tuple(model.axis_names) + tuple(model.servo_names), output_names=fld.layout.output_names,
+                         input_names=tuple(model.axis_names) + tuple(model.servo_names),
+                         output_names=fld.layout.output_names,
                          chart=chart, method=method, t=float(t), notes=fld.notes(),
                          seconds=_time.perf_counter() - start, evaluations=evaluations,
                          fd_steps=fld.fd_steps() if method == "fd" else None,

@@ -36,9 +36,11 @@ as given; a noise's standard deviation per sample sigma becomes the density sigm
 
 A hinge's or rotor's joint damping and frictionloss become its `friction` (viscous and
 Coulomb); a hinge's armature and its spring (stiffness, springref) its `armature` and
-`spring` (docs/models.md, "Armature and joint springs"). Everything the equations of gyro_sim
+`spring` (docs/models.md, "Armature and joint springs"); a model's affine actuators (position,
+velocity, general with an affine bias) its hinges' `servo`, motors too (docs/models.md, "Servo
+actuators"). Everything the equations of gyro_sim
 cannot express (slide joints, tendons, equality constraints, a ball joint's damping, spring or
-armature, servos, branching trees, an inertia outside the triangle inequality on a moving body
+armature, a variable gain, branching trees, an inertia outside the triangle inequality on a moving body
 unless ``balance_inertia``, ...) is refused, one line per element and every problem of the
 file in one refusal; contacts, joint limits and control ranges are ignored and listed in
 :attr:`ImportedModel.notes`, as are missing meshes and textures that no moving body's mass

@@ -150,10 +150,17 @@ def test_linearized_servo_pendulum_has_the_closed_form_eigenvalues(gear):
 
 
 def test_linearize_takes_the_control_clip_one_sided():
-    """A control beyond its range: its column of B is zero (the clip's flat side)."""
+    """A control beyond its range, or a force beyond its range: the column of B is zero (the
+    clip's flat side), and the notes say so."""
     sim = Simulator(pendulum(position_servo(6.0, 0.5, ctrl_range=[-0.2, 0.2])), backend="numpy")
     sim.set_controls([0.5])
-    assert np.all(sim.linearize().B == 0.0)
+    lin = sim.linearize()
+    assert np.all(lin.B == 0.0)
+    assert any("control 0.5 beyond its ctrl_range [-0.2, 0.2]" in note for note in lin.notes)
+    sim = Simulator(pendulum(position_servo(6.0, 0.5, force_range=[-0.1, 0.1])), backend="numpy")
+    sim.set_controls([0.5])
+    lin = sim.linearize()
+    assert np.all(lin.B == 0.0) and any("force 3 at or beyond its force_range" in note for note in lin.notes)
 
 
 def test_set_controls_by_name_and_refusals():
