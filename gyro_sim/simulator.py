@@ -331,6 +331,38 @@ class Simulator:
         self._moments = self._moments.copy()  # a new object: the outputs see new commands
         self._outputs.commanded(self._moments)
 
+    def joint_command_controls(self, names: Sequence[str], position: Sequence[float], velocity: Sequence[float],
+                               effort: Sequence[float], base: np.ndarray | None = None) -> np.ndarray:
+        """The controls (in `control_names` order) after a joint command as the topic-based
+        ros2_control hardware interfaces send it (sensor_msgs/JointState by joint name): each
+        named joint's servo takes its position (a position servo), velocity (a velocity servo)
+        or effort (a motor) entry; the other servos keep theirs from `base` (default: the
+        controls now). ValueError naming the problem: a name that is no servo's joint, or given
+        twice, an array neither empty nor one per name, a non-finite value in any array, the
+        entry a servo takes missing."""
+        m = self.model
+        arrays = {"position": np.asarray(position, dtype=float), "velocity": np.asarray(velocity, dtype=float),
+                  "effort": np.asarray(effort, dtype=float)}
+        for kind, a in arrays.items():
+            if a.size not in (0, len(names)):
+                raise ValueError(f"{kind}: {a.size} values for {len(names)} names (empty or one per name)")
+            if not np.all(np.isfinite(a)):
+                raise ValueError(f"{kind}: holds NaN or inf")
+        servo_of = {m.names[m.hinge_bodies[h]]: i for i, h in enumerate(m.servo_hinge)} if m.servo is not None else {}
+        out = (self._controls if base is None else np.asarray(base, dtype=float)).copy()
+        seen = set()
+        for i, name in enumerate(names):
+            if name not in servo_of:
+                raise ValueError(f"joint {name!r}: no servo drives it (servo joints: {list(servo_of)})")
+            if name in seen:
+                raise ValueError(f"joint {name!r}: given twice")
+            seen.add(name)
+            kind = m.scene.bodies[m.hinge_bodies[m.servo_hinge[servo_of[name]]]].joint.servo.command
+            if arrays[kind].size == 0:
+                raise ValueError(f"joint {name!r}: its servo takes a {kind}, the command has none")
+            out[servo_of[name]] = arrays[kind][i]
+        return out
+
     def _inputs(self):
         """The held inputs (hinge moments (nh,), rotor torques (nt,), or None) from the commanded
         axis moments, saturated to the axes' max_torque, and the servos' drives (their hinges'

@@ -60,6 +60,7 @@ TF = "/tf"
 CLOCK = "/clock"
 DIAGNOSTICS = "/diagnostics"
 AXIS_MOMENTS = NAMESPACE + "/axis_moments"
+JOINT_COMMANDS = NAMESPACE + "/joint_commands"  # the servos' controls, by joint (sensor_msgs/JointState)
 EVENTS = NAMESPACE + "/events"
 ROBOT_DESCRIPTION = "/robot_description"  # the URDF, written once by every log (io.urdf)
 
@@ -177,6 +178,10 @@ class TopicNames:
     @property
     def axis_moments(self) -> str:
         return f"{self.node}/axis_moments"
+
+    @property
+    def joint_commands(self) -> str:
+        return f"{self.node}/joint_commands"
 
     @property
     def events(self) -> str:
@@ -443,6 +448,63 @@ def decode_axis_moments(data: bytes) -> np.ndarray:
     if not 0 <= len(b) - (pos + 8 * n) < 8:  # serializers may pad the end (to 4 or 8 bytes)
         raise ValueError(f"{n} values do not fit the {len(b)} bytes")
     return np.frombuffer(b, dtype="<f8", count=n, offset=pos).astype(float)
+
+
+def joint_command(names: Sequence[str], position=(), velocity=(), effort=()) -> bytes:
+    """sensor_msgs/JointState of a joint command (`~/joint_commands`, stamp zero): each array
+    empty or one value per name."""
+    return bytes(_joint_state(CdrWriter(), list(names), _finite(position, "joint_commands.position"),
+                              _finite(velocity, "joint_commands.velocity"), _finite(effort, "joint_commands.effort"),
+                              0))
+
+
+def decode_joint_command(data: bytes) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray]:
+    """(name, position, velocity, effort) of a sensor_msgs/JointState in CDR (the node's joint
+    command input), without rclpy; the header is skipped. Raises ValueError on bytes that are
+    not such a message."""
+    import struct
+
+    b = memoryview(data)
+    if len(b) < 8 or bytes(b[:2]) != b"\x00\x01":
+        raise ValueError("not little-endian CDR")
+    pos = 4
+
+    def u32() -> int:
+        nonlocal pos
+        pos += -(pos - 4) % 4
+        if pos + 4 > len(b):
+            raise ValueError("truncated")
+        (v,) = struct.unpack_from("<I", b, pos)
+        pos += 4
+        return v
+
+    def text() -> str:
+        nonlocal pos
+        n = u32()
+        if n < 1 or pos + n > len(b):
+            raise ValueError("bad string length")
+        out = bytes(b[pos:pos + n - 1]).decode("utf-8")
+        pos += n
+        return out
+
+    def doubles() -> np.ndarray:
+        nonlocal pos
+        n = u32()
+        if n:
+            pos += -(pos - 4) % 8
+        if pos + 8 * n > len(b):
+            raise ValueError(f"{n} values do not fit the {len(b)} bytes")
+        out = np.frombuffer(b, dtype="<f8", count=n, offset=pos).astype(float)
+        pos += 8 * n
+        return out
+
+    u32(), u32()  # stamp
+    text()  # frame_id
+    count = u32()
+    if count > len(b):
+        raise ValueError("bad name count")
+    names = [text() for _ in range(count)]
+    return names, doubles(), doubles(), doubles()
 
 
 def string(text: str) -> bytes:
