@@ -32,7 +32,8 @@ def scene_file(tmp_path) -> str:
                          "mass": M_, "com": [0.0, 0.0, -L_], "inertia_com": [[0.01, 0, 0], [0, 0.01, 0], [0, 0, 0.005]],
                          "next_joint": [0.0, 0.0, -2 * L_]},
                         {"name": "tip", "joint": {"type": "hinge", "axis": [1.0, 0.0, 0.0]},
-                         "mass": 1e-3, "com": [0.0, 0.0, 0.0], "inertia_com": [[1e-6, 0, 0], [0, 1e-6, 0], [0, 0, 1e-6]]}]}
+                         "mass": 1e-3, "com": [0.0, 0.0, 0.0],
+                         "inertia_com": [[1e-6, 0, 0], [0, 1e-6, 0], [0, 0, 1e-6]]}]}
     path = tmp_path / "servo.yaml"
     path.write_text(yaml.safe_dump(scene))
     return str(path)
@@ -101,7 +102,7 @@ def test_a_position_target_by_joint_name_in_lockstep_reaches_the_servos_steady_s
     phi = brentq(lambda q: KP * (TARGET - q) - mgl * math.sin(q), 0.0, TARGET)
     assert abs(out.states[-1][1][0] - phi) < 1e-6
     expected = replay(cfg, out.log, periods)
-    for (t, got, _), want in zip(out.states, expected):
+    for (_, got, _), want in zip(out.states, expected):
         np.testing.assert_array_equal(got, want)
 
 
