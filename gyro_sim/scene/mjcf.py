@@ -1376,6 +1376,12 @@ def scene_yaml(imported: ImportedModel) -> str:
         lines.append("# Commands: the axis moment is gear x gain x ctrl of the actuator:")
         lines += [f"#   {c.actuator} -> axis {c.axis}: moment = {c.factor!r} x ctrl"
                   for c in imported.commands]
+    servos = [(b["joint"]["servo"].get("name", b["name"]), b["name"]) for b in imported.mapping["bodies"]
+              if "servo" in b["joint"]]
+    if servos:
+        lines.append("# Controls (Simulator.set_controls, ~/joint_commands by joint): each actuator is its "
+                     "joint's servo:")
+        lines += [f"#   {actuator} -> joint {joint}" for actuator, joint in servos]
     if imported.notes:
         lines.append("# Notes (left out or approximated):")
         lines += [f"#   {note}" for note in imported.notes]

@@ -11,7 +11,7 @@ mujoco = pytest.importorskip("mujoco", reason="MuJoCo is the optional extra [mod
 from gyro_sim import Simulator
 from gyro_sim.dynamics.model import initial_state
 from gyro_sim.scene.load import load_scene
-from gyro_sim.scene.mjcf import import_model
+from gyro_sim.scene.mjcf import import_model, scene_yaml
 from test.scene.test_model_import import write
 from test.scene.test_model_joint_terms import mujoco_model
 
@@ -69,6 +69,7 @@ def test_the_actuators_become_the_hinges_servos(tmp_path):
     assert servos["flick"] == {"name": "flick_motor", "gain": 1.0, "bias": [0.0, 0.0, 0.0], "gear": 0.5,
                                "ctrl_range": [-0.2, 0.2]}
     assert imported.commands == ()
+    assert "#   elbow_pos -> joint elbow\n" in scene_yaml(imported)
     sim = Simulator(load_scene(imported.mapping), backend="numpy")
     assert sim.control_names == ("shoulder_pos", "elbow_pos", "wrist_vel", "twist_gen", "flick_motor")
     assert sim.axis_names == []  # every hinge is commanded by its servo's control
