@@ -110,6 +110,9 @@ class Simulator:
         self._conserved = inv.conserved(m)
         self._balanced = inv.balanced_energy(m)  # whose balance E - E0 - W the motion keeps
         self._axis_max_torque = self._axis_limits()
+        if m.servo is not None and integrator not in STATEFUL_INTEGRATORS:
+            raise ValueError(f"integrator {integrator!r} does not take servos (state-dependent "
+                             f"hinge moments); use one of {', '.join(STATEFUL_INTEGRATORS)}")
         if m.stateful and integrator not in STATEFUL_INTEGRATORS:
             from gyro_sim.dynamics.actuators import ActuatorError
 
@@ -262,6 +265,7 @@ class Simulator:
         self._y = initial_state(m)
         self._p = m.torque_p0.copy() if len(m.torque_body) else None
         self._moments = np.zeros(len(m.axis_names))
+        self._controls = np.zeros(len(m.servo_names))
         self._saturated = 0  # commanded values clipped to their max_torque since the reset
         self._outputs.moved(self._t, self._y, self._p, self._moments)
         self._watch_last = None
@@ -309,13 +313,86 @@ class Simulator:
         self._moments = v.copy()
         self._outputs.commanded(self._moments)  # reactions and efforts depend on the commands
 
+    @property
+    def control_names(self) -> tuple[str, ...]:
+        """The servos' controls, in the order of `controls` (the actuators' names of an imported
+        model; a scene's `servo.name`, by default its hinge's)."""
+        return self.model.servo_names
+
+    @property
+    def controls(self) -> np.ndarray:
+        """The servos' controls now in force, as set (before their ctrl_range clip; a copy)."""
+        return self._controls.copy()
+
+    def set_controls(self, values: Sequence[float] | Mapping[str, float]) -> None:
+        """Set the servos' controls, held until changed (zero-order hold; zero after a reset):
+        an array in `control_names` order, or a mapping from control (actuator) or joint names
+        to values, the others kept. Each servo clips its control to its ctrl_range."""
+        m = self.model
+        if isinstance(values, Mapping):
+            v = self._controls.copy()
+            joints = {m.names[m.hinge_bodies[h]]: i for i, h in enumerate(m.servo_hinge)} if m.servo is not None else {}
+            for name, value in values.items():
+                i = m.servo_names.index(name) if name in m.servo_names else joints.get(name)
+                if i is None:
+                    raise ValueError(f"no servo named {name!r} (servos: {list(m.servo_names)})")
+                v[i] = float(value)
+        else:
+            v = np.asarray(values, dtype=float).ravel()
+            if v.shape != (len(m.servo_names),):
+                raise ValueError(f"expected {len(m.servo_names)} controls {list(m.servo_names)}, got {v.size}")
+        if not np.all(np.isfinite(v)):
+            raise ValueError("controls must be finite")
+        self._controls = v.copy()
+        self._moments = self._moments.copy()  # a new object: the outputs see new commands
+        self._outputs.commanded(self._moments)
+
+    def joint_command_controls(self, names: Sequence[str], position: Sequence[float], velocity: Sequence[float],
+                               effort: Sequence[float], base: np.ndarray | None = None) -> np.ndarray:
+        """The controls (in `control_names` order) after a joint command as the topic-based
+        ros2_control hardware interfaces send it (sensor_msgs/JointState by joint name): each
+        named joint's servo takes its position (a position servo), velocity (a velocity servo)
+        or effort (a motor) entry; the other servos keep theirs from `base` (default: the
+        controls now). ValueError naming the problem: a name that is no servo's joint, or given
+        twice, an array neither empty nor one per name, a non-finite value in any array, the
+        entry a servo takes missing."""
+        m = self.model
+        arrays = {"position": np.asarray(position, dtype=float), "velocity": np.asarray(velocity, dtype=float),
+                  "effort": np.asarray(effort, dtype=float)}
+        for kind, a in arrays.items():
+            if a.size not in (0, len(names)):
+                raise ValueError(f"{kind}: {a.size} values for {len(names)} names (empty or one per name)")
+            if not np.all(np.isfinite(a)):
+                raise ValueError(f"{kind}: holds NaN or inf")
+        servo_of = {m.names[m.hinge_bodies[h]]: i for i, h in enumerate(m.servo_hinge)} if m.servo is not None else {}
+        out = (self._controls if base is None else np.asarray(base, dtype=float)).copy()
+        seen = set()
+        for i, name in enumerate(names):
+            if name not in servo_of:
+                raise ValueError(f"joint {name!r}: no servo drives it (servo joints: {list(servo_of)})")
+            if name in seen:
+                raise ValueError(f"joint {name!r}: given twice")
+            seen.add(name)
+            kind = m.scene.bodies[m.hinge_bodies[m.servo_hinge[servo_of[name]]]].joint.servo.command
+            if arrays[kind].size == 0:
+                raise ValueError(f"joint {name!r}: its servo takes a {kind}, the command has none")
+            out[servo_of[name]] = arrays[kind][i]
+        return out
+
     def _inputs(self):
         """The held inputs (hinge moments (nh,), rotor torques (nt,), or None) from the commanded
-        axis moments, saturated to the axes' max_torque."""
+        axis moments, saturated to the axes' max_torque, and the servos' drives (their hinges'
+        entries: gyro_sim.dynamics.reference.servo_drives)."""
         m, v = self.model, self._inputs_moments()
         hinge_tau = L_rotor = None
-        if len(v):
+        if m.servo is not None:
+            from gyro_sim.dynamics.reference import servo_drives
+
             hinge_tau = np.zeros(len(m.hinge_bodies))
+            hinge_tau[m.servo_hinge] = servo_drives(m, self._controls)
+        if len(v):
+            if hinge_tau is None:
+                hinge_tau = np.zeros(len(m.hinge_bodies))
             sel = m.axis_hinge >= 0
             hinge_tau[m.axis_hinge[sel]] = v[sel]
             if len(m.torque_body):
@@ -557,4 +634,4 @@ class Simulator:
         if spins is None:
             spins = y[m.i_spin] if m.stateful else self._p
         return linearize(m, self._t, y, spins, self._moments, method=method, rotor_angles=rotor_angles, chart=chart,
-                         frame_rate=frame_rate)
+                         frame_rate=frame_rate, controls=self._controls)

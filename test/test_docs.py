@@ -47,6 +47,7 @@ SCENE_SECTIONS = {
     "`bodies[k]`": ("BODY_KEYS", "bodies[0]"),
     "`bodies[k].joint`": ("JOINT_KEYS", "bodies[0].joint"),
     "`bodies[k].joint.spring`": ("SPRING_KEYS", "bodies[1].joint.spring"),
+    "`bodies[k].joint.servo`": ("SERVO_KEYS", "bodies[1].joint.servo"),
     "`bodies[k].inertia`": ("INERTIA_KEYS", "bodies[0].inertia"),
     "`bodies[k].rotors[i]`": ("ROTOR_KEYS", "bodies[0].rotors[0]"),
     "`friction`": ("FRICTION_KEYS", "bodies[0].rotors[0].friction"),
@@ -81,7 +82,7 @@ def documented_sections(path: Path) -> dict[str, set[str]]:
 
 def valid_scene() -> dict:
     """A scene holding every level of the format once: a moving base, one spherical body with
-    an inertia, a rotor, an initial state and a visual, and a hinge with a spring."""
+    an inertia, a rotor, an initial state and a visual, and a hinge with a spring and a servo."""
     return {
         "name": "every level",
         "gravity": [0.0, 0.0, -9.81],
@@ -101,7 +102,7 @@ def valid_scene() -> dict:
         }, {
             "name": "arm",
             "joint": {"type": "hinge", "axis": [1.0, 0.0, 0.0], "armature": 0.01,
-                      "spring": {"stiffness": 2.0, "reference": 0.1}},
+                      "spring": {"stiffness": 2.0, "reference": 0.1}, "servo": {"gain": 2.0}},
             "mass": 0.5,
             "com": [0.0, 0.0, 0.1],
             "inertia": {"axial": 0.001, "transverse": 0.009},

@@ -58,7 +58,7 @@ def _rates(t, z, model, data, inputs, zrow, cflags, cwork):
     """Positions of z, pi^k, p_rel and the rates u (into y's velocity block in cwork's y and in
     `rate`), then w^k, v(O^k). Returns nothing: everything is left in the workspaces."""
     (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-     torque_axis, torque_A, flags, base, armature, spring) = model
+     torque_axis, torque_A, flags, base, armature, spring, servo) = model
     work = data.work
     t0, p0, pdot = inputs.t0[0], inputs.p0, inputs.pdot
     base_type, has_lam = flags[0], flags[2] != 0
@@ -166,7 +166,7 @@ def canonical_kernel(t, z, zdot, model, data, inputs, zrow, cflags, cwork):
     """z' (size,) at (t, z) into zdot: what canonical.CanonicalChain.rhs computes."""
     _rates(t, z, model, data, inputs, zrow, cflags, cwork)
     (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-     torque_axis, torque_A, flags, base, armature, spring) = model
+     torque_axis, torque_A, flags, base, armature, spring, servo) = model
     work = data.work
     t0, p0, pdot, tau = inputs.t0[0], inputs.p0, inputs.pdot, inputs.tau
     base_type, has_gravity, has_lam = flags[0], flags[1] != 0, flags[2] != 0
@@ -328,7 +328,7 @@ def state_kernel(t, z, y, model, data, inputs, zrow, cflags, cwork):
     """The package's state y (model size) of z at t: what canonical.CanonicalChain.state does."""
     _rates(t, z, model, data, inputs, zrow, cflags, cwork)
     (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-     torque_axis, torque_A, flags, base, armature, spring) = model
+     torque_axis, torque_A, flags, base, armature, spring, servo) = model
     i_kap, size = cflags[1], cflags[2]
     i_kap_y = flags[5]
     for i in range(size):

@@ -25,8 +25,8 @@ from gyro_sim.dynamics.model import Model
 def balanced_energy(model: Model) -> str | None:
     """The energy whose balance the exact motion keeps: "energy" (E - E0 = the work of the
     commands and of friction), or "jacobi" with speed rotors (kept with commands zero); None on
-    a moving base."""
-    if model.base_type == "moving":
+    a moving base, or with servos (whose work is not tracked)."""
+    if model.base_type == "moving" or model.servo is not None:
         return None
     return "jacobi" if len(model.speed_body) else "energy"
 

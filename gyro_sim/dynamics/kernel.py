@@ -127,6 +127,9 @@ class ChainModel(NamedTuple):
     #: (n, 2) the hinges' springs: stiffness k, reference angle (the moment -k (phi - phi_ref)
     #: is read only with flags[FLAG_SPRINGS])
     spring: np.ndarray
+    #: (n, 5) the hinges' servos: gear, b1, b2, force low, high (read only with
+    #: flags[FLAG_SERVOS], on the bodies whose gear is not zero; the held drive is in tau)
+    servo: np.ndarray
 
 
 #: the index of `flags` among ChainModel's fields (its address in a descriptor: D_MODEL + this)
@@ -196,7 +199,11 @@ FLAG_ACTUATORS, FLAG_I_SPIN, FLAG_I_WORK = 9, 10, 11
 #: flags[FLAG_SPRINGS]: 1 for a model with hinge springs, whose moments are added to the
 #: generalized forces in the workspace's last N floats (`scratch`)
 FLAG_SPRINGS = 12
-FLAGS_SIZE = 13
+#: flags[FLAG_SERVOS]: 1 for a model with hinge servos, whose hinges' held tau is the servo's
+#: drive gain clip(ctrl) + b0, turned into its moment at the state (`servo_moments`) in the N
+#: floats of the workspace before the springs' (`scratch`)
+FLAG_SERVOS = 13
+FLAGS_SIZE = 14
 #: per actuated axis, floats of the workspace's tail of a stateful model: max_speed (inf: none),
 #: coulomb, viscous, static, stribeck_speed (0: no Stribeck term), stick_speed
 ACTUATOR_PARAMETERS = 6
@@ -204,9 +211,9 @@ ACTUATOR_PARAMETERS = 6
 #: ChainModel's order) from D_MODEL, of the scratch at D_WORK, of the held inputs' arrays (in
 #: HeldInputs' order) from D_INPUTS; n, N, nt and the scratch's size; the evaluations counted
 #: (the compiled entry from Python, gyro_sim.dynamics.entry, counts there)
-D_MODEL, D_WORK, D_INPUTS = 0, 17, 18
-D_N, D_NCOL, D_NT, D_NWORK, D_NFEV = 23, 24, 25, 26, 27
-DESCRIPTOR_SIZE = 28
+D_MODEL, D_WORK, D_INPUTS = 0, 18, 19
+D_N, D_NCOL, D_NT, D_NWORK, D_NFEV = 24, 25, 26, 27, 28
+DESCRIPTOR_SIZE = 29
 assert D_WORK - D_MODEL == len(ChainModel.__annotations__) and D_N - D_INPUTS == len(HeldInputs.__annotations__), \
     "the descriptor's layout (D_*) no longer matches the records' fields"
 
@@ -1309,7 +1316,7 @@ if jit.compiling():
             block2(vector_at(a[9], 3 * n, f), 0, n, 3), vector_at(a[10], nt, i),
             block2(vector_at(a[11], 3 * nt, f), 0, nt, 3), vector_at(a[12], nt, f),
             vector_at(a[13], FLAGS_SIZE, i), vector_at(a[14], 7, f), vector_at(a[15], n, f),
-            block2(vector_at(a[16], 2 * n, f), 0, n, 2))
+            block2(vector_at(a[16], 2 * n, f), 0, n, 2), block2(vector_at(a[17], 5 * n, f), 0, n, 5))
         h = d[D_INPUTS:D_N]
         inputs = HeldInputs(vector_at(h[0], 1, f), vector_at(h[1], nt, f), vector_at(h[2], nt, f),
                             vector_at(h[3], nt, f), vector_at(h[4], N, f))
@@ -1452,7 +1459,7 @@ def rhs_kernel(t, y, ydot, model, data, inputs):
     commands through its actuators' speed cut and friction (`actuate`).
     """
     (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-     torque_axis, torque_A, flags, base, armature, spring) = model
+     torque_axis, torque_A, flags, base, armature, spring, servo) = model
     work = data.work
     t0, p0, pdot, L_rotor, tau = inputs.t0[0], inputs.p0, inputs.pdot, inputs.L_rotor, inputs.tau
     base_type = flags[0]
@@ -1472,6 +1479,9 @@ def rhs_kernel(t, y, ydot, model, data, inputs):
     else:  # bias forces: p_i(t) = p_i(t0) + (L_i / A_i)(t - t0) (eq 29)
         for i in range(nt):
             p[i] = p0[i] + pdot[i] * (t - t0)
+        if flags[FLAG_SERVOS] != 0:  # the servos' moments at this state from their held drives
+            tau_applied = block1(work, servo_offset(work, flags), N)
+            servo_moments(y, model, tau, tau_applied)
     if flags[FLAG_SPRINGS] != 0:  # the springs' moments -k (phi - phi_ref) join the hinges'
         with_springs = block1(work, work.shape[0] - N, N)
         _spring_moments(y, model, tau_applied, with_springs)
@@ -1540,19 +1550,46 @@ def actuate(y, ydot, model, data, inputs, R, w, p):
         ydot[i_spin + i] = (motor + friction) / torque_A[i]
         motor_power += motor * rate
         friction_power += friction * rate
+    motor = tau
+    if flags[FLAG_SERVOS] != 0:  # the servos' moments at this state from their held drives
+        motor = block1(work, servo_offset(work, flags), N)
+        servo_moments(y, model, tau, motor)
     for j in range(N):
-        tau_applied[j] = tau[j]
+        tau_applied[j] = motor[j]
     for k in range(n):
         if is_hinge[k]:
             col = own_col[k]
             rate = y[i_vel + col]
             friction = _friction_torque(rate, work, hinge_at + k * ACTUATOR_PARAMETERS)
             tau_applied[col] += friction
-            motor_power += tau[col] * rate
+            motor_power += motor[col] * rate
             friction_power += friction * rate
     ydot[i_work] = motor_power
     ydot[i_work + 1] = friction_power
     return L_applied, tau_applied
+
+
+@_njit_inline
+def servo_moments(y, model, tau, out):
+    """out (N,): the generalized forces tau with each servo's hinge's held drive d turned into
+    its moment gear clip(d + b1 gear phi + b2 gear phi', force range) at y
+    (gyro_sim.dynamics.reference.servo_moments); out is `servo_offset`'s block of the workspace."""
+    N, i_vel = model.flags[6], model.flags[4]
+    for j in range(N):
+        out[j] = tau[j]
+    for k in range(model.mass.shape[0]):
+        gear = model.servo[k, 0]
+        if model.is_hinge[k] and gear != 0.0:
+            col = model.own_col[k]
+            force = (tau[col] + model.servo[k, 1] * (gear * y[model.qrow[k]])
+                     + model.servo[k, 2] * (gear * y[i_vel + col]))
+            out[col] = gear * min(max(force, model.servo[k, 3]), model.servo[k, 4])
+
+
+@_njit_inline
+def servo_offset(work, flags):
+    """Where the servos' moments (N floats) start in a workspace: before the springs'."""
+    return work.shape[0] - flags[6] * (1 + (flags[FLAG_SPRINGS] != 0))
 
 
 @_njit_inline
@@ -1601,7 +1638,7 @@ def chain_model(model: Model) -> ChainModel:
     heavy = heavy_elimination_address() if heavy_subtrees(m.mass) else 0
     flags = np.array([base_type, m.gravity is not None, has_lam, m.i_r0.start, m.i_vel.start,
                       m.i_kappa.start, m.N, heavy, kernel_address(), int(m.stateful), m.i_spin.start,
-                      m.i_work.start, m.spring is not None], dtype=np.int64)
+                      m.i_work.start, m.spring is not None, m.servo is not None], dtype=np.int64)
     base = np.zeros(7)
     if m.base_amplitude is not None:
         base[0:3] = m.base_amplitude
@@ -1615,6 +1652,9 @@ def chain_model(model: Model) -> ChainModel:
         armature[m.hinge_bodies] = m.armature
     if m.spring is not None:
         spring[m.hinge_bodies] = m.spring
+    servo = np.zeros((n, 5))
+    if m.servo is not None:
+        servo[m.hinge_bodies[m.servo_hinge]] = m.servo
 
     def f64(a, shape):
         return np.ascontiguousarray(np.asarray(a, dtype=np.float64).reshape(shape))
@@ -1637,6 +1677,7 @@ def chain_model(model: Model) -> ChainModel:
         base=base,
         armature=armature,
         spring=spring,
+        servo=servo,
     )
 
 
@@ -1671,7 +1712,7 @@ def scratch(model: Model) -> np.ndarray:
     with hinge springs appends N floats for the generalized forces with their moments."""
     m, nt = model, len(model.torque_body)
     size = m.n * WORK_PER_BODY + m.N * WORK_PER_COLUMN + nt * WORK_PER_ROTOR + WORK_FIXED
-    springs = np.zeros(m.N if m.spring is not None else 0)
+    springs = np.zeros(m.N * ((m.spring is not None) + (m.servo is not None)))
     if not m.stateful:
         return np.zeros(size + len(springs))
     act = m.actuators

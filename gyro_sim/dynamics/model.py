@@ -92,6 +92,11 @@ class Model:
     # the hinges' joint terms (docs/theory.md, "Armature and joint springs"), None without any:
     armature: np.ndarray | None = None  # (nh,) reflected rotor inertias on M's hinge diagonal
     spring: np.ndarray | None = None  # (nh, 2) stiffness, reference angle: moment -k (phi - ref)
+    # the hinges' servos (docs/models.md, "Servo actuators"), in chain order; None without any:
+    servo_hinge: np.ndarray | None = None  # (nsv,) index into hinge_bodies
+    servo: np.ndarray | None = None  # (nsv, 5) gear, b1, b2, force low, high (+-inf: none)
+    servo_input: np.ndarray | None = None  # (nsv, 4) gain, b0, ctrl low, high (+-inf: none)
+    servo_names: tuple[str, ...] = ()
 
     @property
     def stateful(self) -> bool:
@@ -130,6 +135,7 @@ def compile_model(scene: Scene) -> Model:
     for k, b in enumerate(bodies):
         if is_hinge[k]:
             hinge_axis[k] = b.joint.axis
+        if is_hinge[k] and b.joint.servo is None:  # a servo's hinge is commanded by its control
             axis_names.append(b.name)
             axis_hinge.append(int(hinge_index[k]))
             axis_rotor.append(-1)
@@ -201,6 +207,13 @@ def compile_model(scene: Scene) -> Model:
     armature = np.array([j.armature for j in hinges], dtype=float)
     spring = np.array([(j.spring.stiffness, j.spring.reference) if j.spring is not None else (0.0, 0.0)
                        for j in hinges], dtype=float).reshape(nh, 2)
+    servo_hinge = [h for h, j in enumerate(hinges) if j.servo is not None]
+    servos = [hinges[h].servo for h in servo_hinge]
+    inf = (-np.inf, np.inf)
+    servo = np.array([(v.gear, v.bias[1], v.bias[2], *(v.force_range or inf)) for v in servos],
+                     dtype=float).reshape(-1, 5)
+    servo_input = np.array([(v.gain, v.bias[0], *(v.ctrl_range or inf)) for v in servos],
+                           dtype=float).reshape(-1, 4)
     g = None if scene.gravity is None else np.array(scene.gravity, dtype=float)
     nu = None if g is None or not np.any(g) else g / np.linalg.norm(g)
     base = scene.base
@@ -253,6 +266,10 @@ def compile_model(scene: Scene) -> Model:
         i_work=i_work,
         armature=armature if np.any(armature) else None,
         spring=spring if np.any(spring[:, 0]) else None,
+        servo_hinge=np.array(servo_hinge, dtype=int) if servos else None,
+        servo=servo if servos else None,
+        servo_input=servo_input if servos else None,
+        servo_names=tuple(v.name for v in servos),
     )
 
 

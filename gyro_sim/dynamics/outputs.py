@@ -288,7 +288,7 @@ def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, s
     position, velocity, effort = states
     dst, at_joint, at_position, at_quat, at_wrench = slots
     (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-     torque_axis, torque_A, flags, base, armature, spring) = model
+     torque_axis, torque_A, flags, base, armature, spring, servo) = model
     work = data.work
     t0, p0, pdot, L_rotor, tau = inputs.t0[0], inputs.p0, inputs.pdot, inputs.L_rotor, inputs.tau
     base_type, has_gravity, has_lam = flags[0], flags[1] != 0, flags[2] != 0
@@ -315,6 +315,9 @@ def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, s
     if stateful:  # the torques applied at this state (motors after the speed cut, friction): the
         # kernel's own computation, again after rhs_call (the same numbers, written again)
         L_applied, tau_applied = fast.actuate(y, ydot, model, data, inputs, R_k, w_k, p)
+    elif flags[fast.FLAG_SERVOS] != 0:  # the servos' moments at this state, as the kernel's
+        tau_applied = block1(work, fast.servo_offset(work, flags), N)
+        fast.servo_moments(y, model, tau, tau_applied)
     for k in range(n):  # the outputs' copies
         for a in range(3):
             w[k, a] = w_k[k, a]

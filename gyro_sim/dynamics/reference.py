@@ -344,6 +344,8 @@ def closure(model: Model, data: Data, t: float, y: np.ndarray, hinge_tau: np.nda
     if not positions_done:
         positions(model, data, t, y)
     velocities(model, data, t, y[..., model.i_vel])
+    if model.servo is not None:  # a servo's hinge moment from its held drive and the state
+        hinge_tau = servo_moments(model, y, hinge_tau)
     if model.stateful:  # the torques applied at this state: motors after the cut, and friction
         hinge_tau, L_rotor = applied_torques(model, data, y, p, hinge_tau, L_rotor)
     lam_w, dlam_w = lam(model, data, p, L_rotor)
@@ -363,6 +365,32 @@ def spring_moments(model: Model, y: np.ndarray) -> np.ndarray:
     to the commanded moment of eq (51) (docs/theory.md, "Armature and joint springs")."""
     k, ref = model.spring[:, 0], model.spring[:, 1]
     return -k * (y[..., model.i_phi] - ref)
+
+
+def servo_moments(model: Model, y: np.ndarray, hinge_tau: np.ndarray) -> np.ndarray:
+    """The hinge moments (nh,) at y (a stack of states too) with each servo's hinge's held drive
+    d = gain clip(ctrl) + b0 (`servo_drives`) turned into its moment gear clip(d + b1 gear phi
+    + b2 gear phi', force_range) (docs/models.md, "Servo actuators"); the other hinges' as held.
+    The clip is complex-step safe: it compares real parts."""
+    h = model.servo_hinge
+    if hinge_tau is None:
+        hinge_tau = np.zeros(len(model.hinge_bodies))
+    gear, b1, b2, low, high = model.servo.T
+    phi = y[..., model.i_phi][..., h]
+    rate = y[..., model.i_vel][..., model.col_hinge[h]]
+    force = hinge_tau[..., h] + b1 * (gear * phi) + b2 * (gear * rate)
+    force = np.where(force.real < low, low, np.where(force.real > high, high, force))
+    out = hinge_tau.astype(np.result_type(hinge_tau, force), copy=True)
+    out[..., h] = gear * force
+    return out
+
+
+def servo_drives(model: Model, controls: np.ndarray) -> np.ndarray:
+    """Each servo's held drive gain clip(ctrl, ctrl_range) + b0 (nsv,) from its control (a stack
+    too; the clip complex-step safe, as `servo_moments`')."""
+    gain, b0, low, high = model.servo_input.T
+    ctrl = np.where(controls.real < low, low, np.where(controls.real > high, high, controls))
+    return gain * ctrl + b0
 
 
 def joint_energy(model: Model, y: np.ndarray) -> tuple[float, float]:

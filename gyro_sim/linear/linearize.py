@@ -8,8 +8,9 @@ The state x is in the tangent space of the chain's configuration (docs/lineariza
 torque-rotor angles kappa_i (nt, only with `rotor_angles=True`)], where the positions are, in
 the order of the velocity columns: the free base's point O^1 (3), the rotation vector of each
 spherical body (3) and each hinge angle (1). The inputs are the commanded axis moments in
-command order (`Simulator.axis_names`). The work accumulators of a scene with friction are
-left out: they feed nothing back.
+command order (`Simulator.axis_names`), then the servos' controls (`Simulator.control_names`:
+A is then the closed loop of the servos, B's last columns act on their controls). The work
+accumulators of a scene with friction are left out: they feed nothing back.
 
 Three charts of the rotations:
 
@@ -188,7 +189,7 @@ class TangentField:
 
     def __init__(self, model: Model, t: float, y0: np.ndarray, p0: np.ndarray | None,
                  moments0: np.ndarray, rotor_angles: bool = False, chart: str = "world",
-                 frame_rate: np.ndarray | None = None):
+                 frame_rate: np.ndarray | None = None, controls0: np.ndarray | None = None):
         if chart not in CHARTS:
             raise LinearizationError(f"chart: {chart!r} is not one of {', '.join(CHARTS)}")
         if (chart == "frame") != (frame_rate is not None):
@@ -199,7 +200,10 @@ class TangentField:
             raise LinearizationError(f"frame_rate: 3 finite numbers (rad/s, world axes), got {frame_rate!r}")
         self.y0 = np.asarray(y0, dtype=float).copy()
         self.p0 = np.zeros(0) if p0 is None else np.asarray(p0, dtype=float).copy()
-        self.m0 = np.asarray(moments0, dtype=float).copy()
+        # the inputs at the point: the axis moments, then the servos' controls
+        self.na = len(model.axis_names)
+        controls0 = np.zeros(len(model.servo_names)) if controls0 is None else controls0
+        self.m0 = np.concatenate((np.asarray(moments0, dtype=float), np.asarray(controls0, dtype=float)))
         self.layout = _layout(model, rotor_angles, chart)
         self.data = dyn.Data(model)  # its own workspace: the simulator's stays as it is
         m = model
@@ -244,17 +248,23 @@ class TangentField:
             y[self.model.i_spin] = self.p0
         return y
 
-    # the inputs: the commanded moments saturated as Simulator._inputs does; ties go inside
+    # the inputs: the commanded moments saturated as Simulator._inputs does; ties go inside;
+    # the servos' drives from their controls (their ctrl_range clip decided on real parts)
     def _inputs(self, v):
         m = self.model
         c = self.m0 + v
+        c, controls = c[..., :self.na], c[..., self.na:]
         over = np.abs(np.real(c)) > self._max
         if np.any(over):
             c = np.where(over, np.sign(np.real(c)) * np.where(over, self._max, 0.0), c)
         hinge_tau = L_rotor = None
+        lead = c.shape[:-1]
+        if m.servo is not None:
+            hinge_tau = np.zeros(lead + (len(m.hinge_bodies),), dtype=controls.dtype)
+            hinge_tau[..., m.servo_hinge] = dyn.servo_drives(m, controls)
         if c.shape[-1]:
-            lead = c.shape[:-1]
-            hinge_tau = np.zeros(lead + (len(m.hinge_bodies),), dtype=c.dtype)
+            if hinge_tau is None:
+                hinge_tau = np.zeros(lead + (len(m.hinge_bodies),), dtype=c.dtype)
             sel = m.axis_hinge >= 0
             hinge_tau[..., m.axis_hinge[sel]] = c[..., sel]
             if len(m.torque_body):
@@ -382,6 +392,29 @@ class TangentField:
             scale[2 * N + nt:] = np.maximum(1.0, np.abs(self.y0[m.i_kappa]))
         return FD_STEP * scale, FD_STEP * np.maximum(1.0, np.abs(self.m0))
 
+    def _servo_notes(self) -> list[str]:
+        """The servos whose control or force is clipped at the point (a flat side, or a kink)."""
+        m, out = self.model, []
+        if m.servo is None:
+            return out
+        controls = self.m0[self.na:]
+        hinge_tau, _ = self._inputs(np.zeros(len(self.m0)))
+        gear, b1, b2 = m.servo[:, 0], m.servo[:, 1], m.servo[:, 2]
+        y = self.y0
+        force = (hinge_tau[m.servo_hinge] + b1 * (gear * y[m.i_phi][m.servo_hinge])
+                 + b2 * (gear * y[m.i_vel][m.col_hinge[m.servo_hinge]]))  # before its clip
+        for name, c, (_, _, c_low, c_high), f, (_, _, _, f_low, f_high) in zip(
+                m.servo_names, controls, m.servo_input, force, m.servo):
+            if not c_low < c < c_high and np.isfinite(c_low):
+                out.append(f"{name}: control {c:g} at or beyond its ctrl_range [{c_low:g}, {c_high:g}]: clipped, "
+                           "its column of B is that of the side inside" if c in (c_low, c_high) else
+                           f"{name}: control {c:g} beyond its ctrl_range [{c_low:g}, {c_high:g}]: clipped, "
+                           "its column of B is zero")
+            if not f_low < f < f_high:
+                out.append(f"{name}: force {f:g} at or beyond its force_range [{f_low:g}, {f_high:g}]: "
+                           "clipped, the servo's terms of A and B are those of the side the clip takes")
+        return out
+
     def notes(self) -> tuple[str, ...]:
         """Where the model is one-sided or time-varying at the point."""
         m, out = self.model, []
@@ -394,6 +427,7 @@ class TangentField:
                            "saturated, its column of B is zero")
             elif c == mx:
                 out.append(f"{name}: command at max_torque {mx:g}: not differentiable; the unsaturated side is used")
+        out += self._servo_notes()
         act = m.actuators
         if act is None or not m.stateful:
             return tuple(out)
@@ -595,15 +629,17 @@ METHODS = ("complex", "fd")
 
 def linearize(model: Model, t: float, y: np.ndarray, spins: np.ndarray | None, moments: np.ndarray, *,
               method: str = "complex", rotor_angles: bool = False, chart: str = "world",
-              frame_rate=None) -> Linearization:
+              frame_rate=None, controls: np.ndarray | None = None) -> Linearization:
     """The linear model of `model` at time t, state y (the model's layout), torque-rotor spins
-    (nt,) and commanded axis moments (na,). method: "complex" (exact, the complex step) or "fd"
-    (central differences, the steps in `fd_steps`)."""
+    (nt,), commanded axis moments (na,) and servo controls (nsv,; None: zero). method:
+    "complex" (exact, the complex step) or "fd" (central differences, the steps in `fd_steps`)."""
     if method not in METHODS:
         raise LinearizationError(f"method: {method!r} is not one of {', '.join(METHODS)}")
     nt = len(model.torque_body)
     for name, value, shape in (("y", y, (model.size,)), ("spins", np.zeros(nt) if spins is None else spins, (nt,)),
-                               ("moments", moments, (len(model.axis_names),))):
+                               ("moments", moments, (len(model.axis_names),)),
+                               ("controls", np.zeros(len(model.servo_names)) if controls is None else controls,
+                                (len(model.servo_names),))):
         a = np.asarray(value)
         if a.shape != shape or not np.issubdtype(a.dtype, np.number) or not np.all(np.isfinite(a)):
             raise LinearizationError(f"{name}: expected {shape[0]} finite numbers (the model's layout), "
@@ -613,12 +649,13 @@ def linearize(model: Model, t: float, y: np.ndarray, spins: np.ndarray | None, m
     if size > MAX_STATES:
         raise LinearizationError(f"{size} states: more than the {MAX_STATES} a dense linear model takes "
                                  "(gyro_sim.linear.linearize.MAX_STATES)")
-    fld = TangentField(model, t, y, spins, moments, rotor_angles, chart, frame_rate)
-    nx, nu = fld.layout.size, len(model.axis_names)
+    fld = TangentField(model, t, y, spins, moments, rotor_angles, chart, frame_rate, controls)
+    nx, nu = fld.layout.size, len(model.axis_names) + len(model.servo_names)
     f0, z0, A, B, C, D = (_complex_step if method == "complex" else _central)(fld, nx, nu)
     evaluations = 1 + (nx + nu) * (1 if method == "complex" else 2)
     return Linearization(A=A, B=B, f0=f0, C=C, D=D, z0=z0, state_names=fld.layout.state_names,
-                         input_names=tuple(model.axis_names), output_names=fld.layout.output_names,
+                         input_names=tuple(model.axis_names) + tuple(model.servo_names),
+                         output_names=fld.layout.output_names,
                          chart=chart, method=method, t=float(t), notes=fld.notes(),
                          seconds=_time.perf_counter() - start, evaluations=evaluations,
                          fd_steps=fld.fd_steps() if method == "fd" else None,

@@ -109,6 +109,8 @@ def resimulate(path: str | os.PathLike, *, integrator: str | None = None, rtol: 
 
     end = info.end_ns or 0
     topics = [names.joint_states, cmd_topic, names.events]
+    if sim.control_names:  # the servos' joint commands, on their own topic
+        topics.append(names.joint_commands)
     if sim.imu_names:  # the IMUs sampled as the log's publications did
         sim.set_imu_default_rate(float(p.get("publish_rate", 100.0)))
         topics += [topic for topic, msgtype in info.topics.items() if msgtype == M.IMU_TYPE]
@@ -137,7 +139,8 @@ def prepare(path: str | os.PathLike, *, integrator: str | None = None):
     if cmd_topic in types:
         raise LogError(f"{path}: parameter commands_topic: {cmd_topic} is the topic of "
                        f"{types[cmd_topic]}, not of the commands")
-    for topic, wanted in {**types, cmd_topic: COMMANDS_TYPE}.items():
+    wanted_types = {**types, cmd_topic: COMMANDS_TYPE, names.joint_commands: TOPIC_TYPES[M.JOINT_STATES]}
+    for topic, wanted in wanted_types.items():
         have = info.topics.get(topic)
         if have is not None and have != wanted:
             what = "parameter commands_topic: " if topic == cmd_topic else ""
@@ -195,6 +198,15 @@ def _replay(path, sim, out: Resimulation, dt: float, cmd_topic: str, topics, end
             try:
                 sim.set_axis_moments(list(_fields(path, msg, topic, t, ("data",)).data))
             except (TypeError, ValueError):  # the node logs rejected commands too, and refused them the same way
+                out.rejected += 1
+                continue
+            out.commands += 1
+        elif topic == names.joint_commands and sim.control_names:
+            fields = _fields(path, msg, topic, t, JOINT_STATE_FIELDS)
+            try:
+                sim.set_controls(sim.joint_command_controls(list(fields.name), list(fields.position),
+                                                            list(fields.velocity), list(fields.effort)))
+            except (TypeError, ValueError):  # refused as the node refuses it
                 out.rejected += 1
                 continue
             out.commands += 1

@@ -60,6 +60,7 @@ TF = "/tf"
 CLOCK = "/clock"
 DIAGNOSTICS = "/diagnostics"
 AXIS_MOMENTS = NAMESPACE + "/axis_moments"
+JOINT_COMMANDS = NAMESPACE + "/joint_commands"  # the servos' controls, by joint (sensor_msgs/JointState)
 EVENTS = NAMESPACE + "/events"
 ROBOT_DESCRIPTION = "/robot_description"  # the URDF, written once by every log (io.urdf)
 
@@ -177,6 +178,10 @@ class TopicNames:
     @property
     def axis_moments(self) -> str:
         return f"{self.node}/axis_moments"
+
+    @property
+    def joint_commands(self) -> str:
+        return f"{self.node}/joint_commands"
 
     @property
     def events(self) -> str:
@@ -410,39 +415,86 @@ def axis_moments(values: Sequence[float]) -> bytes:
     return bytes(w)
 
 
+class _CdrReader:
+    """Reads little-endian CDR (the node's command inputs), without rclpy: each primitive
+    aligned to its size counted after the 4-byte encapsulation header. ValueError on bytes that
+    do not hold what is read."""
+
+    def __init__(self, data: bytes, least: int):
+        self.b = memoryview(data)
+        if len(self.b) < least or bytes(self.b[:2]) != b"\x00\x01":
+            raise ValueError("not little-endian CDR")
+        self.pos = 4
+
+    def u32(self) -> int:
+        import struct
+
+        self.pos += -(self.pos - 4) % 4
+        if self.pos + 4 > len(self.b):
+            raise ValueError("truncated")
+        (v,) = struct.unpack_from("<I", self.b, self.pos)
+        self.pos += 4
+        return v
+
+    def skip_string(self) -> int:
+        n = self.u32()
+        if n > len(self.b):
+            raise ValueError("bad string length")
+        self.pos += n
+        return n
+
+    def text(self) -> str:
+        start = self.pos + 4 + -(self.pos - 4) % 4
+        n = self.skip_string()
+        if n < 1 or self.pos > len(self.b):
+            raise ValueError("bad string length")
+        return bytes(self.b[start:start + n - 1]).decode("utf-8")
+
+    def doubles(self, last: bool = False) -> np.ndarray:
+        """sequence<float64>; `last`: the message's end, which serializers may pad (to 4 or 8)."""
+        n = self.u32()
+        if n:
+            self.pos += -(self.pos - 4) % 8
+        spare = len(self.b) - (self.pos + 8 * n)
+        if spare < 0 or (last and spare >= 8):
+            raise ValueError(f"{n} values do not fit the {len(self.b)} bytes")
+        out = np.frombuffer(self.b, dtype="<f8", count=n, offset=self.pos).astype(float)
+        self.pos += 8 * n
+        return out
+
+
 def decode_axis_moments(data: bytes) -> np.ndarray:
     """The values of a std_msgs/Float64MultiArray in CDR (the node's command input), without
     rclpy; the layout is skipped. Raises ValueError on bytes that are not such a message."""
-    import struct
+    r = _CdrReader(data, 16)
+    for _ in range(r.u32()):  # layout.dim: label, size, stride
+        r.skip_string()
+        r.u32()
+        r.u32()
+    r.u32()  # layout.data_offset
+    return r.doubles(last=True)
 
-    b = memoryview(data)
-    if len(b) < 16 or bytes(b[:2]) != b"\x00\x01":
-        raise ValueError("not little-endian CDR")
-    pos = 4
 
-    def u32() -> int:
-        nonlocal pos
-        pos += -(pos - 4) % 4
-        if pos + 4 > len(b):
-            raise ValueError("truncated")
-        (v,) = struct.unpack_from("<I", b, pos)
-        pos += 4
-        return v
+def joint_command(names: Sequence[str], position=(), velocity=(), effort=()) -> bytes:
+    """sensor_msgs/JointState of a joint command (`~/joint_commands`, stamp zero): each array
+    empty or one value per name."""
+    return bytes(_joint_state(CdrWriter(), list(names), _finite(position, "joint_commands.position"),
+                              _finite(velocity, "joint_commands.velocity"), _finite(effort, "joint_commands.effort"),
+                              0))
 
-    for _ in range(u32()):  # layout.dim: label, size, stride
-        n = u32()
-        if n > len(b):
-            raise ValueError("bad string length")
-        pos += n
-        u32()
-        u32()
-    u32()  # layout.data_offset
-    n = u32()
-    if n:
-        pos += -(pos - 4) % 8
-    if not 0 <= len(b) - (pos + 8 * n) < 8:  # serializers may pad the end (to 4 or 8 bytes)
-        raise ValueError(f"{n} values do not fit the {len(b)} bytes")
-    return np.frombuffer(b, dtype="<f8", count=n, offset=pos).astype(float)
+
+def decode_joint_command(data: bytes) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray]:
+    """(name, position, velocity, effort) of a sensor_msgs/JointState in CDR (the node's joint
+    command input), without rclpy; the header is skipped. Raises ValueError on bytes that are
+    not such a message."""
+    r = _CdrReader(data, 8)
+    r.u32(), r.u32()  # stamp
+    r.skip_string()  # frame_id
+    count = r.u32()
+    if count > len(r.b):
+        raise ValueError("bad name count")
+    names = [r.text() for _ in range(count)]
+    return names, r.doubles(), r.doubles(), r.doubles(last=True)
 
 
 def string(text: str) -> bytes:

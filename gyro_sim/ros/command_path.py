@@ -16,7 +16,14 @@ while the loop was not running (before its start, paused) are not timed.
 In lock-step (`lockstep`) every good command is kept, in the order received, in a queue of at
 most LOCKSTEP_QUEUE: the physics thread takes the oldest (`next_command`) and applies it to a
 whole control period; none is superseded. A command that finds the queue full is rejected
-(logged as an event, never applied), so the commands applied are exactly those logged."""
+(logged as an event, never applied), so the commands applied are exactly those logged.
+
+Joint commands (``~/joint_commands``, the servos' controls by joint name) take the same path
+as the axis moments, each on its own log topic: a good one carries the whole controls vector,
+the previous good one's (zero after a reset) with its joints' entries replaced, so that a
+reader applying the logged joint commands in file order ends with the controls applied. A step
+applies the last axis moments and the last controls logged since the previous step, so that
+neither kind supersedes the other; a timeout zeroes the axis moments and holds the controls."""
 
 from __future__ import annotations
 
@@ -77,8 +84,17 @@ class CommandPath:
 
     def __init__(self, n_axes: int, out, node_ns: Callable[[], int], timeout: float, dt: float, demo=None,
                  clock: Callable[[], float] = time.monotonic, due: Callable[[float], float] | None = None,
-                 window: int = 2000, lockstep: bool = False):
+                 window: int = 2000, lockstep: bool = False, joint_controls: Callable | None = None,
+                 n_controls: int = 0):
         self.n_axes, self.out, self._node_ns = n_axes, out, node_ns
+        #: (names, position, velocity, effort, base) -> the controls after a joint command
+        #: (Simulator.joint_command_controls; ValueError: refused), None without servos
+        self._joint_controls, self.n_controls = joint_controls, n_controls
+        self._controls_submitted = np.zeros(n_controls)  # the last good joint command's controls
+        #: per kind ("moments", "controls"), the values of the last command logged, and the kinds
+        #: logged since the last step took a command
+        self._logged: dict[str, tuple] = {}
+        self._fresh: set[str] = set()
         self.lockstep = lockstep
         #: lock-step: the good commands received and not yet taken, oldest first (as _latest's items)
         self._queue: collections.deque = collections.deque()
@@ -94,7 +110,8 @@ class CommandPath:
         # None for the demo's); one slot, replaced whole
         self._latest: tuple | None = None
         self._taken_seq = 0
-        # every good command received and not yet logged: (sequence number, raw bytes), in order
+        # every good command received and not yet logged: (sequence number, raw bytes, kind,
+        # values), in order
         self._received: collections.deque = collections.deque()
         self._last_step: int | None = None  # step at which the last good command took effect
         #: the built-in demo commands while no command came from outside
@@ -118,12 +135,37 @@ class CommandPath:
                 self._demo_stopped = True
             return self._submit(raw, values, reason, received)
 
-    def _submit(self, raw: bytes, values, reason: str | None, received: float | None = None) -> str | None:
+    def submit_joint(self, raw: bytes, command) -> str | None:
+        """A joint command received (raw CDR bytes and its decoded (names, position, velocity,
+        effort), None for bytes that are no JointState); returns why it is refused, if it is."""
+        received = self._clock()
+        with self._submit_lock:
+            controls, reason = None, None
+            if self._joint_controls is None:
+                reason = "the scene has no servos"
+            elif command is None:
+                reason = "not a sensor_msgs/JointState"
+            else:
+                try:
+                    controls = self._joint_controls(*command, self._controls_submitted)
+                except ValueError as exc:
+                    reason = str(exc)
+            if reason is None and self.lockstep and len(self._queue) >= LOCKSTEP_QUEUE:
+                reason = f"lock-step: {LOCKSTEP_QUEUE} commands already waiting"
+            if reason is None:
+                self._demo_stopped = True
+                self._controls_submitted = controls
+            return self._submit(raw, controls, reason, received, "controls")
+
+    def _submit(self, raw: bytes, values, reason: str | None, received: float | None = None,
+                kind: str = "moments") -> str | None:
         if reason is None:
             seq = self.counters.accepted + 1
-            self._received.append((seq, raw))  # before it is the latest: a step taking it finds it here
+            values = tuple(float(v) for v in values)
+            # before it is the latest: a step taking it finds it here
+            self._received.append((seq, raw, kind, values))
             self.counters.accepted = seq
-            item = (seq, raw, tuple(float(v) for v in values), received)
+            item = (seq, raw, values, received)
             with self._arrived:
                 if self.lockstep:
                     self._queue.append(item)
@@ -168,11 +210,19 @@ class CommandPath:
     def _log_received(self, t_ns: int, upto: int) -> None:
         """Log, at `t_ns`, the good commands received up to sequence number `upto` not yet logged."""
         received = self._received
-        raws = []
+        runs: list[tuple[str, list]] = []  # consecutive commands of one kind: one hand-over
         while received and received[0][0] <= upto:
-            raws.append(received.popleft()[1])
-        if raws:
-            self.out.record_commands(t_ns, raws)
+            _, raw, kind, values = received.popleft()
+            if not runs or runs[-1][0] != kind:
+                runs.append((kind, []))
+            runs[-1][1].append(raw)
+            self._logged[kind] = values
+            self._fresh.add(kind)
+        for kind, raws in runs:
+            if kind == "moments":
+                self.out.record_commands(t_ns, raws)
+            else:
+                self.out.record_joint_commands(t_ns, raws)
 
     def _demo_command(self, t_ns: int) -> None:
         """The demo's command for node time t_ns, through the command path, when one is due."""
@@ -196,21 +246,28 @@ class CommandPath:
         if self.demo is not None:
             self._demo_command(t_ns)
         new = self._latest
-        latest = None
+        latest = controls = None
         if new is not None and new[0] != self._taken_seq:
-            seq, raw, latest, received = new
+            seq, raw, _, received = new
             self.counters.superseded += seq - self._taken_seq - 1
             self._taken_seq = seq
             self._log_received(t_ns, seq)  # the ones it superseded, then it
+            # the last of each kind logged since the last step took one (a pause's log too)
+            latest = self._logged["moments"] if "moments" in self._fresh else None
+            controls = self._logged["controls"] if "controls" in self._fresh else None
+            self._fresh.clear()
             if received is not None and seq > self._timed_after:
                 starts = self._clock()
                 if self._due is not None:
                     starts = max(starts, self._due(t))
                 self.latency.add(starts - received)
-        if latest is not None:
-            if np.any(sim.axis_moments != latest):
-                self.counters.moments_since = t
-            sim.set_axis_moments(latest)
+        if latest is not None or controls is not None:
+            if latest is not None:
+                if np.any(sim.axis_moments != latest):
+                    self.counters.moments_since = t
+                sim.set_axis_moments(latest)
+            if controls is not None:
+                sim.set_controls(controls)
             self._last_step = step
             self.counters.last_effective = t
         elif self._last_step is not None and (step - self._last_step) > self._timeout_steps:
@@ -233,9 +290,11 @@ class CommandPath:
         with self._submit_lock:
             last = self._last_received()
             self._queue.clear()
+            self._controls_submitted = np.zeros(self.n_controls)  # the reset zeroes the controls
         if last is not None:
             self._taken_seq = last
             self._log_received(t_ns, last)
+        self._fresh.clear()  # logged, never applied
         self._last_step = None
 
     def _last_received(self) -> int | None:

@@ -124,7 +124,9 @@ class SimLoop:
         pacer = self.pacing.pacer
         self.commands = CommandPath(len(sim.axis_names), outputs, lambda: self.node_ns, config.command_timeout,
                                     self.dt, demo, clock=clock, due=pacer.deadline if pacer.rtf > 0 else None,
-                                    window=int(2 * config.physics_rate), lockstep=self.lockstep)
+                                    window=int(2 * config.physics_rate), lockstep=self.lockstep,
+                                    joint_controls=sim.joint_command_controls if sim.control_names else None,
+                                    n_controls=len(sim.control_names))
         self.publications = Publications(outputs, paced, clock=clock)
         #: the run waits for its first command (lock-step, hold until_command); cleared when it came
         self.holding = bool(getattr(config, "waits_for_command", False))
@@ -149,6 +151,10 @@ class SimLoop:
     def submit_command(self, raw: bytes, values) -> str | None:
         """A command received (raw CDR bytes and its values); returns why it is refused, if it is."""
         return self.commands.submit(raw, values)
+
+    def submit_joint_command(self, raw: bytes, command) -> str | None:
+        """From the executor thread: a joint command (its decoded fields, None if undecodable)."""
+        return self.commands.submit_joint(raw, command)
 
     def request(self, request: Request, timeout: float = 2.0) -> tuple[bool, str]:
         """Ask the loop for a reset (`Reset()`) or a pause change (`Pause(paused)`); wait until it is done."""

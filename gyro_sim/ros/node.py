@@ -45,6 +45,7 @@ import time
 try:  # rclpy from ROS 2 Jazzy (pip install 'gyro_sim[ros]'); --help works without it
     from rcl_interfaces.msg import ParameterDescriptor, ParameterType
     from rclpy.node import Node
+    from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
     from std_srvs.srv import SetBool, Trigger
 
@@ -54,7 +55,7 @@ except ImportError as _exc:  # the class below is then never instantiated
     ROS_IMPORT_ERROR = _exc
 
 from gyro_sim.simulator import Simulator
-from gyro_sim.msgs.messages import decode_axis_moments
+from gyro_sim.msgs.messages import decode_axis_moments, decode_joint_command
 from gyro_sim.ros.loop import Pause, Reset, SimLoop, warm_up
 from gyro_sim.ros.outputs import Outputs, node_topics
 from gyro_sim.ros.pacing import ShareLimit
@@ -226,6 +227,8 @@ class GyroSimNode(Node):
                 log_file.abandon()
             raise
         self.create_subscription(Float64MultiArray, "~/axis_moments", self.on_command, 10, raw=True)
+        if self.sim.control_names:
+            self.create_subscription(JointState, "~/joint_commands", self.on_joint_command, 10, raw=True)
         self.create_service(Trigger, "~/reset", self.on_reset)
         self.create_service(SetBool, "~/pause", self.on_pause)
         self.get_logger().info(
@@ -234,8 +237,9 @@ class GyroSimNode(Node):
             + (f" = {choice}" if (choice := method_choice(self.sim, cfg)) else "")
             + f", {self.sim.backend} dynamics), "
             f"publish {cfg.publish_rate:g} Hz, "
-            + (f"lock-step: one period of {cfg.steps_per_publish} steps per command on ~/axis_moments, "
-               f"waiting for the first" if cfg.lockstep else
+            + (f"lock-step: one period of {cfg.steps_per_publish} steps per command on ~/axis_moments"
+               + (" or ~/joint_commands" if self.sim.control_names else "") + ", "
+               "waiting for the first" if cfg.lockstep else
                f"real-time factor {cfg.real_time_factor:g}, {self.loop.pacing.per_chunk} steps per wake-up"
                + ("; holding the initial state until the first command" if cfg.hold == "until_command" else ""))
             + (f"; recording to {cfg.record}" if cfg.record else "")
@@ -275,6 +279,18 @@ class GyroSimNode(Node):
         if reason:
             self.get_logger().warning(
                 f"command rejected ({reason}); axes: {self.sim.axis_names}; "
+                f"{self.loop.commands.counters.rejected} rejected so far", throttle_duration_sec=2.0)
+
+    def on_joint_command(self, raw: bytes) -> None:
+        """Bounded work: decode (no rclpy message objects), map onto the servos' controls, keep."""
+        try:
+            command = decode_joint_command(raw)
+        except ValueError:  # malformed bytes: refused
+            command = None
+        reason = self.loop.submit_joint_command(bytes(raw), command)
+        if reason:
+            self.get_logger().warning(
+                f"joint command rejected ({reason}); servos: {self.sim.control_names}; "
                 f"{self.loop.commands.counters.rejected} rejected so far", throttle_duration_sec=2.0)
 
     def on_reset(self, request, response):

@@ -155,6 +155,7 @@ class Outputs:
         self.topics = topics = topics or node_topics(node)
         self.publication = M.Publication(sim.model.names, topics=topics, hardware_id=sim.scene.name)
         self.command_topic = topics.axis_moments
+        self.joint_commands_topic = topics.joint_commands
         self.events_topic = topics.events
         self.pubs: dict[str, object] = {}
         #: a URDF robot's own description, its links' frames on /tf beside the bodies' (scene.robot)
@@ -368,6 +369,11 @@ class Outputs:
         """The commands a step took in, in the order received (the last one applied): one hand-over."""
         if self.recorder is not None:
             self.recorder.raw_many(self.command_topic, M.COMMAND_TYPE, t_ns, raws)
+
+    def record_joint_commands(self, t_ns: int, raws: list) -> None:
+        """The joint commands a step took in (sensor_msgs/JointState), in the order received."""
+        if self.recorder is not None:
+            self.recorder.raw_many(self.joint_commands_topic, M.JOINT_STATE_TYPE, t_ns, raws)
 
     def record_event(self, t_ns: int, text: str) -> None:
         """An event for the log only (e.g. each rejected command: the console says them throttled)."""

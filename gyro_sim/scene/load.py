@@ -48,7 +48,7 @@ from gyro_sim.scene.mjcf import ModelError, import_model, is_model_path
 from gyro_sim.scene.names import name_problem, topic_token
 from gyro_sim.scene.records import (
     BASE_TYPES, JOINT_TYPES, ROTOR_MODES, Base, Body, Friction, Imu, Initial, Joint,
-    Limits, Rotor, Scene, Spring,
+    Limits, Rotor, Scene, Servo, Spring,
 )
 
 __all__ = ["SceneError", "load_scene", "parse_yaml"]
@@ -98,10 +98,11 @@ BASE_TYPE_KEYS = {"fixed": ("type", "position"), "moving": ("type", "position", 
 MOTION_KEYS = ("type", "amplitude", "frequency")
 BODY_KEYS = ("name", "joint", "mass", "com", "inertia", "inertia_com", "next_joint", "rotors",
              "initial", "visual")
-JOINT_KEYS = ("type", "axis", "max_torque", "friction", "armature", "spring")
+JOINT_KEYS = ("type", "axis", "max_torque", "friction", "armature", "spring", "servo")
 #: a hinge's terms a spherical joint does not take (docs/scene-format.md)
-HINGE_ONLY_KEYS = ("armature", "spring")
+HINGE_ONLY_KEYS = ("armature", "spring", "servo")
 SPRING_KEYS = ("stiffness", "reference")
+SERVO_KEYS = ("name", "gain", "bias", "gear", "ctrl_range", "force_range")
 #: a hinge's limits (JOINT_KEYS) and a torque rotor's (ROTOR_KEYS)
 HINGE_LIMIT_KEYS = ("max_torque", "friction")
 ROTOR_LIMIT_KEYS = ("max_torque", "max_speed", "friction")
@@ -693,6 +694,14 @@ def _bodies(ch: _Checker, value: Any, base_type: Any) -> tuple[Body, ...] | None
     _check_names(ch, names)
     if any(body is None for body in bodies):
         return None
+    servos: dict[str, int] = {}
+    for index, body in enumerate(bodies):
+        servo = body.joint.servo
+        if servo is not None and servo.name in servos:
+            ch.fail(f"bodies[{index}].joint.servo.name", f"duplicate servo name {servo.name!r} (also "
+                                                         f"bodies[{servos[servo.name]}]'s)")
+        elif servo is not None:
+            servos[servo.name] = index
     return tuple(bodies)
 
 
@@ -757,6 +766,8 @@ def _body(ch: _Checker, value: Any, path: str, last: bool,
                                       minimum=0.0, strict=True)
     if any(v is None for v in (name, joint, mass, com, inertia, rotors, initial)):
         return None
+    if joint.servo is not None and not joint.servo.name:  # a servo's control is named after its body
+        joint = dataclasses.replace(joint, servo=dataclasses.replace(joint.servo, name=name))
     return Body(name=name, joint=joint, mass=mass, com=_readonly(com), inertia=_readonly(inertia),
                 next_joint=None if next_joint is None else _readonly(next_joint),
                 rotors=rotors, initial=initial, visual_radius=visual_radius)
@@ -789,10 +800,43 @@ def _joint(ch: _Checker, value: Any, path: str) -> Joint | None:
         axis = ch.unit(joint, "axis", path)
         armature = ch.scalar(joint, "armature", path, default=0.0, minimum=0.0)
         spring = _spring(ch, joint.get("spring"), _at(path, "spring"))
-        if axis is None or limits is False or armature is None or spring is False:
+        servo = _servo(ch, joint.get("servo"), _at(path, "servo"))
+        if servo and joint.get("max_torque") is not None:
+            ch.fail(_at(path, "max_torque"), "not allowed with a servo (its force_range bounds it)")
+            servo = False
+        if axis is None or limits is False or armature is None or spring is False or servo is False:
             return None
-        return Joint(type=kind, axis=_readonly(axis), limits=limits, armature=armature, spring=spring)
+        return Joint(type=kind, axis=_readonly(axis), limits=limits, armature=armature, spring=spring,
+                     servo=servo)
     return None
+
+
+def _servo(ch: _Checker, value: Any, path: str) -> Servo | None | bool:
+    """A hinge's servo (SERVO_KEYS): a Servo (its name "" until the body names it), None when
+    absent, False after reporting."""
+    if value is None:
+        return None
+    servo = ch.mapping(value, path, SERVO_KEYS)
+    if servo is None:
+        return False
+    bad = len(ch.errors)
+    name = servo.get("name", "")
+    if not isinstance(name, str):
+        ch.fail(_at(path, "name"), f"must be a string (got {_describe(name)})")
+    gain = ch.scalar(servo, "gain", path, default=1.0)
+    bias = ch.vector(servo, "bias", path, size=3, default=np.zeros(3))
+    gear = ch.scalar(servo, "gear", path, default=1.0)
+    if gear == 0.0:
+        ch.fail(_at(path, "gear"), "must not be zero")
+    ranges = {}
+    for key in ("ctrl_range", "force_range"):
+        r = ch.vector(servo, key, path, size=2, default=None)
+        if r is not None and not r[0] <= r[1]:
+            ch.fail(_at(path, key), f"must be [low, high] with low <= high (got {r.tolist()})")
+        ranges[key] = None if r is None else (float(r[0]), float(r[1]))
+    if len(ch.errors) > bad or gain is None or bias is None or gear is None:
+        return False
+    return Servo(name=name, gain=gain, bias=tuple(float(b) for b in bias), gear=gear, **ranges)
 
 
 def _spring(ch: _Checker, value: Any, path: str) -> Spring | None | bool:

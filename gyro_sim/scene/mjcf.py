@@ -36,9 +36,11 @@ as given; a noise's standard deviation per sample sigma becomes the density sigm
 
 A hinge's or rotor's joint damping and frictionloss become its `friction` (viscous and
 Coulomb); a hinge's armature and its spring (stiffness, springref) its `armature` and
-`spring` (docs/models.md, "Armature and joint springs"). Everything the equations of gyro_sim
+`spring` (docs/models.md, "Armature and joint springs"); a model's affine actuators (position,
+velocity, general with an affine bias) its hinges' `servo`, motors too (docs/models.md, "Servo
+actuators"). Everything the equations of gyro_sim
 cannot express (slide joints, tendons, equality constraints, a ball joint's damping, spring or
-armature, servos, branching trees, an inertia outside the triangle inequality on a moving body
+armature, a variable gain, branching trees, an inertia outside the triangle inequality on a moving body
 unless ``balance_inertia``, ...) is refused, one line per element and every problem of the
 file in one refusal; contacts, joint limits and control ranges are ignored and listed in
 :attr:`ImportedModel.notes`, as are missing meshes and textures that no moving body's mass
@@ -645,6 +647,7 @@ class _Importer:
         self.friction: dict[int, dict[str, float]] = {}  # hinge joint -> its scene friction
         self.armature: dict[int, float] = {}  # hinge joint -> its armature (kg m^2)
         self.spring: dict[int, dict[str, float]] = {}  # hinge joint -> its scene spring
+        self.servo: dict[int, dict[str, Any]] = {}  # hinge joint -> its scene servo (a model with servos)
         self.locked: dict[str, float] = {}  # joints welded (gyro_sim.scene.mjcf._lock_joints)
 
     # --- names
@@ -772,8 +775,13 @@ class _Importer:
         self.check_actuators()
 
     def check_actuators(self) -> None:
+        """Motors become commands (axis moments), unless an actuator of the model has an affine
+        bias (a servo): then every actuator becomes its hinge's servo (docs/models.md, "Servo
+        actuators"), each commanded by its control."""
         mj, m = self.mj, self.m
         trn_joint = (int(mj.mjtTrn.mjTRN_JOINT), int(mj.mjtTrn.mjTRN_JOINTINPARENT))
+        affine = int(mj.mjtBias.mjBIAS_AFFINE)
+        servos = any(int(m.actuator_biastype[a]) == affine for a in range(m.nu))
         for a in range(m.nu):
             name = self._name(mj.mjtObj.mjOBJ_ACTUATOR, a)
             what = f"actuator {name!r}" if name else f"actuator #{a}"
@@ -786,9 +794,9 @@ class _Importer:
                 self.fail(what, "activation dynamics are not supported (a motor only: "
                                 "force = gain x ctrl)")
             if int(m.actuator_gaintype[a]) != int(mj.mjtGain.mjGAIN_FIXED) or \
-                    int(m.actuator_biastype[a]) != int(mj.mjtBias.mjBIAS_NONE):
-                self.fail(what, "a servo (bias or variable gain) is not supported; only motors "
-                                "(force = gain x ctrl) take commanded moments")
+                    int(m.actuator_biastype[a]) not in (int(mj.mjtBias.mjBIAS_NONE), affine):
+                self.fail(what, "a variable gain or a muscle's bias is not supported; motors and "
+                                "affine servos (force = gain x ctrl + b0 + b1 length + b2 velocity) are")
             for extra in ("actuator_damping", "actuator_armature", "actuator_delay"):
                 if np.any(getattr(m, extra, np.zeros((m.nu, 1)))[a]):
                     self.fail(what, f"{extra.removeprefix('actuator_')} is not supported")
@@ -798,12 +806,39 @@ class _Importer:
                 self.fail(what, f"drives the {('free', 'ball')[int(m.jnt_type[j])]} "
                                 f"{self.joint(j)}; only hinges take a commanded moment (a "
                                 "spherical joint transmits none)")
+            if servos:
+                self.add_servo(a, what, j)
+                continue
             if m.actuator_ctrllimited[a]:
                 low, high = m.actuator_ctrlrange[a]
                 self.notes.append(f"{what}: ctrlrange [{low:g}, {high:g}] not enforced")
             if m.actuator_forcelimited[a]:
                 low, high = m.actuator_forcerange[a]
                 self.notes.append(f"{what}: forcerange [{low:g}, {high:g}] not enforced")
+
+    def add_servo(self, a: int, what: str, j: int) -> None:
+        """Actuator `a` (on joint j) as its hinge's scene servo: MuJoCo's gainprm[0],
+        biasprm[0:3], gear[0], ctrlrange and forcerange where limited."""
+        m = self.m
+        if j in self.servo:
+            self.fail(what, f"drives {self.joint(j)}, which another actuator drives "
+                            f"({self.servo[j].get('name') or 'unnamed'!r}); one servo per hinge is supported")
+            return
+        if int(m.jnt_type[j]) != int(self.mj.mjtJoint.mjJNT_HINGE):
+            return  # refused above
+        servo: dict[str, Any] = {}
+        name = self._name(self.mj.mjtObj.mjOBJ_ACTUATOR, a)
+        if name:
+            servo["name"] = name
+        servo["gain"] = _tidy(m.actuator_gainprm[a][0])
+        servo["bias"] = [_tidy(b) for b in m.actuator_biasprm[a][:3]]
+        if m.actuator_gear[a][0] != 1.0:
+            servo["gear"] = _tidy(m.actuator_gear[a][0])
+        if m.actuator_ctrllimited[a]:
+            servo["ctrl_range"] = [_tidy(v) for v in m.actuator_ctrlrange[a]]
+        if m.actuator_forcelimited[a]:
+            servo["force_range"] = [_tidy(v) for v in m.actuator_forcerange[a]]
+        self.servo[j] = servo
 
     # --- structure
     def groups(self) -> dict[int, _Group]:
@@ -867,6 +902,8 @@ class _Importer:
             return "massless"
         if g.joint in self.armature or g.joint in self.spring:
             return "its joint has armature or stiffness (a rotor's axis takes friction only)"
+        if g.joint in self.servo:
+            return "a servo drives its joint (a rotor's axis takes a commanded torque only)"
         a = g.axis / np.linalg.norm(g.axis)
         r = g.com - g.origin
         off = float(np.linalg.norm(r - (r @ a) * a))
@@ -1000,6 +1037,8 @@ class _Importer:
                     body["joint"]["armature"] = self.armature[g.joint]
                 if g.joint in self.spring:
                     body["joint"]["spring"] = self.spring[g.joint]
+                if g.joint in self.servo:
+                    body["joint"]["servo"] = self.servo[g.joint]
             else:
                 body["joint"] = {"type": "spherical"}
             body["mass"] = _tidy(g.mass)
@@ -1267,7 +1306,8 @@ class _Importer:
                                   "starts at t = 0)")
             if m.nu and np.any(m.key_ctrl[key]):
                 self.notes.append("keyframe: ctrl not kept (commands are given to the "
-                                  "simulator as axis moments)")
+                                  + ("simulator as servo controls: Simulator.set_controls)" if self.servo
+                                     else "simulator as axis moments)"))
         mj.mj_kinematics(m, d)
         mj.mj_comPos(m, d)
         mj.mj_comVel(m, d)
@@ -1308,7 +1348,7 @@ class _Importer:
             for r in rotors[g.root]:
                 axis_of[r.joint] = self.scene_name(r, True)
         out = []
-        for a in range(m.nu):
+        for a in range(m.nu if not self.servo else 0):  # servos are commanded by their controls
             j = int(m.actuator_trnid[a][0])
             name = self._name(mj.mjtObj.mjOBJ_ACTUATOR, a) or f"actuator{a}"
             out.append(Command(actuator=name, axis=axis_of[j],
@@ -1336,6 +1376,12 @@ def scene_yaml(imported: ImportedModel) -> str:
         lines.append("# Commands: the axis moment is gear x gain x ctrl of the actuator:")
         lines += [f"#   {c.actuator} -> axis {c.axis}: moment = {c.factor!r} x ctrl"
                   for c in imported.commands]
+    servos = [(b["joint"]["servo"].get("name", b["name"]), b["name"]) for b in imported.mapping["bodies"]
+              if "servo" in b["joint"]]
+    if servos:
+        lines.append("# Controls (Simulator.set_controls, ~/joint_commands by joint): each actuator is its "
+                     "joint's servo:")
+        lines += [f"#   {actuator} -> joint {joint}" for actuator, joint in servos]
     if imported.notes:
         lines.append("# Notes (left out or approximated):")
         lines += [f"#   {note}" for note in imported.notes]

@@ -88,6 +88,27 @@ class Spring:
 
 
 @dataclass(frozen=True, eq=False)
+class Servo:
+    """A hinge's affine actuator (MuJoCo's motor, position, velocity and general with a fixed
+    gain and an affine bias): the actuator force f = gain clip(ctrl, ctrl_range) + b0 + b1 gear
+    phi + b2 gear phi', clipped to force_range; the joint's moment gear f (docs/models.md,
+    "Servo actuators")."""
+
+    name: str  # the control's name (the actuator's), unique among the scene's servos
+    gain: float  # per unit of ctrl
+    bias: tuple[float, float, float]  # b0, b1, b2
+    gear: float = 1.0
+    ctrl_range: tuple[float, float] | None = None  # None: the control is not clipped
+    force_range: tuple[float, float] | None = None  # None: the force is not clipped
+
+    @property
+    def command(self) -> str:
+        """What a JointState command sets: "position" (b1 != 0), "velocity" (b2 != 0) or
+        "effort" (a motor)."""
+        return "position" if self.bias[1] != 0.0 else "velocity" if self.bias[2] != 0.0 else "effort"
+
+
+@dataclass(frozen=True, eq=False)
 class Joint:
     """The joint at O^k between body k-1 (or the base) and body k."""
 
@@ -98,6 +119,7 @@ class Joint:
     #: matrix (MuJoCo's armature, docs/theory.md "Armature and joint springs")
     armature: float = 0.0
     spring: Spring | None = None  # hinge only
+    servo: Servo | None = None  # hinge only: its actuator, commanded by a control (not an axis moment)
 
 
 @dataclass(frozen=True, eq=False)

@@ -186,14 +186,13 @@ def test_as_published_the_cart_slider_is_refused_suggesting_lock():
     assert "joint 'slider'" in info.value.errors[0] and "--lock slider" in info.value.errors[0]
 
 
-def test_as_published_each_servo_is_named_in_the_one_refusal():
-    """dm_control's fish: its position actuators are refused one line each, naming the
-    actuator, in the same refusal as the rest of what the fish needs (fluid forces, tendons,
-    branches)."""
+def test_as_published_the_fish_is_refused_for_what_it_needs_not_for_its_servos():
+    """dm_control's fish: its position actuators are the hinges' servos now; the one refusal
+    names what the fish still needs (fluid forces, tendons, branches) and, of its actuators,
+    only the one on a tendon."""
     with pytest.raises(SceneError) as info:
         load_scene(FISH)
     errors = info.value.errors
-    servos = [e for e in errors if "a servo (bias or variable gain) is not supported" in e]
-    named = {re.search(r"actuator '([^']+)'", e).group(1) for e in servos}
-    assert named == {"tail", "tail_twist", "finleft_pitch", "finright_pitch"}, errors
-    assert any("density and viscosity" in e for e in errors) and len(errors) > len(servos)
+    named = {re.search(r"actuator '([^']+)'", e).group(1) for e in errors if "actuator '" in e}
+    assert named == {"fins_flap"}, errors
+    assert any("density and viscosity" in e for e in errors)

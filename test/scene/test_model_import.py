@@ -466,8 +466,13 @@ REFUSED = {
                              "body 'link': gravcomp (gravity compensation) is not supported"),
     "fluid forces": (bad(option='<option density="1.2"/>'),
                      "option: density and viscosity (fluid forces) are not supported"),
-    "servo": (bad(extra='<actuator><position name="servo" joint="pivot" kp="10"/></actuator>'),
-              "actuator 'servo': a servo (bias or variable gain) is not supported"),
+    "variable gain": (bad(extra='<actuator><general name="servo" joint="pivot" gaintype="affine" '
+                                'gainprm="10 1"/></actuator>'),
+                      "actuator 'servo': a variable gain or a muscle's bias is not supported"),
+    "two servos on a hinge": (bad(extra='<actuator><position name="servo" joint="pivot" kp="10"/>'
+                                        '<velocity name="damper" joint="pivot" kv="1"/></actuator>'),
+                              "actuator 'damper': drives joint 'pivot', which another actuator drives "
+                              "('servo'); one servo per hinge is supported"),
     "activation dynamics": (bad(extra='<actuator><general name="filtered" joint="pivot" dyntype="filter" '
                                       'dynprm="0.1"/></actuator>'),
                             "actuator 'filtered': activation dynamics are not supported"),
