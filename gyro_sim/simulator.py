@@ -110,12 +110,12 @@ class Simulator:
         self._conserved = inv.conserved(m)
         self._balanced = inv.balanced_energy(m)  # whose balance E - E0 - W the motion keeps
         self._axis_max_torque = self._axis_limits()
-        if m.servo is not None and integrator not in STATEFUL_INTEGRATORS:
-            raise ValueError(f"integrator {integrator!r} does not take servos (state-dependent "
-                             f"hinge moments); use one of {', '.join(STATEFUL_INTEGRATORS)}")
-        if m.stateful and integrator not in STATEFUL_INTEGRATORS:
+        if (m.servo is not None or m.stateful) and integrator not in STATEFUL_INTEGRATORS:
             from gyro_sim.dynamics.actuators import ActuatorError
 
+            if m.servo is not None:
+                raise ActuatorError(f"integrator {integrator!r} does not take servos (state-dependent "
+                                    f"hinge moments); use one of {', '.join(STATEFUL_INTEGRATORS)}")
             raise ActuatorError(f"{m.actuators.terms[0]}: integrator {integrator!r} does not take speed-dependent "
                              f"actuator terms (friction, max_speed); use one of {', '.join(STATEFUL_INTEGRATORS)}")
         self._joint_layout()
@@ -331,7 +331,7 @@ class Simulator:
         m = self.model
         if isinstance(values, Mapping):
             v = self._controls.copy()
-            joints = {m.names[m.hinge_bodies[h]]: i for i, h in enumerate(m.servo_hinge)} if m.servo is not None else {}
+            joints = self._servo_joints()
             for name, value in values.items():
                 i = m.servo_names.index(name) if name in m.servo_names else joints.get(name)
                 if i is None:
@@ -346,6 +346,11 @@ class Simulator:
         self._controls = v.copy()
         self._moments = self._moments.copy()  # a new object: the outputs see new commands
         self._outputs.commanded(self._moments)
+
+    def _servo_joints(self) -> dict[str, int]:
+        """Each servo's joint (its hinge body's name) -> its index in `control_names`."""
+        m = self.model
+        return {m.names[m.hinge_bodies[h]]: i for i, h in enumerate(m.servo_hinge)} if m.servo is not None else {}
 
     def joint_command_controls(self, names: Sequence[str], position: Sequence[float], velocity: Sequence[float],
                                effort: Sequence[float], base: np.ndarray | None = None) -> np.ndarray:
@@ -364,7 +369,7 @@ class Simulator:
                 raise ValueError(f"{kind}: {a.size} values for {len(names)} names (empty or one per name)")
             if not np.all(np.isfinite(a)):
                 raise ValueError(f"{kind}: holds NaN or inf")
-        servo_of = {m.names[m.hinge_bodies[h]]: i for i, h in enumerate(m.servo_hinge)} if m.servo is not None else {}
+        servo_of = self._servo_joints()
         out = (self._controls if base is None else np.asarray(base, dtype=float)).copy()
         seen = set()
         for i, name in enumerate(names):

@@ -128,9 +128,7 @@ class CommandPath:
         A good one replaces the latest (taken by the next physics step) and ends the demo."""
         received = self._clock()
         with self._submit_lock:
-            reason = check_command(values, self.n_axes)
-            if reason is None and self.lockstep and len(self._queue) >= LOCKSTEP_QUEUE:
-                reason = f"lock-step: {LOCKSTEP_QUEUE} commands already waiting"
+            reason = check_command(values, self.n_axes) or self._queue_full()
             if reason is None:
                 self._demo_stopped = True
             return self._submit(raw, values, reason, received)
@@ -150,12 +148,17 @@ class CommandPath:
                     controls = self._joint_controls(*command, self._controls_submitted)
                 except ValueError as exc:
                     reason = str(exc)
-            if reason is None and self.lockstep and len(self._queue) >= LOCKSTEP_QUEUE:
-                reason = f"lock-step: {LOCKSTEP_QUEUE} commands already waiting"
+            reason = reason or self._queue_full()
             if reason is None:
                 self._demo_stopped = True
                 self._controls_submitted = controls
             return self._submit(raw, controls, reason, received, "controls")
+
+    def _queue_full(self) -> str | None:
+        """Why a good command is refused in lock-step: the queue is full (None otherwise)."""
+        if self.lockstep and len(self._queue) >= LOCKSTEP_QUEUE:
+            return f"lock-step: {LOCKSTEP_QUEUE} commands already waiting"
+        return None
 
     def _submit(self, raw: bytes, values, reason: str | None, received: float | None = None,
                 kind: str = "moments") -> str | None:

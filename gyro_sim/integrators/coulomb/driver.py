@@ -203,10 +203,11 @@ class CoulombStepping:
             self.torque = torque
             y_plus = self.integrator.advance(t, y, t_end)
             v_plus = self.speeds(t_end, y_plus)
-            self.held_work += self.held(y, y_plus)
+            held_work = self.held(y, y_plus)
+            self.held_work += held_work
             if np.all(np.sign(v_plus) == np.sign(v0)):
                 # every axis slipped the whole step one way, or stayed exactly at rest: exact
-                self.work += self.held(y, y_plus)
+                self.work += held_work
                 self.applied = torque
                 self._rest = v_plus == 0.0
                 y, v0 = y_plus, v_plus
