@@ -196,8 +196,9 @@ class Simulator:
     def _energy_error(self, t0: float, y0: np.ndarray, t1: float, y1: np.ndarray) -> float:
         """How far an integrator's call from (t0, y0) to (t1, y1) breaks the energy balance,
         relative to the kinetic energy: (E1 - E0 - W) / max(T0, T1), W the work of the held
-        moments (exact under the zero-order hold); 0 where no balance holds (Jacobi integral
-        with moments commanded). The kinetic energy, not T + |V|: the potential's zero is
+        moments (exact under the zero-order hold; with speed rotors the Jacobi integral's
+        balance, which the commands' work moves as it moves the energy); 0 where no balance
+        holds (a moving base, servos). The kinetic energy, not T + |V|: the potential's zero is
         arbitrary, and a step that does not resolve the motion errs in proportion to the motion.
         Called by the "fixed" integrator after each call."""
         moving = len(self._axis_angle) and np.any(self._moments)
@@ -205,7 +206,7 @@ class Simulator:
             moving = True
         held = self._coulomb is not None and np.any(self._coulomb.torque)  # exact friction's held moments
         moving = moving or held
-        if self._watched is None or (moving and self._balanced != "energy"):
+        if self._watched is None:
             return 0.0
         if self.model.stateful:
             w = self.model.i_work
@@ -573,9 +574,10 @@ class Simulator:
               "work": self._work}
         if self.model.actuators is not None:
             kw["friction_work"], kw["saturated_commands"] = self.friction_work, self._saturated
-        if self._balanced == "energy":
-            kw["energy_balance"] = now["energy"] - ref["energy"] - self._work - self.friction_work
-            kw["energy_scale"] = inv.drift_scale("energy", ref)
+        if self._balanced is not None:  # the energy's, or with speed rotors the Jacobi integral's
+            b = self._balanced
+            kw["energy_balance"] = now[b] - ref[b] - self._work - self.friction_work
+            kw["energy_scale"] = inv.drift_scale(b, ref)
         return kw
 
     def _snapshot(self, pos, vel, eff, kw: dict, arrays_checked: bool = False) -> Snapshot:

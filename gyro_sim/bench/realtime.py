@@ -196,9 +196,9 @@ def violent_family(scenes=VIOLENT_SCENES, factors=VIOLENT_FACTORS) -> list[Viole
 
 
 def violent_counts(case: ViolentCase | None = None, after: float = VIOLENT_AFTER) -> dict:
-    """A violent case offline, as the node steps it ("fixed" at 1 / PHYSICS_RATE, advanced
-    VIOLENT_CALL at a time as the node's wake-ups do, the command set at the call it takes
-    effect, again at every call when repeated): the counts per simulated second of the whole run, of the push and
+    """A violent case offline, as the node steps it ("fixed" advanced 1 / PHYSICS_RATE at a
+    time, VIOLENT_CALL's worth a wake-up, the command set at the wake-up it takes effect,
+    again at every wake-up when repeated): the counts per simulated second of the whole run, of the push and
     after it, deterministic: they depend on the simulated states only. A simulation error ends
     the run and is reported (`error`)."""
     import numpy as np
@@ -212,6 +212,8 @@ def violent_counts(case: ViolentCase | None = None, after: float = VIOLENT_AFTER
     sim = Simulator(scene, integrator="fixed", step=1.0 / PHYSICS_RATE)
     g = sim.integrator
     e0 = sim.invariants()["energy"]
+    dt = 1.0 / PHYSICS_RATE
+    steps = round(VIOLENT_CALL / dt)
     n_calls = round((VIOLENT_AT + case.push + after) / VIOLENT_CALL)
     on, off = round(VIOLENT_AT / VIOLENT_CALL), round((VIOLENT_AT + case.push) / VIOLENT_CALL)
     marks, methods, worst, error = {}, set(), 0, None
@@ -224,7 +226,8 @@ def violent_counts(case: ViolentCase | None = None, after: float = VIOLENT_AFTER
             marks[i] = (g.nfev, g.nsteps)
         before = g.nfev
         try:
-            sim.advance(VIOLENT_CALL)
+            for _ in range(steps):  # the node's physics steps of one wake-up (gyro_sim.ros.loop.SimLoop._chunk)
+                sim.advance(dt)
         except SimulationError as exc:
             error = str(exc)
             break
@@ -267,7 +270,7 @@ def violent_table(counts: list[dict], nodes: list[dict | None] | None = None) ->
         f"{1e3 * VIOLENT_CALL:g} ms calls, counted over the push and {VIOLENT_AFTER:g} s after it; budget "
         f"{counts[0]['budget_per_s']:,.0f} rhs evaluations per simulated s.",
         "",
-        "| case | rhs evaluations / simulated s (push; after) | substeps / simulated s | most in a call "
+        "| case | rhs evaluations / simulated s (push; after) | substeps / simulated s | most in a wake-up "
         "| energy put in (J) | (E - E0 - W) / E | calls kept over budget (their energy error) | methods after "
         "| /joint_states | RTF | step p50 / p99 (us) | longest gap (ms) |",
         "|---|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|",

@@ -8,7 +8,8 @@
   the upward vertical -nu (+z without gravity). Conserved with a fixed base whose first joint
   is spherical (commands are internal moments).
 - jacobi (scenes with speed rotors): T2 + V + sum_torque A_i p_i^2 / 2, the Jacobi integral of
-  the rheonomic constraint kappa_i' = const: conserved when the energy is not.
+  the rheonomic constraint kappa_i' = const: conserved when the energy is not; with commands
+  it changes by their work, as the energy does without speed rotors.
 - linear_momentum, angular_momentum (free base): total momentum and angular momentum about
   the chain's centre of mass; the latter is conserved under gravity, both without it.
 - Lagrange chains (all spherical, axisymmetric, fixed base): the paper's own integrals
@@ -23,9 +24,12 @@ from gyro_sim.dynamics.model import Model
 
 
 def balanced_energy(model: Model) -> str | None:
-    """The energy whose balance the exact motion keeps: "energy" (E - E0 = the work of the
-    commands and of friction), or "jacobi" with speed rotors (kept with commands zero); None on
-    a moving base, or with servos (whose work is not tracked)."""
+    """The integral whose balance the exact motion keeps: "energy" (E - E0 = the work of the
+    commands and of friction), or "jacobi" with speed rotors (J - J0 = the same work: the
+    rheonomic constraint kappa_i' = const leaves the Lagrangian free of t, so the Jacobi
+    integral changes by the power of the generalised forces alone, while the speed rotors'
+    motors do work on the energy); None on a moving base, or with servos (whose work is not
+    tracked)."""
     if model.base_type == "moving" or model.servo is not None:
         return None
     return "jacobi" if len(model.speed_body) else "energy"

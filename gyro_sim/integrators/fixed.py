@@ -170,7 +170,7 @@ BUDGET_MAX_SUBSTEPS = 96
 #: call whose rungs below are expected to cost more keeps the budget's ways (rk4 in its most
 #: substeps, its own result with its error reported, the budget's rung). About 30 ms of the
 #: rescue's CPU (2.2-3.3 us an evaluation in its Python driver, the hinge chain, 2 cores), what
-#: the node's pacer makes up once in a run (MAX_CATCH_UP: 20 ms a wake-up); the heavy tip's
+#: the node's pacer makes up at once (MAX_CATCH_UP: 150 ms of lateness); the heavy tip's
 #: whips after its first, expected below it, pass at full accuracy
 CALL_BURST = 12_000
 #: "fixed", over its budget: a call whose energy error is below this (relative to the kinetic
@@ -178,6 +178,15 @@ CALL_BURST = 12_000
 #: is retaken by the budget's rung, then by the rescue within one burst, and past that the budget
 #: rung's result is kept (its error reported): what a call costs has a bound
 OVER_BUDGET_WATCH = 1.0
+#: "fixed", over its budget: how far the calls kept with their errors reported may multiply the
+#: kinetic energy, compounded (a gain err of a call's kinetic energy multiplies it by 1 / (1 -
+#: err), a loss by 1 + err; a later loss pays a gain back). A kept call may overshoot: the
+#: budget's rung, L-stable, damps back in the next calls what it cannot resolve (on the hinge chain
+#: pushed at 1e3 x for 1.5 s, x100 then / 100). Past this factor the calls diverge, the state no
+#: longer the motion's (the budget's rung on a free chain whose spun-up wheels nutate faster than
+#: it follows: x100, x14, then without bound), and the run ends in a simulation error
+#: (BudgetOutrun) rather than publish it. A non-finite energy ends it too.
+KEEP_GROWTH = 1e4
 #: "fixed", over its budget: the method of a call rk4 cannot take within the budget, and of its
 #: retakes (in place of the implicit rung and the rescue, whose cost has no bound): the linearly
 #: implicit Euler step (:class:`LinearlyImplicitEuler`), L-stable, size + 1 evaluations a step
@@ -201,6 +210,12 @@ class WatchdogTrip(IntegrationError):
 
 class RescueOverspent(IntegrationError):
     """The rescue, taking a call over budget, spent the budget's whole burst without finishing."""
+
+
+class BudgetOutrun(IntegrationError):
+    """Calls no rung the budget pays for takes kept multiplying the kinetic energy past KEEP_GROWTH:
+    the motion has outrun what real time can resolve, and the run ends rather than carry a state
+    that is not the motion's."""
 
 
 def spectral_radius_estimate(rhs, t: float, y: np.ndarray, dim: int = KRYLOV_DIM) -> float:
@@ -440,6 +455,7 @@ class SceneFixedStep(FixedStepIntegrator):
         self.over_budget = False
         self.budget_calls = 0
         self.budget_energy_error = 0.0
+        self._kept_growth = 0.0  # log of the kinetic energy's factor from the calls kept, compounded (>= 0)
         self._retaken = False  # the method now is a rung below the last choice
         self._implicit_rate = 0.0  # the implicit rung's evaluations a substep in its last call
         self._barred: set[str] = set()  # rungs that failed (the implicit) or overspent (the rescue) since rk4
@@ -616,6 +632,8 @@ class SceneFixedStep(FixedStepIntegrator):
                 except IntegrationError as e:  # the call again from its start, one rung down
                     refused = y.copy() if isinstance(e, WatchdogTrip) else None  # a finite state, not accurate
                     y[:] = self._y0
+                    if isinstance(e, BudgetOutrun):
+                        raise
                     self._learn(m, before, t0, t1)
                     if self.budget_rung and (self.current == self.implicit or isinstance(e, RescueOverspent)):
                         self._barred.add(self.current)  # not again until the scene is soft (rk4 chosen)
@@ -633,14 +651,21 @@ class SceneFixedStep(FixedStepIntegrator):
                     why = ""
                     ladder = [self.implicit, RESCUE] if self.current == "rk4" else [RESCUE]
                     if self.current == BUDGET_RUNG and refused is not None:  # past OVER_BUDGET_WATCH
-                        k = 4 * self.substeps  # again in 4 x its substeps, where the call's share pays for them
-                        if (self.n + 1) * k * round((t1 - t0) / self.step) > income:  # within the call's share
+                        # again in 4 x its substeps, else the rescue, where the budget pays for them
+                        # (as for the rungs below: the credit, at most CALL_BURST beyond the call's share)
+                        k = 4 * self.substeps
+                        payable = min(CALL_BURST + income, max(left, income))
+                        if (self.n + 1) * k * round((t1 - t0) / self.step) <= payable:
+                            after = BUDGET_RUNG
+                        elif (self.ready(RESCUE) and RESCUE not in self._barred
+                              and self._rescue_cost(t0, t1 - t0) <= payable):
+                            after, k = RESCUE, 1  # within one burst
+                        else:
+                            self._keep(e.error, t0)
                             y[:] = refused
-                            self._keep(e.error)
                             self.reason = (f"{self._label()}: kept, {what} at t = {e.t:.6g} s "
                                            "(more substeps beyond the budget)")
                             break
-                        after = BUDGET_RUNG
                     elif self.current == BUDGET_RUNG:  # it broke down (not its energy: that is reported)
                         after, k = RESCUE, 1  # within one burst
                     elif self.budget_rung and self.current == "rk4" and 1 < self.substeps < MAX_SUBSTEPS:
@@ -661,8 +686,8 @@ class SceneFixedStep(FixedStepIntegrator):
                             after, k = "rk4", MAX_SUBSTEPS  # rk4 again in its most substeps (within the budget)
                         elif refused is not None and abs(e.error) <= OVER_BUDGET_WATCH * (t1 - t0):
                             # the rungs below cost more than the budget has: the result kept, its error reported
+                            self._keep(e.error, t0)
                             y[:] = refused
-                            self._keep(e.error)
                             self.reason = (f"{self._label()}: kept, {what} at t = {e.t:.6g} s "
                                            "(the rungs below beyond the budget)")
                             break
@@ -698,7 +723,7 @@ class SceneFixedStep(FixedStepIntegrator):
         if abs(err) <= ENERGY_WATCH * (t1 - t0):
             return
         if self.over_budget and abs(err) <= OVER_BUDGET_WATCH * (t1 - t0):
-            self._keep(err)
+            self._keep(err, t0)
             return
         raise WatchdogTrip(self.current, err, t0, self.step / self.substeps, t1 - t0)
 
@@ -707,13 +732,26 @@ class SceneFixedStep(FixedStepIntegrator):
         No rescue retakes it (the budget chose it); `retake`: an error past OVER_BUDGET_WATCH
         raises WatchdogTrip, for the same rung in more substeps."""
         err = self.monitor(t0, self._y0, t1, y)
-        if retake and abs(err) > OVER_BUDGET_WATCH * (t1 - t0):
+        if retake and not abs(err) <= OVER_BUDGET_WATCH * (t1 - t0):  # a non-finite energy too
             raise WatchdogTrip(self.current, err, t0, self.step / self.substeps, t1 - t0)
-        if abs(err) > ENERGY_WATCH * (t1 - t0):
-            self._keep(err)
+        if not abs(err) <= ENERGY_WATCH * (t1 - t0):
+            self._keep(err, t0)
 
-    def _keep(self, err: float) -> None:
-        """A call kept over budget beyond the watchdog's limit: its energy error counted."""
+    def _keep(self, err: float, t: float) -> None:
+        """A call kept over budget beyond the watchdog's limit: its energy error counted. Where the
+        kept calls' compounded growth of the kinetic energy passes KEEP_GROWTH (or the error is
+        not finite) the run ends (BudgetOutrun), the call's start state kept."""
+        if not err < 1.0:  # not finite, or the whole kinetic energy gained
+            grow = math.inf
+        else:
+            grow = -math.log1p(-err) if err > 0.0 else math.log1p(max(err, -1.0 + 1e-12))
+        growth = max(0.0, self._kept_growth + grow)
+        if not growth <= math.log(KEEP_GROWTH):
+            raise BudgetOutrun(self.current, f"the motion outran the real-time budget ({self._label()} kept "
+                               f"multiplying the kinetic energy, x{math.exp(min(growth, 700.0)):.2g} over the calls "
+                               "it kept, and the methods that resolve it cost more than real time allows)", t,
+                               self.step / self.substeps)
+        self._kept_growth = growth
         self.budget_calls += 1
         self.budget_energy_error += err
 

@@ -145,16 +145,48 @@ def test_over_budget_a_call_beyond_rk4s_substeps_takes_the_fixed_cost_rung():
 
 
 def test_the_budget_rungs_call_is_kept_and_its_error_reported_never_retaken():
-    """Over budget, a call of the budget's rung that breaks the energy balance (by half here) is
-    kept and its error counted: no rescue is run (its cost would have no bound)."""
+    """Over budget, a call of the budget's rung that breaks the energy balance (by 5 % here, past
+    OVER_BUDGET_WATCH) is kept and its error counted: no rescue is run (its
+    cost would have no bound)."""
     sys_ = Rotation(5e5)
     integ = fixed.SceneFixedStep(sys_, step=STEP)
-    integ.monitor = lambda t0, y0, t1, y1: 0.5
+    integ.monitor = lambda t0, y0, t1, y1: 0.05
     over_budget(integ)
     y = integ.advance(0.0, np.array([1.0, 0.0]), CALL)
     assert integ.current == fixed.BUDGET_RUNG and integ.methods[fixed.RESCUE].nfev == 0
-    assert integ.budget_calls == 1 and integ.budget_energy_error == 0.5
+    assert integ.budget_calls == 1 and integ.budget_energy_error == 0.05
     assert np.isfinite(y).all()
+
+
+@pytest.mark.parametrize("error, calls", [(0.5, 14), (0.999, 2), (1.0, 1), (math.nan, 1)])
+def test_calls_kept_past_the_growth_limit_end_the_run(error, calls):
+    """Calls kept over budget whose energy gains (relative to the kinetic energy: x2 a call at
+    0.5, x1000 at 0.999) compound past KEEP_GROWTH end the run: BudgetOutrun, a simulation error,
+    with the state of the failing call's start; an energy that is not finite at once."""
+    sys_ = Rotation(5e5)
+    integ = fixed.SceneFixedStep(sys_, step=STEP)
+    integ.monitor = lambda t0, y0, t1, y1: error
+    y = np.array([1.0, 0.0])
+    for k in range(calls):
+        over_budget(integ)
+        start = y.copy()
+        if k < calls - 1:
+            integ._march(k * CALL, y, (k + 1) * CALL)
+            continue
+        with pytest.raises(fixed.BudgetOutrun, match="outran the real-time budget"):
+            integ._march(k * CALL, y, (k + 1) * CALL)
+        assert np.array_equal(y, start) and integ.budget_calls == calls - 1
+
+
+def test_a_kept_gain_paid_back_by_a_loss_goes_on():
+    """x100 then / 100, again and again: the L-stable rung damping back what it overshot."""
+    integ = fixed.SceneFixedStep(Rotation(5e5), step=STEP)
+    for k in range(20):
+        integ._keep(0.99 if k % 2 == 0 else -0.99, k * CALL)
+    assert integ.budget_calls == 20
+    with pytest.raises(fixed.BudgetOutrun):
+        for k in range(3):
+            integ._keep(0.99, k * CALL)
 
 
 def test_the_rescue_is_bounded_and_the_fixed_cost_result_kept(monkeypatch):
@@ -165,12 +197,12 @@ def test_the_rescue_is_bounded_and_the_fixed_cost_result_kept(monkeypatch):
     monkeypatch.setattr(fixed, "_choice", lambda *a, **k: fixed.Choice("rk4", 1, "forced", 0.0))
     sys_ = Rotation(1e7)
     integ = fixed.SceneFixedStep(sys_, step=STEP)
-    integ.monitor = lambda t0, y0, t1, y1: 0.5
+    integ.monitor = lambda t0, y0, t1, y1: 0.05
     y = integ.advance(0.0, np.array([1.0, 0.0]), CALL)
     assert [s[2] for s in integ.switches] == ["gauss4", fixed.RESCUE, fixed.BUDGET_RUNG]
     assert integ._plain.count == fixed.BURST_STEPS * fixed.EVAL_BUDGET + 1  # the evaluation that stopped it
     assert integ.current == fixed.BUDGET_RUNG and "rescue overspent" in integ.reason
-    assert integ.budget_calls == 1 and integ.budget_energy_error == 0.5
+    assert integ.budget_calls == 1 and integ.budget_energy_error == 0.05
     assert np.isfinite(y).all()
 
 
