@@ -170,7 +170,7 @@ BUDGET_MAX_SUBSTEPS = 96
 #: call whose rungs below are expected to cost more keeps the budget's ways (rk4 in its most
 #: substeps, its own result with its error reported, the budget's rung). About 30 ms of the
 #: rescue's CPU (2.2-3.3 us an evaluation in its Python driver, the hinge chain, 2 cores), what
-#: the node's pacer makes up at once (MAX_CATCH_UP: 150 ms of lateness); the heavy tip's
+#: the node's pacer makes up at once (MAX_CATCH_UP: 300 ms of lateness); the heavy tip's
 #: whips after its first, expected below it, pass at full accuracy
 CALL_BURST = 12_000
 #: "fixed", over its budget: a call whose energy error is below this (relative to the kinetic
@@ -844,3 +844,4 @@ class _Plain:
         if self.count > self._limit:
             raise RescueOverspent(RESCUE, f"{self.count - 1} rhs evaluations in one call, the budget's burst", t, None)
         return self._rhs(t, y, *args, **kwargs)
+
