@@ -48,7 +48,7 @@ from gyro_sim.scene.mjcf import ModelError, import_model, is_model_path
 from gyro_sim.scene.names import name_problem, topic_token
 from gyro_sim.scene.records import (
     BASE_TYPES, JOINT_TYPES, ROTOR_MODES, Base, Body, Friction, Imu, Initial, Joint,
-    Limits, Rotor, Scene, Servo, Spring,
+    Limits, Motor, Rotor, Scene, Servo, Spring,
 )
 
 __all__ = ["SceneError", "load_scene", "parse_yaml"]
@@ -98,9 +98,10 @@ BASE_TYPE_KEYS = {"fixed": ("type", "position"), "moving": ("type", "position", 
 MOTION_KEYS = ("type", "amplitude", "frequency")
 BODY_KEYS = ("name", "joint", "mass", "com", "inertia", "inertia_com", "next_joint", "rotors",
              "initial", "visual")
-JOINT_KEYS = ("type", "axis", "max_torque", "friction", "armature", "spring", "servo")
+JOINT_KEYS = ("type", "axis", "max_torque", "friction", "armature", "spring", "servo", "motor")
 #: a hinge's terms a spherical joint does not take (docs/scene-format.md)
-HINGE_ONLY_KEYS = ("armature", "spring", "servo")
+HINGE_ONLY_KEYS = ("armature", "spring", "servo", "motor")
+MOTOR_KEYS = ("inertia", "gear", "axis")
 SPRING_KEYS = ("stiffness", "reference")
 SERVO_KEYS = ("name", "gain", "bias", "gear", "ctrl_range", "force_range")
 #: a hinge's limits (JOINT_KEYS) and a torque rotor's (ROTOR_KEYS)
@@ -804,10 +805,16 @@ def _joint(ch: _Checker, value: Any, path: str) -> Joint | None:
         if servo and joint.get("max_torque") is not None:
             ch.fail(_at(path, "max_torque"), "not allowed with a servo (its force_range bounds it)")
             servo = False
-        if axis is None or limits is False or armature is None or spring is False or servo is False:
+        motor = _motor(ch, joint.get("motor"), _at(path, "motor"), axis)
+        if motor and armature:
+            ch.fail(_at(path, "motor"), "not allowed with armature on the same joint (the motor is "
+                                        "the exact form of the armature J gear^2)")
+            motor = False
+        if axis is None or limits is False or armature is None or spring is False or servo is False \
+                or motor is False:
             return None
         return Joint(type=kind, axis=_readonly(axis), limits=limits, armature=armature, spring=spring,
-                     servo=servo)
+                     servo=servo, motor=motor)
     return None
 
 
@@ -837,6 +844,25 @@ def _servo(ch: _Checker, value: Any, path: str) -> Servo | None | bool:
     if len(ch.errors) > bad or gain is None or bias is None or gear is None:
         return False
     return Servo(name=name, gain=gain, bias=tuple(float(b) for b in bias), gear=gear, **ranges)
+
+
+def _motor(ch: _Checker, value: Any, path: str, hinge_axis: np.ndarray | None) -> Motor | None | bool:
+    """A hinge's geared motor (MOTOR_KEYS): a Motor (its axis the hinge's unless written), None
+    when absent, False after reporting."""
+    if value is None:
+        return None
+    motor = ch.mapping(value, path, MOTOR_KEYS, required=("inertia", "gear"))
+    if motor is None:
+        return False
+    bad = len(ch.errors)
+    inertia = ch.scalar(motor, "inertia", path, minimum=0.0, strict=True)
+    gear = ch.scalar(motor, "gear", path)
+    if gear == 0.0:
+        ch.fail(_at(path, "gear"), "must not be zero (the rotor turns gear times the joint's rate)")
+    axis = ch.unit(motor, "axis", path) if motor.get("axis") is not None else hinge_axis
+    if len(ch.errors) > bad or inertia is None or gear is None or axis is None:
+        return False
+    return Motor(inertia=inertia, gear=gear, axis=_readonly(np.array(axis, dtype=float)))
 
 
 def _spring(ch: _Checker, value: Any, path: str) -> Spring | None | bool:
