@@ -366,10 +366,8 @@ def make_system(model: Model, backend: str = "auto") -> ChainODE | FastChainODE:
     """
     if backend not in BACKENDS:
         raise ValueError(f"unknown backend {backend!r}; valid: {', '.join(BACKENDS)}")
-    if backend == "numpy" or (backend == "auto" and (not fast.available() or model.motor is not None)):
+    if backend == "numpy" or (backend == "auto" and not fast.available()):
         return ChainODE(model)
-    if model.motor is not None:
-        raise ImportError("the numba backend does not take geared motors yet; use backend 'numpy' or 'auto'")
     if not fast.available():
         raise ImportError("the numba backend needs numba; use backend 'numpy' or 'auto'")
     try:

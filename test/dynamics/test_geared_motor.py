@@ -249,3 +249,141 @@ def test_motor_with_armature_or_on_a_spherical_joint_refused():
 def test_gauss4s_refuses_motors():
     with pytest.raises(ValueError, match="gauss4s does not take geared motors"):
         Simulator(turntable(), integrator="gauss4s", backend="numpy")
+
+
+# --- the compiled kernel against the numpy reference ------------------------------------------
+def with_motors(scene: dict, seed: int) -> dict:
+    """`scene` with a geared motor of random inertia, gear and axis on every hinge but the first
+    body's (its second body made a hinge when it is not one) and a spring on every hinge."""
+    from test.dynamics.test_kernel import chain_scene  # noqa: F401 (the scenes' home)
+
+    scene = copy.deepcopy(scene)
+    rng = np.random.default_rng(seed)
+    if all(b["joint"]["type"] != "hinge" for b in scene["bodies"][1:]):
+        scene["bodies"][1]["joint"] = {"type": "hinge", "axis": [0.3, 1.0, 0.2]}
+        scene["bodies"][1]["initial"] = {"angle": 0.4, "rate": -0.7}
+    for b in scene["bodies"][1:]:
+        if b["joint"]["type"] == "hinge":
+            b["joint"]["motor"] = {"inertia": float(rng.uniform(1e-5, 1e-3)), "gear": float(rng.choice([-1, 1])
+                                                                                         * rng.uniform(5, 100)),
+                                   "axis": rng.normal(size=3).tolist()}
+            b["joint"]["spring"] = {"stiffness": float(rng.uniform(0.1, 3.0)), "reference": float(rng.normal())}
+    return scene
+
+
+def motor_chain(seed: int, base: str, heavy: bool = False) -> dict:
+    from test.dynamics.test_kernel import chain_scene
+
+    scene = with_motors(chain_scene(seed, base, n=5), seed)
+    if heavy:
+        tip = scene["bodies"][-1]
+        tip["mass"] *= 1e3
+        tip["inertia_com"] = (np.asarray(tip["inertia_com"]) * 1e3).tolist()
+    return scene
+
+
+@needs_numba
+@pytest.mark.parametrize("base", ["fixed", "free", "moving"])
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("heavy", [False, True])
+def test_kernel_equals_reference(seed, base, heavy):
+    """Both eliminations (a 1e3 x heavier tip takes the square-root form) with geared motors on
+    every hinge past the first body, random commands and states."""
+    from test.dynamics.test_kernel import assert_rhs_equal
+
+    model = compile_model(load_scene(motor_chain(seed, base, heavy)))
+    assert model.motor is not None
+    assert fast.heavy_subtrees(model.mass) == heavy  # the kernel's heavy-subtree path, or not
+    rng = np.random.default_rng(seed)
+    ref, comp = ChainODE(model), FastChainODE(model)
+    tau = rng.normal(size=len(model.hinge_bodies))
+    for ode in (ref, comp):
+        ode.hold(0.1, ref.spins(0.1), tau, None)
+    for _ in range(3):
+        y = initial_state(model) + rng.normal(size=model.size) * 0.3
+        assert_rhs_equal(model, ref.rhs(0.4, y), comp.rhs(0.4, y), rtol=1e-9 if heavy else 1e-12)
+
+
+@needs_numba
+@pytest.mark.parametrize("base", ["fixed", "free"])
+def test_compiled_outputs_equal_the_reference(base):
+    """The publication kernel's invariants (the rotors' energy and spins) and wrenches (their
+    moments on the parents) against the numpy reference's."""
+    scene = motor_chain(1, base)
+    sims = [Simulator(scene, backend=b) for b in ("numpy", "numba")]
+    for sim in sims:
+        sim.set_axis_moments(np.linspace(-0.5, 0.5, len(sim.axis_names)))
+        sim.advance(0.05)
+    np.testing.assert_allclose(sims[1].state, sims[0].state, rtol=0, atol=1e-9)
+    a, b = (sim.invariants() for sim in sims)
+    for name in a:
+        np.testing.assert_allclose(b[name], a[name], rtol=1e-9, atol=1e-12, err_msg=name)
+    (fa, ma), (fb, mb) = (np.array([[w.force for w in sim.wrenches()], [w.moment for w in sim.wrenches()]])
+                          for sim in sims)
+    np.testing.assert_allclose(fb, fa, rtol=1e-9, atol=1e-9 * np.abs(fa).max())
+    np.testing.assert_allclose(mb, ma, rtol=1e-9, atol=1e-9 * np.abs(ma).max())
+
+
+_STABLE_WITH_MOTORS = """
+import sys
+import numpy as np
+sys.path.insert(0, sys.argv[1])
+from gyro_sim.dynamics import kernel as fast
+fast.STABLE_ABA_RATIO = -1.0  # every elimination takes the square-root form (plain Python)
+from gyro_sim import load_scene
+from gyro_sim.dynamics.model import compile_model, initial_state
+from gyro_sim.dynamics.system import ChainODE
+from test.dynamics.test_geared_motor import motor_chain
+worst = 0.0
+for base in ("fixed", "free", "moving"):
+    for seed in range(3):
+        rng = np.random.default_rng(seed)
+        model = compile_model(load_scene(motor_chain(seed, base)))
+        chain, data, inputs = fast.records(model)
+        y = initial_state(model) + rng.normal(size=model.size) * 0.2
+        tau = rng.normal(size=len(model.hinge_bodies))
+        ref = ChainODE(model)
+        ref.hold(0.0, ref.spins(0.0), tau, None)
+        fast.hold(inputs, model, 0.0, ref.spins(0.0), tau, None)
+        out = np.zeros(model.size)
+        fast.rhs_kernel(0.2, y, out, chain, data, inputs)
+        want = ref.rhs(0.2, y)
+        worst = max(worst, float(np.abs(out - want).max() / np.abs(want).max()))
+print(worst)
+"""
+
+
+@pytest.mark.slow
+def test_the_square_root_elimination_takes_the_motors(tmp_path):
+    """`_aba_stable` (the parent's own factor without the locked rotor, the child's factor with
+    it and one more row, W = (U + m) / D, the refinement's residual with the motors' rows),
+    forced on every chain in plain Python (numba off), against the numpy reference."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    env = dict(os.environ, NUMBA_DISABLE_JIT="1", PYTHONPATH=str(root))
+    run = subprocess.run([sys.executable, "-c", _STABLE_WITH_MOTORS, str(root)], env=env, cwd=tmp_path,
+                         capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr
+    assert float(run.stdout.strip().splitlines()[-1]) <= 1e-12
+
+
+@pytest.mark.parametrize("backend", ["numpy", pytest.param("numba", marks=needs_numba)])
+def test_the_joints_transmit_the_commands(backend):
+    """Eq (51) at the turntable's hinge (the motor's parent: its rotor is inside the subtree,
+    e^1 . L^1 = L_1) and eq (51b) at the arm's (e^2 . L^2 = L_2 - J G (a . w1' + G phi_2''), the
+    torque that spins the rotor stays between the parent and the motor), with the accelerations
+    of the hand-written Lagrangian."""
+    sim = Simulator(turntable(), backend=backend)
+    tau = np.array([0.7, -0.4])
+    sim.set_axis_moments(tau)
+    wrench = sim.wrenches()
+    q, qd = np.array([0.2, 0.3]), np.array([3.0, 0.5])
+    qdd = lagrange_accelerations(q, qd, tau)
+    a = A_MOTOR / np.linalg.norm(A_MOTOR)
+    rotor = J_ROTOR * GEAR * (a[2] * qdd[0] + GEAR * qdd[1])  # a . w1' = a_z theta1'' (a in body 1's axes)
+    assert wrench[0].moment[2] == pytest.approx(tau[0], rel=1e-12)
+    assert wrench[1].moment @ E2 == pytest.approx(tau[1] - rotor, rel=1e-10)
