@@ -179,8 +179,9 @@ def motor_forces(model: Model, data: Data, rates: np.ndarray) -> np.ndarray:
     """(n, 3), world: the moments m_k x rates_k of the hinges' motors (m_k = J G a, `positions`)
     summed on their parents: lambda of the motors for the joint rates, the part of lambda' linear
     in the accelerations for the joint accelerations (a stack too)."""
-    f = np.zeros(data.R.shape[:-2] + (3,), dtype=np.result_type(data.motor_w, rates))
-    np.add.at(np.moveaxis(f, -2, 0), data.motor_parent, np.moveaxis(data.motor_w * rates[..., None], -2, 0))
+    moments = data.motor_w * rates[..., None]  # one configuration may serve a stack of rates
+    f = np.zeros(moments.shape[:-2] + (model.n, 3), dtype=moments.dtype)
+    np.add.at(np.moveaxis(f, -2, 0), data.motor_parent, np.moveaxis(moments, -2, 0))
     return f
 
 
