@@ -143,7 +143,7 @@ class SceneError(GyroSimError, ValueError):
 def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None,
                package_path: Sequence[str | os.PathLike] = (),
                lock: Mapping[str, float | None] | Sequence[str] = (),
-               balance_inertia: bool = False) -> Scene:
+               balance_inertia: bool = False, geared_motors: float | None = None) -> Scene:
     """Load and validate a scene.
 
     Parameters
@@ -169,6 +169,10 @@ def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None,
         Models only: a moving body's inertia outside the triangle inequality takes MuJoCo's
         balanced one (docs/models.md, "Inertias outside the triangle inequality") instead of
         being refused.
+    geared_motors : float, optional
+        Models only: every hinge's armature a becomes the geared motor of this gear ratio G it
+        reflects (a rotor of axial inertia a / G^2 on the parent: docs/models.md, "The geared
+        motor against the armature").
 
     Returns
     -------
@@ -197,7 +201,7 @@ def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None,
         if is_model_path(path):  # MJCF or URDF: its scene mapping, refusals naming elements
             try:
                 model = import_model(path, keyframe, package_path=package_path, lock=lock,
-                                     balance_inertia=balance_inertia)
+                                     balance_inertia=balance_inertia, geared_motors=geared_motors)
             except ModelError as exc:
                 raise SceneError(exc.errors, path) from None
             data = model.mapping
@@ -208,6 +212,9 @@ def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None,
     if balance_inertia and model is None:
         raise SceneError(["balance_inertia: only an MJCF or URDF model's inertias are balanced (a "
                           "scene file's inertia must obey the triangle inequality)"], path)
+    if geared_motors is not None and model is None:
+        raise SceneError(["geared_motors: only an MJCF model's armatures become geared motors (a "
+                          "scene file gives a hinge its `motor`)"], path)
     if lock and model is None:
         raise SceneError(["lock: only the joints of an MJCF or URDF model are locked (a scene "
                           "file's chain is written as it moves)"], path)
