@@ -418,3 +418,11 @@ def test_every_integrator_but_gauss4s_takes_motors(integrator):
     model = sim.model
     np.testing.assert_allclose(np.concatenate((sim.state[model.i_phi], sim.state[model.i_vel])), ref,
                                rtol=0, atol=1e-6)
+
+
+def test_the_mujoco_peer_skips_motors():
+    """The accuracy report's MuJoCo peer has no exact gear: a scene with a motor is skipped, with
+    the reason, not run without its motor."""
+    from gyro_sim.bench import peers
+
+    assert "geared motor of arm" in peers.mujoco_unsupported(load_scene(turntable()))
