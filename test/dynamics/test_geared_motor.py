@@ -426,3 +426,15 @@ def test_the_mujoco_peer_skips_motors():
     from gyro_sim.bench import peers
 
     assert "geared motor of arm" in peers.mujoco_unsupported(load_scene(turntable()))
+
+
+@pytest.mark.parametrize("backend", ["numpy", pytest.param("numba", marks=needs_numba)])
+def test_the_commands_work_is_the_energy_gained(backend):
+    """The command is the joint's moment (G x the motor's torque): its work L_k (phi_k(t) -
+    phi_k(0)) is the change of the energy, the rotor's included, under gravity."""
+    sim = Simulator(turntable(), integrator="dop853", rtol=1e-12, atol=1e-12, backend=backend)
+    e0 = sim.invariants()["energy"]
+    sim.set_axis_moments([0.3, -0.2])
+    sim.advance(0.5)
+    assert sim.invariants()["energy"] - e0 == pytest.approx(sim.work, rel=1e-9)
+    assert abs(sim.work) > 1e-2
