@@ -31,7 +31,9 @@ Pipeline of one evaluation (`rhs_kernel`), all about O^k in world axes:
     bias forces  w, v, t  -> spatial inertias, forces at u' = 0               (eqs 29, 31, 36-39, 58)
     ABA          I, p, c  -> u'                                               (eqs 44, 51, 54)
                  (a hinge's armature added to its D_k, its spring's moment to its tau: eq 51a,
-                 docs/theory.md section 10)
+                 docs/theory.md section 10; a geared motor's m = J G a to its U_k, m . c^k to
+                 its u_k, J G^2 to its D_k, its rotor's gyroscopic moment to the parent's bias
+                 force: eq 51b)
     y'           u', w    -> quaternion rates, phi', u', rotor angle rates    (eqs 18-19)
 
 Nothing is allocated per evaluation (test/dynamics/test_kernel_alloc.py): every intermediate lives in
