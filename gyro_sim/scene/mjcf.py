@@ -1046,9 +1046,10 @@ class _Importer:
                 elif g.joint in self.armature:  # the geared motor the armature reflects, on the parent
                     body["joint"]["motor"] = {"inertia": _tidy(self.armature[g.joint] / self.gear ** 2),
                                               "gear": _tidy(self.gear)}
+                    on = ("on the base (which does not turn: exactly the armature)" if k == 0 else
+                          "on its parent (its rotor's axial inertia joins the parent's)")
                     self.notes.append(f"joint {self.joint_name(g.joint)!r}: armature "
-                                      f"{self.armature[g.joint]:g} as a geared motor of gear {self.gear:g} "
-                                      f"on its parent (its rotor's axial inertia joins the parent's)")
+                                      f"{self.armature[g.joint]:g} as a geared motor of gear {self.gear:g} {on}")
                 if g.joint in self.spring:
                     body["joint"]["spring"] = self.spring[g.joint]
                 if g.joint in self.servo:
