@@ -48,6 +48,7 @@ SCENE_SECTIONS = {
     "`bodies[k].joint`": ("JOINT_KEYS", "bodies[0].joint"),
     "`bodies[k].joint.spring`": ("SPRING_KEYS", "bodies[1].joint.spring"),
     "`bodies[k].joint.servo`": ("SERVO_KEYS", "bodies[1].joint.servo"),
+    "`bodies[k].joint.motor`": ("MOTOR_KEYS", "bodies[1].joint.motor"),
     "`bodies[k].inertia`": ("INERTIA_KEYS", "bodies[0].inertia"),
     "`bodies[k].rotors[i]`": ("ROTOR_KEYS", "bodies[0].rotors[0]"),
     "`friction`": ("FRICTION_KEYS", "bodies[0].rotors[0].friction"),
@@ -82,7 +83,7 @@ def documented_sections(path: Path) -> dict[str, set[str]]:
 
 def valid_scene() -> dict:
     """A scene holding every level of the format once: a moving base, one spherical body with
-    an inertia, a rotor, an initial state and a visual, and a hinge with a spring and a servo."""
+    an inertia, a rotor, an initial state and a visual, and a hinge with a spring, a servo and a geared motor."""
     return {
         "name": "every level",
         "gravity": [0.0, 0.0, -9.81],
@@ -101,8 +102,9 @@ def valid_scene() -> dict:
             "next_joint": [0.0, 0.0, 0.2],
         }, {
             "name": "arm",
-            "joint": {"type": "hinge", "axis": [1.0, 0.0, 0.0], "armature": 0.01,
-                      "spring": {"stiffness": 2.0, "reference": 0.1}, "servo": {"gain": 2.0}},
+            "joint": {"type": "hinge", "axis": [1.0, 0.0, 0.0],
+                      "spring": {"stiffness": 2.0, "reference": 0.1}, "servo": {"gain": 2.0},
+                      "motor": {"inertia": 1e-4, "gear": 10.0}},
             "mass": 0.5,
             "com": [0.0, 0.0, 0.1],
             "inertia": {"axial": 0.001, "transverse": 0.009},

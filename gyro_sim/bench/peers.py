@@ -17,8 +17,9 @@ test/oracles/pin_chain.py, which checks gyro_sim against Pinocchio):
 
 MuJoCo cannot hold a speed rotor's kappa_i' constant (a rheonomic constraint: only an
 actuator that approximately tracks it) nor move the base along a prescribed path with the
-exact accelerations (a mocap body has no dynamics): such scenes are skipped, with that
-reason, by :func:`mujoco_unsupported`.
+exact accelerations (a mocap body has no dynamics), nor gear a rotor exactly to a joint (a
+geared motor: its equality constraints are soft): such scenes are skipped, with that reason, by
+:func:`mujoco_unsupported`.
 """
 from __future__ import annotations
 
@@ -139,6 +140,9 @@ def mujoco_unsupported(scene: Scene) -> str | None:
     if scene.base.type == "moving":
         return "moving base: MuJoCo cannot prescribe the base motion with its exact accelerations"
     for b in scene.bodies:
+        if b.joint.motor is not None:
+            return (f"geared motor of {b.name}: MuJoCo couples a rotor to a joint only through a soft "
+                    "equality constraint, not an exact gear")
         for r in b.rotors:
             if r.mode == "speed":
                 return f"speed rotor {r.name}: MuJoCo cannot hold kappa' constant (rheonomic constraint)"

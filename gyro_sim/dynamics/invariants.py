@@ -1,7 +1,9 @@
 """First integrals and other monitors of the motion, from the state alone.
 
 - energy: T + V, T by eq (33) summed over the chain, V = -g . sum m^k r_c^k; the hinges'
-  armatures add 1/2 a phi'^2 to T, their springs 1/2 k (phi - phi_ref)^2 to V.
+  armatures add 1/2 a phi'^2 to T, their geared motors phi' J G a . w^{k-1} + 1/2 J G^2 phi'^2
+  (and their rotors' spin J G phi' a to the parent's angular momentum), their springs
+  1/2 k (phi - phi_ref)^2 to V.
   Conserved with a fixed base, no speed rotors and zero commands.
 - angular_momentum_O1: the angular momentum vector about O^1 (3,), world frame.
 - vertical_momentum: angular momentum about the vertical through O^1 (eq 79), component along
@@ -70,8 +72,8 @@ def invariants(model: Model, data: Data, p: np.ndarray | None, t: float, y: np.n
     if p is not None:
         T += 0.5 * float(np.sum(model.torque_A * p**2))
     V = 0.0 if model.gravity is None else -float(model.gravity @ h.sum(axis=0))
-    if model.armature is not None or model.spring is not None:
-        T_joint, V_joint = joint_energy(model, y)
+    if model.armature is not None or model.spring is not None or model.motor is not None:
+        T_joint, V_joint = joint_energy(model, y, data)
         T, V = T + T_joint, V + V_joint
     out = {"energy": T + V, "kinetic": T, "potential": V}
     if model.lam_speed is not None:

@@ -31,7 +31,9 @@ Pipeline of one evaluation (`rhs_kernel`), all about O^k in world axes:
     bias forces  w, v, t  -> spatial inertias, forces at u' = 0               (eqs 29, 31, 36-39, 58)
     ABA          I, p, c  -> u'                                               (eqs 44, 51, 54)
                  (a hinge's armature added to its D_k, its spring's moment to its tau: eq 51a,
-                 docs/theory.md section 10)
+                 docs/theory.md section 10; a geared motor's m = J G a to its U_k, m . c^k to
+                 its u_k, J G^2 to its D_k, its rotor's gyroscopic moment to the parent's bias
+                 force: eq 51b)
     y'           u', w    -> quaternion rates, phi', u', rotor angle rates    (eqs 18-19)
 
 Nothing is allocated per evaluation (test/dynamics/test_kernel_alloc.py): every intermediate lives in
@@ -130,6 +132,10 @@ class ChainModel(NamedTuple):
     #: (n, 5) the hinges' servos: gear, b1, b2, force low, high (read only with
     #: flags[FLAG_SERVOS], on the bodies whose gear is not zero; the held drive is in tau)
     servo: np.ndarray
+    #: (n, 5) the hinges' geared motors on their parents: J G, J G^2, the rotor's axis a in the
+    #: parent's frame (3) (read only with flags[FLAG_MOTORS], on the bodies whose J G^2 is not
+    #: zero; docs/theory.md, "The geared motor")
+    motor: np.ndarray
 
 
 #: the index of `flags` among ChainModel's fields (its address in a descriptor: D_MODEL + this)
@@ -203,7 +209,11 @@ FLAG_SPRINGS = 12
 #: drive gain clip(ctrl) + b0, turned into its moment at the state (`servo_moments`) in the N
 #: floats of the workspace before the springs' (`scratch`)
 FLAG_SERVOS = 13
-FLAGS_SIZE = 14
+#: flags[FLAG_MOTORS]: 1 for a model with geared motors on turning parents, whose per-evaluation
+#: terms (m = J G a in world axes, J G^2) sit in 4 n floats before the servos' and springs'
+#: (`motor_offset`)
+FLAG_MOTORS = 14
+FLAGS_SIZE = 15
 #: per actuated axis, floats of the workspace's tail of a stateful model: max_speed (inf: none),
 #: coulomb, viscous, static, stribeck_speed (0: no Stribeck term), stick_speed
 ACTUATOR_PARAMETERS = 6
@@ -211,9 +221,9 @@ ACTUATOR_PARAMETERS = 6
 #: ChainModel's order) from D_MODEL, of the scratch at D_WORK, of the held inputs' arrays (in
 #: HeldInputs' order) from D_INPUTS; n, N, nt and the scratch's size; the evaluations counted
 #: (the compiled entry from Python, gyro_sim.dynamics.entry, counts there)
-D_MODEL, D_WORK, D_INPUTS = 0, 18, 19
-D_N, D_NCOL, D_NT, D_NWORK, D_NFEV = 24, 25, 26, 27, 28
-DESCRIPTOR_SIZE = 29
+D_MODEL, D_WORK, D_INPUTS = 0, 19, 20
+D_N, D_NCOL, D_NT, D_NWORK, D_NFEV = 25, 26, 27, 28, 29
+DESCRIPTOR_SIZE = 30
 assert D_WORK - D_MODEL == len(ChainModel.__annotations__) and D_N - D_INPUTS == len(HeldInputs.__annotations__), \
     "the descriptor's layout (D_*) no longer matches the records' fields"
 
@@ -761,7 +771,9 @@ class Elimination(NamedTuple):
     columns S (N, 6), the bodies' inertias IA (n, 6, 6) and bias forces pA (n, 6) (overwritten),
     the joint bias accelerations c (n, 6), the base's acceleration a_base (6,), the joint
     offsets s_w (n, 3); U, W (N, 6), u (N,), Dinv (n, 6, 6), Ia (6, 6), pa (6,), Dx, T, G (3, 3),
-    x (6,): scratch; armature (n,): each hinge's, added to its D (zero elsewhere)."""
+    x (6,): scratch; armature (n,): each hinge's, added to its D (zero elsewhere); motor (n, 4) or
+    (0, 4) without motors: each hinge's geared motor, m = J G a (world axes, a the rotor's axis)
+    and J G^2 (zero rows: none; `motor_axes`)."""
 
     S: np.ndarray
     IA: np.ndarray
@@ -780,6 +792,20 @@ class Elimination(NamedTuple):
     G: np.ndarray
     x: np.ndarray
     armature: np.ndarray
+    motor: np.ndarray
+
+
+@_njit_inline
+def _motor_column(S, U, u, c, motor, k, j0):
+    """A geared motor in hinge k's elimination (eq 51b: the row gains m . w^{k-1}' + J G^2
+    phi_k''): U' = U + (m, 0), u' = u + m . c^k (the parent's angular acceleration is that of
+    body k before its joint, less c^k's); returns what D = S^T U' must gain to be S^T U + J G^2."""
+    m0, m1, m2 = motor[k, 0], motor[k, 1], motor[k, 2]
+    U[j0, 0] += m0
+    U[j0, 1] += m1
+    U[j0, 2] += m2
+    u[j0] += m0 * c[k, 0] + m1 * c[k, 1] + m2 * c[k, 2]
+    return motor[k, 3] - (m0 * S[j0, 0] + m1 * S[j0, 1] + m2 * S[j0, 2])
 
 
 @_njit_inline
@@ -799,7 +825,7 @@ def _aba_classic(is_hinge, col_start, e, tau, udot):
     (S = (1, 0)) is eliminated in closed form, in scalars: D = J, and only the apparent mass
     M - H^T J^-1 H passes to the parent.
     """
-    S, IA, pA, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x, armature = e
+    S, IA, pA, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x, armature, motor = e
     n = IA.shape[0]
     worst = 0.0  # largest apparent mass passed on / the carrier's own mass
     # backward: I^a = I^A - U D^-1 U^T, p^a = p^A + I^a c + U D^-1 u, to the parent's O^{k-1}
@@ -864,7 +890,10 @@ def _aba_classic(is_hinge, col_start, e, tau, udot):
                                + IA[k, r, 3] * S[j, 3] + IA[k, r, 4] * S[j, 4] + IA[k, r, 5] * S[j, 5])
                 u[j] = tau[j] - (S[j, 0] * pA[k, 0] + S[j, 1] * pA[k, 1] + S[j, 2] * pA[k, 2]
                                  + S[j, 3] * pA[k, 3] + S[j, 4] * pA[k, 4] + S[j, 5] * pA[k, 5])
-            _joint_projection(S, U, Dinv[k], W, j0, nk, armature[k])
+            extra = armature[k]
+            if motor.shape[0] != 0 and motor[k, 3] != 0.0:  # a geared motor: U, u and D (eq 51b)
+                extra += _motor_column(S, U, u, c, motor, k, j0)
+            _joint_projection(S, U, Dinv[k], W, j0, nk, extra)
             if k == 0:
                 continue
             for r in range(6):
@@ -1024,7 +1053,8 @@ def _aba_stable(is_hinge, col_start, e, tau, udot):
     articulated inertia formed, F^T F (nothing passes on from it).
     """
     S, IA, pA, c, a_base, s_w, U, W, u, Dinv = e.S, e.IA, e.pA, e.c, e.a_base, e.s_w, e.U, e.W, e.u, e.Dinv
-    armature = e.armature
+    armature, motor = e.armature, e.motor
+    motors = motor.shape[0] != 0
     n = IA.shape[0]
     Ia = np.empty((6, 6))
     pa = np.empty(6)
@@ -1046,7 +1076,20 @@ def _aba_stable(is_hinge, col_start, e, tau, udot):
         IAk, pAk, D = IA[k], pA[k], Dinv[k]
         for j in range(j0, j1):
             u[j] = tau[j] - dot6(S[j], pAk)
-        _chol_upper6(IAk, K)
+        if motors and motor[k, 3] != 0.0:  # u' = u + m . c^k (eq 51b, as `_motor_column`)
+            u[j0] += motor[k, 0] * c[k, 0] + motor[k, 1] * c[k, 1] + motor[k, 2] * c[k, 2]
+        if motors and k + 1 < n and motor[k + 1, 3] != 0.0:
+            # the locked rotor J a a^T = m m^T / (J G^2) of the child's motor is factored with the
+            # child (its I^a below is then positive semidefinite): the own factor without it
+            for r in range(6):
+                for q in range(6):
+                    Ia[r, q] = IAk[r, q]
+            for r in range(3):
+                for q in range(3):
+                    Ia[r, q] -= motor[k + 1, r] * motor[k + 1, q] / motor[k + 1, 3]
+            _chol_upper6(Ia, K)
+        else:
+            _chol_upper6(IAk, K)
         if nk != 1 and nk != SPHERICAL_DOF:
             # free base and first joint (k = 0): I^A = F^T F formed, D = S^T I^A S
             for r in range(6):
@@ -1125,6 +1168,21 @@ def _aba_stable(is_hinge, col_start, e, tau, udot):
                 Ia[m2, r] = scale * W[j0, r]
                 W[j0, r] *= D0 / Dk
             rows = m2 + 1
+        elif hinge and motors and motor[k, 3] != 0.0:
+            # a geared motor (m = J G a, d = J G^2): D = D0 + d, W = (U + (m, 0)) / D with U = D0 W,
+            # and the articulated inertia with the locked rotor, I^A + J a a^T - W D W^T, is
+            # N R22^T R22 N^T + v v^T / D, v = sqrt(d D0) W - sqrt(D0 / d) (m, 0): one more row
+            D0 = St[0, 0] * St[0, 0]
+            d = motor[k, 3]
+            Dk = D0 + d
+            D[0, 0] = 1.0 / Dk
+            scale = math.sqrt(D0 / Dk)
+            sd = math.sqrt(d)
+            for r in range(6):
+                mr = motor[k, r] if r < 3 else 0.0
+                Ia[m2, r] = scale * (sd * W[j0, r] - mr / sd)
+                W[j0, r] = (D0 * W[j0, r] + mr) / Dk
+            rows = m2 + 1
         if k == 0:
             continue
         # the factor passed on: R22 N^T, N = Q[:, nk:] ((6 - nk) rows, in world axes)
@@ -1152,6 +1210,10 @@ def _aba_stable(is_hinge, col_start, e, tau, udot):
         for b in range(rows):
             for r in range(6):
                 pa[r] += Ia[b, r] * z[b]
+        if hinge and motors and motor[k, 3] != 0.0:  # I^a c without the locked rotor (the parent's)
+            f = (motor[k, 0] * c[k, 0] + motor[k, 1] * c[k, 1] + motor[k, 2] * c[k, 2]) / motor[k, 3]
+            for r in range(3):
+                pa[r] -= motor[k, r] * f
         # the factor moved to O^{k-1} = O^k - s^{k-1}: rows (f_ang, f_lin) X = (f_ang + s x f_lin, f_lin)
         d = s_w[k - 1]
         nc = rows
@@ -1198,12 +1260,19 @@ def _aba_stable(is_hinge, col_start, e, tau, udot):
     for k in range(n):
         for r in range(6):
             F[k, r] += dot6(IA[k, r], acc_body[k])
+    if motors:  # the motors' J G phi'' a on their parents
+        for k in range(1, n):
+            for r in range(3):
+                F[k - 1, r] += motor[k, r] * udot[col_start[k]]
     res = np.empty(u.shape[0])
     for k in range(n - 1, -1, -1):
         for j in range(col_start[k], col_start[k + 1]):
             res[j] = tau[j] - dot6(S[j], F[k])
             if armature[k] != 0.0 and col_start[k + 1] - col_start[k] == 1:
                 res[j] -= armature[k] * udot[j]
+            if motors and motor[k, 3] != 0.0:  # (51b)
+                res[j] -= (motor[k, 0] * acc_body[k - 1, 0] + motor[k, 1] * acc_body[k - 1, 1]
+                           + motor[k, 2] * acc_body[k - 1, 2] + motor[k, 3] * udot[j])
         if k > 0:
             vec_cross_add(s_w[k - 1], F[k, 3:], F[k - 1, :3])
             for r in range(6):
@@ -1261,8 +1330,9 @@ def heavy_subtrees(mass) -> bool:
     return not worst <= STABLE_ABA_RATIO
 
 
-#: `_heavy_entry`'s arguments: the addresses of `_aba_heavy`'s 20 arrays, then n and N
-HEAVY_ENTRY_ARGUMENTS = 23
+#: `_heavy_entry`'s arguments: the addresses of `_aba_heavy`'s 21 arrays, then the motors' rows
+#: (n or 0), n and N
+HEAVY_ENTRY_ARGUMENTS = 25
 
 
 if jit.compiling():
@@ -1280,10 +1350,10 @@ if jit.compiling():
             address_of(e.c), address_of(tau), address_of(e.a_base), address_of(e.s_w), address_of(e.U),
             address_of(e.W), address_of(e.u), address_of(e.Dinv), address_of(udot), address_of(e.Ia),
             address_of(e.pa), address_of(e.Dx), address_of(e.T), address_of(e.G), address_of(e.x),
-            address_of(e.armature), e.IA.shape[0], e.S.shape[0]))
+            address_of(e.armature), address_of(e.motor), e.motor.shape[0], e.IA.shape[0], e.S.shape[0]))
 
     def _heavy_entry(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot, Ia, pa,
-                     Dx, T, G, x, armature, n, N):
+                     Dx, T, G, x, armature, motor, n_motor, n, N):
         """`_aba_heavy` on the arrays at these addresses (C-contiguous, the shapes `_aba` gives
         them for n bodies and N columns): compiled as a C function (`heavy_elimination_address`)."""
         f = np.float64
@@ -1295,7 +1365,8 @@ if jit.compiling():
             vector_at(u, N, f), block3(vector_at(Dinv, 36 * n, f), 0, n, 6, 6),
             block2(vector_at(Ia, 36, f), 0, 6, 6), vector_at(pa, 6, f),
             block2(vector_at(Dx, 9, f), 0, 3, 3), block2(vector_at(T, 9, f), 0, 3, 3),
-            block2(vector_at(G, 9, f), 0, 3, 3), vector_at(x, 6, f), vector_at(armature, n, f))
+            block2(vector_at(G, 9, f), 0, 3, 3), vector_at(x, 6, f), vector_at(armature, n, f),
+            block2(vector_at(motor, 4 * n_motor, f), 0, n_motor, 4))
         _aba_heavy(vector_at(is_hinge, n, np.bool_), vector_at(col_start, n + 1, np.int64), e,
                    vector_at(tau, N, f), vector_at(udot, N, f))
 
@@ -1316,7 +1387,8 @@ if jit.compiling():
             block2(vector_at(a[9], 3 * n, f), 0, n, 3), vector_at(a[10], nt, i),
             block2(vector_at(a[11], 3 * nt, f), 0, nt, 3), vector_at(a[12], nt, f),
             vector_at(a[13], FLAGS_SIZE, i), vector_at(a[14], 7, f), vector_at(a[15], n, f),
-            block2(vector_at(a[16], 2 * n, f), 0, n, 2), block2(vector_at(a[17], 5 * n, f), 0, n, 5))
+            block2(vector_at(a[16], 2 * n, f), 0, n, 2), block2(vector_at(a[17], 5 * n, f), 0, n, 5),
+            block2(vector_at(a[18], 5 * n, f), 0, n, 5))
         h = d[D_INPUTS:D_N]
         inputs = HeldInputs(vector_at(h[0], 1, f), vector_at(h[1], nt, f), vector_at(h[2], nt, f),
                             vector_at(h[3], nt, f), vector_at(h[4], N, f))
@@ -1459,7 +1531,7 @@ def rhs_kernel(t, y, ydot, model, data, inputs):
     commands through its actuators' speed cut and friction (`actuate`).
     """
     (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-     torque_axis, torque_A, flags, base, armature, spring, servo) = model
+     torque_axis, torque_A, flags, base, armature, spring, servo, motor) = model
     work = data.work
     t0, p0, pdot, L_rotor, tau = inputs.t0[0], inputs.p0, inputs.pdot, inputs.L_rotor, inputs.tau
     base_type = flags[0]
@@ -1487,6 +1559,11 @@ def rhs_kernel(t, y, ydot, model, data, inputs):
         _spring_moments(y, model, tau_applied, with_springs)
         tau_applied = with_springs
     bias_forces(model, R, hk, Aw, w, vO, p, L_applied, lam_b, dlam_b, I6, pb)
+    motor_w = block2(work, 0, 0, 4)
+    if flags[FLAG_MOTORS] != 0:  # the motors' m = J G a (world) and their gyroscopic moments
+        motor_w = block2(work, motor_offset(work, flags, n), n, 4)
+        motor_axes(model, R, motor_w)
+        motor_gyroscopic(y, model, w, motor_w, pb)
     # ABA
     _joint_columns(is_hinge, own_col, base_type, e_w, S)
     for a in range(6):
@@ -1495,7 +1572,8 @@ def rhs_kernel(t, y, ydot, model, data, inputs):
         sw = -base_omega * base_omega * math.sin(base_omega * t)
         for a in range(3):
             a_base[3 + a] = base_amplitude[a] * sw
-    _aba(is_hinge, col_start, Elimination(S, I6, pb, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x, armature),
+    _aba(is_hinge, col_start,
+         Elimination(S, I6, pb, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x, armature, motor_w),
          tau_applied, ydot[i_vel:i_vel + N], flags[FLAG_HEAVY])
     # y'
     if base_type == BASE_FREE:
@@ -1593,6 +1671,43 @@ def servo_offset(work, flags):
 
 
 @_njit_inline
+def motor_offset(work, flags, n):
+    """Where the motors' terms (n, 4) start in a workspace: before the servos' and springs'."""
+    return work.shape[0] - flags[6] * ((flags[FLAG_SERVOS] != 0) + (flags[FLAG_SPRINGS] != 0)) - 4 * n
+
+
+@_njit_inline
+def motor_axes(model, R, motor_w):
+    """motor_w (n, 4): each hinge's geared motor's m = J G a in world axes (a, the rotor's axis, is
+    fixed in the parent: R^{k-1} a) and J G^2; zero rows where none (reference.positions'
+    `motor_w`)."""
+    motor = model.motor
+    for k in range(motor.shape[0]):
+        for r in range(4):
+            motor_w[k, r] = 0.0
+        if k > 0 and motor[k, 1] != 0.0:
+            for r in range(3):
+                motor_w[k, r] = motor[k, 0] * (R[k - 1, r, 0] * motor[k, 2] + R[k - 1, r, 1] * motor[k, 3]
+                                               + R[k - 1, r, 2] * motor[k, 4])
+            motor_w[k, 3] = motor[k, 1]
+
+
+@_njit_inline
+def motor_gyroscopic(y, model, w, motor_w, pb):
+    """pb[k - 1] += w^{k-1} x (m phi_k'): the rotor's spin relative to its carrier, J G phi_k' a,
+    is the parent's gyrostatic moment (eq 31); its rate in the parent's axes, m phi_k'', is the
+    elimination's (`_motor_column`)."""
+    i_vel = model.flags[4]
+    for k in range(1, motor_w.shape[0]):
+        if motor_w[k, 3] != 0.0:
+            rate = y[i_vel + model.own_col[k]]
+            l0, l1, l2 = motor_w[k, 0] * rate, motor_w[k, 1] * rate, motor_w[k, 2] * rate
+            pb[k - 1, 0] += w[k - 1, 1] * l2 - w[k - 1, 2] * l1
+            pb[k - 1, 1] += w[k - 1, 2] * l0 - w[k - 1, 0] * l2
+            pb[k - 1, 2] += w[k - 1, 0] * l1 - w[k - 1, 1] * l0
+
+
+@_njit_inline
 def _spring_moments(y, model, tau, out):
     """out (N,): the generalized forces tau with the hinges' spring moments -k (phi - phi_ref)
     added (gyro_sim.dynamics.reference.spring_moments)."""
@@ -1638,7 +1753,8 @@ def chain_model(model: Model) -> ChainModel:
     heavy = heavy_elimination_address() if heavy_subtrees(m.mass) else 0
     flags = np.array([base_type, m.gravity is not None, has_lam, m.i_r0.start, m.i_vel.start,
                       m.i_kappa.start, m.N, heavy, kernel_address(), int(m.stateful), m.i_spin.start,
-                      m.i_work.start, m.spring is not None, m.servo is not None], dtype=np.int64)
+                      m.i_work.start, m.spring is not None, m.servo is not None, m.motor is not None],
+                     dtype=np.int64)
     base = np.zeros(7)
     if m.base_amplitude is not None:
         base[0:3] = m.base_amplitude
@@ -1655,6 +1771,10 @@ def chain_model(model: Model) -> ChainModel:
     servo = np.zeros((n, 5))
     if m.servo is not None:
         servo[m.hinge_bodies[m.servo_hinge]] = m.servo
+    motor = np.zeros((n, 5))
+    if m.motor is not None:  # J G, J G^2, a
+        J, G = m.motor[:, 0], m.motor[:, 1]
+        motor[m.hinge_bodies] = np.column_stack((J * G, J * G * G, m.motor[:, 2:]))
 
     def f64(a, shape):
         return np.ascontiguousarray(np.asarray(a, dtype=np.float64).reshape(shape))
@@ -1678,6 +1798,7 @@ def chain_model(model: Model) -> ChainModel:
         armature=armature,
         spring=spring,
         servo=servo,
+        motor=motor,
     )
 
 
@@ -1709,10 +1830,11 @@ def scratch(model: Model) -> np.ndarray:
     + nt WORK_PER_ROTOR + WORK_FIXED (nt torque rotors). A stateful model (`Model.stateful`)
     appends its actuators' parameters, ACTUATOR_PARAMETERS per torque rotor then per body
     (hinges'; zero on spherical bodies), and the scratch of the applied torques (nt + N). A model
-    with hinge springs appends N floats for the generalized forces with their moments."""
+    with hinge springs appends N floats for the generalized forces with their moments. A model
+    with geared motors has 4 n floats before the servos' and springs' (`motor_offset`)."""
     m, nt = model, len(model.torque_body)
     size = m.n * WORK_PER_BODY + m.N * WORK_PER_COLUMN + nt * WORK_PER_ROTOR + WORK_FIXED
-    springs = np.zeros(m.N * ((m.spring is not None) + (m.servo is not None)))
+    springs = np.zeros(4 * m.n * (m.motor is not None) + m.N * ((m.spring is not None) + (m.servo is not None)))
     if not m.stateful:
         return np.zeros(size + len(springs))
     act = m.actuators

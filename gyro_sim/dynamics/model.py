@@ -92,6 +92,9 @@ class Model:
     # the hinges' joint terms (docs/theory.md, "Armature and joint springs"), None without any:
     armature: np.ndarray | None = None  # (nh,) reflected rotor inertias on M's hinge diagonal
     spring: np.ndarray | None = None  # (nh, 2) stiffness, reference angle: moment -k (phi - ref)
+    # the hinges' geared motors on a turning parent (docs/theory.md, "The geared motor"), None
+    # without any; a zero row: none (a motor on the first body is folded into its armature):
+    motor: np.ndarray | None = None  # (nh, 5) J, gear G, axis a in the parent's frame (3)
     # the hinges' servos (docs/models.md, "Servo actuators"), in chain order; None without any:
     servo_hinge: np.ndarray | None = None  # (nsv,) index into hinge_bodies
     servo: np.ndarray | None = None  # (nsv, 5) gear, b1, b2, force low, high (+-inf: none)
@@ -132,9 +135,16 @@ def compile_model(scene: Scene) -> Model:
     tb, ta, tA, tp, tn, vb, va, vA, vr, vn = ([] for _ in range(10))
     axis_names, axis_hinge, axis_rotor = [], [], []
     hinge_index = np.cumsum(is_hinge) - 1
+    motor = np.zeros((int(np.sum(is_hinge)), 5))
     for k, b in enumerate(bodies):
         if is_hinge[k]:
             hinge_axis[k] = b.joint.axis
+        if is_hinge[k] and b.joint.motor is not None and k > 0:
+            # a motor's rotor on the parent: its axial inertia turns with the parent (eq 30,
+            # as a prescribed rotor's A_i), its relative spin G phi_k' is lambda^{k-1} (eq 31)
+            mo = b.joint.motor
+            inertia[k - 1] += mo.inertia * np.outer(mo.axis, mo.axis)
+            motor[hinge_index[k]] = (mo.inertia, mo.gear, *mo.axis)
         if is_hinge[k] and b.joint.servo is None:  # a servo's hinge is commanded by its control
             axis_names.append(b.name)
             axis_hinge.append(int(hinge_index[k]))
@@ -204,7 +214,10 @@ def compile_model(scene: Scene) -> Model:
         return np.array(x, dtype=float).reshape(shape)
 
     hinges = [bodies[k].joint for k in hin]
-    armature = np.array([j.armature for j in hinges], dtype=float)
+    # a motor on the first body turns against the base, which never rotates: exactly an
+    # armature J G^2 (docs/theory.md, "The geared motor")
+    armature = np.array([j.armature + (j.motor.inertia * j.motor.gear ** 2 if j.motor is not None and k == 0 else 0.0)
+                         for k, j in zip(hin, hinges)], dtype=float)
     spring = np.array([(j.spring.stiffness, j.spring.reference) if j.spring is not None else (0.0, 0.0)
                        for j in hinges], dtype=float).reshape(nh, 2)
     servo_hinge = [h for h, j in enumerate(hinges) if j.servo is not None]
@@ -266,6 +279,7 @@ def compile_model(scene: Scene) -> Model:
         i_work=i_work,
         armature=armature if np.any(armature) else None,
         spring=spring if np.any(spring[:, 0]) else None,
+        motor=motor if np.any(motor[:, 0]) else None,
         servo_hinge=np.array(servo_hinge, dtype=int) if servos else None,
         servo=servo if servos else None,
         servo_input=servo_input if servos else None,

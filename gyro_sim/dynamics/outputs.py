@@ -288,7 +288,7 @@ def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, s
     position, velocity, effort = states
     dst, at_joint, at_position, at_quat, at_wrench = slots
     (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-     torque_axis, torque_A, flags, base, armature, spring, servo) = model
+     torque_axis, torque_A, flags, base, armature, spring, servo, motor) = model
     work = data.work
     t0, p0, pdot, L_rotor, tau = inputs.t0[0], inputs.p0, inputs.pdot, inputs.L_rotor, inputs.tau
     base_type, has_gravity, has_lam = flags[0], flags[1] != 0, flags[2] != 0
@@ -324,6 +324,11 @@ def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, s
             vO[k, a] = vO_k[k, a]
             for b in range(3):
                 R[k, a, b] = R_k[k, a, b]
+    motors = flags[fast.FLAG_MOTORS] != 0 and (do_wrench or do_inv)
+    motor_w = block2(work, 0, 0, 4)
+    if motors:  # the geared motors' m = J G a (world) and J G^2
+        motor_w = block2(work, fast.motor_offset(work, flags, n), n, 4)
+        fast.motor_axes(model, R, motor_w)
     q = 0
     I6 = block3(scratch, q, n, 6, 6)
     q += 36 * n
@@ -344,6 +349,8 @@ def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, s
     if do_wrench or nv > 0:
         # body inertias and forces at zero acceleration (as rhs_kernel, which overwrote its own)
         bias_forces(model, R, hk, Aw, w, vO, p, L_applied, lam_b, dlam_b, I6, pb)
+        if motors:
+            fast.motor_gyroscopic(y, model, w, motor_w, pb)
         udot = ydot[i_vel:i_vel + N]
         # body accelerations about O^k: A^k = A^{k-1} moved to O^k + c^k + S_k u'_k
         for a in range(6):
@@ -378,6 +385,11 @@ def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, s
                 Fl0 += dot6(I6[k, 3], acc[k]) + pb[k, 3]
                 Fl1 += dot6(I6[k, 4], acc[k]) + pb[k, 4]
                 Fl2 += dot6(I6[k, 5], acc[k]) + pb[k, 5]
+                if motors and k + 1 < n:  # the child's motor's J G phi'' a on body k
+                    ud = udot[col_start[k + 1]]
+                    Fa0 += motor_w[k + 1, 0] * ud
+                    Fa1 += motor_w[k + 1, 1] * ud
+                    Fa2 += motor_w[k + 1, 2] * ud
                 for a in range(3):
                     wrench_force[k, a] = R[k, 0, a] * Fl0 + R[k, 1, a] * Fl1 + R[k, 2, a] * Fl2
                     wrench_moment[k, a] = R[k, 0, a] * Fa0 + R[k, 1, a] * Fa1 + R[k, 2, a] * Fa2
@@ -498,6 +510,14 @@ def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, s
         T += 0.5 * torque_A[i] * p[i] * p[i]
     if has_gravity:
         V = -(gravity[0] * hsum[0] + gravity[1] * hsum[1] + gravity[2] * hsum[2])
+    if motors:  # the geared motors: phi' m . w^{k-1} + 1/2 J G^2 phi'^2, and their spins m phi'
+        for k in range(1, n):
+            if motor_w[k, 3] != 0.0:
+                rate = y[i_vel + own_col[k]]
+                T += rate * (motor_w[k, 0] * w[k - 1, 0] + motor_w[k, 1] * w[k - 1, 1] + motor_w[k, 2] * w[k - 1, 2])
+                T += 0.5 * motor_w[k, 3] * rate * rate
+                for a in range(3):
+                    L[a] += motor_w[k, a] * rate
     for k in range(n):  # the hinges' armatures 1/2 a phi'^2, springs 1/2 k (phi - phi_ref)^2
         if is_hinge[k] and armature[k] != 0.0:
             rate = y[i_vel + own_col[k]]

@@ -66,6 +66,9 @@ class Data:
         self.hinge_K = np.array([_skew(model.hinge_axis[k]) for k in model.hinge_bodies]).reshape(-1, 3, 3)
         self.hinge_K2 = self.hinge_K @ self.hinge_K
         self.sph_axes = np.tile(EYE3, (len(model.sph_bodies), 1))  # a spherical joint's unit motions (joint_columns)
+        # each hinge's parent (a motor's rotor is on it; a row without motor points at body 0 and
+        # is zero)
+        self.motor_parent = np.maximum(model.hinge_bodies - 1, 0)
 
 
 def _skew(a: np.ndarray) -> np.ndarray:
@@ -105,6 +108,9 @@ def positions(model: Model, data: Data, t: float, y: np.ndarray) -> None:
     hk = matvec(R, model.first_moment)  # m^k c^k, world components
     data.h = model.mass[:, None] * data.O + hk  # first moments about the origin
     data.e_w = matvec(R[..., model.hinge_bodies, :, :], model.hinge_axis[model.hinge_bodies])  # hinge axes
+    if model.motor is not None:  # m = J G a of each hinge's motor, world components (its parent's R)
+        J, G = model.motor[:, 0], model.motor[:, 1]
+        data.motor_w = matvec(R[..., data.motor_parent, :, :], (J * G)[:, None] * model.motor[:, 2:])
     # inertia about the origin: J_O^k (rotated) shifted from O^k to the origin
     A_w = R @ model.inertia @ R.swapaxes(-1, -2)
     O = data.O
@@ -139,6 +145,7 @@ def velocities(model: Model, data: Data, t: float, u: np.ndarray) -> None:
     elif model.moving:
         v_o += base_motion(model, t)[1]
     data.wrel, data.w, data.v_o = wrel, w, v_o
+    data.hinge_rate = u[..., model.col_hinge]
     data.vO = v_o + cross(w, O)  # (34): velocity of O^k
     w_parent = np.zeros(w.shape, dtype=w.dtype)
     w_parent[..., 1:, :] = w[..., :-1, :]
@@ -156,7 +163,30 @@ def torque_rotor_rates(model: Model, data: Data, p: np.ndarray) -> np.ndarray:
 
 
 def lam(model: Model, data: Data, p: np.ndarray | None, L_rotor: np.ndarray | None):
-    """Gyrostatic moments lambda^k (eq 31) and their rates, world frame, or (None, None)."""
+    """Gyrostatic moments lambda^k (eq 31) and their rates, world frame, or (None, None).
+
+    A hinge's geared motor adds J G phi_k' a to its parent's lambda (its rotor's spin relative
+    to the parent, eq 31 with kappa' = G phi_k'); the rate of that, J G phi_k'' a, is linear in
+    the accelerations and so is left to the mass matrix (`mass_matrix`, `motor_forces`)."""
+    lam_w, dlam_w = _rotor_lam(model, data, p, L_rotor)
+    if model.motor is None:
+        return lam_w, dlam_w
+    motor = motor_forces(model, data, data.hinge_rate)
+    return (motor if lam_w is None else lam_w + motor), dlam_w
+
+
+def motor_forces(model: Model, data: Data, rates: np.ndarray) -> np.ndarray:
+    """(n, 3), world: the moments m_k x rates_k of the hinges' motors (m_k = J G a, `positions`)
+    summed on their parents: lambda of the motors for the joint rates, the part of lambda' linear
+    in the accelerations for the joint accelerations (a stack too)."""
+    moments = data.motor_w * rates[..., None]  # one configuration may serve a stack of rates
+    f = np.zeros(moments.shape[:-2] + (model.n, 3), dtype=moments.dtype)
+    np.add.at(np.moveaxis(f, -2, 0), data.motor_parent, np.moveaxis(moments, -2, 0))
+    return f
+
+
+def _rotor_lam(model: Model, data: Data, p: np.ndarray | None, L_rotor: np.ndarray | None):
+    """lambda^k and lambda^k' of the rotors (eqs 29, 31), world frame, or (None, None)."""
     lam_b = model.lam_speed.copy() if model.lam_speed is not None else None
     dlam_b = None
     if len(model.torque_body):
@@ -228,6 +258,15 @@ def mass_matrix(model: Model, data: Data, Sa: np.ndarray, Sb: np.ndarray) -> np.
     M = np.where(model.col_upper, Mfull, Mfull.T)
     if model.armature is not None:  # a reflected rotor inertia on its hinge's own diagonal
         M[model.col_hinge, model.col_hinge] += model.armature
+    if model.motor is not None:
+        # a geared motor: T gains phi_k' (m . w^{k-1}) + 1/2 J G^2 phi_k'^2, w^{k-1} the sum of
+        # Sa_j u_j over the columns of bodies up to the parent
+        J, G = model.motor[:, 0], model.motor[:, 1]
+        col = model.col_hinge  # a hinge without motor: m = 0
+        coupling = (Sa @ data.motor_w.T) * (model.col_body[:, None] <= data.motor_parent[None, :])
+        M[:, col] += coupling
+        M[col, :] += coupling.T
+        M[col, col] += J * G * G
     return M
 
 
@@ -237,10 +276,23 @@ def mass_times(model: Model, data: Data, Sa: np.ndarray, Sb: np.ndarray, udot: n
     acc_w, acc_v = accelerations_from(model, data, Sa, Sb, udot, 0.0, 0.0)
     f_ang = matvec(data.J, acc_w) + cross(data.h, acc_v)
     f_lin = model.mass[:, None] * acc_v + cross(acc_w, data.h)
+    if model.motor is not None:  # the motors' J G phi'' a on their parents
+        f_ang = f_ang + motor_forces(model, data, udot[..., model.col_hinge])
     out = project_subtree(model, Sa, Sb, f_ang, f_lin)
     if model.armature is not None:
         out[..., model.col_hinge] += model.armature * udot[..., model.col_hinge]
+    if model.motor is not None:
+        out[..., model.col_hinge] += motor_row(model, data, acc_w, udot[..., model.col_hinge])
     return out
+
+
+def motor_row(model: Model, data: Data, acc_w: np.ndarray, hinge_udot: np.ndarray) -> np.ndarray:
+    """(nh,): what the geared motors add to their hinges' rows of eqs (51)-(52), J G times the
+    rate of the rotor's absolute spin, J G (a . w^{k-1}' + G phi_k'') = m . w^{k-1}' + J G^2
+    phi_k'' (eq 51b), for the bodies' angular accelerations acc_w (n, 3) (a stack too)."""
+    J, G = model.motor[:, 0], model.motor[:, 1]
+    parent = acc_w[..., data.motor_parent, :]
+    return np.einsum("...ni,...ni->...n", data.motor_w, parent) + J * G * G * hinge_udot
 
 
 def project_subtree(model: Model, Sa, Sb, f_ang, f_lin) -> np.ndarray:
@@ -353,6 +405,8 @@ def closure(model: Model, data: Data, t: float, y: np.ndarray, hinge_tau: np.nda
     f_ang, f_lin = body_forces(model, data, acc_w0, acc_v0, lam_w, dlam_w)
     Sa, Sb = joint_columns(model, data)
     rhs = -project_subtree(model, Sa, Sb, f_ang, f_lin)
+    if model.motor is not None:  # (51b): the motors' rows at the bias accelerations
+        rhs[..., model.col_hinge] -= motor_row(model, data, acc_w0, 0.0)
     if hinge_tau is not None:
         rhs[..., model.col_hinge] += hinge_tau  # (51): e^k . L^k = L_k
     if model.spring is not None:
@@ -393,13 +447,19 @@ def servo_drives(model: Model, controls: np.ndarray) -> np.ndarray:
     return gain * ctrl + b0
 
 
-def joint_energy(model: Model, y: np.ndarray) -> tuple[float, float]:
+def joint_energy(model: Model, y: np.ndarray, data: Data | None = None) -> tuple[float, float]:
     """What the hinges' joint terms add to the energy at y: the armatures' kinetic energy
-    1/2 a phi'^2 and the springs' potential 1/2 k (phi - phi_ref)^2 (zero without them)."""
+    1/2 a phi'^2, the geared motors' phi' (m . w^{k-1}) + 1/2 J G^2 phi'^2 (velocities of y in
+    `data`) and the springs' potential 1/2 k (phi - phi_ref)^2 (zero without them)."""
     T = V = 0.0
     if model.armature is not None:
         rate = y[model.i_vel][model.col_hinge]
         T = 0.5 * float(np.sum(model.armature * rate * rate))
+    if model.motor is not None:
+        rate = y[model.i_vel][model.col_hinge]
+        J, G = model.motor[:, 0], model.motor[:, 1]
+        w_parent = data.w[data.motor_parent]
+        T += float(np.sum(rate * np.einsum("ni,ni->n", data.motor_w, w_parent) + 0.5 * J * G * G * rate * rate))
     if model.spring is not None:
         stretch = y[model.i_phi] - model.spring[:, 1]
         V = 0.5 * float(np.sum(model.spring[:, 0] * stretch * stretch))
@@ -412,4 +472,7 @@ def fill_evaluation(model: Model, data: Data, udot: np.ndarray, parts: tuple, ou
     Sa, Sb, lam_w, dlam_w, acc_w0, acc_v0 = parts
     out.udot, out.Sa, out.Sb, out.lam_w, out.dlam_w = udot, Sa, Sb, lam_w, dlam_w
     out.acc_w, out.acc_v = accelerations_from(model, data, Sa, Sb, udot, acc_w0, acc_v0)
+    if model.motor is not None:  # the motors' J G phi'' a on their parents (eq 31's lambda')
+        motor = motor_forces(model, data, udot[..., model.col_hinge])
+        dlam_w = motor if dlam_w is None else dlam_w + motor
     out.f_ang, out.f_lin = body_forces(model, data, out.acc_w, out.acc_v, lam_w, dlam_w)

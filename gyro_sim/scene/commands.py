@@ -57,6 +57,10 @@ def add_model_options(parser) -> None:
                         help="models only: a moving body's inertia outside the triangle inequality "
                              "A + B >= C takes MuJoCo's balanced one (its principal moments set to "
                              "their mean) instead of being refused (docs/models.md)")
+    parser.add_argument("--geared-motors", type=float, default=None, metavar="GEAR",
+                        help="models only: every hinge's armature a becomes the geared motor it "
+                             "reflects, a rotor of inertia a / GEAR^2 on the parent turning GEAR "
+                             "times the joint's rate (docs/models.md)")
 
 
 def model_options(args) -> dict:
@@ -64,7 +68,8 @@ def model_options(args) -> dict:
     return {"keyframe": getattr(args, "keyframe", None),
             "package_path": list(getattr(args, "package_path", None) or []),
             "lock": list(getattr(args, "lock", None) or []),
-            "balance_inertia": bool(getattr(args, "balance_inertia", False))}
+            "balance_inertia": bool(getattr(args, "balance_inertia", False)),
+            "geared_motors": getattr(args, "geared_motors", None)}
 
 
 def node_model_options(values: dict) -> dict:

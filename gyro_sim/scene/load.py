@@ -48,7 +48,7 @@ from gyro_sim.scene.mjcf import ModelError, import_model, is_model_path
 from gyro_sim.scene.names import name_problem, topic_token
 from gyro_sim.scene.records import (
     BASE_TYPES, JOINT_TYPES, ROTOR_MODES, Base, Body, Friction, Imu, Initial, Joint,
-    Limits, Rotor, Scene, Servo, Spring,
+    Limits, Motor, Rotor, Scene, Servo, Spring,
 )
 
 __all__ = ["SceneError", "load_scene", "parse_yaml"]
@@ -98,9 +98,10 @@ BASE_TYPE_KEYS = {"fixed": ("type", "position"), "moving": ("type", "position", 
 MOTION_KEYS = ("type", "amplitude", "frequency")
 BODY_KEYS = ("name", "joint", "mass", "com", "inertia", "inertia_com", "next_joint", "rotors",
              "initial", "visual")
-JOINT_KEYS = ("type", "axis", "max_torque", "friction", "armature", "spring", "servo")
+JOINT_KEYS = ("type", "axis", "max_torque", "friction", "armature", "spring", "servo", "motor")
 #: a hinge's terms a spherical joint does not take (docs/scene-format.md)
-HINGE_ONLY_KEYS = ("armature", "spring", "servo")
+HINGE_ONLY_KEYS = ("armature", "spring", "servo", "motor")
+MOTOR_KEYS = ("inertia", "gear", "axis")
 SPRING_KEYS = ("stiffness", "reference")
 SERVO_KEYS = ("name", "gain", "bias", "gear", "ctrl_range", "force_range")
 #: a hinge's limits (JOINT_KEYS) and a torque rotor's (ROTOR_KEYS)
@@ -142,7 +143,7 @@ class SceneError(GyroSimError, ValueError):
 def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None,
                package_path: Sequence[str | os.PathLike] = (),
                lock: Mapping[str, float | None] | Sequence[str] = (),
-               balance_inertia: bool = False) -> Scene:
+               balance_inertia: bool = False, geared_motors: float | None = None) -> Scene:
     """Load and validate a scene.
 
     Parameters
@@ -168,6 +169,10 @@ def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None,
         Models only: a moving body's inertia outside the triangle inequality takes MuJoCo's
         balanced one (docs/models.md, "Inertias outside the triangle inequality") instead of
         being refused.
+    geared_motors : float, optional
+        Models only: every hinge's armature a becomes the geared motor of this gear ratio G it
+        reflects (a rotor of axial inertia a / G^2 on the parent: docs/models.md, "The geared
+        motor against the armature").
 
     Returns
     -------
@@ -196,7 +201,7 @@ def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None,
         if is_model_path(path):  # MJCF or URDF: its scene mapping, refusals naming elements
             try:
                 model = import_model(path, keyframe, package_path=package_path, lock=lock,
-                                     balance_inertia=balance_inertia)
+                                     balance_inertia=balance_inertia, geared_motors=geared_motors)
             except ModelError as exc:
                 raise SceneError(exc.errors, path) from None
             data = model.mapping
@@ -207,6 +212,9 @@ def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None,
     if balance_inertia and model is None:
         raise SceneError(["balance_inertia: only an MJCF or URDF model's inertias are balanced (a "
                           "scene file's inertia must obey the triangle inequality)"], path)
+    if geared_motors is not None and model is None:
+        raise SceneError(["geared_motors: only an MJCF model's armatures become geared motors (a "
+                          "scene file gives a hinge its `motor`)"], path)
     if lock and model is None:
         raise SceneError(["lock: only the joints of an MJCF or URDF model are locked (a scene "
                           "file's chain is written as it moves)"], path)
@@ -804,10 +812,16 @@ def _joint(ch: _Checker, value: Any, path: str) -> Joint | None:
         if servo and joint.get("max_torque") is not None:
             ch.fail(_at(path, "max_torque"), "not allowed with a servo (its force_range bounds it)")
             servo = False
-        if axis is None or limits is False or armature is None or spring is False or servo is False:
+        motor = _motor(ch, joint.get("motor"), _at(path, "motor"), axis)
+        if motor and armature:
+            ch.fail(_at(path, "motor"), "not allowed with armature on the same joint (the motor is "
+                                        "the exact form of the armature J gear^2)")
+            motor = False
+        if axis is None or limits is False or armature is None or spring is False or servo is False \
+                or motor is False:
             return None
         return Joint(type=kind, axis=_readonly(axis), limits=limits, armature=armature, spring=spring,
-                     servo=servo)
+                     servo=servo, motor=motor)
     return None
 
 
@@ -837,6 +851,25 @@ def _servo(ch: _Checker, value: Any, path: str) -> Servo | None | bool:
     if len(ch.errors) > bad or gain is None or bias is None or gear is None:
         return False
     return Servo(name=name, gain=gain, bias=tuple(float(b) for b in bias), gear=gear, **ranges)
+
+
+def _motor(ch: _Checker, value: Any, path: str, hinge_axis: np.ndarray | None) -> Motor | None | bool:
+    """A hinge's geared motor (MOTOR_KEYS): a Motor (its axis the hinge's unless written), None
+    when absent, False after reporting."""
+    if value is None:
+        return None
+    motor = ch.mapping(value, path, MOTOR_KEYS, required=("inertia", "gear"))
+    if motor is None:
+        return False
+    bad = len(ch.errors)
+    inertia = ch.scalar(motor, "inertia", path, minimum=0.0, strict=True)
+    gear = ch.scalar(motor, "gear", path)
+    if gear == 0.0:
+        ch.fail(_at(path, "gear"), "must not be zero (the rotor turns gear times the joint's rate)")
+    axis = ch.unit(motor, "axis", path) if motor.get("axis") is not None else hinge_axis
+    if len(ch.errors) > bad or inertia is None or gear is None or axis is None:
+        return False
+    return Motor(inertia=inertia, gear=gear, axis=_readonly(np.array(axis, dtype=float)))
 
 
 def _spring(ch: _Checker, value: Any, path: str) -> Spring | None | bool:

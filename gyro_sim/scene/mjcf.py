@@ -176,7 +176,7 @@ def _mat(a: np.ndarray) -> list[list[float]]:
 def import_model(path: str | os.PathLike, keyframe: str | None = None,
                  package_path: Sequence[str | os.PathLike] = (),
                  lock: Mapping[str, float | None] | Sequence[str] = (),
-                 balance_inertia: bool = False) -> ImportedModel:
+                 balance_inertia: bool = False, geared_motors: float | None = None) -> ImportedModel:
     """Read an MJCF or URDF model as a scene mapping (module docstring, docs/models.md).
 
     Parameters
@@ -191,6 +191,9 @@ def import_model(path: str | os.PathLike, keyframe: str | None = None,
     balance_inertia : a moving body's inertia that breaks the triangle inequality A + B >= C
         of its principal moments is replaced by MuJoCo's balanced one (the three set to their
         mean, MuJoCo's ``balanceinertia``) with a note, instead of refused
+    geared_motors : a gear ratio G: every hinge's armature a becomes the geared motor it reflects,
+        a rotor of axial inertia a / G^2 on the parent turning G times the joint's rate
+        (docs/models.md, "The geared motor against the armature"); None: the armature
 
     Raises
     ------
@@ -204,6 +207,9 @@ def import_model(path: str | os.PathLike, keyframe: str | None = None,
     except ImportError:
         raise ModelError([f"{path}: reading an MJCF or URDF model needs mujoco, not installed; "
                           f"install it with: {INSTALL_HINT}"], path) from None
+    if geared_motors is not None and not (math.isfinite(geared_motors) and geared_motors != 0.0):
+        raise ModelError([f"geared_motors: the gear ratio must be a finite non-zero number (got {geared_motors!r})"],
+                         path)
     if not os.path.exists(path):
         raise ModelError([f"{path}: file not found"], path)
     if not os.path.isfile(path):
@@ -242,6 +248,7 @@ def import_model(path: str | os.PathLike, keyframe: str | None = None,
     importer.errors += errors
     importer.notes += notes
     importer.locked = locked
+    importer.gear = geared_motors
     return importer.run(keyframe)
 
 
@@ -649,6 +656,7 @@ class _Importer:
         self.spring: dict[int, dict[str, float]] = {}  # hinge joint -> its scene spring
         self.servo: dict[int, dict[str, Any]] = {}  # hinge joint -> its scene servo (a model with servos)
         self.locked: dict[str, float] = {}  # joints welded (gyro_sim.scene.mjcf._lock_joints)
+        self.gear: float | None = None  # armatures as geared motors of this ratio (import_model)
 
     # --- names
     def _name(self, obj: Any, index: int) -> str:
@@ -1033,8 +1041,15 @@ class _Importer:
                 body["joint"] = {"type": "hinge", "axis": _vec(G_parent.T @ g.axis)}
                 if g.joint in self.friction:
                     body["joint"]["friction"] = self.friction[g.joint]
-                if g.joint in self.armature:
+                if g.joint in self.armature and self.gear is None:
                     body["joint"]["armature"] = self.armature[g.joint]
+                elif g.joint in self.armature:  # the geared motor the armature reflects, on the parent
+                    body["joint"]["motor"] = {"inertia": _tidy(self.armature[g.joint] / self.gear ** 2),
+                                              "gear": _tidy(self.gear)}
+                    on = ("on the base (which does not turn: exactly the armature)" if k == 0 else
+                          "on its parent (its rotor's axial inertia joins the parent's)")
+                    self.notes.append(f"joint {self.joint_name(g.joint)!r}: armature "
+                                      f"{self.armature[g.joint]:g} as a geared motor of gear {self.gear:g} {on}")
                 if g.joint in self.spring:
                     body["joint"]["spring"] = self.spring[g.joint]
                 if g.joint in self.servo:

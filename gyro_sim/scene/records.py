@@ -109,6 +109,18 @@ class Servo:
 
 
 @dataclass(frozen=True, eq=False)
+class Motor:
+    """A hinge's geared motor: a rotor on the parent body, spinning about `axis` (fixed in the
+    parent) at gear times the joint's rate relative to the parent (docs/theory.md, "The geared
+    motor"). Its mass and transverse inertia are the parent body's; its axial inertia is added
+    to the parent's inertia operator by the model."""
+
+    inertia: float  # J, the rotor's axial moment of inertia (kg m^2), > 0
+    gear: float  # G, the rotor's rate relative to the parent over the joint's rate, != 0
+    axis: np.ndarray  # (3,) unit axis a of the rotor in the parent's frame
+
+
+@dataclass(frozen=True, eq=False)
 class Joint:
     """The joint at O^k between body k-1 (or the base) and body k."""
 
@@ -120,6 +132,7 @@ class Joint:
     armature: float = 0.0
     spring: Spring | None = None  # hinge only
     servo: Servo | None = None  # hinge only: its actuator, commanded by a control (not an axis moment)
+    motor: Motor | None = None  # hinge only: its geared motor's rotor, on the parent
 
 
 @dataclass(frozen=True, eq=False)

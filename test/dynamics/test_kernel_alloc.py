@@ -24,6 +24,7 @@ from gyro_sim.bench.scenes import spherical_chain
 from gyro_sim.dynamics import kernel as fast
 from gyro_sim.dynamics.model import compile_model, initial_state
 from test.dynamics.chains import random_chain
+from test.dynamics.test_geared_motor import motor_chain
 
 @numba.njit
 def repeat(m, t, y, ydot, args):
@@ -37,7 +38,8 @@ moving["base"] = {"type": "moving", "position": [0.0, 0.0, 0.0],
 out = {}
 for name, scene in (("spherical, rotors, gravity", spherical_chain(5, rotors=True)),
                     ("hinges, free base", random_chain(3, base="free", n=5)),
-                    ("hinges, moving base", moving)):
+                    ("hinges, moving base", moving),
+                    ("geared motors, free base", motor_chain(1, "free"))):
     model = compile_model(load_scene(scene))
     y = initial_state(model)
     args = fast.records(model)
