@@ -1,8 +1,9 @@
 """The violent family of `gyro-sim bench realtime --violent-family`, counted offline with the
-node's integrator ("fixed" at 1 kHz, one call a physics step as the node makes them): what it spends per simulated second stays
-within its real-time budget, no call costs more than the bound its policy sets, the energy put
-in is accounted for and the drift let through is reported, and a violent run re-simulates bit
-for bit."""
+node's integrator ("fixed" at 1 kHz, one call a physics step as the node makes them): what it
+spends per simulated second stays within its real-time budget, no wake-up costs more than the
+bound its policy sets, the energy put in is accounted for and the drift let through is
+reported, a violent run re-simulates bit for bit, and the cases beyond real time end in one
+simulation error."""
 import math
 
 import numpy as np
