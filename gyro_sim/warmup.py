@@ -638,8 +638,18 @@ def _say_ready(out) -> bool:
 
 def _end_with(parent: int) -> None:
     """End this process (at once: os._exit) when `parent` ends, checked every PARENT_POLL s
-    from a daemon thread: a helper never outlives the start that needs it."""
+    from a daemon thread: a helper never outlives the start that needs it. On Linux the kernel
+    also kills it when its parent ends (PR_SET_PDEATHSIG), which no thread of this process
+    has to see: the watch needs the interpreter, and a compile may keep it from the watch."""
     import threading
+
+    try:
+        import ctypes
+        import signal
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL))  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):  # not Linux: the watch alone
+        pass
 
     def watch():
         while os.getppid() == parent:
