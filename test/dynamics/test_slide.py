@@ -207,3 +207,22 @@ def test_gauss4s_refuses_slides_and_fixed_takes_gauss4():
     with pytest.raises(ValueError, match="cart: gauss4s does not take slide joints"):
         Simulator(cart_pole(), integrator="gauss4s", backend="numpy")
     assert implicit_for(compile_model(load_scene(cart_pole()))) == "gauss4"
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_a_cart_with_exact_coulomb_friction_stops_where_its_closed_form_says(backend):
+    """A cart alone on a level slide, launched at v0 against a Coulomb force c (N): it slows at
+    c / M, stops at t = M v0 / c after M v0^2 / (2 c), and sticks there (no force drives it)."""
+    v0, c = 1.0, 2.0
+    scene = cart_pole(0.0, v0, friction={"coulomb": c})
+    del scene["bodies"][1], scene["bodies"][0]["next_joint"]
+    sim = Simulator(scene, integrator="dop853", rtol=1e-12, atol=1e-12, backend=backend)
+    t_stop = M * v0 / c
+    sim.advance(0.5 * t_stop)
+    t = sim.time
+    assert sim.joint_states().position[0] == pytest.approx(v0 * t - 0.5 * c / M * t * t, abs=1e-9)
+    assert sim.joint_states().velocity[0] == pytest.approx(v0 - c / M * t, abs=1e-9)
+    sim.advance(t_stop)
+    assert sim.joint_states().position[0] == pytest.approx(M * v0 * v0 / (2.0 * c), abs=1e-9)
+    assert sim.joint_states().velocity[0] == pytest.approx(0.0, abs=1e-9)
+    assert sim.friction_work == pytest.approx(-0.5 * M * v0 * v0, abs=1e-8)

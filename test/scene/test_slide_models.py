@@ -102,3 +102,69 @@ def test_a_cart_on_a_slide_moves_as_in_mujoco(name, backend, tmp_path):
         moved = max(moved, float(np.max(np.abs(d.qpos - qpos))))
     print(f"{name}: joint positions within {worst:.2g} of MuJoCo over 0.5 s (moved {moved:.2g})")
     assert worst <= AGREEMENT and moved > 0.01
+
+
+#: a cart on a tilted slide with armature, stiffness (springref), damping and a position servo,
+#: a pole on it, a slider on the pole along its length (a slide after a hinge)
+SERVO_CART = """<mujoco model="servo_cart">
+  <option gravity="0 0 -9.81"/>
+  <worldbody>
+    <body name="cart" pos="0 0 0.5">
+      <joint name="rail" type="slide" axis="1 0 0.3" armature="0.2" stiffness="3" springref="0.1" damping="0.4"/>
+      <inertial pos="0.02 0 0" mass="1.2" diaginertia="0.01 0.02 0.015"/>
+      <body name="pole" pos="0 0.05 0">
+        <joint name="pivot" type="hinge" axis="0 1 0"/>
+        <inertial pos="0 0 0.3" mass="0.3" diaginertia="0.009 0.009 0.0002"/>
+        <body name="bead" pos="0 0 0.2">
+          <joint name="bead" type="slide" axis="0 0 1"/>
+          <inertial pos="0 0 0" mass="0.1" diaginertia="1e-4 1e-4 1e-4"/>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+  <actuator>
+    <position name="hold" joint="rail" kp="20" kv="3" ctrlrange="-1 1"/>
+    <motor name="push" joint="bead" gear="2"/>
+  </actuator>
+  <keyframe><key name="off" qpos="0.2 0.5 -0.05" qvel="-0.3 0.8 0.2"/></keyframe>
+</mujoco>
+"""
+
+
+def test_a_slides_armature_spring_damper_and_servo_are_mujocos(tmp_path):
+    """The slide's terms in N, kg, N/m, N s/m: MuJoCo's qacc at random states and controls, and
+    the motion from the keyframe with held controls for 0.5 s (RK4 at 5e-5 s, as the hinges'
+    servos are judged), and the published efforts MuJoCo's qfrc_actuator with the damper."""
+    from test.scene.test_model_import import write
+    from test.scene.test_model_joint_terms import mujoco_model as plain_mujoco_model
+
+    path = write(tmp_path, "cart.xml", SERVO_CART)
+    joints = {b["name"]: b["joint"] for b in import_model(path).mapping["bodies"]}
+    assert joints["rail"]["type"] == joints["bead"]["type"] == "slide"
+    assert joints["rail"]["armature"] == 0.2 and joints["rail"]["spring"] == {"stiffness": 3.0, "reference": 0.1}
+    assert joints["rail"]["friction"] == {"viscous": 0.4} and joints["rail"]["servo"]["name"] == "hold"
+    m = plain_mujoco_model(path)
+    d = mujoco.MjData(m)
+    sim = Simulator(load_scene(path), backend="numpy")
+    model = sim.model
+    rng = np.random.default_rng(4)
+    worst = 0.0
+    for _ in range(8):
+        d.qpos[:], d.qvel[:], d.ctrl[:] = rng.uniform(-0.8, 0.8, 3), rng.normal(size=3), rng.uniform(-0.9, 0.9, 2)
+        mujoco.mj_forward(m, d)
+        y = initial_state(model)
+        y[model.i_phi], y[model.i_vel] = d.qpos, d.qvel
+        sim.set_controls(d.ctrl.copy())
+        udot = sim.held_rhs()(0.0, y)[model.i_vel]
+        worst = max(worst, float(np.max(np.abs(udot - d.qacc)) / np.max(np.abs(d.qacc))))
+    assert worst <= AGREEMENT
+    m.opt.timestep = 5e-5
+    mujoco.mj_resetDataKeyframe(m, d, 0)
+    d.ctrl[:] = [0.4, -0.3]
+    mujoco.mj_step(m, d, nstep=10000)
+    sim = Simulator(load_scene(path), integrator="dop853", rtol=1e-12, atol=1e-12)
+    sim.set_controls({"hold": 0.4, "push": -0.3})
+    sim.advance(d.time)
+    state = sim.joint_states()
+    assert np.max(np.abs(np.asarray(state.position) - d.qpos)) < AGREEMENT
+    assert np.allclose(state.effort, d.qfrc_actuator - m.dof_damping * d.qvel, rtol=1e-8, atol=1e-9)
