@@ -204,8 +204,15 @@ def test_slide_keys_are_checked():
 def test_gauss4s_refuses_slides_and_fixed_takes_gauss4():
     from gyro_sim.integrators.fixed import implicit_for
 
-    with pytest.raises(ValueError, match="cart: gauss4s does not take slide joints"):
+    from gyro_sim.dynamics.actuators import ActuatorError
+    from gyro_sim.dynamics.canonical import CanonicalChain
+
+    said = (r"bodies\[0\]\.joint\.type: integrator 'gauss4s' does not take slide joints \('cart'\); "
+            r"use one of auto, dop853, fixed, gauss4, lie4, radau, rk4$")
+    with pytest.raises(ActuatorError, match=said):
         Simulator(cart_pole(), integrator="gauss4s", backend="numpy")
+    with pytest.raises(ValueError, match="cart: gauss4s does not take slide joints"):
+        CanonicalChain(ChainODE(compile_model(load_scene(cart_pole()))))
     assert implicit_for(compile_model(load_scene(cart_pole()))) == "gauss4"
 
 
