@@ -12,7 +12,8 @@ of mass and inertia are the ones MuJoCo simulates (also when it derives them fro
   torque rotor of its parent (eqs (18)-(19), (29)), actuated when a motor drives its joint
   (every rotor of a URDF model is);
 - the other bodies form the chain: a free joint on the first is the free base (with a
-  spherical joint at O^1), ball joints are spherical joints, hinges are hinges.
+  spherical joint at O^1), ball joints are spherical joints, hinges are hinges, slides slides
+(the body keeps its parent's frame, moved along the axis).
 
 Frames. A body's frame in the scene has its origin at its joint point O^k (the joint's
 anchor; for a free joint the body's origin). A ball or free body's frame turns with the MuJoCo
@@ -22,7 +23,7 @@ angle, as docs/scene-format.md defines it, so the hinge axis is written in the p
 Every vector of the scene is MuJoCo's world vector at the reference pose, rotated into that
 frame.
 
-Names: a hinge and a rotor are named after their joint (so ``joint_states`` and the axis
+Names: a hinge, a slide and a rotor are named after their joint (so ``joint_states`` and the axis
 moments use the joint names of the file, as MuJoCo's ``qpos`` and actuators do), a ball or
 free body after its body.
 
@@ -995,7 +996,7 @@ class _Importer:
         return f"; weld all {what} but one with --lock JOINT (their joints: {shown})"
 
     def scene_name(self, g: _Group, as_hinge: bool) -> str:
-        """The scene name of a group (module docstring): joint first for hinges and rotors."""
+        """The scene name of a group (module docstring): joint first for hinges, slides and rotors."""
         joint, body = self.joint_name(g.joint), self.body_name(g.root)
         first = (joint, body) if as_hinge else (body, joint)
         return next((n for n in first if n), f"joint{g.joint}" if as_hinge else f"body{g.root}")
@@ -1369,7 +1370,7 @@ def scene_yaml(imported: ImportedModel) -> str:
            else f"keyframe {imported.keyframe!r}" if imported.keyframe else "the first keyframe")
     lines = [f"# gyro_sim scene imported by gyro-sim import from {source} ({imported.kind}), "
              f"initial state from {key}.",
-             "# Names: a hinge or rotor is named after its joint, a ball or free body after its "
+             "# Names: a hinge, slide or rotor is named after its joint, a ball or free body after its "
              "body, an IMU after its site or Gazebo sensor (docs/models.md)."]
     lines += [f"#   {element} -> {name}" for element, name in imported.names]
     if imported.commands:
