@@ -1041,6 +1041,10 @@ class _Importer:
                     body["joint"]["friction"] = self.friction[g.joint]
                 if g.joint in self.armature and self.gear is None:
                     body["joint"]["armature"] = self.armature[g.joint]
+                elif g.joint in self.armature and g.kind == "slide":  # a slide's drive stays its armature
+                    body["joint"]["armature"] = self.armature[g.joint]
+                    self.notes.append(f"joint {self.joint_name(g.joint)!r}: a slide's armature "
+                                      f"{self.armature[g.joint]:g} kept (geared motors turn hinges)")
                 elif g.joint in self.armature:  # the geared motor the armature reflects, on the parent
                     body["joint"]["motor"] = {"inertia": _tidy(self.armature[g.joint] / self.gear ** 2),
                                               "gear": _tidy(self.gear)}

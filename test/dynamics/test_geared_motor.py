@@ -244,6 +244,10 @@ def test_motor_with_armature_or_on_a_spherical_joint_refused():
     scene["bodies"][0]["joint"]["motor"] = {"inertia": 1e-3, "gear": 10}
     with pytest.raises(SceneError, match="joint.motor: not allowed for a spherical joint"):
         load_scene(scene)
+    scene = turntable()
+    scene["bodies"][1]["joint"]["type"] = "slide"
+    with pytest.raises(SceneError, match="joint.motor: not allowed on a slide"):
+        load_scene(scene)
 
 
 def test_gauss4s_refuses_motors():

@@ -63,3 +63,21 @@ def test_the_command_line(pusher, tmp_path):
     assert done.returncode == 0, done.stderr
     bad = run("--geared-motors", "0")
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and "geared_motors" in bad.stderr
+
+
+CART = """<mujoco><worldbody><body name="cart"><joint name="slider" type="slide" axis="1 0 0" armature="0.3"/>
+<geom type="box" size="0.2 0.1 0.1" mass="1"/>
+<body name="pole"><joint name="hinge" type="hinge" axis="0 1 0" armature="0.02"/>
+<geom type="capsule" fromto="0 0 0 0 0 0.6" size="0.02" mass="0.1"/></body></body></worldbody></mujoco>"""
+
+
+def test_a_slides_armature_stays_an_armature(tmp_path):
+    """A geared motor turns a hinge: a slide's armature is kept as it is, with a note."""
+    path = tmp_path / "cart.xml"
+    path.write_text(CART)
+    imported = import_model(path, geared_motors=10.0)
+    cart, pole = (b["joint"] for b in imported.mapping["bodies"])
+    assert cart["type"] == "slide" and cart["armature"] == pytest.approx(0.3) and "motor" not in cart
+    assert pole["motor"] == {"inertia": pytest.approx(0.02 / 100), "gear": 10.0} and "armature" not in pole
+    assert any("a slide's armature 0.3 kept" in note for note in imported.notes)
+    load_scene(imported.mapping)
