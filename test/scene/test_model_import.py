@@ -452,8 +452,9 @@ REFUSED = {
                                                              attrs='frictionloss="0.1"')),
                                       "joint 'wrist': frictionloss on a ball joint is not supported"),
     "reference angle": (bad(joint_attrs='ref="0.2"'), "joint 'pivot': ref = 0.2: a reference angle is not supported"),
-    "two joints in a body": (bad(inner='<joint name="roll" type="hinge" axis="0 1 0"/>'),
-                             "body 'link': 2 joints; one joint per body"),
+    "a ball joint with another in a body": (bad(inner='<joint name="roll" type="ball"/>'),
+                                            "body 'link': 2 joints, a ball or free joint among them; several "
+                                            "joints in one body are hinge and slide joints only"),
     "branching tree": (bad(inner=CHILD.format(name="a", joint="ja", type="hinge", attrs='axis="1 0 0"')
                            + CHILD.format(name="b", joint="jb", type="ball", attrs="")),
                        "body 'link': 2 moving children ('a', 'b'): a chain only, branching trees are not supported"),
