@@ -83,6 +83,9 @@ class CanonicalChain:
     def __init__(self, ode):
         self.ode = ode
         m = self.model = ode.model
+        if len(m.slide_bodies):
+            raise ValueError(f"{m.names[m.slide_bodies[0]]}: gauss4s does not take slide joints (its canonical "
+                             f"momenta are a hinge's and a ball's); use gauss4 or another integrator")
         self.data = dyn.Data(m)
         self.free = m.free
         ns, nh, nt = len(m.sph_bodies), len(m.hinge_bodies), len(m.torque_body)

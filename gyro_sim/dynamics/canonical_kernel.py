@@ -58,7 +58,7 @@ def _rates(t, z, model, data, inputs, zrow, cflags, cwork):
     """Positions of z, pi^k, p_rel and the rates u (into y's velocity block in cwork's y and in
     `rate`), then w^k, v(O^k). Returns nothing: everything is left in the workspaces."""
     (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-     torque_axis, torque_A, flags, base, armature, spring, servo) = model
+     torque_axis, torque_A, flags, base, armature, spring, servo, is_slide) = model
     work = data.work
     t0, p0, pdot = inputs.t0[0], inputs.p0, inputs.pdot
     base_type, has_lam = flags[0], flags[2] != 0
@@ -86,7 +86,7 @@ def _rates(t, z, model, data, inputs, zrow, cflags, cwork):
             q0, q1, q2, q3 = z[j], z[j + 1], z[j + 2], z[j + 3]
             nq = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
             y[i], y[i + 1], y[i + 2], y[i + 3] = q0 / nq, q1 / nq, q2 / nq, q3 / nq
-    fast.positions_stage(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, hk, Aw, e_w)
+    fast.positions_stage(y, model, R, s_w, hk, Aw, e_w)
     # gyrostatic moments lambda^k (body axes) at t (eq 31, p_i(t) by eq 29)
     if has_lam:
         for k in range(n):
@@ -152,7 +152,7 @@ def _rates(t, z, model, data, inputs, zrow, cflags, cwork):
         fast.spatial_inertia(k, mass[k], hk[k, 0], hk[k, 1], hk[k, 2], Aw, I6)
     for a in range(6):
         a_base[a] = 0.0
-    fast.joint_columns_stage(is_hinge, own_col, base_type, e_w, S)
+    fast.joint_columns_stage(is_hinge, is_slide, own_col, base_type, e_w, S)
     fast.articulated_solve(is_hinge, col_start,
                            fast.Elimination(S, I6, pb, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x, armature),
                            prel, rate, flags[fast.FLAG_HEAVY])
@@ -166,7 +166,7 @@ def canonical_kernel(t, z, zdot, model, data, inputs, zrow, cflags, cwork):
     """z' (size,) at (t, z) into zdot: what canonical.CanonicalChain.rhs computes."""
     _rates(t, z, model, data, inputs, zrow, cflags, cwork)
     (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-     torque_axis, torque_A, flags, base, armature, spring, servo) = model
+     torque_axis, torque_A, flags, base, armature, spring, servo, is_slide) = model
     work = data.work
     t0, p0, pdot, tau = inputs.t0[0], inputs.p0, inputs.pdot, inputs.tau
     base_type, has_gravity, has_lam = flags[0], flags[1] != 0, flags[2] != 0
@@ -328,7 +328,7 @@ def state_kernel(t, z, y, model, data, inputs, zrow, cflags, cwork):
     """The package's state y (model size) of z at t: what canonical.CanonicalChain.state does."""
     _rates(t, z, model, data, inputs, zrow, cflags, cwork)
     (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-     torque_axis, torque_A, flags, base, armature, spring, servo) = model
+     torque_axis, torque_A, flags, base, armature, spring, servo, is_slide) = model
     i_kap, size = cflags[1], cflags[2]
     i_kap_y = flags[5]
     for i in range(size):

@@ -90,7 +90,7 @@ class ChainModel(NamedTuple):
     builds it). The one place the model's arrays are named; n bodies, N velocity columns, nt
     torque rotors."""
 
-    #: (n,) bool: body k's own joint is a hinge (else spherical)
+    #: (n,) bool: body k's own joint has one coordinate, a hinge or a slide (else spherical)
     is_hinge: np.ndarray
     #: (n,) int64: the y index of body k's quaternion (spherical) or of phi_k (hinge)
     qrow: np.ndarray
@@ -130,6 +130,9 @@ class ChainModel(NamedTuple):
     #: (n, 5) the hinges' servos: gear, b1, b2, force low, high (read only with
     #: flags[FLAG_SERVOS], on the bodies whose gear is not zero; the held drive is in tau)
     servo: np.ndarray
+    #: (n,) bool: body k's joint of one coordinate (is_hinge) is a slide, a translation d_k along
+    #: its axis (docs/theory.md section 12); every "hinge" term above then acts on d_k
+    is_slide: np.ndarray
 
 
 #: the index of `flags` among ChainModel's fields (its address in a descriptor: D_MODEL + this)
@@ -211,9 +214,9 @@ ACTUATOR_PARAMETERS = 6
 #: ChainModel's order) from D_MODEL, of the scratch at D_WORK, of the held inputs' arrays (in
 #: HeldInputs' order) from D_INPUTS; n, N, nt and the scratch's size; the evaluations counted
 #: (the compiled entry from Python, gyro_sim.dynamics.entry, counts there)
-D_MODEL, D_WORK, D_INPUTS = 0, 18, 19
-D_N, D_NCOL, D_NT, D_NWORK, D_NFEV = 24, 25, 26, 27, 28
-DESCRIPTOR_SIZE = 29
+D_MODEL, D_WORK, D_INPUTS = 0, 19, 20
+D_N, D_NCOL, D_NT, D_NWORK, D_NFEV = 25, 26, 27, 28, 29
+DESCRIPTOR_SIZE = 30
 assert D_WORK - D_MODEL == len(ChainModel.__annotations__) and D_N - D_INPUTS == len(HeldInputs.__annotations__), \
     "the descriptor's layout (D_*) no longer matches the records' fields"
 
@@ -480,13 +483,28 @@ def _shift_mass(m00, m01, m02, m11, m12, m22, d0, d1, d2, IA, kp):
 
 # --- stages -----------------------------------------------------------------------------------
 @_njit_inline
-def body_positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, hk, Aw, e_w):
+def body_positions(y, model, R, s_w, hk, Aw, e_w):
     """World components of each body's constants: R^k (quaternion, or eq 50 for a hinge),
-    s^k, h^k = m^k c^k, the inertia A^k about O^k (eq 30) and the hinge axis e^k."""
+    s^k, h^k = m^k c^k, the inertia A^k about O^k (eq 30) and the hinge or slide axis e^k.
+    A slide keeps its parent's orientation and moves O^k by e^k d_k: s_w[k - 1] leaves as the
+    whole offset O^k - O^{k-1} (section 12; a first body's slide moves O^1, which nothing here
+    reads: its velocity is `body_velocities`', its point the outputs')."""
+    is_hinge, is_slide, qrow, hinge_axis, s, first_moment, inertia = (
+        model.is_hinge, model.is_slide, model.qrow, model.hinge_axis, model.s, model.first_moment, model.inertia)
     n = s.shape[0]
     for k in range(n):
         i = qrow[k]
-        if is_hinge[k]:
+        if is_slide[k]:
+            for a in range(3):
+                for b in range(3):
+                    R[k, a, b] = R[k - 1, a, b] if k > 0 else (1.0 if a == b else 0.0)
+            e0, e1, e2 = hinge_axis[k, 0], hinge_axis[k, 1], hinge_axis[k, 2]
+            d = y[i]
+            for a in range(3):
+                e_w[k, a] = R[k, a, 0] * e0 + R[k, a, 1] * e1 + R[k, a, 2] * e2
+                if k > 0:
+                    s_w[k - 1, a] += e_w[k, a] * d
+        elif is_hinge[k]:
             # (50): body k is its parent turned by phi_k about e^k: Rrel = 1 + sin K + (1 - cos) K^2,
             # K = e x = [[0, -e2, e1], [e2, 0, -e0], [-e1, e0, 0]]; Rrel is held in R[k]
             phi = y[i]
@@ -539,8 +557,9 @@ def body_velocities(t, y, model, s_w, e_w, w, vO, c):
 
         spherical joint (world-component axes do not turn): c = (0, v(O^k) x w_rel)
         hinge, (e^k)' = w^{k-1} x e^k: c = (w^{k-1} x e^k phi', v(O^k) x e^k phi')
+        slide, S = (0, e^k): no rotation, v(O^k) gains e^k d_k', c = (0, w^{k-1} x e^k d_k')
     """
-    is_hinge, own_col, flags, base = model.is_hinge, model.own_col, model.flags, model.base
+    is_hinge, is_slide, own_col, flags, base = model.is_hinge, model.is_slide, model.own_col, model.flags, model.base
     base_type, i_vel, base_amplitude, base_omega = flags[0], flags[4], base[0:3], base[3]
     n = s_w.shape[0]
     wp0, wp1, wp2 = 0.0, 0.0, 0.0  # w^{k-1}
@@ -564,7 +583,21 @@ def body_velocities(t, y, model, s_w, e_w, w, vO, c):
             vO[k, 1] = (wp2 * s0 - wp0 * s2) + vO[k - 1, 1]
             vO[k, 2] = (wp0 * s1 - wp1 * s0) + vO[k - 1, 2]
         j = i_vel + own_col[k]
-        if is_hinge[k]:
+        slide = is_slide[k]
+        if slide:
+            dd = y[j]
+            t0_, t1_, t2_ = e_w[k, 0] * dd, e_w[k, 1] * dd, e_w[k, 2] * dd
+            vO[k, 0] += t0_
+            vO[k, 1] += t1_
+            vO[k, 2] += t2_
+            wr0, wr1, wr2 = 0.0, 0.0, 0.0
+            c[k, 0] = 0.0
+            c[k, 1] = 0.0
+            c[k, 2] = 0.0
+            c[k, 3] = wp1 * t2_ - wp2 * t1_
+            c[k, 4] = wp2 * t0_ - wp0 * t2_
+            c[k, 5] = wp0 * t1_ - wp1 * t0_
+        elif is_hinge[k]:
             ph = y[j]
             # (50): e^k phi_k'
             wr0, wr1, wr2 = e_w[k, 0] * ph, e_w[k, 1] * ph, e_w[k, 2] * ph
@@ -578,10 +611,11 @@ def body_velocities(t, y, model, s_w, e_w, w, vO, c):
             c[k, 2] = 0.0
         wp0, wp1, wp2 = wp0 + wr0, wp1 + wr1, wp2 + wr2
         w[k, 0], w[k, 1], w[k, 2] = wp0, wp1, wp2
-        v0, v1, v2 = vO[k, 0], vO[k, 1], vO[k, 2]
-        c[k, 3] = v1 * wr2 - v2 * wr1
-        c[k, 4] = v2 * wr0 - v0 * wr2
-        c[k, 5] = v0 * wr1 - v1 * wr0
+        if not slide:
+            v0, v1, v2 = vO[k, 0], vO[k, 1], vO[k, 2]
+            c[k, 3] = v1 * wr2 - v2 * wr1
+            c[k, 4] = v2 * wr0 - v0 * wr2
+            c[k, 5] = v0 * wr1 - v1 * wr0
 
 
 @_njit_inline
@@ -666,16 +700,19 @@ def bias_forces(model, R, hk, Aw, w, vO, p, L_rotor, lam_b, dlam_b, I6, pb):
 
 
 @_njit_inline
-def _joint_columns(is_hinge, own_col, base_type, e_w, S):
+def _joint_columns(is_hinge, is_slide, own_col, base_type, e_w, S):
     """Unit motions S_j (N, 6) of the velocity columns about their body's O^k (dyn.joint_columns
-    moved there): spherical (e_i, 0), hinge (e^k, 0), free base (0, e_i)."""
+    moved there): spherical (e_i, 0), hinge (e^k, 0), slide (0, e^k), free base (0, e_i)."""
     S[:, :] = 0.0
     if base_type == BASE_FREE:
         for a in range(3):
             S[a, 3 + a] = 1.0
     for k in range(e_w.shape[0]):
         j = own_col[k]
-        if is_hinge[k]:
+        if is_slide[k]:
+            for a in range(3):
+                S[j, 3 + a] = e_w[k, a]
+        elif is_hinge[k]:
             for a in range(3):
                 S[j, a] = e_w[k, a]
         else:
@@ -1014,7 +1051,8 @@ def _aba_stable(is_hinge, col_start, e, tau, udot):
     mode of a heavy tip on light links), which loses digits as the mass ratio squared. Here
     the body's own factor (Cholesky of its inertia) is stacked on its child's and reduced by a
     Householder QR in joint-adapted axes Q = [S | N] (spherical: the identity; hinge: a
-    reflector taking e^k to the first axis): R = [[R11, R12], [0, R22]], and then
+    reflector taking e^k to the first axis; slide: the same on the linear components, put
+    first): R = [[R11, R12], [0, R22]], and then
 
         D = R11^T R11,  U D^-1 = Q [1; (R11^-1 R12)^T],  I^a = N R22^T R22 N^T
 
@@ -1064,18 +1102,26 @@ def _aba_stable(is_hinge, col_start, e, tau, udot):
                     U[j, r] = dot6(Ia[r], S[j])
             _joint_projection(S, U, D, W, j0, nk, 0.0)
             continue
-        # the stacked factor [F_own; F_child] in joint axes Q (columns 0..2 times H for a hinge)
+        # the stacked factor [F_own; F_child] in joint axes Q: a hinge's angular columns (ro = 0)
+        # times H, then its linear ones (oo = 3); a slide's (S = (0, e)) linear columns (ro = 3)
+        # times H first, then its angular ones (oo = 0): the joint's own axis is column 0
         sigma = 1.0
         hinge = is_hinge[k]
+        ro, oo = 0, 3
         if hinge:
-            sigma = _hinge_reflector(S[j0, :3], H)
+            if S[j0, 0] == 0.0 and S[j0, 1] == 0.0 and S[j0, 2] == 0.0:
+                ro, oo = 3, 0
+            sigma = _hinge_reflector(S[j0, ro:ro + 3], H)
         for i in range(6 + nc):
             for q in range(6):
                 St[i, q] = K[i, q] if i < 6 else Fc[i - 6, q]
             if hinge:
-                x0, x1, x2 = St[i, 0], St[i, 1], St[i, 2]
+                x0, x1, x2 = St[i, ro], St[i, ro + 1], St[i, ro + 2]
+                z0, z1, z2 = St[i, oo], St[i, oo + 1], St[i, oo + 2]
                 for a in range(3):
                     St[i, a] = x0 * H[0, a] + x1 * H[1, a] + x2 * H[2, a]
+                if ro == 3:
+                    St[i, 3], St[i, 4], St[i, 5] = z0, z1, z2
         _householder_qr6(St, 6 + nc, v)
         # D^-1 = R11^-1 R11^-T; G = R11^-1 R12
         for a in range(nk - 1, -1, -1):
@@ -1108,9 +1154,9 @@ def _aba_stable(is_hinge, col_start, e, tau, udot):
                 if hinge:
                     if b < 2:
                         for r in range(3):
-                            W[j, r] += g * H[r, 1 + b]
+                            W[j, ro + r] += g * H[r, 1 + b]
                     else:
-                        W[j, 3 + b - 2] += g
+                        W[j, oo + b - 2] += g
                 else:
                     W[j, 3 + b] += g
         # a hinge's armature a: D = D0 + a (D0 = R11^2, the body's own), W = U / D is the W
@@ -1137,9 +1183,9 @@ def _aba_stable(is_hinge, col_start, e, tau, udot):
                 if hinge:
                     if i < 2:
                         for r in range(3):
-                            Ia[b, r] += f * H[r, 1 + i]
+                            Ia[b, ro + r] += f * H[r, 1 + i]
                     else:
-                        Ia[b, 3 + i - 2] += f
+                        Ia[b, oo + i - 2] += f
                 else:
                     Ia[b, 3 + i] += f
         # p^a = p^A + I^a c + U D^-1 u, I^a c = F^T (F c)
@@ -1317,7 +1363,8 @@ if jit.compiling():
             block2(vector_at(a[9], 3 * n, f), 0, n, 3), vector_at(a[10], nt, i),
             block2(vector_at(a[11], 3 * nt, f), 0, nt, 3), vector_at(a[12], nt, f),
             vector_at(a[13], FLAGS_SIZE, i), vector_at(a[14], 7, f), vector_at(a[15], n, f),
-            block2(vector_at(a[16], 2 * n, f), 0, n, 2), block2(vector_at(a[17], 5 * n, f), 0, n, 5))
+            block2(vector_at(a[16], 2 * n, f), 0, n, 2), block2(vector_at(a[17], 5 * n, f), 0, n, 5),
+            vector_at(a[18], n, np.bool_))
         h = d[D_INPUTS:D_N]
         inputs = HeldInputs(vector_at(h[0], 1, f), vector_at(h[1], nt, f), vector_at(h[2], nt, f),
                             vector_at(h[3], nt, f), vector_at(h[4], N, f))
@@ -1460,7 +1507,7 @@ def rhs_kernel(t, y, ydot, model, data, inputs):
     commands through its actuators' speed cut and friction (`actuate`).
     """
     (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-     torque_axis, torque_A, flags, base, armature, spring, servo) = model
+     torque_axis, torque_A, flags, base, armature, spring, servo, is_slide) = model
     work = data.work
     t0, p0, pdot, L_rotor, tau = inputs.t0[0], inputs.p0, inputs.pdot, inputs.L_rotor, inputs.tau
     base_type = flags[0]
@@ -1472,7 +1519,7 @@ def rhs_kernel(t, y, ydot, model, data, inputs):
      Ia, pa, Dx, T, G, x, a_base) = workspace_views(work, n, N, nt)
 
     # positions, velocities
-    body_positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R, s_w, hk, Aw, e_w)
+    body_positions(y, model, R, s_w, hk, Aw, e_w)
     body_velocities(t, y, model, s_w, e_w, w, vO, c)
     L_applied, tau_applied = L_rotor, tau
     if flags[FLAG_ACTUATORS] != 0:  # spins and works are states; the torques applied at this state
@@ -1489,7 +1536,7 @@ def rhs_kernel(t, y, ydot, model, data, inputs):
         tau_applied = with_springs
     bias_forces(model, R, hk, Aw, w, vO, p, L_applied, lam_b, dlam_b, I6, pb)
     # ABA
-    _joint_columns(is_hinge, own_col, base_type, e_w, S)
+    _joint_columns(is_hinge, is_slide, own_col, base_type, e_w, S)
     for a in range(6):
         a_base[a] = 0.0
     if base_type == BASE_MOVING:
@@ -1618,7 +1665,7 @@ def normalize_quaternions(y, i_q0, nq):
 def chain_model(model: Model) -> ChainModel:
     """The model as the compiled kernels read it (see ChainModel).
 
-    Per body: the y index of its quaternion (spherical) or of phi_k (hinge) (`qrow`); the first
+    Per body: the y index of its quaternion (spherical) or of phi_k (hinge) or d_k (slide) (`qrow`); the first
     velocity column of its own joint (`own_col`); the range of all its columns (`col_start`,
     n + 1; a free base's translations belong to body 0). `flags` and `base` as in `rhs_kernel`:
     the kernel's C function is compiled (or loaded) now, and the heavy path for a model with
@@ -1679,6 +1726,7 @@ def chain_model(model: Model) -> ChainModel:
         armature=armature,
         spring=spring,
         servo=servo,
+        is_slide=np.ascontiguousarray(m.is_slide, dtype=np.bool_),
     )
 
 

@@ -10,8 +10,18 @@ Generalized velocities (the unknowns of eqs (52)-(54), in a relative basis):
     spherical joint k: w^k - w^{k-1}, the angular velocity of body k relative to its parent
         (3, world-frame components; the paper's absolute w^k is their prefix sum)
     hinge k: phi_k' (eq 50)
+    slide k: d_k', the rate of body k's translation d_k along its axis e^k (docs/theory.md
+        section 12): body k keeps its parent's orientation and O^k moves by R^{k-1} e^k d_k
 State vector y = [r0 (free base, 3) | quaternions of spherical bodies (4 each, w x y z, world
-from body) | hinge angles phi_k | generalized velocities | torque-rotor angles kappa_i].
+from body) | hinge angles phi_k and slide positions d_k | generalized velocities | torque-rotor
+angles kappa_i].
+
+A slide is a joint of one coordinate as a hinge is: the arrays named after hinges
+(`hinge_bodies`, `col_hinge`, `i_phi`, `armature`, `spring`, servos, limits, the commanded
+moments of the actuated axes) hold every joint of one coordinate, hinges and slides in chain
+order, and `hinge_slide` tells the slides among them (a slide's "moment" is a force along its
+axis, N; its armature a mass, kg; its spring's stiffness N/m). Only the kinematics differ
+(`is_slide`); a scene without slides has `slide_bodies` empty and computes nothing for them.
 The rotor angles are quadratures for output only: nothing feeds back from them.
 A scene with speed-dependent actuator terms (friction, max_speed: gyro_sim.dynamics.actuators)
 appends [absolute spins p_i of the torque rotors | work of the motors | work of friction]:
@@ -29,7 +39,7 @@ from gyro_sim.dynamics.rotations import (
     quat_to_matrix,
 )
 from gyro_sim.dynamics.actuators import Actuators, AxisLimits
-from gyro_sim.scene.records import Scene
+from gyro_sim.scene.records import ONE_AXIS_JOINTS, Scene
 
 
 @dataclass(frozen=True)
@@ -39,10 +49,13 @@ class Model:
     scene: Scene
     names: tuple[str, ...]
     n: int
-    is_hinge: np.ndarray  # (n,) bool
+    is_hinge: np.ndarray  # (n,) bool: a joint of one coordinate (hinge or slide)
+    is_slide: np.ndarray  # (n,) bool: a slide
     sph_bodies: np.ndarray  # (ns,) int, chain order
-    hinge_bodies: np.ndarray  # (nh,) int, chain order
-    hinge_axis: np.ndarray  # (n, 3) hinge axis e^k (parent frame = own frame); zero on spherical bodies
+    hinge_bodies: np.ndarray  # (nh,) int, chain order: the joints of one coordinate
+    hinge_slide: np.ndarray  # (nh,) bool: which of hinge_bodies are slides
+    slide_bodies: np.ndarray  # (nsl,) int, chain order
+    hinge_axis: np.ndarray  # (n, 3) axis e^k of a hinge or slide (parent frame = own frame); zero on spherical bodies
     # gyrostat k composed with its rotors, body frame (eqs 22, 30)
     mass: np.ndarray  # (n,) m^k
     first_moment: np.ndarray  # (n, 3) m^k c^k
@@ -122,7 +135,8 @@ def compile_model(scene: Scene) -> Model:
     """Compose each gyrostat (eqs 22, 30, 31) and lay out columns and state for `scene`."""
     bodies = scene.bodies
     n = len(bodies)
-    is_hinge = np.array([b.joint.type == "hinge" for b in bodies], dtype=bool)
+    is_hinge = np.array([b.joint.type in ONE_AXIS_JOINTS for b in bodies], dtype=bool)
+    is_slide = np.array([b.joint.type == "slide" for b in bodies], dtype=bool)
     hinge_axis = np.zeros((n, 3))
     mass = np.zeros(n)
     first = np.zeros((n, 3))
@@ -222,8 +236,11 @@ def compile_model(scene: Scene) -> Model:
         names=tuple(b.name for b in bodies),
         n=n,
         is_hinge=is_hinge,
+        is_slide=is_slide,
         sph_bodies=sph,
         hinge_bodies=hin,
+        hinge_slide=is_slide[hin],
+        slide_bodies=np.flatnonzero(is_slide),
         hinge_axis=hinge_axis,
         mass=mass,
         first_moment=first,
@@ -281,7 +298,7 @@ def _actuators(scene: Scene) -> Actuators | None:
     """The limits of the torque rotors and hinges (model order), None when no axis has any."""
     rotor, hinge, terms = [], [], []
     for b in scene.bodies:
-        if b.joint.type == "hinge":
+        if b.joint.type in ONE_AXIS_JOINTS:
             hinge.append(b.joint.limits)
             if b.joint.limits is not None and b.joint.limits.friction is not None:
                 terms.append(f"{b.name}.friction")
@@ -309,7 +326,11 @@ def initial_state(model: Model) -> np.ndarray:
     isph = ihin = 0
     for k, b in enumerate(bodies):
         ini = b.initial
-        if model.is_hinge[k]:
+        if model.is_slide[k]:  # the parent's orientation and angular velocity
+            R, w = R_parent, w_parent
+            phi[ihin], phid[ihin] = ini.position, ini.velocity
+            ihin += 1
+        elif model.is_hinge[k]:
             R = R_parent @ axis_angle_matrix(model.hinge_axis[k], ini.angle)
             w = w_parent + (R @ model.hinge_axis[k]) * ini.rate  # (50)
             phi[ihin], phid[ihin] = ini.angle, ini.rate

@@ -288,7 +288,7 @@ def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, s
     position, velocity, effort = states
     dst, at_joint, at_position, at_quat, at_wrench = slots
     (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-     torque_axis, torque_A, flags, base, armature, spring, servo) = model
+     torque_axis, torque_A, flags, base, armature, spring, servo, is_slide) = model
     work = data.work
     t0, p0, pdot, L_rotor, tau = inputs.t0[0], inputs.p0, inputs.pdot, inputs.L_rotor, inputs.tau
     base_type, has_gravity, has_lam = flags[0], flags[1] != 0, flags[2] != 0
@@ -309,7 +309,7 @@ def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, s
         if not stateful:  # a stateful model's spins are states: `fast.actuate` reads them from y
             for i in range(nt):
                 p[i] = p0[i] + pdot[i] * (t - t0)  # (29)
-        body_positions(y, is_hinge, qrow, hinge_axis, s, first_moment, inertia, R_k, s_w, hk, Aw, e_w)
+        body_positions(y, model, R_k, s_w, hk, Aw, e_w)
         body_velocities(t, y, model, s_w, e_w, w_k, vO_k, c)
     L_applied, tau_applied = L_rotor, tau
     if stateful:  # the torques applied at this state (motors after the speed cut, friction): the
@@ -403,6 +403,9 @@ def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, s
                 O[0, a] = base_position[a] + amp[a] * math.sin(W * t)
             else:
                 O[0, a] = base_position[a]
+        if is_slide[0]:  # a first body's slide moves O^1 (the others' are in s_w[k - 1])
+            for a in range(3):
+                O[0, a] += e_w[0, a] * y[qrow[0]]
         for k in range(1, n):
             for a in range(3):
                 O[k, a] = O[k - 1, a] + s_w[k - 1, a]

@@ -1,7 +1,7 @@
 """Chain dynamics: eqs (34)-(54) of the paper as a world-frame Newton-Euler recursion.
 
 Pipeline of one evaluation (MuJoCo-style stages, each filling `Data`):
-    positions   q        -> R^k, O^k, world vectors            (eqs 34, 50 for hinges)
+    positions   q        -> R^k, O^k, world vectors            (eqs 34, 50 for hinges; slides: section 12)
     velocities  q, u     -> w^k, v0^k                          (eqs 34-35, 50, 53)
     bias        q, u, t  -> body forces at zero acceleration   (eqs 36-39, 58)
     mass matrix q        -> M                                  (the part of (52)-(54) linear in u')
@@ -93,6 +93,9 @@ def positions(model: Model, data: Data, t: float, y: np.ndarray) -> None:
         Rrel = (EYE3 + np.sin(phi)[..., None, None] * data.hinge_K
                 + (1.0 - np.cos(phi))[..., None, None] * data.hinge_K2)
         for i, k in enumerate(model.hinge_bodies):
+            if model.hinge_slide[i]:  # a slide keeps its parent's orientation (section 12)
+                R[..., k, :, :] = EYE3 if k == 0 else R[..., k - 1, :, :]
+                continue
             R[..., k, :, :] = Rrel[..., i, :, :] if k == 0 else R[..., k - 1, :, :] @ Rrel[..., i, :, :]
     if model.free:
         O1 = y[..., model.i_r0][..., None, :]
@@ -102,6 +105,12 @@ def positions(model: Model, data: Data, t: float, y: np.ndarray) -> None:
         O1 = model.base_position
     s_w = matvec(R, model.s)
     data.O = O1 + s_w.cumsum(-2) - s_w
+    if len(model.slide_bodies):  # a slide moves O^k (and the bodies after it) by e^k d_k
+        sl = model.slide_bodies
+        d_w = np.zeros(R.shape[:-1], dtype=R.dtype)
+        d_w[..., sl, :] = (matvec(R[..., sl, :, :], model.hinge_axis[sl])
+                           * y[..., model.i_phi][..., model.hinge_slide][..., None])
+        data.O = data.O + d_w.cumsum(-2)
     hk = matvec(R, model.first_moment)  # m^k c^k, world components
     data.h = model.mass[:, None] * data.O + hk  # first moments about the origin
     data.e_w = matvec(R[..., model.hinge_bodies, :, :], model.hinge_axis[model.hinge_bodies])  # hinge axes
@@ -131,9 +140,17 @@ def velocities(model: Model, data: Data, t: float, u: np.ndarray) -> None:
         wrel[..., model.sph_bodies, :] = u[..., model.col_sph]
     if len(model.hinge_bodies):
         wrel[..., model.hinge_bodies, :] = data.e_w * u[..., model.col_hinge][..., None]  # (50): e^k phi_k'
+    vrel = None
+    if len(model.slide_bodies):  # a slide: no rotation, the translation e^k d_k' (section 12)
+        vrel = np.zeros(wrel.shape, dtype=wrel.dtype)
+        vrel[..., model.slide_bodies, :] = wrel[..., model.slide_bodies, :]
+        wrel[..., model.slide_bodies, :] = 0.0
     w = wrel.cumsum(-2)
     O = data.O
     v_o = cross(O, wrel).cumsum(-2)  # velocity of the body point at the origin
+    if vrel is not None:
+        v_o = v_o + vrel.cumsum(-2)
+    data.vrel = vrel
     if model.free:
         v_o += u[..., model.col_base][..., None, :]
     elif model.moving:
@@ -195,10 +212,13 @@ def bias_accelerations(model: Model, data: Data, t: float) -> tuple[np.ndarray, 
 
     Spherical joint (world-component axes a through O^k): S' u = (0, v(O^k) x w_rel).
     Hinge: e^k' = w^{k-1} x e^k, so S' u = (w^{k-1} x e^k phi', v(O^k) x e^k phi' + O^k x (w^{k-1} x e^k) phi').
+    Slide: S = (0, e^k), so S' u = (0, w^{k-1} x e^k d_k').
     """
     da = cross(data.w_parent, data.wrel)
     da[..., model.sph_bodies, :] = 0.0  # spherical joints: world-component axes do not turn
     dv = cross(data.vO, data.wrel) + cross(data.O, da)
+    if data.vrel is not None:  # a slide's axis turns with its parent: S' u = (0, w^{k-1} x e^k d_k')
+        dv = dv + cross(data.w_parent, data.vrel)
     acc_w = da.cumsum(-2)
     acc_v = dv.cumsum(-2)
     if model.moving:
@@ -212,6 +232,10 @@ def joint_columns(model: Model, data: Data) -> tuple[np.ndarray, np.ndarray]:
     Sa[..., model.col_sph.ravel(), :] = data.sph_axes
     Sa[..., model.col_hinge, :] = data.e_w
     Sb = cross(data.O[..., model.col_body, :], Sa)
+    if len(model.slide_bodies):  # a slide's unit motion is the translation (0, e^k) (section 12)
+        cols = model.col_hinge[model.hinge_slide]
+        Sb[..., cols, :] = Sa[..., cols, :]
+        Sa[..., cols, :] = 0.0
     if model.free:
         Sb[..., model.col_base, :] = EYE3
     return Sa, Sb

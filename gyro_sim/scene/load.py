@@ -47,7 +47,7 @@ from gyro_sim.errors import GyroSimError
 from gyro_sim.scene.mjcf import ModelError, import_model, is_model_path
 from gyro_sim.scene.names import name_problem, topic_token
 from gyro_sim.scene.records import (
-    BASE_TYPES, JOINT_TYPES, ROTOR_MODES, Base, Body, Friction, Imu, Initial, Joint,
+    BASE_TYPES, JOINT_TYPES, ONE_AXIS_JOINTS, ROTOR_MODES, Base, Body, Friction, Imu, Initial, Joint,
     Limits, Rotor, Scene, Servo, Spring,
 )
 
@@ -114,7 +114,8 @@ ROTOR_KEYS = ("name", "axis", "position", "mass", "axial_inertia", "transverse_i
 EULER_KEYS = ("euler", "euler_rates")
 QUATERNION_KEYS = ("quaternion", "angular_velocity")
 HINGE_INITIAL_KEYS = ("angle", "rate")
-INITIAL_KEYS = EULER_KEYS + QUATERNION_KEYS + HINGE_INITIAL_KEYS
+SLIDE_INITIAL_KEYS = ("position", "velocity")
+INITIAL_KEYS = EULER_KEYS + QUATERNION_KEYS + HINGE_INITIAL_KEYS + SLIDE_INITIAL_KEYS
 IMU_NOISE_KEYS = ("gyro_noise_density", "gyro_bias_instability", "accel_noise_density",
                   "accel_bias_instability")
 IMU_KEYS = ("name", "body", "position", "orientation", "rate", "seed") + IMU_NOISE_KEYS
@@ -691,8 +692,9 @@ def _bodies(ch: _Checker, value: Any, base_type: Any) -> tuple[Body, ...] | None
     first = value[0]
     first_joint = first.get("joint") if isinstance(first, Mapping) else None
     if base_type == "free" and isinstance(first_joint, Mapping) and \
-            first_joint.get("type") == "hinge":
-        ch.fail("bodies[0].joint.type", "a free base's first joint must be spherical, not a hinge")
+            first_joint.get("type") in ONE_AXIS_JOINTS:
+        ch.fail("bodies[0].joint.type", f"a free base's first joint must be spherical, not a "
+                                        f"{first_joint.get('type')}")
     _check_names(ch, names)
     if any(body is None for body in bodies):
         return None
@@ -788,16 +790,16 @@ def _joint(ch: _Checker, value: Any, path: str) -> Joint | None:
                                        "axis)")
         for key in HINGE_LIMIT_KEYS:
             if joint.get(key) is not None:
-                ch.fail(_at(path, key), "not allowed for a spherical joint (only a hinge carries "
-                                        "a commanded moment)")
+                ch.fail(_at(path, key), "not allowed for a spherical joint (only a hinge or a slide "
+                                        "carries a commanded moment or force)")
         for key in HINGE_ONLY_KEYS:
             if joint.get(key) is not None:
-                ch.fail(_at(path, key), "not allowed for a spherical joint (a hinge's term)")
+                ch.fail(_at(path, key), "not allowed for a spherical joint (a hinge's or a slide's term)")
         return Joint(type=kind)
-    if kind == "hinge":
+    if kind in ONE_AXIS_JOINTS:
         limits = _limits(ch, joint, path, HINGE_LIMIT_KEYS)
         if joint.get("axis") is None:
-            ch.fail(_at(path, "axis"), "required for a hinge (its axis in the parent's frame)")
+            ch.fail(_at(path, "axis"), f"required for a {kind} (its axis in the parent's frame)")
             return None
         axis = ch.unit(joint, "axis", path)
         armature = ch.scalar(joint, "armature", path, default=0.0, minimum=0.0)
@@ -1080,10 +1082,11 @@ def _initial(ch: _Checker, value: Any, path: str, joint_type: str | None) -> Ini
         return None
     given = {key for key, item in initial.items() if item is not None}
     if joint_type == "spherical":
-        for key in HINGE_INITIAL_KEYS:
+        for key in HINGE_INITIAL_KEYS + SLIDE_INITIAL_KEYS:
             if key in initial:
-                ch.fail(_at(path, key), "hinge-joint key, not allowed on a spherical joint "
-                                        "(give euler/euler_rates or quaternion/angular_velocity)")
+                kind = "slide" if key in SLIDE_INITIAL_KEYS else "hinge"
+                ch.fail(_at(path, key), f"{kind}-joint key, not allowed on a spherical joint "
+                                        f"(give euler/euler_rates or quaternion/angular_velocity)")
         if given & set(QUATERNION_KEYS):
             if given & set(EULER_KEYS):
                 ch.fail(path, "mixes the Euler form (euler, euler_rates) and the quaternion form "
@@ -1103,11 +1106,23 @@ def _initial(ch: _Checker, value: Any, path: str, joint_type: str | None) -> Ini
         if euler is None or rates is None:
             return None
         return Initial(euler=_readonly(euler), euler_rates=_readonly(rates))
-    if joint_type == "hinge":
-        for key in EULER_KEYS + QUATERNION_KEYS:
+    if joint_type == "slide":
+        for key in EULER_KEYS + QUATERNION_KEYS + HINGE_INITIAL_KEYS:
             if key in initial:
-                ch.fail(_at(path, key), "spherical-joint key, not allowed on a hinge joint "
-                                        "(give angle, rate)")
+                kind = "hinge" if key in HINGE_INITIAL_KEYS else "spherical"
+                ch.fail(_at(path, key), f"{kind}-joint key, not allowed on a slide joint "
+                                        f"(give position, velocity)")
+        position = ch.scalar(initial, "position", path, default=0.0)
+        velocity = ch.scalar(initial, "velocity", path, default=0.0)
+        if position is None or velocity is None:
+            return None
+        return Initial(position=position, velocity=velocity)
+    if joint_type == "hinge":
+        for key in EULER_KEYS + QUATERNION_KEYS + SLIDE_INITIAL_KEYS:
+            if key in initial:
+                kind = "slide" if key in SLIDE_INITIAL_KEYS else "spherical"
+                ch.fail(_at(path, key), f"{kind}-joint key, not allowed on a hinge joint "
+                                        f"(give angle, rate)")
         angle = ch.scalar(initial, "angle", path, default=0.0)
         rate = ch.scalar(initial, "rate", path, default=0.0)
         if angle is None or rate is None:
@@ -1117,7 +1132,7 @@ def _initial(ch: _Checker, value: Any, path: str, joint_type: str | None) -> Ini
     for key in EULER_KEYS + ("angular_velocity",):
         ch.vector(initial, key, path, default=None)
     ch.vector(initial, "quaternion", path, size=4, default=None)
-    for key in HINGE_INITIAL_KEYS:
+    for key in HINGE_INITIAL_KEYS + SLIDE_INITIAL_KEYS:
         ch.scalar(initial, key, path, default=None)
     return None
 

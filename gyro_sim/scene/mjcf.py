@@ -36,12 +36,13 @@ through fused fixed links. A rate is MuJoCo's ``interval`` or Gazebo's ``update_
 as given; a noise's standard deviation per sample sigma becomes the density sigma / sqrt(rate)
 (the default publish rate when none is given). Every other sensor is named in a note.
 
-A hinge's or rotor's joint damping and frictionloss become its `friction` (viscous and
+A slide joint becomes a body's `slide` (its terms as a hinge's). A hinge's or rotor's joint damping
+and frictionloss become its `friction` (viscous and
 Coulomb); a hinge's armature and its spring (stiffness, springref) its `armature` and
 `spring` (docs/models.md, "Armature and joint springs"); a model's affine actuators (position,
 velocity, general with an affine bias) its hinges' `servo`, motors too (docs/models.md, "Servo
 actuators"). Everything the equations of gyro_sim
-cannot express (slide joints, tendons, equality constraints, a ball joint's damping, spring or
+cannot express (tendons, equality constraints, a ball joint's damping, spring or
 armature, a variable gain, branching trees, an inertia outside the triangle inequality on a moving body
 unless ``balance_inertia``, ...) is refused, one line per element and every problem of the
 file in one refusal; contacts, joint limits and control ranges are ignored and listed in
@@ -743,17 +744,12 @@ class _Importer:
         for j in range(m.njnt):
             kind = int(m.jnt_type[j])
             dofs = range(m.jnt_dofadr[j], m.jnt_dofadr[j] + (6 if kind == 0 else 3 if kind == 1 else 1))
-            if kind == int(mj.mjtJoint.mjJNT_SLIDE):
-                how = (f"weld it where it is with --lock {self.joint_name(j)}" if self.lockable(j) else
-                       "--lock cannot weld it (only a body's only, named hinge or slide joint is locked)")
-                self.fail(self.joint(j), "slide joints are not supported (chains of ball and hinge joints "
-                                         f"only); {how}")
-                continue
+            axis = kind in (int(mj.mjtJoint.mjJNT_HINGE), int(mj.mjtJoint.mjJNT_SLIDE))  # one coordinate
             if springs and np.any(getattr(m, "jnt_stiffnesspoly", np.zeros((m.njnt, 1)))[j]):
                 self.fail(self.joint(j), "stiffnesspoly (a nonlinear spring) is not supported; a "
                                          "linear stiffness is")
             elif springs and m.jnt_stiffness[j] != 0.0:
-                if kind == int(mj.mjtJoint.mjJNT_HINGE):  # docs/models.md, "Armature and springs"
+                if axis:  # docs/models.md, "Armature and springs"
                     self.spring[j] = {"stiffness": _tidy(m.jnt_stiffness[j]),
                                       "reference": _tidy(m.qpos_spring[m.jnt_qposadr[j]])}
                 else:
@@ -764,7 +760,7 @@ class _Importer:
                                          "a linear damping is")
             viscous = float(m.dof_damping[dofs][0]) if dampers else 0.0
             coulomb = float(m.dof_frictionloss[dofs][0]) if friction else 0.0
-            if kind == int(mj.mjtJoint.mjJNT_HINGE):
+            if axis:
                 if viscous or coulomb:  # the axis's friction (docs/models.md, "Damping and friction")
                     self.friction[j] = {key: _tidy(value) for key, value in
                                         (("coulomb", coulomb), ("viscous", viscous)) if value}
@@ -775,14 +771,15 @@ class _Importer:
                 self.fail(self.joint(j), f"frictionloss on a {('free', 'ball')[kind]} joint is "
                                          "not supported (friction acts on a hinge's or rotor's axis)")
             if np.any(m.dof_armature[dofs]):
-                if kind == int(mj.mjtJoint.mjJNT_HINGE):  # docs/models.md, "Armature and springs"
+                if axis:  # docs/models.md, "Armature and springs"
                     self.armature[j] = _tidy(m.dof_armature[dofs][0])
                 else:
                     self.fail(self.joint(j), f"armature on a {('free', 'ball')[kind]} joint is not "
                                              "supported (a reflected inertia on a hinge's axis is)")
-            if kind == int(mj.mjtJoint.mjJNT_HINGE) and m.qpos0[m.jnt_qposadr[j]] != 0.0:
-                self.fail(self.joint(j), f"ref = {m.qpos0[m.jnt_qposadr[j]]:g}: a reference angle "
-                                         "is not supported (the hinge angle is MuJoCo's qpos)")
+            if axis and m.qpos0[m.jnt_qposadr[j]] != 0.0:
+                self.fail(self.joint(j), f"ref = {m.qpos0[m.jnt_qposadr[j]]:g}: a reference "
+                                         f"{'angle' if kind == int(mj.mjtJoint.mjJNT_HINGE) else 'position'} "
+                                         "is not supported (the joint's coordinate is MuJoCo's qpos)")
             if m.jnt_limited[j]:
                 low, high = m.jnt_range[j]
                 self.notes.append(f"{self.joint(j)}: limits [{low:g}, {high:g}] not enforced")
@@ -842,7 +839,7 @@ class _Importer:
             self.fail(what, f"drives {self.joint(j)}, which another actuator drives "
                             f"({self.servo[j].get('name') or 'unnamed'!r}); one servo per hinge is supported")
             return
-        if int(m.jnt_type[j]) != int(self.mj.mjtJoint.mjJNT_HINGE):
+        if int(m.jnt_type[j]) not in (int(self.mj.mjtJoint.mjJNT_HINGE), int(self.mj.mjtJoint.mjJNT_SLIDE)):
             return  # refused above
         servo: dict[str, Any] = {}
         name = self._name(self.mj.mjtObj.mjOBJ_ACTUATOR, a)
@@ -1066,12 +1063,12 @@ class _Importer:
         frames: dict[int, tuple[str, np.ndarray, np.ndarray]] = {}  # group root -> name, G, O^k
         G_parent = np.eye(3)
         for k, g in enumerate(chain):
-            name = self.scene_name(g, g.kind == "hinge")
+            name = self.scene_name(g, g.kind in ("hinge", "slide"))
             G = self.R_ref[g.root] if g.kind in ("free", "ball") else G_parent
             frames[g.root] = (name, G, g.origin)
             body: dict[str, Any] = {"name": name}
-            if g.kind == "hinge":
-                body["joint"] = {"type": "hinge", "axis": _vec(G_parent.T @ g.axis)}
+            if g.kind in ("hinge", "slide"):  # a slide keeps its parent's frame, as a hinge at angle 0
+                body["joint"] = {"type": g.kind, "axis": _vec(G_parent.T @ g.axis)}
                 if g.joint in self.friction:
                     body["joint"]["friction"] = self.friction[g.joint]
                 if g.joint in self.armature:
@@ -1373,6 +1370,9 @@ class _Importer:
                 if kind == int(mj.mjtJoint.mjJNT_FREE):
                     out["position"] = d.xpos[b].copy()
                     out["velocity"] = vel[3:].copy()
+            elif kind == int(mj.mjtJoint.mjJNT_SLIDE):
+                out["initial"][b] = {"position": _tidy(d.qpos[m.jnt_qposadr[j]]),
+                                     "velocity": _tidy(d.qvel[m.jnt_dofadr[j]])}
             else:
                 out["initial"][b] = {"angle": _tidy(d.qpos[m.jnt_qposadr[j]]),
                                      "rate": _tidy(d.qvel[m.jnt_dofadr[j]])}
@@ -1388,7 +1388,7 @@ class _Importer:
         mj, m = self.mj, self.m
         axis_of = {}
         for g in chain:
-            if g.kind == "hinge":
+            if g.kind in ("hinge", "slide"):
                 axis_of[g.joint] = self.scene_name(g, True)
             for r in rotors[g.root]:
                 axis_of[r.joint] = self.scene_name(r, True)

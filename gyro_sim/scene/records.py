@@ -12,7 +12,9 @@ from typing import Any
 
 import numpy as np
 
-JOINT_TYPES = ("spherical", "hinge")
+JOINT_TYPES = ("spherical", "hinge", "slide")
+#: the joints of one coordinate: a hinge turns about its axis, a slide translates along it
+ONE_AXIS_JOINTS = ("hinge", "slide")
 BASE_TYPES = ("fixed", "moving", "free")
 ROTOR_MODES = ("torque", "speed")
 
@@ -112,9 +114,12 @@ class Servo:
 class Joint:
     """The joint at O^k between body k-1 (or the base) and body k."""
 
-    type: str  # "spherical" | "hinge"
-    axis: np.ndarray | None = None  # hinge only: (3,) unit axis in the parent's frame
-    limits: Limits | None = None  # hinge only (max_torque, friction)
+    type: str  # "spherical" | "hinge" | "slide"
+    #: hinge and slide: (3,) unit axis in the parent's frame (a slide translates along it)
+    axis: np.ndarray | None = None
+    #: hinge and slide (max_torque, friction; a slide's in N and m/s). Here and below, "hinge
+    #: only" means a joint of one axis, hinge or slide
+    limits: Limits | None = None
     #: hinge only: a reflected rotor inertia (kg m^2) on the joint's own diagonal of the mass
     #: matrix (MuJoCo's armature, docs/theory.md "Armature and joint springs")
     armature: float = 0.0
@@ -129,7 +134,7 @@ class Initial:
     Spherical joints give either Euler angles (psi, theta, phi) with their rates, or a
     quaternion (w, x, y, z; world from body) with a body-frame angular velocity. Exactly one
     of the two forms is set (the loader fills the Euler form with zeros when neither is
-    given). Hinge joints give `angle` and `rate`.
+    given). Hinge joints give `angle` and `rate`, slide joints `position` and `velocity`.
     """
 
     euler: np.ndarray | None = None  # (3,) psi, theta, phi
@@ -138,6 +143,8 @@ class Initial:
     angular_velocity: np.ndarray | None = None  # (3,) body frame
     angle: float = 0.0  # hinge
     rate: float = 0.0  # hinge
+    position: float = 0.0  # slide: d_k (m) along its axis
+    velocity: float = 0.0  # slide: d_k' (m/s)
 
 
 @dataclass(frozen=True, eq=False)

@@ -7,8 +7,9 @@ directly, Foxglove, RViz) then show the moving chain without gyro_sim. Each body
 cylinder along s^k (or along twice its centre of mass on the last body) of the scene's visual
 radius; each rotor a disc at h_i about e_i, sized from its mass and inertia, its visual named
 after the rotor. The joints are ``floating`` from ``world``: the poses come from /tf, not from
-joint states. A ``<gyro_sim base="x y z" gravity="x y z"/>`` element (which URDF readers skip)
-gives a viewer the base point and gravity, so a live view draws what a log's view draws.
+joint states. A ``<gyro_sim base="x y z" gravity="x y z" slides="a b"/>`` element (which URDF
+readers skip) gives a viewer the base point, gravity and the bodies on slides (whose joint
+states are positions in m, not angles), so a live view draws what a log's view draws.
 """
 from __future__ import annotations
 
@@ -106,7 +107,9 @@ def urdf(scene) -> str:
     lines = ['<?xml version="1.0"?>', '<robot name="gyro_sim">', f'  <link name="{ROOT_LINK}"/>']
     # what a viewer draws besides the links (URDF readers skip an element they do not know)
     gravity = f' gravity="{_v(scene.gravity)}"' if scene.gravity is not None else ""
-    lines.append(f'  <gyro_sim base="{_v(scene.base.position)}"{gravity}/>')
+    slides = " ".join(b.name for b in scene.bodies if b.joint.type == "slide")
+    slides = f" slides={quoteattr(slides)}" if slides else ""
+    lines.append(f'  <gyro_sim base="{_v(scene.base.position)}"{gravity}{slides}/>')
     for b in scene.bodies:
         lines.append(f"  <link name={quoteattr(b.name)}>")
         ext = body_extent(b)

@@ -34,12 +34,14 @@ class RotorShape:
 
 @dataclass
 class BodyShape:
-    """A body: its vector s^k (the capsule along it, of `radius`) and its rotors."""
+    """A body: its vector s^k (the capsule along it, of `radius`) and its rotors; `slide`: its
+    joint is a slide (its joint state a position in m)."""
 
     name: str
     extent: np.ndarray
     radius: float
     rotors: list[RotorShape] = field(default_factory=list)
+    slide: bool = False
 
 
 @dataclass
@@ -63,7 +65,8 @@ class Chain:
 
         return (self.name, self.length, None if self.gravity is None else v(self.gravity), v(self.base),
                 tuple((b.name, v(b.extent), b.radius,
-                       tuple((r.name, v(r.position), v(r.axis), r.radius, r.thickness) for r in b.rotors))
+                       tuple((r.name, v(r.position), v(r.axis), r.radius, r.thickness) for r in b.rotors),
+                       b.slide)
                       for b in self.bodies))
 
 
@@ -76,7 +79,8 @@ def from_scene(scene) -> Chain:
         for r in b.rotors:
             rad, thick = rotor_size(r, length)
             rotors.append(RotorShape(r.name, np.asarray(r.position, float), np.asarray(r.axis, float), rad, thick))
-        bodies.append(BodyShape(b.name, np.asarray(body_extent(b), float), body_radius(b, length), rotors))
+        bodies.append(BodyShape(b.name, np.asarray(body_extent(b), float), body_radius(b, length), rotors,
+                                b.joint.type == "slide"))
     g = None if scene.gravity is None else np.asarray(scene.gravity, float)
     return Chain(scene.name, bodies, length, g, np.asarray(scene.base.position, float))
 
@@ -99,8 +103,8 @@ def _floats(text: str | None, n: int) -> np.ndarray:
 def from_urdf(text: str) -> Chain:
     """The chain of a gyro_sim URDF (gyro_sim.scene.urdf.urdf); ChainError if it is not one.
 
-    Its rotors are named by their visuals' names (their spin is drawn), its base and gravity
-    given by its ``<gyro_sim>`` element.
+    Its rotors are named by their visuals' names (their spin is drawn), its base, gravity and
+    the bodies on slides given by its ``<gyro_sim>`` element.
     """
     try:
         root = ET.fromstring(text)
@@ -143,4 +147,7 @@ def from_urdf(text: str) -> Chain:
             base = _floats(extra.get("base"), 3)
         except (TypeError, ValueError) as exc:
             raise ChainError(f"robot_description: <gyro_sim>: {exc}") from None
+        slides = set((extra.get("slides") or "").split())
+        for b in bodies:
+            b.slide = b.name in slides
     return Chain(root.get("name", "robot"), bodies, length, gravity, base)

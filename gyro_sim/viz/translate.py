@@ -17,7 +17,8 @@ Entities (timeline ``sim_time``, a duration: simulated seconds):
   ``world/angular_momentum`` (about O^1, from /diagnostics), ``world/gravity``;
 - ``world/legend``: the scene's name and the arrows' scales;
 - plots: ``plots/euler/<body>`` (psi, theta, phi; psi and phi unwrapped), ``plots/hinge/<body>``,
-  ``plots/rotor_rate/<rotor>``, ``plots/axis_moments/<axis>`` (the commands in force), ``plots/drift/<invariant>`` and
+  ``plots/slide/<body>`` (a slide's position, m), ``plots/rotor_rate/<rotor>``,
+  ``plots/axis_moments/<axis>`` (the commands in force), ``plots/drift/<invariant>`` and
   ``plots/balance/energy_balance`` (log10 of the relative drift of the conserved integrals
   and of E - E0 - W: one readable axis for values from 1e-16 to 1),
   ``plots/imu/<imu>/gyro`` and ``plots/imu/<imu>/accel`` (an IMU's angular velocity and
@@ -84,8 +85,9 @@ COLORS = {
 #: the plots in the order the view shows them, with their titles
 TITLES = {
     "plots/hinge": "hinge angles (rad)",
+    "plots/slide": "slide positions (m)",
     "plots/rotor_rate": "rotor rates (rad/s)",
-    "plots/axis_moments": "commands (N m)",
+    "plots/axis_moments": "commands (N m; N on slides)",
     "plots/drift": "log10 |relative drift|",
 }
 #: entity trees drawn in a plot besides its own
@@ -358,9 +360,12 @@ class Translator:
             values = pos[[idx[f"{b}_{a}"] for a in EULER]]
             values = self._unwrapped(f"euler/{b}", values, (0, 2))
             self._scalars(f"plots/euler/{b}", f"plots/euler/{b}", [f"{b} {a}" for a in EULER], t, values)
-        hinges = [b for b in bodies if b in idx and b not in spherical]
+        slides = {b.name for b in self.chain.bodies if b.slide} if self.chain else set()
+        hinges = [b for b in bodies if b in idx and b not in spherical and b not in slides]
         for b in _pick(hinges, MAX_SERIES):
             self._scalars(f"plots/hinge/{b}", "plots/hinge", [b], t, [pos[idx[b]]])
+        for b in _pick([b for b in bodies if b in idx and b in slides], MAX_SERIES):
+            self._scalars(f"plots/slide/{b}", "plots/slide", [b], t, [pos[idx[b]]])
         if self.chain is None:
             return  # hinges and rotors are told apart by the chain's body names
         rotors = [r.name for b in self.chain.bodies for r in b.rotors if r.name in idx]

@@ -397,7 +397,7 @@ MALFORMED = [
     ("body not a mapping", put("bodies[1]", "arm2"), "bodies[1]", "must be a mapping"),
     # joints
     ("bad joint type", put("bodies[0].joint.type", "ball"), "bodies[0].joint.type",
-     "must be one of spherical, hinge (got 'ball')"),
+     "must be one of spherical, hinge, slide (got 'ball')"),
     ("hinge without axis", drop("bodies[2].joint.axis"), "bodies[2].joint.axis",
      "required for a hinge"),
     ("axis on spherical", put("bodies[0].joint.axis", [0, 0, 1]), "bodies[0].joint.axis",

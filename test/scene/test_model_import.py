@@ -432,8 +432,9 @@ def bad(**parts) -> str:
 
 #: one refused element each: (the model, the one error line's element and reason)
 REFUSED = {
-    "slide joint": (bad(inner=CHILD.format(name="cart", joint="rail", type="slide", attrs='axis="1 0 0"')),
-                    "joint 'rail': slide joints are not supported (chains of ball and hinge joints only)"),
+    "slide off its reference": (bad(inner=CHILD.format(name="cart", joint="rail", type="slide",
+                                                       attrs='axis="1 0 0" ref="0.1"')),
+                                "joint 'rail': ref = 0.1: a reference position is not supported"),
     "tendon": (bad(extra='<tendon><fixed name="cable"><joint joint="pivot" coef="1"/></fixed></tendon>'),
                "tendon 'cable': tendons are not supported"),
     "equality": (bad(inner=CHILD.format(name="arm", joint="elbow", type="hinge", attrs='axis="1 0 0"'),
@@ -515,16 +516,18 @@ URDF_JOINT = """<robot name="bad">
 """
 
 
-@pytest.mark.parametrize("joint, dynamics, expected", [
-    ("prismatic", "", "joint 'rail': slide joints are not supported"),
-    ("prismatic", '<dynamics damping="0.2" friction="0.1"/>', "joint 'rail': slide joints are not supported"),
+@pytest.mark.parametrize("dynamics, friction", [
+    ("", None),
+    ('<dynamics damping="0.2" friction="0.1"/>', {"coulomb": 0.1, "viscous": 0.2}),
 ])
-def test_urdf_joints_gyro_sim_cannot_express_are_refused(tmp_path, joint, dynamics, expected):
-    path = write(tmp_path, "bad.urdf", URDF_JOINT.format(name="rail", type=joint, dynamics=dynamics))
-    with pytest.raises(SceneError) as info:
-        load_scene(path)
-    (error,) = info.value.errors
-    assert error.startswith(f"{path}: {expected}"), error
+def test_urdf_prismatic_joints_are_slides(tmp_path, dynamics, friction):
+    """A prismatic joint is a slide along its axis, its damping and friction the slide's (N s/m, N)."""
+    path = write(tmp_path, "rail.urdf", URDF_JOINT.format(name="rail", type="prismatic", dynamics=dynamics))
+    (body,) = import_model(path).mapping["bodies"]
+    assert body["name"] == "rail" and body["joint"]["type"] == "slide" and body["joint"]["axis"] == [1.0, 0.0, 0.0]
+    assert body["joint"].get("friction") == friction
+    assert body["initial"] == {"position": 0.0, "velocity": 0.0}
+    assert len(load_scene(path).bodies) == 1
 
 
 def test_a_scene_rule_broken_by_the_names_is_said_by_elements(tmp_path):
@@ -542,9 +545,9 @@ def test_a_scene_rule_broken_by_the_names_is_said_by_elements(tmp_path):
 
 
 def test_the_refusals_come_before_anything_runs(tmp_path, capsys):
-    path = write(tmp_path, "bad.xml", REFUSED["slide joint"][0])
+    path = write(tmp_path, "bad.xml", REFUSED["tendon"][0])
     assert main(["run", "--scene", str(path), "--duration", "1"]) == 2
-    assert "joint 'rail': slide joints are not supported" in capsys.readouterr().err
+    assert "tendon 'cable': tendons are not supported" in capsys.readouterr().err
 
 
 def test_every_refusal_is_reported_at_once(tmp_path):
@@ -639,11 +642,11 @@ def test_import_never_replaces_a_file_without_force(tmp_path, capsys):
 
 
 def test_import_refuses_bad_input_with_exit_2(tmp_path, capsys):
-    bad_model = write(tmp_path, "bad.xml", REFUSED["slide joint"][0])
+    bad_model = write(tmp_path, "bad.xml", REFUSED["tendon"][0])
     assert main(["import", str(bad_model), "-o", str(tmp_path / "a.yaml")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == [f"gyro-sim import: {bad_model}: joint 'rail': slide joints are not supported "
-                   "(chains of ball and hinge joints only); weld it where it is with --lock rail"]
+    assert err == [f"gyro-sim import: {bad_model}: tendon 'cable': tendons are not supported (a chain of "
+                   "rigid bodies and rotors only); --lock its joints ('pivot') to weld them: the tendon goes with them"]
     assert main(["import", str(ARM), "-o", str(tmp_path / "b.yaml"), "--keyframe", "nope"]) == 2
     assert "keyframe 'nope': no such keyframe" in capsys.readouterr().err
     assert main(["import", "hinge_chain", "-o", str(tmp_path / "c.yaml")]) == 2

@@ -88,10 +88,6 @@ def test_a_gripper_left_unlocked_is_refused_suggesting_lock(tmp_path):
     assert info.value.errors == [
         f"{path}: equality #0: equality constraints are not supported (an open chain only); "
         "--lock the joints it couples to weld them",
-        f"{path}: joint 'finger_joint1': slide joints are not supported (chains of ball and hinge "
-        "joints only); weld it where it is with --lock finger_joint1",
-        f"{path}: joint 'finger_joint2': slide joints are not supported (chains of ball and hinge "
-        "joints only); weld it where it is with --lock finger_joint2",
         f"{path}: body 'link2': 2 moving children ('left_finger', 'right_finger'): a chain only, "
         "branching trees are not supported; weld all branches but one with --lock JOINT (their "
         "joints: 'finger_joint1', 'finger_joint2')"]
@@ -146,13 +142,12 @@ def test_lock_on_the_command_line_and_bad_locks(tmp_path, capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and said in err[0], err
     # a joint that is not there is said with every other problem of the file (the fingers,
-    # not locked, are slide joints), in one refusal
+    # not locked, branch and are coupled), in one refusal
     assert main(["run", "--scene", str(path), "--duration", "0.01", "--lock", "nope"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert "lock: no joint named 'nope'" in err[1] and "(5 errors)" in err[0], err
+    assert "lock: no joint named 'nope'" in err[1] and "(3 errors)" in err[0], err
     said = "\n".join(err[2:])
-    for element in ("equality #0", "joint 'finger_joint1': slide", "joint 'finger_joint2': slide",
-                    "body 'link2': 2 moving children"):
+    for element in ("equality #0", "body 'link2': 2 moving children"):
         assert element in said, said
     # and what each suggests, --lock the fingers, is what then loads
     assert main(["run", "--scene", str(path), "--duration", "0.01", "--lock", "finger_joint1",

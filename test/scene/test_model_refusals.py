@@ -168,15 +168,13 @@ def test_one_refusal_lists_every_problem_and_suggests_no_refused_lock(tmp_path):
         "tendon 'cable': tendons are not supported",
         "body 'carriage': 2 joints, a ball or free joint among them; several joints in one body are hinge and "
         "slide joints only",
-        "joint 'rail': slide joints are not supported (chains of ball and hinge joints only); weld it where it "
-        "is with --lock rail",
         "body 'upper': 2 moving children ('carriage', 'side'): a chain only, branching trees are not supported",
     ]
     for said in expected:
         assert any(e.startswith(said) for e in errors), (said, errors)
     assert len(errors) == len(expected), errors
     # no error suggests a --lock that the lock would refuse: the branches ('swivel' and 'knob'
-    # are ball joints) say so; the tendon's joints and the slide 'rail' are welded
+    # are ball joints) say so; the tendon's joints are welded
     suggestion = r"--lock its joints \(([^)]*)\)|--lock (\w+)"
     suggested = sorted({name for e in errors for listed, single in re.findall(suggestion, e)
                         for name in (re.findall(r"'(\w+)'", listed) or [single]) if name != "cannot"})

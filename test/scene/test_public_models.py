@@ -137,8 +137,6 @@ def test_vendored_urdfs_load_with_their_meshes_missing():
 
 
 @pytest.mark.parametrize("path, said", [
-    (DMC / "cartpole.xml", "joint 'slider': slide joints are not supported (chains of ball and hinge "
-                           "joints only); weld it where it is with --lock slider"),
     (DMC / "finger.xml", "joint 'proximal': ref = -1.5708: a reference angle is not supported"),
     (ERD / "panda.urdf", "equality #0: equality constraints are not supported (an open chain only); "
                          "--lock the joints it couples to weld them"),
