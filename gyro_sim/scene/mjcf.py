@@ -13,16 +13,18 @@ of mass and inertia are the ones MuJoCo simulates (also when it derives them fro
   (every rotor of a URDF model is);
 - the other bodies form the chain: a free joint on the first is the free base (with a
   spherical joint at O^1), ball joints are spherical joints, hinges are hinges;
-- a body with several hinge joints j1..jm (MuJoCo applies them in order) is m chain bodies: a
-  massless frame at the anchor of each of j1..j(m-1), then the body on jm.
+- a body with several hinge and slide joints j1..jm (MuJoCo applies them in order) is m chain
+  bodies: a massless frame at the anchor of each of j1..j(m-1), then the body on jm.
 
 Frames. A body's frame in the scene has its origin at its joint point O^k (the joint's
 anchor; for a free joint the body's origin). A ball or free body's frame turns with the MuJoCo
 body frame and equals it in rotation (its quaternion is MuJoCo's ``xquat``); a hinge body's
-frame is its parent's frame at the model's reference pose (``qpos0``), turned by the hinge
-angle, as docs/scene-format.md defines it, so the hinge axis is written in the parent's frame.
-Every vector of the scene is MuJoCo's world vector at the reference pose, rotated into that
-frame.
+frame is its parent's frame at the model's reference pose, turned by the hinge angle, as
+docs/scene-format.md defines it, so the hinge axis is written in the parent's frame. The
+reference pose is MuJoCo's ``qpos0`` with every hinge and slide at 0 (a joint's ``ref`` only
+says where the file draws its body), so that a hinge's angle and a slide's position are
+MuJoCo's ``qpos``. Every vector of the scene is MuJoCo's world vector at the reference pose,
+rotated into that frame.
 
 Names: a hinge and a rotor are named after their joint (so ``joint_states`` and the axis
 moments use the joint names of the file, as MuJoCo's ``qpos`` and actuators do), a ball or
@@ -776,10 +778,6 @@ class _Importer:
                 else:
                     self.fail(self.joint(j), f"armature on a {('free', 'ball')[kind]} joint is not "
                                              "supported (a reflected inertia on a hinge's axis is)")
-            if axis and m.qpos0[m.jnt_qposadr[j]] != 0.0:
-                self.fail(self.joint(j), f"ref = {m.qpos0[m.jnt_qposadr[j]]:g}: a reference "
-                                         f"{'angle' if kind == int(mj.mjtJoint.mjJNT_HINGE) else 'position'} "
-                                         "is not supported (the joint's coordinate is MuJoCo's qpos)")
             if m.jnt_limited[j]:
                 low, high = m.jnt_range[j]
                 self.notes.append(f"{self.joint(j)}: limits [{low:g}, {high:g}] not enforced")
@@ -895,9 +893,12 @@ class _Importer:
         return out
 
     def measure(self, groups: dict[int, _Group]) -> None:
-        """Each group's mass, centre of mass, inertia and joint at the reference pose."""
+        """Each group's mass, centre of mass, inertia and joint at the reference pose (qpos0 with
+        every hinge and slide at 0: their coordinates are then MuJoCo's qpos, whatever their ref)."""
         mj, m = self.mj, self.m
         d = mj.MjData(m)  # qpos = qpos0
+        one = (int(mj.mjtJoint.mjJNT_HINGE), int(mj.mjtJoint.mjJNT_SLIDE))
+        d.qpos[[int(m.jnt_qposadr[j]) for j in range(m.njnt) if int(m.jnt_type[j]) in one]] = 0.0
         mj.mj_kinematics(m, d)
         self.R_ref = d.xmat.reshape(-1, 3, 3).copy()
         self.ximat_ref = d.ximat.reshape(-1, 3, 3).copy()
@@ -1361,7 +1362,9 @@ class _Importer:
             omega[b] = vel[:3].copy()
             j = int(m.body_jntadr[b]) + int(m.body_jntnum[b]) - 1  # the body's last joint (its group's)
             for f in range(int(m.body_jntadr[b]), j):  # the massless frames' joints before it
-                out["frames"][f] = {"angle": _tidy(d.qpos[m.jnt_qposadr[f]]), "rate": _tidy(d.qvel[m.jnt_dofadr[f]])}
+                slide = int(m.jnt_type[f]) == int(mj.mjtJoint.mjJNT_SLIDE)
+                keys = ("position", "velocity") if slide else ("angle", "rate")
+                out["frames"][f] = dict(zip(keys, (_tidy(d.qpos[m.jnt_qposadr[f]]), _tidy(d.qvel[m.jnt_dofadr[f]]))))
             kind = int(m.jnt_type[j])
             R = d.xmat[b].reshape(3, 3)
             if kind in (int(mj.mjtJoint.mjJNT_FREE), int(mj.mjtJoint.mjJNT_BALL)):

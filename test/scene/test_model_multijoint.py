@@ -6,10 +6,16 @@ MuJoCo is the judge: a universal-joint pendulum written here (two hinges in one 
 anchors apart, a second body below) must accelerate as MuJoCo's forward dynamics at random
 states (contacts and constraints off) and move as MuJoCo's RK4 over 2 s to MULTIJOINT_AGREEMENT;
 with joints locked, the accelerations are MuJoCo's with those joints held (its mass matrix
-reduced to the free joints) wherever the locked joints sit in the body's order; Gymnasium's
-reacher (test/scene/models/gymnasium/, MIT) loads with its target's two slides locked and its
-arm moves as in MuJoCo (the target is a chain of its own there: nothing couples it to the arm
-once contacts are off).
+reduced to the free joints) wherever the locked joints sit in the body's order.
+
+Gymnasium 1.4.0's planar models (test/scene/models/gymnasium/, MIT, as published): the hopper
+whole (its torso on slide x, slide z and hinge y: two massless frames on the world, then the
+torso), the walker with its left leg locked (a chain only: the two legs branch from the torso),
+the reacher with its target's two slides locked (the arm) or its arm locked (the target on its
+two slides); contacts and constraints (limits) off in MuJoCo, where they are ignored in
+gyro_sim. Each: accelerations at random states, and a motion under a constant generalised
+force on every joint left, over 2 s against MuJoCo's RK4 on the file with the locked joints
+deleted from its spec.
 """
 from __future__ import annotations
 
@@ -53,7 +59,23 @@ GIMBAL = """<mujoco model="gimbal">
 """
 UNIVERSAL = GIMBAL.format(extra="", key='<keyframe><key qpos="0.3 -0.2 0.4" qvel="0.5 1.0 -0.7"/></keyframe>')
 THREE = GIMBAL.format(extra='\n      <joint name="uz" type="hinge" pos="-0.02 0.01 0" axis="0.1 0.2 1"/>', key="")
-REACHER = Path(__file__).parent / "models" / "gymnasium" / "reacher.xml"
+GYMNASIUM = Path(__file__).parent / "models" / "gymnasium"
+REACHER = GYMNASIUM / "reacher.xml"
+LEFT_LEG = ("thigh_left_joint", "leg_left_joint", "foot_left_joint")
+#: per model: the file, the joints locked (at 0, their reference), the scene's bodies, and a
+#: generalised force per joint left (N or N m)
+PLANAR = {
+    "hopper": (GYMNASIUM / "hopper.xml", (), ["rootx", "rootz", "rooty", "thigh_joint", "leg_joint", "foot_joint"],
+               {"rootx": 2.0, "rootz": 30.0, "rooty": 0.5, "thigh_joint": 3.0, "leg_joint": -2.0, "foot_joint": 1.0}),
+    "walker2d, left leg locked": (GYMNASIUM / "walker2d.xml", LEFT_LEG,
+                                  ["rootx", "rootz", "rooty", "thigh_joint", "leg_joint", "foot_joint"],
+                                  {"rootx": 2.0, "rootz": 40.0, "rooty": 0.5, "thigh_joint": 3.0,
+                                   "leg_joint": -2.0, "foot_joint": 1.0}),
+    "reacher, target locked": (REACHER, ("target_x", "target_y"), ["joint0", "joint1"],
+                               {"joint0": 0.2, "joint1": -0.1}),
+    "reacher, arm locked": (REACHER, ("joint0", "joint1"), ["target_x", "target_y"],
+                            {"target_x": 0.002, "target_y": -0.001}),
+}
 
 
 def judge(m):
@@ -64,7 +86,8 @@ def judge(m):
 def held_accelerations(path: Path, locked: dict[str, float], seed: int = 1, states: int = 5) -> float:
     """The largest difference of gyro_sim's accelerations (the file loaded with `locked`) from
     MuJoCo's with the locked joints held at their values (M reduced to the free joints: M_ff
-    qacc_f = (qfrc_passive - qfrc_bias)_f), at random states; relative to the largest."""
+    qacc_f = (qfrc_passive - qfrc_bias + qfrc_applied)_f), at random states under random
+    generalised forces on the joints left; relative to the largest."""
     scene = load_scene(path, lock=[f"{k}={v}" for k, v in locked.items()])
     m = judge(mujoco.MjModel.from_xml_path(str(path)))
     d = mujoco.MjData(m)
@@ -76,6 +99,9 @@ def held_accelerations(path: Path, locked: dict[str, float], seed: int = 1, stat
     qf = [int(m.jnt_qposadr[joint[n]]) for n in names]
     vf = [int(m.jnt_dofadr[joint[n]]) for n in names]
     rng = np.random.default_rng(seed)
+    forces = rng.normal(size=len(names))
+    sim.set_axis_moments([forces[names.index(a)] for a in sim.axis_names])
+    d.qfrc_applied[vf] = forces
     worst = 0.0
     for _ in range(states):
         d.qpos[:], d.qvel[:] = rng.uniform(-2.0, 2.0, m.nq), rng.normal(size=m.nv)
@@ -84,10 +110,11 @@ def held_accelerations(path: Path, locked: dict[str, float], seed: int = 1, stat
         mujoco.mj_forward(m, d)
         M = np.zeros((m.nv, m.nv))
         mujoco.mj_fullM(m, d, M)
-        qacc = np.linalg.solve(M[np.ix_(vf, vf)], (d.qfrc_passive - d.qfrc_bias)[vf])
+        qacc = np.linalg.solve(M[np.ix_(vf, vf)], (d.qfrc_passive - d.qfrc_bias + d.qfrc_applied)[vf])
         y = initial_state(model)
         y[model.i_phi], y[model.i_vel] = d.qpos[qf], d.qvel[vf]
         udot = sim.held_rhs()(0.0, y)[model.i_vel]
+        assert np.max(np.abs(qacc)) > 0.0
         worst = max(worst, float(np.max(np.abs(udot - qacc)) / np.max(np.abs(qacc))))
     return worst
 
@@ -109,12 +136,20 @@ def test_a_universal_joint_accelerates_as_in_mujoco(tmp_path):
     assert worst <= QACC_RTOL
 
 
-@pytest.mark.slow
-def test_a_universal_joint_moves_as_in_mujoco(tmp_path):
-    path = write(tmp_path, "universal.xml", UNIVERSAL)
-    forces = {"ux": 0.3, "uy": -0.2, "tipj": 0.1}
-    mj_out = mujoco_run(path, {}, forces, INSTANTS)
-    gs_out = gyro_run(load_scene(path), forces, INSTANTS)
+def moves_as_in_mujoco(path: Path, locked: tuple[str, ...], forces: dict[str, float]) -> tuple[float, float]:
+    """The largest difference of the joints' positions and velocities from MuJoCo's (RK4 at
+    1e-4 s on the file with the `locked` joints deleted) over 2 s under constant `forces` by
+    joint, and how far MuJoCo's joints moved."""
+    model = None
+    if locked:  # the judge: the locked joints deleted, with the actuators that drive them
+        spec = mujoco.MjSpec.from_file(str(path))
+        for actuator in [a for a in spec.actuators if a.target in locked]:
+            spec.delete(actuator)
+        for name in locked:
+            spec.delete(spec.joint(name))
+        model = spec.compile()
+    mj_out = mujoco_run(path, {}, forces, INSTANTS, model=model)
+    gs_out = gyro_run(load_scene(path, lock=list(locked)), forces, INSTANTS)
     worst = moved = 0.0
     for (m, d), (_, position, velocity) in zip(mj_out, gs_out):
         for j in range(m.njnt):
@@ -122,6 +157,13 @@ def test_a_universal_joint_moves_as_in_mujoco(tmp_path):
             worst = max(worst, abs(position[name] - d.qpos[m.jnt_qposadr[j]]),
                         abs(velocity[name] - d.qvel[m.jnt_dofadr[j]]))
         moved = max(moved, float(np.max(np.abs(d.qpos - mj_out[0][1].qpos))))
+    return worst, moved
+
+
+@pytest.mark.slow
+def test_a_universal_joint_moves_as_in_mujoco(tmp_path):
+    worst, moved = moves_as_in_mujoco(write(tmp_path, "universal.xml", UNIVERSAL), (),
+                                      {"ux": 0.3, "uy": -0.2, "tipj": 0.1})
     print(f"universal joint: angles and rates within {worst:.2g} of MuJoCo's over 2 s (moved {moved:.2g} rad)")
     assert worst <= MULTIJOINT_AGREEMENT and moved > 0.1
 
@@ -145,28 +187,21 @@ def test_a_massless_frame_turning_about_its_childs_axis_is_refused_naming_it(tmp
         "undetermined; give it a mass, or give what it carries inertia about that axis"]
 
 
-def test_the_reacher_with_its_target_locked_moves_as_in_mujoco():
-    scene = load_scene(REACHER, lock=["target_x", "target_y"])
-    assert [b.name for b in scene.bodies] == ["joint0", "joint1"]
-    worst = held_accelerations(REACHER, {"target_x": 0.0, "target_y": 0.0})
-    print(f"reacher, target locked: accelerations within {worst:.2g} (relative) of MuJoCo's")
+@pytest.mark.parametrize("name", list(PLANAR))
+def test_gymnasiums_planar_models_accelerate_as_in_mujoco(name):
+    path, locked, bodies, _ = PLANAR[name]
+    assert [b.name for b in load_scene(path, lock=list(locked)).bodies] == bodies
+    worst = held_accelerations(path, dict.fromkeys(locked, 0.0))
+    print(f"{name}: accelerations within {worst:.2g} (relative) of MuJoCo's")
     assert worst <= QACC_RTOL
 
 
 @pytest.mark.slow
-def test_the_reacher_arm_moves_as_in_mujoco_with_its_target_locked():
-    forces = {"joint0": 0.2, "joint1": -0.1}
-    mj_out = mujoco_run(REACHER, {}, forces, INSTANTS)
-    gs_out = gyro_run(load_scene(REACHER, lock=["target_x", "target_y"]), forces, INSTANTS)
-    worst = moved = 0.0
-    for (m, d), (_, position, velocity) in zip(mj_out, gs_out):
-        for name in forces:
-            j = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name)
-            worst = max(worst, abs(position[name] - d.qpos[m.jnt_qposadr[j]]),
-                        abs(velocity[name] - d.qvel[m.jnt_dofadr[j]]))
-            moved = max(moved, abs(d.qpos[m.jnt_qposadr[j]]))
-    print(f"reacher, target locked: arm angles and rates within {worst:.2g} of MuJoCo's over 2 s "
-          f"(moved {moved:.2g} rad)")
+@pytest.mark.parametrize("name", list(PLANAR))
+def test_gymnasiums_planar_models_move_as_in_mujoco(name):
+    path, locked, _, forces = PLANAR[name]
+    worst, moved = moves_as_in_mujoco(path, locked, forces)
+    print(f"{name}: positions and velocities within {worst:.2g} of MuJoCo's over 2 s (moved {moved:.2g})")
     assert worst <= MULTIJOINT_AGREEMENT and moved > 0.1
 
 
@@ -177,3 +212,16 @@ def test_unnamed_joints_of_a_body_take_names_that_collide_with_none(tmp_path):
     imported = import_model(write(tmp_path, "unnamed.xml", text))
     assert [n for _, n in imported.names] == ["rod_joint0_", "rod_joint1", "tipj"]
     load_scene(write(tmp_path, "unnamed.xml", text))  # and they load
+
+
+def test_a_reference_angle_or_position_is_where_the_file_draws_the_body():
+    """A joint's ref (the finger's proximal at -90 degrees, the hopper's rootz at 1.25 m) is its
+    qpos at rest: the scene's coordinate is MuJoCo's qpos, and the finger (its spinner locked)
+    accelerates as MuJoCo's from random states."""
+    finger = GYMNASIUM.parent / "dm_control" / "finger.xml"
+    scene = load_scene(finger, lock=["hinge"])
+    assert scene.bodies[0].initial.angle == pytest.approx(-np.pi / 2, abs=1e-12)
+    assert load_scene(GYMNASIUM / "hopper.xml").bodies[1].initial.position == 1.25
+    worst = held_accelerations(finger, {"hinge": 0.0})
+    print(f"finger, spinner locked: accelerations within {worst:.2g} (relative) of MuJoCo's")
+    assert worst <= QACC_RTOL
