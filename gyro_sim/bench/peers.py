@@ -176,10 +176,11 @@ def mjcf(scene: Scene, timestep: float, integrator: str) -> str:
             axis = np.asarray(b.joint.axis, dtype=float)
             axis = axis / np.linalg.norm(axis)
             terms = f' armature="{float(b.joint.armature)!r}"' if b.joint.armature else ""
-            if b.joint.spring is not None:  # springref in the compiler's default unit, degrees
+            if b.joint.spring is not None:  # a hinge's springref in the compiler's default unit, degrees
+                ref = b.joint.spring.reference
                 terms += (f' stiffness="{float(b.joint.spring.stiffness)!r}" '
-                          f'springref="{math.degrees(b.joint.spring.reference)!r}"')
-            lines.append(f'{indent}  <joint name="joint:{b.name}" type="hinge" axis="{_vec(axis)}"{terms}/>')
+                          f'springref="{math.degrees(ref) if b.joint.type == "hinge" else float(ref)!r}"')
+            lines.append(f'{indent}  <joint name="joint:{b.name}" type="{b.joint.type}" axis="{_vec(axis)}"{terms}/>')
         c = np.asarray(b.com, dtype=float)
         I_c = np.asarray(b.inertia, dtype=float) - b.mass * ((c @ c) * np.eye(3) - np.outer(c, c))
         lines.append(f'{indent}  <inertial pos="{_vec(c)}" mass="{float(b.mass)!r}" '

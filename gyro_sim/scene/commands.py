@@ -121,7 +121,7 @@ def cmd_import(args) -> int:
         return 1
     rotors = sum(len(b.rotors) for b in scene.bodies)
     axes = [name for b in scene.bodies  # in command order (docs/scene-format.md)
-            for name in ([b.name] if b.joint.type == "hinge" else [])
+            for name in ([b.name] if b.joint.type in ("hinge", "slide") else [])
             + [r.name for r in b.rotors if r.actuated]]
     imus = f", IMUs {[imu.name for imu in scene.imus]}" if scene.imus else ""
     print(f"wrote {out}: scene '{scene.name}', {len(scene.bodies)} bodies, {rotors} rotors, "

@@ -46,12 +46,33 @@ def published_fk(urdf: str, joint_states: dict[str, float], tmp_path: Path):
             for b in range(1, m.nbody)}
 
 
+#: a revolute shoulder, a prismatic joint along a tilted axis with its link's frame turned by
+#: its rpy, a revolute wrist after it
+PRISMATIC_URDF = """<robot name="telescope">
+  <link name="base"/>
+  <joint name="shoulder" type="revolute"><parent link="base"/><child link="upper"/>
+    <origin xyz="0 0 1"/><axis xyz="0 1 0"/><limit lower="-3" upper="3" effort="5" velocity="5"/></joint>
+  <link name="upper"><inertial><origin xyz="0 0 -0.2"/><mass value="1"/>
+    <inertia ixx="0.02" iyy="0.02" izz="0.002" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <joint name="extend" type="prismatic"><parent link="upper"/><child link="sleeve"/>
+    <origin xyz="0 0.05 -0.3" rpy="0.3 0 0.2"/><axis xyz="0.2 0 -1"/>
+    <limit lower="-0.2" upper="0.2" effort="5" velocity="1"/></joint>
+  <link name="sleeve"><inertial><origin xyz="0 0 -0.1"/><mass value="0.5"/>
+    <inertia ixx="0.004" iyy="0.004" izz="0.001" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <joint name="wrist" type="revolute"><parent link="sleeve"/><child link="hand"/>
+    <origin xyz="0 0 -0.2"/><axis xyz="1 0 0"/><limit lower="-3" upper="3" effort="5" velocity="5"/></joint>
+  <link name="hand"><inertial><origin xyz="0 0.02 -0.05"/><mass value="0.2"/>
+    <inertia ixx="0.001" iyy="0.001" izz="0.0005" ixy="0" ixz="0" iyz="0"/></inertial></link>
+</robot>
+"""
+
 CASES = {
     "shipped UR5": lambda tmp: (find_scene("ur5.urdf"), []),
     "Panda, fingers locked open": lambda tmp: (ERD / "panda.urdf", ["panda_finger_joint1=0.02",
                                                                    "panda_finger_joint2=0.03"]),
     "arm with a wheel and a fixed flange": lambda tmp: (write(tmp, "arm_wheel.urdf", ARM_URDF), []),
     "Kinova (fixed joints without an axis)": lambda tmp: (ERD / "kinova.urdf", []),
+    "arm with a prismatic joint": lambda tmp: (write(tmp, "telescope.urdf", PRISMATIC_URDF), []),
 }
 
 

@@ -168,3 +168,28 @@ def test_a_slides_armature_spring_damper_and_servo_are_mujocos(tmp_path):
     state = sim.joint_states()
     assert np.max(np.abs(np.asarray(state.position) - d.qpos)) < AGREEMENT
     assert np.allclose(state.effort, d.qfrc_actuator - m.dof_damping * d.qvel, rtol=1e-8, atol=1e-9)
+
+
+@pytest.mark.parametrize("seed", [3, 7])
+def test_a_scene_with_slides_exported_by_peers_comes_back_the_same(seed, tmp_path):
+    """gyro_sim.bench.peers writes a slide as MJCF's slide (a spring's reference in m, not
+    degrees), and the import reads it back: the same joints, axes, springs, initial state."""
+    from test.dynamics.test_slide import slide_chain
+    from test.scene.test_model_import import exported
+
+    scene_map = slide_chain(seed, "fixed")
+    for b in scene_map["bodies"]:
+        b.pop("rotors", None)
+    original = load_scene(scene_map)
+    back = load_scene(exported(scene_map, tmp_path))
+    assert [(b.name, b.joint.type) for b in back.bodies] == [(b.name, b.joint.type) for b in original.bodies]
+    assert any(b.joint.type == "slide" and b.joint.spring is not None for b in original.bodies)
+    for a, b in zip(original.bodies, back.bodies):
+        if a.joint.type == "slide":
+            assert np.allclose(b.joint.axis, a.joint.axis, atol=1e-14)
+            assert b.joint.armature == pytest.approx(a.joint.armature, rel=1e-15)
+            assert (b.joint.spring is None) == (a.joint.spring is None)
+            if a.joint.spring is not None:
+                assert b.joint.spring.reference == pytest.approx(a.joint.spring.reference, abs=1e-15)
+            assert (b.initial.position, b.initial.velocity) == pytest.approx((a.initial.position, a.initial.velocity),
+                                                                             abs=1e-14)
