@@ -1010,11 +1010,11 @@ def _massless_problems(scene: Scene) -> list[str]:
             continue
         stuck = [j for j in columns if not pivots[j] > MASSLESS_PIVOT_RTOL * diagonal[j]]
         if stuck:
-            what = {"hinge": "its hinge axis", "spherical": "some axis through its joint"}.get(body.joint.type,
-                                                                                              "its joint's axis")
-            out.append(f"bodies[{k}].mass: 0 (a massless frame), and what it carries has no inertia about {what} "
-                       "at the initial state: its joint's acceleration is undetermined; give it a mass, or "
-                       "give what it carries inertia about that axis")
+            what = {"hinge": "inertia about its hinge axis", "slide": "mass to move along its slide axis"}.get(
+                body.joint.type, "inertia about some axis through its joint")
+            out.append(f"bodies[{k}].mass: 0 (a massless frame), and what it carries has no {what} at the "
+                       "initial state: its joint's acceleration is undetermined; give it a mass, or give what "
+                       "it carries that inertia")
     return out
 
 

@@ -24,9 +24,10 @@ def test_a_massless_body_with_inertia_is_refused():
                                  "without mass has no inertia"]
 
 
-UNDETERMINED = ("bodies[{k}].mass: 0 (a massless frame), and what it carries has no inertia about its hinge "
-                "axis at the initial state: its joint's acceleration is undetermined; give it a mass, or give "
-                "what it carries inertia about that axis")
+UNDETERMINED = ("bodies[{k}].mass: 0 (a massless frame), and what it carries has no {what} at the initial "
+                "state: its joint's acceleration is undetermined; give it a mass, or give what it carries that "
+                "inertia")
+HINGE = "inertia about its hinge axis"
 
 
 @pytest.mark.parametrize("case", ["coaxial", "last"])
@@ -41,4 +42,16 @@ def test_a_massless_frame_carrying_nothing_about_its_axis_is_refused_naming_it(c
         bodies[2].update(mass=0.0, inertia_com=ZERO, com=[0.0, 0.0, 0.0])
     with pytest.raises(SceneError) as info:
         load_scene(data)
-    assert info.value.errors == [UNDETERMINED.format(k=k)]
+    assert info.value.errors == [UNDETERMINED.format(k=k, what=HINGE)]
+
+
+def test_a_massless_slide_frame_whose_child_slides_along_its_axis_is_refused():
+    data = universal_pendulum()
+    data["bodies"][0]["joint"] = {"type": "slide", "axis": [1.0, 0.0, 0.0]}
+    data["bodies"][0]["initial"] = {"position": 0.1, "velocity": 0.0}
+    load_scene(data)  # the rod on its hinge about y: the frame's slide moves its mass
+    data["bodies"][1]["joint"] = {"type": "slide", "axis": [2.0, 0.0, 0.0]}
+    data["bodies"][1]["initial"] = {"position": 0.0, "velocity": 0.0}
+    with pytest.raises(SceneError) as info:
+        load_scene(data)
+    assert info.value.errors == [UNDETERMINED.format(k=0, what="mass to move along its slide axis")]

@@ -184,7 +184,7 @@ def test_a_massless_frame_turning_about_its_childs_axis_is_refused_naming_it(tmp
     assert info.value.errors == [
         f"{path}: body 'rod' (hinge joint 'ux', a massless frame): mass: 0 (a massless frame), and what it "
         "carries has no inertia about its hinge axis at the initial state: its joint's acceleration is "
-        "undetermined; give it a mass, or give what it carries inertia about that axis"]
+        "undetermined; give it a mass, or give what it carries that inertia"]
 
 
 @pytest.mark.parametrize("name", list(PLANAR))
