@@ -139,6 +139,8 @@ def mujoco_unsupported(scene: Scene) -> str | None:
     if scene.base.type == "moving":
         return "moving base: MuJoCo cannot prescribe the base motion with its exact accelerations"
     for b in scene.bodies:
+        if b.mass == 0.0:  # a frame of an MJCF body with several joints (docs/models.md)
+            return f"massless body {b.name}: MuJoCo gives every moving body a mass (write its joint in the next body)"
         for r in b.rotors:
             if r.mode == "speed":
                 return f"speed rotor {r.name}: MuJoCo cannot hold kappa' constant (rheonomic constraint)"

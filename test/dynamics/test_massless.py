@@ -77,3 +77,4 @@ def test_the_energy_is_kept():
     snapshot = sim.snapshot()
     assert abs(snapshot.drift["energy"]) <= 1e-10
     assert abs(sim.joint_states().position[0] - 0.3) > 0.05  # the massless frame turned
+
