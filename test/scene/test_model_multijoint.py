@@ -225,3 +225,11 @@ def test_a_reference_angle_or_position_is_where_the_file_draws_the_body():
     worst = held_accelerations(finger, {"hinge": 0.0})
     print(f"finger, spinner locked: accelerations within {worst:.2g} (relative) of MuJoCo's")
     assert worst <= QACC_RTOL
+
+
+@pytest.mark.parametrize("locked", [{"rooty": 0.3}, {"rootz": 1.0}, {"rootx": 0.4, "rooty": -0.7},
+                                    {"rootx": 0.4, "rootz": 0.9}])
+def test_any_joint_of_the_hoppers_planar_root_is_locked_as_mujoco_holds_it(locked):
+    """Slides and a hinge in one body: the hinge locked turns the slides before it back (their
+    axes stay the world's), a slide locked moves the body along its axis (rootz from its ref)."""
+    assert held_accelerations(GYMNASIUM / "hopper.xml", locked) <= QACC_RTOL
