@@ -31,6 +31,7 @@ from gyro_sim.dynamics.model import initial_state
 from gyro_sim.scene.load import SceneError, load_scene
 from gyro_sim.scene.mjcf import import_model
 from test.scene.test_model_import import INSTANTS, gyro_run, mujoco_run, write
+from test.scene.test_model_sensors import READING_RTOL, deviation, gyro_readings, mujoco_readings, with_imu_sites
 
 #: joint angles and rates of gyro_sim and MuJoCo (RK4 at 1e-4 s against dop853 at 1e-12) over 2 s
 #: (measured: 2e-13)
@@ -233,3 +234,16 @@ def test_any_joint_of_the_hoppers_planar_root_is_locked_as_mujoco_holds_it(locke
     """Slides and a hinge in one body: the hinge locked turns the slides before it back (their
     axes stay the world's), a slide locked moves the body along its axis (rootz from its ref)."""
     assert held_accelerations(GYMNASIUM / "hopper.xml", locked) <= QACC_RTOL
+
+
+@pytest.mark.parametrize("model, bodies", [("universal", ["rod", "tip"]), ("hopper", ["torso", "foot"])])
+def test_imus_on_a_body_with_several_joints_read_as_mujocos_sensors(model, bodies, tmp_path):
+    """A site on a body with several joints rides its last frame: gyro, accelerometer,
+    orientation and world-frame acceleration as MuJoCo's sensors at random keyframes."""
+    source = write(tmp_path, "universal.xml", UNIVERSAL) if model == "universal" else GYMNASIUM / "hopper.xml"
+    path = with_imu_sites(source, bodies, np.random.default_rng(5), tmp_path)
+    sites = [f"imu_{b}" for b in bodies]
+    for key in ("probe0", "probe1"):
+        ctrl = np.zeros(mujoco.MjModel.from_xml_path(str(path)).nu)
+        worst = deviation(mujoco_readings(path, ctrl, key=key), gyro_readings(path, key, ctrl), sites)
+        assert worst <= READING_RTOL, (key, worst)
