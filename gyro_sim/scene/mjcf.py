@@ -12,7 +12,8 @@ of mass and inertia are the ones MuJoCo simulates (also when it derives them fro
   torque rotor of its parent (eqs (18)-(19), (29)), actuated when a motor drives its joint
   (every rotor of a URDF model is);
 - the other bodies form the chain: a free joint on the first is the free base (with a
-  spherical joint at O^1), ball joints are spherical joints, hinges are hinges;
+  spherical joint at O^1), ball joints are spherical joints, hinges are hinges, slides slides
+  (the body keeps its parent's frame, moved along the axis);
 - a body with several hinge and slide joints j1..jm (MuJoCo applies them in order) is m chain
   bodies: a massless frame at the anchor of each of j1..j(m-1), then the body on jm.
 
@@ -26,7 +27,7 @@ says where the file draws its body), so that a hinge's angle and a slide's posit
 MuJoCo's ``qpos``. Every vector of the scene is MuJoCo's world vector at the reference pose,
 rotated into that frame.
 
-Names: a hinge and a rotor are named after their joint (so ``joint_states`` and the axis
+Names: a hinge, a slide and a rotor are named after their joint (so ``joint_states`` and the axis
 moments use the joint names of the file, as MuJoCo's ``qpos`` and actuators do), a ball or
 free body after its body.
 
@@ -1028,9 +1029,9 @@ class _Importer:
         return f"; weld all {what} but one with --lock JOINT (their joints: {shown})"
 
     def scene_name(self, g: _Group, as_hinge: bool) -> str:
-        """The scene name of a group (module docstring): joint first for hinges and rotors; an
-        unnamed joint of a body with several joints ``<body>_joint<i>`` (i its place in the body),
-        with ``_`` added until it is no name of the model's."""
+        """The scene name of a group (module docstring): joint first for hinges, slides and rotors;
+        an unnamed joint of a body with several joints ``<body>_joint<i>`` (i its place in the
+        body), with ``_`` added until it is no name of the model's."""
         joint, body = self.joint_name(g.joint), self.body_name(g.root)
         if not joint and g.root in self.frames:
             m, obj = self.m, self.mj.mjtObj
@@ -1417,7 +1418,7 @@ def scene_yaml(imported: ImportedModel) -> str:
            else f"keyframe {imported.keyframe!r}" if imported.keyframe else "the first keyframe")
     lines = [f"# gyro_sim scene imported by gyro-sim import from {source} ({imported.kind}), "
              f"initial state from {key}.",
-             "# Names: a hinge or rotor is named after its joint, a ball or free body after its "
+             "# Names: a hinge, slide or rotor is named after its joint, a ball or free body after its "
              "body, an IMU after its site or Gazebo sensor (docs/models.md)."]
     lines += [f"#   {element} -> {name}" for element, name in imported.names]
     if imported.commands:

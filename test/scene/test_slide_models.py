@@ -193,3 +193,25 @@ def test_a_scene_with_slides_exported_by_peers_comes_back_the_same(seed, tmp_pat
                 assert b.joint.spring.reference == pytest.approx(a.joint.spring.reference, abs=1e-15)
             assert (b.initial.position, b.initial.velocity) == pytest.approx((a.initial.position, a.initial.velocity),
                                                                              abs=1e-14)
+
+
+def test_imus_on_slides_read_as_mujocos_sensors(tmp_path):
+    """An IMU on the cart, on the pole and on the bead sliding along the pole (a site at a random
+    pose on each, MuJoCo's gyro, accelerometer, framequat and framelinacc) at two random states
+    under random motor commands: the readings equal MuJoCo's sensordata (the slides' motion in
+    the specific force, the bead's Coriolis term included)."""
+    from test.scene.test_model_import import write
+    from test.scene.test_model_sensors import READING_RTOL, deviation, gyro_readings, mujoco_readings, with_imu_sites
+
+    motors = SERVO_CART.replace('<position name="hold" joint="rail" kp="20" kv="3" ctrlrange="-1 1"/>',
+                                '<motor name="hold" joint="rail" gear="3"/>')
+    source = write(tmp_path, "motor_cart.xml", motors)
+    rng = np.random.default_rng(11)
+    bodies = ["cart", "pole", "bead"]
+    path = with_imu_sites(source, bodies, rng, tmp_path)
+    sites = [f"imu_{b}" for b in bodies]
+    worst = 0.0
+    for key in ("probe0", "probe1"):
+        ctrl = rng.uniform(-0.9, 0.9, 2)
+        worst = max(worst, deviation(mujoco_readings(path, ctrl, key=key), gyro_readings(path, key, ctrl), sites))
+    assert worst < READING_RTOL
