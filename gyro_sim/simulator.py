@@ -84,14 +84,6 @@ class Simulator:
             scene = load_scene(scene)
         self.scene = scene
         self.model = compile_model(scene)
-        if integrator == "gauss4s" and len(self.model.slide_bodies):  # its canonical momenta have no slide
-            from gyro_sim.dynamics.actuators import ActuatorError
-            from gyro_sim.integrators import INTEGRATORS
-
-            k = int(self.model.slide_bodies[0])
-            others = ", ".join(sorted(set(INTEGRATORS) - {"gauss4s"}))
-            raise ActuatorError(f"bodies[{k}].joint.type: integrator 'gauss4s' does not take slide joints "
-                                f"({self.model.names[k]!r}); use one of {others}")
         from gyro_sim.dynamics.system import make_system
 
         self.system = make_system(self.model, backend)  # numba-compiled, or the numpy reference

@@ -143,6 +143,8 @@ def mujoco_unsupported(scene: Scene) -> str | None:
         if b.joint.motor is not None:
             return (f"geared motor of {b.name}: MuJoCo couples a rotor to a joint only through a soft "
                     "equality constraint, not an exact gear")
+        if b.mass == 0.0:  # a frame of an MJCF body with several joints (docs/models.md)
+            return f"massless body {b.name}: MuJoCo gives every moving body a mass (write its joint in the next body)"
         for r in b.rotors:
             if r.mode == "speed":
                 return f"speed rotor {r.name}: MuJoCo cannot hold kappa' constant (rheonomic constraint)"

@@ -37,8 +37,8 @@ from gyro_sim.errors import GyroSimError
 from gyro_sim.scene.records import DEFAULT_STICK_SPEED, Limits
 
 class ActuatorError(GyroSimError, ValueError):
-    """A scene's actuator terms (or slide joints) that the method asked for does not take (one
-    line naming the scene key)."""
+    """A scene's actuator terms that the method asked for does not take (one line naming the
+    scene key)."""
 
 
 #: the speed limit's cut is a linear ramp over this fraction of max_speed below it

@@ -48,8 +48,11 @@ rates up to it, so
     pi^k = p_rel(k) - p_rel(k'),   p_phi_l = p_rel(l) - e_l . p_rel(k'),   p_r = p_rel(base)
 
 where k' is the next spherical body after k (after the hinge l); without one, the subtracted
-term is zero. The rates follow from the momenta by the mass matrix: M u = p_rel - b(q, t), b the
-momentum at zero joint rates (gyrostatic moments, a moving base).
+term is zero. A slide l (docs/theory.md section 12) turns nothing: its momentum is its relative
+one, p_d_l = p_rel(l) = e_l . P_l (P_l the subtree's linear momentum), with
+p_rel(l)' = (w^{l-1} x e_l) . P_l + e_l . F_l + tau_l. The rates follow from the momenta by
+the mass matrix: M u = p_rel - b(q, t), b the momentum at zero joint rates (gyrostatic moments,
+a moving base).
 
 This module is the numpy form (a dense solve of M: for checks and small chains).
 """
@@ -83,9 +86,6 @@ class CanonicalChain:
     def __init__(self, ode):
         self.ode = ode
         m = self.model = ode.model
-        if len(m.slide_bodies):
-            raise ValueError(f"{m.names[m.slide_bodies[0]]}: gauss4s does not take slide joints (its canonical "
-                             f"momenta are a hinge's and a ball's); use gauss4 or another integrator")
         self.data = dyn.Data(m)
         self.free = m.free
         ns, nh, nt = len(m.sph_bodies), len(m.hinge_bodies), len(m.torque_body)
@@ -115,8 +115,11 @@ class CanonicalChain:
         sph_pos[m.sph_bodies] = np.arange(ns)
         self._sph_next = np.array([sph_pos[nxt[k]] if nxt[k] >= 0 else -1 for k in m.sph_bodies],
                                   dtype=int)
-        self._hinge_next = np.array([sph_pos[nxt[k]] if nxt[k] >= 0 else -1 for k in m.hinge_bodies],
-                                    dtype=int)
+        # (a slide's momentum e . P_k needs no correction: it changes no angular velocity)
+        self._hinge_next = np.array([sph_pos[nxt[k]] if nxt[k] >= 0 and not m.is_slide[k] else -1
+                                     for k in m.hinge_bodies], dtype=int)
+        self._slide_cols = m.col_hinge[m.hinge_slide]
+        self._slides = m.hinge_slide
         self._y = np.empty(m.size)  # the coordinates of z in the package's layout (positions)
 
     # --- the package's state <-> canonical ------------------------------------------------------
@@ -140,6 +143,8 @@ class CanonicalChain:
             p[m.col_base] = Pk[0]
         p[m.col_sph] = Hk[m.sph_bodies]
         p[m.col_hinge] = np.einsum("ni,ni->n", d.e_w, Hk[m.hinge_bodies])
+        if len(self._slide_cols):  # a slide's: the subtree's linear momentum along e^k (section 12)
+            p[self._slide_cols] = np.einsum("ni,ni->n", d.e_w[self._slides], Pk[m.slide_bodies])
         return p
 
     def _positions(self, t: float, q: np.ndarray, z: np.ndarray) -> None:
@@ -255,6 +260,10 @@ class CanonicalChain:
             e = d.e_w
             de = cross(d.w_parent[hb], e)  # (50): e' = w^{k-1} x e
             dp[m.col_hinge] = np.einsum("ni,ni->n", de, Hk[hb]) + np.einsum("ni,ni->n", e, G[hb])
+            if len(self._slide_cols):  # a slide's S = (0, e): S' . h + S . F = (w^{k-1} x e) . P + e . F
+                sl = self._slides
+                dp[self._slide_cols] = (np.einsum("ni,ni->n", de[sl], Pk[m.slide_bodies])
+                                        + np.einsum("ni,ni->n", e[sl], Fl[m.slide_bodies]))
             if self.ode.hinge_tau is not None:
                 dp[m.col_hinge] += self.ode.hinge_tau  # (51)
             if m.spring is not None:

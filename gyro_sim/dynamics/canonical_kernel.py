@@ -126,7 +126,10 @@ def _rates(t, z, model, data, inputs, zrow, cflags, cwork):
         P1 += m * vb1
         P2 += m * vb2
         jc, jm = own_col[k], zrow[k, 1]
-        if is_hinge[k]:
+        if is_slide[k]:  # its momentum is its relative one, e . P (canonical.py)
+            e0, e1, e2 = e_w[k, 0], e_w[k, 1], e_w[k, 2]
+            prel[jc] = z[jm] - (e0 * P0 + e1 * P1 + e2 * P2)
+        elif is_hinge[k]:
             e0, e1, e2 = e_w[k, 0], e_w[k, 1], e_w[k, 2]
             prel[jc] = z[jm] + (e0 * A0 + e1 * A1 + e2 * A2) - (e0 * H0 + e1 * H1 + e2 * H2)
         else:
@@ -230,7 +233,10 @@ def canonical_kernel(t, z, zdot, model, data, inputs, zrow, cflags, cwork):
                 a0, a1, a2 = 0.0, 0.0, 0.0
             # (50): e' = w^{k-1} x e
             d0, d1, d2 = a1 * e2 - a2 * e1, a2 * e0 - a0 * e2, a0 * e1 - a1 * e0
-            dprel[jc] = (d0 * H0 + d1 * H1 + d2 * H2) + (e0 * G0 + e1 * G1 + e2 * G2) + tau[jc]  # (51)
+            if is_slide[k]:  # S = (0, e): (w^{k-1} x e) . P + e . F (canonical.py)
+                dprel[jc] = (d0 * P0 + d1 * P1 + d2 * P2) + (e0 * F0 + e1 * F1 + e2 * F2) + tau[jc]
+            else:
+                dprel[jc] = (d0 * H0 + d1 * H1 + d2 * H2) + (e0 * G0 + e1 * G1 + e2 * G2) + tau[jc]  # (51)
             if flags[fast.FLAG_SPRINGS] != 0:  # the spring's moment -k (phi - phi_ref)
                 dprel[jc] += -spring[k, 0] * (z[zrow[k, 0]] - spring[k, 1])
         else:
@@ -251,7 +257,10 @@ def canonical_kernel(t, z, zdot, model, data, inputs, zrow, cflags, cwork):
                 a0, a1, a2 = 0.0, 0.0, 0.0
             d0, d1, d2 = a1 * e2 - a2 * e1, a2 * e0 - a0 * e2, a0 * e1 - a1 * e0
             zdot[jq] = rate[jc]
-            zdot[jm] = dprel[jc] - (d0 * B0 + d1 * B1 + d2 * B2) - (e0 * D0 + e1 * D1 + e2 * D2)
+            if is_slide[k]:  # no correction: a slide changes no angular velocity
+                zdot[jm] = dprel[jc]
+            else:
+                zdot[jm] = dprel[jc] - (d0 * B0 + d1 * B1 + d2 * B2) - (e0 * D0 + e1 * D1 + e2 * D2)
         else:
             # pi' = p_rel'(k) - p_rel'(k'); p' = (2 (0, pi') + Pi (x) (0, w)) (x) q / |q|^2
             x0, x1, x2 = dprel[jc] - D0, dprel[jc + 1] - D1, dprel[jc + 2] - D2

@@ -907,7 +907,7 @@ def _aba_classic(is_hinge, col_start, e, tau, udot):
             pl0 = pA[k, 3] + (m00 * c3 + m01 * c4 + m02 * c5) + (g00 * u0 + g10 * u1 + g20 * u2)
             pl1 = pA[k, 4] + (m01 * c3 + m11 * c4 + m12 * c5) + (g01 * u0 + g11 * u1 + g21 * u2)
             pl2 = pA[k, 5] + (m02 * c3 + m12 * c4 + m22 * c5) + (g02 * u0 + g12 * u1 + g22 * u2)
-            ratio = (m00 + m11 + m22) / (3.0 * IA[k - 1, 3, 3])
+            ratio = (m00 + m11 + m22) / (3.0 * IA[k - 1, 3, 3]) if IA[k - 1, 3, 3] > 0.0 else 0.0
             if ratio > worst:
                 worst = ratio
             s0, s1, s2 = s_w[k - 1, 0], s_w[k - 1, 1], s_w[k - 1, 2]
@@ -946,7 +946,7 @@ def _aba_classic(is_hinge, col_start, e, tau, udot):
                 for a in range(nk):
                     acc += W[j0 + a, r] * u[j0 + a]
                 pa[r] = acc
-            ratio = (Ia[3, 3] + Ia[4, 4] + Ia[5, 5]) / (3.0 * IA[k - 1, 3, 3])
+            ratio = (Ia[3, 3] + Ia[4, 4] + Ia[5, 5]) / (3.0 * IA[k - 1, 3, 3]) if IA[k - 1, 3, 3] > 0.0 else 0.0
             if ratio > worst:
                 worst = ratio
             _shift_inertia(Ia, s_w[k - 1], IA[k - 1], Dx, T, G)
@@ -1037,7 +1037,8 @@ def _aba(is_hinge, col_start, e, tau, udot, heavy):
     worst = 0.0
     for k in range(n - 1, 0, -1):
         after += IA[k, 3, 3]  # the mass of bodies k..n
-        if after > worst * IA[k - 1, 3, 3]:
+        # a massless carrier has no inertia of its own for the elimination to lose
+        if IA[k - 1, 3, 3] > 0.0 and after > worst * IA[k - 1, 3, 3]:
             worst = after / IA[k - 1, 3, 3]
     if worst <= STABLE_ABA_RATIO:  # no subtree can pass on more mass than it has
         _aba_classic(is_hinge, col_start, e, tau, udot)
@@ -1371,7 +1372,7 @@ def heavy_subtrees(mass) -> bool:
     worst = 0.0
     for k in range(len(mass) - 1, 0, -1):
         after += float(mass[k])
-        if after > worst * float(mass[k - 1]):
+        if float(mass[k - 1]) > 0.0 and after > worst * float(mass[k - 1]):
             worst = after / float(mass[k - 1])
     return not worst <= STABLE_ABA_RATIO
 

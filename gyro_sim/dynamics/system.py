@@ -348,10 +348,12 @@ BACKENDS = ("auto", "numba", "numpy")
 
 
 def heavy_subtree_ratio(model: Model) -> float:
-    """The largest ratio of the mass of bodies k+1..n to the mass of body k."""
+    """The largest ratio of the mass of bodies k+1..n to the mass of body k (a massless body
+    k, which has no inertia of its own to lose, left out)."""
     m = model.mass
     after = np.cumsum(m[::-1])[::-1][1:]
-    return float(np.max(after / m[:-1])) if len(m) > 1 else 0.0
+    carriers = m[:-1] > 0.0
+    return float(np.max(after[carriers] / m[:-1][carriers])) if np.any(carriers) else 0.0
 
 
 def make_system(model: Model, backend: str = "auto") -> ChainODE | FastChainODE:

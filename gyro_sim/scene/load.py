@@ -224,6 +224,8 @@ def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None,
                          path)
     checker = _Checker()
     scene = _scene(checker, data)
+    if not checker.errors and any(b.mass == 0.0 for b in scene.bodies):
+        checker.errors += _massless_problems(scene)
     if checker.errors:
         raise SceneError(checker.errors if model is None else model.describe(checker.errors), path)
     return dataclasses.replace(scene, source=_plain(data), path=path,
@@ -753,7 +755,7 @@ def _body(ch: _Checker, value: Any, path: str, last: bool,
     joint_type = written if written in JOINT_TYPES else None  # known even if the axis is bad
     if name is not None:
         names.append((name, _at(path, "name"), joint_type or "?"))
-    mass = ch.scalar(body, "mass", path, minimum=0.0, strict=True)
+    mass = ch.scalar(body, "mass", path, minimum=0.0)
     com = ch.vector(body, "com", path, default=np.zeros(3))
     inertia = _body_inertia(ch, body, path, mass, com)
 
@@ -947,6 +949,8 @@ def _body_inertia(ch: _Checker, body: Mapping, path: str, mass: float | None,
         ch.fail(_at(path, "inertia"), "required: give inertia {axial, transverse} (about O^k) "
                                       "or inertia_com (3x3, about the centre of mass)")
         return None
+    if mass == 0.0:  # a massless frame: no inertia either (docs/scene-format.md, "Massless bodies")
+        return _massless_inertia(ch, body, path)
     parallel = None if mass is None or com is None else _point_mass_inertia(mass, com)
     if has_com:
         where = _at(path, "inertia_com")
@@ -988,6 +992,67 @@ def _body_inertia(ch: _Checker, body: Mapping, path: str, mass: float | None,
                        f"the centre of mass, I_O - m (|c|^2 1 - c c^T), {problem}")
         return None
     return inertia
+
+
+def _massless_inertia(ch: _Checker, body: Mapping, path: str) -> np.ndarray | None:
+    """The inertia of a body of mass 0: zero, written as either form (all zeros), else refused."""
+    if body.get("inertia_com") is not None:
+        where = _at(path, "inertia_com")
+        inertia = ch.matrix(body["inertia_com"], where, "inertia_com")
+    else:
+        where = _at(path, "inertia")
+        form = ch.mapping(body["inertia"], where, INERTIA_KEYS, required=INERTIA_KEYS)
+        if form is None:
+            return None
+        axial = ch.scalar(form, "axial", where, minimum=0.0)
+        transverse = ch.scalar(form, "transverse", where, minimum=0.0)
+        inertia = None if axial is None or transverse is None else np.diag([transverse, transverse, axial])
+    if inertia is None:
+        return None
+    if np.any(inertia != 0.0):
+        ch.fail(where, "must be zero for a massless body (mass 0): a body without mass has no inertia")
+        return None
+    return np.zeros((3, 3))
+
+
+#: a massless body's joint column whose pivot, eliminated from the tip, is at most this fraction of
+#: its diagonal of the mass matrix takes no inertia: its acceleration is undetermined
+MASSLESS_PIVOT_RTOL = 1e-10
+
+
+def _massless_problems(scene: Scene) -> list[str]:
+    """The massless bodies (mass 0) of `scene` whose joint moves nothing with inertia at the
+    initial state: the mass matrix's pivots eliminated from the tip (the articulated-body
+    elimination's own, D = S^T I^A S) of their columns, against the diagonal (the subtree's
+    inertia about the joint as one rigid body). One error per such body, `bodies[k]: ...`."""
+    from gyro_sim.dynamics import reference
+    from gyro_sim.dynamics.model import compile_model, initial_state
+
+    model = compile_model(scene)
+    data = reference.Data(model)
+    reference.positions(model, data, 0.0, initial_state(model))
+    M = reference.mass_matrix(model, data, *reference.joint_columns(model, data))
+    diagonal = np.diag(M).copy()
+    A = M[::-1, ::-1].copy()  # the tip's columns first
+    pivots = np.zeros(len(A))
+    for i in range(len(A)):
+        pivots[i] = A[i, i]
+        if pivots[i] > MASSLESS_PIVOT_RTOL * diagonal[::-1][i]:
+            A[i + 1:, i + 1:] -= np.outer(A[i + 1:, i], A[i, i + 1:]) / pivots[i]
+    pivots = pivots[::-1]
+    out = []
+    for k, body in enumerate(scene.bodies):
+        columns = np.flatnonzero(model.col_body == k)
+        if body.mass != 0.0 or not len(columns):
+            continue
+        stuck = [j for j in columns if not pivots[j] > MASSLESS_PIVOT_RTOL * diagonal[j]]
+        if stuck:
+            what = {"hinge": "inertia about its hinge axis", "slide": "mass to move along its slide axis"}.get(
+                body.joint.type, "inertia about some axis through its joint")
+            out.append(f"bodies[{k}].mass: 0 (a massless frame), and what it carries has no {what} at the "
+                       "initial state: its joint's acceleration is undetermined; give it a mass, or give what "
+                       "it carries that inertia")
+    return out
 
 
 def _rotors(ch: _Checker, value: Any, path: str,

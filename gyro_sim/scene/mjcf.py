@@ -13,15 +13,19 @@ of mass and inertia are the ones MuJoCo simulates (also when it derives them fro
   (every rotor of a URDF model is);
 - the other bodies form the chain: a free joint on the first is the free base (with a
   spherical joint at O^1), ball joints are spherical joints, hinges are hinges, slides slides
-(the body keeps its parent's frame, moved along the axis).
+  (the body keeps its parent's frame, moved along the axis);
+- a body with several hinge and slide joints j1..jm (MuJoCo applies them in order) is m chain
+  bodies: a massless frame at the anchor of each of j1..j(m-1), then the body on jm.
 
 Frames. A body's frame in the scene has its origin at its joint point O^k (the joint's
 anchor; for a free joint the body's origin). A ball or free body's frame turns with the MuJoCo
 body frame and equals it in rotation (its quaternion is MuJoCo's ``xquat``); a hinge body's
-frame is its parent's frame at the model's reference pose (``qpos0``), turned by the hinge
-angle, as docs/scene-format.md defines it, so the hinge axis is written in the parent's frame.
-Every vector of the scene is MuJoCo's world vector at the reference pose, rotated into that
-frame.
+frame is its parent's frame at the model's reference pose, turned by the hinge angle, as
+docs/scene-format.md defines it, so the hinge axis is written in the parent's frame. The
+reference pose is MuJoCo's ``qpos0`` with every hinge and slide at 0 (a joint's ``ref`` only
+says where the file draws its body), so that a hinge's angle and a slide's position are
+MuJoCo's ``qpos``. Every vector of the scene is MuJoCo's world vector at the reference pose,
+rotated into that frame.
 
 Names: a hinge, a slide and a rotor are named after their joint (so ``joint_states`` and the axis
 moments use the joint names of the file, as MuJoCo's ``qpos`` and actuators do), a ball or
@@ -286,7 +290,9 @@ def _lock_joints(mujoco: Any, spec: Any, m0: Any, path: str, locks: dict[str, fl
                  keyframe: str | None, locked: dict[str, float], notes: list[str]) -> list[str]:
     """Weld the joints of `locks` in `spec` where they are (docs/models.md, "Locked joints"):
     each child body turned (hinge) or moved (slide) to the joint's value from the reference
-    position, then the joint deleted, so that MuJoCo's compiler merges the body into its parent;
+    position, then the joint deleted, so that MuJoCo's compiler merges the body into its parent
+    (or, in a body with several joints, the body's joints before it moved back through that
+    turn, so that they act after it as they did before it);
     the actuators, equalities and sensors of a locked joint deleted with a note, keyframes
     without its entries. `m0`: the model compiled before; `locked` gains (name, value) in the
     file's order. The errors."""
@@ -308,9 +314,6 @@ def _lock_joints(mujoco: Any, spec: Any, m0: Any, path: str, locks: dict[str, fl
         elif int(m0.jnt_type[j]) not in (int(jt.mjJNT_HINGE), int(jt.mjJNT_SLIDE)):
             errors.append(f"{path}: lock: joint {name!r} is a {('free', 'ball')[int(m0.jnt_type[j])]} "
                           "joint; only hinge and slide joints are locked")
-        elif m0.body_jntnum[m0.jnt_bodyid[j]] > 1:
-            errors.append(f"{path}: lock: joint {name!r} shares its body with other joints; "
-                          "only a body's only joint is locked")
         else:
             joints[name] = j  # the others are said, and these locked all the same (one refusal)
     removed_q: list[int] = []
@@ -338,11 +341,24 @@ def _lock_joints(mujoco: Any, spec: Any, m0: Any, path: str, locks: dict[str, fl
         R = quat_to_matrix(quat)
         if int(m0.jnt_type[j]) == int(jt.mjJNT_HINGE):
             turn = np.concatenate([[math.cos(0.5 * delta)], math.sin(0.5 * delta) * axis])
-            body.pos = np.asarray(body.pos, dtype=float) + R @ (pos - quat_to_matrix(turn) @ pos)
+            T = quat_to_matrix(turn)
+            body.pos = np.asarray(body.pos, dtype=float) + R @ (pos - T @ pos)
             body.quat = quat_mul(quat, turn)
             body.alt.type = mujoco.mjtOrientation.mjORIENTATION_QUAT
         else:
+            T = np.eye(3)
             body.pos = np.asarray(body.pos, dtype=float) + R @ (delta * axis)
+        # MuJoCo applies a body's joints in order, X_B R_1 ... R_j ...: with R_j now in X_B, each
+        # joint before it (not locked) becomes R_j^-1 R_p R_j, its line moved by R_j^-1 (x -> T^T (x -
+        # pos - delta axis) + pos, axes by T^T)
+        first = int(m0.body_jntadr[m0.jnt_bodyid[j]])
+        shift = delta * axis if int(m0.jnt_type[j]) == int(jt.mjJNT_SLIDE) else np.zeros(3)
+        for p in range(first, j):
+            if p in joints.values():
+                continue
+            before = body.joints[p - first]
+            before.pos = T.T @ (np.asarray(before.pos, dtype=float) - pos - shift) + pos
+            before.axis = T.T @ np.asarray(before.axis, dtype=float)
         removed_q.append(qa)
         removed_a += [a for a in range(m0.nu) if int(m0.actuator_trnid[a][0]) == j and
                       int(m0.actuator_trntype[a]) in (int(mujoco.mjtTrn.mjTRN_JOINT),
@@ -623,6 +639,7 @@ class _Group:
     origin: np.ndarray = field(default_factory=lambda: np.zeros(3))  # O^k, world
     axis: np.ndarray = field(default_factory=lambda: np.zeros(3))  # hinge axis, world
     children: list[int] = field(default_factory=list)
+    frame: bool = False  # a massless frame carrying one of its body's joints before the last
 
 
 @dataclass
@@ -729,9 +746,12 @@ class _Importer:
         for b in range(1, m.nbody):
             if m.body_gravcomp[b] != 0.0:
                 self.fail(self.body(b), "gravcomp (gravity compensation) is not supported")
-            if m.body_jntnum[b] > 1:
-                self.fail(self.body(b), f"{m.body_jntnum[b]} joints; one joint per body (a ball "
-                                        "joint for three rotational freedoms)")
+            if m.body_jntnum[b] > 1:  # docs/models.md, "Several joints in one body"
+                joints = range(int(m.body_jntadr[b]), int(m.body_jntadr[b]) + int(m.body_jntnum[b]))
+                if any(int(m.jnt_type[j]) in (int(mj.mjtJoint.mjJNT_FREE), int(mj.mjtJoint.mjJNT_BALL))
+                       for j in joints):
+                    self.fail(self.body(b), f"{m.body_jntnum[b]} joints, a ball or free joint among them; "
+                                            "several joints in one body are hinge and slide joints only")
         for j in range(m.njnt):
             kind = int(m.jnt_type[j])
             dofs = range(m.jnt_dofadr[j], m.jnt_dofadr[j] + (6 if kind == 0 else 3 if kind == 1 else 1))
@@ -767,10 +787,6 @@ class _Importer:
                 else:
                     self.fail(self.joint(j), f"armature on a {('free', 'ball')[kind]} joint is not "
                                              "supported (a reflected inertia on a hinge's axis is)")
-            if axis and m.qpos0[m.jnt_qposadr[j]] != 0.0:
-                self.fail(self.joint(j), f"ref = {m.qpos0[m.jnt_qposadr[j]]:g}: a reference "
-                                         f"{'angle' if kind == int(mj.mjtJoint.mjJNT_HINGE) else 'position'} "
-                                         "is not supported (the joint's coordinate is MuJoCo's qpos)")
             if m.jnt_limited[j]:
                 low, high = m.jnt_range[j]
                 self.notes.append(f"{self.joint(j)}: limits [{low:g}, {high:g}] not enforced")
@@ -873,12 +889,25 @@ class _Importer:
         for g in out.values():
             if g.parent:
                 out[g.parent].children.append(g.root)
+        # a body with several joints (docs/models.md, "Several joints in one body"): its group
+        # carries the last joint; each joint before it is a massless frame, in MuJoCo's order
+        self.frames: dict[int, list[_Group]] = {}
+        for b, g in out.items():
+            first, count = int(m.body_jntadr[b]), int(m.body_jntnum[b])
+            if count > 1:
+                kind = {j: kinds.get(int(m.jnt_type[j]), "slide") for j in range(first, first + count)}
+                self.frames[b] = [_Group(root=b, joint=j, kind=kind[j], parent=g.parent, members=[], frame=True)
+                                  for j in range(first, first + count - 1)]
+                g.joint, g.kind = first + count - 1, kind[first + count - 1]
         return out
 
     def measure(self, groups: dict[int, _Group]) -> None:
-        """Each group's mass, centre of mass, inertia and joint at the reference pose."""
+        """Each group's mass, centre of mass, inertia and joint at the reference pose (qpos0 with
+        every hinge and slide at 0: their coordinates are then MuJoCo's qpos, whatever their ref)."""
         mj, m = self.mj, self.m
         d = mj.MjData(m)  # qpos = qpos0
+        one = (int(mj.mjtJoint.mjJNT_HINGE), int(mj.mjtJoint.mjJNT_SLIDE))
+        d.qpos[[int(m.jnt_qposadr[j]) for j in range(m.njnt) if int(m.jnt_type[j]) in one]] = 0.0
         mj.mj_kinematics(m, d)
         self.R_ref = d.xmat.reshape(-1, 3, 3).copy()
         self.ximat_ref = d.ximat.reshape(-1, 3, 3).copy()
@@ -897,11 +926,16 @@ class _Importer:
             g.inertia = 0.5 * (inertia + inertia.T)
             g.origin = (d.xpos[g.root] if g.kind == "free" else d.xanchor[g.joint]).copy()
             g.axis = d.xaxis[g.joint].copy()
+            for f in self.frames.get(g.root, []):  # massless: no mass, no inertia, the centre at O^k
+                f.origin, f.axis = d.xanchor[f.joint].copy(), d.xaxis[f.joint].copy()
+                f.com = f.origin.copy()
 
     def rotor_problem(self, g: _Group) -> str | None:
         """Why group `g` is no rotor of its parent, or None when it is one."""
         if g.kind != "hinge":
             return f"on a {g.kind} joint"
+        if g.root in self.frames:
+            return "it has several joints"
         if g.children:
             return "it carries moving bodies"
         if g.mass <= 0.0:
@@ -974,14 +1008,13 @@ class _Importer:
         for g in chain[1:]:
             if g.kind == "free":
                 self.fail(self.joint(g.joint), "a free joint only on the chain's first body")
+        chain = [f for g in chain for f in self.frames.get(g.root, []) + [g]]
         return chain, rotors
 
     def lockable(self, j: int) -> bool:
-        """Whether --lock welds joint `j` (_lock_joints): a named hinge or slide, its body's
-        only joint."""
+        """Whether --lock welds joint `j` (_lock_joints): a named hinge or slide."""
         m, jt = self.m, self.mj.mjtJoint
-        return bool(self.joint_name(j)) and int(m.jnt_type[j]) in (int(jt.mjJNT_HINGE), int(jt.mjJNT_SLIDE)) \
-            and int(m.body_jntnum[m.jnt_bodyid[j]]) == 1
+        return bool(self.joint_name(j)) and int(m.jnt_type[j]) in (int(jt.mjJNT_HINGE), int(jt.mjJNT_SLIDE))
 
     def weld_hint(self, groups: dict[int, _Group], parts: list[_Group], what: str) -> str:
         """How to weld all but one of `parts` (subtrees) with --lock, naming their joints; or
@@ -998,14 +1031,23 @@ class _Importer:
         stuck = [j for j in joints if not self.lockable(j)]
         if stuck:
             return (f"; --lock cannot weld {', '.join(self.joint(j) for j in stuck[:5])}"
-                    f"{' ...' if len(stuck) > 5 else ''} (only a body's only hinge or slide joint is locked)")
+                    f"{' ...' if len(stuck) > 5 else ''} (only named hinge and slide joints are locked)")
         names = [self.joint_name(j) for j in joints]
         shown = ", ".join(repr(n) for n in names[:8]) + (" ..." if len(names) > 8 else "")
         return f"; weld all {what} but one with --lock JOINT (their joints: {shown})"
 
     def scene_name(self, g: _Group, as_hinge: bool) -> str:
-        """The scene name of a group (module docstring): joint first for hinges, slides and rotors."""
+        """The scene name of a group (module docstring): joint first for hinges, slides and rotors;
+        an unnamed joint of a body with several joints ``<body>_joint<i>`` (i its place in the
+        body), with ``_`` added until it is no name of the model's."""
         joint, body = self.joint_name(g.joint), self.body_name(g.root)
+        if not joint and g.root in self.frames:
+            m, obj = self.m, self.mj.mjtObj
+            taken = {self._name(obj.mjOBJ_JOINT, j) for j in range(m.njnt)} | \
+                {self._name(obj.mjOBJ_BODY, b) for b in range(m.nbody)}
+            joint = f"{body or f'body{g.root}'}_joint{g.joint - int(m.body_jntadr[g.root])}"
+            while joint in taken:
+                joint += "_"
         first = (joint, body) if as_hinge else (body, joint)
         return next((n for n in first if n), f"joint{g.joint}" if as_hinge else f"body{g.root}")
 
@@ -1064,10 +1106,12 @@ class _Importer:
             if k + 1 < len(chain):
                 body["next_joint"] = _vec(G.T @ (chain[k + 1].origin - g.origin))
             element = f"{self.body(g.root)} ({g.kind} {self.joint(g.joint, bare=True)})"
+            if g.frame:
+                element = element[:-1] + ", a massless frame)"
             where[f"bodies[{k}]"] = element
             names.append((element, name))
             body_rotors = []
-            for i, r in enumerate(rotors[g.root]):
+            for i, r in enumerate(rotors[g.root] if not g.frame else []):  # on the body's last frame
                 rname = self.scene_name(r, True)
                 a = r.axis / np.linalg.norm(r.axis)
                 axial, transverse = self.rotor_moments(r)
@@ -1089,7 +1133,7 @@ class _Importer:
                 names.append((element, rname))
             if body_rotors:
                 body["rotors"] = body_rotors
-            body["initial"] = state["initial"][g.root]
+            body["initial"] = state["frames"][g.joint] if g.frame else state["initial"][g.root]
             bodies.append(body)
             G_parent = G
         first = chain[0]
@@ -1328,7 +1372,7 @@ class _Importer:
         mj.mj_kinematics(m, d)
         mj.mj_comPos(m, d)
         mj.mj_comVel(m, d)
-        out: dict[str, Any] = {"initial": {}, "spin": {}, "angle": {}}
+        out: dict[str, Any] = {"initial": {}, "spin": {}, "angle": {}, "frames": {}}
         omega: dict[int, np.ndarray] = {}
         vel = np.zeros(6)
         for b in range(1, m.nbody):
@@ -1336,7 +1380,11 @@ class _Importer:
                 continue
             mj.mj_objectVelocity(m, d, mj.mjtObj.mjOBJ_XBODY, b, vel, 0)
             omega[b] = vel[:3].copy()
-            j = int(m.body_jntadr[b])
+            j = int(m.body_jntadr[b]) + int(m.body_jntnum[b]) - 1  # the body's last joint (its group's)
+            for f in range(int(m.body_jntadr[b]), j):  # the massless frames' joints before it
+                slide = int(m.jnt_type[f]) == int(mj.mjtJoint.mjJNT_SLIDE)
+                keys = ("position", "velocity") if slide else ("angle", "rate")
+                out["frames"][f] = dict(zip(keys, (_tidy(d.qpos[m.jnt_qposadr[f]]), _tidy(d.qvel[m.jnt_dofadr[f]]))))
             kind = int(m.jnt_type[j])
             R = d.xmat[b].reshape(3, 3)
             if kind in (int(mj.mjtJoint.mjJNT_FREE), int(mj.mjtJoint.mjJNT_BALL)):

@@ -156,3 +156,13 @@ def test_oracle_is_the_float_kernel_to_round_off_on_a_soft_chain():
     u = ChainODE(model).rhs(0.0, initial_state(model))[model.i_vel]
     assert np.abs(u - exact).max() <= 1e-12 * np.abs(exact).max()
     assert fast is not None
+
+
+def test_the_mujoco_peer_says_it_cannot_take_a_massless_body():
+    """MuJoCo gives every moving body a mass: a scene with a massless frame (docs/scene-format.md)
+    is no case for it, said by name."""
+    from gyro_sim.bench.peers import mujoco_unsupported
+    from gyro_sim.scene.load import load_scene
+    from test.dynamics.test_massless import universal_pendulum
+
+    assert "massless body ux" in mujoco_unsupported(load_scene(universal_pendulum()))

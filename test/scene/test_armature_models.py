@@ -4,9 +4,9 @@ double pendulum (test/scene/models/gymnasium/, MIT), and the refusal of dm_contr
 whose joints are driven by position servos (test/scene/models/dm_control/, Apache-2.0).
 
 The files are kept as published. The reacher's target and the pusher's object and goal sit
-on two slide joints each, which --lock does not weld (a body's only joint is locked): the
-judged copy has those joints taken out of its text (`judged`), so that the bodies stand still
-as part of the base; everything else (armature, damping, inertias from the geoms, motors) is
+on two slide joints each: the judged copy has those joints taken out of its text (`judged`), so
+that the bodies stand still as part of the base (--lock welds them as well:
+test/scene/test_model_multijoint.py); everything else (armature, damping, inertias from the geoms, motors) is
 the file's. The pendulum's cart slider is welded with --lock at the keyframe the copy is given
 (unlocked, it is judged in test/scene/test_slide_models.py).
 Two judges: MuJoCo's forward dynamics (qacc of mj_forward, contacts and constraints off) at
@@ -165,19 +165,18 @@ def test_a_model_with_armature_moves_as_in_mujoco(name, tmp_path):
 
 
 @pytest.mark.parametrize("case", ["reacher", "pusher"])
-def test_as_published_the_two_slide_bodies_are_what_is_refused(case):
-    """The files as published: one refusal, every line of it about the bodies on two slide
-    joints (their joints, that they branch from the world), each saying that --lock cannot weld
-    them; nothing about the armature, the damping or the hinges' limits."""
-    path, joints = CASES[case].path, CASES[case].removed
+def test_as_published_the_bodies_on_two_slides_are_refused_as_chains_of_their_own(case):
+    """The files as published: one refusal, one line: the bodies on two slide joints hang from
+    the world beside the arm (chains of their own), --lock suggested; nothing about the slides,
+    the armature, the damping or the limits."""
+    path = CASES[case].path
     bodies = {"reacher": ("target",), "pusher": ("object", "goal")}[case]
     with pytest.raises(SceneError) as info:
         load_scene(path)
-    errors = info.value.errors
-    assert errors and all(any(f"'{n}'" in e for n in bodies + joints) for e in errors), errors
-    assert all(any(f"'{n}'" in e for e in errors) for n in bodies + joints), errors
-    assert all("--lock cannot weld" in e for e in errors if "branching trees" in e), errors
-    assert not any("armature" in e or "damping" in e or "limit" in e for e in errors), errors
+    (error,) = info.value.errors
+    assert f"worldbody: {len(bodies) + 1} moving bodies hang from the world" in error
+    assert all(f"'{n}'" in error for n in bodies) and "with --lock JOINT" in error, error
+    assert not any(word in error for word in ("slide joints", "armature", "damping", "limit")), error
 
 
 def test_as_published_the_fish_is_refused_for_what_it_needs_not_for_its_servos():

@@ -327,8 +327,8 @@ NON_PD = [[1e-3, 0, 0], [0, 1e-3, 0], [0, 0, -1e-4]]
 
 MALFORMED = [
     # masses and numbers
-    ("negative mass", put("bodies[2].mass", -1.0), "bodies[2].mass", "must be > 0 (got -1.0)"),
-    ("zero mass", put("bodies[0].mass", 0), "bodies[0].mass", "must be > 0"),
+    ("negative mass", put("bodies[2].mass", -1.0), "bodies[2].mass", "must be >= 0 (got -1.0)"),
+    ("zero mass with an inertia", put("bodies[0].mass", 0), "bodies[0].inertia", "must be zero for a massless body"),
     ("string number", put("bodies[0].mass", "heavy"), "bodies[0].mass", "must be a number"),
     ("numeric string", put("bodies[0].mass", "0.5"), "bodies[0].mass", "must be a number"),
     ("NaN", put("gravity", [0.0, 0.0, float("nan")]), "gravity[2]", "must be finite"),
@@ -516,7 +516,7 @@ def test_all_errors_reported_at_once():
         "bodies[0].rotors[0].mode: must be one of torque, speed (got 'sped')",
         "bodies[1].inertia_com: not positive definite",
         "bodies[2].joint.axis: zero vector",
-        "bodies[2].mass: must be > 0 (got -1.0)",
+        "bodies[2].mass: must be >= 0 (got -1.0)",
     ]
     errors = info.value.errors
     assert len(errors) == len(expected), errors

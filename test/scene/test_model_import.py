@@ -432,9 +432,6 @@ def bad(**parts) -> str:
 
 #: one refused element each: (the model, the one error line's element and reason)
 REFUSED = {
-    "slide off its reference": (bad(inner=CHILD.format(name="cart", joint="rail", type="slide",
-                                                       attrs='axis="1 0 0" ref="0.1"')),
-                                "joint 'rail': ref = 0.1: a reference position is not supported"),
     "tendon": (bad(extra='<tendon><fixed name="cable"><joint joint="pivot" coef="1"/></fixed></tendon>'),
                "tendon 'cable': tendons are not supported"),
     "equality": (bad(inner=CHILD.format(name="arm", joint="elbow", type="hinge", attrs='axis="1 0 0"'),
@@ -452,9 +449,9 @@ REFUSED = {
     "friction loss of a ball joint": (bad(inner=CHILD.format(name="hand", joint="wrist", type="ball",
                                                              attrs='frictionloss="0.1"')),
                                       "joint 'wrist': frictionloss on a ball joint is not supported"),
-    "reference angle": (bad(joint_attrs='ref="0.2"'), "joint 'pivot': ref = 0.2: a reference angle is not supported"),
-    "two joints in a body": (bad(inner='<joint name="roll" type="hinge" axis="0 1 0"/>'),
-                             "body 'link': 2 joints; one joint per body"),
+    "a ball joint with another in a body": (bad(inner='<joint name="roll" type="ball"/>'),
+                                            "body 'link': 2 joints, a ball or free joint among them; several "
+                                            "joints in one body are hinge and slide joints only"),
     "branching tree": (bad(inner=CHILD.format(name="a", joint="ja", type="hinge", attrs='axis="1 0 0"')
                            + CHILD.format(name="b", joint="jb", type="ball", attrs="")),
                        "body 'link': 2 moving children ('a', 'b'): a chain only, branching trees are not supported"),
