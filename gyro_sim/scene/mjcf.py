@@ -1304,10 +1304,14 @@ class _Importer:
             if m.key_time[key] != 0.0:
                 self.notes.append(f"keyframe: time {m.key_time[key]:g} not kept (the scene "
                                   "starts at t = 0)")
-            if m.nu and np.any(m.key_ctrl[key]):
-                self.notes.append("keyframe: ctrl not kept (commands are given to the "
-                                  + ("simulator as servo controls: Simulator.set_controls)" if self.servo
-                                     else "simulator as axis moments)"))
+            if m.nu and self.servo:  # the servos' initial controls (docs/models.md, "Servo actuators")
+                for a in range(m.nu):
+                    j = int(m.actuator_trnid[a][0])
+                    if j in self.servo and m.key_ctrl[key][a] != 0.0:
+                        self.servo[j]["control"] = _tidy(m.key_ctrl[key][a])
+            elif m.nu and np.any(m.key_ctrl[key]):
+                self.notes.append("keyframe: ctrl not kept (commands are given to the simulator as "
+                                  "axis moments)")
         mj.mj_kinematics(m, d)
         mj.mj_comPos(m, d)
         mj.mj_comVel(m, d)
