@@ -515,9 +515,9 @@ class Simulator:
     def work(self) -> float:
         """Work done by the commanded axis moments since the last reset (J): the sum over
         `advance` calls of moment * change of the axis angle (exact under the zero-order hold),
-        the moments saturated to their max_torque. With speed-dependent actuator terms
-        (friction, max_speed) the integral of the motors' power, a state integrated with the
-        motion."""
+        the moments saturated to their max_torque. With state-dependent actuator terms
+        (friction, max_speed, servos) the integral of the motors' and the servos' power, a
+        state integrated with the motion."""
         return self._work
 
     @property

@@ -13,8 +13,9 @@ Generalized velocities (the unknowns of eqs (52)-(54), in a relative basis):
 State vector y = [r0 (free base, 3) | quaternions of spherical bodies (4 each, w x y z, world
 from body) | hinge angles phi_k | generalized velocities | torque-rotor angles kappa_i].
 The rotor angles are quadratures for output only: nothing feeds back from them.
-A scene with speed-dependent actuator terms (friction, max_speed: gyro_sim.dynamics.actuators)
-appends [absolute spins p_i of the torque rotors | work of the motors | work of friction]:
+A scene with state-dependent actuator terms (friction, max_speed: gyro_sim.dynamics.actuators;
+servos) appends [absolute spins p_i of the torque rotors | work of the motors and servos | work
+of friction]:
 its applied torques depend on the state, so the spins are integrated with it (eq 29,
 A_i p_i' = L_i) and so are the works (quadratures of the applied torques' power).
 """
@@ -100,8 +101,8 @@ class Model:
 
     @property
     def stateful(self) -> bool:
-        """Whether the applied torques depend on the state (friction, max_speed): the spins
-        and works are states (`i_spin`, `i_work`)."""
+        """Whether the applied torques depend on the state (friction, max_speed, servos): the
+        spins and works are states (`i_spin`, `i_work`; a servo's work is the motors')."""
         return self.actuators is not None and self.actuators.speed_dependent
 
     @property
@@ -291,9 +292,10 @@ def _actuators(scene: Scene) -> Actuators | None:
                 for key in ("friction", "max_speed"):
                     if r.limits is not None and getattr(r.limits, key) is not None:
                         terms.append(f"{r.name}.{key}")
-    if all(lim is None for lim in rotor + hinge):
+    servos = any(b.joint.servo is not None for b in scene.bodies)  # their work is a state too
+    if all(lim is None for lim in rotor + hinge) and not servos:
         return None
-    return Actuators(AxisLimits.of(rotor, exact=True), AxisLimits.of(hinge, exact=True), tuple(terms))
+    return Actuators(AxisLimits.of(rotor, exact=True), AxisLimits.of(hinge, exact=True), tuple(terms), servos)
 
 
 def initial_state(model: Model) -> np.ndarray:
