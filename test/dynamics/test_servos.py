@@ -239,7 +239,7 @@ def test_a_servos_work_closes_the_energy_balance(backend):
     e0 = pendulum_energy(0.2, 0.0)
     worst = swing = 0.0
     clipped = False
-    for i in range(300):  # 3 s in 10 ms holds of the target 1.2 sin(2 t)
+    for _ in range(300):  # 3 s in 10 ms holds of the target 1.2 sin(2 t)
         sim.set_controls([1.2 * math.sin(2.0 * sim.time)])
         sim.advance(0.01)
         state = sim.joint_states()
