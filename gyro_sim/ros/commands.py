@@ -81,7 +81,9 @@ def check_joint_targets(targets: dict[str, tuple[str, float]], scene: str) -> li
               for h in (model.servo_hinge if model.servo is not None else ())}
     for name, (kind, _) in targets.items():
         if name not in sim.joint_names:
-            raise BadCommand(f"joint {name!r}: no such joint in {scene} (servo joints: {', '.join(servos) or 'none'})")
+            joint = next((j for j, servo in servos.items() if servo.name == name), None)
+            raise BadCommand(f"joint {name!r}: no such joint in {scene} (servo joints: {', '.join(servos) or 'none'})"
+                             + (f"; {name!r} is the control of joint {joint!r}" if joint else ""))
         if name not in servos:
             raise BadCommand(f"joint {name!r}: no servo drives it (servo joints: {', '.join(servos) or 'none'}"
                              + ("; its axis moment is sent with `gyro-sim cmd constant`)" if name in sim.axis_names
@@ -234,7 +236,7 @@ def _publish(args, msg_type, kind: str, message, interrupted) -> int:
                 print(f"gyro-sim cmd: the command on {args.topic} was not acknowledged within "
                       f"{DISCOVERY_TIMEOUT:g} s", file=sys.stderr)
                 return 1
-            print(f"published one {args.mode} command to {args.topic}")
+            print(f"published one {'joint' if kind == 'joint_commands' else args.mode} command to {args.topic}")
             return 0
         print(f"publishing {args.mode} commands to {args.topic} at {args.rate:g} Hz"
               + (f" for {args.seconds:g} s" if args.seconds > 0 else " (Ctrl-C to stop)"))

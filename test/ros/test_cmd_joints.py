@@ -22,6 +22,7 @@ def cmd(*args: str, env: dict | None = None) -> subprocess.CompletedProcess:
 
 @pytest.mark.parametrize("items, says", [
     (["--position", "elbow=0.5"], "joint 'elbow': no such joint"),
+    (["--position", "arm_pos=0.5"], "joint 'arm_pos': no such joint"),
     (["--position", "tip=0.5"], "joint 'tip': no servo drives it"),
     (["--velocity", "arm=0.5"], "joint 'arm': its servo takes a position, not a velocity"),
     (["--position", "arm=high"], "--position 'arm=high': expected JOINT=VALUE"),
@@ -33,6 +34,8 @@ def test_bad_joint_targets_are_refused_naming_the_joint(tmp_path, items, says):
     r = cmd("--scene", scene_file(tmp_path), "joints", *items)
     assert r.returncode == 2 and r.stdout == ""
     assert r.stderr.startswith(f"gyro-sim cmd: {says}") and len(r.stderr.splitlines()) == 1, r.stderr
+    if "arm_pos" in says:  # a servo's control name is not its joint's: the refusal says whose it is
+        assert "'arm_pos' is the control of joint 'arm'" in r.stderr
 
 
 def test_mixed_kinds_without_a_scene_are_refused():
