@@ -362,6 +362,10 @@ def _lock_joints(mujoco: Any, spec: Any, m0: Any, path: str, locks: dict[str, fl
             if name and sensor.objtype == obj.mjOBJ_TENDON and sensor.objname == name:
                 notes.append(f"sensor {sensor.name or '(unnamed)'!r}: left out with the tendon {shown}")
                 spec.delete(sensor)
+        for equality in list(spec.equalities):  # a coupling of the tendon's length goes with it
+            if name and equality.type == mujoco.mjtEq.mjEQ_TENDON and name in (equality.name1, equality.name2):
+                notes.append(f"equality {equality.name or '(unnamed)'!r}: left out with the tendon {shown}")
+                spec.delete(equality)
         notes.append(f"tendon {shown}: left out, its joints are all locked")
     removed_a = sorted(set(removed_a))
     for a in removed_a:
