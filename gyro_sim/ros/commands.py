@@ -96,8 +96,8 @@ def check_joint_targets(targets: dict[str, tuple[str, float]], scene: str) -> li
 
 def joint_message(targets: dict[str, tuple[str, float]]) -> dict[str, list]:
     """The JointState's fields of `targets`: every name, and each kind given one value per name
-    (the node reads the entry of each servo's kind; the others are 0 and unread). BadCommand
-    when kinds are mixed without --scene (an unchecked joint would read a 0 of another kind)."""
+    (the node reads the entry of each servo's kind; the others are 0 and unread: `cmd_joints`
+    mixes kinds only with --scene, where each joint's kind is checked)."""
     kinds = {kind for kind, _ in targets.values()}
     fields: dict[str, list] = {"name": list(targets)}
     for kind in JOINT_KINDS:
