@@ -122,11 +122,8 @@ class CoulombStepping:
         self._others = np.concatenate((index[m.i_r0], m.i_quat.ravel(), index[m.i_kappa])).astype(np.intp)
         self._response = np.zeros((m.N, len(self.mu)))
         self._ydot = np.empty(m.size)
-        if m.stateful:  # `_correct_works`: the hinges' then the rotors' angles, the numpy reference's workspace
-            from gyro_sim.dynamics.reference import Data
-
-            self._angles = np.concatenate((index[m.i_phi], index[m.i_kappa])).astype(np.intp)
-            self._data = Data(m)
+        # `_correct_works`: the hinges' then the torque rotors' angles
+        self._angles = np.concatenate((index[m.i_phi], index[m.i_kappa])).astype(np.intp)
         self.bind(system, integrator)
         self.reset()
 
@@ -226,28 +223,15 @@ class CoulombStepping:
     def _correct_works(self, t: float, smooth: np.ndarray, out: np.ndarray, base: tuple) -> None:
         """A stateful model's work states in `out` (the impulses' correction of the smooth
         step's end `smooth`), from the smooth step's integrals to the corrected step's: the
-        applied torques at `out` (the commands `base`, the servos' moments, the motors after
-        their speed cut, the friction in F; the exact friction's is `work`'s) times the change
-        the correction made to their axes' angles, as the held commands' work is theirs."""
+        torques applied at `out` (the commands `base`, the servos' moments, the motors after
+        their speed cut, the friction in F; the exact friction's is `work`'s: the system's
+        `applied`) times the change the correction made to their axes' angles, as the held
+        commands' work is theirs."""
         m = self.model
         dangle = out[self._angles] - smooth[self._angles]
-        motor, friction = self._applied(t, out, base)
+        motor, friction = self.system.applied(t, out, *base)
         out[m.i_work.start] += float(motor @ dangle)
         out[m.i_work.start + 1] += float(friction @ dangle)
-
-    def _applied(self, t: float, y: np.ndarray, base: tuple) -> tuple[np.ndarray, np.ndarray]:
-        """The motors' (servos' included) and the friction's (in F) torques on the hinges then
-        the torque rotors at state y of a stateful model, the commands `base` held (the numpy
-        reference: gyro_sim.dynamics.reference.applied_torques)."""
-        from gyro_sim.dynamics import reference as dyn
-
-        m, d = self.model, self._data
-        dyn.positions(m, d, t, y)
-        dyn.velocities(m, d, t, y[m.i_vel])
-        tau = dyn.servo_moments(m, y, base[0]) if m.servo is not None else base[0]
-        dyn.applied_torques(m, d, y, y[m.i_spin], tau, base[1])
-        a = d.applied
-        return np.concatenate((a.hinge_motor, a.rotor_motor)), np.concatenate((a.hinge_friction, a.rotor_friction))
 
     def _with(self, base: tuple, torque: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The commands `base` (hinge moments, rotor torques) with the friction moments added."""
