@@ -260,13 +260,14 @@ class Simulator:
 
     # --- state -----------------------------------------------------------------------------
     def reset(self) -> None:
-        """Back to the scene's initial state, commands zero."""
+        """Back to the scene's initial state, axis moments zero, the servos' controls their
+        initial `control`."""
         m = self.model
         self._t = 0.0
         self._y = initial_state(m)
         self._p = m.torque_p0.copy() if len(m.torque_body) else None
         self._moments = np.zeros(len(m.axis_names))
-        self._controls = np.zeros(len(m.servo_names))
+        self._controls = self.initial_controls
         self._saturated = 0  # commanded values clipped to their max_torque since the reset
         self._outputs.moved(self._t, self._y, self._p, self._moments)
         self._watch_last = None
@@ -321,12 +322,21 @@ class Simulator:
         return self.model.servo_names
 
     @property
+    def initial_controls(self) -> np.ndarray:
+        """The servos' controls from the start and after each reset, in `control_names` order:
+        each servo's `control` (an imported model's keyframe `ctrl`; default 0); a copy."""
+        m = self.model
+        return np.array([m.scene.bodies[m.hinge_bodies[h]].joint.servo.control for h in m.servo_hinge]) \
+            if m.servo is not None else np.zeros(0)
+
+    @property
     def controls(self) -> np.ndarray:
         """The servos' controls now in force, as set (before their ctrl_range clip; a copy)."""
         return self._controls.copy()
 
     def set_controls(self, values: Sequence[float] | Mapping[str, float]) -> None:
-        """Set the servos' controls, held until changed (zero-order hold; zero after a reset):
+        """Set the servos' controls, held until changed (zero-order hold; their initial
+        `control`, `initial_controls`, after a reset):
         an array in `control_names` order, or a mapping from control (actuator) or joint names
         to values, the others kept. Each servo clips its control to its ctrl_range."""
         m = self.model
@@ -506,9 +516,9 @@ class Simulator:
     def work(self) -> float:
         """Work done by the commanded axis moments since the last reset (J): the sum over
         `advance` calls of moment * change of the axis angle (exact under the zero-order hold),
-        the moments saturated to their max_torque. With speed-dependent actuator terms
-        (friction, max_speed) the integral of the motors' power, a state integrated with the
-        motion."""
+        the moments saturated to their max_torque. With state-dependent actuator terms
+        (friction, max_speed, servos) the integral of the motors' and the servos' power, a
+        state integrated with the motion."""
         return self._work
 
     @property

@@ -19,6 +19,8 @@ is conserved with or without commands wherever the energy is conserved without t
 (fixed base, no speed rotors): the drift a user wants to watch on a commanded chain.
 With actuator friction (docs/scene-format.md) its work W_f <= 0 (the energy dissipated) is
 integrated with the motion and counted apart: energy_balance = E(t) - E(0) - W(t) - W_f(t).
+A servo's moment depends on the state: its work (moment x joint rate) is integrated with the
+motion too, and is part of W.
 """
 from __future__ import annotations
 

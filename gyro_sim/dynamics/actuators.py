@@ -141,11 +141,14 @@ class Actuators:
     hinge: AxisLimits
     #: the speed-dependent terms written, "<axis>.<key>" (for messages)
     terms: tuple[str, ...] = ()
+    #: the model has servos (docs/models.md, "Servo actuators"): their force depends on the
+    #: state, and their work is integrated with the motion as the motors' is
+    servos: bool = False
 
     @property
     def speed_dependent(self) -> bool:
-        """Whether any applied torque depends on the state (friction, max_speed)."""
-        return self.rotor.speed_dependent or self.hinge.speed_dependent
+        """Whether any applied torque depends on the state (friction, max_speed, a servo)."""
+        return self.rotor.speed_dependent or self.hinge.speed_dependent or self.servos
 
     @property
     def exact(self) -> bool:

@@ -168,8 +168,6 @@ class NumpyOutputs(_State):
             self._evaluate()
             a = self.system.data.applied
             hinge_tau, L_rotor = a.hinge_motor + a.hinge_friction, a.rotor_motor + a.rotor_friction
-        elif m.servo is not None:  # a servo's moment at this state
-            hinge_tau = dyn.servo_moments(m, self.y, hinge_tau)
         nh, nt = len(m.hinge_bodies), len(m.torque_body)
         u = self.y[m.i_vel]
         pos = np.concatenate((euler.ravel(), self.y[m.i_phi], self.y[m.i_kappa], m.speed_rate * self.t))

@@ -27,12 +27,11 @@ from gyro_sim.dynamics.model import Model
 
 def balanced_energy(model: Model) -> str | None:
     """The integral whose balance the exact motion keeps: "energy" (E - E0 = the work of the
-    commands and of friction), or "jacobi" with speed rotors (J - J0 = the same work: the
-    rheonomic constraint kappa_i' = const leaves the Lagrangian free of t, so the Jacobi
-    integral changes by the power of the generalised forces alone, while the speed rotors'
-    motors do work on the energy); None on a moving base, or with servos (whose work is not
-    tracked)."""
-    if model.base_type == "moving" or model.servo is not None:
+    commands, of the servos and of friction), or "jacobi" with speed rotors (J - J0 = the same
+    work: the rheonomic constraint kappa_i' = const leaves the Lagrangian free of t, so the
+    Jacobi integral changes by the power of the generalised forces alone, while the speed
+    rotors' motors do work on the energy); None on a moving base."""
+    if model.base_type == "moving":
         return None
     return "jacobi" if len(model.speed_body) else "energy"
 
@@ -45,7 +44,7 @@ def conserved(model: Model) -> tuple[str, ...]:
     names = []
     energy = balanced_energy(model)
     dissipates = model.actuators is not None and any(t.endswith(".friction") for t in model.actuators.terms)
-    if energy is not None and not dissipates:
+    if energy is not None and not dissipates and model.servo is None:  # a servo works on the chain
         names.append(energy)
     if model.base_type == "fixed" and not model.is_hinge[0]:
         names.append("vertical_momentum")

@@ -201,16 +201,17 @@ FLAG_HEAVY = 7
 #: flags[FLAG_KERNEL]: the address of `rhs_kernel` compiled as a C function (`kernel_address`),
 #: which the compiled loops call (`rhs_call`) instead of compiling the kernel into themselves
 FLAG_KERNEL = 8
-#: flags[FLAG_ACTUATORS]: 1 for a model with speed-dependent actuator terms (model.stateful:
-#: friction, max_speed), whose spins and works are states at flags[FLAG_I_SPIN],
+#: flags[FLAG_ACTUATORS]: 1 for a model with state-dependent actuator terms (model.stateful:
+#: friction, max_speed, servos), whose spins and works are states at flags[FLAG_I_SPIN],
 #: flags[FLAG_I_WORK] and whose parameters sit in the workspace's tail (`workspace`)
 FLAG_ACTUATORS, FLAG_I_SPIN, FLAG_I_WORK = 9, 10, 11
 #: flags[FLAG_SPRINGS]: 1 for a model with hinge springs, whose moments are added to the
 #: generalized forces in the workspace's last N floats (`scratch`)
 FLAG_SPRINGS = 12
 #: flags[FLAG_SERVOS]: 1 for a model with hinge servos, whose hinges' held tau is the servo's
-#: drive gain clip(ctrl) + b0, turned into its moment at the state (`servo_moments`) in the N
-#: floats of the workspace before the springs' (`scratch`)
+#: drive gain clip(ctrl) + b0, turned into its moment at the state (`servo_moments`, called by
+#: `actuate`: a model with servos is stateful) in the N floats of the workspace before the
+#: springs' (`scratch`)
 FLAG_SERVOS = 13
 #: flags[FLAG_MOTORS]: 1 for a model with geared motors on turning parents, whose per-evaluation
 #: terms (m = J G a in world axes, J G^2) sit in 4 n floats before the servos' and springs'
@@ -1599,9 +1600,6 @@ def rhs_kernel(t, y, ydot, model, data, inputs):
     else:  # bias forces: p_i(t) = p_i(t0) + (L_i / A_i)(t - t0) (eq 29)
         for i in range(nt):
             p[i] = p0[i] + pdot[i] * (t - t0)
-        if flags[FLAG_SERVOS] != 0:  # the servos' moments at this state from their held drives
-            tau_applied = block1(work, servo_offset(work, flags), N)
-            servo_moments(y, model, tau, tau_applied)
     if flags[FLAG_SPRINGS] != 0:  # the springs' moments -k (phi - phi_ref) join the hinges'
         with_springs = block1(work, work.shape[0] - N, N)
         _spring_moments(y, model, tau_applied, with_springs)

@@ -23,8 +23,9 @@ order, and `hinge_slide` tells the slides among them (a slide's "moment" is a fo
 axis, N; its armature a mass, kg; its spring's stiffness N/m). Only the kinematics differ
 (`is_slide`); a scene without slides has `slide_bodies` empty and computes nothing for them.
 The rotor angles are quadratures for output only: nothing feeds back from them.
-A scene with speed-dependent actuator terms (friction, max_speed: gyro_sim.dynamics.actuators)
-appends [absolute spins p_i of the torque rotors | work of the motors | work of friction]:
+A scene with state-dependent actuator terms (friction, max_speed: gyro_sim.dynamics.actuators;
+servos) appends [absolute spins p_i of the torque rotors | work of the motors and servos | work
+of friction]:
 its applied torques depend on the state, so the spins are integrated with it (eq 29,
 A_i p_i' = L_i) and so are the works (quadratures of the applied torques' power).
 """
@@ -116,8 +117,8 @@ class Model:
 
     @property
     def stateful(self) -> bool:
-        """Whether the applied torques depend on the state (friction, max_speed): the spins
-        and works are states (`i_spin`, `i_work`)."""
+        """Whether the applied torques depend on the state (friction, max_speed, servos): the
+        spins and works are states (`i_spin`, `i_work`; a servo's work is the motors')."""
         return self.actuators is not None and self.actuators.speed_dependent
 
     @property
@@ -322,9 +323,10 @@ def _actuators(scene: Scene) -> Actuators | None:
                 for key in ("friction", "max_speed"):
                     if r.limits is not None and getattr(r.limits, key) is not None:
                         terms.append(f"{r.name}.{key}")
-    if all(lim is None for lim in rotor + hinge):
+    servos = any(b.joint.servo is not None for b in scene.bodies)  # their work is a state too
+    if all(lim is None for lim in rotor + hinge) and not servos:
         return None
-    return Actuators(AxisLimits.of(rotor, exact=True), AxisLimits.of(hinge, exact=True), tuple(terms))
+    return Actuators(AxisLimits.of(rotor, exact=True), AxisLimits.of(hinge, exact=True), tuple(terms), servos)
 
 
 def initial_state(model: Model) -> np.ndarray:

@@ -315,9 +315,6 @@ def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, s
     if stateful:  # the torques applied at this state (motors after the speed cut, friction): the
         # kernel's own computation, again after rhs_call (the same numbers, written again)
         L_applied, tau_applied = fast.actuate(y, ydot, model, data, inputs, R_k, w_k, p)
-    elif flags[fast.FLAG_SERVOS] != 0:  # the servos' moments at this state, as the kernel's
-        tau_applied = block1(work, fast.servo_offset(work, flags), N)
-        fast.servo_moments(y, model, tau, tau_applied)
     for k in range(n):  # the outputs' copies
         for a in range(3):
             w[k, a] = w_k[k, a]

@@ -381,6 +381,21 @@ def applied_torques(model: Model, data: Data, y: np.ndarray, p: np.ndarray | Non
     return a.hinge_motor + a.hinge_friction, (a.rotor_motor + a.rotor_friction if nt else None)
 
 
+def applied_at(model: Model, data: Data, t: float, y: np.ndarray, hinge_tau: np.ndarray | None,
+               L_rotor: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """The motors' (the servos' moments included) and the friction's (in F) torques at state y
+    of a stateful model under the commands hinge_tau (a servo's hinge: its drive) and L_rotor:
+    each (nh + nt,), the hinges' then the torque rotors' (`applied_torques`, as `closure`
+    applies them)."""
+    positions(model, data, t, y)
+    velocities(model, data, t, y[..., model.i_vel])
+    if model.servo is not None:
+        hinge_tau = servo_moments(model, y, hinge_tau)
+    applied_torques(model, data, y, y[model.i_spin], hinge_tau, L_rotor)
+    a = data.applied
+    return np.concatenate((a.hinge_motor, a.rotor_motor)), np.concatenate((a.hinge_friction, a.rotor_friction))
+
+
 class Evaluation:
     """What one forward evaluation leaves behind for outputs (reactions, rotor torques)."""
 

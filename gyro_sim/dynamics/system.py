@@ -138,6 +138,12 @@ class ChainODE:
             q = y[self.quat_index]
             y[self.quat_index] = q / np.linalg.norm(q, axis=1, keepdims=True)
 
+    def applied(self, t: float, y: np.ndarray, hinge_tau, L_rotor) -> tuple[np.ndarray, np.ndarray]:
+        """A stateful model's motor and friction torques at (t, y) under the commands given, the
+        hinges' then the torque rotors' (gyro_sim.dynamics.reference.applied_at); not counted
+        in `nfev` and the held inputs kept."""
+        return dyn.applied_at(self.model, self.data, t, y, hinge_tau, L_rotor)
+
 
 _F64 = np.dtype(np.float64)
 _empty = np.empty  # FastChainODE.rhs: a global name, one attribute lookup less per call
@@ -204,6 +210,10 @@ class FastChainODE:
     def held(self) -> tuple:
         """The arguments of the last `hold`: (t0, p0, hinge_tau, L_rotor) (ChainODE's)."""
         return self._ref.held
+
+    def applied(self, t: float, y: np.ndarray, hinge_tau, L_rotor) -> tuple[np.ndarray, np.ndarray]:
+        """ChainODE.applied (the numpy reference: a step's correction needs it rarely)."""
+        return self._ref.applied(t, y, hinge_tau, L_rotor)
 
     def kernel_arguments(self) -> tuple:
         """The arguments of :func:`gyro_sim.dynamics.kernel.rhs_kernel` after (t, y, out): its

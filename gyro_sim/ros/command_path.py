@@ -20,10 +20,11 @@ whole control period; none is superseded. A command that finds the queue full is
 
 Joint commands (``~/joint_commands``, the servos' controls by joint name) take the same path
 as the axis moments, each on its own log topic: a good one carries the whole controls vector,
-the previous good one's (zero after a reset) with its joints' entries replaced, so that a
-reader applying the logged joint commands in file order ends with the controls applied. A step
-applies the last axis moments and the last controls logged since the previous step, so that
-neither kind supersedes the other; a timeout zeroes the axis moments and holds the controls."""
+the previous good one's (the servos' initial `control` after a reset) with its joints' entries
+replaced, so that a reader applying the logged joint commands in file order ends with the
+controls applied. A step applies the last axis moments and the last controls logged since the
+previous step, so that neither kind supersedes the other; a timeout zeroes the axis moments and
+holds the controls."""
 
 from __future__ import annotations
 
@@ -85,12 +86,14 @@ class CommandPath:
     def __init__(self, n_axes: int, out, node_ns: Callable[[], int], timeout: float, dt: float, demo=None,
                  clock: Callable[[], float] = time.monotonic, due: Callable[[float], float] | None = None,
                  window: int = 2000, lockstep: bool = False, joint_controls: Callable | None = None,
-                 n_controls: int = 0):
+                 initial_controls: np.ndarray | None = None):
         self.n_axes, self.out, self._node_ns = n_axes, out, node_ns
         #: (names, position, velocity, effort, base) -> the controls after a joint command
         #: (Simulator.joint_command_controls; ValueError: refused), None without servos
-        self._joint_controls, self.n_controls = joint_controls, n_controls
-        self._controls_submitted = np.zeros(n_controls)  # the last good joint command's controls
+        self._joint_controls = joint_controls
+        #: the servos' controls at the start and after a reset (Simulator.initial_controls)
+        self.initial_controls = np.zeros(0) if initial_controls is None else np.array(initial_controls, dtype=float)
+        self._controls_submitted = self.initial_controls.copy()  # the last good joint command's controls
         #: per kind ("moments", "controls"), the values of the last command logged, and the kinds
         #: logged since the last step took a command
         self._logged: dict[str, tuple] = {}
@@ -293,7 +296,7 @@ class CommandPath:
         with self._submit_lock:
             last = self._last_received()
             self._queue.clear()
-            self._controls_submitted = np.zeros(self.n_controls)  # the reset zeroes the controls
+            self._controls_submitted = self.initial_controls.copy()  # the reset restores the controls
         if last is not None:
             self._taken_seq = last
             self._log_received(t_ns, last)

@@ -126,7 +126,7 @@ class SimLoop:
                                     self.dt, demo, clock=clock, due=pacer.deadline if pacer.rtf > 0 else None,
                                     window=int(2 * config.physics_rate), lockstep=self.lockstep,
                                     joint_controls=sim.joint_command_controls if sim.control_names else None,
-                                    n_controls=len(sim.control_names))
+                                    initial_controls=sim.initial_controls)
         self.publications = Publications(outputs, paced, clock=clock)
         #: the run waits for its first command (lock-step, hold until_command); cleared when it came
         self.holding = bool(getattr(config, "waits_for_command", False))

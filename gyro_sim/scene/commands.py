@@ -148,7 +148,8 @@ def register(sub, bench) -> None:
     p.add_argument("model", metavar="MODEL", help="the MJCF or URDF file")
     p.add_argument("-o", "--output", required=True, metavar="SCENE.yaml", help="the scene file to write")
     p.add_argument("--keyframe", metavar="NAME",
-                   help="the keyframe giving the initial state (default: the first; none: rest)")
+                   help="the keyframe giving the initial state and the servos' controls (default: the first; "
+                        "none: rest)")
     p.add_argument("--force", action="store_true", help="replace an existing output file (never the model)")
     add_model_options(p)
     p.set_defaults(fn=cmd_import)

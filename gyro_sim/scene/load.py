@@ -103,7 +103,7 @@ JOINT_KEYS = ("type", "axis", "max_torque", "friction", "armature", "spring", "s
 HINGE_ONLY_KEYS = ("armature", "spring", "servo", "motor")
 MOTOR_KEYS = ("inertia", "gear", "axis")
 SPRING_KEYS = ("stiffness", "reference")
-SERVO_KEYS = ("name", "gain", "bias", "gear", "ctrl_range", "force_range")
+SERVO_KEYS = ("name", "gain", "bias", "gear", "ctrl_range", "force_range", "control")
 #: a hinge's limits (JOINT_KEYS) and a torque rotor's (ROTOR_KEYS)
 HINGE_LIMIT_KEYS = ("max_torque", "friction")
 ROTOR_LIMIT_KEYS = ("max_torque", "max_speed", "friction")
@@ -848,6 +848,7 @@ def _servo(ch: _Checker, value: Any, path: str) -> Servo | None | bool:
     gain = ch.scalar(servo, "gain", path, default=1.0)
     bias = ch.vector(servo, "bias", path, size=3, default=np.zeros(3))
     gear = ch.scalar(servo, "gear", path, default=1.0)
+    control = ch.scalar(servo, "control", path, default=0.0)
     if gear == 0.0:
         ch.fail(_at(path, "gear"), "must not be zero")
     ranges = {}
@@ -856,9 +857,9 @@ def _servo(ch: _Checker, value: Any, path: str) -> Servo | None | bool:
         if r is not None and not r[0] <= r[1]:
             ch.fail(_at(path, key), f"must be [low, high] with low <= high (got {r.tolist()})")
         ranges[key] = None if r is None else (float(r[0]), float(r[1]))
-    if len(ch.errors) > bad or gain is None or bias is None or gear is None:
+    if len(ch.errors) > bad or gain is None or bias is None or gear is None or control is None:
         return False
-    return Servo(name=name, gain=gain, bias=tuple(float(b) for b in bias), gear=gear, **ranges)
+    return Servo(name=name, gain=gain, bias=tuple(float(b) for b in bias), gear=gear, control=control, **ranges)
 
 
 def _motor(ch: _Checker, value: Any, path: str, hinge_axis: np.ndarray | None) -> Motor | None | bool:

@@ -387,6 +387,10 @@ def _lock_joints(mujoco: Any, spec: Any, m0: Any, path: str, locks: dict[str, fl
             if name and sensor.objtype == obj.mjOBJ_TENDON and sensor.objname == name:
                 notes.append(f"sensor {sensor.name or '(unnamed)'!r}: left out with the tendon {shown}")
                 spec.delete(sensor)
+        for equality in list(spec.equalities):  # a coupling of the tendon's length goes with it
+            if name and equality.type == mujoco.mjtEq.mjEQ_TENDON and name in (equality.name1, equality.name2):
+                notes.append(f"equality {equality.name or '(unnamed)'!r}: left out with the tendon {shown}")
+                spec.delete(equality)
         notes.append(f"tendon {shown}: left out, its joints are all locked")
     removed_a = sorted(set(removed_a))
     for a in removed_a:
@@ -1365,10 +1369,14 @@ class _Importer:
             if m.key_time[key] != 0.0:
                 self.notes.append(f"keyframe: time {m.key_time[key]:g} not kept (the scene "
                                   "starts at t = 0)")
-            if m.nu and np.any(m.key_ctrl[key]):
-                self.notes.append("keyframe: ctrl not kept (commands are given to the "
-                                  + ("simulator as servo controls: Simulator.set_controls)" if self.servo
-                                     else "simulator as axis moments)"))
+            if m.nu and self.servo:  # the servos' initial controls (docs/models.md, "Servo actuators")
+                for a in range(m.nu):
+                    j = int(m.actuator_trnid[a][0])
+                    if j in self.servo and m.key_ctrl[key][a] != 0.0:
+                        self.servo[j]["control"] = _tidy(m.key_ctrl[key][a])
+            elif m.nu and np.any(m.key_ctrl[key]):
+                self.notes.append("keyframe: ctrl not kept (commands are given to the simulator as "
+                                  "axis moments)")
         mj.mj_kinematics(m, d)
         mj.mj_comPos(m, d)
         mj.mj_comVel(m, d)

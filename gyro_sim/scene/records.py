@@ -102,6 +102,7 @@ class Servo:
     gear: float = 1.0
     ctrl_range: tuple[float, float] | None = None  # None: the control is not clipped
     force_range: tuple[float, float] | None = None  # None: the force is not clipped
+    control: float = 0.0  # the control from the start and after a reset, until one is set
 
     @property
     def command(self) -> str:

@@ -12,6 +12,7 @@ from scipy.optimize import brentq
 
 from gyro_sim.msgs import messages as M
 from gyro_sim.ros.loop import SimLoop, warm_up
+from gyro_sim.ros.requests import Reset
 from gyro_sim.ros.params import validate
 from gyro_sim.simulator import Simulator
 
@@ -23,12 +24,14 @@ from .test_pacing import FakeClock, Outputs
 M_, L_, G_, KP, KV, TARGET = 1.0, 0.3, 9.81, 20.0, 3.0, 0.5
 
 
-def scene_file(tmp_path) -> str:
+def scene_file(tmp_path, **servo) -> str:
+    """The scene; `servo`: more keys of the arm's servo."""
     import yaml
 
     scene = {"name": "servo pendulum", "gravity": [0.0, 0.0, -G_], "base": {"type": "fixed"},
              "bodies": [{"name": "arm", "joint": {"type": "hinge", "axis": [0.0, 1.0, 0.0],
-                                                  "servo": {"name": "arm_pos", "gain": KP, "bias": [0.0, -KP, -KV]}},
+                                                  "servo": {"name": "arm_pos", "gain": KP, "bias": [0.0, -KP, -KV],
+                                                            **servo}},
                          "mass": M_, "com": [0.0, 0.0, -L_], "inertia_com": [[0.01, 0, 0], [0, 0.01, 0], [0, 0, 0.005]],
                          "next_joint": [0.0, 0.0, -2 * L_]},
                         {"name": "tip", "joint": {"type": "hinge", "axis": [1.0, 0.0, 0.0]},
@@ -58,8 +61,8 @@ class JointLog(Outputs):
             assert self.loop.submit_joint_command(raw, M.decode_joint_command(raw)) is None
 
 
-def make(tmp_path, out, **params):
-    cfg = validate({"scene": scene_file(tmp_path), "physics_rate": 1000.0, "publish_rate": 100.0,
+def make(tmp_path, out, servo: dict | None = None, **params):
+    cfg = validate({"scene": scene_file(tmp_path, **(servo or {})), "physics_rate": 1000.0, "publish_rate": 100.0,
                     "thread_priority": 0, **params})
     sim = Simulator(cfg.scene, integrator=cfg.integrator, step=cfg.dt)
     warm_up(sim, cfg.dt)
@@ -146,3 +149,19 @@ def test_joint_commands_and_axis_moments_supersede_only_their_own_kind(tmp_path)
     assert loop.sim.controls.tolist() == [0.3] and loop.sim.axis_moments.tolist() == [0.25]
     assert [kind for kind, _, _ in out.log] == ["joint_command", "command", "joint_command"]
     assert loop.commands.counters.superseded == 2
+
+
+def test_a_servos_initial_control_holds_from_the_start_and_after_a_reset(tmp_path):
+    """A servo's `control` is its control before any command and again after ~/reset (a joint
+    command applied before the reset is gone), the pendulum held at the servo's steady state."""
+    out = JointLog()
+    loop, _ = make(tmp_path, out, servo={"control": TARGET}, lockstep=True)
+    assert loop.sim.controls.tolist() == [TARGET]
+    raw = M.joint_command(["arm"], position=[0.1])
+    assert loop.submit_joint_command(raw, M.decode_joint_command(raw)) is None
+    run(loop, lambda: len(out.states) >= 2)
+    assert loop.sim.controls.tolist() == [0.1]
+    assert loop._handle(Reset()).startswith("reset")
+    assert loop.sim.controls.tolist() == [TARGET]
+    # the next joint command's unnamed servos keep the reset's controls
+    np.testing.assert_array_equal(loop.commands._controls_submitted, [TARGET])

@@ -770,3 +770,17 @@ def test_one_problem_is_one_line(tmp_path):
     with pytest.raises(SceneError) as info:
         load_scene(tmp_path / "nowhere.yaml")
     assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("control", ["high", float("nan")])
+def test_a_servos_initial_control_is_a_finite_number(control):
+
+    scene = {"name": "s", "base": {"type": "fixed"},
+             "bodies": [{"name": "arm", "joint": {"type": "hinge", "axis": [0.0, 1.0, 0.0],
+                                                  "servo": {"gain": 2.0, "bias": [0.0, -2.0, 0.0], "control": control}},
+                         "mass": 1.0, "com": [0.0, 0.0, -0.3],
+                         "inertia_com": [[0.01, 0, 0], [0, 0.01, 0], [0, 0, 0.005]]}]}
+    with pytest.raises(SceneError, match=r"bodies\[0\]\.joint\.servo\.control"):
+        load_scene(scene)
+    scene["bodies"][0]["joint"]["servo"]["control"] = 0.25
+    assert load_scene(scene).bodies[0].joint.servo.control == 0.25

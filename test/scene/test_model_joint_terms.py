@@ -131,6 +131,18 @@ def test_the_energy_counts_the_springs_and_armatures(tmp_path):
     assert spread > 0.01 * scale  # energy moved between the parts
 
 
+def test_lock_drops_a_tendons_coupling_with_the_tendon(tmp_path):
+    """A tendon's equality (a coupling of its length, as dm_control's manipulator and
+    robosuite's Jaco fingers have) goes with the tendon of locked joints, said in a note: the
+    model imports."""
+    coupled = GRIPPER.replace('<equality><joint name="mimic" joint1="left_slide" joint2="right_slide"/></equality>',
+                              '<equality><tendon name="coupling" tendon1="grip"/></equality>')
+    assert coupled != GRIPPER
+    imported = import_model(write(tmp_path, "gripper.xml", coupled), lock=["left_slide", "right_slide"])
+    assert "equality 'coupling': left out with the tendon 'grip'" in imported.notes
+    assert [b["name"] for b in imported.mapping["bodies"]] == ["shoulder"]
+
+
 def test_lock_trims_keyframes_and_drops_a_tendon_of_locked_joints(tmp_path):
     """Locking both fingers: the keyframes lose the fingers' entries (qpos, qvel; ctrl loses the
     tendon's motor), the tendon on them goes with its motor and sensor, the equality with the

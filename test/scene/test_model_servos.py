@@ -129,3 +129,76 @@ def test_servos_move_as_in_mujoco(tmp_path):
     assert np.max(np.abs(np.asarray(state.position) - d.qpos)) < 1e-9
     assert np.max(np.abs(np.asarray(state.velocity) - d.qvel)) < 1e-8
     assert np.allclose(state.effort, d.qfrc_actuator - m.dof_damping * d.qvel, rtol=1e-8, atol=1e-9)
+
+
+#: a Menagerie-style arm: position servos on three hinges under gravity and a "home" keyframe
+#: whose ctrl is its qpos (the servos hold the pose from t = 0 with no command)
+HOME_ARM = """<mujoco model="home_arm">
+  <option gravity="0 0 -9.81"/>
+  <worldbody>
+    <body name="link1" pos="0 0 0.5">
+      <joint name="base_yaw" axis="0 0 1" damping="0.5"/>
+      <inertial pos="0 0 0.05" mass="2" diaginertia="0.01 0.01 0.006"/>
+      <body name="link2" pos="0 0 0.1">
+        <joint name="shoulder" axis="0 1 0"/>
+        <inertial pos="0.15 0 0" mass="1.2" diaginertia="0.002 0.012 0.012"/>
+        <body name="link3" pos="0.3 0 0">
+          <joint name="elbow" axis="0 1 0" armature="0.01"/>
+          <inertial pos="0.12 0 0" mass="0.6" diaginertia="0.001 0.005 0.005"/>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+  <actuator>
+    <position name="base_yaw" joint="base_yaw" kp="200" kv="20" ctrlrange="-3 3"/>
+    <position name="shoulder" joint="shoulder" kp="400" kv="30" ctrlrange="-2 2"/>
+    <position name="elbow" joint="elbow" kp="200" kv="10" ctrlrange="-2.5 2.5"/>
+  </actuator>
+  <keyframe>
+    <key name="home" qpos="0.4 -0.7 1.2" ctrl="0.4 -0.7 1.2"/>
+  </keyframe>
+</mujoco>
+"""
+
+
+@pytest.mark.slow
+def test_a_keyframes_ctrl_holds_its_pose_from_the_start(tmp_path):
+    """The keyframe's ctrl becomes each servo's initial `control` (a reset restores it): with
+    no command the arm stays near its home pose (the servos' sag under gravity only), where
+    the same arm without the keyframe's ctrl falls away from it, and the motion over 1 s is
+    MuJoCo's from the same keyframe to 1e-9 rad (RK4 at 2e-5 s there)."""
+    path = write(tmp_path, "arm.xml", HOME_ARM)
+    imported = import_model(path)
+    controls = {b["name"]: b["joint"]["servo"].get("control") for b in imported.mapping["bodies"]}
+    assert controls == {"base_yaw": 0.4, "shoulder": -0.7, "elbow": 1.2}
+    assert not any("ctrl" in note for note in imported.notes)
+    q0 = np.array([0.4, -0.7, 1.2])
+    m = mujoco_model(path)
+    m.opt.timestep = 2e-5
+    d = mujoco.MjData(m)
+    mujoco.mj_resetDataKeyframe(m, d, 0)
+    assert np.array_equal(d.ctrl, q0)  # MuJoCo starts from the keyframe's ctrl too
+    mujoco.mj_step(m, d, nstep=50000)
+    sim = Simulator(load_scene(imported.mapping), integrator="dop853", rtol=1e-12, atol=1e-12, backend="numpy")
+    assert np.array_equal(sim.controls, q0) and np.array_equal(sim.initial_controls, q0)
+    sim.advance(1.0)
+    q = np.asarray(sim.joint_states().position)
+    assert np.max(np.abs(q - d.qpos)) < 1e-9
+    assert np.max(np.abs(q - q0)) < 0.02  # held, the sag of a finite kp under gravity aside
+    sim.set_controls([0.0, 0.0, 0.0])
+    sim.reset()
+    assert np.array_equal(sim.controls, q0)  # a reset restores the initial controls
+    unheld = load_scene(without_controls(imported.mapping))
+    loose = Simulator(unheld, integrator="dop853", rtol=1e-10, atol=1e-10, backend="numpy")
+    loose.advance(1.0)
+    assert np.max(np.abs(np.asarray(loose.joint_states().position) - q0)) > 0.3
+
+
+def without_controls(mapping: dict) -> dict:
+    """A copy of an imported mapping with its servos' initial controls taken out."""
+    import copy
+
+    out = copy.deepcopy(mapping)
+    for body in out["bodies"]:
+        body["joint"]["servo"].pop("control")
+    return out

@@ -122,6 +122,8 @@ class CoulombStepping:
         self._others = np.concatenate((index[m.i_r0], m.i_quat.ravel(), index[m.i_kappa])).astype(np.intp)
         self._response = np.zeros((m.N, len(self.mu)))
         self._ydot = np.empty(m.size)
+        # `_correct_works`: the hinges' then the torque rotors' angles
+        self._angles = np.concatenate((index[m.i_phi], index[m.i_kappa])).astype(np.intp)
         self.bind(system, integrator)
         self.reset()
 
@@ -213,8 +215,23 @@ class CoulombStepping:
                 y, v0 = y_plus, v_plus
                 continue
             y = self._impulses(t_end, y, y_plus, h, torque, v0, self._with(base, torque))
+            if self.model.stateful:  # the works integrated along the smooth step, corrected
+                self._correct_works(t_end, y_plus, y, base)
             v0 = self.speeds(t_end, y)
         return y
+
+    def _correct_works(self, t: float, smooth: np.ndarray, out: np.ndarray, base: tuple) -> None:
+        """A stateful model's work states in `out` (the impulses' correction of the smooth
+        step's end `smooth`), from the smooth step's integrals to the corrected step's: the
+        torques applied at `out` (the commands `base`, the servos' moments, the motors after
+        their speed cut, the friction in F; the exact friction's is `work`'s: the system's
+        `applied`) times the change the correction made to their axes' angles, as the held
+        commands' work is theirs."""
+        m = self.model
+        dangle = out[self._angles] - smooth[self._angles]
+        motor, friction = self.system.applied(t, out, *base)
+        out[m.i_work.start] += float(motor @ dangle)
+        out[m.i_work.start + 1] += float(friction @ dangle)
 
     def _with(self, base: tuple, torque: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The commands `base` (hinge moments, rotor torques) with the friction moments added."""
