@@ -28,6 +28,8 @@ import time
 
 import numpy as np
 
+from gyro_sim.errors import GyroSimError
+
 DEFAULT_TOPIC = "/gyro_sim/axis_moments"
 DISCOVERY_TIMEOUT = 15.0
 #: the entries of a joint command, in sensor_msgs/JointState's order
@@ -43,7 +45,7 @@ def command_topic(namespace: str, kind: str = "axis_moments") -> str:
     return getattr(TopicNames(namespace=ns, node=f"{ns.rstrip('/')}/{NODE_NAME}"), kind)
 
 
-class BadCommand(ValueError):
+class BadCommand(GyroSimError, ValueError):
     """A command the user wrote that cannot be sent (one line, exit 2)."""
 
 
