@@ -267,8 +267,8 @@ def violent_table(counts: list[dict], nodes: list[dict | None] | None = None) ->
     lines = [
         f"The violent family: step moments of a multiple of each axis's gravity torque, from t = {VIOLENT_AT:g} s, "
         f"held (one command) or sent again every {1e3 * VIOLENT_PERIOD:g} ms; \"fixed\" at {PHYSICS_RATE:g} Hz, "
-        f"a call a step and {1e3 * VIOLENT_CALL:g} ms a wake-up, counted over the push and {VIOLENT_AFTER:g} s after it; budget "
-        f"{counts[0]['budget_per_s']:,.0f} rhs evaluations per simulated s.",
+        f"a call a step and {1e3 * VIOLENT_CALL:g} ms a wake-up, counted over the push and {VIOLENT_AFTER:g} s "
+        f"after it; budget {counts[0]['budget_per_s']:,.0f} rhs evaluations per simulated s.",
         "",
         "| case | rhs evaluations / simulated s (push; after) | substeps / simulated s | most in a wake-up "
         "| energy put in (J) | (E - E0 - W) / E | calls kept over budget (their energy error) | methods after "

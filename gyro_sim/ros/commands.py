@@ -153,18 +153,28 @@ def cmd_publish(args) -> int:
             f0 = f
             f = lambda t: np.broadcast_to(f0(t), (len(axes),))  # noqa: E731
         print(f"axes: {', '.join(axes)}")
+    kinds = _ros_kinds(args, "std_msgs.msg", "Float64MultiArray")
+    if kinds is None:
+        return 2
+    message, shutdown = kinds
+    return _publish(args, message, "axis_moments", lambda t: message(data=[float(v) for v in f(t)]), shutdown)
+
+
+def _ros_kinds(args, module: str, name: str):
+    """(the message type `module.name`, rclpy's ExternalShutdownException), or None after one
+    line on stderr: a --rate that is not > 0, or no rclpy."""
     if not args.rate > 0:
         print("gyro-sim cmd: --rate must be > 0", file=sys.stderr)
-        return 2
+        return None
     try:
+        import importlib
+
         from rclpy.executors import ExternalShutdownException
-        from std_msgs.msg import Float64MultiArray
+
+        return getattr(importlib.import_module(module), name), ExternalShutdownException
     except ImportError as exc:
         print(f"gyro-sim cmd: needs rclpy ({exc}); install it with: pip install 'gyro_sim[ros]'", file=sys.stderr)
-        return 2
-
-    return _publish(args, Float64MultiArray, "axis_moments",
-                    lambda t: Float64MultiArray(data=[float(v) for v in f(t)]), ExternalShutdownException)
+        return None
 
 
 def cmd_joints(args) -> int:
@@ -187,16 +197,11 @@ def cmd_joints(args) -> int:
     except BadCommand as exc:
         print(f"gyro-sim cmd: {exc}", file=sys.stderr)
         return 2
-    if not args.rate > 0:
-        print("gyro-sim cmd: --rate must be > 0", file=sys.stderr)
+    kinds = _ros_kinds(args, "sensor_msgs.msg", "JointState")
+    if kinds is None:
         return 2
-    try:
-        from rclpy.executors import ExternalShutdownException
-        from sensor_msgs.msg import JointState
-    except ImportError as exc:
-        print(f"gyro-sim cmd: needs rclpy ({exc}); install it with: pip install 'gyro_sim[ros]'", file=sys.stderr)
-        return 2
-    return _publish(args, JointState, "joint_commands", lambda t: JointState(**fields), ExternalShutdownException)
+    message, shutdown = kinds
+    return _publish(args, message, "joint_commands", lambda t: message(**fields), shutdown)
 
 
 def _publish(args, msg_type, kind: str, message, interrupted) -> int:

@@ -1144,28 +1144,18 @@ def _initial(ch: _Checker, value: Any, path: str, joint_type: str | None) -> Ini
         if euler is None or rates is None:
             return None
         return Initial(euler=_readonly(euler), euler_rates=_readonly(rates))
-    if joint_type == "slide":
-        for key in EULER_KEYS + QUATERNION_KEYS + HINGE_INITIAL_KEYS:
+    if joint_type in ONE_AXIS_JOINTS:  # its coordinate and rate: (position, velocity) or (angle, rate)
+        own, other = ((SLIDE_INITIAL_KEYS, HINGE_INITIAL_KEYS) if joint_type == "slide"
+                      else (HINGE_INITIAL_KEYS, SLIDE_INITIAL_KEYS))
+        for key in EULER_KEYS + QUATERNION_KEYS + other:
             if key in initial:
-                kind = "hinge" if key in HINGE_INITIAL_KEYS else "spherical"
-                ch.fail(_at(path, key), f"{kind}-joint key, not allowed on a slide joint "
-                                        f"(give position, velocity)")
-        position = ch.scalar(initial, "position", path, default=0.0)
-        velocity = ch.scalar(initial, "velocity", path, default=0.0)
-        if position is None or velocity is None:
+                kind = ("hinge" if joint_type == "slide" else "slide") if key in other else "spherical"
+                ch.fail(_at(path, key), f"{kind}-joint key, not allowed on a {joint_type} joint "
+                                        f"(give {', '.join(own)})")
+        q, rate = (ch.scalar(initial, key, path, default=0.0) for key in own)
+        if q is None or rate is None:
             return None
-        return Initial(position=position, velocity=velocity)
-    if joint_type == "hinge":
-        for key in EULER_KEYS + QUATERNION_KEYS + SLIDE_INITIAL_KEYS:
-            if key in initial:
-                kind = "slide" if key in SLIDE_INITIAL_KEYS else "spherical"
-                ch.fail(_at(path, key), f"{kind}-joint key, not allowed on a hinge joint "
-                                        f"(give angle, rate)")
-        angle = ch.scalar(initial, "angle", path, default=0.0)
-        rate = ch.scalar(initial, "rate", path, default=0.0)
-        if angle is None or rate is None:
-            return None
-        return Initial(angle=angle, rate=rate)
+        return (Initial(position=q, velocity=rate) if joint_type == "slide" else Initial(angle=q, rate=rate))
     # joint type invalid (already reported): still check the values' shapes
     for key in EULER_KEYS + ("angular_velocity",):
         ch.vector(initial, key, path, default=None)
