@@ -450,6 +450,14 @@ def _interrupted_line(argv) -> Callable[[str], str]:
                          "under its name")
 
 
+def _warnings_in_one_line(prog: str) -> None:
+    """A warning this command prints (an integrator's switch, a library's) in one line, its
+    kind and message, without the source line Python quotes by default."""
+    import warnings
+
+    warnings.formatwarning = lambda message, category, *_, **__: f"{prog}: {category.__name__}: {message}\n"
+
+
 def main(argv=None) -> int:
     # a signal during the imports and the parser's construction: one line and exit 1, as later
     exit_on_signals(_interrupted_line(argv), 1)
@@ -460,6 +468,7 @@ def main(argv=None) -> int:
         return 2
     if getattr(args, "duration", None) is not None and args.duration <= 0:
         ap.error("--duration must be > 0")
+    _warnings_in_one_line(f"gyro-sim {args.cmd}")
     from gyro_sim.safe_paths import OutputError, raise_on_signals
 
     try:

@@ -325,9 +325,7 @@ class Simulator:
     def initial_controls(self) -> np.ndarray:
         """The servos' controls from the start and after each reset, in `control_names` order:
         each servo's `control` (an imported model's keyframe `ctrl`; default 0); a copy."""
-        m = self.model
-        return np.array([m.scene.bodies[m.hinge_bodies[h]].joint.servo.control for h in m.servo_hinge]) \
-            if m.servo is not None else np.zeros(0)
+        return self.model.initial_controls
 
     @property
     def controls(self) -> np.ndarray:

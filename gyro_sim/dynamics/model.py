@@ -122,6 +122,14 @@ class Model:
         return self.actuators is not None and self.actuators.speed_dependent
 
     @property
+    def initial_controls(self) -> np.ndarray:
+        """The servos' controls from the start, in servo order (`servo_names`): each servo's
+        `control` (an imported model's keyframe `ctrl`; default 0)."""
+        if self.servo is None:
+            return np.zeros(0)
+        return np.array([self.scene.bodies[self.hinge_bodies[h]].joint.servo.control for h in self.servo_hinge])
+
+    @property
     def free(self) -> bool:
         return self.base_type == "free"
 

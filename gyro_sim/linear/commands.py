@@ -19,7 +19,8 @@ LINEARIZE_EXAMPLES = """examples:
 
 --state FILE: a YAML mapping of body names to the scene's `initial` keys, e.g.
   pendulum: {angle: 3.14159, rate: 0.0}
-The model is at the scene's initial state (or that one) with zero commands (docs/linearization.md)."""
+The model is at the scene's initial state (or that one) with zero commands and the servos' initial
+controls (a keyframe's ctrl) (docs/linearization.md)."""
 
 
 def register(sub, bench) -> None:
@@ -40,6 +41,9 @@ def register(sub, bench) -> None:
     p.add_argument("--rotor-angles", action="store_true", help="keep the rotor angles in the state (cyclic)")
     p.add_argument("--fd", action="store_true", help="central differences instead of the exact complex step")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    from gyro_sim.scene.commands import add_model_options
+
+    add_model_options(p)
     p.set_defaults(fn=cmd_linearize)
 
 
@@ -72,23 +76,26 @@ def cmd_linearize(args) -> int:
     from gyro_sim.dynamics.model import compile_model, initial_state
     from gyro_sim.linear.linearize import LinearizationError, linearize
     from gyro_sim.paths import find_scene
+    from gyro_sim.scene.commands import model_options
     from gyro_sim.scene.load import SceneError, load_scene
 
     if args.discrete is not None and not (args.discrete > 0 and math.isfinite(args.discrete)):
         return _fail(f"--discrete: the step must be a positive finite number of seconds, got {args.discrete}")
     try:
-        scene = load_scene(find_scene(args.scene), keyframe=args.keyframe)
+        scene = load_scene(find_scene(args.scene), **model_options(args))
         if args.state:
             scene = _with_state(scene, args.state)
     except (SceneError, FileNotFoundError, OSError) as exc:
-        return _fail(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+        return _fail(str(exc) or type(exc).__name__)  # every problem of the file, as `run` lists them
     start = time.perf_counter()
-    try:  # the scene's initial state, zero commands (what Simulator.linearize() gives after a reset)
+    try:  # the scene's initial state, zero commands, the servos' initial controls (a keyframe's
+        # ctrl): what Simulator.linearize() gives after a reset
         model = compile_model(scene)
         y = initial_state(model)
         spins = y[model.i_spin] if model.stateful else model.torque_p0
         lin = linearize(model, 0.0, y, spins, np.zeros(len(model.axis_names)), method="fd" if args.fd else "complex",
-                        chart=args.chart, rotor_angles=args.rotor_angles, frame_rate=args.frame_rate)
+                        chart=args.chart, rotor_angles=args.rotor_angles, frame_rate=args.frame_rate,
+                        controls=model.initial_controls)
         disc = lin.discrete(args.discrete, args.method) if args.discrete is not None else None
     except LinearizationError as exc:
         return _fail(str(exc))
