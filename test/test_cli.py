@@ -54,8 +54,8 @@ def test_bench_scaling_quick(tmp_path):
 def test_a_warning_is_one_line_naming_the_command(tmp_path):
     """The auto integrator's switch on a stiff scene is said in one line, its kind and message,
     without the source line Python quotes by default."""
-    r = subprocess.run([sys.executable, "-m", "gyro_sim.cli", "run", "--scene", "stiff_fast_rotor", "--duration", "0.2"],
-                       cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    r = subprocess.run([sys.executable, "-m", "gyro_sim.cli", "run", "--scene", "stiff_fast_rotor",
+                        "--duration", "0.2"], cwd=tmp_path, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr
     said = [line for line in r.stderr.splitlines() if "Warning" in line]
     assert said and all(line.startswith("gyro-sim run: StiffnessWarning: auto integrator:") for line in said)
