@@ -11,10 +11,13 @@ of mass and inertia are the ones MuJoCo simulates (also when it derives them fro
   hinge axis and whose inertia is symmetric about it (both to ``ROTOR_RTOL``): it becomes a
   torque rotor of its parent (eqs (18)-(19), (29)), actuated when a motor drives its joint
   (every rotor of a URDF model is);
-- the other bodies form the chain: a free joint on the first is the free base (with a
-  spherical joint at O^1), ball joints are spherical joints, hinges are hinges, slides slides
-  (the body keeps its parent's frame, moved along the axis);
-- a body with several hinge and slide joints j1..jm (MuJoCo applies them in order) is m chain
+- the other bodies form the tree, every parent before its children (depth first in MuJoCo's
+  order: a chain keeps its order, and a body's first child follows it); a body that is not its
+  parent's first child names its `parent` (``base`` for the world) and its joint point
+  `joint.at`; a free joint on the body on the world is the free base (with a spherical joint
+  at O^1; it carries the whole tree), ball joints are spherical joints, hinges are hinges,
+  slides slides (the body keeps its parent's frame, moved along the axis);
+- a body with several hinge and slide joints j1..jm (MuJoCo applies them in order) is m scene
   bodies: a massless frame at the anchor of each of j1..j(m-1), then the body on jm.
 
 Frames. A body's frame in the scene has its origin at its joint point O^k (the joint's
@@ -44,11 +47,11 @@ and frictionloss become its `friction` (viscous and
 Coulomb); a hinge's armature and its spring (stiffness, springref) its `armature` and
 `spring` (docs/models.md, "Armature and joint springs"); a model's affine actuators (position,
 velocity, general with an affine bias) its hinges' `servo`, motors too (docs/models.md, "Servo
-actuators"). Everything the equations of gyro_sim
-cannot express (tendons, equality constraints, a ball joint's damping, spring or
-armature, a variable gain, branching trees, an inertia outside the triangle inequality on a moving body
-unless ``balance_inertia``, ...) is refused, one line per element and every problem of the
-file in one refusal; contacts, joint limits and control ranges are ignored and listed in
+actuators"). Everything the equations of gyro_sim cannot express (tendons, equality
+constraints, a ball joint's damping, spring or armature, a variable gain, a free body beside
+other bodies on the world, an inertia outside the triangle inequality on a moving body unless
+``balance_inertia``, ...) is refused, one line per element and every problem of the file in
+one refusal; contacts, joint limits and control ranges are ignored and listed in
 :attr:`ImportedModel.notes`, as are missing meshes and textures that no moving body's mass
 needs. This module raises :class:`ModelError`; ``gyro_sim.scene.load.load_scene`` turns it
 into a ``SceneError``.
@@ -611,6 +614,8 @@ def _gazebo_sites(spec: Any, gazebo: GazeboSensors) -> list[tuple[GazeboImu, str
     return out
 
 
+#: the parent of a body hanging from the base (docs/scene-format.md)
+BASE_PARENT = "base"
 #: how much of a file's head is read to find its root element
 HEAD_BYTES = 65536
 _MARKUP = re.compile(r"<\?.*?\?>|<!--.*?-->|<!DOCTYPE[^>]*>", re.S)
@@ -724,14 +729,14 @@ class _Importer:
                 hint = ("; --lock its joints (" + ", ".join(repr(self.joint_name(j)) for j in joints)
                         + ") to weld them: the tendon goes with them")
             self.fail(f"tendon {name!r}" if name else f"tendon #{t}",
-                      "tendons are not supported (a chain of rigid bodies and rotors only)" + hint)
+                      "tendons are not supported (a tree of rigid bodies and rotors only)" + hint)
         if m.neq and not flags & int(dsbl.mjDSBL_EQUALITY):
             for e in range(m.neq):
                 name = self._name(obj.mjOBJ_EQUALITY, e)
                 coupled = [int(j) for j in (m.eq_obj1id[e], m.eq_obj2id[e]) if j >= 0]
                 lockable = int(m.eq_type[e]) == int(mj.mjtEq.mjEQ_JOINT) and all(self.lockable(j) for j in coupled)
                 self.fail(f"equality {name!r}" if name else f"equality #{e}",
-                          "equality constraints are not supported (an open chain only)"
+                          "equality constraints are not supported (an open tree only)"
                           + ("; --lock the joints it couples to weld them" if lockable else ""))
         for f in range(m.nflex):
             name = self._name(obj.mjOBJ_FLEX, f)
@@ -975,41 +980,41 @@ class _Importer:
         axial = float(a @ r.inertia @ a)
         return axial, 0.5 * (float(np.trace(r.inertia)) - axial)
 
-    def chain(self, groups: dict[int, _Group]) -> tuple[list[_Group], dict[int, list[_Group]]]:
-        """The chain from the world outwards, and each chain body's rotors."""
+    def tree(self, groups: dict[int, _Group]) -> tuple[list[_Group], list[int], dict[int, list[_Group]]]:
+        """The scene's bodies from the world outwards, every parent before its children (depth
+        first, children in MuJoCo's order, so that a chain stays in its order and a body's first
+        child follows it), each one's parent (its index in the list; -1: the base), and each
+        body's rotors. A body with several joints is its massless frames, then itself."""
         top = [g for g in groups.values() if g.parent == 0]
         if not top:
             self.fail("worldbody", "no body has a joint: nothing moves")
             self.raise_errors()
-        elif len(top) > 1:
-            self.fail("worldbody", f"{len(top)} moving bodies hang from the world ("
-                      + ", ".join(repr(self.body_name(g.root)) for g in top)
-                      + "); one chain only (branching trees are not supported"
-                      + self.weld_hint(groups, top, "chains") + ")")
-        chain, rotors = [top[0]], {}
-        while True:
-            current = chain[-1]
-            kids = [groups[c] for c in current.children]
-            problems = {c.root: self.rotor_problem(c) for c in kids}
-            rotors[current.root] = [c for c in kids if problems[c.root] is None]
-            rest = [c for c in kids if problems[c.root] is not None]
-            if len(rest) > 1:
-                why = "; ".join(f"{self.body(c.root)} is no rotor: {problems[c.root]}"
-                                for c in rest if c.kind == "hinge")
-                self.fail(self.body(current.root),
-                          f"{len(rest)} moving children ("
-                          + ", ".join(repr(self.body_name(c.root)) for c in rest)
-                          + "): a chain only, branching trees are not supported"
-                          + (f" ({why})" if why else "") + self.weld_hint(groups, rest, "branches"))
-                break
-            if not rest:
-                break
-            chain.append(rest[0])
-        for g in chain[1:]:
-            if g.kind == "free":
-                self.fail(self.joint(g.joint), "a free joint only on the chain's first body")
-        chain = [f for g in chain for f in self.frames.get(g.root, []) + [g]]
-        return chain, rotors
+        free = [g for g in top if g.kind == "free"]
+        if free and len(top) > 1:
+            others = [g for g in top if g is not free[0]]
+            self.fail("worldbody", f"{len(others)} moving {'body hangs' if len(others) == 1 else 'bodies hang'} "
+                      f"from the world (" + ", ".join(repr(self.body_name(g.root)) for g in others)
+                      + f") beside the free {self.body(free[0].root)}: a free base carries the whole tree"
+                      + self.weld_hint(groups, others, "weld them"))
+        order: list[_Group] = []
+        parents: list[int] = []
+        rotors: dict[int, list[_Group]] = {}
+        todo = [(g, -1) for g in reversed(top)]
+        while todo:  # depth first, without recursion (a chain may be long)
+            g, parent = todo.pop()
+            if g.kind == "free" and parent >= 0:
+                self.fail(self.joint(g.joint), "a free joint only on a body hanging from the world")
+            for f in self.frames.get(g.root, []):
+                order.append(f)
+                parents.append(parent)
+                parent = len(order) - 1
+            order.append(g)
+            parents.append(parent)
+            kids = [groups[c] for c in g.children]
+            rotors[g.root] = [c for c in kids if self.rotor_problem(c) is None]
+            here = len(order) - 1
+            todo += [(c, here) for c in reversed(kids) if c not in rotors[g.root]]
+        return order, parents, rotors
 
     def lockable(self, j: int) -> bool:
         """Whether --lock welds joint `j` (_lock_joints): a named hinge or slide."""
@@ -1017,8 +1022,8 @@ class _Importer:
         return bool(self.joint_name(j)) and int(m.jnt_type[j]) in (int(jt.mjJNT_HINGE), int(jt.mjJNT_SLIDE))
 
     def weld_hint(self, groups: dict[int, _Group], parts: list[_Group], what: str) -> str:
-        """How to weld all but one of `parts` (subtrees) with --lock, naming their joints; or
-        why --lock cannot (it is never suggested where it would be refused)."""
+        """How to weld the subtrees `parts` with --lock (`what`: the phrase it follows), naming
+        their joints; or why --lock cannot (it is never suggested where it would be refused)."""
         m = self.m
         joints: list[int] = []
         todo = list(parts)
@@ -1034,7 +1039,7 @@ class _Importer:
                     f"{' ...' if len(stuck) > 5 else ''} (only named hinge and slide joints are locked)")
         names = [self.joint_name(j) for j in joints]
         shown = ", ".join(repr(n) for n in names[:8]) + (" ..." if len(names) > 8 else "")
-        return f"; weld all {what} but one with --lock JOINT (their joints: {shown})"
+        return f"; {what} with --lock JOINT (their joints: {shown})"
 
     def scene_name(self, g: _Group, as_hinge: bool) -> str:
         """The scene name of a group (module docstring): joint first for hinges, slides and rotors;
@@ -1060,7 +1065,7 @@ class _Importer:
         # the structure is checked too before anything is refused: one refusal says it all
         groups = self.groups()
         self.measure(groups)
-        chain, rotors = self.chain(groups)
+        chain, parents, rotors = self.tree(groups)
         self.raise_errors()
         key, key_name = self.keyframe(keyframe)
         self.raise_errors()
@@ -1071,12 +1076,19 @@ class _Importer:
         actuated = {c.axis for c in commands}
         names, where, bodies = [], {}, []
         frames: dict[int, tuple[str, np.ndarray, np.ndarray]] = {}  # group root -> name, G, O^k
-        G_parent = np.eye(3)
+        scene_names, rotations = [], []  # by body: its scene name, its frame's rotation G at the reference pose
+        first_child = {p: k for k, p in reversed(list(enumerate(parents)))}  # body (-1: the base) -> its first child
         for k, g in enumerate(chain):
             name = self.scene_name(g, g.kind in ("hinge", "slide"))
+            p = parents[k]
+            G_parent = rotations[p] if p >= 0 else np.eye(3)
             G = self.R_ref[g.root] if g.kind in ("free", "ball") else G_parent
             frames[g.root] = (name, G, g.origin)
+            scene_names.append(name)
+            rotations.append(G)
             body: dict[str, Any] = {"name": name}
+            if p != k - 1:  # not its parent's first child, which follows it (docs/scene-format.md, trees)
+                body["parent"] = scene_names[p] if p >= 0 else BASE_PARENT
             if g.kind in ("hinge", "slide"):  # a slide keeps its parent's frame, as a hinge at angle 0
                 body["joint"] = {"type": g.kind, "axis": _vec(G_parent.T @ g.axis)}
                 if g.joint in self.friction:
@@ -1090,7 +1102,7 @@ class _Importer:
                 elif g.joint in self.armature:  # the geared motor the armature reflects, on the parent
                     body["joint"]["motor"] = {"inertia": _tidy(self.armature[g.joint] / self.gear ** 2),
                                               "gear": _tidy(self.gear)}
-                    on = ("on the base (which does not turn: exactly the armature)" if k == 0 else
+                    on = ("on the base (which does not turn: exactly the armature)" if p < 0 else
                           "on its parent (its rotor's axial inertia joins the parent's)")
                     self.notes.append(f"joint {self.joint_name(g.joint)!r}: armature "
                                       f"{self.armature[g.joint]:g} as a geared motor of gear {self.gear:g} {on}")
@@ -1100,11 +1112,15 @@ class _Importer:
                     body["joint"]["servo"] = self.servo[g.joint]
             else:
                 body["joint"] = {"type": "spherical"}
+            if p != k - 1:  # its joint point O^k in the parent's frame, from the parent's O (after the axis)
+                at = _vec(G_parent.T @ (g.origin - (chain[p].origin if p >= 0 else chain[0].origin)))
+                joint = list(body["joint"].items())
+                body["joint"] = dict(joint[:2] + [("at", at)] + joint[2:])
             body["mass"] = _tidy(g.mass)
             body["com"] = _vec(G.T @ (g.com - g.origin))
             body["inertia_com"] = _mat(G.T @ g.inertia @ G)
-            if k + 1 < len(chain):
-                body["next_joint"] = _vec(G.T @ (chain[k + 1].origin - g.origin))
+            if k in first_child:  # to its first child's joint point; the others say theirs (joint.at)
+                body["next_joint"] = _vec(G.T @ (chain[first_child[k]].origin - g.origin))
             element = f"{self.body(g.root)} ({g.kind} {self.joint(g.joint, bare=True)})"
             if g.frame:
                 element = element[:-1] + ", a massless frame)"
@@ -1135,7 +1151,6 @@ class _Importer:
                 body["rotors"] = body_rotors
             body["initial"] = state["frames"][g.joint] if g.frame else state["initial"][g.root]
             bodies.append(body)
-            G_parent = G
         first = chain[0]
         if first.kind == "free":
             base = {"type": "free", "position": _vec(state["position"]),
