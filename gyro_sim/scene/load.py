@@ -759,6 +759,9 @@ def _tree(ch: _Checker, value: list, base_type: Any) -> tuple[list[int], list[bo
         if parent >= 0:
             needs_next[parent] = bool(needs_next[parent]) or not has_at[index]
     on_base = [index for index, parent in enumerate(parents) if parent < 0]
+    if base_type == "free" and on_base and has_at[on_base[0]]:
+        ch.fail(f"bodies[{on_base[0]}].joint.at", "not allowed on a free base's body (its joint point is "
+                                                  "the base's position, the state r0)")
     if base_type == "free" and len(on_base) > 1:
         ch.fail(f"bodies[{on_base[1]}].parent", f"a free base carries one body (bodies[{on_base[0]}] "
                                                 "already hangs from it); hang this one from a body")
