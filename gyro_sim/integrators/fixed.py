@@ -123,8 +123,9 @@ def implicit_for(model) -> str:
     """The implicit rung of "fixed" for a chain's model (None: a system that is not a chain).
     A model whose actuators are states (friction, max_speed: `Model.stateful`) gets gauss4 on
     its own state: the canonical equations of gauss4s have no place for them, nor for servos
-    and geared motors."""
-    chain = model is not None and not model.stateful and model.servo is None and model.motor is None
+    and geared motors, nor for trees (bodies with several children)."""
+    chain = (model is not None and not model.stateful and model.servo is None and model.motor is None
+             and model.chain)
     return IMPLICIT if chain and model.n <= IMPLICIT_MAX_BODIES else IMPLICIT_PLAIN
 #: "fixed": the last resort of a call that rk4 and the implicit method both fail (adaptive,
 #: error-controlled)
