@@ -639,7 +639,7 @@ def test_import_refuses_bad_input_with_exit_2(tmp_path, capsys):
     bad_model = write(tmp_path, "bad.xml", REFUSED["tendon"][0])
     assert main(["import", str(bad_model), "-o", str(tmp_path / "a.yaml")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == [f"gyro-sim import: {bad_model}: tendon 'cable': tendons are not supported (a chain of "
+    assert err == [f"gyro-sim import: {bad_model}: tendon 'cable': tendons are not supported (a tree of "
                    "rigid bodies and rotors only); --lock its joints ('pivot') to weld them: the tendon goes with them"]
     assert main(["import", str(ARM), "-o", str(tmp_path / "b.yaml"), "--keyframe", "nope"]) == 2
     assert "keyframe 'nope': no such keyframe" in capsys.readouterr().err

@@ -3,15 +3,20 @@ children, `parent` and `joint.at` written where a body is not its parent's first
 with several joints as massless frames, a free base carrying several chains, several chains on
 the world; `--lock` welding a whole branch.
 
-The judge of the structure is MuJoCo's own kinematics: the tree's forward kinematics is written
-out here from the imported scene mapping alone (each body's frame from its parent's, its joint
-point `joint.at` or the parent's `next_joint`, its hinge turned or its slide moved by MuJoCo's
-qpos), and every MuJoCo body (welded ones included) must sit where its scene body carries it,
-at qpos0 and at random qpos, to POSE_ATOL. Models: Gymnasium 1.4.0's ant (a free torso with
-four legs), walker2d (both legs), reacher and pusher as published (chains on the world),
-robosuite 1.5.2's baxter (two arms on a static torso), dm_control's cheetah (a planar root and
-two legs) and humanoid (a free torso, arms, legs, hips of three hinges), and two arms written
-here (test/scene/models/, licences there).
+MuJoCo is the judge. The structure: the tree's forward kinematics is written out here from the
+imported scene mapping alone (each body's frame from its parent's, its joint point `joint.at`
+or the parent's `next_joint`, its hinge turned or its slide moved by MuJoCo's qpos), and every
+MuJoCo body (welded ones included) must sit where its scene body carries it, and every joint's
+anchor at its body's O^k, at qpos0 and at random qpos, to POSE_ATOL. The dynamics (contacts
+and constraints off in MuJoCo, as they are ignored here): MuJoCo's qacc at random states
+(hinges and slides), an IMU on every moving body reading as MuJoCo's sensors (ball and free
+joints), and the motion against MuJoCo's RK4 (2 s of joint positions and velocities; 0.5 s of
+the IMUs' readings). Models: Gymnasium 1.4.0's ant (free, and with its free root deleted: a
+fixed-base ant, its four legs chains on the world), walker2d (both legs), reacher and pusher as
+published (their targets chains on the world), robosuite 1.5.2's baxter (two arms on a static
+torso, armature on every joint), dm_control's cheetah (a planar root and two legs) and humanoid
+(a free torso, arms, legs, hips of three hinges), and two arms written here
+(test/scene/models/, licences there).
 """
 from __future__ import annotations
 
@@ -23,8 +28,12 @@ import pytest
 mujoco = pytest.importorskip("mujoco", reason="MuJoCo is the optional extra [models]")
 
 from gyro_sim.dynamics.rotations import axis_angle_matrix, quat_to_matrix
+from gyro_sim.scene.load import load_scene
 from gyro_sim.scene.mjcf import ModelError, caught_warnings, import_model
+from test.scene import test_model_sensors
 from test.scene.test_model_import import write
+from test.scene.test_model_multijoint import MULTIJOINT_AGREEMENT, QACC_RTOL, held_accelerations, moves_as_in_mujoco
+from test.scene.test_model_sensors import READING_RTOL, deviation, gyro_readings, mujoco_readings, with_imu_sites
 
 MODELS = Path(__file__).parent / "models"
 GYMNASIUM = MODELS / "gymnasium"
@@ -346,3 +355,145 @@ def test_a_free_base_beside_another_chain_on_the_world_is_refused_naming_it(tmp_
         f"{path}: worldbody: 1 moving body hangs from the world ('pole') beside the free body 'torso': a free "
         "base carries the whole tree; weld them with --lock JOINT (their joints: 'pole', 'flag')"]
     import_model(path, lock=["pole", "flag"])  # and the lock it suggests makes it one
+
+
+# ------------------------------------------------------------------ the dynamics against MuJoCo
+def judged_copy(path: Path, tmp_path: Path, delete: tuple[str, ...] = ()) -> Path:
+    """`path` as MuJoCo writes it back, its meshes and their geoms left out (the import leaves
+    them out: robosuite's files come without them), the joints `delete` deleted (the ant's free
+    root: a fixed-base ant, its torso part of the base) and every body named (body<i>), so that
+    a site can be put on it."""
+    with caught_warnings(mujoco):
+        spec = mujoco.MjSpec.from_file(str(path))
+    for mesh in list(spec.meshes):
+        for geom in [g for g in spec.geoms if g.meshname == mesh.name]:
+            spec.delete(geom)
+        spec.delete(mesh)
+    for name in delete:
+        spec.delete(spec.joint(name))
+    for i, body in enumerate(spec.bodies):
+        if not body.name:
+            body.name = f"body{i}"
+    with caught_warnings(mujoco):
+        spec.compile()
+        return write(tmp_path, f"judged_{path.name}", spec.to_xml())
+
+
+#: models of hinges and slides only: the file (a function of tmp_path), as published unless said
+HINGED = {
+    "ant, fixed base (its free root deleted)": lambda tmp: judged_copy(GYMNASIUM / "ant.xml", tmp, ("root",)),
+    "walker2d": lambda tmp: GYMNASIUM / "walker2d.xml",
+    "reacher": lambda tmp: GYMNASIUM / "reacher.xml",
+    "pusher": lambda tmp: GYMNASIUM / "pusher_v5.xml",
+    "baxter": lambda tmp: judged_copy(BAXTER, tmp),
+    "dm_control cheetah": lambda tmp: DMC / "cheetah.xml",
+}
+
+
+@pytest.mark.parametrize("name", list(HINGED))
+def test_a_tree_of_hinges_and_slides_accelerates_as_in_mujoco(name, tmp_path):
+    """MuJoCo's qacc (mj_forward, contacts and constraints off: armature, damping and gravity
+    the file's) at random states under random generalised forces."""
+    worst = held_accelerations(HINGED[name](tmp_path), {})
+    print(f"{name}: accelerations within {worst:.2g} (relative) of MuJoCo's")
+    assert worst <= QACC_RTOL
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", list(HINGED))
+def test_a_tree_of_hinges_and_slides_moves_as_in_mujoco(name, tmp_path):
+    """Over 2 s under a constant generalised force on every joint (alternating +-0.3 N m or N),
+    MuJoCo's RK4 at 1e-4 s against dop853 at 1e-12: every joint's position and velocity."""
+    path = HINGED[name](tmp_path)
+    names = [b.name for b in load_scene(path).bodies]
+    worst, moved = moves_as_in_mujoco(path, (), {n: 0.3 * (-1) ** i for i, n in enumerate(names)})
+    print(f"{name}: positions and velocities within {worst:.2g} of MuJoCo's over 2 s (moved {moved:.2g})")
+    assert worst <= MULTIJOINT_AGREEMENT and moved > 0.1
+
+
+def probed(path: Path, tmp_path: Path, states: int = 2) -> tuple[Path, list[str]]:
+    """A copy of `path` with a site and MuJoCo's four IMU sensors on every moving body but the
+    rotors (no bodies of the scene), at a random pose in it, and `states` random keyframes; the
+    sites' names."""
+    copy = judged_copy(path, tmp_path)
+    m = mujoco.MjModel.from_xml_path(str(copy))
+    rotors = {r["name"] for b in import_model(copy).mapping["bodies"] for r in b.get("rotors", [])}
+    bodies = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, b) for b in range(1, m.nbody) if m.body_weldid[b]
+              and mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, int(m.body_jntadr[m.body_weldid[b]])) not in rotors]
+    return with_imu_sites(copy, bodies, np.random.default_rng(11), tmp_path, states), [f"imu_{b}" for b in bodies]
+
+
+#: MuJoCo's RK4 step judging the motion of the trees with spherical joints (its own error over
+#: 0.5 s: 2e-9 at 1e-4 s on the two arms and the pole, 4e-11 at this step)
+MOTION_STEP = 2.5e-5
+#: models with ball and free joints: the file (a function of tmp_path)
+SPHERICAL = {
+    "ant": lambda tmp: GYMNASIUM / "ant.xml",
+    "dm_control humanoid": lambda tmp: DMC / "humanoid.xml",
+    "two arms": two_arms,
+    "two arms, free": lambda tmp: two_arms(tmp, FREE),
+    "two arms and a pole on the world": lambda tmp: two_arms(tmp, beside=POLE),
+}
+
+
+@pytest.mark.parametrize("name", list(SPHERICAL))
+def test_a_tree_with_ball_and_free_joints_accelerates_as_in_mujoco(name, tmp_path):
+    """An IMU on every moving body reads as MuJoCo's gyro, accelerometer, framequat and
+    framelinacc (the site's acceleration: every joint's acceleration enters it) at random states."""
+    path, sites = probed(SPHERICAL[name](tmp_path), tmp_path)
+    ctrl = np.zeros(mujoco.MjModel.from_xml_path(str(path)).nu)
+    worst = max(deviation(mujoco_readings(path, ctrl, key=key), gyro_readings(path, key, ctrl), sites)
+                for key in ("probe0", "probe1"))
+    print(f"{name}: {len(sites)} IMUs within {worst:.2g} (relative) of MuJoCo's sensors")
+    assert worst <= READING_RTOL
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", list(SPHERICAL))
+def test_a_tree_with_ball_and_free_joints_moves_as_in_mujoco(name, tmp_path, monkeypatch):
+    """From a random state, 0.5 s of MuJoCo's RK4 at MOTION_STEP against dop853 at 1e-12: every
+    IMU's readings (the bodies' orientations, angular velocities and accelerations) after it."""
+    monkeypatch.setattr(test_model_sensors, "MUJOCO_STEP", MOTION_STEP)
+    path, sites = probed(SPHERICAL[name](tmp_path), tmp_path, states=1)
+    ctrl = np.zeros(mujoco.MjModel.from_xml_path(str(path)).nu)
+    worst = deviation(mujoco_readings(path, ctrl, advance=0.5, key="probe0"),
+                      gyro_readings(path, "probe0", ctrl, advance=0.5), sites)
+    print(f"{name}: {len(sites)} IMUs within {worst:.2g} of MuJoCo's sensors after 0.5 s")
+    assert worst <= MULTIJOINT_AGREEMENT
+
+
+def test_a_whole_branch_is_locked_as_mujoco_holds_it(tmp_path):
+    """Baxter's left arm welded at a pose (seven hinges): the right arm accelerates as MuJoCo's
+    with the left arm's joints held there, and the scene is a chain again."""
+    path = judged_copy(BAXTER, tmp_path)
+    left = dict(zip([f"left_{j}" for j in ("s0", "s1", "e0", "e1", "w0", "w1", "w2")],
+                    (0.4, -0.6, 1.1, 0.9, -0.3, 0.7, 1.5)))
+    mapping = import_model(path, lock=[f"{k}={v}" for k, v in left.items()]).mapping
+    assert [b["name"] for b in mapping["bodies"]] == [f"right_{j}" for j in ("s0", "s1", "e0", "e1", "w0", "w1", "w2")]
+    assert not any("parent" in b or "at" in b["joint"] for b in mapping["bodies"])
+    worst = held_accelerations(path, left)
+    print(f"baxter, left arm locked: accelerations within {worst:.2g} (relative) of MuJoCo's")
+    assert worst <= QACC_RTOL
+
+
+def test_the_base_is_named_as_scene_files_name_it():
+    from gyro_sim.scene import load, mjcf
+
+    assert mjcf.BASE_PARENT == load.BASE_PARENT
+
+
+def test_gyro_sim_import_writes_the_tree_as_a_scene_file(tmp_path):
+    """`gyro-sim import` writes `parent` and `joint.at`; the file loads into the same tree."""
+    from gyro_sim.cli import main
+
+    source = two_arms(tmp_path, beside=POLE)
+    out = tmp_path / "two_arms.yaml"
+    assert main(["import", str(source), "-o", str(out)]) == 0
+    text = out.read_text()
+    assert "parent: waist" in text and "parent: base" in text and "at: [" in text
+    written, direct = load_scene(out), load_scene(source)
+    parents = [-1, 0, 1, 2, 3, 0, 5, 6, 0, -1, 9]
+    assert [b.parent for b in written.bodies] == [b.parent for b in direct.bodies] == parents
+    for a, b in zip(written.bodies, direct.bodies):
+        assert (a.joint.at is None) == (b.joint.at is None)
+        assert a.joint.at is None or np.array_equal(a.joint.at, b.joint.at)
