@@ -699,7 +699,8 @@ def _bodies(ch: _Checker, value: Any, base_type: Any) -> tuple[Body, ...] | None
     parents, needs_next = _tree(ch, value, base_type)
     bodies = []
     for index, item in enumerate(value):
-        bodies.append(_body(ch, item, f"bodies[{index}]", needs_next[index], names, parents[index]))
+        bodies.append(_body(ch, item, f"bodies[{index}]", needs_next[index], names, parents[index],
+                            index == len(value) - 1))
     first = value[0]
     first_joint = first.get("joint") if isinstance(first, Mapping) else None
     if base_type == "free" and isinstance(first_joint, Mapping) and \
@@ -796,7 +797,7 @@ def _check_names(ch: _Checker, names: list[tuple[str, str, str]]) -> None:
 
 
 def _body(ch: _Checker, value: Any, path: str, needs_next: bool | None,
-          names: list[tuple[str, str, str]], parent: int) -> Body | None:
+          names: list[tuple[str, str, str]], parent: int, last: bool) -> Body | None:
     body = ch.mapping(value, path, BODY_KEYS, required=("name", "joint", "mass"))
     if body is None:
         return None
@@ -812,10 +813,11 @@ def _body(ch: _Checker, value: Any, path: str, needs_next: bool | None,
 
     next_joint = ch.vector(body, "next_joint", path, default=None)
     if needs_next is None and body.get("next_joint") is not None:
-        ch.fail(_at(path, "next_joint"), "not allowed on a body without children (there is no next joint)")
+        where = "the last body" if last else "a body without children"
+        ch.fail(_at(path, "next_joint"), f"not allowed on {where} (there is no next joint)")
     elif needs_next and "next_joint" not in body:
-        ch.fail(_at(path, "next_joint"), "required on every body with a child that gives no joint.at "
-                                         "(s^k, from O^k to O^{k+1})")
+        ch.fail(_at(path, "next_joint"), "required on every body but the last (s^k, from O^k to O^{k+1}), "
+                                         "unless each of its children gives its joint.at")
     elif needs_next and body["next_joint"] is None:
         ch.fail(_at(path, "next_joint"), "required, got null")
 
