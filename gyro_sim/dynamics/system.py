@@ -161,8 +161,6 @@ class FastChainODE:
     def __init__(self, model: Model):
         if not fast.available():
             raise ImportError("FastChainODE needs numba; use ChainODE")
-        if not model.chain:
-            raise ValueError("FastChainODE runs chains; a tree runs on ChainODE")
         self.model = model
         self._ref = ChainODE(model)  # the numpy path: outputs; also keeps the held inputs
         self.data = self._ref.data
@@ -370,11 +368,8 @@ def make_system(model: Model, backend: str = "auto") -> ChainODE | FastChainODE:
     """
     if backend not in BACKENDS:
         raise ValueError(f"unknown backend {backend!r}; valid: {', '.join(BACKENDS)}")
-    if backend == "numpy" or (backend == "auto" and (not fast.available() or not model.chain)):
-        return ChainODE(model)  # a tree runs on the numpy reference (docs/theory.md section 11)
-    if not model.chain:
-        raise ValueError("the numba backend runs chains; a tree (a body's parent other than the body "
-                         "before it) runs on backend 'numpy' or 'auto'")
+    if backend == "numpy" or (backend == "auto" and not fast.available()):
+        return ChainODE(model)
     if not fast.available():
         raise ImportError("the numba backend needs numba; use backend 'numpy' or 'auto'")
     try:
