@@ -166,7 +166,7 @@ def test_a_model_with_armature_moves_as_in_mujoco(name, tmp_path):
 
 def test_as_published_the_fish_is_refused_for_what_it_needs_not_for_its_servos():
     """dm_control's fish: its position actuators are the hinges' servos now; the one refusal
-    names what the fish still needs (fluid forces, tendons, branches) and, of its actuators,
+    names what the fish still needs (fluid forces, tendons) and, of its actuators,
     only the one on a tendon."""
     with pytest.raises(SceneError) as info:
         load_scene(FISH)

@@ -387,15 +387,17 @@ HINGED = {
     "pusher": lambda tmp: GYMNASIUM / "pusher_v5.xml",
     "baxter": lambda tmp: judged_copy(BAXTER, tmp),
     "dm_control cheetah": lambda tmp: DMC / "cheetah.xml",
+    "dm_control finger": lambda tmp: DMC / "finger.xml",
 }
 
 
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
 @pytest.mark.parametrize("name", list(HINGED))
-def test_a_tree_of_hinges_and_slides_accelerates_as_in_mujoco(name, tmp_path):
+def test_a_tree_of_hinges_and_slides_accelerates_as_in_mujoco(name, backend, tmp_path):
     """MuJoCo's qacc (mj_forward, contacts and constraints off: armature, damping and gravity
-    the file's) at random states under random generalised forces."""
-    worst = held_accelerations(HINGED[name](tmp_path), {})
-    print(f"{name}: accelerations within {worst:.2g} (relative) of MuJoCo's")
+    the file's) at random states under random generalised forces, on both backends."""
+    worst = held_accelerations(HINGED[name](tmp_path), {}, backend=backend)
+    print(f"{name} ({backend}): accelerations within {worst:.2g} (relative) of MuJoCo's")
     assert worst <= QACC_RTOL
 
 
