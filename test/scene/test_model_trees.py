@@ -358,13 +358,17 @@ def test_a_free_base_beside_another_chain_on_the_world_is_refused_naming_it(tmp_
 
 
 # ------------------------------------------------------------------ the dynamics against MuJoCo
-def judged_copy(path: Path, tmp_path: Path, delete: tuple[str, ...] = ()) -> Path:
+def judged_copy(path: Path, tmp_path: Path, delete: tuple[str, ...] = (), dry_friction: bool = True) -> Path:
     """`path` as MuJoCo writes it back, its meshes and their geoms left out (the import leaves
     them out: robosuite's files come without them), the joints `delete` deleted (the ant's free
     root: a fixed-base ant, its torso part of the base) and every body named (body<i>), so that
-    a site can be put on it."""
+    a site can be put on it. Without `dry_friction` the joints' frictionloss is taken out
+    (MuJoCo's is a constraint, off in the judge, where gyro_sim's Coulomb friction acts: judged
+    in test/scene/test_model_friction.py)."""
     with caught_warnings(mujoco):
         spec = mujoco.MjSpec.from_file(str(path))
+    for joint in spec.joints if not dry_friction else ():
+        joint.frictionloss = 0.0
     for mesh in list(spec.meshes):
         for geom in [g for g in spec.geoms if g.meshname == mesh.name]:
             spec.delete(geom)
@@ -387,7 +391,8 @@ HINGED = {
     "pusher": lambda tmp: GYMNASIUM / "pusher_v5.xml",
     "baxter": lambda tmp: judged_copy(BAXTER, tmp),
     "dm_control cheetah": lambda tmp: DMC / "cheetah.xml",
-    "dm_control finger": lambda tmp: DMC / "finger.xml",
+    "dm_control finger, its spinner's dry friction out": lambda tmp: judged_copy(DMC / "finger.xml", tmp,
+                                                                                 dry_friction=False),
 }
 
 
