@@ -32,6 +32,7 @@ from gyro_sim.scene.load import load_scene
 from gyro_sim.scene.mjcf import ModelError, caught_warnings, import_model
 from test.scene import test_model_sensors
 from test.scene.test_model_import import write
+from test.scene.test_model_lock import GRIPPER_URDF
 from test.scene.test_model_multijoint import MULTIJOINT_AGREEMENT, QACC_RTOL, held_accelerations, moves_as_in_mujoco
 from test.scene.test_model_sensors import READING_RTOL, deviation, gyro_readings, mujoco_readings, with_imu_sites
 
@@ -504,3 +505,15 @@ def test_gyro_sim_import_writes_the_tree_as_a_scene_file(tmp_path):
     for a, b in zip(written.bodies, direct.bodies):
         assert (a.joint.at is None) == (b.joint.at is None)
         assert a.joint.at is None or np.array_equal(a.joint.at, b.joint.at)
+
+
+def test_a_urdf_tree_is_imported_and_accelerates_as_in_mujoco(tmp_path):
+    """A URDF arm whose hand (on a fixed joint) carries two prismatic fingers, the mimic taken
+    out: the fingers branch from the arm's last body (the hand merged into it)."""
+    path = write(tmp_path, "gripper.urdf", GRIPPER_URDF.replace('<mimic joint="finger_joint1"/>', ""))
+    bodies = import_model(path).mapping["bodies"]
+    assert [(b["name"], b.get("parent")) for b in bodies] == [("joint1", None), ("joint2", None),
+                                                              ("finger_joint1", None), ("finger_joint2", "joint2")]
+    worst = held_accelerations(path, {})
+    print(f"URDF gripper, fingers free: accelerations within {worst:.2g} (relative) of MuJoCo's")
+    assert worst <= QACC_RTOL
