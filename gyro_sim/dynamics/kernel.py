@@ -604,14 +604,14 @@ def body_velocities(t, y, model, s_w, e_w, w, vO, c):
             # v(O^1): free base (a state), moving base (a W cos(W t)) or fixed
             if base_type == BASE_FREE:
                 for a in range(3):
-                    vO[0, a] = y[i_vel + a]
+                    vO[k, a] = y[i_vel + a]
             elif base_type == BASE_MOVING:
                 cw = base_omega * math.cos(base_omega * t)
                 for a in range(3):
-                    vO[0, a] = base_amplitude[a] * cw
+                    vO[k, a] = base_amplitude[a] * cw
             else:
                 for a in range(3):
-                    vO[0, a] = 0.0
+                    vO[k, a] = 0.0
         else:
             # (34): v0^k = v0^{k-1} + w^{k-1} x s^{k-1}
             s0, s1, s2 = s_w[ko, 0], s_w[ko, 1], s_w[ko, 2]

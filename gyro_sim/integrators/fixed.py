@@ -294,8 +294,15 @@ def body_rate_bound(model, y: np.ndarray) -> float:
     hinge = np.zeros(n)
     if len(model.col_hinge):
         hinge[model.hinge_bodies] = np.abs(u[model.col_hinge])
-    w = np.cumsum(vec, axis=0)
-    return float((np.sqrt((w * w).sum(axis=1)) + np.cumsum(hinge)).max())
+    if model.chain:
+        w, path = np.cumsum(vec, axis=0), np.cumsum(hinge)
+    else:  # a tree: summed along the path from the base to each body
+        w, path = vec.copy(), hinge.copy()
+        for k, q in enumerate(model.parent):
+            if q >= 0:
+                w[k] += w[q]
+                path[k] += path[q]
+    return float((np.sqrt((w * w).sum(axis=1)) + path).max())
 
 
 def substeps_for(h: float, omega: float, now: int = 1) -> int:

@@ -12,6 +12,8 @@ import pytest
 from gyro_sim import load_scene
 from gyro_sim.dynamics import kernel as fast
 from gyro_sim.dynamics import reference as dyn
+from gyro_sim.dynamics.invariants import invariants
+from gyro_sim.dynamics.outputs import INV_ENERGY
 from gyro_sim.dynamics.model import compile_model, initial_state
 from gyro_sim.dynamics.system import ChainODE, FastChainODE
 
@@ -110,6 +112,10 @@ def test_tree_rhs_and_outputs_equal_the_reference(seed, base, options):
         assert np.abs(out["wrench_moment"] - moment).max() <= tol * scale_m
         np.testing.assert_allclose(out["O"], ref.data.O, rtol=0, atol=1e-13)
         np.testing.assert_allclose(out["w"], ref.data.w, rtol=0, atol=1e-12 * max(1.0, np.abs(ref.data.w).max()))
+        np.testing.assert_allclose(out["vO"], ref.data.vO, rtol=0, atol=1e-12 * max(1.0, np.abs(ref.data.vO).max()))
+        inv = out["inv"]
+        expected = invariants(model, ref.data, ref.spins(t), t, y)
+        assert abs(inv[INV_ENERGY] - expected["energy"]) <= 1e-12 * max(1.0, abs(expected["energy"]))
 
 
 @pytest.mark.parametrize("seed,base", [(1, "fixed"), (2, "free"), (4, "moving")])
