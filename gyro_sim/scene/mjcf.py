@@ -314,9 +314,9 @@ def _lock_joints(mujoco: Any, spec: Any, m0: Any, path: str, locks: dict[str, fl
             named = [mujoco.mj_id2name(m0, obj.mjOBJ_JOINT, i) for i in range(m0.njnt)]
             errors.append(f"{path}: lock: no joint named {name!r} (the model's: "
                           + ", ".join(repr(n) for n in named if n) + ")")
-        elif int(m0.jnt_type[j]) not in (int(jt.mjJNT_HINGE), int(jt.mjJNT_SLIDE)):
-            errors.append(f"{path}: lock: joint {name!r} is a {('free', 'ball')[int(m0.jnt_type[j])]} "
-                          "joint; only hinge and slide joints are locked")
+        elif int(m0.jnt_type[j]) in (int(jt.mjJNT_FREE), int(jt.mjJNT_BALL)) and locks[name] is not None:
+            errors.append(f"{path}: lock: joint {name!r} is a {('free', 'ball')[int(m0.jnt_type[j])]} joint: it "
+                          "is locked where it is (its keyframe's pose, else the file's), without a value")
         else:
             joints[name] = j  # the others are said, and these locked all the same (one refusal)
     removed_q: list[int] = []
@@ -325,6 +325,13 @@ def _lock_joints(mujoco: Any, spec: Any, m0: Any, path: str, locks: dict[str, fl
         joint = spec.joint(name)
         body = joint.parent
         qa = int(m0.jnt_qposadr[j])
+        if int(m0.jnt_type[j]) in (int(jt.mjJNT_FREE), int(jt.mjJNT_BALL)):
+            removed_q += _weld_spherical(mujoco, spec, m0, j, body, key)
+            removed_a += [a for a in range(m0.nu) if int(m0.actuator_trnid[a][0]) == j]
+            locked[name] = 0.0  # no coordinate of its own: its pose is the body's in the spec now
+            notes.append(f"joint {name!r}: locked at its {'keyframe' if key is not None else 'reference'} "
+                         "pose (its body welded to its parent)")
+            continue
         ref = float(m0.qpos0[qa])
         value = locks[name]
         if value is None:
@@ -405,7 +412,8 @@ def _lock_joints(mujoco: Any, spec: Any, m0: Any, path: str, locks: dict[str, fl
     # keyframes' sizes against the joints still there)
     for name in joints:
         spec.delete(spec.joint(name))
-    removed_v = [int(m0.jnt_dofadr[j]) for j in joints.values()]
+    removed_v = [d for j in joints.values() for d in range(int(m0.jnt_dofadr[j]),
+                                                           int(m0.jnt_dofadr[j]) + _DOFS[int(m0.jnt_type[j])])]
     for k in spec.keys:
         if len(k.qpos) == m0.nq:
             k.qpos = np.delete(np.asarray(k.qpos), removed_q)
@@ -417,6 +425,34 @@ def _lock_joints(mujoco: Any, spec: Any, m0: Any, path: str, locks: dict[str, fl
         if len(k.ctrl) == m0.nu and removed_a:
             k.ctrl = np.delete(np.asarray(k.ctrl), removed_a)
     return errors
+
+
+#: the coordinates (qpos) and the velocities (qvel) of MuJoCo's joint types: free, ball, slide, hinge
+_QPOS = (7, 4, 1, 1)
+_DOFS = (6, 3, 1, 1)
+
+
+def _weld_spherical(mujoco: Any, spec: Any, m0: Any, j: int, body: Any, key: int | None) -> list[int]:
+    """Weld the ball or free joint `j` of `body` where it stands: at keyframe `key` (None: the
+    reference, qpos0), the body turned through its anchor by the ball's quaternion, or a free
+    body (on the world) placed at its pose; its qpos entries."""
+    kind = int(m0.jnt_type[j])
+    qa = int(m0.jnt_qposadr[j])
+    q = np.asarray(m0.key_qpos[key] if key is not None else m0.qpos0, dtype=float)[qa:qa + _QPOS[kind]]
+    if kind == int(mujoco.mjtJoint.mjJNT_FREE):
+        body.pos = q[:3]
+        body.quat = q[3:] / np.linalg.norm(q[3:])
+    else:
+        turn = q / np.linalg.norm(q)
+        quat = np.asarray(body.quat if body.alt.type == mujoco.mjtOrientation.mjORIENTATION_QUAT else
+                          spec.resolve_orientation(spec.compiler.degree, spec.compiler.eulerseq, body.alt),
+                          dtype=float)
+        quat = quat / np.linalg.norm(quat)
+        pos = np.asarray(spec.joint(mujoco.mj_id2name(m0, mujoco.mjtObj.mjOBJ_JOINT, j)).pos, dtype=float)
+        body.pos = np.asarray(body.pos, dtype=float) + quat_to_matrix(quat) @ (pos - quat_to_matrix(turn) @ pos)
+        body.quat = quat_mul(quat, turn)
+    body.alt.type = mujoco.mjtOrientation.mjORIENTATION_QUAT
+    return list(range(qa, qa + _QPOS[kind]))
 
 
 def _locked_tendons(mujoco: Any, m0: Any, joints: set[int]) -> list[int]:
@@ -1017,9 +1053,8 @@ class _Importer:
         return order, parents, rotors
 
     def lockable(self, j: int) -> bool:
-        """Whether --lock welds joint `j` (_lock_joints): a named hinge or slide."""
-        m, jt = self.m, self.mj.mjtJoint
-        return bool(self.joint_name(j)) and int(m.jnt_type[j]) in (int(jt.mjJNT_HINGE), int(jt.mjJNT_SLIDE))
+        """Whether --lock welds joint `j` (_lock_joints): a named one."""
+        return bool(self.joint_name(j))
 
     def weld_hint(self, groups: dict[int, _Group], parts: list[_Group], what: str) -> str:
         """How to weld the subtrees `parts` with --lock (`what`: the phrase it follows), naming
@@ -1036,7 +1071,7 @@ class _Importer:
         stuck = [j for j in joints if not self.lockable(j)]
         if stuck:
             return (f"; --lock cannot weld {', '.join(self.joint(j) for j in stuck[:5])}"
-                    f"{' ...' if len(stuck) > 5 else ''} (only named hinge and slide joints are locked)")
+                    f"{' ...' if len(stuck) > 5 else ''} (only named joints are locked)")
         names = [self.joint_name(j) for j in joints]
         shown = ", ".join(repr(n) for n in names[:8]) + (" ..." if len(names) > 8 else "")
         return f"; {what} with --lock JOINT (their joints: {shown})"

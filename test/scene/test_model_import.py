@@ -455,7 +455,7 @@ REFUSED = {
                   '<inertial pos="0 0 -0.1" mass="1" diaginertia="0.01 0.01 0.002"/></body>').replace(
             '<joint name="pivot" type="hinge" axis="1 0 0" />', '<freejoint name="pivot"/>'),
         "worldbody: 1 moving body hangs from the world ('other') beside the free body 'link': a free base "
-        "carries the whole tree; --lock cannot weld joint 'o'"),
+        "carries the whole tree; weld them with --lock JOINT (their joints: 'o')"),
     "nothing moves": (bad().replace('<joint name="pivot" type="hinge" axis="1 0 0" />', ""),
                       "worldbody: no body has a joint: nothing moves"),
     "gravity compensation": (bad(body_attrs='gravcomp="1"'),

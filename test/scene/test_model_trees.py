@@ -20,6 +20,7 @@ torso, armature on every joint), dm_control's cheetah (a planar root and two leg
 """
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -92,6 +93,7 @@ TWO_ARMS = """<mujoco model="two arms">
     </body>
     {beside}
   </worldbody>
+  {key}
 </mujoco>
 """
 HINGED = '<joint name="waist" type="hinge" axis="0 0 1" pos="0 0 -0.1"/>'
@@ -103,8 +105,17 @@ POLE = ('<body name="pole" pos="1 0.5 0.5"><joint name="pole" type="hinge" axis=
         '<inertial pos="0.1 0 0" mass="0.1" diaginertia="1e-4 1e-3 1e-3"/></body></body>')
 
 
-def two_arms(tmp_path: Path, root: str = HINGED, beside: str = "") -> Path:
-    return write(tmp_path, "two_arms.xml", TWO_ARMS.format(root=root, beside=beside))
+def unit(*q: float) -> str:
+    return " ".join(repr(float(x)) for x in np.asarray(q) / np.linalg.norm(q))
+
+
+#: a keyframe of the free two arms: the torso's pose, the left shoulder's quaternion, the hinges and the slide
+KEY = (f'<keyframe><key name="pose" qpos="0.3 -0.2 1.5 {unit(0.9, 0.1, -0.3, 0.2)} {unit(0.8, 0.2, 0.4, -0.3)} '
+       '0.5 -0.4 0.1 0.7 -0.6 1.2 0.3 -0.5"/></keyframe>')
+
+
+def two_arms(tmp_path: Path, root: str = HINGED, beside: str = "", key: str = "") -> Path:
+    return write(tmp_path, "two_arms.xml", TWO_ARMS.format(root=root, beside=beside, key=key))
 
 
 def tree(mapping: dict) -> list[int]:
@@ -221,24 +232,29 @@ def pose_deviation(path: Path, lock: tuple[str, ...] = (), states: int = 4, seed
     """The largest difference between every MuJoCo body's world position and orientation and
     where the imported tree carries it, and between every joint's anchor and its scene body's
     O^k, at the reference pose and at `states` random qpos; and how many MuJoCo bodies were
-    compared. The MuJoCo model is the file with the locked joints deleted (locked at their
-    reference), its meshes left out."""
+    compared. MuJoCo's model is the file's, its meshes left out, its locked joints held where
+    the lock welds them (the first keyframe's, else qpos0)."""
     mapping = import_model(path, lock=list(lock)).mapping
     with caught_warnings(mujoco):
         spec = mujoco.MjSpec.from_file(str(path))
-        for name in lock:
-            spec.delete(spec.joint(name))
         for mesh in list(spec.meshes):  # left out as the import leaves them (not in the wheel's robot.xml)
             for geom in [g for g in spec.geoms if g.meshname == mesh.name]:
                 spec.delete(geom)
             spec.delete(mesh)
         m = spec.compile()
     d = mujoco.MjData(m)
+    held = {}  # qpos index -> the locked joint's value there
+    for name in lock:
+        j = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name)
+        qa = int(m.jnt_qposadr[j])
+        n = {int(mujoco.mjtJoint.mjJNT_FREE): 7, int(mujoco.mjtJoint.mjJNT_BALL): 4}.get(int(m.jnt_type[j]), 1)
+        held.update({q: (m.key_qpos[0] if m.nkey else m.qpos0)[q] for q in range(qa, qa + n)})
     ride = carriers(m, mapping)
     one = [int(m.jnt_qposadr[j]) for j in range(m.njnt)
            if int(m.jnt_type[j]) in (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))]
     d.qpos[:] = m.qpos0
     d.qpos[one] = 0.0  # the reference pose: every hinge and slide at 0 (docs/models.md, Frames)
+    d.qpos[list(held)] = list(held.values())
     mujoco.mj_kinematics(m, d)
     ref = forward(mapping, scene_values(m, d, mapping))
     # each MuJoCo body in its scene body's frame, at the reference pose
@@ -249,6 +265,7 @@ def pose_deviation(path: Path, lock: tuple[str, ...] = (), states: int = 4, seed
     for i in range(states + 1):
         if i:
             random_state(m, d, rng)
+            d.qpos[list(held)] = list(held.values())
             mujoco.mj_kinematics(m, d)
         values = scene_values(m, d, mapping)
         poses = forward(mapping, values)
@@ -310,6 +327,14 @@ CASES = {
                                           ("l_elbow_y", None), ("l_slide", None), ("r_shoulder", "waist"),
                                           ("r_elbow", None), ("r_wrist", None), ("tail", "waist"),
                                           ("pole", "base"), ("flag", None)]),
+    "ant, its free root locked (a fixed-base ant)": (lambda tmp: GYMNASIUM / "ant.xml", ("root",), "fixed",
+                                                     [("hip_1", None), ("ankle_1", None), ("hip_2", "base"),
+                                                      ("ankle_2", None), ("hip_3", "base"), ("ankle_3", None),
+                                                      ("hip_4", "base"), ("ankle_4", None)]),
+    "two arms, free, its root and left shoulder locked at a keyframe": (
+        lambda tmp: two_arms(tmp, FREE, key=KEY), ("root", "l_shoulder"), "fixed",
+        [("l_elbow_x", None), ("l_elbow_y", None), ("l_slide", None), ("r_shoulder", "base"), ("r_elbow", None),
+         ("r_wrist", None), ("tail", "base")]),
     "two arms, left arm and tail locked": (lambda tmp: two_arms(tmp), ("l_elbow_x", "l_elbow_y", "l_slide", "tail"),
                                            "fixed", [("waist", None), ("l_upper", None), ("r_shoulder", "waist"),
                                                      ("r_elbow", None), ("r_wrist", None)]),
@@ -517,3 +542,16 @@ def test_a_urdf_tree_is_imported_and_accelerates_as_in_mujoco(tmp_path):
     worst = held_accelerations(path, {})
     print(f"URDF gripper, fingers free: accelerations within {worst:.2g} (relative) of MuJoCo's")
     assert worst <= QACC_RTOL
+
+
+def test_a_locked_free_root_is_the_file_without_it(tmp_path):
+    """`--lock root` on the ant welds its torso where the file puts it: the scene of the file
+    with its free joint taken out of its text (a fixed-base ant, judged above)."""
+    locked = import_model(GYMNASIUM / "ant.xml", lock=["root"])
+    assert "joint 'root': locked at its reference pose (its body welded to its parent)" in locked.notes
+    text, found = re.subn(r'\s*<joint [^>]*name="root"[^>]*type="free"/>', "", (GYMNASIUM / "ant.xml").read_text())
+    assert found == 1
+    deleted = import_model(write(tmp_path, "ant.xml", text)).mapping
+    assert locked.mapping["bodies"] == deleted["bodies"] and locked.mapping["base"] == deleted["base"]
+    with pytest.raises(ModelError, match="is locked where it is"):
+        import_model(GYMNASIUM / "ant.xml", lock=["root=0.3"])
