@@ -517,7 +517,8 @@ def body_positions(y, model, R, s_w, hk, Aw, e_w):
         kp = model.parent[k] if tree else k - 1
         if tree:  # s_w[k] = O^k - O^{parent}: the parent's R, or the world's on the base
             for a in range(3):
-                s_w[k, a] = (R[kp, a, 0] * s[k, 0] + R[kp, a, 1] * s[k, 1] + R[kp, a, 2] * s[k, 2]) if kp >= 0 else s[k, a]
+                s_w[k, a] = ((R[kp, a, 0] * s[k, 0] + R[kp, a, 1] * s[k, 1] + R[kp, a, 2] * s[k, 2]) if kp >= 0
+                             else s[k, a])
         if is_slide[k]:
             for a in range(3):
                 for b in range(3):

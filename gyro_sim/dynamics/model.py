@@ -243,7 +243,8 @@ def compile_model(scene: Scene) -> Model:
     hinges = [bodies[k].joint for k in hin]
     # a motor on the first body turns against the base, which never rotates: exactly an
     # armature J G^2 (docs/theory.md, "The geared motor")
-    armature = np.array([j.armature + (j.motor.inertia * j.motor.gear ** 2 if j.motor is not None and parent[k] < 0 else 0.0)
+    armature = np.array([j.armature + (j.motor.inertia * j.motor.gear ** 2
+                                       if j.motor is not None and parent[k] < 0 else 0.0)
                          for k, j in zip(hin, hinges)], dtype=float)
     spring = np.array([(j.spring.stiffness, j.spring.reference) if j.spring is not None else (0.0, 0.0)
                        for j in hinges], dtype=float).reshape(nh, 2)
