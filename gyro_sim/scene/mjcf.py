@@ -35,7 +35,7 @@ moments use the joint names of the file, as MuJoCo's ``qpos`` and actuators do),
 free body after its body.
 
 Sensors. A gyro or an accelerometer on a site (a framequat or framelinacc of the same site
-joins them) becomes one IMU of the scene, named after the site, on the chain body the site
+joins them) becomes one IMU of the scene, named after the site, on the scene body the site
 moves with, at the site's pose in that body's frame at the reference pose; a URDF's Gazebo
 IMUs (:mod:`gyro_sim.scene.gazebo`) become sites on their links first, so MuJoCo carries them
 through fused fixed links. A rate is MuJoCo's ``interval`` or Gazebo's ``update_rate``, kept
@@ -121,7 +121,7 @@ class ImportedModel:
     path: str  # the model file
     kind: str  # "MJCF" or "URDF"
     keyframe: str | None  # the keyframe the initial state comes from ("" unnamed), None: rest
-    names: tuple[tuple[str, str], ...]  # (model element, scene name), in chain order, then the IMUs
+    names: tuple[tuple[str, str], ...]  # (model element, scene name), in the scene's order, then the IMUs
     commands: tuple[Command, ...]  # the model's actuators
     notes: tuple[str, ...]  # what was left out or approximated (contacts, limits, sensors...), one line each
     where: dict[str, str] = field(default_factory=dict)  # scene key path -> model element
@@ -699,7 +699,7 @@ class _ImuSource:
 
 
 class _Importer:
-    """One model's conversion: refusals first, then the chain, frames and initial state."""
+    """One model's conversion: refusals first, then the tree, frames and initial state."""
 
     def __init__(self, mujoco: Any, model: Any, path: str, kind: str,
                  gazebo: GazeboSensors | None = None, gazebo_sites: Sequence[tuple[GazeboImu, str]] = ()):
@@ -1100,12 +1100,12 @@ class _Importer:
         # the structure is checked too before anything is refused: one refusal says it all
         groups = self.groups()
         self.measure(groups)
-        chain, parents, rotors = self.tree(groups)
+        order, parents, rotors = self.tree(groups)
         self.raise_errors()
         key, key_name = self.keyframe(keyframe)
         self.raise_errors()
         state = self.initial_state(key)
-        commands = self.commands(chain, rotors)
+        commands = self.commands(order, rotors)
         self.raise_errors()
         m, mj = self.m, self.mj
         actuated = {c.axis for c in commands}
@@ -1113,7 +1113,7 @@ class _Importer:
         frames: dict[int, tuple[str, np.ndarray, np.ndarray]] = {}  # group root -> name, G, O^k
         scene_names, rotations = [], []  # by body: its scene name, its frame's rotation G at the reference pose
         first_child = {p: k for k, p in reversed(list(enumerate(parents)))}  # body (-1: the base) -> its first child
-        for k, g in enumerate(chain):
+        for k, g in enumerate(order):
             name = self.scene_name(g, g.kind in ("hinge", "slide"))
             p = parents[k]
             G_parent = rotations[p] if p >= 0 else np.eye(3)
@@ -1148,14 +1148,14 @@ class _Importer:
             else:
                 body["joint"] = {"type": "spherical"}
             if p != k - 1:  # its joint point O^k in the parent's frame, from the parent's O (after the axis)
-                at = _vec(G_parent.T @ (g.origin - (chain[p].origin if p >= 0 else chain[0].origin)))
+                at = _vec(G_parent.T @ (g.origin - (order[p].origin if p >= 0 else order[0].origin)))
                 joint = list(body["joint"].items())
                 body["joint"] = dict(joint[:2] + [("at", at)] + joint[2:])
             body["mass"] = _tidy(g.mass)
             body["com"] = _vec(G.T @ (g.com - g.origin))
             body["inertia_com"] = _mat(G.T @ g.inertia @ G)
             if k in first_child:  # to its first child's joint point; the others say theirs (joint.at)
-                body["next_joint"] = _vec(G.T @ (chain[first_child[k]].origin - g.origin))
+                body["next_joint"] = _vec(G.T @ (order[first_child[k]].origin - g.origin))
             element = f"{self.body(g.root)} ({g.kind} {self.joint(g.joint, bare=True)})"
             if g.frame:
                 element = element[:-1] + ", a massless frame)"
@@ -1186,7 +1186,7 @@ class _Importer:
                 body["rotors"] = body_rotors
             body["initial"] = state["frames"][g.joint] if g.frame else state["initial"][g.root]
             bodies.append(body)
-        first = chain[0]
+        first = order[0]
         if first.kind == "free":
             base = {"type": "free", "position": _vec(state["position"]),
                     "velocity": _vec(state["velocity"])}
@@ -1213,11 +1213,11 @@ class _Importer:
                 text = stream.read()
             body_frames = {name: (G, origin) for name, G, origin in frames.values()}
             rotor_axes = {self.scene_name(r, True): (frames[g.root][0], r.axis / np.linalg.norm(r.axis), r.origin)
-                          for g in chain for r in rotors[g.root]}
+                          for g in order for r in rotors[g.root]}
             try:
                 robot = describe_robot(text, self.locked, body_frames, rotor_axes)
             except (ValueError, TypeError, KeyError, AttributeError, ET.ParseError) as exc:  # MuJoCo read it
-                self.notes.append(f"robot description not kept (ROS gets the chain's): {exc}")
+                self.notes.append(f"robot description not kept (ROS gets the scene's): {exc}")
         return ImportedModel(mapping=mapping, path=self.path, kind=self.kind, keyframe=key_name,
                              names=tuple(names), commands=tuple(commands),
                              notes=tuple(self.notes), where=where, robot=robot)
@@ -1325,7 +1325,7 @@ class _Importer:
     def imus(self, frames: dict[int, tuple[str, np.ndarray, np.ndarray]], rotor_joints: dict[int, int],
              names: list, where: dict) -> list[dict]:
         """The scene's `imus` from the model's sensors (docs/models.md, "Sensors"): each on the
-        chain body its site moves with, at the site's pose in that body's frame at the
+        scene body its site moves with, at the site's pose in that body's frame at the
         reference pose; the noise per sample converted to densities at its rate. What cannot
         be an IMU is said in the notes; `names` and `where` gain the IMUs."""
 
@@ -1456,11 +1456,11 @@ class _Importer:
                     out["angle"][b] = float(d.qpos[m.jnt_qposadr[j]])
         return out
 
-    def commands(self, chain: list[_Group], rotors: dict[int, list[_Group]]) -> list[Command]:
+    def commands(self, order: list[_Group], rotors: dict[int, list[_Group]]) -> list[Command]:
         """Each actuator's axis and factor (gear x gain)."""
         mj, m = self.mj, self.m
         axis_of = {}
-        for g in chain:
+        for g in order:
             if g.kind in ("hinge", "slide"):
                 axis_of[g.joint] = self.scene_name(g, True)
             for r in rotors[g.root]:
