@@ -349,3 +349,24 @@ def test_friction_on_a_tree_closes_the_energy_balance_on_both_backends():
             final.append(sim.state)
     np.testing.assert_allclose(final[2], final[0], rtol=0, atol=1e-9)
     np.testing.assert_allclose(final[3], final[1], rtol=0, atol=1e-9)
+
+
+def test_gauss4s_refuses_a_tree_and_fixed_takes_gauss4_for_it():
+    from gyro_sim.integrators.fixed import IMPLICIT_PLAIN, implicit_for
+
+    scene = free_hub_scene(PANELS, False, 0.5)
+    with pytest.raises(ValueError, match="gauss4s integrates chains, not trees"):
+        Simulator(scene, integrator="gauss4s")
+    assert implicit_for(Simulator(scene).model) == IMPLICIT_PLAIN == "gauss4"
+
+
+def test_a_tree_of_lagrange_gyroscopes_is_not_a_lagrange_chain():
+    from gyro_sim.analytic.lagrange import LagrangeChain
+
+    top = {"joint": {"type": "spherical"}, "mass": 1.0, "com": [0, 0, 0.1],
+           "inertia": {"axial": 0.01, "transverse": 0.02}}
+    bodies = [dict(top, name="a", next_joint=[0, 0, 0.2]), dict(top, name="b"), dict(top, name="c", parent="a")]
+    scene = load_scene({"name": "t", "gravity": [0, 0, -G], "base": {"type": "fixed"}, "bodies": bodies})
+    assert LagrangeChain.from_scene(scene) is None
+    chain = load_scene({"name": "t", "gravity": [0, 0, -G], "base": {"type": "fixed"}, "bodies": bodies[:2]})
+    assert LagrangeChain.from_scene(chain) is not None
