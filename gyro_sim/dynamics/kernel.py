@@ -560,11 +560,15 @@ def body_positions(y, model, R, s_w, hk, Aw, e_w):
             e_w[k, 0] = 0.0
             e_w[k, 1] = 0.0
             e_w[k, 2] = 0.0
-        for a in range(3):
-            r0, r1, r2 = R[k, a, 0], R[k, a, 1], R[k, a, 2]
-            if not tree:
+        if tree:  # s_w[k] is set above
+            for a in range(3):
+                r0, r1, r2 = R[k, a, 0], R[k, a, 1], R[k, a, 2]
+                hk[k, a] = r0 * first_moment[k, 0] + r1 * first_moment[k, 1] + r2 * first_moment[k, 2]
+        else:
+            for a in range(3):
+                r0, r1, r2 = R[k, a, 0], R[k, a, 1], R[k, a, 2]
                 s_w[k, a] = r0 * s[k, 0] + r1 * s[k, 1] + r2 * s[k, 2]
-            hk[k, a] = r0 * first_moment[k, 0] + r1 * first_moment[k, 1] + r2 * first_moment[k, 2]
+                hk[k, a] = r0 * first_moment[k, 0] + r1 * first_moment[k, 1] + r2 * first_moment[k, 2]
         # R A R^T, exactly symmetric (see the module docstring): row a of R A, then row a of the
         # upper triangle
         for a in range(3):
