@@ -192,6 +192,10 @@ def cmd_bench_scaling(args) -> int:
                                repeats=1 if args.quick else scaling.FIXED_STEP_REPEATS)
     text += ("\n\n### One simulated second, RK4 at 1 kHz, beside MuJoCo (CPU, median of runs)\n\n"
              + scaling.fixed_step_table(fixed))
+    tree_rows = scaling.trees(scaling.QUICK_TREE_SIZES if args.quick else scaling.TREE_SIZES,
+                              min_time=0.05 if args.quick else 0.3)
+    text += ("\n\n### Trees: one evaluation, the compiled kernel's own time, n links as a chain and as "
+             "trees\n\n" + scaling.trees_table(tree_rows))
     mem = []
     if args.memory:
         mem = scaling.memory(scaling.QUICK_MEMORY_SIZES if args.quick else scaling.MEMORY_SIZES,
@@ -201,7 +205,8 @@ def cmd_bench_scaling(args) -> int:
                  "(peak resident memory of a process of its own)\n\n" + scaling.memory_table(mem))
     print(text)
     data = {"rows": [dataclasses.asdict(r) if dataclasses.is_dataclass(r) else r for r in rows],
-            "fixed_step": [dataclasses.asdict(r) for r in fixed], "memory": [dataclasses.asdict(r) for r in mem]}
+            "fixed_step": [dataclasses.asdict(r) for r in fixed], "memory": [dataclasses.asdict(r) for r in mem],
+            "trees": tree_rows}
     write_report(args.out, "scaling", text + "\n", data, lambda png: scaling.plot(rows, png), force=args.force,
                  json_default=str)
     return 0

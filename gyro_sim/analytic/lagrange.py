@@ -149,7 +149,8 @@ class LagrangeChain:
     def from_scene(cls, scene: Scene) -> LagrangeChain | None:
         """The chain's constants, or None when `scene` is not a Lagrange chain.
 
-        A Lagrange chain: fixed base, every joint spherical, gravity present, and every
+        A Lagrange chain: fixed base, a chain (no `parent` but the body before, no `joint.at`),
+        every joint spherical, gravity present, and every
         gyrostat axially symmetric about its body z-axis (carrier inertia at O^k diagonal
         with Ixx = Iyy, com and next_joint on the z-axis, rotors centred on the z-axis with
         axis +-z), to the relative tolerance AXISYM_RTOL.
@@ -160,6 +161,8 @@ class LagrangeChain:
         """
         if scene.base.type != "fixed" or scene.gravity is None:
             return None
+        if any(b.joint.at is not None or b.parent not in (None, k - 1) for k, b in enumerate(scene.bodies)):
+            return None  # a tree, or a chain whose joint points are written as joint.at
         g = float(np.linalg.norm(scene.gravity))
         if g == 0.0 or not scene.bodies:
             return None

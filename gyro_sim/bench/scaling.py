@@ -318,6 +318,48 @@ def fixed_step_table(rows: list[FixedStepRow]) -> str:
     return "\n".join(lines)
 
 
+#: sizes of the trees' table (`trees`)
+TREE_SIZES = (10, 30, 100, 300)
+QUICK_TREE_SIZES = (10,)
+
+
+def tree_of_links(n: int, branching: int) -> dict:
+    """The spherical chain of `spherical_chain(n)` hung as a tree: body k from body
+    (k - 1) // branching, at its parent's tip (branching 1: the chain itself, as it is written;
+    2: a binary tree; n: a hub carrying the n - 1 others)."""
+    scene = spherical_chain(n)
+    if branching == 1:
+        return scene
+    tip = scene["bodies"][0].get("next_joint", [0.0, 0.0, 0.2])
+    for k, body in enumerate(scene["bodies"]):
+        body.pop("next_joint", None)
+        if k:
+            body["parent"] = scene["bodies"][(k - 1) // branching]["name"]
+            body["joint"]["at"] = list(tip)
+    return scene
+
+
+def trees(sizes=TREE_SIZES, min_time: float = 0.3) -> list[tuple[int, float, float, float]]:
+    """(n, chain, binary tree, hub with n - 1 bodies): the compiled kernel's own time (us) of one
+    evaluation (`kernel_time`) on n spherical links hung as each (`tree_of_links`)."""
+    rows = []
+    for n in sizes:
+        times = []
+        for branching in (1, 2, n):
+            model = compile_model(load_scene(tree_of_links(n, branching)))
+            times.append(kernel_time(make_system(model, "numba"), initial_state(model), min_time) * 1e6)
+        rows.append((n, *times))
+    return rows
+
+
+def trees_table(rows) -> str:
+    lines = ["| n | chain (us) | binary tree (us) | hub with n - 1 bodies (us) | tree / chain |",
+             "|---:|---:|---:|---:|---:|"]
+    for n, chain, binary, hub in rows:
+        lines.append(f"| {n} | {chain:.2f} | {binary:.2f} | {hub:.2f} | {max(binary, hub) / chain:.2f} |")
+    return "\n".join(lines)
+
+
 def table(rows: list[Row]) -> str:
     backend = rows[0].backend if rows else "numba"
     lines = [

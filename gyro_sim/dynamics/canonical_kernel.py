@@ -58,7 +58,7 @@ def _rates(t, z, model, data, inputs, zrow, cflags, cwork):
     """Positions of z, pi^k, p_rel and the rates u (into y's velocity block in cwork's y and in
     `rate`), then w^k, v(O^k). Returns nothing: everything is left in the workspaces."""
     (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-     torque_axis, torque_A, flags, base, armature, spring, servo, motor, is_slide) = model
+     torque_axis, torque_A, flags, base, armature, spring, servo, motor, is_slide, parent) = model
     work = data.work
     t0, p0, pdot = inputs.t0[0], inputs.p0, inputs.pdot
     base_type, has_lam = flags[0], flags[2] != 0
@@ -158,7 +158,7 @@ def _rates(t, z, model, data, inputs, zrow, cflags, cwork):
     fast.joint_columns_stage(is_hinge, is_slide, own_col, base_type, e_w, S)
     fast.articulated_solve(is_hinge, col_start,
                            fast.Elimination(S, I6, pb, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x, armature,
-                                            block2(work, 0, 0, 4)),  # no motors: gauss4s refuses them
+                                            block2(work, 0, 0, 4), parent),  # no motors, no trees: gauss4s refuses them
                            prel, rate, flags[fast.FLAG_HEAVY])
     for j in range(N):
         y[i_vel + j] = rate[j]
@@ -170,7 +170,7 @@ def canonical_kernel(t, z, zdot, model, data, inputs, zrow, cflags, cwork):
     """z' (size,) at (t, z) into zdot: what canonical.CanonicalChain.rhs computes."""
     _rates(t, z, model, data, inputs, zrow, cflags, cwork)
     (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-     torque_axis, torque_A, flags, base, armature, spring, servo, motor, is_slide) = model
+     torque_axis, torque_A, flags, base, armature, spring, servo, motor, is_slide, parent) = model
     work = data.work
     t0, p0, pdot, tau = inputs.t0[0], inputs.p0, inputs.pdot, inputs.tau
     base_type, has_gravity, has_lam = flags[0], flags[1] != 0, flags[2] != 0
@@ -338,7 +338,7 @@ def state_kernel(t, z, y, model, data, inputs, zrow, cflags, cwork):
     """The package's state y (model size) of z at t: what canonical.CanonicalChain.state does."""
     _rates(t, z, model, data, inputs, zrow, cflags, cwork)
     (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-     torque_axis, torque_A, flags, base, armature, spring, servo, motor, is_slide) = model
+     torque_axis, torque_A, flags, base, armature, spring, servo, motor, is_slide, parent) = model
     i_kap, size = cflags[1], cflags[2]
     i_kap_y = flags[5]
     for i in range(size):

@@ -139,6 +139,10 @@ class ChainModel(NamedTuple):
     #: (n,) bool: body k's joint of one coordinate (is_hinge) is a slide, a translation d_k along
     #: its axis (docs/theory.md section 12); every "hinge" term above then acts on d_k
     is_slide: np.ndarray
+    #: a tree's (flags[FLAG_TREE]): (n,) int64, each body's parent (-1: the base), and `s` holds
+    #: each body's joint point O^k from its parent's O in the parent's frame (s^{parent(k),k},
+    #: docs/theory.md section 11); (0,) on a chain, whose parent is the body before
+    parent: np.ndarray
 
 
 #: the index of `flags` among ChainModel's fields (its address in a descriptor: D_MODEL + this)
@@ -217,7 +221,10 @@ FLAG_SERVOS = 13
 #: terms (m = J G a in world axes, J G^2) sit in 4 n floats before the servos' and springs'
 #: (`motor_offset`)
 FLAG_MOTORS = 14
-FLAGS_SIZE = 15
+#: flags[FLAG_TREE]: 1 for a tree (a body whose parent is not the body before it: ChainModel's
+#: `parent`); every loop then goes from parent to child and back (docs/theory.md section 11)
+FLAG_TREE = 15
+FLAGS_SIZE = 16
 #: per actuated axis, floats of the workspace's tail of a stateful model: max_speed (inf: none),
 #: coulomb, viscous, static, stribeck_speed (0: no Stribeck term), stick_speed
 ACTUATOR_PARAMETERS = 6
@@ -225,9 +232,9 @@ ACTUATOR_PARAMETERS = 6
 #: ChainModel's order) from D_MODEL, of the scratch at D_WORK, of the held inputs' arrays (in
 #: HeldInputs' order) from D_INPUTS; n, N, nt and the scratch's size; the evaluations counted
 #: (the compiled entry from Python, gyro_sim.dynamics.entry, counts there)
-D_MODEL, D_WORK, D_INPUTS = 0, 20, 21
-D_N, D_NCOL, D_NT, D_NWORK, D_NFEV = 26, 27, 28, 29, 30
-DESCRIPTOR_SIZE = 31
+D_MODEL, D_WORK, D_INPUTS = 0, 21, 22
+D_N, D_NCOL, D_NT, D_NWORK, D_NFEV = 27, 28, 29, 30, 31
+DESCRIPTOR_SIZE = 32
 assert D_WORK - D_MODEL == len(ChainModel.__annotations__) and D_N - D_INPUTS == len(HeldInputs.__annotations__), \
     "the descriptor's layout (D_*) no longer matches the records' fields"
 
@@ -499,21 +506,31 @@ def body_positions(y, model, R, s_w, hk, Aw, e_w):
     s^k, h^k = m^k c^k, the inertia A^k about O^k (eq 30) and the hinge or slide axis e^k.
     A slide keeps its parent's orientation and moves O^k by e^k d_k: s_w[k - 1] leaves as the
     whole offset O^k - O^{k-1} (section 12; a first body's slide moves O^1, which nothing here
-    reads: its velocity is `body_velocities`', its point the outputs')."""
+    reads: its velocity is `body_velocities`', its point the outputs'). On a tree (ChainModel's
+    `parent`) s_w[k] is body k's whole offset O^k - O^{parent(k)} (from the base's point for a
+    body on the base), R^{parent(k)} s^{parent(k),k} plus a slide's e^k d_k."""
     is_hinge, is_slide, qrow, hinge_axis, s, first_moment, inertia = (
         model.is_hinge, model.is_slide, model.qrow, model.hinge_axis, model.s, model.first_moment, model.inertia)
     n = s.shape[0]
+    tree = model.parent.shape[0] != 0
     for k in range(n):
         i = qrow[k]
+        kp = model.parent[k] if tree else k - 1
+        if tree:  # s_w[k] = O^k - O^{parent}: the parent's R, or the world's on the base
+            for a in range(3):
+                s_w[k, a] = ((R[kp, a, 0] * s[k, 0] + R[kp, a, 1] * s[k, 1] + R[kp, a, 2] * s[k, 2]) if kp >= 0
+                             else s[k, a])
         if is_slide[k]:
             for a in range(3):
                 for b in range(3):
-                    R[k, a, b] = R[k - 1, a, b] if k > 0 else (1.0 if a == b else 0.0)
+                    R[k, a, b] = R[kp, a, b] if kp >= 0 else (1.0 if a == b else 0.0)
             e0, e1, e2 = hinge_axis[k, 0], hinge_axis[k, 1], hinge_axis[k, 2]
             d = y[i]
             for a in range(3):
                 e_w[k, a] = R[k, a, 0] * e0 + R[k, a, 1] * e1 + R[k, a, 2] * e2
-                if k > 0:
+                if tree:
+                    s_w[k, a] += e_w[k, a] * d
+                elif k > 0:
                     s_w[k - 1, a] += e_w[k, a] * d
         elif is_hinge[k]:
             # (50): body k is its parent turned by phi_k about e^k: Rrel = 1 + sin K + (1 - cos) K^2,
@@ -530,12 +547,12 @@ def body_positions(y, model, R, s_w, hk, Aw, e_w):
             R[k, 2, 0] = 0.0 + sp * -e1 + cp * (e0 * e2)
             R[k, 2, 1] = 0.0 + sp * e0 + cp * (-e1 * -e2)
             R[k, 2, 2] = 1.0 + sp * 0.0 + cp * (-e1 * e1 + e0 * -e0)
-            if k > 0:
+            if kp >= 0:
                 # R^k = R^{k-1} Rrel, a column at a time (Rrel's column read before it is replaced)
                 for b in range(3):
                     x0, x1, x2 = R[k, 0, b], R[k, 1, b], R[k, 2, b]
                     for a in range(3):
-                        R[k, a, b] = R[k - 1, a, 0] * x0 + R[k - 1, a, 1] * x1 + R[k - 1, a, 2] * x2
+                        R[k, a, b] = R[kp, a, 0] * x0 + R[kp, a, 1] * x1 + R[kp, a, 2] * x2
             for a in range(3):
                 e_w[k, a] = R[k, a, 0] * e0 + R[k, a, 1] * e1 + R[k, a, 2] * e2
         else:
@@ -544,10 +561,15 @@ def body_positions(y, model, R, s_w, hk, Aw, e_w):
             e_w[k, 0] = 0.0
             e_w[k, 1] = 0.0
             e_w[k, 2] = 0.0
-        for a in range(3):
-            r0, r1, r2 = R[k, a, 0], R[k, a, 1], R[k, a, 2]
-            s_w[k, a] = r0 * s[k, 0] + r1 * s[k, 1] + r2 * s[k, 2]
-            hk[k, a] = r0 * first_moment[k, 0] + r1 * first_moment[k, 1] + r2 * first_moment[k, 2]
+        if tree:  # s_w[k] is set above
+            for a in range(3):
+                r0, r1, r2 = R[k, a, 0], R[k, a, 1], R[k, a, 2]
+                hk[k, a] = r0 * first_moment[k, 0] + r1 * first_moment[k, 1] + r2 * first_moment[k, 2]
+        else:
+            for a in range(3):
+                r0, r1, r2 = R[k, a, 0], R[k, a, 1], R[k, a, 2]
+                s_w[k, a] = r0 * s[k, 0] + r1 * s[k, 1] + r2 * s[k, 2]
+                hk[k, a] = r0 * first_moment[k, 0] + r1 * first_moment[k, 1] + r2 * first_moment[k, 2]
         # R A R^T, exactly symmetric (see the module docstring): row a of R A, then row a of the
         # upper triangle
         for a in range(3):
@@ -573,26 +595,35 @@ def body_velocities(t, y, model, s_w, e_w, w, vO, c):
     is_hinge, is_slide, own_col, flags, base = model.is_hinge, model.is_slide, model.own_col, model.flags, model.base
     base_type, i_vel, base_amplitude, base_omega = flags[0], flags[4], base[0:3], base[3]
     n = s_w.shape[0]
+    tree = model.parent.shape[0] != 0
     wp0, wp1, wp2 = 0.0, 0.0, 0.0  # w^{k-1}
     for k in range(n):
-        if k == 0:
+        kp = k - 1
+        ko = k - 1  # the row of s_w that holds O^k - O^{parent}
+        if tree:
+            kp, ko = model.parent[k], k
+            if kp >= 0:
+                wp0, wp1, wp2 = w[kp, 0], w[kp, 1], w[kp, 2]
+            else:
+                wp0, wp1, wp2 = 0.0, 0.0, 0.0
+        if kp < 0:
             # v(O^1): free base (a state), moving base (a W cos(W t)) or fixed
             if base_type == BASE_FREE:
                 for a in range(3):
-                    vO[0, a] = y[i_vel + a]
+                    vO[k, a] = y[i_vel + a]
             elif base_type == BASE_MOVING:
                 cw = base_omega * math.cos(base_omega * t)
                 for a in range(3):
-                    vO[0, a] = base_amplitude[a] * cw
+                    vO[k, a] = base_amplitude[a] * cw
             else:
                 for a in range(3):
-                    vO[0, a] = 0.0
+                    vO[k, a] = 0.0
         else:
             # (34): v0^k = v0^{k-1} + w^{k-1} x s^{k-1}
-            s0, s1, s2 = s_w[k - 1, 0], s_w[k - 1, 1], s_w[k - 1, 2]
-            vO[k, 0] = (wp1 * s2 - wp2 * s1) + vO[k - 1, 0]
-            vO[k, 1] = (wp2 * s0 - wp0 * s2) + vO[k - 1, 1]
-            vO[k, 2] = (wp0 * s1 - wp1 * s0) + vO[k - 1, 2]
+            s0, s1, s2 = s_w[ko, 0], s_w[ko, 1], s_w[ko, 2]
+            vO[k, 0] = (wp1 * s2 - wp2 * s1) + vO[kp, 0]
+            vO[k, 1] = (wp2 * s0 - wp0 * s2) + vO[kp, 1]
+            vO[k, 2] = (wp0 * s1 - wp1 * s0) + vO[kp, 2]
         j = i_vel + own_col[k]
         slide = is_slide[k]
         if slide:
@@ -811,7 +842,7 @@ class Elimination(NamedTuple):
     offsets s_w (n, 3); U, W (N, 6), u (N,), Dinv (n, 6, 6), Ia (6, 6), pa (6,), Dx, T, G (3, 3),
     x (6,): scratch; armature (n,): each hinge's, added to its D (zero elsewhere); motor (n, 4) or
     (0, 4) without motors: each hinge's geared motor, m = J G a (world axes, a the rotor's axis)
-    and J G^2 (zero rows: none; `motor_axes`)."""
+    and J G^2 (zero rows: none; `motor_axes`); parent: a tree's, or (0,)."""
 
     S: np.ndarray
     IA: np.ndarray
@@ -831,6 +862,9 @@ class Elimination(NamedTuple):
     x: np.ndarray
     armature: np.ndarray
     motor: np.ndarray
+    #: a tree's parents ((n,) int64, -1: the base; s_w[k] is then O^k - O^{parent(k)}), (0,) on a
+    #: chain (parent k - 1, s_w[k - 1] = O^k - O^{k-1})
+    parent: np.ndarray
 
 
 @_njit_inline
@@ -863,13 +897,16 @@ def _aba_classic(is_hinge, col_start, e, tau, udot):
     (S = (1, 0)) is eliminated in closed form, in scalars: D = J, and only the apparent mass
     M - H^T J^-1 H passes to the parent.
     """
-    S, IA, pA, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x, armature, motor = e
+    S, IA, pA, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x, armature, motor, parent = e
     n = IA.shape[0]
+    tree = parent.shape[0] != 0
     worst = 0.0  # largest apparent mass passed on / the carrier's own mass
     # backward: I^a = I^A - U D^-1 U^T, p^a = p^A + I^a c + U D^-1 u, to the parent's O^{k-1}
+    # (a tree's: each child's to its parent's, O^{parent(k)} = O^k - s_w[k])
     for k in range(n - 1, -1, -1):
         j0, j1 = col_start[k], col_start[k + 1]
         nk = j1 - j0
+        kp, ko = (parent[k], k) if tree else (k - 1, k - 1)
         if nk == SPHERICAL_DOF and not is_hinge[k]:
             # D^-1 = J^-1, I^A = [[J, H], [H^T, M]]
             d00, d01, d02, d11, d12, d22 = _inv3_sym(IA[k, 0, 0], IA[k, 0, 1], IA[k, 0, 2],
@@ -881,7 +918,7 @@ def _aba_classic(is_hinge, col_start, e, tau, udot):
             u1 = tau[j0 + 1] - pA[k, 1]
             u2 = tau[j0 + 2] - pA[k, 2]
             u[j0], u[j0 + 1], u[j0 + 2] = u0, u1, u2
-            if k == 0:
+            if kp < 0:
                 continue
             h00, h01, h02 = IA[k, 0, 3], IA[k, 0, 4], IA[k, 0, 5]
             h10, h11, h12 = IA[k, 1, 3], IA[k, 1, 4], IA[k, 1, 5]
@@ -908,18 +945,18 @@ def _aba_classic(is_hinge, col_start, e, tau, udot):
             pl0 = pA[k, 3] + (m00 * c3 + m01 * c4 + m02 * c5) + (g00 * u0 + g10 * u1 + g20 * u2)
             pl1 = pA[k, 4] + (m01 * c3 + m11 * c4 + m12 * c5) + (g01 * u0 + g11 * u1 + g21 * u2)
             pl2 = pA[k, 5] + (m02 * c3 + m12 * c4 + m22 * c5) + (g02 * u0 + g12 * u1 + g22 * u2)
-            ratio = (m00 + m11 + m22) / (3.0 * IA[k - 1, 3, 3]) if IA[k - 1, 3, 3] > 0.0 else 0.0
+            ratio = (m00 + m11 + m22) / (3.0 * IA[kp, 3, 3]) if IA[kp, 3, 3] > 0.0 else 0.0
             if ratio > worst:
                 worst = ratio
-            s0, s1, s2 = s_w[k - 1, 0], s_w[k - 1, 1], s_w[k - 1, 2]
-            _shift_mass(m00, m01, m02, m11, m12, m22, s0, s1, s2, IA, k - 1)
+            s0, s1, s2 = s_w[ko, 0], s_w[ko, 1], s_w[ko, 2]
+            _shift_mass(m00, m01, m02, m11, m12, m22, s0, s1, s2, IA, kp)
             # forces to O^{k-1} = O^k - s^{k-1}: (n + s x f, f)
-            pA[k - 1, 0] = (pA[k - 1, 0] + (s1 * pl2 - s2 * pl1)) + tau[j0]
-            pA[k - 1, 1] = (pA[k - 1, 1] + (s2 * pl0 - s0 * pl2)) + tau[j0 + 1]
-            pA[k - 1, 2] = (pA[k - 1, 2] + (s0 * pl1 - s1 * pl0)) + tau[j0 + 2]
-            pA[k - 1, 3] += pl0
-            pA[k - 1, 4] += pl1
-            pA[k - 1, 5] += pl2
+            pA[kp, 0] = (pA[kp, 0] + (s1 * pl2 - s2 * pl1)) + tau[j0]
+            pA[kp, 1] = (pA[kp, 1] + (s2 * pl0 - s0 * pl2)) + tau[j0 + 1]
+            pA[kp, 2] = (pA[kp, 2] + (s0 * pl1 - s1 * pl0)) + tau[j0 + 2]
+            pA[kp, 3] += pl0
+            pA[kp, 4] += pl1
+            pA[kp, 5] += pl2
         else:
             # U = I^A S, u = tau - S^T p^A
             for j in range(j0, j1):
@@ -932,7 +969,7 @@ def _aba_classic(is_hinge, col_start, e, tau, udot):
             if motor.shape[0] != 0 and motor[k, 3] != 0.0:  # a geared motor: U, u and D (eq 51b)
                 extra += _motor_column(S, U, u, c, motor, k, j0)
             _joint_projection(S, U, Dinv[k], W, j0, nk, extra)
-            if k == 0:
+            if kp < 0:
                 continue
             for r in range(6):
                 for q in range(r, 6):
@@ -947,24 +984,35 @@ def _aba_classic(is_hinge, col_start, e, tau, udot):
                 for a in range(nk):
                     acc += W[j0 + a, r] * u[j0 + a]
                 pa[r] = acc
-            ratio = (Ia[3, 3] + Ia[4, 4] + Ia[5, 5]) / (3.0 * IA[k - 1, 3, 3]) if IA[k - 1, 3, 3] > 0.0 else 0.0
+            ratio = (Ia[3, 3] + Ia[4, 4] + Ia[5, 5]) / (3.0 * IA[kp, 3, 3]) if IA[kp, 3, 3] > 0.0 else 0.0
             if ratio > worst:
                 worst = ratio
-            _shift_inertia(Ia, s_w[k - 1], IA[k - 1], Dx, T, G)
+            _shift_inertia(Ia, s_w[ko], IA[kp], Dx, T, G)
             # forces to O^{k-1} = O^k - s^{k-1}: (n + s x f, f)
-            s0, s1, s2 = s_w[k - 1, 0], s_w[k - 1, 1], s_w[k - 1, 2]
-            pA[k - 1, 0] = (pA[k - 1, 0] + (s1 * pa[5] - s2 * pa[4])) + pa[0]
-            pA[k - 1, 1] = (pA[k - 1, 1] + (s2 * pa[3] - s0 * pa[5])) + pa[1]
-            pA[k - 1, 2] = (pA[k - 1, 2] + (s0 * pa[4] - s1 * pa[3])) + pa[2]
-            pA[k - 1, 3] += pa[3]
-            pA[k - 1, 4] += pa[4]
-            pA[k - 1, 5] += pa[5]
-    # forward: a = A^{k-1} + c^k, u'_k = D^-1 (u - U^T a), A^k = a + S u'_k
+            s0, s1, s2 = s_w[ko, 0], s_w[ko, 1], s_w[ko, 2]
+            pA[kp, 0] = (pA[kp, 0] + (s1 * pa[5] - s2 * pa[4])) + pa[0]
+            pA[kp, 1] = (pA[kp, 1] + (s2 * pa[3] - s0 * pa[5])) + pa[1]
+            pA[kp, 2] = (pA[kp, 2] + (s0 * pa[4] - s1 * pa[3])) + pa[2]
+            pA[kp, 3] += pa[3]
+            pA[kp, 4] += pa[4]
+            pA[kp, 5] += pa[5]
+    # forward: a = A^{k-1} + c^k, u'_k = D^-1 (u - U^T a), A^k = a + S u'_k (a tree's A^{parent}
+    # is kept in pA[parent], which the forward sweep no longer reads)
     A0, A1, A2, A3, A4, A5 = a_base[0], a_base[1], a_base[2], a_base[3], a_base[4], a_base[5]
     for k in range(n):
         j0, j1 = col_start[k], col_start[k + 1]
         nk = j1 - j0
-        if k > 0:
+        if tree:
+            kp = parent[k]
+            if kp >= 0:
+                A0, A1, A2, A3, A4, A5 = pA[kp, 0], pA[kp, 1], pA[kp, 2], pA[kp, 3], pA[kp, 4], pA[kp, 5]
+                s0, s1, s2 = s_w[k, 0], s_w[k, 1], s_w[k, 2]
+                A3 += A1 * s2 - A2 * s1
+                A4 += A2 * s0 - A0 * s2
+                A5 += A0 * s1 - A1 * s0
+            else:
+                A0, A1, A2, A3, A4, A5 = a_base[0], a_base[1], a_base[2], a_base[3], a_base[4], a_base[5]
+        elif k > 0:
             # motions from O^{k-1} to O^k: (alpha, a + alpha x s^{k-1})
             s0, s1, s2 = s_w[k - 1, 0], s_w[k - 1, 1], s_w[k - 1, 2]
             A3 += A1 * s2 - A2 * s1
@@ -1010,6 +1058,8 @@ def _aba_classic(is_hinge, col_start, e, tau, udot):
                 A3 += S[j, 3] * ud
                 A4 += S[j, 4] * ud
                 A5 += S[j, 5] * ud
+        if tree:
+            pA[k, 0], pA[k, 1], pA[k, 2], pA[k, 3], pA[k, 4], pA[k, 5] = A0, A1, A2, A3, A4, A5
     return worst
 
 
@@ -1036,11 +1086,23 @@ def _aba(is_hinge, col_start, e, tau, udot, heavy):
     n = IA.shape[0]
     after = 0.0
     worst = 0.0
-    for k in range(n - 1, 0, -1):
-        after += IA[k, 3, 3]  # the mass of bodies k..n
-        # a massless carrier has no inertia of its own for the elimination to lose
-        if IA[k - 1, 3, 3] > 0.0 and after > worst * IA[k - 1, 3, 3]:
-            worst = after / IA[k - 1, 3, 3]
+    if e.parent.shape[0] != 0:  # a tree: each subtree's mass (summed in Dinv[k, 0, 0], free until
+        # the elimination) against its parent's
+        Dinv = e.Dinv
+        for k in range(n):
+            Dinv[k, 0, 0] = IA[k, 3, 3]
+        for k in range(n - 1, -1, -1):
+            kp = e.parent[k]
+            if kp >= 0:
+                Dinv[kp, 0, 0] += Dinv[k, 0, 0]
+                if IA[kp, 3, 3] > 0.0 and Dinv[k, 0, 0] > worst * IA[kp, 3, 3]:
+                    worst = Dinv[k, 0, 0] / IA[kp, 3, 3]
+    else:
+        for k in range(n - 1, 0, -1):
+            after += IA[k, 3, 3]  # the mass of bodies k..n
+            # a massless carrier has no inertia of its own for the elimination to lose
+            if IA[k - 1, 3, 3] > 0.0 and after > worst * IA[k - 1, 3, 3]:
+                worst = after / IA[k - 1, 3, 3]
     if worst <= STABLE_ABA_RATIO:  # no subtree can pass on more mass than it has
         _aba_classic(is_hinge, col_start, e, tau, udot)
         return
@@ -1093,9 +1155,16 @@ def _aba_stable(is_hinge, col_start, e, tau, udot):
     articulated inertia formed, F^T F (nothing passes on from it).
     """
     S, IA, pA, c, a_base, s_w, U, W, u, Dinv = e.S, e.IA, e.pA, e.c, e.a_base, e.s_w, e.U, e.W, e.u, e.Dinv
-    armature, motor = e.armature, e.motor
+    armature, motor, parent = e.armature, e.motor, e.parent
     motors = motor.shape[0] != 0
     n = IA.shape[0]
+    tree = parent.shape[0] != 0
+    # a tree: each body's children's factors, reduced to at most six rows as they arrive (a QR
+    # of the stacked rows keeps F^T F), and how many rows each holds
+    pending = np.zeros((n if tree else 0, 6, 6))
+    npending = np.zeros(n if tree else 0, dtype=np.int64)
+    merged = np.zeros((12, 6))
+    vm = np.empty(12)
     Ia = np.empty((6, 6))
     pa = np.empty(6)
     K = np.empty((6, 6))
@@ -1114,11 +1183,32 @@ def _aba_stable(is_hinge, col_start, e, tau, udot):
         j0, j1 = col_start[k], col_start[k + 1]
         nk = j1 - j0
         IAk, pAk, D = IA[k], pA[k], Dinv[k]
+        kp, ko = (parent[k], k) if tree else (k - 1, k - 1)
+        if tree:  # the children's factors, moved to O^k already
+            nc = npending[k]
+            for b in range(nc):
+                for r in range(6):
+                    Fc[b, r] = pending[k, b, r]
         for j in range(j0, j1):
             u[j] = tau[j] - dot6(S[j], pAk)
         if motors and motor[k, 3] != 0.0:  # u' = u + m . c^k (eq 51b, as `_motor_column`)
             u[j0] += motor[k, 0] * c[k, 0] + motor[k, 1] * c[k, 1] + motor[k, 2] * c[k, 2]
-        if motors and k + 1 < n and motor[k + 1, 3] != 0.0:
+        child_motor = False
+        if motors and tree:  # the locked rotors of the children's motors, as below
+            for r in range(6):
+                for b in range(6):
+                    Ia[r, b] = IAk[r, b]
+            for j in range(k + 1, n):
+                if parent[j] == k and motor[j, 3] != 0.0:
+                    child_motor = True
+                    for r in range(3):
+                        for b in range(3):
+                            Ia[r, b] -= motor[j, r] * motor[j, b] / motor[j, 3]
+        if child_motor:
+            _chol_upper6(Ia, K)
+        elif tree:
+            _chol_upper6(IAk, K)
+        elif motors and k + 1 < n and motor[k + 1, 3] != 0.0:
             # the locked rotor J a a^T = m m^T / (J G^2) of the child's motor is factored with the
             # child (its I^a below is then positive semidefinite): the own factor without it
             for r in range(6):
@@ -1231,7 +1321,7 @@ def _aba_stable(is_hinge, col_start, e, tau, udot):
                 Ia[m2, r] = scale * (sd * W[j0, r] - mr / sd)
                 W[j0, r] = (D0 * W[j0, r] + mr) / Dk
             rows = m2 + 1
-        if k == 0:
+        if kp < 0:
             continue
         # the factor passed on: R22 N^T, N = Q[:, nk:] ((6 - nk) rows, in world axes)
         for b in range(m2):
@@ -1263,7 +1353,7 @@ def _aba_stable(is_hinge, col_start, e, tau, udot):
             for r in range(3):
                 pa[r] -= motor[k, r] * f
         # the factor moved to O^{k-1} = O^k - s^{k-1}: rows (f_ang, f_lin) X = (f_ang + s x f_lin, f_lin)
-        d = s_w[k - 1]
+        d = s_w[ko]
         nc = rows
         for b in range(rows):
             fl0, fl1, fl2 = Ia[b, 3], Ia[b, 4], Ia[b, 5]
@@ -1271,10 +1361,26 @@ def _aba_stable(is_hinge, col_start, e, tau, udot):
             Fc[b, 1] = Ia[b, 1] + (d[2] * fl0 - d[0] * fl2)
             Fc[b, 2] = Ia[b, 2] + (d[0] * fl1 - d[1] * fl0)
             Fc[b, 3], Fc[b, 4], Fc[b, 5] = fl0, fl1, fl2
+        if tree:  # joins the parent's other children's: [pending; Fc] reduced by a QR
+            m0 = npending[kp]
+            for b in range(m0):
+                for r in range(6):
+                    merged[b, r] = pending[kp, b, r]
+            for b in range(rows):
+                for r in range(6):
+                    merged[m0 + b, r] = Fc[b, r]
+            mr = m0 + rows
+            if m0 > 0:
+                _householder_qr6(merged, mr, vm)
+                mr = min(mr, 6)
+            for b in range(mr):
+                for r in range(6):
+                    pending[kp, b, r] = merged[b, r]
+            npending[kp] = mr
         # forces to O^{k-1} = O^k - s^{k-1}: (n + s x f, f)
-        vec_cross_add(s_w[k - 1], pa[3:], pA[k - 1, :3])
+        vec_cross_add(s_w[ko], pa[3:], pA[kp, :3])
         for r in range(6):
-            pA[k - 1, r] += pa[r]
+            pA[kp, r] += pa[r]
     # forward: a = A^{k-1} + c^k, u'_k = D^-1 u - (U D^-1)^T a, A^k = a + S u'_k
     A = np.empty(6)
     for r in range(6):
@@ -1284,7 +1390,13 @@ def _aba_stable(is_hinge, col_start, e, tau, udot):
         j0, j1 = col_start[k], col_start[k + 1]
         nk = j1 - j0
         D = Dinv[k]
-        if k > 0:
+        if tree:  # from the parent's A (or the base's)
+            kp = parent[k]
+            for r in range(6):
+                A[r] = acc_body[kp, r] if kp >= 0 else a_base[r]
+            if kp >= 0:
+                vec_cross_add(A[:3], s_w[k], A[3:])
+        elif k > 0:
             # motions from O^{k-1} to O^k: (alpha, a + alpha x s^{k-1})
             vec_cross_add(A[:3], s_w[k - 1], A[3:])
         for r in range(6):
@@ -1310,51 +1422,64 @@ def _aba_stable(is_hinge, col_start, e, tau, udot):
             F[k, r] += dot6(IA[k, r], acc_body[k])
     if motors:  # the motors' J G phi'' a on their parents
         for k in range(1, n):
+            kp = parent[k] if tree else k - 1
+            if kp < 0:
+                continue
             for r in range(3):
-                F[k - 1, r] += motor[k, r] * udot[col_start[k]]
+                F[kp, r] += motor[k, r] * udot[col_start[k]]
     res = np.empty(u.shape[0])
     for k in range(n - 1, -1, -1):
+        kp, ko = (parent[k], k) if tree else (k - 1, k - 1)
         for j in range(col_start[k], col_start[k + 1]):
             res[j] = tau[j] - dot6(S[j], F[k])
             if armature[k] != 0.0 and col_start[k + 1] - col_start[k] == 1:
                 res[j] -= armature[k] * udot[j]
             if motors and motor[k, 3] != 0.0:  # (51b)
-                res[j] -= (motor[k, 0] * acc_body[k - 1, 0] + motor[k, 1] * acc_body[k - 1, 1]
-                           + motor[k, 2] * acc_body[k - 1, 2] + motor[k, 3] * udot[j])
-        if k > 0:
-            vec_cross_add(s_w[k - 1], F[k, 3:], F[k - 1, :3])
+                res[j] -= (motor[k, 0] * acc_body[kp, 0] + motor[k, 1] * acc_body[kp, 1]
+                           + motor[k, 2] * acc_body[kp, 2] + motor[k, 3] * udot[j])
+        if kp >= 0:
+            vec_cross_add(s_w[ko], F[k, 3:], F[kp, :3])
             for r in range(6):
-                F[k - 1, r] += F[k, r]
-    _aba_resolve(col_start, S, s_w, W, Dinv, res, u, F, udot)
+                F[kp, r] += F[k, r]
+    _aba_resolve(col_start, S, s_w, W, Dinv, res, u, F, udot, parent)
 
 
 @_njit_alloc
-def _aba_resolve(col_start, S, s_w, W, Dinv, rhs, u, P, udot):
+def _aba_resolve(col_start, S, s_w, W, Dinv, rhs, u, P, udot, parent):
     """udot += M^-1 rhs (N,) with the elimination `_aba` left in W (U D^-1) and Dinv: its two
-    sweeps with no bias and no base motion. u (N,), P (n, 6): scratch."""
+    sweeps with no bias and no base motion. u (N,), P (n, 6): scratch; parent: a tree's, or (0,)."""
     n = P.shape[0]
+    tree = parent.shape[0] != 0
     P[:, :] = 0.0
     pa = np.empty(6)
     for k in range(n - 1, -1, -1):
         j0, j1 = col_start[k], col_start[k + 1]
+        kp, ko = (parent[k], k) if tree else (k - 1, k - 1)
         for j in range(j0, j1):
             u[j] = rhs[j] - dot6(S[j], P[k])
-        if k == 0:
+        if kp < 0:
             continue
         for r in range(6):
             acc = P[k, r]
             for j in range(j0, j1):
                 acc += W[j, r] * u[j]
             pa[r] = acc
-        vec_cross_add(s_w[k - 1], pa[3:], P[k - 1, :3])
+        vec_cross_add(s_w[ko], pa[3:], P[kp, :3])
         for r in range(6):
-            P[k - 1, r] += pa[r]
+            P[kp, r] += pa[r]
     A = np.zeros(6)
+    At = np.zeros((n if tree else 0, 6))  # a tree's body accelerations
     for k in range(n):
         j0, j1 = col_start[k], col_start[k + 1]
         nk = j1 - j0
         D = Dinv[k]
-        if k > 0:
+        if tree:
+            kp = parent[k]
+            for r in range(6):
+                A[r] = At[kp, r] if kp >= 0 else 0.0
+            if kp >= 0:
+                vec_cross_add(A[:3], s_w[k], A[3:])
+        elif k > 0:
             vec_cross_add(A[:3], s_w[k - 1], A[3:])
         for a in range(nk):
             acc = -dot6(W[j0 + a], A)
@@ -1363,14 +1488,27 @@ def _aba_resolve(col_start, S, s_w, W, Dinv, rhs, u, P, udot):
             udot[j0 + a] += acc
             for r in range(6):
                 A[r] += S[j0 + a, r] * acc
+        if tree:
+            for r in range(6):
+                At[k, r] = A[r]
 
 
 # --- the heavy-subtree path, compiled apart and called through its address ---------------------
-def heavy_subtrees(mass) -> bool:
+def heavy_subtrees(mass, parent=None) -> bool:
     """True when `_aba` takes its heavy-subtree path for bodies of these masses (n,): the same
-    test in the same operations as `_aba`'s (the mass of bodies k.. against body k - 1's)."""
+    test in the same operations as `_aba`'s (the mass of bodies k.. against body k - 1's; on a
+    tree, of k's subtree against its parent's, `parent` (n,) the tree's)."""
     after = 0.0
     worst = 0.0
+    if parent is not None:
+        sub = [float(m) for m in mass]
+        for k in range(len(mass) - 1, -1, -1):
+            kp = int(parent[k])
+            if kp >= 0:
+                sub[kp] += sub[k]
+                if float(mass[kp]) > 0.0 and sub[k] > worst * float(mass[kp]):
+                    worst = sub[k] / float(mass[kp])
+        return not worst <= STABLE_ABA_RATIO
     for k in range(len(mass) - 1, 0, -1):
         after += float(mass[k])
         if float(mass[k - 1]) > 0.0 and after > worst * float(mass[k - 1]):
@@ -1378,9 +1516,9 @@ def heavy_subtrees(mass) -> bool:
     return not worst <= STABLE_ABA_RATIO
 
 
-#: `_heavy_entry`'s arguments: the addresses of `_aba_heavy`'s 21 arrays, then the motors' rows
-#: (n or 0), n and N
-HEAVY_ENTRY_ARGUMENTS = 25
+#: `_heavy_entry`'s arguments: the addresses of `_aba_heavy`'s 22 arrays, then the motors' rows
+#: (n or 0), the parents' (n or 0), n and N
+HEAVY_ENTRY_ARGUMENTS = 27
 
 
 if jit.compiling():
@@ -1398,10 +1536,11 @@ if jit.compiling():
             address_of(e.c), address_of(tau), address_of(e.a_base), address_of(e.s_w), address_of(e.U),
             address_of(e.W), address_of(e.u), address_of(e.Dinv), address_of(udot), address_of(e.Ia),
             address_of(e.pa), address_of(e.Dx), address_of(e.T), address_of(e.G), address_of(e.x),
-            address_of(e.armature), address_of(e.motor), e.motor.shape[0], e.IA.shape[0], e.S.shape[0]))
+            address_of(e.armature), address_of(e.motor), address_of(e.parent), e.motor.shape[0],
+            e.parent.shape[0], e.IA.shape[0], e.S.shape[0]))
 
     def _heavy_entry(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot, Ia, pa,
-                     Dx, T, G, x, armature, motor, n_motor, n, N):
+                     Dx, T, G, x, armature, motor, parent, n_motor, n_parent, n, N):
         """`_aba_heavy` on the arrays at these addresses (C-contiguous, the shapes `_aba` gives
         them for n bodies and N columns): compiled as a C function (`heavy_elimination_address`)."""
         f = np.float64
@@ -1414,7 +1553,7 @@ if jit.compiling():
             block2(vector_at(Ia, 36, f), 0, 6, 6), vector_at(pa, 6, f),
             block2(vector_at(Dx, 9, f), 0, 3, 3), block2(vector_at(T, 9, f), 0, 3, 3),
             block2(vector_at(G, 9, f), 0, 3, 3), vector_at(x, 6, f), vector_at(armature, n, f),
-            block2(vector_at(motor, 4 * n_motor, f), 0, n_motor, 4))
+            block2(vector_at(motor, 4 * n_motor, f), 0, n_motor, 4), vector_at(parent, n_parent, np.int64))
         _aba_heavy(vector_at(is_hinge, n, np.bool_), vector_at(col_start, n + 1, np.int64), e,
                    vector_at(tau, N, f), vector_at(udot, N, f))
 
@@ -1427,6 +1566,7 @@ if jit.compiling():
         d = vector_at(descriptor, DESCRIPTOR_SIZE, i)
         n, N, nt = d[D_N], d[D_NCOL], d[D_NT]
         a = d[D_MODEL:D_WORK]
+        flags = vector_at(a[13], FLAGS_SIZE, i)
         model = ChainModel(
             vector_at(a[0], n, np.bool_), vector_at(a[1], n, i), vector_at(a[2], n, i),
             vector_at(a[3], n + 1, i), block2(vector_at(a[4], 3 * n, f), 0, n, 3),
@@ -1434,10 +1574,10 @@ if jit.compiling():
             block2(vector_at(a[7], 3 * n, f), 0, n, 3), block3(vector_at(a[8], 9 * n, f), 0, n, 3, 3),
             block2(vector_at(a[9], 3 * n, f), 0, n, 3), vector_at(a[10], nt, i),
             block2(vector_at(a[11], 3 * nt, f), 0, nt, 3), vector_at(a[12], nt, f),
-            vector_at(a[13], FLAGS_SIZE, i), vector_at(a[14], 7, f), vector_at(a[15], n, f),
+            flags, vector_at(a[14], 7, f), vector_at(a[15], n, f),
             block2(vector_at(a[16], 2 * n, f), 0, n, 2), block2(vector_at(a[17], 5 * n, f), 0, n, 5),
             block2(vector_at(a[18], 5 * n, f), 0, n, 5),
-            vector_at(a[19], n, np.bool_))
+            vector_at(a[19], n, np.bool_), vector_at(a[20], n * (flags[FLAG_TREE] != 0), i))
         h = d[D_INPUTS:D_N]
         inputs = HeldInputs(vector_at(h[0], 1, f), vector_at(h[1], nt, f), vector_at(h[2], nt, f),
                             vector_at(h[3], nt, f), vector_at(h[4], N, f))
@@ -1580,7 +1720,7 @@ def rhs_kernel(t, y, ydot, model, data, inputs):
     commands through its actuators' speed cut and friction (`actuate`).
     """
     (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-     torque_axis, torque_A, flags, base, armature, spring, servo, motor, is_slide) = model
+     torque_axis, torque_A, flags, base, armature, spring, servo, motor, is_slide, parent) = model
     work = data.work
     t0, p0, pdot, L_rotor, tau = inputs.t0[0], inputs.p0, inputs.pdot, inputs.L_rotor, inputs.tau
     base_type = flags[0]
@@ -1619,7 +1759,7 @@ def rhs_kernel(t, y, ydot, model, data, inputs):
         for a in range(3):
             a_base[3 + a] = base_amplitude[a] * sw
     _aba(is_hinge, col_start,
-         Elimination(S, I6, pb, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x, armature, motor_w),
+         Elimination(S, I6, pb, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x, armature, motor_w, parent),
          tau_applied, ydot[i_vel:i_vel + N], flags[FLAG_HEAVY])
     # y'
     if base_type == BASE_FREE:
@@ -1728,13 +1868,15 @@ def motor_axes(model, R, motor_w):
     fixed in the parent: R^{k-1} a) and J G^2; zero rows where none (reference.positions'
     `motor_w`)."""
     motor = model.motor
+    tree = model.parent.shape[0] != 0
     for k in range(motor.shape[0]):
         for r in range(4):
             motor_w[k, r] = 0.0
-        if k > 0 and motor[k, 1] != 0.0:
+        kp = model.parent[k] if tree else k - 1
+        if kp >= 0 and motor[k, 1] != 0.0:
             for r in range(3):
-                motor_w[k, r] = motor[k, 0] * (R[k - 1, r, 0] * motor[k, 2] + R[k - 1, r, 1] * motor[k, 3]
-                                               + R[k - 1, r, 2] * motor[k, 4])
+                motor_w[k, r] = motor[k, 0] * (R[kp, r, 0] * motor[k, 2] + R[kp, r, 1] * motor[k, 3]
+                                               + R[kp, r, 2] * motor[k, 4])
             motor_w[k, 3] = motor[k, 1]
 
 
@@ -1744,13 +1886,15 @@ def motor_gyroscopic(y, model, w, motor_w, pb):
     is the parent's gyrostatic moment (eq 31); its rate in the parent's axes, m phi_k'', is the
     elimination's (`_motor_column`)."""
     i_vel = model.flags[4]
+    tree = model.parent.shape[0] != 0
     for k in range(1, motor_w.shape[0]):
-        if motor_w[k, 3] != 0.0:
+        if motor_w[k, 3] != 0.0:  # (a motor on a body on the base is an armature: its row is zero)
+            kp = model.parent[k] if tree else k - 1
             rate = y[i_vel + model.own_col[k]]
             l0, l1, l2 = motor_w[k, 0] * rate, motor_w[k, 1] * rate, motor_w[k, 2] * rate
-            pb[k - 1, 0] += w[k - 1, 1] * l2 - w[k - 1, 2] * l1
-            pb[k - 1, 1] += w[k - 1, 2] * l0 - w[k - 1, 0] * l2
-            pb[k - 1, 2] += w[k - 1, 0] * l1 - w[k - 1, 1] * l0
+            pb[kp, 0] += w[kp, 1] * l2 - w[kp, 2] * l1
+            pb[kp, 1] += w[kp, 2] * l0 - w[kp, 0] * l2
+            pb[kp, 2] += w[kp, 0] * l1 - w[kp, 1] * l0
 
 
 @_njit_inline
@@ -1796,10 +1940,11 @@ def chain_model(model: Model) -> ChainModel:
         raise ValueError("a joint has more than six velocity columns")
     base_type = {"fixed": BASE_FIXED, "moving": BASE_MOVING, "free": BASE_FREE}[m.base_type]
     has_lam = len(m.torque_body) > 0 or m.lam_speed is not None
-    heavy = heavy_elimination_address() if heavy_subtrees(m.mass) else 0
+    tree = not m.chain
+    heavy = heavy_elimination_address() if heavy_subtrees(m.mass, m.parent if tree else None) else 0
     flags = np.array([base_type, m.gravity is not None, has_lam, m.i_r0.start, m.i_vel.start,
                       m.i_kappa.start, m.N, heavy, kernel_address(), int(m.stateful), m.i_spin.start,
-                      m.i_work.start, m.spring is not None, m.servo is not None, m.motor is not None],
+                      m.i_work.start, m.spring is not None, m.servo is not None, m.motor is not None, tree],
                      dtype=np.int64)
     base = np.zeros(7)
     if m.base_amplitude is not None:
@@ -1831,7 +1976,7 @@ def chain_model(model: Model) -> ChainModel:
         own_col=own_col,
         col_start=col_start,
         hinge_axis=f64(m.hinge_axis, (n, 3)),
-        s=f64(m.s, (n, 3)),
+        s=f64(m.offset if tree else m.s, (n, 3)),
         mass=f64(m.mass, (n,)),
         first_moment=f64(m.first_moment, (n, 3)),
         inertia=f64(m.inertia, (n, 3, 3)),
@@ -1846,6 +1991,7 @@ def chain_model(model: Model) -> ChainModel:
         servo=servo,
         motor=motor,
         is_slide=np.ascontiguousarray(m.is_slide, dtype=np.bool_),
+        parent=np.ascontiguousarray(m.parent if tree else np.zeros(0), dtype=np.int64),
     )
 
 

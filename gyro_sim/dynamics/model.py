@@ -62,6 +62,15 @@ class Model:
     first_moment: np.ndarray  # (n, 3) m^k c^k
     inertia: np.ndarray  # (n, 3, 3) A^k at O^k (eq 30)
     s: np.ndarray  # (n, 3) s^k, zero on the last body
+    # the tree (docs/theory.md section 11): parent[k] < k, -1 for a body on the base; on a chain
+    # parent[k] = k - 1 and `chain` is True (every chain code path is then the one it was)
+    parent: np.ndarray  # (n,) int
+    chain: bool
+    #: (n, 3) the joint point O^k from O^{parent(k)} in the parent's frame, s^{parent(k),k}
+    #: (a body on the base: from the base's position, world frame); a chain's s^{k-1}
+    offset: np.ndarray
+    #: (n, n) bool: ancestor[k, l] when body l is on the path from the base to k (l == k included)
+    ancestor: np.ndarray
     # rotors (eq 31): torque rotors carry lambda = A_i p_i e_i, speed rotors A_i kappa_i' e_i
     torque_body: np.ndarray  # (nt,) int
     torque_axis: np.ndarray  # (nt, 3)
@@ -88,7 +97,10 @@ class Model:
     # velocity columns: col_body[j] = body whose joint column j belongs to (free base: 0)
     N: int
     col_body: np.ndarray  # (N,)
-    col_upper: np.ndarray  # (N, N) bool: col_body[i] <= col_body[j]
+    col_upper: np.ndarray  # (N, N) bool: body col_body[i] is an ancestor of (or is) col_body[j]
+    #: (N, N) bool: the columns' bodies are on one path from the base (one an ancestor of the
+    #: other): M_ij vanishes elsewhere (branch-induced sparsity); all True on a chain
+    col_related: np.ndarray
     col_sph: np.ndarray  # (ns, 3) column indices of spherical joints
     col_hinge: np.ndarray  # (nh,) column indices of hinges
     col_base: np.ndarray  # (3,) or (0,)
@@ -159,14 +171,15 @@ def compile_model(scene: Scene) -> Model:
     axis_names, axis_hinge, axis_rotor = [], [], []
     hinge_index = np.cumsum(is_hinge) - 1
     motor = np.zeros((int(np.sum(is_hinge)), 5))
+    parent, offset, ancestor = tree_of(bodies)
     for k, b in enumerate(bodies):
         if is_hinge[k]:
             hinge_axis[k] = b.joint.axis
-        if is_hinge[k] and b.joint.motor is not None and k > 0:
+        if is_hinge[k] and b.joint.motor is not None and parent[k] >= 0:
             # a motor's rotor on the parent: its axial inertia turns with the parent (eq 30,
-            # as a prescribed rotor's A_i), its relative spin G phi_k' is lambda^{k-1} (eq 31)
+            # as a prescribed rotor's A_i), its relative spin G phi_k' is lambda^{parent} (eq 31)
             mo = b.joint.motor
-            inertia[k - 1] += mo.inertia * np.outer(mo.axis, mo.axis)
+            inertia[parent[k]] += mo.inertia * np.outer(mo.axis, mo.axis)
             motor[hinge_index[k]] = (mo.inertia, mo.gear, *mo.axis)
         if is_hinge[k] and b.joint.servo is None:  # a servo's hinge is commanded by its control
             axis_names.append(b.name)
@@ -239,7 +252,8 @@ def compile_model(scene: Scene) -> Model:
     hinges = [bodies[k].joint for k in hin]
     # a motor on the first body turns against the base, which never rotates: exactly an
     # armature J G^2 (docs/theory.md, "The geared motor")
-    armature = np.array([j.armature + (j.motor.inertia * j.motor.gear ** 2 if j.motor is not None and k == 0 else 0.0)
+    armature = np.array([j.armature + (j.motor.inertia * j.motor.gear ** 2
+                                       if j.motor is not None and parent[k] < 0 else 0.0)
                          for k, j in zip(hin, hinges)], dtype=float)
     spring = np.array([(j.spring.stiffness, j.spring.reference) if j.spring is not None else (0.0, 0.0)
                        for j in hinges], dtype=float).reshape(nh, 2)
@@ -268,6 +282,11 @@ def compile_model(scene: Scene) -> Model:
         first_moment=first,
         inertia=inertia,
         s=s,
+        parent=parent,
+        chain=bool(np.array_equal(parent, np.arange(n) - 1) and not np.any(offset[0])
+                   and np.array_equal(offset[1:], s[:-1])),
+        offset=offset,
+        ancestor=ancestor,
         torque_body=np.array(tb, dtype=int),
         torque_axis=arr(ta, (nt, 3)),
         torque_A=arr(tA, (nt,)),
@@ -290,7 +309,8 @@ def compile_model(scene: Scene) -> Model:
         down=down_frame(nu),
         N=N,
         col_body=col_body,
-        col_upper=col_body[:, None] <= col_body[None, :],
+        col_upper=ancestor[col_body[None, :], col_body[:, None]],
+        col_related=ancestor[col_body[None, :], col_body[:, None]] | ancestor[col_body[:, None], col_body[None, :]],
         col_sph=np.array(col_sph, dtype=int).reshape(ns, 3),
         col_hinge=np.array(col_hinge, dtype=int),
         col_base=np.arange(3) if free else np.arange(0),
@@ -311,6 +331,27 @@ def compile_model(scene: Scene) -> Model:
         servo_input=servo_input if servos else None,
         servo_names=tuple(v.name for v in servos),
     )
+
+
+def tree_of(bodies) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The tree of `bodies` (docs/theory.md section 11): each body's parent index (-1: the base;
+    a Body's None: the body before it), its joint point from its parent's O in the parent's frame
+    (`joint.at`, else the parent's next_joint; zero on the base: the base's position) and the
+    ancestor relation (n, n), ancestor[k, l] when l is on the path from the base to k."""
+    n = len(bodies)
+    parent = np.array([k - 1 if b.parent is None else b.parent for k, b in enumerate(bodies)], dtype=int)
+    offset = np.zeros((n, 3))
+    ancestor = np.zeros((n, n), dtype=bool)
+    for k, b in enumerate(bodies):
+        q = parent[k]
+        if b.joint.at is not None:
+            offset[k] = b.joint.at
+        elif q >= 0 and bodies[q].next_joint is not None:
+            offset[k] = bodies[q].next_joint
+        if q >= 0:
+            ancestor[k] = ancestor[q]
+        ancestor[k, k] = True
+    return parent, offset, ancestor
 
 
 #: the work states of a stateful model: the motors', friction's
@@ -341,8 +382,7 @@ def initial_state(model: Model) -> np.ndarray:
     """The state vector y (model.size,) of the scene's initial conditions."""
     y = np.zeros(model.size)
     bodies = model.scene.bodies
-    R_parent = np.eye(3)
-    w_parent = np.zeros(3)
+    Rs, ws = np.zeros((model.n, 3, 3)), np.zeros((model.n, 3))
     nu_rel = np.zeros((model.n, 3))
     q = np.zeros((len(model.sph_bodies), 4))
     phi = np.zeros(len(model.hinge_bodies))
@@ -350,6 +390,8 @@ def initial_state(model: Model) -> np.ndarray:
     isph = ihin = 0
     for k, b in enumerate(bodies):
         ini = b.initial
+        q_k = model.parent[k]
+        R_parent, w_parent = (np.eye(3), np.zeros(3)) if q_k < 0 else (Rs[q_k], ws[q_k])
         if model.is_slide[k]:  # the parent's orientation and angular velocity
             R, w = R_parent, w_parent
             phi[ihin], phid[ihin] = ini.position, ini.velocity
@@ -375,7 +417,7 @@ def initial_state(model: Model) -> np.ndarray:
             q[isph] = qk
             nu_rel[k] = w - w_parent
             isph += 1
-        R_parent, w_parent = R, w
+        Rs[k], ws[k] = R, w
     if model.free:
         y[model.i_r0] = model.base_position
     y[model.i_quat.ravel()] = q.ravel()

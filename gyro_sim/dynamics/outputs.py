@@ -224,6 +224,29 @@ def _scatter(dst, at, src, first):
 
 
 @_njit_inline
+def _tree_wrenches(R, I6, acc, pb, s_w, parent, motor_w, col_start, udot, force, moment):
+    """A tree's joint forces R^k (eq 40) and moments L^k (eq 48T) in body k's frame into force,
+    moment (n, 3): F^k = (I a + p)^k plus each child's F^j moved from O^j to O^k (s_w[j] =
+    O^j - O^k), summed from the leaves in pb (the bodies' bias forces, overwritten); a child's
+    geared motor adds J G phi_j'' a to its parent's moment (motor_w (n, 4), or (0, 4))."""
+    for k in range(acc.shape[0] - 1, -1, -1):
+        for r in range(6):
+            pb[k, r] += dot6(I6[k, r], acc[k])
+        kp = parent[k]
+        if motor_w.shape[0] != 0 and kp >= 0 and motor_w[k, 3] != 0.0:
+            ud = udot[col_start[k]]
+            for r in range(3):
+                pb[kp, r] += motor_w[k, r] * ud
+        for a in range(3):
+            force[k, a] = R[k, 0, a] * pb[k, 3] + R[k, 1, a] * pb[k, 4] + R[k, 2, a] * pb[k, 5]
+            moment[k, a] = R[k, 0, a] * pb[k, 0] + R[k, 1, a] * pb[k, 1] + R[k, 2, a] * pb[k, 2]
+        if kp >= 0:
+            vec_cross_add(s_w[k], pb[k, 3:], pb[kp, :3])
+            for r in range(6):
+                pb[kp, r] += pb[k, r]
+
+
+@_njit_inline
 def _finite(a):
     """Every entry of a (m, q) finite."""
     ok = True
@@ -288,7 +311,7 @@ def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, s
     position, velocity, effort = states
     dst, at_joint, at_position, at_quat, at_wrench = slots
     (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
-     torque_axis, torque_A, flags, base, armature, spring, servo, motor, is_slide) = model
+     torque_axis, torque_A, flags, base, armature, spring, servo, motor, is_slide, parent) = model
     work = data.work
     t0, p0, pdot, L_rotor, tau = inputs.t0[0], inputs.p0, inputs.pdot, inputs.L_rotor, inputs.tau
     base_type, has_gravity, has_lam = flags[0], flags[1] != 0, flags[2] != 0
@@ -356,8 +379,16 @@ def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, s
             sw = -W * W * math.sin(W * t)
             for a in range(3):
                 A[3 + a] = amp[a] * sw
+        tree = parent.shape[0] != 0
         for k in range(n):
-            if k > 0:
+            if tree:  # from the parent's A (a tree's s_w[k] is O^k - O^{parent}), or the base's
+                kp = parent[k]
+                for r in range(6):
+                    A[r] = acc[kp, r] if kp >= 0 else (amp[r - 3] * -W * W * math.sin(W * t)
+                                                       if r >= 3 and base_type == fast.BASE_MOVING else 0.0)
+                if kp >= 0:
+                    vec_cross_add(A[:3], s_w[k], A[3:])
+            elif k > 0:
                 vec_cross_add(A[:3], s_w[k - 1], A[3:])  # a kernel helper
             for r in range(6):
                 A[r] += c[k, r]
@@ -366,11 +397,16 @@ def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, s
                     A[r] += S[j, r] * udot[j]
             for r in range(6):
                 acc[k, r] = A[r]
+        if do_wrench and tree:
+            _tree_wrenches(R, I6, acc, pb, s_w, parent, motor_w if motors else motor_w[:0], col_start, udot,
+                           wrench_force, wrench_moment)
         if do_wrench:
             # F^k = sum_{p >= k} (I a + p)^p about O^k; R^k its force (40), L^k its moment (48)
             Fa0 = Fa1 = Fa2 = 0.0
             Fl0 = Fl1 = Fl2 = 0.0
             for k in range(n - 1, -1, -1):
+                if tree:
+                    break
                 if k < n - 1:  # the moment of F^{k+1} moved to O^k
                     d0, d1, d2 = s_w[k, 0], s_w[k, 1], s_w[k, 2]
                     Fa0 += d1 * Fl2 - d2 * Fl1
@@ -412,12 +448,20 @@ def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, s
                 O[0, a] = base_position[a] + amp[a] * math.sin(W * t)
             else:
                 O[0, a] = base_position[a]
-        if is_slide[0]:  # a first body's slide moves O^1 (the others' are in s_w[k - 1])
+        if parent.shape[0] != 0:  # a tree: O^k = O^{parent} + s_w[k] (the base's point on the base)
             for a in range(3):
-                O[0, a] += e_w[0, a] * y[qrow[0]]
-        for k in range(1, n):
-            for a in range(3):
-                O[k, a] = O[k - 1, a] + s_w[k - 1, a]
+                tmp[a] = O[0, a]
+            for k in range(n):
+                kp = parent[k]
+                for a in range(3):
+                    O[k, a] = (O[kp, a] if kp >= 0 else tmp[a]) + s_w[k, a]
+        else:
+            if is_slide[0]:  # a first body's slide moves O^1 (the others' are in s_w[k - 1])
+                for a in range(3):
+                    O[0, a] += e_w[0, a] * y[qrow[0]]
+            for k in range(1, n):
+                for a in range(3):
+                    O[k, a] = O[k - 1, a] + s_w[k - 1, a]
     # Euler angles (joint states of spherical joints; every body for the Lagrange integrals)
     all_euler = (want & WANT_EULER_ALL) != 0
     for k in range(n):
@@ -514,7 +558,8 @@ def publication_kernel(t, y, ydot, model, data, inputs, layout, want, outputs, s
         for k in range(1, n):
             if motor_w[k, 3] != 0.0:
                 rate = y[i_vel + own_col[k]]
-                T += rate * (motor_w[k, 0] * w[k - 1, 0] + motor_w[k, 1] * w[k - 1, 1] + motor_w[k, 2] * w[k - 1, 2])
+                kp = parent[k] if parent.shape[0] != 0 else k - 1
+                T += rate * (motor_w[k, 0] * w[kp, 0] + motor_w[k, 1] * w[kp, 1] + motor_w[k, 2] * w[kp, 2])
                 T += 0.5 * motor_w[k, 3] * rate * rate
                 for a in range(3):
                     L[a] += motor_w[k, a] * rate

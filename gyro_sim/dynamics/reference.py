@@ -52,6 +52,48 @@ def rcumsum(a: np.ndarray, axis: int = 0) -> np.ndarray:
     return a[rev].cumsum(axis)[rev]
 
 
+def _body_axis(a: np.ndarray, axis: int, k: int) -> tuple:
+    """The index of body k along the bodies' axis `axis` (0 or -2) of a."""
+    return (k,) if axis == 0 else (Ellipsis, k, slice(None))
+
+
+def subtree_sum(model: Model, a: np.ndarray, axis: int = 0) -> np.ndarray:
+    """Sums over each body's subtree (docs/theory.md section 11: eqs 40, 48T), along the bodies'
+    axis `axis` (0 or -2): out[k] = sum_{p in sub(k)} a[p]; a chain's suffix sums (`rcumsum`)."""
+    if model.chain:
+        return rcumsum(a, axis)
+    out = np.array(a, copy=True)
+    for k in range(model.n - 1, -1, -1):  # children before parents
+        q = model.parent[k]
+        if q >= 0:
+            out[_body_axis(out, axis, q)] += out[_body_axis(out, axis, k)]
+    return out
+
+
+def path_sum(model: Model, a: np.ndarray) -> np.ndarray:
+    """Sums over the path from the base to each body along the bodies' axis -2 (eqs 34, 53 on a
+    tree): out[k] = a[k] + out[parent(k)]; a chain's prefix sums (cumsum)."""
+    if model.chain:
+        return a.cumsum(-2)
+    out = np.array(a, copy=True)
+    for k in range(model.n):  # parents before children
+        q = model.parent[k]
+        if q >= 0:
+            out[..., k, :] += out[..., q, :]
+    return out
+
+
+def of_parents(model: Model, a: np.ndarray) -> np.ndarray:
+    """a[..., parent(k), :] for every body k along the axis -2, zero for a body on the base."""
+    out = np.zeros(a.shape, dtype=a.dtype)
+    if model.chain:
+        out[..., 1:, :] = a[..., :-1, :]
+        return out
+    on_body = model.parent >= 0
+    out[..., on_body, :] = a[..., model.parent[on_body], :]
+    return out
+
+
 class Data:
     """Workspace of one evaluation; its fields are the results of the last stage run."""
 
@@ -68,7 +110,7 @@ class Data:
         self.sph_axes = np.tile(EYE3, (len(model.sph_bodies), 1))  # a spherical joint's unit motions (joint_columns)
         # each hinge's parent (a motor's rotor is on it; a row without motor points at body 0 and
         # is zero)
-        self.motor_parent = np.maximum(model.hinge_bodies - 1, 0)
+        self.motor_parent = np.maximum(model.parent[model.hinge_bodies], 0)
 
 
 def _skew(a: np.ndarray) -> np.ndarray:
@@ -96,24 +138,32 @@ def positions(model: Model, data: Data, t: float, y: np.ndarray) -> None:
         Rrel = (EYE3 + np.sin(phi)[..., None, None] * data.hinge_K
                 + (1.0 - np.cos(phi))[..., None, None] * data.hinge_K2)
         for i, k in enumerate(model.hinge_bodies):
+            q = model.parent[k]
             if model.hinge_slide[i]:  # a slide keeps its parent's orientation (section 12)
-                R[..., k, :, :] = EYE3 if k == 0 else R[..., k - 1, :, :]
+                R[..., k, :, :] = EYE3 if q < 0 else R[..., q, :, :]
                 continue
-            R[..., k, :, :] = Rrel[..., i, :, :] if k == 0 else R[..., k - 1, :, :] @ Rrel[..., i, :, :]
+            R[..., k, :, :] = Rrel[..., i, :, :] if q < 0 else R[..., q, :, :] @ Rrel[..., i, :, :]
     if model.free:
         O1 = y[..., model.i_r0][..., None, :]
     elif model.moving:
         O1 = base_motion(model, t)[0]
     else:
         O1 = model.base_position
-    s_w = matvec(R, model.s)
-    data.O = O1 + s_w.cumsum(-2) - s_w
+    if model.chain:
+        s_w = matvec(R, model.s)
+        data.O = O1 + s_w.cumsum(-2) - s_w
+    else:  # (34) on a tree: O^k = O^{parent(k)} + R^{parent(k)} s^{parent(k),k}
+        R_parent = np.array(R, copy=True)
+        on_base = model.parent < 0
+        R_parent[..., on_base, :, :] = EYE3
+        R_parent[..., ~on_base, :, :] = R[..., model.parent[~on_base], :, :]
+        data.O = O1 + path_sum(model, matvec(R_parent, model.offset))
     if len(model.slide_bodies):  # a slide moves O^k (and the bodies after it) by e^k d_k
         sl = model.slide_bodies
         d_w = np.zeros(R.shape[:-1], dtype=R.dtype)
         d_w[..., sl, :] = (matvec(R[..., sl, :, :], model.hinge_axis[sl])
                            * y[..., model.i_phi][..., model.hinge_slide][..., None])
-        data.O = data.O + d_w.cumsum(-2)
+        data.O = data.O + path_sum(model, d_w)
     hk = matvec(R, model.first_moment)  # m^k c^k, world components
     data.h = model.mass[:, None] * data.O + hk  # first moments about the origin
     data.e_w = matvec(R[..., model.hinge_bodies, :, :], model.hinge_axis[model.hinge_bodies])  # hinge axes
@@ -151,11 +201,11 @@ def velocities(model: Model, data: Data, t: float, u: np.ndarray) -> None:
         vrel = np.zeros(wrel.shape, dtype=wrel.dtype)
         vrel[..., model.slide_bodies, :] = wrel[..., model.slide_bodies, :]
         wrel[..., model.slide_bodies, :] = 0.0
-    w = wrel.cumsum(-2)
+    w = path_sum(model, wrel)
     O = data.O
-    v_o = cross(O, wrel).cumsum(-2)  # velocity of the body point at the origin
+    v_o = path_sum(model, cross(O, wrel))  # velocity of the body point at the origin
     if vrel is not None:
-        v_o = v_o + vrel.cumsum(-2)
+        v_o = v_o + path_sum(model, vrel)
     data.vrel = vrel
     if model.free:
         v_o += u[..., model.col_base][..., None, :]
@@ -164,9 +214,7 @@ def velocities(model: Model, data: Data, t: float, u: np.ndarray) -> None:
     data.wrel, data.w, data.v_o = wrel, w, v_o
     data.hinge_rate = u[..., model.col_hinge]
     data.vO = v_o + cross(w, O)  # (34): velocity of O^k
-    w_parent = np.zeros(w.shape, dtype=w.dtype)
-    w_parent[..., 1:, :] = w[..., :-1, :]
-    data.w_parent = w_parent
+    data.w_parent = of_parents(model, w)
 
 
 def torque_rotor_rates(model: Model, data: Data, p: np.ndarray) -> np.ndarray:
@@ -249,8 +297,8 @@ def bias_accelerations(model: Model, data: Data, t: float) -> tuple[np.ndarray, 
     dv = cross(data.vO, data.wrel) + cross(data.O, da)
     if data.vrel is not None:  # a slide's axis turns with its parent: S' u = (0, w^{k-1} x e^k d_k')
         dv = dv + cross(data.w_parent, data.vrel)
-    acc_w = da.cumsum(-2)
-    acc_v = dv.cumsum(-2)
+    acc_w = path_sum(model, da)
+    acc_v = path_sum(model, dv)
     if model.moving:
         acc_v += base_motion(model, t)[2]
     return acc_w, acc_v
@@ -272,14 +320,18 @@ def joint_columns(model: Model, data: Data) -> tuple[np.ndarray, np.ndarray]:
 
 
 def mass_matrix(model: Model, data: Data, Sa: np.ndarray, Sb: np.ndarray) -> np.ndarray:
-    """M_ij = S_i . I^C_{max(k_i, k_j)} S_j with I^C_k the composite inertia of bodies k..n."""
-    JC = rcumsum(data.J)[model.col_body]
-    hC = rcumsum(data.h)[model.col_body]
-    mC = rcumsum(model.mass)[model.col_body]
+    """M_ij = S_i . I^C_{max(k_i, k_j)} S_j with I^C_k the composite inertia of bodies k..n (on
+    a tree, of the deeper body's subtree, and zero unless one body is the other's ancestor:
+    docs/theory.md section 11)."""
+    JC = subtree_sum(model, data.J)[model.col_body]
+    hC = subtree_sum(model, data.h)[model.col_body]
+    mC = subtree_sum(model, model.mass)[model.col_body]
     F_ang = matvec(JC, Sa) + cross(hC, Sb)
     F_lin = mC[:, None] * Sb + cross(Sa, hC)
     Mfull = Sa @ F_ang.T + Sb @ F_lin.T
     M = np.where(model.col_upper, Mfull, Mfull.T)
+    if not model.chain:  # branch-induced sparsity
+        M = np.where(model.col_related, M, 0.0)
     if model.armature is not None:  # a reflected rotor inertia on its hinge's own diagonal
         M[model.col_hinge, model.col_hinge] += model.armature
     if model.motor is not None:
@@ -287,7 +339,7 @@ def mass_matrix(model: Model, data: Data, Sa: np.ndarray, Sb: np.ndarray) -> np.
         # Sa_j u_j over the columns of bodies up to the parent
         J, G = model.motor[:, 0], model.motor[:, 1]
         col = model.col_hinge  # a hinge without motor: m = 0
-        coupling = (Sa @ data.motor_w.T) * (model.col_body[:, None] <= data.motor_parent[None, :])
+        coupling = (Sa @ data.motor_w.T) * model.ancestor[data.motor_parent[None, :], model.col_body[:, None]]
         M[:, col] += coupling
         M[col, :] += coupling.T
         M[col, col] += J * G * G
@@ -321,19 +373,19 @@ def motor_row(model: Model, data: Data, acc_w: np.ndarray, hinge_udot: np.ndarra
 
 def project_subtree(model: Model, Sa, Sb, f_ang, f_lin) -> np.ndarray:
     """Generalized forces S_j . sum_{p >= k(j)} f_p (the rows of eqs 52-54)."""
-    FCa = rcumsum(f_ang, -2)[..., model.col_body, :]
-    FCl = rcumsum(f_lin, -2)[..., model.col_body, :]
+    FCa = subtree_sum(model, f_ang, -2)[..., model.col_body, :]
+    FCl = subtree_sum(model, f_lin, -2)[..., model.col_body, :]
     return np.einsum("...ni,...ni->...n", Sa, FCa) + np.einsum("...ni,...ni->...n", Sb, FCl)
 
 
 def reactions(model: Model, data: Data, f_ang: np.ndarray, f_lin: np.ndarray):
-    """Joint reactions on body k from body k-1 (or the base), world components.
+    """Joint reactions on body k from its parent (or the base), world components.
 
     R^k = sum_{p>=k} (m^p (v^p)' - F^p) (eq 40); L^k = moment about O^k of the same subtree
-    sums (eq 48). Returns (R, L), each (n, 3).
+    sums (eq 48; on a tree the sums are over sub(k), eq 48T). Returns (R, L), each (n, 3).
     """
-    FCa = rcumsum(f_ang)
-    R = rcumsum(f_lin)
+    FCa = subtree_sum(model, f_ang)
+    R = subtree_sum(model, f_lin)
     L = FCa - cross(data.O, R)
     return R, L
 
@@ -346,7 +398,7 @@ def accelerations_from(model: Model, data: Data, Sa, Sb, udot, acc_w0, acc_v0):
     # summed over each body's columns along the bodies' axis, moved first for np.add.at
     np.add.at(np.moveaxis(da, -2, 0), model.col_body, np.moveaxis(Sa * udot[..., None], -2, 0))
     np.add.at(np.moveaxis(dv, -2, 0), model.col_body, np.moveaxis(Sb * udot[..., None], -2, 0))
-    return acc_w0 + da.cumsum(-2), acc_v0 + dv.cumsum(-2)
+    return acc_w0 + path_sum(model, da), acc_v0 + path_sum(model, dv)
 
 
 class Applied:

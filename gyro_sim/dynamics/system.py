@@ -358,9 +358,15 @@ BACKENDS = ("auto", "numba", "numpy")
 
 
 def heavy_subtree_ratio(model: Model) -> float:
-    """The largest ratio of the mass of bodies k+1..n to the mass of body k (a massless body
-    k, which has no inertia of its own to lose, left out)."""
+    """The largest ratio of the mass of bodies k+1..n to the mass of body k (on a tree: of a
+    child's subtree to its parent's own; a massless body k, which has no inertia of its own to
+    lose, left out)."""
     m = model.mass
+    if not model.chain:
+        sub = dyn.subtree_sum(model, m)
+        child = np.flatnonzero((model.parent >= 0))
+        child = child[m[model.parent[child]] > 0.0]
+        return float(np.max(sub[child] / m[model.parent[child]])) if len(child) else 0.0
     after = np.cumsum(m[::-1])[::-1][1:]
     carriers = m[:-1] > 0.0
     return float(np.max(after[carriers] / m[:-1][carriers])) if np.any(carriers) else 0.0

@@ -123,8 +123,8 @@ def implicit_for(model) -> str:
     """The implicit rung of "fixed" for a chain's model (None: a system that is not a chain).
     A model whose actuators are states (friction, max_speed: `Model.stateful`) gets gauss4 on
     its own state: the canonical equations of gauss4s have no place for them, nor for servos
-    (which make a model stateful) and geared motors."""
-    chain = model is not None and not model.stateful and model.motor is None
+    (which make a model stateful) and geared motors, nor for trees (bodies with several children)."""
+    chain = model is not None and not model.stateful and model.motor is None and model.chain
     return IMPLICIT if chain and model.n <= IMPLICIT_MAX_BODIES else IMPLICIT_PLAIN
 #: "fixed": the last resort of a call that rk4 and the implicit method both fail (adaptive,
 #: error-controlled)
@@ -293,8 +293,15 @@ def body_rate_bound(model, y: np.ndarray) -> float:
     hinge = np.zeros(n)
     if len(model.col_hinge):
         hinge[model.hinge_bodies] = np.abs(u[model.col_hinge])
-    w = np.cumsum(vec, axis=0)
-    return float((np.sqrt((w * w).sum(axis=1)) + np.cumsum(hinge)).max())
+    if model.chain:
+        w, path = np.cumsum(vec, axis=0), np.cumsum(hinge)
+    else:  # a tree: summed along the path from the base to each body
+        w, path = vec.copy(), hinge.copy()
+        for k, q in enumerate(model.parent):
+            if q >= 0:
+                w[k] += w[q]
+                path[k] += path[q]
+    return float((np.sqrt((w * w).sum(axis=1)) + path).max())
 
 
 def substeps_for(h: float, omega: float, now: int = 1) -> int:

@@ -142,7 +142,7 @@ def register(sub, bench) -> None:
 
     p = sub.add_parser("import", help="write an MJCF or URDF model (MuJoCo) as a gyro_sim scene",
                        description="Write an MJCF or URDF model as a gyro_sim scene file (YAML): "
-                                   "the chain, its rotors, gravity, its IMUs and the initial state "
+                                   "its bodies (a chain or a tree), rotors, gravity, IMUs and the initial state "
                                    "of a keyframe. docs/models.md gives the mapping.",
                        epilog=EXAMPLES, formatter_class=RawDescriptionHelpFormatter)
     p.add_argument("model", metavar="MODEL", help="the MJCF or URDF file")

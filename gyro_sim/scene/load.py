@@ -75,7 +75,7 @@ BOUNDS = {
     "mass": (1e9, "kg"),
     "axial": (1e12, "kg m^2"), "transverse": (1e12, "kg m^2"), "inertia_com": (1e12, "kg m^2"),
     "axial_inertia": (1e12, "kg m^2"), "transverse_inertia": (1e12, "kg m^2"),
-    "com": (1e4, "m"), "next_joint": (1e4, "m"), "position": (1e4, "m"), "radius": (1e4, "m"),
+    "com": (1e4, "m"), "next_joint": (1e4, "m"), "at": (1e4, "m"), "position": (1e4, "m"), "radius": (1e4, "m"),
     "amplitude": (1e3, "m"), "gravity": (1e4, "m/s^2"), "frequency": (1e6, "Hz"),
     "velocity": (1e6, "m/s"),
     "spin": (1e7, "rad/s"), "rate": (1e7, "rad/s"), "euler_rates": (1e7, "rad/s"),
@@ -96,9 +96,11 @@ BASE_KEYS = ("type", "position", "motion", "velocity")
 BASE_TYPE_KEYS = {"fixed": ("type", "position"), "moving": ("type", "position", "motion"),
                   "free": ("type", "position", "velocity")}
 MOTION_KEYS = ("type", "amplitude", "frequency")
-BODY_KEYS = ("name", "joint", "mass", "com", "inertia", "inertia_com", "next_joint", "rotors",
+BODY_KEYS = ("name", "parent", "joint", "mass", "com", "inertia", "inertia_com", "next_joint", "rotors",
              "initial", "visual")
-JOINT_KEYS = ("type", "axis", "max_torque", "friction", "armature", "spring", "servo", "motor")
+#: a body's `parent` naming the base: the body hangs from the base (docs/scene-format.md)
+BASE_PARENT = "base"
+JOINT_KEYS = ("type", "axis", "at", "max_torque", "friction", "armature", "spring", "servo", "motor")
 #: a hinge's terms a spherical joint does not take (docs/scene-format.md)
 HINGE_ONLY_KEYS = ("armature", "spring", "servo", "motor")
 MOTOR_KEYS = ("inertia", "gear", "axis")
@@ -694,9 +696,11 @@ def _bodies(ch: _Checker, value: Any, base_type: Any) -> tuple[Body, ...] | None
         ch.fail("bodies", "must not be empty (a scene has at least one body)")
         return None
     names: list[tuple[str, str, str]] = []  # (name, path, joint type or "rotor")
+    parents, needs_next = _tree(ch, value, base_type)
     bodies = []
     for index, item in enumerate(value):
-        bodies.append(_body(ch, item, f"bodies[{index}]", index == len(value) - 1, names))
+        bodies.append(_body(ch, item, f"bodies[{index}]", needs_next[index], names, parents[index],
+                            index == len(value) - 1))
     first = value[0]
     first_joint = first.get("joint") if isinstance(first, Mapping) else None
     if base_type == "free" and isinstance(first_joint, Mapping) and \
@@ -715,6 +719,54 @@ def _bodies(ch: _Checker, value: Any, base_type: Any) -> tuple[Body, ...] | None
         elif servo is not None:
             servos[servo.name] = index
     return tuple(bodies)
+
+
+def _tree(ch: _Checker, value: list, base_type: Any) -> tuple[list[int], list[bool | None]]:
+    """Each body's parent index (-1: the base) from its `parent` (default: the body before it)
+    and, per body, whether a child takes its joint point from the body's `next_joint` (True:
+    required), None when the body has no child (refused there), False when every child gives
+    `joint.at`."""
+    index_of: dict[str, int] = {}
+    parents: list[int] = []
+    has_at: list[bool] = []
+    for index, item in enumerate(value):
+        body = item if isinstance(item, Mapping) else {}
+        path = f"bodies[{index}]"
+        parent = index - 1
+        if "parent" in body:
+            written = body["parent"]
+            if not isinstance(written, str):
+                ch.fail(_at(path, "parent"), f"must be a body's name or {BASE_PARENT!r} (got {_describe(written)})")
+            elif written == BASE_PARENT:
+                parent = -1
+            elif written in index_of:
+                parent = index_of[written]
+            elif any(isinstance(b, Mapping) and b.get("name") == written for b in value[index:]):
+                ch.fail(_at(path, "parent"), f"{written!r} is listed at or after this body; a parent "
+                                             "comes before its children")
+            else:
+                ch.fail(_at(path, "parent"), f"unknown body {written!r} (a body listed before this one, "
+                                             f"or {BASE_PARENT!r})")
+        joint = body.get("joint")
+        has_at.append(isinstance(joint, Mapping) and joint.get("at") is not None)
+        name = body.get("name")
+        if isinstance(name, str) and name != BASE_PARENT:
+            index_of.setdefault(name, index)
+        elif name == BASE_PARENT:
+            ch.fail(_at(path, "name"), f"{BASE_PARENT!r} is reserved: a `parent` naming it is the base")
+        parents.append(parent)
+    needs_next: list[bool | None] = [None] * len(value)
+    for index, parent in enumerate(parents):
+        if parent >= 0:
+            needs_next[parent] = bool(needs_next[parent]) or not has_at[index]
+    on_base = [index for index, parent in enumerate(parents) if parent < 0]
+    if base_type == "free" and on_base and has_at[on_base[0]]:
+        ch.fail(f"bodies[{on_base[0]}].joint.at", "not allowed on a free base's body (its joint point is "
+                                                  "the base's position, the state r0)")
+    if base_type == "free" and len(on_base) > 1:
+        ch.fail(f"bodies[{on_base[1]}].parent", f"a free base carries one body (bodies[{on_base[0]}] "
+                                                "already hangs from it); hang this one from a body")
+    return parents, needs_next
 
 
 def _check_names(ch: _Checker, names: list[tuple[str, str, str]]) -> None:
@@ -744,8 +796,8 @@ def _check_names(ch: _Checker, names: list[tuple[str, str, str]]) -> None:
                               f"(a spherical joint publishes <body>_psi, _theta, _phi)")
 
 
-def _body(ch: _Checker, value: Any, path: str, last: bool,
-          names: list[tuple[str, str, str]]) -> Body | None:
+def _body(ch: _Checker, value: Any, path: str, needs_next: bool | None,
+          names: list[tuple[str, str, str]], parent: int, last: bool) -> Body | None:
     body = ch.mapping(value, path, BODY_KEYS, required=("name", "joint", "mass"))
     if body is None:
         return None
@@ -760,12 +812,13 @@ def _body(ch: _Checker, value: Any, path: str, last: bool,
     inertia = _body_inertia(ch, body, path, mass, com)
 
     next_joint = ch.vector(body, "next_joint", path, default=None)
-    if last and body.get("next_joint") is not None:
-        ch.fail(_at(path, "next_joint"), "not allowed on the last body (there is no next joint)")
-    elif not last and "next_joint" not in body:
-        ch.fail(_at(path, "next_joint"), "required on every body but the last "
-                                         "(s^k, from O^k to O^{k+1})")
-    elif not last and body["next_joint"] is None:
+    if needs_next is None and body.get("next_joint") is not None:
+        where = "the last body" if last else "a body without children"
+        ch.fail(_at(path, "next_joint"), f"not allowed on {where} (there is no next joint)")
+    elif needs_next and "next_joint" not in body:
+        ch.fail(_at(path, "next_joint"), "required on every body but the last (s^k, from O^k to O^{k+1}), "
+                                         "unless each of its children gives its joint.at")
+    elif needs_next and body["next_joint"] is None:
         ch.fail(_at(path, "next_joint"), "required, got null")
 
     rotors = _rotors(ch, body.get("rotors"), _at(path, "rotors"), names)
@@ -782,7 +835,7 @@ def _body(ch: _Checker, value: Any, path: str, last: bool,
         joint = dataclasses.replace(joint, servo=dataclasses.replace(joint.servo, name=name))
     return Body(name=name, joint=joint, mass=mass, com=_readonly(com), inertia=_readonly(inertia),
                 next_joint=None if next_joint is None else _readonly(next_joint),
-                rotors=rotors, initial=initial, visual_radius=visual_radius)
+                rotors=rotors, initial=initial, visual_radius=visual_radius, parent=parent)
 
 
 def _joint(ch: _Checker, value: Any, path: str) -> Joint | None:
@@ -792,6 +845,8 @@ def _joint(ch: _Checker, value: Any, path: str) -> Joint | None:
     if joint is None:
         return None
     kind = ch.choice(joint, "type", path, JOINT_TYPES)
+    at = ch.vector(joint, "at", path, default=None)
+    at = None if at is None else _readonly(at)
     if kind == "spherical":
         if "axis" in joint:
             ch.fail(_at(path, "axis"), "not allowed for a spherical joint (only a hinge has an "
@@ -803,7 +858,7 @@ def _joint(ch: _Checker, value: Any, path: str) -> Joint | None:
         for key in HINGE_ONLY_KEYS:
             if joint.get(key) is not None:
                 ch.fail(_at(path, key), "not allowed for a spherical joint (a hinge's or a slide's term)")
-        return Joint(type=kind)
+        return Joint(type=kind, at=at)
     if kind in ONE_AXIS_JOINTS:
         limits = _limits(ch, joint, path, HINGE_LIMIT_KEYS)
         if joint.get("axis") is None:
@@ -829,7 +884,7 @@ def _joint(ch: _Checker, value: Any, path: str) -> Joint | None:
                 or motor is False:
             return None
         return Joint(type=kind, axis=_readonly(axis), limits=limits, armature=armature, spring=spring,
-                     servo=servo, motor=motor)
+                     servo=servo, motor=motor, at=at)
     return None
 
 

@@ -11,10 +11,13 @@ of mass and inertia are the ones MuJoCo simulates (also when it derives them fro
   hinge axis and whose inertia is symmetric about it (both to ``ROTOR_RTOL``): it becomes a
   torque rotor of its parent (eqs (18)-(19), (29)), actuated when a motor drives its joint
   (every rotor of a URDF model is);
-- the other bodies form the chain: a free joint on the first is the free base (with a
-  spherical joint at O^1), ball joints are spherical joints, hinges are hinges, slides slides
-  (the body keeps its parent's frame, moved along the axis);
-- a body with several hinge and slide joints j1..jm (MuJoCo applies them in order) is m chain
+- the other bodies form the tree, every parent before its children (depth first in MuJoCo's
+  order: a chain keeps its order, and a body's first child follows it); a body that is not its
+  parent's first child names its `parent` (``base`` for the world) and its joint point
+  `joint.at`; a free joint on the body on the world is the free base (with a spherical joint
+  at O^1; it carries the whole tree), ball joints are spherical joints, hinges are hinges,
+  slides slides (the body keeps its parent's frame, moved along the axis);
+- a body with several hinge and slide joints j1..jm (MuJoCo applies them in order) is m scene
   bodies: a massless frame at the anchor of each of j1..j(m-1), then the body on jm.
 
 Frames. A body's frame in the scene has its origin at its joint point O^k (the joint's
@@ -32,7 +35,7 @@ moments use the joint names of the file, as MuJoCo's ``qpos`` and actuators do),
 free body after its body.
 
 Sensors. A gyro or an accelerometer on a site (a framequat or framelinacc of the same site
-joins them) becomes one IMU of the scene, named after the site, on the chain body the site
+joins them) becomes one IMU of the scene, named after the site, on the scene body the site
 moves with, at the site's pose in that body's frame at the reference pose; a URDF's Gazebo
 IMUs (:mod:`gyro_sim.scene.gazebo`) become sites on their links first, so MuJoCo carries them
 through fused fixed links. A rate is MuJoCo's ``interval`` or Gazebo's ``update_rate``, kept
@@ -44,11 +47,11 @@ and frictionloss become its `friction` (viscous and
 Coulomb); a hinge's armature and its spring (stiffness, springref) its `armature` and
 `spring` (docs/models.md, "Armature and joint springs"); a model's affine actuators (position,
 velocity, general with an affine bias) its hinges' `servo`, motors too (docs/models.md, "Servo
-actuators"). Everything the equations of gyro_sim
-cannot express (tendons, equality constraints, a ball joint's damping, spring or
-armature, a variable gain, branching trees, an inertia outside the triangle inequality on a moving body
-unless ``balance_inertia``, ...) is refused, one line per element and every problem of the
-file in one refusal; contacts, joint limits and control ranges are ignored and listed in
+actuators"). Everything the equations of gyro_sim cannot express (tendons, equality
+constraints, a ball joint's damping, spring or armature, a variable gain, a free body beside
+other bodies on the world, an inertia outside the triangle inequality on a moving body unless
+``balance_inertia``, ...) is refused, one line per element and every problem of the file in
+one refusal; contacts, joint limits and control ranges are ignored and listed in
 :attr:`ImportedModel.notes`, as are missing meshes and textures that no moving body's mass
 needs. This module raises :class:`ModelError`; ``gyro_sim.scene.load.load_scene`` turns it
 into a ``SceneError``.
@@ -118,7 +121,7 @@ class ImportedModel:
     path: str  # the model file
     kind: str  # "MJCF" or "URDF"
     keyframe: str | None  # the keyframe the initial state comes from ("" unnamed), None: rest
-    names: tuple[tuple[str, str], ...]  # (model element, scene name), in chain order, then the IMUs
+    names: tuple[tuple[str, str], ...]  # (model element, scene name), in the scene's order, then the IMUs
     commands: tuple[Command, ...]  # the model's actuators
     notes: tuple[str, ...]  # what was left out or approximated (contacts, limits, sensors...), one line each
     where: dict[str, str] = field(default_factory=dict)  # scene key path -> model element
@@ -311,9 +314,9 @@ def _lock_joints(mujoco: Any, spec: Any, m0: Any, path: str, locks: dict[str, fl
             named = [mujoco.mj_id2name(m0, obj.mjOBJ_JOINT, i) for i in range(m0.njnt)]
             errors.append(f"{path}: lock: no joint named {name!r} (the model's: "
                           + ", ".join(repr(n) for n in named if n) + ")")
-        elif int(m0.jnt_type[j]) not in (int(jt.mjJNT_HINGE), int(jt.mjJNT_SLIDE)):
-            errors.append(f"{path}: lock: joint {name!r} is a {('free', 'ball')[int(m0.jnt_type[j])]} "
-                          "joint; only hinge and slide joints are locked")
+        elif int(m0.jnt_type[j]) in (int(jt.mjJNT_FREE), int(jt.mjJNT_BALL)) and locks[name] is not None:
+            errors.append(f"{path}: lock: joint {name!r} is a {('free', 'ball')[int(m0.jnt_type[j])]} joint: it "
+                          "is locked where it is (its keyframe's pose, else the file's), without a value")
         else:
             joints[name] = j  # the others are said, and these locked all the same (one refusal)
     removed_q: list[int] = []
@@ -322,6 +325,13 @@ def _lock_joints(mujoco: Any, spec: Any, m0: Any, path: str, locks: dict[str, fl
         joint = spec.joint(name)
         body = joint.parent
         qa = int(m0.jnt_qposadr[j])
+        if int(m0.jnt_type[j]) in (int(jt.mjJNT_FREE), int(jt.mjJNT_BALL)):
+            removed_q += _weld_spherical(mujoco, spec, m0, j, body, key)
+            removed_a += [a for a in range(m0.nu) if int(m0.actuator_trnid[a][0]) == j]
+            locked[name] = 0.0  # no coordinate of its own: its pose is the body's in the spec now
+            notes.append(f"joint {name!r}: locked at its {'keyframe' if key is not None else 'reference'} "
+                         "pose (its body welded to its parent)")
+            continue
         ref = float(m0.qpos0[qa])
         value = locks[name]
         if value is None:
@@ -406,7 +416,8 @@ def _lock_joints(mujoco: Any, spec: Any, m0: Any, path: str, locks: dict[str, fl
     # keyframes' sizes against the joints still there)
     for name in joints:
         spec.delete(spec.joint(name))
-    removed_v = [int(m0.jnt_dofadr[j]) for j in joints.values()]
+    removed_v = [d for j in joints.values() for d in range(int(m0.jnt_dofadr[j]),
+                                                           int(m0.jnt_dofadr[j]) + _DOFS[int(m0.jnt_type[j])])]
     for k in spec.keys:
         if len(k.qpos) == m0.nq:
             k.qpos = np.delete(np.asarray(k.qpos), removed_q)
@@ -418,6 +429,34 @@ def _lock_joints(mujoco: Any, spec: Any, m0: Any, path: str, locks: dict[str, fl
         if len(k.ctrl) == m0.nu and removed_a:
             k.ctrl = np.delete(np.asarray(k.ctrl), removed_a)
     return errors
+
+
+#: the coordinates (qpos) and the velocities (qvel) of MuJoCo's joint types: free, ball, slide, hinge
+_QPOS = (7, 4, 1, 1)
+_DOFS = (6, 3, 1, 1)
+
+
+def _weld_spherical(mujoco: Any, spec: Any, m0: Any, j: int, body: Any, key: int | None) -> list[int]:
+    """Weld the ball or free joint `j` of `body` where it stands: at keyframe `key` (None: the
+    reference, qpos0), the body turned through its anchor by the ball's quaternion, or a free
+    body (on the world) placed at its pose; its qpos entries."""
+    kind = int(m0.jnt_type[j])
+    qa = int(m0.jnt_qposadr[j])
+    q = np.asarray(m0.key_qpos[key] if key is not None else m0.qpos0, dtype=float)[qa:qa + _QPOS[kind]]
+    if kind == int(mujoco.mjtJoint.mjJNT_FREE):
+        body.pos = q[:3]
+        body.quat = q[3:] / np.linalg.norm(q[3:])
+    else:
+        turn = q / np.linalg.norm(q)
+        quat = np.asarray(body.quat if body.alt.type == mujoco.mjtOrientation.mjORIENTATION_QUAT else
+                          spec.resolve_orientation(spec.compiler.degree, spec.compiler.eulerseq, body.alt),
+                          dtype=float)
+        quat = quat / np.linalg.norm(quat)
+        pos = np.asarray(spec.joint(mujoco.mj_id2name(m0, mujoco.mjtObj.mjOBJ_JOINT, j)).pos, dtype=float)
+        body.pos = np.asarray(body.pos, dtype=float) + quat_to_matrix(quat) @ (pos - quat_to_matrix(turn) @ pos)
+        body.quat = quat_mul(quat, turn)
+    body.alt.type = mujoco.mjtOrientation.mjORIENTATION_QUAT
+    return list(range(qa, qa + _QPOS[kind]))
 
 
 def _locked_tendons(mujoco: Any, m0: Any, joints: set[int]) -> list[int]:
@@ -615,6 +654,8 @@ def _gazebo_sites(spec: Any, gazebo: GazeboSensors) -> list[tuple[GazeboImu, str
     return out
 
 
+#: the parent of a body hanging from the base (docs/scene-format.md)
+BASE_PARENT = "base"
 #: how much of a file's head is read to find its root element
 HEAD_BYTES = 65536
 _MARKUP = re.compile(r"<\?.*?\?>|<!--.*?-->|<!DOCTYPE[^>]*>", re.S)
@@ -662,7 +703,7 @@ class _ImuSource:
 
 
 class _Importer:
-    """One model's conversion: refusals first, then the chain, frames and initial state."""
+    """One model's conversion: refusals first, then the tree, frames and initial state."""
 
     def __init__(self, mujoco: Any, model: Any, path: str, kind: str,
                  gazebo: GazeboSensors | None = None, gazebo_sites: Sequence[tuple[GazeboImu, str]] = ()):
@@ -728,14 +769,14 @@ class _Importer:
                 hint = ("; --lock its joints (" + ", ".join(repr(self.joint_name(j)) for j in joints)
                         + ") to weld them: the tendon goes with them")
             self.fail(f"tendon {name!r}" if name else f"tendon #{t}",
-                      "tendons are not supported (a chain of rigid bodies and rotors only)" + hint)
+                      "tendons are not supported (a tree of rigid bodies and rotors only)" + hint)
         if m.neq and not flags & int(dsbl.mjDSBL_EQUALITY):
             for e in range(m.neq):
                 name = self._name(obj.mjOBJ_EQUALITY, e)
                 coupled = [int(j) for j in (m.eq_obj1id[e], m.eq_obj2id[e]) if j >= 0]
                 lockable = int(m.eq_type[e]) == int(mj.mjtEq.mjEQ_JOINT) and all(self.lockable(j) for j in coupled)
                 self.fail(f"equality {name!r}" if name else f"equality #{e}",
-                          "equality constraints are not supported (an open chain only)"
+                          "equality constraints are not supported (an open tree only)"
                           + ("; --lock the joints it couples to weld them" if lockable else ""))
         for f in range(m.nflex):
             name = self._name(obj.mjOBJ_FLEX, f)
@@ -979,50 +1020,49 @@ class _Importer:
         axial = float(a @ r.inertia @ a)
         return axial, 0.5 * (float(np.trace(r.inertia)) - axial)
 
-    def chain(self, groups: dict[int, _Group]) -> tuple[list[_Group], dict[int, list[_Group]]]:
-        """The chain from the world outwards, and each chain body's rotors."""
+    def tree(self, groups: dict[int, _Group]) -> tuple[list[_Group], list[int], dict[int, list[_Group]]]:
+        """The scene's bodies from the world outwards, every parent before its children (depth
+        first, children in MuJoCo's order, so that a chain stays in its order and a body's first
+        child follows it), each one's parent (its index in the list; -1: the base), and each
+        body's rotors. A body with several joints is its massless frames, then itself."""
         top = [g for g in groups.values() if g.parent == 0]
         if not top:
             self.fail("worldbody", "no body has a joint: nothing moves")
             self.raise_errors()
-        elif len(top) > 1:
-            self.fail("worldbody", f"{len(top)} moving bodies hang from the world ("
-                      + ", ".join(repr(self.body_name(g.root)) for g in top)
-                      + "); one chain only (branching trees are not supported"
-                      + self.weld_hint(groups, top, "chains") + ")")
-        chain, rotors = [top[0]], {}
-        while True:
-            current = chain[-1]
-            kids = [groups[c] for c in current.children]
-            problems = {c.root: self.rotor_problem(c) for c in kids}
-            rotors[current.root] = [c for c in kids if problems[c.root] is None]
-            rest = [c for c in kids if problems[c.root] is not None]
-            if len(rest) > 1:
-                why = "; ".join(f"{self.body(c.root)} is no rotor: {problems[c.root]}"
-                                for c in rest if c.kind == "hinge")
-                self.fail(self.body(current.root),
-                          f"{len(rest)} moving children ("
-                          + ", ".join(repr(self.body_name(c.root)) for c in rest)
-                          + "): a chain only, branching trees are not supported"
-                          + (f" ({why})" if why else "") + self.weld_hint(groups, rest, "branches"))
-                break
-            if not rest:
-                break
-            chain.append(rest[0])
-        for g in chain[1:]:
-            if g.kind == "free":
-                self.fail(self.joint(g.joint), "a free joint only on the chain's first body")
-        chain = [f for g in chain for f in self.frames.get(g.root, []) + [g]]
-        return chain, rotors
+        free = [g for g in top if g.kind == "free"]
+        if free and len(top) > 1:
+            others = [g for g in top if g is not free[0]]
+            self.fail("worldbody", f"{len(others)} moving {'body hangs' if len(others) == 1 else 'bodies hang'} "
+                      f"from the world (" + ", ".join(repr(self.body_name(g.root)) for g in others)
+                      + f") beside the free {self.body(free[0].root)}: a free base carries the whole tree"
+                      + self.weld_hint(groups, others, "weld them"))
+        order: list[_Group] = []
+        parents: list[int] = []
+        rotors: dict[int, list[_Group]] = {}
+        todo = [(g, -1) for g in reversed(top)]
+        while todo:  # depth first, without recursion (a chain may be long)
+            g, parent = todo.pop()
+            if g.kind == "free" and parent >= 0:
+                self.fail(self.joint(g.joint), "a free joint only on a body hanging from the world")
+            for f in self.frames.get(g.root, []):
+                order.append(f)
+                parents.append(parent)
+                parent = len(order) - 1
+            order.append(g)
+            parents.append(parent)
+            kids = [groups[c] for c in g.children]
+            rotors[g.root] = [c for c in kids if self.rotor_problem(c) is None]
+            here = len(order) - 1
+            todo += [(c, here) for c in reversed(kids) if c not in rotors[g.root]]
+        return order, parents, rotors
 
     def lockable(self, j: int) -> bool:
-        """Whether --lock welds joint `j` (_lock_joints): a named hinge or slide."""
-        m, jt = self.m, self.mj.mjtJoint
-        return bool(self.joint_name(j)) and int(m.jnt_type[j]) in (int(jt.mjJNT_HINGE), int(jt.mjJNT_SLIDE))
+        """Whether --lock welds joint `j` (_lock_joints): a named one."""
+        return bool(self.joint_name(j))
 
     def weld_hint(self, groups: dict[int, _Group], parts: list[_Group], what: str) -> str:
-        """How to weld all but one of `parts` (subtrees) with --lock, naming their joints; or
-        why --lock cannot (it is never suggested where it would be refused)."""
+        """How to weld the subtrees `parts` with --lock (`what`: the phrase it follows), naming
+        their joints; or why --lock cannot (it is never suggested where it would be refused)."""
         m = self.m
         joints: list[int] = []
         todo = list(parts)
@@ -1035,10 +1075,10 @@ class _Importer:
         stuck = [j for j in joints if not self.lockable(j)]
         if stuck:
             return (f"; --lock cannot weld {', '.join(self.joint(j) for j in stuck[:5])}"
-                    f"{' ...' if len(stuck) > 5 else ''} (only named hinge and slide joints are locked)")
+                    f"{' ...' if len(stuck) > 5 else ''} (only named joints are locked)")
         names = [self.joint_name(j) for j in joints]
         shown = ", ".join(repr(n) for n in names[:8]) + (" ..." if len(names) > 8 else "")
-        return f"; weld all {what} but one with --lock JOINT (their joints: {shown})"
+        return f"; {what} with --lock JOINT (their joints: {shown})"
 
     def scene_name(self, g: _Group, as_hinge: bool) -> str:
         """The scene name of a group (module docstring): joint first for hinges, slides and rotors;
@@ -1064,23 +1104,30 @@ class _Importer:
         # the structure is checked too before anything is refused: one refusal says it all
         groups = self.groups()
         self.measure(groups)
-        chain, rotors = self.chain(groups)
+        order, parents, rotors = self.tree(groups)
         self.raise_errors()
         key, key_name = self.keyframe(keyframe)
         self.raise_errors()
         state = self.initial_state(key)
-        commands = self.commands(chain, rotors)
+        commands = self.commands(order, rotors)
         self.raise_errors()
         m, mj = self.m, self.mj
         actuated = {c.axis for c in commands}
         names, where, bodies = [], {}, []
         frames: dict[int, tuple[str, np.ndarray, np.ndarray]] = {}  # group root -> name, G, O^k
-        G_parent = np.eye(3)
-        for k, g in enumerate(chain):
+        scene_names, rotations = [], []  # by body: its scene name, its frame's rotation G at the reference pose
+        first_child = {p: k for k, p in reversed(list(enumerate(parents)))}  # body (-1: the base) -> its first child
+        for k, g in enumerate(order):
             name = self.scene_name(g, g.kind in ("hinge", "slide"))
+            p = parents[k]
+            G_parent = rotations[p] if p >= 0 else np.eye(3)
             G = self.R_ref[g.root] if g.kind in ("free", "ball") else G_parent
             frames[g.root] = (name, G, g.origin)
+            scene_names.append(name)
+            rotations.append(G)
             body: dict[str, Any] = {"name": name}
+            if p != k - 1:  # not its parent's first child, which follows it (docs/scene-format.md, trees)
+                body["parent"] = scene_names[p] if p >= 0 else BASE_PARENT
             if g.kind in ("hinge", "slide"):  # a slide keeps its parent's frame, as a hinge at angle 0
                 body["joint"] = {"type": g.kind, "axis": _vec(G_parent.T @ g.axis)}
                 if g.joint in self.friction:
@@ -1094,7 +1141,7 @@ class _Importer:
                 elif g.joint in self.armature:  # the geared motor the armature reflects, on the parent
                     body["joint"]["motor"] = {"inertia": _tidy(self.armature[g.joint] / self.gear ** 2),
                                               "gear": _tidy(self.gear)}
-                    on = ("on the base (which does not turn: exactly the armature)" if k == 0 else
+                    on = ("on the base (which does not turn: exactly the armature)" if p < 0 else
                           "on its parent (its rotor's axial inertia joins the parent's)")
                     self.notes.append(f"joint {self.joint_name(g.joint)!r}: armature "
                                       f"{self.armature[g.joint]:g} as a geared motor of gear {self.gear:g} {on}")
@@ -1104,11 +1151,15 @@ class _Importer:
                     body["joint"]["servo"] = self.servo[g.joint]
             else:
                 body["joint"] = {"type": "spherical"}
+            if p != k - 1:  # its joint point O^k in the parent's frame, from the parent's O (after the axis)
+                at = _vec(G_parent.T @ (g.origin - (order[p].origin if p >= 0 else order[0].origin)))
+                joint = list(body["joint"].items())
+                body["joint"] = dict(joint[:2] + [("at", at)] + joint[2:])
             body["mass"] = _tidy(g.mass)
             body["com"] = _vec(G.T @ (g.com - g.origin))
             body["inertia_com"] = _mat(G.T @ g.inertia @ G)
-            if k + 1 < len(chain):
-                body["next_joint"] = _vec(G.T @ (chain[k + 1].origin - g.origin))
+            if k in first_child:  # to its first child's joint point; the others say theirs (joint.at)
+                body["next_joint"] = _vec(G.T @ (order[first_child[k]].origin - g.origin))
             element = f"{self.body(g.root)} ({g.kind} {self.joint(g.joint, bare=True)})"
             if g.frame:
                 element = element[:-1] + ", a massless frame)"
@@ -1139,8 +1190,7 @@ class _Importer:
                 body["rotors"] = body_rotors
             body["initial"] = state["frames"][g.joint] if g.frame else state["initial"][g.root]
             bodies.append(body)
-            G_parent = G
-        first = chain[0]
+        first = order[0]
         if first.kind == "free":
             base = {"type": "free", "position": _vec(state["position"]),
                     "velocity": _vec(state["velocity"])}
@@ -1167,11 +1217,11 @@ class _Importer:
                 text = stream.read()
             body_frames = {name: (G, origin) for name, G, origin in frames.values()}
             rotor_axes = {self.scene_name(r, True): (frames[g.root][0], r.axis / np.linalg.norm(r.axis), r.origin)
-                          for g in chain for r in rotors[g.root]}
+                          for g in order for r in rotors[g.root]}
             try:
                 robot = describe_robot(text, self.locked, body_frames, rotor_axes)
             except (ValueError, TypeError, KeyError, AttributeError, ET.ParseError) as exc:  # MuJoCo read it
-                self.notes.append(f"robot description not kept (ROS gets the chain's): {exc}")
+                self.notes.append(f"robot description not kept (ROS gets the scene's): {exc}")
         return ImportedModel(mapping=mapping, path=self.path, kind=self.kind, keyframe=key_name,
                              names=tuple(names), commands=tuple(commands),
                              notes=tuple(self.notes), where=where, robot=robot)
@@ -1279,7 +1329,7 @@ class _Importer:
     def imus(self, frames: dict[int, tuple[str, np.ndarray, np.ndarray]], rotor_joints: dict[int, int],
              names: list, where: dict) -> list[dict]:
         """The scene's `imus` from the model's sensors (docs/models.md, "Sensors"): each on the
-        chain body its site moves with, at the site's pose in that body's frame at the
+        scene body its site moves with, at the site's pose in that body's frame at the
         reference pose; the noise per sample converted to densities at its rate. What cannot
         be an IMU is said in the notes; `names` and `where` gain the IMUs."""
 
@@ -1414,11 +1464,11 @@ class _Importer:
                     out["angle"][b] = float(d.qpos[m.jnt_qposadr[j]])
         return out
 
-    def commands(self, chain: list[_Group], rotors: dict[int, list[_Group]]) -> list[Command]:
+    def commands(self, order: list[_Group], rotors: dict[int, list[_Group]]) -> list[Command]:
         """Each actuator's axis and factor (gear x gain)."""
         mj, m = self.mj, self.m
         axis_of = {}
-        for g in chain:
+        for g in order:
             if g.kind in ("hinge", "slide"):
                 axis_of[g.joint] = self.scene_name(g, True)
             for r in rotors[g.root]:

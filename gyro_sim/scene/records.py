@@ -125,7 +125,7 @@ class Motor:
 
 @dataclass(frozen=True, eq=False)
 class Joint:
-    """The joint at O^k between body k-1 (or the base) and body k."""
+    """The joint at O^k between body k's parent (or the base) and body k."""
 
     type: str  # "spherical" | "hinge" | "slide"
     #: hinge and slide: (3,) unit axis in the parent's frame (a slide translates along it)
@@ -139,6 +139,9 @@ class Joint:
     spring: Spring | None = None  # hinge only
     servo: Servo | None = None  # hinge only: its actuator, commanded by a control (not an axis moment)
     motor: Motor | None = None  # hinge only: its geared motor's rotor, on the parent
+    #: (3,) the joint point O^k from O^parent in the parent's frame (from the base's position in
+    #: the world frame on the base); None: the parent's next_joint (the base's position)
+    at: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -170,10 +173,13 @@ class Body:
     mass: float  # the carrier alone
     com: np.ndarray  # (3,) from O^k to the carrier's centre of mass
     inertia: np.ndarray  # (3, 3) carrier inertia about O^k, body frame, symmetric
-    next_joint: np.ndarray | None  # (3,) s^k from O^k to O^{k+1}; None on the last body
+    next_joint: np.ndarray | None  # (3,) s^k from O^k to O^{k+1}; None on a body without children
     rotors: tuple[Rotor, ...]
     initial: Initial
     visual_radius: float | None = None
+    #: index of the parent body in the scene's bodies, -1: the base (docs/scene-format.md,
+    #: `parent`); None: the body before it (the base for the first), as in a chain
+    parent: int | None = None
 
 
 @dataclass(frozen=True, eq=False)

@@ -3,11 +3,13 @@
 Every log carries the URDF of its scene as one std_msgs/String on /robot_description (log
 time 0): links named after the bodies, so that the /tf frames world -> <body> place them.
 Viewers that draw a robot from its description and its TF (rerun opening the .mcap
-directly, Foxglove, RViz) then show the moving chain without gyro_sim. Each body is a
-cylinder along s^k (or along twice its centre of mass on the last body) of the scene's visual
-radius; each rotor a disc at h_i about e_i, sized from its mass and inertia, its visual named
-after the rotor. The joints are ``floating`` from ``world``: the poses come from /tf, not from
-joint states. A ``<gyro_sim base="x y z" gravity="x y z" slides="a b"/>`` element (which URDF
+directly, Foxglove, RViz) then show the moving bodies without gyro_sim. Each body is a
+cylinder from its joint point to each child's (s^k on a chain; twice its centre of mass on a
+body without children) of the scene's visual radius; each rotor a disc at h_i about e_i, sized
+from its mass and inertia, its visual named after the rotor. Each body's joint is
+``floating`` from its parent's link (``world`` for a body on the base), named
+``<parent>_to_<body>``: the description is the scene's tree, the poses come from /tf (world ->
+each body), not from joint states. A ``<gyro_sim base="x y z" gravity="x y z" slides="a b"/>`` element (which URDF
 readers skip) gives a viewer the base point, gravity and the bodies on slides (whose joint
 states are positions in m, not angles), so a live view draws what a log's view draws.
 """
@@ -35,19 +37,34 @@ ROTOR_RGBA = (0.90, 0.63, 0.16, 1.0)
 ROOT_LINK = "world"
 
 
-def body_extent(body) -> np.ndarray:
-    """The segment a body is drawn along, from O^k, body frame (3,): s^k, or twice its centre
-    of mass on the last body (zero if it has neither)."""
-    if body.next_joint is not None and np.linalg.norm(body.next_joint) > 0:
-        return np.asarray(body.next_joint, dtype=float)
-    if np.linalg.norm(body.com) > 0:
-        return 2.0 * np.asarray(body.com, dtype=float)
-    return np.zeros(3)
+def parents(scene) -> list[int]:
+    """Each body's parent (its index; -1: the base): its `parent`, else the body before it."""
+    return [k - 1 if b.parent is None else int(b.parent) for k, b in enumerate(scene.bodies)]
+
+
+def body_segments(scene) -> list[list[np.ndarray]]:
+    """Per body, the segments it is drawn along, from O^k in its frame: to each child's joint
+    point (its `joint.at`, else s^k), or twice its centre of mass when it has none (a body
+    without children, or whose children hang at O^k); none when that is zero too. A chain's
+    body: [s^k], its last [2 c]."""
+    bodies = scene.bodies
+    out: list[list[np.ndarray]] = [[] for _ in bodies]
+    for k, p in enumerate(parents(scene)):
+        if p < 0:
+            continue
+        at = bodies[k].joint.at if bodies[k].joint.at is not None else bodies[p].next_joint
+        at = np.asarray(at, dtype=float)
+        if np.linalg.norm(at) > 0 and not any(np.array_equal(at, s) for s in out[p]):
+            out[p].append(at)
+    for k, b in enumerate(bodies):
+        if not out[k] and np.linalg.norm(b.com) > 0:
+            out[k].append(2.0 * np.asarray(b.com, dtype=float))
+    return out
 
 
 def chain_length(scene) -> float:
     """Sum of the bodies' drawn lengths (m): the scale of everything drawn."""
-    return max(sum(float(np.linalg.norm(body_extent(b))) for b in scene.bodies), 1e-3)
+    return max(sum(float(np.linalg.norm(s)) for segments in body_segments(scene) for s in segments), 1e-3)
 
 
 def body_radius(body, length: float) -> float:
@@ -110,17 +127,17 @@ def urdf(scene) -> str:
     slides = " ".join(b.name for b in scene.bodies if b.joint.type == "slide")
     slides = f" slides={quoteattr(slides)}" if slides else ""
     lines.append(f'  <gyro_sim base="{_v(scene.base.position)}"{gravity}{slides}/>')
-    for b in scene.bodies:
+    for b, segments, p in zip(scene.bodies, body_segments(scene), parents(scene)):
         lines.append(f"  <link name={quoteattr(b.name)}>")
-        ext = body_extent(b)
-        n = float(np.linalg.norm(ext))
-        if n > 0:
-            lines.append(_visual(ext / 2, rpy_z_to(ext), body_radius(b, length), n, "body", BODY_RGBA))
+        for ext in segments:
+            lines.append(_visual(ext / 2, rpy_z_to(ext), body_radius(b, length), float(np.linalg.norm(ext)), "body",
+                                 BODY_RGBA))
         for r in b.rotors:
             rad, thick = rotor_size(r, length)
             lines.append(_visual(r.position, rpy_z_to(r.axis), rad, thick, "rotor", ROTOR_RGBA, r.name))
         lines.append("  </link>")
-        lines.append(f"  <joint name={quoteattr(ROOT_LINK + '_to_' + b.name)} type=\"floating\">"
-                     f"<parent link=\"{ROOT_LINK}\"/><child link={quoteattr(b.name)}/></joint>")
+        parent = scene.bodies[p].name if p >= 0 else ROOT_LINK
+        lines.append(f"  <joint name={quoteattr(parent + '_to_' + b.name)} type=\"floating\">"
+                     f"<parent link={quoteattr(parent)}/><child link={quoteattr(b.name)}/></joint>")
     lines.append("</robot>")
     return "\n".join(lines) + "\n"

@@ -10,10 +10,12 @@ times a second).
 Entities (timeline ``sim_time``, a duration: simulated seconds):
 
 - ``world/<body>``: the body frame (Transform3D world -> body, with axes); under it ``body``
-  (a capsule along s^k), ``<rotor>`` (the rotor's disc) with ``<rotor>/spin`` turned by
+  (a capsule from O^k to each child's joint point: s^k on a chain; to twice its centre of mass
+  on a body without children), ``<rotor>`` (the rotor's disc) with ``<rotor>/spin`` turned by
   kappa_i when the rotor is named (scenes; a URDF does not name them), ``wrench/force`` and
   ``wrench/moment`` (R^k and L^k at O^k in the body's frame);
-- ``world/links`` (the polyline through O^1 ... O^n and the tip), ``world/base`` (O^1),
+- ``world/links`` (lines from each body's joint point to each child's and to a tip: on a chain
+  the polyline through O^1 ... O^n and the tip), ``world/base`` (the joint points on the base),
   ``world/angular_momentum`` (about O^1, from /diagnostics), ``world/gravity``;
 - ``world/legend``: the scene's name and the arrows' scales;
 - plots: ``plots/euler/<body>`` (psi, theta, phi; psi and phi unwrapped), ``plots/hinge/<body>``,
@@ -220,11 +222,11 @@ class Translator:
         for b in chain.bodies:
             ent = f"world/{b.name}"
             self.rec.log(ent, rr.TransformAxes3D(AXES_FRACTION * length), static=True)
-            n = float(np.linalg.norm(b.extent))
-            if n > 0:
-                self._static(f"{ent}/body", rr.Capsules3D(lengths=[n], radii=[b.radius],
-                                                           quaternions=[quat_z_to(b.extent)],
-                                                           colors=[COLORS["body"]]))
+            if b.segments:  # a capsule from O^k to each child's joint point (or to its tip)
+                self._static(f"{ent}/body", rr.Capsules3D(lengths=[float(np.linalg.norm(e)) for e in b.segments],
+                                                           radii=[b.radius] * len(b.segments),
+                                                           quaternions=[quat_z_to(e) for e in b.segments],
+                                                           colors=[COLORS["body"]] * len(b.segments)))
             else:
                 self._static(f"{ent}/body", rr.Ellipsoids3D(half_sizes=[[b.radius] * 3], colors=[COLORS["body"]]))
             for i, r in enumerate(b.rotors):
@@ -331,12 +333,13 @@ class Translator:
         self.bbox = [lo, hi] if self.bbox is None else [np.minimum(self.bbox[0], lo), np.maximum(self.bbox[1], hi)]
         for i, n in enumerate(names):
             self._rows(f"world/{n}", "transform").add(t, translation=pos[i], quaternion=quat[i])
-        points = list(pos)
-        if self.chain is not None and self.chain.body_names == names:
-            tip = self.chain.bodies[-1]
-            points.append(pos[-1] + _rotate(quat[-1], tip.extent))
-        self._rows("world/links", "strips").add(t, strips=np.array(points))
-        self._rows("world/base", "points").add(t, positions=pos[0])
+        if self.chain is not None and self.chain.body_names == names:  # the tree's lines, the joint points on the base
+            strips = self.chain.strips(pos, quat)
+            base = pos[[k for k, p in enumerate(self.chain.parents()) if p < 0]]
+        else:  # no names yet: one line through the joint points in order
+            strips, base = [pos], pos[:1]
+        self._rows("world/links", "strips").add(t, strips=strips)
+        self._rows("world/base", "points").add(t, positions=base)
 
     # --- joint states: angles, rates, commands, rotor spin ----------------------------------------------
     def _joint_states(self, t: float, msg) -> None:
@@ -479,15 +482,17 @@ class Translator:
         for entity, c in buf.items():
             if not c.times:
                 continue
-            cols = {k: np.asarray(v, float) for k, v in c.rows.items() if k != "strips"}
+            cols = {k: np.asarray(v, float) for k, v in c.rows.items() if k not in ("strips", "positions")}
             if c.kind == "transform":
                 columns = rr.Transform3D.columns(translation=cols["translation"], quaternion=cols["quaternion"])
             elif c.kind == "quaternion":
                 columns = rr.Transform3D.columns(quaternion=cols["quaternion"])
-            elif c.kind == "strips":
-                columns = rr.LineStrips3D.columns(strips=[np.asarray(p, float) for p in c.rows["strips"]])
-            elif c.kind == "points":
-                columns = rr.Points3D.columns(positions=cols["positions"])
+            elif c.kind == "strips":  # several lines at each time (a tree's branches)
+                columns = rr.LineStrips3D.columns(strips=[np.asarray(p, float) for row in c.rows["strips"]
+                                                          for p in row]).partition([len(r) for r in c.rows["strips"]])
+            elif c.kind == "points":  # several points at each time
+                columns = rr.Points3D.columns(positions=np.concatenate(c.rows["positions"])).partition(
+                    [len(r) for r in c.rows["positions"]])
             elif c.kind.startswith("arrow:"):
                 v = cols["vectors"] * scale[c.kind[len("arrow:"):]]
                 columns = (rr.Arrows3D.columns(vectors=v, origins=cols["origins"]) if "origins" in cols
@@ -566,9 +571,3 @@ def title(plot: str) -> str | None:
 def _log10(value: float) -> float:
     return math.log10(max(abs(value), DRIFT_FLOOR))
 
-
-def _rotate(q_xyzw: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate vectors v (..., 3) by quaternions (..., 4) x, y, z, w."""
-    u, w = q_xyzw[..., :3], q_xyzw[..., 3:4]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)

@@ -107,7 +107,8 @@ def test_records_of_models_with_empty_blocks(scene):
     held = (0.25, None, np.full(len(model.hinge_bodies), 0.1) if len(model.hinge_bodies) else None, None)
     chain, data, inputs = bound(model, held)
     arrays = (*chain, data.work, *inputs)
-    assert len(arrays) == 26 and all(a.flags.c_contiguous for a in arrays)
+    assert len(arrays) == len(fast.ChainModel._fields) + 1 + len(fast.HeldInputs._fields) == 27
+    assert all(a.flags.c_contiguous for a in arrays)
     assert {a.dtype for a in arrays} == {np.dtype(np.float64), np.dtype(np.int64), np.dtype(np.bool_)}
     d = data.descriptor
     assert list(d[fast.D_MODEL:fast.D_N]) == [a.ctypes.data for a in arrays]

@@ -164,24 +164,9 @@ def test_a_model_with_armature_moves_as_in_mujoco(name, tmp_path):
     assert worst < AGREEMENT and moved > 0.01
 
 
-@pytest.mark.parametrize("case", ["reacher", "pusher"])
-def test_as_published_the_bodies_on_two_slides_are_refused_as_chains_of_their_own(case):
-    """The files as published: one refusal, one line: the bodies on two slide joints hang from
-    the world beside the arm (chains of their own), --lock suggested; nothing about the slides,
-    the armature, the damping or the limits."""
-    path = CASES[case].path
-    bodies = {"reacher": ("target",), "pusher": ("object", "goal")}[case]
-    with pytest.raises(SceneError) as info:
-        load_scene(path)
-    (error,) = info.value.errors
-    assert f"worldbody: {len(bodies) + 1} moving bodies hang from the world" in error
-    assert all(f"'{n}'" in error for n in bodies) and "with --lock JOINT" in error, error
-    assert not any(word in error for word in ("slide joints", "armature", "damping", "limit")), error
-
-
 def test_as_published_the_fish_is_refused_for_what_it_needs_not_for_its_servos():
     """dm_control's fish: its position actuators are the hinges' servos now; the one refusal
-    names what the fish still needs (fluid forces, tendons, branches) and, of its actuators,
+    names what the fish still needs (fluid forces, tendons) and, of its actuators,
     only the one on a tendon."""
     with pytest.raises(SceneError) as info:
         load_scene(FISH)

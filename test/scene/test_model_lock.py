@@ -86,11 +86,8 @@ def test_a_gripper_left_unlocked_is_refused_suggesting_lock(tmp_path):
     with pytest.raises(SceneError) as info:
         load_scene(path)
     assert info.value.errors == [
-        f"{path}: equality #0: equality constraints are not supported (an open chain only); "
-        "--lock the joints it couples to weld them",
-        f"{path}: body 'link2': 2 moving children ('left_finger', 'right_finger'): a chain only, "
-        "branching trees are not supported; weld all branches but one with --lock JOINT (their "
-        "joints: 'finger_joint1', 'finger_joint2')"]
+        f"{path}: equality #0: equality constraints are not supported (an open tree only); "
+        "--lock the joints it couples to weld them"]
 
 
 def test_locked_fingers_move_as_in_mujoco_without_them(tmp_path):
@@ -142,13 +139,11 @@ def test_lock_on_the_command_line_and_bad_locks(tmp_path, capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and said in err[0], err
     # a joint that is not there is said with every other problem of the file (the fingers,
-    # not locked, branch and are coupled), in one refusal
+    # not locked, are coupled), in one refusal
     assert main(["run", "--scene", str(path), "--duration", "0.01", "--lock", "nope"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert "lock: no joint named 'nope'" in err[1] and "(3 errors)" in err[0], err
-    said = "\n".join(err[2:])
-    for element in ("equality #0", "body 'link2': 2 moving children"):
-        assert element in said, said
+    assert "lock: no joint named 'nope'" in err[1] and "(2 errors)" in err[0], err
+    assert "equality #0" in err[2], err
     # and what each suggests, --lock the fingers, is what then loads
     assert main(["run", "--scene", str(path), "--duration", "0.01", "--lock", "finger_joint1",
                  "--lock", "finger_joint2"]) == 0

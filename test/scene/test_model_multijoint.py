@@ -84,15 +84,16 @@ def judge(m):
     return m
 
 
-def held_accelerations(path: Path, locked: dict[str, float], seed: int = 1, states: int = 5) -> float:
+def held_accelerations(path: Path, locked: dict[str, float], seed: int = 1, states: int = 5,
+                       backend: str = "numpy") -> float:
     """The largest difference of gyro_sim's accelerations (the file loaded with `locked`) from
     MuJoCo's with the locked joints held at their values (M reduced to the free joints: M_ff
     qacc_f = (qfrc_passive - qfrc_bias + qfrc_applied)_f), at random states under random
-    generalised forces on the joints left; relative to the largest."""
+    generalised forces on the joints left; relative to the largest. `backend`: the Simulator's."""
     scene = load_scene(path, lock=[f"{k}={v}" for k, v in locked.items()])
     m = judge(mujoco.MjModel.from_xml_path(str(path)))
     d = mujoco.MjData(m)
-    sim = Simulator(scene, backend="numpy")
+    sim = Simulator(scene, backend=backend)
     model = sim.model
     joint = {mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j): j for j in range(m.njnt)}
     names = list(sim.joint_states().name)

@@ -20,6 +20,7 @@ from gyro_sim.scene.load import load_scene
 from gyro_sim.scene.mjcf import caught_warnings
 from gyro_sim.scene.robot import link_poses
 from test.scene.test_model_import import ARM_URDF, write
+from test.scene.test_model_lock import GRIPPER_URDF
 
 ERD = Path(__file__).parent / "models" / "example_robot_data"
 #: largest difference of a link's position (m) or rotation matrix entry
@@ -73,6 +74,8 @@ CASES = {
     "arm with a wheel and a fixed flange": lambda tmp: (write(tmp, "arm_wheel.urdf", ARM_URDF), []),
     "Kinova (fixed joints without an axis)": lambda tmp: (ERD / "kinova.urdf", []),
     "arm with a prismatic joint": lambda tmp: (write(tmp, "telescope.urdf", PRISMATIC_URDF), []),
+    "gripper, its fingers free (a tree)": lambda tmp: (write(tmp, "gripper.urdf", GRIPPER_URDF.replace(
+        '<mimic joint="finger_joint1"/>', "")), []),
 }
 
 

@@ -22,9 +22,9 @@ def test_urdf_has_a_link_per_body_with_its_shapes(name):
         cylinders = links[b.name].findall("visual/geometry/cylinder")
         assert len(cylinders) == 1 + len(b.rotors)
         assert all(float(c.get("length")) > 0 and float(c.get("radius")) > 0 for c in cylinders)
-    joints = robot.findall("joint")
-    assert {j.find("child").get("link") for j in joints} == {b.name for b in scene.bodies}
-    assert {j.find("parent").get("link") for j in joints} == {"world"}
+    joints = robot.findall("joint")  # each body's joint from its parent's link: a chain's previous body
+    assert [j.find("child").get("link") for j in joints] == [b.name for b in scene.bodies]
+    assert [j.find("parent").get("link") for j in joints] == ["world"] + [b.name for b in scene.bodies[:-1]]
 
 
 @pytest.mark.parametrize("v", [[0, 0, 1], [1, 0, 0], [0, 1, 0], [0, 0, -1], [1, -2, 0.5]])
