@@ -189,7 +189,8 @@ def import_model(path: str | os.PathLike, keyframe: str | None = None,
     ----------
     path : the model file: MJCF, or URDF (a ``<robot>`` root), whatever its suffix
     keyframe : the name of the keyframe giving the initial state; None: the model's first
-        keyframe, or the reference pose at rest when it has none
+        keyframe, or the reference pose at rest when it has none; "none" (unless a keyframe has
+        that name): the reference pose at rest
     package_path : directories searched first for the packages of ``package://`` URIs
         (:mod:`gyro_sim.scene.packages`)
     lock : joints welded where they are: a mapping joint name -> value (rad or m; None: the
@@ -1349,6 +1350,8 @@ class _Importer:
         names = [self._name(mj.mjtObj.mjOBJ_KEY, k) for k in range(m.nkey)]
         if keyframe is None:
             return (0, names[0]) if m.nkey else (None, None)
+        if keyframe == "none" and keyframe not in names:  # the reference pose at rest (--keyframe none)
+            return None, None
         if keyframe not in names or not keyframe:
             known = ", ".join(repr(n) for n in names if n) or "none named"
             self.fail(f"keyframe {keyframe!r}", f"no such keyframe (the model's: {known})")

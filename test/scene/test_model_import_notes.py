@@ -1,0 +1,62 @@
+"""What an imported model keeps, notes or refuses where public arms differ from the plain case
+(docs/models.md): `--keyframe none`, a joint's actuatorfrcrange, equalities welded by `--lock`,
+missing meshes, and keyframes whose servo targets differ from their pose. Each on a small MJCF
+written here; the physics against MuJoCo on the same file."""
+from __future__ import annotations
+
+import pytest
+
+mujoco = pytest.importorskip("mujoco", reason="MuJoCo is the optional extra [models]")
+
+from gyro_sim.cli import main
+from gyro_sim.scene.load import load_scene, parse_yaml
+from gyro_sim.scene.mjcf import import_model
+from test.scene.test_model_import import write
+
+#: two hinges under gravity, position servos, a keyframe "bent"
+BENT_ARM = """<mujoco model="bent_arm">
+  <option gravity="0 0 -9.81"/>
+  <worldbody>
+    <body name="upper" pos="0 0 1">
+      <joint name="shoulder" axis="0 1 0"/>
+      <inertial pos="0.1 0 0" mass="1" diaginertia="0.002 0.01 0.01"/>
+      <body name="fore" pos="0.2 0 0">
+        <joint name="elbow" axis="0 1 0"/>
+        <inertial pos="0.1 0 0" mass="0.5" diaginertia="0.001 0.005 0.005"/>
+      </body>
+    </body>
+  </worldbody>
+  <actuator>
+    <position name="shoulder_pos" joint="shoulder" kp="50"/>
+    <position name="elbow_pos" joint="elbow" kp="20"/>
+  </actuator>
+  <keyframe><key name="bent" qpos="0.5 -0.4" ctrl="0.5 -0.4"/></keyframe>
+</mujoco>
+"""
+
+
+# ------------------------------------------------------------------------- --keyframe none
+def test_keyframe_none_is_the_rest_pose(tmp_path, capsys):
+    """`--keyframe none` starts at the reference pose at rest with zero controls (exit 0), in
+    `gyro-sim import`, `gyro-sim run` and load_scene; a keyframe named "none" is still that
+    keyframe; an unknown name stays exit 2."""
+    path = write(tmp_path, "arm.xml", BENT_ARM)
+    bent = import_model(path)
+    assert [b["initial"]["angle"] for b in bent.mapping["bodies"]] == [0.5, -0.4]
+    rest = import_model(path, keyframe="none")
+    assert rest.keyframe is None
+    assert [b["initial"] for b in rest.mapping["bodies"]] == [{"angle": 0.0, "rate": 0.0}] * 2
+    assert all("control" not in b["joint"]["servo"] for b in rest.mapping["bodies"])
+    assert [b.initial.angle for b in load_scene(path, keyframe="none").bodies] == [0.0, 0.0]
+    locked = import_model(path, keyframe="none", lock=["elbow"])  # locked at the reference
+    assert "joint 'elbow': locked at 0 (its body welded to its parent)" in locked.notes
+    out = tmp_path / "rest.yaml"
+    assert main(["import", str(path), "-o", str(out), "--keyframe", "none"]) == 0
+    assert [b["initial"]["angle"] for b in parse_yaml(out.read_text())["bodies"]] == [0.0, 0.0]
+    assert main(["run", "--scene", str(path), "--keyframe", "none", "--duration", "0.01",
+                 "--integrator", "rk4"]) == 0
+    capsys.readouterr()
+    assert main(["run", "--scene", str(path), "--keyframe", "nope", "--duration", "0.01"]) == 2
+    assert "keyframe 'nope': no such keyframe" in capsys.readouterr().err
+    named = write(tmp_path, "named.xml", BENT_ARM.replace('name="bent"', 'name="none"'))
+    assert [b["initial"]["angle"] for b in import_model(named, keyframe="none").mapping["bodies"]] == [0.5, -0.4]
