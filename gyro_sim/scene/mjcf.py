@@ -815,7 +815,8 @@ class _Importer:
             trn = int(m.actuator_trntype[a])
             if trn not in trn_joint:
                 self.fail(what, f"drives a {mj.mjtTrn(trn).name.removeprefix('mjTRN_').lower()}; "
-                                "only motors on hinge joints are supported")
+                                "actuators on hinge and slide joints are supported (motors, position, "
+                                "velocity and affine general servos)")
                 continue
             if int(m.actuator_dyntype[a]) != int(mj.mjtDyn.mjDYN_NONE):
                 self.fail(what, "activation dynamics are not supported (a motor only: "
