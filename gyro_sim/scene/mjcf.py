@@ -484,6 +484,7 @@ def _prepare_assets(spec: Any, path: str, resolver: PackageResolver, notes: list
     never = from_geoms == mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
     errors = []
     kind = "link" if _kind(path) == "URDF" else "body"
+    left: list[tuple[str, list[str], str, list[str]]] = []  # (shown, bodies, why, welded) of each mesh left out
     for mesh in list(spec.meshes):
         if not mesh.file:
             continue  # vertices given inline
@@ -507,13 +508,22 @@ def _prepare_assets(spec: Any, path: str, resolver: PackageResolver, notes: list
         for b in needs + fixed:  # a stand-in mass: what is welded to the world moves nothing, and
             body = spec.body(b)  # a moving body is refused all the same (the rest is still checked)
             body.explicitinertial, body.mass, body.inertia = True, 1.0, [1.0, 1.0, 1.0]
-        if needs:
-            continue
-        on = f" (on {', '.join(repr(b) for b in bodies)})" if bodies else ""
-        why_not = ("masses and inertias are given" if not fixed else
-                   f"{', '.join(repr(b) for b in fixed)} welded to the world need{'s' if len(fixed) == 1 else ''} "
-                   "no mass")
-        notes.append(f"mesh {shown}{on}: left out, {why}; the motion does not need it ({why_not})")
+        if not needs and geoms:  # an asset no geom uses is left out unsaid
+            left.append((shown, bodies, why, fixed))
+    if left:  # one note for all (a description without its meshes misses them all)
+        fixed = list(dict.fromkeys(b for entry in left for b in entry[3]))
+        welded = (f"{', '.join(repr(b) for b in fixed)} welded to the world need{'s' if len(fixed) == 1 else ''} "
+                  "no mass")
+        why_not = (welded if fixed and all(entry[3] for entry in left) else
+                   f"masses and inertias are given, {welded}" if fixed else "masses and inertias are given")
+        shown, bodies, why, _ = left[0]
+        if len(left) == 1:
+            on = f" (on {', '.join(repr(b) for b in bodies)})" if bodies else ""
+            notes.append(f"mesh {shown}{on}: left out, {why}; the motion does not need it ({why_not})")
+        else:
+            more = f" and {len(left) - 3} more" if len(left) > 3 else ""
+            notes.append(f"{len(left)} meshes left out with their geoms ({', '.join(e[0] for e in left[:3])}{more}): "
+                         f"they cannot be read (the first: {why}); the motion does not need them ({why_not})")
     texture_dir = os.path.join(model_dir, spec.texturedir) if spec.texturedir else model_dir
     for texture in list(spec.textures):
         if not texture.file:

@@ -60,3 +60,24 @@ def test_keyframe_none_is_the_rest_pose(tmp_path, capsys):
     assert "keyframe 'nope': no such keyframe" in capsys.readouterr().err
     named = write(tmp_path, "named.xml", BENT_ARM.replace('name="bent"', 'name="none"'))
     assert [b["initial"]["angle"] for b in import_model(named, keyframe="none").mapping["bodies"]] == [0.5, -0.4]
+
+
+# ------------------------------------------------------------------------- missing meshes
+def test_missing_meshes_are_one_note_and_unused_ones_none(tmp_path):
+    """Five meshes on moving bodies with given inertials, missing: one note naming the count and
+    the first three files; a missing mesh no geom uses is not mentioned; one missing mesh keeps
+    its own note."""
+    assets = "".join(f'<mesh name="m{i}" file="part{i}.stl"/>' for i in range(5))
+    assets += '<mesh name="spare" file="spare.stl"/>'
+    geoms = "".join(f'<geom type="mesh" mesh="m{i}"/>' for i in range(5))
+    text = BENT_ARM.replace("<worldbody>", f"<asset>{assets}</asset>\n  <worldbody>").replace(
+        '<joint name="elbow" axis="0 1 0"/>', '<joint name="elbow" axis="0 1 0"/>' + geoms)
+    imported = import_model(write(tmp_path, "arm.xml", text))
+    said = [n for n in imported.notes if "mesh" in n or ".stl" in n]
+    assert said == ["5 meshes left out with their geoms (part0.stl, part1.stl, part2.stl and 2 more): they cannot "
+                    f"be read (the first: no such file ({tmp_path / 'part0.stl'})); the motion does not need them "
+                    "(masses and inertias are given)"]
+    one = import_model(write(tmp_path, "one.xml", text.replace(geoms, geoms[:geoms.index("/>") + 2])))
+    assert [n for n in one.notes if ".stl" in n] == [
+        f"mesh part0.stl (on 'fore'): left out, no such file ({tmp_path / 'part0.stl'}); the motion does not "
+        "need it (masses and inertias are given)"]
