@@ -743,6 +743,15 @@ class _Importer:
         if m.neq and not flags & int(dsbl.mjDSBL_EQUALITY):
             for e in range(m.neq):
                 name = self._name(obj.mjOBJ_EQUALITY, e)
+                if int(m.eq_type[e]) in (int(mj.mjtEq.mjEQ_CONNECT), int(mj.mjtEq.mjEQ_WELD)):
+                    ends = [int(i) if int(m.eq_objtype[e]) != int(obj.mjOBJ_SITE) else int(m.site_bodyid[i])
+                            for i in (m.eq_obj1id[e], m.eq_obj2id[e])]
+                    if m.body_weldid[ends[0]] == m.body_weldid[ends[1]]:  # one rigid body: no force on it
+                        by = " by --lock" if self.locked else ""
+                        self.notes.append(f"{f'equality {name!r}' if name else f'equality #{e}'}: left out, "
+                                          f"{self.body(ends[0])} and {self.body(ends[1])} are welded into "
+                                          f"one{by} (it moves nothing)")
+                        continue
                 coupled = [int(j) for j in (m.eq_obj1id[e], m.eq_obj2id[e]) if j >= 0]
                 lockable = int(m.eq_type[e]) == int(mj.mjtEq.mjEQ_JOINT) and all(self.lockable(j) for j in coupled)
                 self.fail(f"equality {name!r}" if name else f"equality #{e}",

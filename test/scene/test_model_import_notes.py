@@ -10,7 +10,7 @@ mujoco = pytest.importorskip("mujoco", reason="MuJoCo is the optional extra [mod
 
 from gyro_sim.cli import main
 from gyro_sim.scene.load import load_scene, parse_yaml
-from gyro_sim.scene.mjcf import import_model
+from gyro_sim.scene.mjcf import ModelError, import_model
 from test.scene.test_model_import import write
 
 #: two hinges under gravity, position servos, a keyframe "bent"
@@ -81,3 +81,61 @@ def test_missing_meshes_are_one_note_and_unused_ones_none(tmp_path):
     assert [n for n in one.notes if ".stl" in n] == [
         f"mesh part0.stl (on 'fore'): left out, no such file ({tmp_path / 'part0.stl'}); the motion does not "
         "need it (masses and inertias are given)"]
+
+
+# ------------------------------------------------------------------- equalities welded by --lock
+#: an arm with a gripper whose finger closes a loop with its knuckle (a `connect`), and a `weld`
+#: between the other finger's tip (a site) and the hand
+GRIPPER = """<mujoco model="gripper">
+  <option gravity="0 0 -9.81"/>
+  <worldbody>
+    <body name="arm" pos="0 0 1">
+      <joint name="shoulder" axis="0 1 0"/>
+      <inertial pos="0.1 0 0" mass="1" diaginertia="0.002 0.01 0.01"/>
+      <body name="hand" pos="0.2 0 0">
+        <joint name="wrist" axis="1 0 0"/>
+        <inertial pos="0.02 0 0" mass="0.3" diaginertia="0.0003 0.0003 0.0003"/>
+        <body name="knuckle" pos="0.03 0.01 0">
+          <joint name="knuckle_joint" axis="0 0 1"/>
+          <inertial pos="0.01 0 0" mass="0.02" diaginertia="1e-6 1e-6 1e-6"/>
+        </body>
+        <body name="finger" pos="0.03 0.02 0">
+          <joint name="finger_joint" axis="0 0 1"/>
+          <inertial pos="0.01 0 0" mass="0.03" diaginertia="1e-6 1e-6 1e-6"/>
+        </body>
+        <body name="other" pos="0.03 -0.02 0">
+          <joint name="other_joint" axis="0 0 1"/>
+          <inertial pos="0.01 0 0" mass="0.03" diaginertia="1e-6 1e-6 1e-6"/>
+          <site name="tip" pos="0.02 0 0"/>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+  <equality>
+    <connect body1="finger" body2="knuckle" anchor="0.01 0 0"/>
+    <weld name="grip" site1="tip" site2="hand_site"/>
+  </equality>
+</mujoco>
+"""
+FINGERS = ["knuckle_joint", "finger_joint", "other_joint"]
+
+
+def test_equalities_inside_one_welded_body_are_left_out(tmp_path):
+    """A connect and a weld whose two ends --lock welds into one body are left out with a note
+    each (a constraint inside one rigid body moves nothing: the scene is the one of the file
+    without them); unlocked, or one finger left free, they are refused."""
+    text = GRIPPER.replace('<body name="knuckle"', '<site name="hand_site" pos="0.05 -0.02 0"/>\n'
+                           '        <body name="knuckle"')
+    path = write(tmp_path, "gripper.xml", text)
+    imported = import_model(path, lock=FINGERS)
+    assert "equality #0: left out, body 'finger' and body 'knuckle' are welded into one by --lock " \
+           "(it moves nothing)" in imported.notes
+    assert "equality 'grip': left out, body 'other' and body 'hand' are welded into one by --lock " \
+           "(it moves nothing)" in imported.notes
+    (tmp_path / "bare").mkdir()
+    bare = write(tmp_path / "bare", "gripper.xml", text[:text.index("<equality>")] + "</mujoco>\n")
+    assert imported.mapping == import_model(bare, lock=FINGERS).mapping
+    with pytest.raises(ModelError) as info:
+        import_model(path, lock=FINGERS[1:])  # the knuckle moves: the loop is a constraint
+    assert [e for e in info.value.errors if "equality" in e] == [
+        f"{path}: equality #0: equality constraints are not supported (an open chain only)"]
