@@ -1397,6 +1397,24 @@ class _Importer:
                     j = int(m.actuator_trnid[a][0])
                     if j in self.servo and m.key_ctrl[key][a] != 0.0:
                         self.servo[j]["control"] = _tidy(m.key_ctrl[key][a])
+                apart = []  # position servos whose target (where their force is 0 at rest) is not the pose
+                for a in range(m.nu):
+                    j = int(m.actuator_trnid[a][0])
+                    b1, gear = float(m.actuator_biasprm[a][1]), float(m.actuator_gear[a][0])
+                    if j not in self.servo or b1 == 0.0 or gear == 0.0:
+                        continue
+                    ctrl = float(m.key_ctrl[key][a])
+                    if m.actuator_ctrllimited[a]:
+                        ctrl = min(max(ctrl, float(m.actuator_ctrlrange[a][0])), float(m.actuator_ctrlrange[a][1]))
+                    target = -(float(m.actuator_gainprm[a][0]) * ctrl + float(m.actuator_biasprm[a][0])) / (b1 * gear)
+                    pose = float(m.key_qpos[key][m.jnt_qposadr[j]])
+                    if abs(target - pose) > 1e-6 * max(1.0, abs(pose)):
+                        unit = "m" if int(m.jnt_type[j]) == int(mj.mjtJoint.mjJNT_SLIDE) else "rad"
+                        apart.append(f"{self.servo[j].get('name') or self.joint_name(j)!r} target {target:.6g}, "
+                                     f"pose {pose:.6g} ({target - pose:+.3g} {unit})")
+                if apart:
+                    self.notes.append(f"keyframe {self._name(mj.mjtObj.mjOBJ_KEY, key) or key!r}: its ctrl is "
+                                      f"not its pose, the servos pull away from it at t = 0: " + "; ".join(apart))
             elif m.nu and np.any(m.key_ctrl[key]):
                 self.notes.append("keyframe: ctrl not kept (commands are given to the simulator as "
                                   "axis moments)")

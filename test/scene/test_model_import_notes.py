@@ -139,3 +139,25 @@ def test_equalities_inside_one_welded_body_are_left_out(tmp_path):
         import_model(path, lock=FINGERS[1:])  # the knuckle moves: the loop is a constraint
     assert [e for e in info.value.errors if "equality" in e] == [
         f"{path}: equality #0: equality constraints are not supported (an open chain only)"]
+
+
+# ------------------------------------------------------------- a keyframe's ctrl against its pose
+def test_a_keyframe_whose_servo_targets_are_not_its_pose_is_noted(tmp_path):
+    """A position servo's target (where its force vanishes at rest: ctrl / gear for a position
+    actuator, clipped to its ctrlrange) away from the keyframe's pose is noted with the gap; a
+    keyframe whose ctrl is its pose (or a velocity servo) is not; MuJoCo's force at the keyframe
+    vanishes exactly at the targets the note gives."""
+    text = BENT_ARM.replace('kp="20"', 'kp="20" gear="2"').replace('ctrl="0.5 -0.4"', 'ctrl="0 -0.8"')
+    path = write(tmp_path, "arm.xml", text)
+    imported = import_model(path)
+    assert ("keyframe 'bent': its ctrl is not its pose, the servos pull away from it at t = 0: "
+            "'shoulder_pos' target 0, pose 0.5 (-0.5 rad)") in imported.notes
+    assert not any("elbow_pos" in n for n in imported.notes)  # ctrl -0.8 / gear 2 is its pose -0.4
+    m = mujoco.MjSpec.from_file(str(path)).compile()
+    d = mujoco.MjData(m)
+    mujoco.mj_resetDataKeyframe(m, d, 0)
+    d.qpos[0] = 0.0  # at the target the note gives, the servo pushes nothing
+    mujoco.mj_forward(m, d)
+    assert d.actuator_force[0] == 0.0 and d.actuator_force[1] == 0.0
+    held = import_model(write(tmp_path, "held.xml", BENT_ARM))
+    assert not any("its ctrl is not its pose" in n for n in held.notes)
