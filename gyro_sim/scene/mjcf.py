@@ -689,6 +689,8 @@ class _Importer:
         self.armature: dict[int, float] = {}  # hinge joint -> its armature (kg m^2)
         self.spring: dict[int, dict[str, float]] = {}  # hinge joint -> its scene spring
         self.servo: dict[int, dict[str, Any]] = {}  # hinge joint -> its scene servo (a model with servos)
+        self.actfrc: dict[int, tuple[float, float]] = {}  # joint of one actuator -> its actuatorfrcrange
+        self.max_torque: dict[int, float] = {}  # joint of one motor -> its actuatorfrcrange as max_torque
         self.locked: dict[str, float] = {}  # joints welded (gyro_sim.scene.mjcf._lock_joints)
         self.gear: float | None = None  # armatures as geared motors of this ratio (import_model)
 
@@ -816,8 +818,13 @@ class _Importer:
                 self.notes.append(f"{self.joint(j)}: limits [{low:g}, {high:g}] not enforced")
             if m.jnt_actfrclimited[j]:
                 low, high = m.jnt_actfrcrange[j]
-                self.notes.append(f"{self.joint(j)}: actuatorfrcrange [{low:g}, {high:g}] not "
-                                  "enforced")
+                drives = [a for a in range(m.nu) if int(m.actuator_trnid[a][0]) == j and int(m.actuator_trntype[a])
+                          in (int(mj.mjtTrn.mjTRN_JOINT), int(mj.mjtTrn.mjTRN_JOINTINPARENT))]
+                if len(drives) == 1 and m.actuator_gear[drives[0]][0] != 0.0:  # its actuator's bound
+                    self.actfrc[j] = (float(low), float(high))  # (check_actuators, add_servo)
+                else:
+                    self.notes.append(f"{self.joint(j)}: actuatorfrcrange [{low:g}, {high:g}] not "
+                                      "enforced" + (f" ({len(drives)} actuators drive it)" if drives else ""))
         self.check_actuators()
 
     def check_actuators(self) -> None:
@@ -856,6 +863,13 @@ class _Importer:
             if servos:
                 self.add_servo(a, what, j)
                 continue
+            if j in self.actfrc:  # its moment gear x gain x ctrl is clipped to it: max_torque when symmetric
+                low, high = self.actfrc[j]
+                if low == -high:
+                    self.max_torque[j] = _tidy(high)
+                else:
+                    self.notes.append(f"{self.joint(j)}: actuatorfrcrange [{low:g}, {high:g}] not enforced "
+                                      "(not symmetric: a max_torque bounds a moment on both sides alike)")
             if m.actuator_ctrllimited[a]:
                 low, high = m.actuator_ctrlrange[a]
                 self.notes.append(f"{what}: ctrlrange [{low:g}, {high:g}] not enforced")
@@ -885,6 +899,11 @@ class _Importer:
             servo["ctrl_range"] = [_tidy(v) for v in m.actuator_ctrlrange[a]]
         if m.actuator_forcelimited[a]:
             servo["force_range"] = [_tidy(v) for v in m.actuator_forcerange[a]]
+        if j in self.actfrc:  # MuJoCo clips gear x force to the joint's range: the force to range / gear
+            gear = float(m.actuator_gear[a][0])
+            low, high = sorted(v / gear for v in self.actfrc[j])
+            own = servo.get("force_range", [-math.inf, math.inf])
+            servo["force_range"] = [_tidy(min(max(v, low), high)) for v in own]
         self.servo[j] = servo
 
     # --- structure
@@ -1123,6 +1142,8 @@ class _Importer:
                     body["joint"]["spring"] = self.spring[g.joint]
                 if g.joint in self.servo:
                     body["joint"]["servo"] = self.servo[g.joint]
+                if g.joint in self.max_torque:
+                    body["joint"]["max_torque"] = self.max_torque[g.joint]
             else:
                 body["joint"] = {"type": "spherical"}
             body["mass"] = _tidy(g.mass)
@@ -1149,6 +1170,8 @@ class _Importer:
                 })
                 if r.joint in self.friction:
                     body_rotors[-1]["friction"] = self.friction[r.joint]
+                if r.joint in self.max_torque:
+                    body_rotors[-1]["max_torque"] = self.max_torque[r.joint]
                 if state["angle"][r.root] != 0.0:
                     self.notes.append(f"{self.joint(r.joint)}: the keyframe's angle "
                                       f"{state['angle'][r.root]:g} not kept (a rotor's angle "

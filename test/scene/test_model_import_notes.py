@@ -4,14 +4,18 @@ missing meshes, and keyframes whose servo targets differ from their pose. Each o
 written here; the physics against MuJoCo on the same file."""
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 mujoco = pytest.importorskip("mujoco", reason="MuJoCo is the optional extra [models]")
 
+from gyro_sim import Simulator
 from gyro_sim.cli import main
+from gyro_sim.dynamics.model import initial_state
 from gyro_sim.scene.load import load_scene, parse_yaml
 from gyro_sim.scene.mjcf import ModelError, import_model
 from test.scene.test_model_import import write
+from test.scene.test_model_joint_terms import mujoco_model
 
 #: two hinges under gravity, position servos, a keyframe "bent"
 BENT_ARM = """<mujoco model="bent_arm">
@@ -161,3 +165,106 @@ def test_a_keyframe_whose_servo_targets_are_not_its_pose_is_noted(tmp_path):
     assert d.actuator_force[0] == 0.0 and d.actuator_force[1] == 0.0
     held = import_model(write(tmp_path, "held.xml", BENT_ARM))
     assert not any("its ctrl is not its pose" in n for n in held.notes)
+
+
+# ----------------------------------------------------------------- a joint's actuatorfrcrange
+#: three hinges under gravity, each driven by one actuator and bounded by actuatorfrcrange: a
+#: geared position servo with its own forcerange, a servo of negative gear, and a motor (every
+#: actuator a servo then)
+FRC_ARM = """<mujoco model="frc_arm">
+  <option gravity="0 0 -9.81"/>
+  <worldbody>
+    <body name="upper" pos="0 0 1">
+      <joint name="shoulder" axis="0 1 0" actuatorfrcrange="-20 40"/>
+      <inertial pos="0.1 0 0" mass="1.1" diaginertia="0.002 0.01 0.011"/>
+      <body name="fore" pos="0.25 0 0" quat="0.98 0.1 0.1 0">
+        <joint name="elbow" axis="0 0 1" actuatorfrcrange="-3 6"/>
+        <inertial pos="0.08 0.01 0" mass="0.6" diaginertia="0.001 0.004 0.0045"/>
+        <body name="hand" pos="0.2 0 0">
+          <joint name="wrist" axis="1 0 0" actuatorfrcrange="-1 1"/>
+          <inertial pos="0.03 0 0.02" mass="0.3" diaginertia="0.0004 0.0005 0.0003"/>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+  <actuator>
+    <position name="shoulder_pos" joint="shoulder" kp="100" kv="5" gear="2" forcerange="-30 30"/>
+    <position name="elbow_pos" joint="elbow" kp="50" gear="-1.5"/>
+    <motor name="wrist_motor" joint="wrist" gear="0.5"/>
+  </actuator>
+</mujoco>
+"""
+
+
+def test_actuatorfrcrange_bounds_a_joints_one_servo_as_in_mujoco(tmp_path):
+    """A joint's actuatorfrcrange bounds gear x force: its one servo's force range becomes its own
+    forcerange met with the joint's range / gear (flipped for a negative gear). MuJoCo's qacc
+    at random states and controls driving every servo into the bound, on both sides, to 1e-9
+    relative."""
+    path = write(tmp_path, "arm.xml", FRC_ARM)
+    imported = import_model(path)
+    ranges = [b["joint"]["servo"]["force_range"] for b in imported.mapping["bodies"]]
+    assert ranges == [[-10.0, 20.0], [-4.0, 2.0], [-2.0, 2.0]]
+    assert not any("actuatorfrcrange" in n for n in imported.notes)
+    m = mujoco_model(path)
+    d = mujoco.MjData(m)
+    sim = Simulator(load_scene(path), backend="numpy")
+    model = sim.model
+    rng = np.random.default_rng(7)
+    worst, bound = 0.0, set()
+    for _ in range(16):
+        d.qpos[:], d.qvel[:] = rng.uniform(-2, 2, 3), rng.normal(scale=2.0, size=3)
+        d.ctrl[:] = rng.uniform(-8, 8, 3)
+        mujoco.mj_forward(m, d)
+        bound |= {(j, int(np.sign(d.qfrc_actuator[j]))) for j in range(3)
+                  if abs(d.qfrc_actuator[j]) in np.abs(m.jnt_actfrcrange[j])}
+        y = initial_state(model)
+        y[model.i_phi], y[model.i_vel] = d.qpos, d.qvel
+        sim.set_controls(d.ctrl.copy())
+        udot = sim.held_rhs()(0.0, y)[model.i_vel]
+        worst = max(worst, float(np.max(np.abs(udot - d.qacc)) / np.max(np.abs(d.qacc))))
+    assert worst <= 1e-9
+    assert bound == {(j, s) for j in range(3) for s in (-1, 1)}  # every bound reached, both sides
+
+
+#: a motor bounded by a symmetric actuatorfrcrange, two motors on one joint, an asymmetric range
+FRC_MOTORS = FRC_ARM.replace(
+    '<position name="shoulder_pos" joint="shoulder" kp="100" kv="5" gear="2" forcerange="-30 30"/>',
+    '<motor name="shoulder_motor" joint="shoulder" gear="2"/>').replace(
+    '<position name="elbow_pos" joint="elbow" kp="50" gear="-1.5"/>',
+    '<motor name="elbow_a" joint="elbow"/><motor name="elbow_b" joint="elbow" gear="2"/>').replace(
+    'actuatorfrcrange="-20 40"', 'actuatorfrcrange="-5 5"').replace(
+    'actuatorfrcrange="-1 1"', 'actuatorfrcrange="-1 2"')
+
+
+def test_actuatorfrcrange_of_a_joints_one_motor_is_its_max_torque(tmp_path):
+    """A motor's axis moment is gear x ctrl, which MuJoCo clips to the joint's actuatorfrcrange:
+    a symmetric range becomes the axis's max_torque (MuJoCo's qacc with the moment beyond it,
+    to 1e-9 relative); two motors on one joint, or an asymmetric range, stay a note."""
+    path = write(tmp_path, "motors.xml", FRC_MOTORS)
+    imported = import_model(path)
+    joints = {b["name"]: b["joint"] for b in imported.mapping["bodies"]}
+    assert joints["shoulder"]["max_torque"] == 5.0
+    assert "max_torque" not in joints["elbow"] and "max_torque" not in joints["wrist"]
+    assert "joint 'elbow': actuatorfrcrange [-3, 6] not enforced (2 actuators drive it)" in imported.notes
+    assert ("joint 'wrist': actuatorfrcrange [-1, 2] not enforced (not symmetric: a max_torque bounds a "
+            "moment on both sides alike)") in imported.notes
+    m = mujoco_model(path)
+    d = mujoco.MjData(m)
+    sim = Simulator(load_scene(path), backend="numpy")
+    model = sim.model
+    factors = {c.axis: [] for c in imported.commands}
+    for a, c in enumerate(imported.commands):
+        factors[c.axis].append((a, c.factor))
+    rng = np.random.default_rng(3)
+    worst = 0.0
+    for shoulder in (4.0, -4.0, 1.0):  # 8 N m and -8 N m clipped to 5, 2 N m inside
+        d.qpos[:], d.qvel[:] = rng.uniform(-2, 2, 3), rng.normal(size=3)
+        d.ctrl[:] = [shoulder, 0.5, 0.5, 0.6]  # the elbow's and wrist's inside their ranges
+        mujoco.mj_forward(m, d)
+        y = initial_state(model)
+        y[model.i_phi], y[model.i_vel] = d.qpos, d.qvel
+        sim.set_axis_moments([sum(f * d.ctrl[a] for a, f in factors[axis]) for axis in sim.axis_names])
+        udot = sim.held_rhs()(0.0, y)[model.i_vel]
+        worst = max(worst, float(np.max(np.abs(udot - d.qacc)) / np.max(np.abs(d.qacc))))
+    assert worst <= 1e-9
