@@ -342,7 +342,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="scene file, an MJCF or URDF model (docs/models.md), or the name of a shipped scene (config/)")
     r.add_argument("--keyframe", metavar="NAME",
                    help="models only: the keyframe of the initial state and of the servos' controls "
-                   "(default: the model's first)")
+                   "(default: the model's first; none: rest)")
     from gyro_sim.scene.commands import add_model_options
 
     add_model_options(r)

@@ -159,7 +159,7 @@ def load_scene(source: str | os.PathLike | Mapping, keyframe: str | None = None,
         MJCF or URDF model, read through MuJoCo (:mod:`gyro_sim.scene.mjcf`, docs/models.md).
     keyframe : str, optional
         Models only: the keyframe giving the initial state (default: the model's first, or
-        the reference pose at rest).
+        the reference pose at rest; ``"none"``: the reference pose at rest).
     package_path : sequence of directories, optional
         Models only: searched first for the packages of ``package://`` mesh URIs, before the
         ament index, ROS_PACKAGE_PATH and the package.xml above the file

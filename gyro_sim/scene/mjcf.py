@@ -192,7 +192,8 @@ def import_model(path: str | os.PathLike, keyframe: str | None = None,
     ----------
     path : the model file: MJCF, or URDF (a ``<robot>`` root), whatever its suffix
     keyframe : the name of the keyframe giving the initial state; None: the model's first
-        keyframe, or the reference pose at rest when it has none
+        keyframe, or the reference pose at rest when it has none; "none" (unless a keyframe has
+        that name): the reference pose at rest
     package_path : directories searched first for the packages of ``package://`` URIs
         (:mod:`gyro_sim.scene.packages`)
     lock : joints welded where they are: a mapping joint name -> value (rad or m; None: the
@@ -522,6 +523,7 @@ def _prepare_assets(spec: Any, path: str, resolver: PackageResolver, notes: list
     never = from_geoms == mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
     errors = []
     kind = "link" if _kind(path) == "URDF" else "body"
+    left: list[tuple[str, list[str], str, list[str]]] = []  # (shown, bodies, why, welded) of each mesh left out
     for mesh in list(spec.meshes):
         if not mesh.file:
             continue  # vertices given inline
@@ -545,13 +547,22 @@ def _prepare_assets(spec: Any, path: str, resolver: PackageResolver, notes: list
         for b in needs + fixed:  # a stand-in mass: what is welded to the world moves nothing, and
             body = spec.body(b)  # a moving body is refused all the same (the rest is still checked)
             body.explicitinertial, body.mass, body.inertia = True, 1.0, [1.0, 1.0, 1.0]
-        if needs:
-            continue
-        on = f" (on {', '.join(repr(b) for b in bodies)})" if bodies else ""
-        why_not = ("masses and inertias are given" if not fixed else
-                   f"{', '.join(repr(b) for b in fixed)} welded to the world need{'s' if len(fixed) == 1 else ''} "
-                   "no mass")
-        notes.append(f"mesh {shown}{on}: left out, {why}; the motion does not need it ({why_not})")
+        if not needs and geoms:  # an asset no geom uses is left out unsaid
+            left.append((shown, bodies, why, fixed))
+    if left:  # one note for all (a description without its meshes misses them all)
+        fixed = list(dict.fromkeys(b for entry in left for b in entry[3]))
+        welded = (f"{', '.join(repr(b) for b in fixed)} welded to the world need{'s' if len(fixed) == 1 else ''} "
+                  "no mass")
+        why_not = (welded if fixed and all(entry[3] for entry in left) else
+                   f"masses and inertias are given, {welded}" if fixed else "masses and inertias are given")
+        shown, bodies, why, _ = left[0]
+        if len(left) == 1:
+            on = f" (on {', '.join(repr(b) for b in bodies)})" if bodies else ""
+            notes.append(f"mesh {shown}{on}: left out, {why}; the motion does not need it ({why_not})")
+        else:
+            more = f" and {len(left) - 3} more" if len(left) > 3 else ""
+            notes.append(f"{len(left)} meshes left out with their geoms ({', '.join(e[0] for e in left[:3])}{more}): "
+                         f"they cannot be read (the first: {why}); the motion does not need them ({why_not})")
     texture_dir = os.path.join(model_dir, spec.texturedir) if spec.texturedir else model_dir
     for texture in list(spec.textures):
         if not texture.file:
@@ -719,6 +730,8 @@ class _Importer:
         self.armature: dict[int, float] = {}  # hinge joint -> its armature (kg m^2)
         self.spring: dict[int, dict[str, float]] = {}  # hinge joint -> its scene spring
         self.servo: dict[int, dict[str, Any]] = {}  # hinge joint -> its scene servo (a model with servos)
+        self.actfrc: dict[int, tuple[float, float]] = {}  # joint of one actuator -> its actuatorfrcrange
+        self.max_torque: dict[int, float] = {}  # joint of one motor -> its actuatorfrcrange as max_torque
         self.locked: dict[str, float] = {}  # joints welded (gyro_sim.scene.mjcf._lock_joints)
         self.gear: float | None = None  # armatures as geared motors of this ratio (import_model)
 
@@ -773,6 +786,15 @@ class _Importer:
         if m.neq and not flags & int(dsbl.mjDSBL_EQUALITY):
             for e in range(m.neq):
                 name = self._name(obj.mjOBJ_EQUALITY, e)
+                if int(m.eq_type[e]) in (int(mj.mjtEq.mjEQ_CONNECT), int(mj.mjtEq.mjEQ_WELD)):
+                    ends = [int(i) if int(m.eq_objtype[e]) != int(obj.mjOBJ_SITE) else int(m.site_bodyid[i])
+                            for i in (m.eq_obj1id[e], m.eq_obj2id[e])]
+                    if m.body_weldid[ends[0]] == m.body_weldid[ends[1]]:  # one rigid body: no force on it
+                        by = " by --lock" if self.locked else ""
+                        self.notes.append(f"{f'equality {name!r}' if name else f'equality #{e}'}: left out, "
+                                          f"{self.body(ends[0])} and {self.body(ends[1])} are welded into "
+                                          f"one{by} (it moves nothing)")
+                        continue
                 coupled = [int(j) for j in (m.eq_obj1id[e], m.eq_obj2id[e]) if j >= 0]
                 lockable = int(m.eq_type[e]) == int(mj.mjtEq.mjEQ_JOINT) and all(self.lockable(j) for j in coupled)
                 self.fail(f"equality {name!r}" if name else f"equality #{e}",
@@ -837,8 +859,13 @@ class _Importer:
                 self.notes.append(f"{self.joint(j)}: limits [{low:g}, {high:g}] not enforced")
             if m.jnt_actfrclimited[j]:
                 low, high = m.jnt_actfrcrange[j]
-                self.notes.append(f"{self.joint(j)}: actuatorfrcrange [{low:g}, {high:g}] not "
-                                  "enforced")
+                drives = [a for a in range(m.nu) if int(m.actuator_trnid[a][0]) == j and int(m.actuator_trntype[a])
+                          in (int(mj.mjtTrn.mjTRN_JOINT), int(mj.mjtTrn.mjTRN_JOINTINPARENT))]
+                if len(drives) == 1 and m.actuator_gear[drives[0]][0] != 0.0:  # its actuator's bound
+                    self.actfrc[j] = (float(low), float(high))  # (check_actuators, add_servo)
+                else:
+                    self.notes.append(f"{self.joint(j)}: actuatorfrcrange [{low:g}, {high:g}] not "
+                                      "enforced" + (f" ({len(drives)} actuators drive it)" if drives else ""))
         self.check_actuators()
 
     def check_actuators(self) -> None:
@@ -855,7 +882,8 @@ class _Importer:
             trn = int(m.actuator_trntype[a])
             if trn not in trn_joint:
                 self.fail(what, f"drives a {mj.mjtTrn(trn).name.removeprefix('mjTRN_').lower()}; "
-                                "only motors on hinge joints are supported")
+                                "actuators on hinge and slide joints are supported (motors, position, "
+                                "velocity and affine general servos)")
                 continue
             if int(m.actuator_dyntype[a]) != int(mj.mjtDyn.mjDYN_NONE):
                 self.fail(what, "activation dynamics are not supported (a motor only: "
@@ -876,6 +904,13 @@ class _Importer:
             if servos:
                 self.add_servo(a, what, j)
                 continue
+            if j in self.actfrc:  # its moment gear x gain x ctrl is clipped to it: max_torque when symmetric
+                low, high = self.actfrc[j]
+                if low == -high:
+                    self.max_torque[j] = _tidy(high)
+                else:
+                    self.notes.append(f"{self.joint(j)}: actuatorfrcrange [{low:g}, {high:g}] not enforced "
+                                      "(not symmetric: a max_torque bounds a moment on both sides alike)")
             if m.actuator_ctrllimited[a]:
                 low, high = m.actuator_ctrlrange[a]
                 self.notes.append(f"{what}: ctrlrange [{low:g}, {high:g}] not enforced")
@@ -905,6 +940,11 @@ class _Importer:
             servo["ctrl_range"] = [_tidy(v) for v in m.actuator_ctrlrange[a]]
         if m.actuator_forcelimited[a]:
             servo["force_range"] = [_tidy(v) for v in m.actuator_forcerange[a]]
+        if j in self.actfrc:  # MuJoCo clips gear x force to the joint's range: the force to range / gear
+            gear = float(m.actuator_gear[a][0])
+            low, high = sorted(v / gear for v in self.actfrc[j])
+            own = servo.get("force_range", [-math.inf, math.inf])
+            servo["force_range"] = [_tidy(min(max(v, low), high)) for v in own]
         self.servo[j] = servo
 
     # --- structure
@@ -1149,6 +1189,8 @@ class _Importer:
                     body["joint"]["spring"] = self.spring[g.joint]
                 if g.joint in self.servo:
                     body["joint"]["servo"] = self.servo[g.joint]
+                if g.joint in self.max_torque:
+                    body["joint"]["max_torque"] = self.max_torque[g.joint]
             else:
                 body["joint"] = {"type": "spherical"}
             if p != k - 1:  # its joint point O^k in the parent's frame, from the parent's O (after the axis)
@@ -1179,6 +1221,8 @@ class _Importer:
                 })
                 if r.joint in self.friction:
                     body_rotors[-1]["friction"] = self.friction[r.joint]
+                if r.joint in self.max_torque:
+                    body_rotors[-1]["max_torque"] = self.max_torque[r.joint]
                 if state["angle"][r.root] != 0.0:
                     self.notes.append(f"{self.joint(r.joint)}: the keyframe's angle "
                                       f"{state['angle'][r.root]:g} not kept (a rotor's angle "
@@ -1399,6 +1443,8 @@ class _Importer:
         names = [self._name(mj.mjtObj.mjOBJ_KEY, k) for k in range(m.nkey)]
         if keyframe is None:
             return (0, names[0]) if m.nkey else (None, None)
+        if keyframe == "none" and keyframe not in names:  # the reference pose at rest (--keyframe none)
+            return None, None
         if keyframe not in names or not keyframe:
             known = ", ".join(repr(n) for n in names if n) or "none named"
             self.fail(f"keyframe {keyframe!r}", f"no such keyframe (the model's: {known})")
@@ -1424,6 +1470,24 @@ class _Importer:
                     j = int(m.actuator_trnid[a][0])
                     if j in self.servo and m.key_ctrl[key][a] != 0.0:
                         self.servo[j]["control"] = _tidy(m.key_ctrl[key][a])
+                apart = []  # position servos whose target (where their force is 0 at rest) is not the pose
+                for a in range(m.nu):
+                    j = int(m.actuator_trnid[a][0])
+                    b1, gear = float(m.actuator_biasprm[a][1]), float(m.actuator_gear[a][0])
+                    if j not in self.servo or b1 == 0.0 or gear == 0.0:
+                        continue
+                    ctrl = float(m.key_ctrl[key][a])
+                    if m.actuator_ctrllimited[a]:
+                        ctrl = min(max(ctrl, float(m.actuator_ctrlrange[a][0])), float(m.actuator_ctrlrange[a][1]))
+                    target = -(float(m.actuator_gainprm[a][0]) * ctrl + float(m.actuator_biasprm[a][0])) / (b1 * gear)
+                    pose = float(m.key_qpos[key][m.jnt_qposadr[j]])
+                    if abs(target - pose) > 1e-6 * max(1.0, abs(pose)):
+                        unit = "m" if int(m.jnt_type[j]) == int(mj.mjtJoint.mjJNT_SLIDE) else "rad"
+                        apart.append(f"{self.servo[j].get('name') or self.joint_name(j)!r} target {target:.6g}, "
+                                     f"pose {pose:.6g} ({target - pose:+.3g} {unit})")
+                if apart:
+                    self.notes.append(f"keyframe {self._name(mj.mjtObj.mjOBJ_KEY, key) or key!r}: its ctrl is "
+                                      f"not its pose, the servos pull away from it at t = 0: " + "; ".join(apart))
             elif m.nu and np.any(m.key_ctrl[key]):
                 self.notes.append("keyframe: ctrl not kept (commands are given to the simulator as "
                                   "axis moments)")

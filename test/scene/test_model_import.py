@@ -473,7 +473,8 @@ REFUSED = {
                                       'dynprm="0.1"/></actuator>'),
                             "actuator 'filtered': activation dynamics are not supported"),
     "site transmission": (bad(extra='<actuator><motor name="thruster" site="tip" gear="0 0 1 0 0 0"/></actuator>'),
-                          "actuator 'thruster': drives a site; only motors on hinge joints are supported"),
+                          "actuator 'thruster': drives a site; actuators on hinge and slide joints are supported "
+                          "(motors, position, velocity and affine general servos)"),
     "motor on a ball joint": (bad(inner=CHILD.format(name="hand", joint="wrist", type="ball", attrs=""),
                                   extra='<actuator><motor name="twist" joint="wrist" gear="0 0 1"/></actuator>'),
                               "actuator 'twist': drives the ball joint 'wrist'; only hinges take a commanded moment"),
