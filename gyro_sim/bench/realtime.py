@@ -98,14 +98,15 @@ NODE_COMMAND = (sys.executable, "-m", "gyro_sim.ros.node")
 
 
 def run_node(n: int, record: bool, seconds: float, workdir: Path, index: int = 0, node_command=NODE_COMMAND,
-             backend: str = "auto", priority: int = DEFAULT_PRIORITY) -> Run:
-    """One node run on spherical_chain(n); its statistics."""
+             backend: str = "auto", priority: int = DEFAULT_PRIORITY, branching: int = 1) -> Run:
+    """One node run on spherical_chain(n), hung as a tree of `branching` children a body
+    (`gyro_sim.bench.scaling.tree_of_links`; 1: the chain); its statistics."""
     import yaml
 
-    from gyro_sim.bench.scenes import spherical_chain
+    from gyro_sim.bench.scaling import tree_of_links
 
-    scene = workdir / f"chain_{n}.yaml"
-    scene.write_text(yaml.safe_dump(spherical_chain(n, gravity=GRAVITY), sort_keys=False))
+    scene = workdir / (f"chain_{n}.yaml" if branching == 1 else f"tree_{n}_{branching}.yaml")
+    scene.write_text(yaml.safe_dump(tree_of_links(n, branching, gravity=GRAVITY), sort_keys=False))
     stats = workdir / f"stats_{n}_{int(record)}_{priority}.json"
     params = [f"scene:={scene}", f"physics_rate:={PHYSICS_RATE}", f"publish_rate:={PUBLISH_RATE}",
               "real_time_factor:=1.0", "integrator:=rk4", f"backend:={backend}", f"duration:={seconds}",
@@ -397,12 +398,12 @@ def run_violent_node(workdir: Path, seconds: float = VIOLENT_SECONDS, case: Viol
 
 
 def measure(sizes=DEFAULT_SIZES, seconds: float = DEFAULT_SECONDS, progress=None, node_command=NODE_COMMAND,
-            backend: str = "auto", priorities=(DEFAULT_PRIORITY,)) -> list[Run]:
+            backend: str = "auto", priorities=(DEFAULT_PRIORITY,), branching: int = 1) -> list[Run]:
     runs = []
     with tempfile.TemporaryDirectory(prefix="gyro_sim_realtime_") as tmp:
         cases = [(n, rec, p) for n in sizes for rec in (False, True) for p in priorities]
         for i, (n, rec, p) in enumerate(cases):
-            runs.append(run_node(n, rec, seconds, Path(tmp), i, node_command, backend, p))
+            runs.append(run_node(n, rec, seconds, Path(tmp), i, node_command, backend, p, branching))
             if progress:
                 progress(i + 1, len(cases), f"n = {n}{' recording' if rec else ''}, thread_priority {p}")
     return runs
@@ -508,19 +509,24 @@ def cmd_bench_realtime(args) -> int:
 
     if refused(args, "realtime"):
         return 2
+    if args.branching < 1:
+        print(f"gyro-sim bench realtime: --branching must be >= 1, got {args.branching}", file=sys.stderr)
+        return 2
     sizes = QUICK_SIZES if args.quick else tuple(args.sizes or DEFAULT_SIZES)
     seconds = QUICK_SECONDS if args.quick else args.seconds
     t0 = time.perf_counter()
     load0 = os.getloadavg()[0]
     try:
         runs = measure(sizes, seconds, progress=Progress("realtime"), backend=args.backend,
-                       priorities=tuple(args.thread_priority))
+                       priorities=tuple(args.thread_priority), branching=args.branching)
     except RuntimeError as exc:
         print(f"gyro-sim bench realtime: {exc}", file=sys.stderr)
         return 1
     backends = ", ".join(sorted({str(r.stats.get("backend")) for r in runs}))
+    shape = ("chains" if args.branching == 1 else
+             f"trees (body k hangs from body (k - 1) // {args.branching}: `tree_of_links`)")
     text = (f"### Real time: the node at physics {PHYSICS_RATE:g} Hz, publish {PUBLISH_RATE:g} Hz, RK4 "
-            f"({backends} dynamics), {seconds:g} s simulated per run\n\n" + table(runs)
+            f"({backends} dynamics), {seconds:g} s simulated per run, spherical {shape}\n\n" + table(runs)
             + f"\nMachine load (1-minute average, {os.cpu_count()} cores): {load0:.2f} at the start, "
             f"{os.getloadavg()[0]:.2f} at the end.")
     rows = [{"n": r.n, "record": r.record, **r.stats} for r in runs]
@@ -550,6 +556,9 @@ def register(sub, bench) -> None:
     r = bench.add_parser("realtime", help="the node's step time, jitter, CPU share and real-time factor (needs rclpy)")
     r.add_argument("--sizes", type=int, nargs="+", help=f"chain lengths (default {' '.join(map(str, DEFAULT_SIZES))})")
     r.add_argument("--seconds", type=float, default=DEFAULT_SECONDS, help="simulated seconds per run")
+    r.add_argument("--branching", type=int, default=1, metavar="K",
+                   help="hang the n links as a tree: body k from body (k - 1) // K (default 1: a chain; 2: a "
+                   "binary tree; n: a hub carrying the others)")
     r.add_argument("--quick", action="store_true", help=f"n = 2 only, {QUICK_SECONDS:g} s runs (CI)")
     r.add_argument("--backend", default="auto", help="dynamics of the node: auto | numba | numpy")
     r.add_argument("--thread-priority", type=int, nargs="+", default=[DEFAULT_PRIORITY], choices=range(100),

@@ -323,11 +323,11 @@ TREE_SIZES = (10, 30, 100, 300)
 QUICK_TREE_SIZES = (10,)
 
 
-def tree_of_links(n: int, branching: int) -> dict:
-    """The spherical chain of `spherical_chain(n)` hung as a tree: body k from body
+def tree_of_links(n: int, branching: int, **options) -> dict:
+    """The spherical chain of `spherical_chain(n, **options)` hung as a tree: body k from body
     (k - 1) // branching, at its parent's tip (branching 1: the chain itself, as it is written;
     2: a binary tree; n: a hub carrying the n - 1 others)."""
-    scene = spherical_chain(n)
+    scene = spherical_chain(n, **options)
     if branching == 1:
         return scene
     tip = scene["bodies"][0].get("next_joint", [0.0, 0.0, 0.2])
