@@ -1163,6 +1163,16 @@ def _aba_stable(is_hinge, col_start, e, tau, udot, parent):
     npending = np.zeros(n if tree else 0, dtype=np.int64)
     merged = np.zeros((12, 6))
     vm = np.empty(12)
+    # a tree's locked rotors of each body's children's motors, m m^T / (J G^2) summed (as below)
+    locked = np.zeros((n if tree and motors else 0, 3, 3))
+    has_locked = np.zeros(n if tree and motors else 0, dtype=np.bool_)
+    for j in range(locked.shape[0]):
+        kp = parent[j]
+        if kp >= 0 and motor[j, 3] != 0.0:
+            has_locked[kp] = True
+            for r in range(3):
+                for b in range(3):
+                    locked[kp, r, b] += motor[j, r] * motor[j, b] / motor[j, 3]
     Ia = np.empty((6, 6))
     pa = np.empty(6)
     K = np.empty((6, 6))
@@ -1191,18 +1201,11 @@ def _aba_stable(is_hinge, col_start, e, tau, udot, parent):
             u[j] = tau[j] - dot6(S[j], pAk)
         if motors and motor[k, 3] != 0.0:  # u' = u + m . c^k (eq 51b, as `_motor_column`)
             u[j0] += motor[k, 0] * c[k, 0] + motor[k, 1] * c[k, 1] + motor[k, 2] * c[k, 2]
-        child_motor = False
-        if motors and tree:  # the locked rotors of the children's motors, as below
+        child_motor = motors and tree and has_locked[k]
+        if child_motor:  # the locked rotors of the children's motors, as below
             for r in range(6):
                 for b in range(6):
-                    Ia[r, b] = IAk[r, b]
-            for j in range(k + 1, n):
-                if parent[j] == k and motor[j, 3] != 0.0:
-                    child_motor = True
-                    for r in range(3):
-                        for b in range(3):
-                            Ia[r, b] -= motor[j, r] * motor[j, b] / motor[j, 3]
-        if child_motor:
+                    Ia[r, b] = IAk[r, b] - (locked[k, r, b] if r < 3 and b < 3 else 0.0)
             _chol_upper6(Ia, K)
         elif tree:
             _chol_upper6(IAk, K)
