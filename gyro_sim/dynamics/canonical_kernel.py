@@ -158,8 +158,8 @@ def _rates(t, z, model, data, inputs, zrow, cflags, cwork):
     fast.joint_columns_stage(is_hinge, is_slide, own_col, base_type, e_w, S)
     fast.articulated_solve(is_hinge, col_start,
                            fast.Elimination(S, I6, pb, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x, armature,
-                                            block2(work, 0, 0, 4), parent),  # no motors, no trees: gauss4s refuses them
-                           prel, rate, flags[fast.FLAG_HEAVY])
+                                            block2(work, 0, 0, 4)),  # no motors, no trees: gauss4s refuses them
+                           prel, rate, flags[fast.FLAG_HEAVY], parent)
     for j in range(N):
         y[i_vel + j] = rate[j]
     fast.velocities_stage(t, y, model, s_w, e_w, w, vO, c)

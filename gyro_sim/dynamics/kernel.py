@@ -842,7 +842,9 @@ class Elimination(NamedTuple):
     offsets s_w (n, 3); U, W (N, 6), u (N,), Dinv (n, 6, 6), Ia (6, 6), pa (6,), Dx, T, G (3, 3),
     x (6,): scratch; armature (n,): each hinge's, added to its D (zero elsewhere); motor (n, 4) or
     (0, 4) without motors: each hinge's geared motor, m = J G a (world axes, a the rotor's axis)
-    and J G^2 (zero rows: none; `motor_axes`); parent: a tree's, or (0,)."""
+    and J G^2 (zero rows: none; `motor_axes`). The eliminations take a tree's parents apart
+    (`parent`: (n,) int64, -1 on the base, s_w[k] then O^k - O^{parent(k)}; (0,) on a chain,
+    whose parent is k - 1 and s_w[k - 1] = O^k - O^{k-1})."""
 
     S: np.ndarray
     IA: np.ndarray
@@ -862,9 +864,6 @@ class Elimination(NamedTuple):
     x: np.ndarray
     armature: np.ndarray
     motor: np.ndarray
-    #: a tree's parents ((n,) int64, -1: the base; s_w[k] is then O^k - O^{parent(k)}), (0,) on a
-    #: chain (parent k - 1, s_w[k - 1] = O^k - O^{k-1})
-    parent: np.ndarray
 
 
 @_njit_inline
@@ -881,7 +880,7 @@ def _motor_column(S, U, u, c, motor, k, j0):
 
 
 @_njit_inline
-def _aba_classic(is_hinge, col_start, e, tau, udot):
+def _aba_classic(is_hinge, col_start, e, tau, udot, parent):
     """`_aba` as Featherstone writes it, the articulated inertias formed: I^a = I^A - U D^-1 U^T.
     Fast, and exact to round-off while no subtree is much heavier than its carrier (see
     STABLE_ABA_RATIO); IA leaves as the articulated inertias. Returns the largest apparent mass
@@ -897,7 +896,7 @@ def _aba_classic(is_hinge, col_start, e, tau, udot):
     (S = (1, 0)) is eliminated in closed form, in scalars: D = J, and only the apparent mass
     M - H^T J^-1 H passes to the parent.
     """
-    S, IA, pA, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x, armature, motor, parent = e
+    S, IA, pA, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x, armature, motor = e
     n = IA.shape[0]
     tree = parent.shape[0] != 0
     worst = 0.0  # largest apparent mass passed on / the carrier's own mass
@@ -1064,7 +1063,7 @@ def _aba_classic(is_hinge, col_start, e, tau, udot):
 
 
 @_njit_inline
-def _aba(is_hinge, col_start, e, tau, udot, heavy):
+def _aba(is_hinge, col_start, e, tau, udot, heavy, parent):
     """Articulated-body algorithm: u' (N,) of the closure rows S_j . F_subtree(k(j)) = tau_j
     (eqs 44, 51, 54; Featherstone 2008, Table 7.1), about each body's O^k in world axes; e the
     Elimination's arrays.
@@ -1086,13 +1085,13 @@ def _aba(is_hinge, col_start, e, tau, udot, heavy):
     n = IA.shape[0]
     after = 0.0
     worst = 0.0
-    if e.parent.shape[0] != 0:  # a tree: each subtree's mass (summed in Dinv[k, 0, 0], free until
+    if parent.shape[0] != 0:  # a tree: each subtree's mass (summed in Dinv[k, 0, 0], free until
         # the elimination) against its parent's
         Dinv = e.Dinv
         for k in range(n):
             Dinv[k, 0, 0] = IA[k, 3, 3]
         for k in range(n - 1, -1, -1):
-            kp = e.parent[k]
+            kp = parent[k]
             if kp >= 0:
                 Dinv[kp, 0, 0] += Dinv[k, 0, 0]
                 if IA[kp, 3, 3] > 0.0 and Dinv[k, 0, 0] > worst * IA[kp, 3, 3]:
@@ -1104,30 +1103,30 @@ def _aba(is_hinge, col_start, e, tau, udot, heavy):
             if IA[k - 1, 3, 3] > 0.0 and after > worst * IA[k - 1, 3, 3]:
                 worst = after / IA[k - 1, 3, 3]
     if worst <= STABLE_ABA_RATIO:  # no subtree can pass on more mass than it has
-        _aba_classic(is_hinge, col_start, e, tau, udot)
+        _aba_classic(is_hinge, col_start, e, tau, udot, parent)
         return
     # a heavy subtree: what decides is the mass its elimination passes on (an articulated, not a
     # rigid, inertia: a uniform chain of 1000 links passes on about a link's mass at each joint),
     # known only once the classic elimination has run
-    _heavy(heavy, is_hinge, col_start, e, tau, udot)
+    _heavy(heavy, is_hinge, col_start, e, tau, udot, parent)
 
 
 @_njit_alloc
-def _aba_heavy(is_hinge, col_start, e, tau, udot):
+def _aba_heavy(is_hinge, col_start, e, tau, udot, parent):
     """`_aba` where a subtree is more than STABLE_ABA_RATIO times heavier than its carrier:
     `_aba_classic`, and `_aba_stable` from the bodies' own inertias again if the classic
     elimination passed on too much (arguments as `_aba`)."""
     IA, pA = e.IA, e.pA
     IA0 = IA.copy()
     pA0 = pA.copy()
-    if _aba_classic(is_hinge, col_start, e, tau, udot) > STABLE_ABA_RATIO:
+    if _aba_classic(is_hinge, col_start, e, tau, udot, parent) > STABLE_ABA_RATIO:
         IA[:] = IA0
         pA[:] = pA0
-        _aba_stable(is_hinge, col_start, e, tau, udot)
+        _aba_stable(is_hinge, col_start, e, tau, udot, parent)
 
 
 @_njit_alloc
-def _aba_stable(is_hinge, col_start, e, tau, udot):
+def _aba_stable(is_hinge, col_start, e, tau, udot, parent):
     """`_aba` for heavy subtrees on light carriers (and any other chain, at ~2.5 x the cost of
     `_aba_classic`).
 
@@ -1155,7 +1154,7 @@ def _aba_stable(is_hinge, col_start, e, tau, udot):
     articulated inertia formed, F^T F (nothing passes on from it).
     """
     S, IA, pA, c, a_base, s_w, U, W, u, Dinv = e.S, e.IA, e.pA, e.c, e.a_base, e.s_w, e.U, e.W, e.u, e.Dinv
-    armature, motor, parent = e.armature, e.motor, e.parent
+    armature, motor = e.armature, e.motor
     motors = motor.shape[0] != 0
     n = IA.shape[0]
     tree = parent.shape[0] != 0
@@ -1165,6 +1164,16 @@ def _aba_stable(is_hinge, col_start, e, tau, udot):
     npending = np.zeros(n if tree else 0, dtype=np.int64)
     merged = np.zeros((12, 6))
     vm = np.empty(12)
+    # a tree's locked rotors of each body's children's motors, m m^T / (J G^2) summed (as below)
+    locked = np.zeros((n if tree and motors else 0, 3, 3))
+    has_locked = np.zeros(n if tree and motors else 0, dtype=np.bool_)
+    for j in range(locked.shape[0]):
+        kp = parent[j]
+        if kp >= 0 and motor[j, 3] != 0.0:
+            has_locked[kp] = True
+            for r in range(3):
+                for b in range(3):
+                    locked[kp, r, b] += motor[j, r] * motor[j, b] / motor[j, 3]
     Ia = np.empty((6, 6))
     pa = np.empty(6)
     K = np.empty((6, 6))
@@ -1193,18 +1202,11 @@ def _aba_stable(is_hinge, col_start, e, tau, udot):
             u[j] = tau[j] - dot6(S[j], pAk)
         if motors and motor[k, 3] != 0.0:  # u' = u + m . c^k (eq 51b, as `_motor_column`)
             u[j0] += motor[k, 0] * c[k, 0] + motor[k, 1] * c[k, 1] + motor[k, 2] * c[k, 2]
-        child_motor = False
-        if motors and tree:  # the locked rotors of the children's motors, as below
+        child_motor = motors and tree and has_locked[k]
+        if child_motor:  # the locked rotors of the children's motors, as below
             for r in range(6):
                 for b in range(6):
-                    Ia[r, b] = IAk[r, b]
-            for j in range(k + 1, n):
-                if parent[j] == k and motor[j, 3] != 0.0:
-                    child_motor = True
-                    for r in range(3):
-                        for b in range(3):
-                            Ia[r, b] -= motor[j, r] * motor[j, b] / motor[j, 3]
-        if child_motor:
+                    Ia[r, b] = IAk[r, b] - (locked[k, r, b] if r < 3 and b < 3 else 0.0)
             _chol_upper6(Ia, K)
         elif tree:
             _chol_upper6(IAk, K)
@@ -1523,7 +1525,7 @@ HEAVY_ENTRY_ARGUMENTS = 27
 
 if jit.compiling():
     @_njit_inline
-    def _heavy(address, is_hinge, col_start, e, tau, udot):
+    def _heavy(address, is_hinge, col_start, e, tau, udot, parent):
         """`_aba_heavy` through the address of its compiled entry (`heavy_elimination_address`).
         Address 0 (a model built without it, `chain_model` says why that cannot happen with
         heavy subtrees): u' not a number, which the integrators report as a non-finite rhs."""
@@ -1536,8 +1538,8 @@ if jit.compiling():
             address_of(e.c), address_of(tau), address_of(e.a_base), address_of(e.s_w), address_of(e.U),
             address_of(e.W), address_of(e.u), address_of(e.Dinv), address_of(udot), address_of(e.Ia),
             address_of(e.pa), address_of(e.Dx), address_of(e.T), address_of(e.G), address_of(e.x),
-            address_of(e.armature), address_of(e.motor), address_of(e.parent), e.motor.shape[0],
-            e.parent.shape[0], e.IA.shape[0], e.S.shape[0]))
+            address_of(e.armature), address_of(e.motor), address_of(parent), e.motor.shape[0],
+            parent.shape[0], e.IA.shape[0], e.S.shape[0]))
 
     def _heavy_entry(is_hinge, col_start, S, IA, pA, c, tau, a_base, s_w, U, W, u, Dinv, udot, Ia, pa,
                      Dx, T, G, x, armature, motor, parent, n_motor, n_parent, n, N):
@@ -1553,9 +1555,9 @@ if jit.compiling():
             block2(vector_at(Ia, 36, f), 0, 6, 6), vector_at(pa, 6, f),
             block2(vector_at(Dx, 9, f), 0, 3, 3), block2(vector_at(T, 9, f), 0, 3, 3),
             block2(vector_at(G, 9, f), 0, 3, 3), vector_at(x, 6, f), vector_at(armature, n, f),
-            block2(vector_at(motor, 4 * n_motor, f), 0, n_motor, 4), vector_at(parent, n_parent, np.int64))
+            block2(vector_at(motor, 4 * n_motor, f), 0, n_motor, 4))
         _aba_heavy(vector_at(is_hinge, n, np.bool_), vector_at(col_start, n + 1, np.int64), e,
-                   vector_at(tau, N, f), vector_at(udot, N, f))
+                   vector_at(tau, N, f), vector_at(udot, N, f), vector_at(parent, n_parent, np.int64))
 
     @_njit_inline
     def records_at(descriptor):
@@ -1603,8 +1605,8 @@ if jit.compiling():
         for k in range(size):
             v[k] = 0.0
 else:  # plain Python: the heavy path and the kernel called directly
-    def _heavy(address, is_hinge, col_start, e, tau, udot):
-        _aba_heavy(is_hinge, col_start, e, tau, udot)
+    def _heavy(address, is_hinge, col_start, e, tau, udot, parent):
+        _aba_heavy(is_hinge, col_start, e, tau, udot, parent)
 
     def rhs_call(*arguments):
         rhs_kernel(*arguments)
@@ -1759,8 +1761,8 @@ def rhs_kernel(t, y, ydot, model, data, inputs):
         for a in range(3):
             a_base[3 + a] = base_amplitude[a] * sw
     _aba(is_hinge, col_start,
-         Elimination(S, I6, pb, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x, armature, motor_w, parent),
-         tau_applied, ydot[i_vel:i_vel + N], flags[FLAG_HEAVY])
+         Elimination(S, I6, pb, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x, armature, motor_w),
+         tau_applied, ydot[i_vel:i_vel + N], flags[FLAG_HEAVY], parent)
     # y'
     if base_type == BASE_FREE:
         for a in range(3):
