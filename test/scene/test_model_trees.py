@@ -41,6 +41,7 @@ MODELS = Path(__file__).parent / "models"
 GYMNASIUM = MODELS / "gymnasium"
 DMC = MODELS / "dm_control"
 BAXTER = MODELS / "robosuite" / "baxter" / "robot.xml"
+TIAGO = MODELS / "robosuite" / "tiago" / "robot.xml"
 #: positions (m) and rotation matrices of MuJoCo's bodies against the scene's tree (measured: 1e-15)
 POSE_ATOL = 1e-12
 
@@ -416,6 +417,7 @@ HINGED = {
     "reacher": lambda tmp: GYMNASIUM / "reacher.xml",
     "pusher": lambda tmp: GYMNASIUM / "pusher_v5.xml",
     "baxter": lambda tmp: judged_copy(BAXTER, tmp),
+    "tiago (a torso on a slide, a head, two arms)": lambda tmp: judged_copy(TIAGO, tmp),
     "dm_control cheetah": lambda tmp: DMC / "cheetah.xml",
     "dm_control finger, its spinner's dry friction out": lambda tmp: judged_copy(DMC / "finger.xml", tmp,
                                                                                  dry_friction=False),
