@@ -17,9 +17,24 @@ def children(pid: int) -> list[int]:
 
 
 def running(pid: int) -> bool:
-    """Whether process `pid` still runs (a zombie, ended and not yet reaped, does not)."""
+    """Whether process `pid` still runs: one of its threads has not ended. A zombie, ended and not
+    yet reaped, does not run; but a thread group's leader shows as a zombie while its other
+    threads still end, and the process's files (its locks) are closed only when the last one
+    has: every thread is looked at."""
+    def ended(stat: Path) -> bool:
+        return stat.read_text().rsplit(")", 1)[1].split()[0] in ("Z", "X")
+
     try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+        tasks = list(Path(f"/proc/{pid}/task").glob("*/stat"))
+        if not tasks:
+            return not ended(Path(f"/proc/{pid}/stat"))
+        alive = False
+        for task in tasks:
+            try:
+                alive = alive or not ended(task)
+            except (OSError, IndexError):  # that thread has gone meanwhile
+                continue
+        return alive
     except (OSError, IndexError):
         return False
 
