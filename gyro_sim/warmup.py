@@ -60,11 +60,17 @@ from pathlib import Path
 
 #: measured cold compile (CPU s) of what the first step of a run with each integrator needs,
 #: NUMBA_CACHE_DIR pointing at an empty directory, on the project's 2-core machine: the longer
-#: of this process's share (the dynamics kernel and its entry: 14 s) and the helper's (the rk4
-#: loop, the outputs: 7.5 s, and the integrator's first loop), which run at the same time;
-#: wall time is longer on a busy machine
+#: of this process's share (the dynamics kernel and its entry: 14 s; 13.5 s with trees, slides
+#: and geared motors, 2026-11-29) and the helper's (the rk4 loop, the outputs: 7.5 s, and the
+#: integrator's first loop), which run at the same time; wall time is longer on a busy machine
 COMPILE_SECONDS = {"fixed": 15, "rk4": 15, "lie4": 15, "auto": 16, "dop853": 16, "radau": 24, "gauss4": 31,
                    "gauss4s": 48}
+#: measured cold compile (CPU s) of the first step whole in one process (the dynamics kernel, its
+#: entry, the rk4 loop and the outputs: what the background helper of `start_deferred` compiles
+#: before the switch), the same empty cache and machine: 19.9 + 2.2 s (2026-11-29, `time python -c
+#: "from gyro_sim import warmup; warmup.precompile(integrator='fixed', helper=False)"`); the
+#: integrators whose first loop is another have no figure
+WHOLE_COMPILE_SECONDS = {"fixed": 22, "rk4": 22}
 #: the scene compiled for: one signature serves every scene (fast.py), any small one will do
 WARM_UP_SCENE = "hinge_chain"
 #: a Lagrange chain (its integrals, eqs 82 and 85, are compiled for its snapshots)
@@ -484,8 +490,9 @@ def start_deferred(integrator: str = DEFAULT_INTEGRATOR, stream=sys.stderr, prog
     if helper is None:
         return False
     _helper = _deferred = helper
-    seconds = COMPILE_SECONDS.get(integrator, max(COMPILE_SECONDS.values()))
-    stream.write(f"{prog}: compiling the dynamics in the background (about {seconds} s of CPU, at the lowest "
+    seconds = WHOLE_COMPILE_SECONDS.get(integrator)
+    about = f"about {seconds} s of CPU, " if seconds is not None else ""
+    stream.write(f"{prog}: compiling the dynamics in the background ({about}at the lowest "
                  f"priority); the run steps on the numpy reference until then\n")
     stream.flush()
     return True
