@@ -455,12 +455,15 @@ def _interrupted_line(argv) -> Callable[[str], str]:
                          "under its name")
 
 
-def _warnings_in_one_line(prog: str) -> None:
+def _warnings_in_one_line(prog: str):
     """A warning this command prints (an integrator's switch, a library's) in one line, its
-    kind and message, without the source line Python quotes by default."""
+    kind and message, without the source line Python quotes by default. Returns the previous
+    format, for `main` to put back when it returns (a caller in the same process keeps its own)."""
     import warnings
 
+    previous = warnings.formatwarning
     warnings.formatwarning = lambda message, category, *_, **__: f"{prog}: {category.__name__}: {message}\n"
+    return previous
 
 
 def main(argv=None) -> int:
@@ -473,7 +476,9 @@ def main(argv=None) -> int:
         return 2
     if getattr(args, "duration", None) is not None and args.duration <= 0:
         ap.error("--duration must be > 0")
-    _warnings_in_one_line(f"gyro-sim {args.cmd}")
+    import warnings
+
+    previous_format = _warnings_in_one_line(f"gyro-sim {args.cmd}")
     from gyro_sim.safe_paths import OutputError, raise_on_signals
 
     try:
@@ -497,6 +502,8 @@ def main(argv=None) -> int:
         if interrupt is None:
             raise
         return _interrupted(args, interrupt)
+    finally:
+        warnings.formatwarning = previous_format
 
 
 if __name__ == "__main__":
