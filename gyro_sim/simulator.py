@@ -198,23 +198,19 @@ class Simulator:
         relative to the kinetic energy: (E1 - E0 - W) / max(T0, T1), W the work of the held
         moments (exact under the zero-order hold; with speed rotors the Jacobi integral's
         balance, which the commands' work moves as it moves the energy); 0 where no balance
-        holds (a moving base, servos). The kinetic energy, not T + |V|: the potential's zero is
+        holds (a moving base). The kinetic energy, not T + |V|: the potential's zero is
         arbitrary, and a step that does not resolve the motion errs in proportion to the motion.
         Called by the "fixed" integrator after each call."""
-        moving = len(self._axis_angle) and np.any(self._moments)
-        if self.model.stateful:  # the applied torques' work is a state: the motors', friction's
-            moving = True
-        held = self._coulomb is not None and np.any(self._coulomb.torque)  # exact friction's held moments
-        moving = moving or held
         if self._watched is None:
             return 0.0
-        if self.model.stateful:
+        if self.model.stateful:  # the applied torques' work is a state: the motors', the servos', friction's
             w = self.model.i_work
             work = float(np.sum(y1[w] - y0[w]))
         else:
             i = self._axis_angle
             work = float(self._inputs_moments() @ (y1[i] - y0[i])) if len(i) and np.any(self._moments) else 0.0
-            work += self._coulomb.held(y0, y1) if held else 0.0
+            if self._coulomb is not None and np.any(self._coulomb.torque):  # exact friction's held moments
+                work += self._coulomb.held(y0, y1)
         from gyro_sim.dynamics.outputs import INV_KINETIC
 
         last = self._watch_last  # the previous call's end is usually this one's start
@@ -358,8 +354,7 @@ class Simulator:
 
     def _servo_joints(self) -> dict[str, int]:
         """Each servo's joint (its hinge body's name) -> its index in `control_names`."""
-        m = self.model
-        return {m.names[m.hinge_bodies[h]]: i for i, h in enumerate(m.servo_hinge)} if m.servo is not None else {}
+        return {name: i for i, (name, _) in enumerate(self.model.servo_joints)}
 
     def joint_command_controls(self, names: Sequence[str], position: Sequence[float], velocity: Sequence[float],
                                effort: Sequence[float], base: np.ndarray | None = None) -> np.ndarray:
@@ -387,7 +382,7 @@ class Simulator:
             if name in seen:
                 raise ValueError(f"joint {name!r}: given twice")
             seen.add(name)
-            kind = m.scene.bodies[m.hinge_bodies[m.servo_hinge[servo_of[name]]]].joint.servo.command
+            kind = m.servo_joints[servo_of[name]][1].command
             if arrays[kind].size == 0:
                 raise ValueError(f"joint {name!r}: its servo takes a {kind}, the command has none")
             out[servo_of[name]] = arrays[kind][i]

@@ -100,10 +100,10 @@ NODE_COMMAND = (sys.executable, "-m", "gyro_sim.ros.node")
 def run_node(n: int, record: bool, seconds: float, workdir: Path, index: int = 0, node_command=NODE_COMMAND,
              backend: str = "auto", priority: int = DEFAULT_PRIORITY, branching: int = 1) -> Run:
     """One node run on spherical_chain(n), hung as a tree of `branching` children a body
-    (`gyro_sim.bench.scaling.tree_of_links`; 1: the chain); its statistics."""
+    (`gyro_sim.bench.scenes.tree_of_links`; 1: the chain); its statistics."""
     import yaml
 
-    from gyro_sim.bench.scaling import tree_of_links
+    from gyro_sim.bench.scenes import tree_of_links
 
     scene = workdir / (f"chain_{n}.yaml" if branching == 1 else f"tree_{n}_{branching}.yaml")
     scene.write_text(yaml.safe_dump(tree_of_links(n, branching, gravity=GRAVITY), sort_keys=False))

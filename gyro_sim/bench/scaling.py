@@ -36,7 +36,7 @@ from gyro_sim.dynamics.model import compile_model, initial_state
 from gyro_sim.scene.load import load_scene
 from gyro_sim.simulator import Simulator
 from gyro_sim.dynamics.system import ChainODE, make_system
-from gyro_sim.bench.scenes import spherical_chain
+from gyro_sim.bench.scenes import spherical_chain, tree_of_links
 
 DEFAULT_SIZES = (1, 2, 5, 10, 20, 50, 100)
 QUICK_SIZES = (1, 2, 5)
@@ -321,22 +321,6 @@ def fixed_step_table(rows: list[FixedStepRow]) -> str:
 #: sizes of the trees' table (`trees`)
 TREE_SIZES = (10, 30, 100, 300)
 QUICK_TREE_SIZES = (10,)
-
-
-def tree_of_links(n: int, branching: int, **options) -> dict:
-    """The spherical chain of `spherical_chain(n, **options)` hung as a tree: body k from body
-    (k - 1) // branching, at its parent's tip (branching 1: the chain itself, as it is written;
-    2: a binary tree; n: a hub carrying the n - 1 others)."""
-    scene = spherical_chain(n, **options)
-    if branching == 1:
-        return scene
-    tip = scene["bodies"][0].get("next_joint", [0.0, 0.0, 0.2])
-    for k, body in enumerate(scene["bodies"]):
-        body.pop("next_joint", None)
-        if k:
-            body["parent"] = scene["bodies"][(k - 1) // branching]["name"]
-            body["joint"]["at"] = list(tip)
-    return scene
 
 
 def trees(sizes=TREE_SIZES, min_time: float = 0.3) -> list[tuple[int, float, float, float]]:

@@ -1,4 +1,4 @@
-"""Synthetic scenes for benchmarks: uniform chains of any length."""
+"""Synthetic scenes for benchmarks: uniform chains of any length, and the same links hung as trees."""
 from __future__ import annotations
 
 LINK = 0.2  # m, joint to joint
@@ -40,4 +40,20 @@ def spherical_chain(n: int, *, gravity: bool = True, rotors: bool = False, zero_
     scene = {"name": f"spherical chain n={n}", "base": {"type": "fixed"}, "bodies": bodies}
     if gravity or zero_features:
         scene["gravity"] = [0.0, 0.0, 0.0] if zero_features else [0.0, 0.0, -9.81]
+    return scene
+
+
+def tree_of_links(n: int, branching: int, **options) -> dict:
+    """The spherical chain of `spherical_chain(n, **options)` hung as a tree: body k from body
+    (k - 1) // branching, at its parent's tip (branching 1: the chain itself, as it is written;
+    2: a binary tree; n: a hub carrying the n - 1 others)."""
+    scene = spherical_chain(n, **options)
+    if branching == 1:
+        return scene
+    tip = scene["bodies"][0].get("next_joint", [0.0, 0.0, 0.2])
+    for k, body in enumerate(scene["bodies"]):
+        body.pop("next_joint", None)
+        if k:
+            body["parent"] = scene["bodies"][(k - 1) // branching]["name"]
+            body["joint"]["at"] = list(tip)
     return scene

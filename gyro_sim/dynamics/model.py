@@ -134,12 +134,19 @@ class Model:
         return self.actuators is not None and self.actuators.speed_dependent
 
     @property
+    def servo_joints(self) -> tuple:
+        """Each servo's joint (its body's name) and its scene record (`Servo`: command kind,
+        control, ...), in servo order (`servo_names`)."""
+        if self.servo is None:
+            return ()
+        return tuple((self.names[self.hinge_bodies[h]], self.scene.bodies[self.hinge_bodies[h]].joint.servo)
+                     for h in self.servo_hinge)
+
+    @property
     def initial_controls(self) -> np.ndarray:
         """The servos' controls from the start, in servo order (`servo_names`): each servo's
         `control` (an imported model's keyframe `ctrl`; default 0)."""
-        if self.servo is None:
-            return np.zeros(0)
-        return np.array([self.scene.bodies[self.hinge_bodies[h]].joint.servo.control for h in self.servo_hinge])
+        return np.array([servo.control for _, servo in self.servo_joints], dtype=float)
 
     @property
     def free(self) -> bool:

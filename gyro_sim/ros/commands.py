@@ -79,8 +79,7 @@ def check_joint_targets(targets: dict[str, tuple[str, float]], scene: str) -> li
 
     sim = Simulator(scene, integrator="rk4", backend="numpy")
     model = sim.model
-    servos = {model.names[model.hinge_bodies[h]]: model.scene.bodies[model.hinge_bodies[h]].joint.servo
-              for h in (model.servo_hinge if model.servo is not None else ())}
+    servos = dict(model.servo_joints)
     for name, (kind, _) in targets.items():
         if name not in sim.joint_names:
             joint = next((j for j, servo in servos.items() if servo.name == name), None)
@@ -183,7 +182,6 @@ def cmd_joints(args) -> int:
         targets = joint_targets(args)
         if args.scene:
             from gyro_sim.paths import find_scene
-            from gyro_sim.errors import GyroSimError
 
             try:
                 servos = check_joint_targets(targets, find_scene(args.scene))

@@ -1,16 +1,16 @@
 """`gyro-sim bench scaling`: the trees' table (tiny run) and the trees it times."""
 import pytest
 
-from gyro_sim.bench import scaling
+from gyro_sim.bench import scaling, scenes
 from gyro_sim.dynamics import kernel as fast
 from gyro_sim.dynamics.model import compile_model
 from gyro_sim.scene.load import load_scene
 
 
 def test_tree_of_links_hangs_the_chain_as_a_tree():
-    chain = compile_model(load_scene(scaling.tree_of_links(7, 1)))
-    binary = compile_model(load_scene(scaling.tree_of_links(7, 2)))
-    hub = compile_model(load_scene(scaling.tree_of_links(7, 7)))
+    chain = compile_model(load_scene(scenes.tree_of_links(7, 1)))
+    binary = compile_model(load_scene(scenes.tree_of_links(7, 2)))
+    hub = compile_model(load_scene(scenes.tree_of_links(7, 7)))
     assert chain.chain and not binary.chain and not hub.chain
     assert list(binary.parent) == [-1, 0, 0, 1, 1, 2, 2]
     assert list(hub.parent) == [-1, 0, 0, 0, 0, 0, 0]
