@@ -254,6 +254,7 @@ PLUGINS = (
     "gyro_sim.linear.commands",  # linearize (the linear model at a state)
     "gyro_sim.bench.linearize",  # bench linearize (its cost against pinocchio)
     "gyro_sim.bench.friction",  # bench friction (robots with dry joint friction)
+    "gyro_sim.bench.steps",  # bench steps (CPU per physics step, beside another source tree)
     "gyro_sim.warmup",  # warmup (the kernel cache filled in the foreground)
 )
 

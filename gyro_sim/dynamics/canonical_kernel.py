@@ -167,6 +167,13 @@ def _rates(t, z, model, data, inputs, zrow, cflags, cwork):
 
 @_njit
 def canonical_kernel(t, z, zdot, model, data, inputs, zrow, cflags, cwork):
+    """z' (size,) at (t, z) into zdot: `_canonical_rhs` compiled on its own, for callers from
+    Python with records of numpy arrays."""
+    _canonical_rhs(t, z, zdot, model, data, inputs, zrow, cflags, cwork)
+
+
+@jit.inline_ir
+def _canonical_rhs(t, z, zdot, model, data, inputs, zrow, cflags, cwork):
     """z' (size,) at (t, z) into zdot: what canonical.CanonicalChain.rhs computes."""
     _rates(t, z, model, data, inputs, zrow, cflags, cwork)
     (is_hinge, qrow, own_col, col_start, hinge_axis, s, mass, first_moment, inertia, lam_speed, torque_body,
@@ -317,7 +324,7 @@ def _canonical_entry(t, z, zdot, size, descriptor, zrow, cflags, cwork, ncwork):
     model, data, inputs = fast.records_at(descriptor)
     f, i = np.float64, np.int64
     n = model.mass.shape[0]
-    canonical_kernel(t, vector_at(z, size, f), vector_at(zdot, size, f), model, data, inputs,
+    _canonical_rhs(t, vector_at(z, size, f), vector_at(zdot, size, f), model, data, inputs,
                      block2(vector_at(zrow, 2 * n, i), 0, n, 2), vector_at(cflags, CFLAGS_SIZE, i),
                      vector_at(cwork, ncwork, f))
 

@@ -1589,7 +1589,7 @@ if jit.compiling():
         """`rhs_kernel` on y, ydot (`size` floats at these addresses) and the records `descriptor`
         (an address) describes: compiled as a C function (`kernel_address`)."""
         model, data, inputs = records_at(descriptor)
-        rhs_kernel(t, vector_at(y, size, np.float64), vector_at(ydot, size, np.float64), model, data, inputs)
+        _rhs(t, vector_at(y, size, np.float64), vector_at(ydot, size, np.float64), model, data, inputs)
 
     @_njit_inline
     def rhs_call(t, y, ydot, model, data, inputs):
@@ -1707,6 +1707,13 @@ def workspace_views(work, n, N, nt):
 
 @_njit
 def rhs_kernel(t, y, ydot, model, data, inputs):
+    """y' (size,) at (t, y) into ydot: `_rhs` compiled on its own, for callers from Python with
+    records of numpy arrays."""
+    _rhs(t, y, ydot, model, data, inputs)
+
+
+@_njit_inline
+def _rhs(t, y, ydot, model, data, inputs):
     """y' (size,) at (t, y) into ydot: what system.ChainODE.rhs computes, for the ChainModel
     `model` (`chain_model`), the Workspace `data` (its scratch: n WORK_PER_BODY + N
     WORK_PER_COLUMN + nt + WORK_FIXED floats; nothing is allocated per call) and the
