@@ -467,7 +467,52 @@ def _warnings_in_one_line(prog: str):
     return previous
 
 
+class _ReaderMayLeave:
+    """Standard output (or error) whose reader may close it early (`gyro-sim import m.xml | head -1`): the
+    first write that finds the pipe closed sends this and every later write to the null device
+    (the descriptor itself, so that the interpreter's last flush finds nothing to complain
+    about), and the command goes on to its end and its own exit status: what it writes to
+    files is written, what it prints after that is dropped."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def _guarded(self, call, *args):
+        try:
+            return call(*args)
+        except BrokenPipeError:
+            import os
+
+            null = os.open(os.devnull, os.O_WRONLY)
+            try:
+                os.dup2(null, self._stream.fileno())
+            finally:
+                os.close(null)
+            return None
+
+    def write(self, text):
+        self._guarded(self._stream.write, text)
+        return len(text)
+
+    def flush(self):
+        self._guarded(self._stream.flush)
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
 def main(argv=None) -> int:
+    """`gyro-sim`: the command `argv` names (sys.argv's by default); its exit status."""
+    streams = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = (s if s is None or isinstance(s, _ReaderMayLeave) else _ReaderMayLeave(s)
+                              for s in streams)
+    try:
+        return _main(argv)
+    finally:
+        sys.stdout, sys.stderr = streams
+
+
+def _main(argv) -> int:
     # a signal during the imports and the parser's construction: one line and exit 1, as later
     exit_on_signals(_interrupted_line(argv), 1)
     ap = build_parser()

@@ -10,7 +10,8 @@ class Progress:
 
     WIDTH = 30
 
-    def __init__(self, label: str, stream=sys.stderr):
+    def __init__(self, label: str, stream=None):
+        stream = sys.stderr if stream is None else stream  # (sys.stderr as it is now: the CLI guards it)
         self.label, self.stream = label, stream
         self.tty = stream.isatty()
         self._last_decile = -1

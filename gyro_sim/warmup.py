@@ -404,7 +404,7 @@ def verbose() -> bool:
     return os.environ.get(VERBOSE_VARIABLE, "") not in ("", "0")
 
 
-def precompile(stream=sys.stderr, prog: str = "gyro_sim", integrator: str = DEFAULT_INTEGRATOR,
+def precompile(stream=None, prog: str = "gyro_sim", integrator: str = DEFAULT_INTEGRATOR,
                helper: bool = True) -> bool:
     """If the cache is cold for the first step of a run with `integrator`, say so in one line,
     compile its kernels (with a line per kernel where :func:`verbose`; the helper compiling
@@ -415,6 +415,7 @@ def precompile(stream=sys.stderr, prog: str = "gyro_sim", integrator: str = DEFA
     selection of the Simulator, which falls back to numpy when it may. The helper fills the
     whole cache and outlives this process where `background_fill_allowed`; elsewhere it
     compiles only the first step's share beside it (a cold start) and ends with it."""
+    stream = sys.stderr if stream is None else stream
     global _helper
     ks = kernels()
     if not ks:
@@ -474,7 +475,7 @@ def precompile(stream=sys.stderr, prog: str = "gyro_sim", integrator: str = DEFA
 _deferred: subprocess.Popen | None = None
 
 
-def start_deferred(integrator: str = DEFAULT_INTEGRATOR, stream=sys.stderr, prog: str = "gyro_sim") -> bool:
+def start_deferred(integrator: str = DEFAULT_INTEGRATOR, stream=None, prog: str = "gyro_sim") -> bool:
     """Where the cache is cold for the first step of a run with `integrator` and a background
     fill is allowed (`background_fill_allowed`), start the helper compiling that first step
     whole, then everything else a run may switch to, at the lowest CPU priority (it takes no
@@ -483,6 +484,7 @@ def start_deferred(integrator: str = DEFAULT_INTEGRATOR, stream=sys.stderr, prog
     then loads them off its physics thread and switches at a step boundary (the node:
     gyro_sim.ros.loop). False, with nothing started, where the cache is warm, numba is missing,
     the fill is not allowed, or no helper can start."""
+    stream = sys.stderr if stream is None else stream
     global _helper, _deferred
     if not kernels() or not background_fill_allowed() or not cache_is_cold(integrator):
         return False
@@ -667,11 +669,13 @@ def _end_with(parent: int) -> None:
 
 
 # --- gyro-sim warmup: the whole fill in the foreground -----------------------------------------
-def foreground_fill(integrator: str = DEFAULT_INTEGRATOR, out=sys.stderr) -> bool:
+def foreground_fill(integrator: str = DEFAULT_INTEGRATOR, out=None) -> bool:
     """Every kernel a run with `integrator` may call, compiled (or loaded) into the cache now,
     with a progress line per part, under the helpers' lock (a helper filling the cache is waited
     for: what it left, this compiles). False when there was nothing to do."""
     import fcntl
+
+    out = sys.stderr if out is None else out
 
     from gyro_sim.progress import Progress
 

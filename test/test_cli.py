@@ -60,3 +60,37 @@ def test_a_warning_is_one_line_naming_the_command(tmp_path):
     said = [line for line in r.stderr.splitlines() if "Warning" in line]
     assert said and all(line.startswith("gyro-sim run: StiffnessWarning: auto integrator:") for line in said)
     assert not any(line.startswith(" ") for line in r.stderr.splitlines()), r.stderr
+
+
+def _closed_pipe():
+    """The write end of a pipe whose reader has gone (`| head -1` once it has its line)."""
+    import os
+
+    r, w = os.pipe()
+    os.close(r)
+    return w
+
+
+@pytest.mark.slow
+def test_a_reader_that_leaves_early_neither_stops_the_command_nor_gets_a_traceback(tmp_path):
+    import os
+
+    model = ROOT / "test" / "scene" / "models" / "robosuite" / "jaco.xml"
+    out, log = tmp_path / "jaco.yaml", tmp_path / "run.mcap"
+    w = _closed_pipe()
+    try:  # stdout closed (`gyro-sim import m.xml | head -0`): the scene is written, exit 0
+        r = subprocess.run([sys.executable, "-m", "gyro_sim.cli", "import", str(model), "--out", str(out)],
+                           cwd=tmp_path, stdout=w, stderr=subprocess.PIPE, text=True)
+        # both closed (`gyro-sim run ... 2>&1 | head -1`): the run goes on to its end and its log
+        both = subprocess.run([sys.executable, "-m", "gyro_sim.cli", "run", "--scene", "heavy_top", "--duration",
+                               "0.2", "--record", str(log)], cwd=ROOT, stdout=w, stderr=w)
+    finally:
+        os.close(w)
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+    assert "bodies:" in out.read_text()
+    assert both.returncode == 0
+    from mcap.reader import make_reader  # an independent reader: the log is whole, to its end
+
+    with open(log, "rb") as f:
+        stats = make_reader(f).get_summary().statistics
+    assert stats.message_count > 0 and stats.message_end_time >= 0.2e9 - 1e6

@@ -849,8 +849,8 @@ def _joint(ch: _Checker, value: Any, path: str) -> Joint | None:
     at = None if at is None else _readonly(at)
     if kind == "spherical":
         if "axis" in joint:
-            ch.fail(_at(path, "axis"), "not allowed for a spherical joint (only a hinge has an "
-                                       "axis)")
+            ch.fail(_at(path, "axis"), "not allowed for a spherical joint (only a hinge or a slide "
+                                       "has an axis)")
         for key in HINGE_LIMIT_KEYS:
             if joint.get(key) is not None:
                 ch.fail(_at(path, key), "not allowed for a spherical joint (only a hinge or a slide "

@@ -899,7 +899,7 @@ class _Importer:
             if int(m.jnt_type[j]) != int(mj.mjtJoint.mjJNT_HINGE) and \
                     int(m.jnt_type[j]) != int(mj.mjtJoint.mjJNT_SLIDE):
                 self.fail(what, f"drives the {('free', 'ball')[int(m.jnt_type[j])]} "
-                                f"{self.joint(j)}; only hinges take a commanded moment (a "
+                                f"{self.joint(j)}; only hinges and slides take a commanded moment or force (a "
                                 "spherical joint transmits none)")
             if servos:
                 self.add_servo(a, what, j)

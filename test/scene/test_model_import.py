@@ -477,7 +477,8 @@ REFUSED = {
                           "(motors, position, velocity and affine general servos)"),
     "motor on a ball joint": (bad(inner=CHILD.format(name="hand", joint="wrist", type="ball", attrs=""),
                                   extra='<actuator><motor name="twist" joint="wrist" gear="0 0 1"/></actuator>'),
-                              "actuator 'twist': drives the ball joint 'wrist'; only hinges take a commanded moment"),
+                              "actuator 'twist': drives the ball joint 'wrist'; only hinges and slides take a "
+                              "commanded moment"),
     "a name no frame can have": (bad(inner=CHILD.format(name="hand", joint="wrist 1", type="hinge",
                                                         attrs='axis="1 0 0"')),
                                  "body 'hand' (hinge joint 'wrist 1'): name: must not contain whitespace"),
