@@ -2,6 +2,9 @@
 view's (gyro_sim.viz.rerun_view.screenshot) and looked at pixel by pixel."""
 from __future__ import annotations
 
+import signal
+import time
+
 import pytest
 
 from test.viz.test_view_screenshot import PLOTS, RERUN, VULKAN, Image, inspect
@@ -12,6 +15,7 @@ pytestmark = [
     pytest.mark.skipif(RERUN is None, reason="the rerun binary (rerun-sdk) is not installed"),
     pytest.mark.skipif(not VULKAN, reason="no Vulkan driver (apt-get install mesa-vulkan-drivers libvulkan1)"),
 ]
+#: wall seconds captured after the first message drawn
 CAPTURE_SECONDS = 12
 #: palette pixels of one legend entry's dot (measured: 44 at 1200x800), and the fewest of a
 #: drawn line (12 s of a 30 s window: about 100 pixels wide)
@@ -31,7 +35,12 @@ def test_screenshot_of_a_live_capture_shows_every_plot_and_the_chain(tmp_path, d
         wait_for(lambda: client.node.count_publishers("/joint_states") > 0 or not n.alive(), START_TIMEOUT, "the node")
         cmd = Commander(client)
         rrd = tmp_path / "live.rrd"
-        live = Live(tmp_path, env, "--save", rrd, "--seconds", CAPTURE_SECONDS)
+        live = Live(tmp_path, env, "--save", rrd)
+        # the capture's length counted from the first message drawn, not from the view's start
+        # (its discovery of the node takes longer on a busy machine, and the lines would be shorter)
+        live.says("receiving from the node", START_TIMEOUT)
+        time.sleep(CAPTURE_SECONDS)
+        live.proc.send_signal(signal.SIGINT)
         assert live.wait() == 0, live.stderr
         cmd.close()
     finally:
