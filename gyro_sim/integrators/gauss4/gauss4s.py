@@ -65,9 +65,6 @@ class Gauss4S(FixedStepIntegrator):
             raise ValueError("gauss4s integrates a chain (a system with a `model`), not a general ODE")
         if system.model.motor is not None:  # its canonical momenta know the armature, not the motor's coupling
             raise ValueError("gauss4s does not take geared motors on a turning parent (joint motor); use gauss4")
-        if not system.model.chain:  # its canonical momenta are sums along a chain
-            raise ValueError("gauss4s integrates chains, not trees (a body's parent other than the body "
-                             "before it); use gauss4")
         super().__init__(system, **options)
         if callable(getattr(system, "kernel_arguments", None)):  # compiled: FastChainODE
             from gyro_sim.dynamics.canonical_kernel import FastCanonicalChain
