@@ -19,6 +19,7 @@ from gyro_sim.dynamics.canonical import CanonicalChain
 from gyro_sim.dynamics.invariants import conserved
 from gyro_sim.dynamics.model import compile_model, initial_state
 from gyro_sim.dynamics.system import ChainODE, FastChainODE
+from gyro_sim.integrators import RK4, Gauss4
 from gyro_sim.simulator import Simulator
 
 from test.dynamics.test_kernel import hold_random
@@ -152,6 +153,22 @@ def test_tree_field_is_hamiltonian(case):
         D[:, j] = (can.rhs(t, z + dz)[:2 * nq] - can.rhs(t, z - dz)[:2 * nq]) / (2 * dz[j])
     hess = np.vstack([-D[nq:], D[:nq]])
     assert np.abs(hess - hess.T).max() <= 1e-6 * np.abs(hess).max()
+
+
+@pytest.mark.slow
+def test_step_map_on_a_tree_is_symplectic():
+    """One gauss4s step on the hub with two pendulums is a symplectic map of the canonical
+    variables; one rk4 step of the same field is not (the check can fail)."""
+    from test.integrators.test_gauss4s import _step_map_defect
+
+    model = _model("hub_with_two_pendulums")
+    can = CanonicalChain(ChainODE(model))
+    z = can.momenta(0.0, initial_state(model))
+    h = 0.05
+    gauss = _step_map_defect(Gauss4(can, step=h), can, 0.0, z, h)
+    rk4 = _step_map_defect(RK4(can, step=h), can, 0.0, z, h)
+    assert gauss <= 1e-7, gauss
+    assert rk4 >= 1e3 * gauss and rk4 >= 1e-6, (rk4, gauss)
 
 
 @needs_numba
