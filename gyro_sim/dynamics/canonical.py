@@ -1,4 +1,4 @@
-"""The chain's equations in canonical (Hamiltonian) form, for a symplectic integrator.
+"""The chain's (or tree's) equations in canonical (Hamiltonian) form, for a symplectic integrator.
 
 Why: a Gauss-Legendre method is symplectic, and keeps every quadratic invariant exactly, only
 for a Hamiltonian system in canonical coordinates (Hairer, Lubich, Wanner, "Geometric
@@ -54,6 +54,13 @@ p_rel(l)' = (w^{l-1} x e_l) . P_l + e_l . F_l + tau_l. The rates follow from the
 the mass matrix: M u = p_rel - b(q, t), b the momentum at zero joint rates (gyrostatic moments,
 a moving base).
 
+On a tree (docs/theory.md section 11) "l >= k" is "l in k's subtree" (`reference.subtree_sum`),
+w^{l-1} the parent's angular velocity, and k' each of the next spherical bodies below k: the
+first spherical body on each branch going down from k, past hinges and slides. Then
+pi^k = p_rel(k) - sum_k' p_rel(k'), p_phi_l = p_rel(l) - e_l . sum_k' p_rel(k'), and p_rel(k)
+is the sum of pi over the spherical bodies of k's subtree (`_tree_maps`). A chain has one k'
+at most, and its code path is the chain's own.
+
 This module is the numpy form (a dense solve of M: for checks and small chains).
 """
 from __future__ import annotations
@@ -77,7 +84,7 @@ def _next_spherical(model: Model) -> np.ndarray:
 
 
 class CanonicalChain:
-    """The chain as a Hamiltonian ODE system z' = f(t, z) (same interface as ChainODE).
+    """The chain (or tree) as a Hamiltonian ODE system z' = f(t, z) (same interface as ChainODE).
 
     Wraps a numpy :class:`gyro_sim.dynamics.system.ChainODE` (its model, held inputs and spins).
     `momenta(t, y)` and `state(t, z)` convert between the package's state y and z.
@@ -339,7 +346,8 @@ class CanonicalChain:
 
     def angular_momentum(self, z: np.ndarray) -> np.ndarray:
         """sum_k pi^k (+ r0 x p_r for a free base): the world angular momentum about the base
-        point (about the origin for a free base), bilinear in z, when body 1 is spherical."""
+        point (about the origin for a free base), bilinear in z, when every body on the base is
+        spherical."""
         Pi = 0.5 * quat_mul(z[self.i_pq], quat_conj(z[self.i_quat]))
         L = Pi[:, 1:].sum(axis=0)
         if self.free:

@@ -20,8 +20,14 @@ and of its momentum; `cflags` (i_pr, i_kappa of z, the model's size); `cwork`, t
     field                -> subtree momenta (H_k about O^k, P_k), external wrench (gravity),
                             p_rel' = S' . h + S . F + tau, then the canonical rates
 
+On a tree (ChainModel's `parent`, flags[FLAG_TREE]) the backward sweeps keep each body's sums
+in `cwork` (TREE_BLOCKS) and add a child's into its parent's as they leave it, a moment moved
+by s_w[k] = O^k - O^{parent(k)} (`_to_parent`), where a chain's carry them in scalars from
+O^{k+1} to O^k; the chain's arithmetic is unchanged.
+
 The derivation and the formulas are in canonical.py's docstring; this is the same arithmetic
-in scalar loops (test/integrators/test_gauss4s.py checks the two against each other).
+in scalar loops (test/integrators/test_gauss4s.py and test_gauss4s_trees.py check the two
+against each other).
 """
 from __future__ import annotations
 

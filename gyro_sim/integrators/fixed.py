@@ -3,7 +3,8 @@ Gauss method on the scene's canonical equations, a chain's or a tree's: A-stable
 symplectic, momenta kept to round-off) where the scene is stiff ; and the integrator "fixed" that
 makes this choice at the start and again as the motion changes (:class:`SceneFixedStep`, the
 node's default). On a system that is not a scene's (and on stateful actuators, geared motors)
-the implicit rung is gauss4, the same method on the system's own state. Below, "gauss4" stands for either where the two behave alike.
+the implicit rung is gauss4, the same method on the system's own state. Below, "gauss4" stands
+for either where the two behave alike.
 
 RK4 is stable for h lambda inside its stability region, which reaches RK4_IMAG_LIMIT = 2 sqrt 2
 along the imaginary axis (gyroscopic nutation: eigenvalues +-i w) and 2.785 along the negative
