@@ -61,6 +61,13 @@ pi^k = p_rel(k) - sum_k' p_rel(k'), p_phi_l = p_rel(l) - e_l . sum_k' p_rel(k'),
 is the sum of pi over the spherical bodies of k's subtree (`_tree_maps`). A chain has one k'
 at most, and its code path is the chain's own.
 
+A hinge's geared motor on a turning parent (docs/theory.md section 10, eq 51b): its rotor's spin
+J G phi_k' a relative to the parent is the parent's gyrostatic moment (in the subtree momenta
+from the rates, `_subtree`), and hinge k's momentum gains m . w^{parent} + J G^2 phi_k'
+(m = J G a: the derivative of T_motor). The momentum rates keep their form: the rotor's
+J G (a . w^{parent}' + G phi_k'') is both in the rate of hinge k's momentum and in its joint
+moment (51b), and cancels. M (`reference.mass_matrix`) holds the motors' coupling.
+
 This module is the numpy form (a dense solve of M: for checks and small chains).
 """
 from __future__ import annotations
@@ -166,6 +173,8 @@ class CanonicalChain:
         mom_lin = m.mass[:, None] * d.v_o + cross(d.w, d.h)
         if self._lam_w is not None:
             mom_ang = mom_ang + self._lam_w
+        if m.motor is not None:  # a geared motor's rotor spin J G phi' a, on its parent (eq 31)
+            mom_ang = mom_ang + dyn.motor_forces(m, d, u[m.col_hinge])
         Hs, Ps = dyn.subtree_sum(m, mom_ang), dyn.subtree_sum(m, mom_lin)  # a chain's rcumsum
         return Hs - cross(d.O, Ps), Ps
 
@@ -190,7 +199,8 @@ class CanonicalChain:
         y[m.i_quat] = q
         y[m.i_phi] = z[self.i_phi]
         dyn.positions(m, self.data, t, y)
-        self._lam_w = dyn.lam(m, self.data, self.ode.spins(t), None)[0]
+        # the rotors' (a geared motor's part is the rates', added in `_subtree`)
+        self._lam_w = dyn._rotor_lam(m, self.data, self.ode.spins(t), None)[0]
 
     def momenta(self, t: float, y: np.ndarray) -> np.ndarray:
         """z (size,) of the package's state y at time t."""
@@ -206,6 +216,11 @@ class CanonicalChain:
         p_rel = self._relative(Hk, Pk)
         if m.armature is not None:  # a hinge's momentum gains its armature's a phi'
             p_rel[m.col_hinge] += m.armature * y[m.i_vel][m.col_hinge]
+        if m.motor is not None:  # and its geared motor's, m . w^{parent} + J G^2 phi' (eq 51b)
+            rates = y[m.i_vel][m.col_hinge]
+            w_parent = self.data.w_parent[m.hinge_bodies]
+            p_rel[m.col_hinge] += (np.einsum("ni,ni->n", self.data.motor_w, w_parent)
+                                   + m.motor[:, 0] * m.motor[:, 1] ** 2 * rates)
         pi, p_phi, p_r = self._to_absolute(p_rel)
         if m.free:
             z[self.i_pr] = p_r

@@ -23,7 +23,9 @@ and of its momentum; `cflags` (i_pr, i_kappa of z, the model's size); `cwork`, t
 On a tree (ChainModel's `parent`, flags[FLAG_TREE]) the backward sweeps keep each body's sums
 in `cwork` (TREE_BLOCKS) and add a child's into its parent's as they leave it, a moment moved
 by s_w[k] = O^k - O^{parent(k)} (`_to_parent`), where a chain's carry them in scalars from
-O^{k+1} to O^k; the chain's arithmetic is unchanged.
+O^{k+1} to O^k; the chain's arithmetic is unchanged. Geared motors (flags[FLAG_MOTORS]): the
+elimination takes their columns (`fast.motor_axes`), and each motor's J G phi' a joins its
+parent's subtree momentum.
 
 The derivation and the formulas are in canonical.py's docstring; this is the same arithmetic
 in scalar loops (test/integrators/test_gauss4s.py and test_gauss4s_trees.py check the two
@@ -205,9 +207,13 @@ def _rates(t, z, model, data, inputs, zrow, cflags, cwork):
     for a in range(6):
         a_base[a] = 0.0
     fast.joint_columns_stage(is_hinge, is_slide, own_col, base_type, e_w, S)
+    motor_w = block2(work, 0, 0, 4)
+    if flags[fast.FLAG_MOTORS] != 0:  # geared motors (eq 51b): m = J G a (world), J G^2, for M
+        motor_w = block2(work, fast.motor_offset(work, flags, n), n, 4)
+        fast.motor_axes(model, R, motor_w)
     fast.articulated_solve(is_hinge, col_start,
                            fast.Elimination(S, I6, pb, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x, armature,
-                                            block2(work, 0, 0, 4)),  # no motors: gauss4s refuses them
+                                            motor_w),
                            prel, rate, flags[fast.FLAG_HEAVY], parent)
     for j in range(N):
         y[i_vel + j] = rate[j]
@@ -249,6 +255,8 @@ def _canonical_rhs(t, z, zdot, model, data, inputs, zrow, cflags, cwork):
     tree = parent.shape[0] != 0
     sums = block3(cwork, o + 3 * n, TREE_BLOCKS if tree else 0, n, 3)
     _clear(sums, 1, TREE_BLOCKS)
+    motors = flags[fast.FLAG_MOTORS] != 0
+    motor_w = block2(work, fast.motor_offset(work, flags, n) if motors else 0, n if motors else 0, 4)  # _rates'
     for k in range(n - 1, -1, -1):
         if tree:
             H0, H1, H2 = sums[1, k, 0], sums[1, k, 1], sums[1, k, 2]
@@ -308,6 +316,10 @@ def _canonical_rhs(t, z, zdot, model, data, inputs, zrow, cflags, cwork):
                 dprel[jc] += -spring[k, 0] * (z[zrow[k, 0]] - spring[k, 1])
         else:
             dprel[jc], dprel[jc + 1], dprel[jc + 2] = G0, G1, G2
+        if motors and motor_w[k, 3] != 0.0:  # its rotor's spin J G phi' a: the parent's moment (eq 31)
+            H0 += motor_w[k, 0] * rate[jc]
+            H1 += motor_w[k, 1] * rate[jc]
+            H2 += motor_w[k, 2] * rate[jc]
         if tree and kp >= 0:
             _to_parent(sums, 1, k, kp, s_w, H0, H1, H2, P0, P1, P2)
             _to_parent(sums, 3, k, kp, s_w, M0, M1, M2, F0, F1, F2)

@@ -2,8 +2,8 @@
 Gauss method on the scene's canonical equations, a chain's or a tree's: A-stable and
 symplectic, momenta kept to round-off) where the scene is stiff ; and the integrator "fixed" that
 makes this choice at the start and again as the motion changes (:class:`SceneFixedStep`, the
-node's default). On a system that is not a scene's (and on stateful actuators, geared motors)
-the implicit rung is gauss4, the same method on the system's own state. Below, "gauss4" stands
+node's default). On a system that is not a scene's (and on stateful actuators) the implicit
+rung is gauss4, the same method on the system's own state. Below, "gauss4" stands
 for either where the two behave alike.
 
 RK4 is stable for h lambda inside its stability region, which reaches RK4_IMAG_LIMIT = 2 sqrt 2
@@ -124,8 +124,8 @@ def implicit_for(model) -> str:
     """The implicit rung of "fixed" for a scene's model, a chain or a tree (None: a system that
     is not a scene's). A model whose actuators are states (friction, max_speed:
     `Model.stateful`) gets gauss4 on its own state: the canonical equations of gauss4s have no
-    place for them, nor for servos (which make a model stateful) and geared motors."""
-    canonical = model is not None and not model.stateful and model.motor is None
+    place for them, nor for servos (which make a model stateful)."""
+    canonical = model is not None and not model.stateful
     return IMPLICIT if canonical and model.n <= IMPLICIT_MAX_BODIES else IMPLICIT_PLAIN
 #: "fixed": the last resort of a call that rk4 and the implicit method both fail (adaptive,
 #: error-controlled)
@@ -370,7 +370,7 @@ class SceneFixedStep(FixedStepIntegrator):
     ----------
     current : the method stepping now ("rk4", `implicit` or the rescue's "dop853").
     implicit : "gauss4s" on a chain or tree of at most IMPLICIT_MAX_BODIES bodies, "gauss4" on a
-        larger one, on one with stateful actuators or geared motors, or on another system.
+        larger one, on one with stateful actuators, or on another system.
     substeps : substeps of one step now (1: none): the fastest body turns at most
         SPIN_RESOLVE rad in one.
     reason : one line: why (the substeps, h |lambda| of a substep against rk4's limit).

@@ -1,4 +1,5 @@
-"""gauss4s on trees of gyrostats (docs/theory.md section 11): the canonical form's subtree sums.
+"""gauss4s on trees of gyrostats (docs/theory.md section 11): the canonical form's subtree sums;
+and on geared motors on a turning parent (section 10, eq 51b), on chains and trees.
 
 Checked against what does not share the canonical code: the kernel's y' (the articulated-body
 recursion on the package's state) pushed through the canonical transformation by a complex step
@@ -22,6 +23,8 @@ from gyro_sim.dynamics.system import ChainODE, FastChainODE
 from gyro_sim.integrators import RK4, Gauss4
 from gyro_sim.simulator import Simulator
 
+from test.dynamics.test_geared_motor import free_chain as motor_chain
+from test.dynamics.test_geared_motor import turntable
 from test.dynamics.test_kernel import hold_random
 from test.dynamics.test_tree_kernel import random_tree
 
@@ -93,25 +96,47 @@ def spacecraft(spin: float = 0.0) -> dict:
     return scene
 
 
+def free_tree_with_motors() -> dict:
+    """free_tree_with_rotors with geared motors on its hinged arm (a bevel axis) and on a hinge
+    added below the spherical tip."""
+    scene = free_tree_with_rotors()
+    scene["bodies"][1]["joint"]["motor"] = {"inertia": 2e-4, "gear": 40.0, "axis": [1.0, 0.0, 0.5]}
+    hand = _hinge("hand", "tip", (0.0, 0.0, -0.3), (1.0, 0.0, 0.0), rate=-3.0, mass=0.3)
+    hand["joint"]["motor"] = {"inertia": 1e-4, "gear": -25.0}
+    scene["bodies"].append(hand)
+    return scene
+
+
 NAMED = {"spacecraft_panels": lambda: spacecraft(300.0), "hub_with_two_pendulums": hub_with_two_pendulums,
-         "free_tree_with_rotors": free_tree_with_rotors, "tree_with_slide": tree_with_slide}
+         "free_tree_with_rotors": free_tree_with_rotors, "tree_with_slide": tree_with_slide,
+         "free_tree_with_motors": free_tree_with_motors}
+#: geared motors on chains (test/dynamics/test_geared_motor.py's scenes)
+MOTOR_CHAINS = {"turntable": lambda: turntable(), "free_motor_chain": lambda: motor_chain("free"),
+                "fixed_motor_chain": lambda: motor_chain("fixed")}
 #: random trees (seed, base, options of random_tree): slides, speed and torque rotors; massless
 #: hinge frames carrying a hinge
 RANDOM = [(seed, base, {}) for seed in range(4) for base in ("fixed", "free", "moving")] + [
-    (31, "fixed", {"massless": True}), (33, "free", {"massless": True})]
+    (31, "fixed", {"massless": True}), (33, "free", {"massless": True})] + [
+    (41, "fixed", {"motors": True}), (42, "moving", {"motors": True}), (22, "free", {"motors": True}),
+    (32, "free", {"massless": True, "motors": True})]
 
 
 def _scene(case) -> dict:
-    return NAMED[case]() if isinstance(case, str) else random_tree(case[0], case[1], **case[2])
+    if isinstance(case, str):
+        return {**NAMED, **MOTOR_CHAINS}[case]()
+    return random_tree(case[0], case[1], **case[2])
 
 
 def _model(case):
     model = compile_model(load_scene(_scene(case)))
-    assert not model.chain
+    chain = isinstance(case, str) and case in MOTOR_CHAINS
+    assert model.chain == chain
+    if chain or "motor" in str(case):
+        assert model.motor is not None  # on a turning parent
     return model
 
 
-CASES = list(NAMED) + RANDOM
+CASES = list(NAMED) + list(MOTOR_CHAINS) + RANDOM
 
 
 @needs_numba
@@ -136,7 +161,8 @@ def test_canonical_rates_are_the_kernels_rates(case):
     assert np.abs(zd - along).max() <= 1e-12 * np.abs(zd).max()
 
 
-@pytest.mark.parametrize("case", ["hub_with_two_pendulums", "free_tree_with_rotors", "tree_with_slide"])
+@pytest.mark.parametrize("case", ["hub_with_two_pendulums", "free_tree_with_rotors", "tree_with_slide",
+                                  "free_tree_with_motors", "turntable"])
 def test_tree_field_is_hamiltonian(case):
     """f = J grad H on a tree: J^T f' is symmetric, also off |q| = 1 and q . p = 0 (the subtree
     sums must make the momenta conjugate to the coordinates, or the Gauss method is not
@@ -198,7 +224,7 @@ def test_compiled_tree_field_matches_numpy(case):
 
 @needs_numba
 @pytest.mark.slow
-@pytest.mark.parametrize("case", list(NAMED))
+@pytest.mark.parametrize("case", list(NAMED) + list(MOTOR_CHAINS))
 def test_gauss4s_follows_dop853_on_trees(case):
     """1 s at 1 ms steps: gauss4s (compiled) on the canonical equations against dop853 at
     rtol 1e-12 on the package's state (no code of the canonical form): the coordinates and
@@ -225,16 +251,17 @@ def _momenta(sim, can):
 
 @needs_numba
 @pytest.mark.slow
-def test_free_tree_keeps_energy_bounded_and_momenta_to_round_off():
-    """2e4 steps of 1 ms on the free-floating tree with spinning rotors: with gauss4s the
-    linear and angular momentum stay at their initial values to round-off and the error of the
-    Jacobi integral (the energy less the speed rotor's part: what such a rotor conserves) does
-    not grow (its largest over the second 10 s is within twice that over the first);
-    gauss4 on the package's state keeps the momenta only to its truncation (the check can
-    fail)."""
+@pytest.mark.parametrize("case", ["free_tree_with_rotors", "free_tree_with_motors"])
+def test_free_tree_keeps_energy_bounded_and_momenta_to_round_off(case):
+    """2e4 steps of 1 ms on a free-floating tree with spinning rotors (and geared motors): with
+    gauss4s the linear and angular momentum stay at their initial values to round-off, and the
+    error of the Jacobi integral (the energy less the speed rotor's part: what such a rotor
+    conserves) does not grow beyond round-off (its largest over the second 10 s is within twice
+    that over the first, plus 1e-12: measured 1e-13 to 6e-13, wandering); gauss4 on the
+    package's state keeps the momenta only to its truncation (the check can fail)."""
     drift, energy = {}, {}
     for name in ("gauss4s", "gauss4"):
-        sim = Simulator(free_tree_with_rotors(), integrator=name, step=1e-3)
+        sim = Simulator(NAMED[case](), integrator=name, step=1e-3)
         can = CanonicalChain(ChainODE(sim.model))
         L0, P0 = _momenta(sim, can)
         assert "jacobi" in conserved(sim.model)
@@ -250,8 +277,8 @@ def test_free_tree_keeps_energy_bounded_and_momenta_to_round_off():
         drift[name], energy[name] = worst, halves
     assert drift["gauss4s"] <= 5e-14, drift
     assert drift["gauss4"] >= 30 * drift["gauss4s"], drift
-    assert energy["gauss4s"][1] <= 2.0 * energy["gauss4s"][0] + 1e-14, energy
-    assert max(energy["gauss4s"]) <= 1e-9, energy
+    assert energy["gauss4s"][1] <= 2.0 * energy["gauss4s"][0] + 1e-12, energy
+    assert max(energy["gauss4s"]) <= 5e-12, energy
 
 
 @needs_numba

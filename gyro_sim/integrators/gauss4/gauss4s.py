@@ -47,8 +47,7 @@ class Gauss4S(FixedStepIntegrator):
 
     Attributes: `canonical` (the Hamiltonian system), `inner` (the gauss4 stepping it; its
     `counts` are this method's); the base's counters mirror the inner ones. The system must be
-    a scene's, a chain or a tree (ChainODE or FastChainODE: it has a `model`), without geared
-    motors on turning parents.
+    a scene's, a chain or a tree (ChainODE or FastChainODE: it has a `model`).
 
     References
     ----------
@@ -64,8 +63,6 @@ class Gauss4S(FixedStepIntegrator):
                  level_max: int = LEVEL_MAX, **options):
         if getattr(system, "model", None) is None:
             raise ValueError("gauss4s integrates a chain or tree (a system with a `model`), not a general ODE")
-        if system.model.motor is not None:  # its canonical momenta know the armature, not the motor's coupling
-            raise ValueError("gauss4s does not take geared motors on a turning parent (joint motor); use gauss4")
         super().__init__(system, **options)
         if callable(getattr(system, "kernel_arguments", None)):  # compiled: FastChainODE
             from gyro_sim.dynamics.canonical_kernel import FastCanonicalChain
