@@ -200,7 +200,7 @@ class CanonicalChain:
         y[m.i_phi] = z[self.i_phi]
         dyn.positions(m, self.data, t, y)
         # the rotors' (a geared motor's part is the rates', added in `_subtree`)
-        self._lam_w = dyn._rotor_lam(m, self.data, self.ode.spins(t), None)[0]
+        self._lam_w = dyn.rotor_lam(m, self.data, self.ode.spins(t), None)[0]
 
     def momenta(self, t: float, y: np.ndarray) -> np.ndarray:
         """z (size,) of the package's state y at time t."""
