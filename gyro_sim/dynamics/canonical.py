@@ -1,4 +1,4 @@
-"""The chain's equations in canonical (Hamiltonian) form, for a symplectic integrator.
+"""The chain's (or tree's) equations in canonical (Hamiltonian) form, for a symplectic integrator.
 
 Why: a Gauss-Legendre method is symplectic, and keeps every quadratic invariant exactly, only
 for a Hamiltonian system in canonical coordinates (Hairer, Lubich, Wanner, "Geometric
@@ -54,6 +54,20 @@ p_rel(l)' = (w^{l-1} x e_l) . P_l + e_l . F_l + tau_l. The rates follow from the
 the mass matrix: M u = p_rel - b(q, t), b the momentum at zero joint rates (gyrostatic moments,
 a moving base).
 
+On a tree (docs/theory.md section 11) "l >= k" is "l in k's subtree" (`reference.subtree_sum`),
+w^{l-1} the parent's angular velocity, and k' each of the next spherical bodies below k: the
+first spherical body on each branch going down from k, past hinges and slides. Then
+pi^k = p_rel(k) - sum_k' p_rel(k'), p_phi_l = p_rel(l) - e_l . sum_k' p_rel(k'), and p_rel(k)
+is the sum of pi over the spherical bodies of k's subtree (`_tree_maps`). A chain has one k'
+at most, and its code path is the chain's own.
+
+A hinge's geared motor on a turning parent (docs/theory.md section 10, eq 51b): its rotor's spin
+J G phi_k' a relative to the parent is the parent's gyrostatic moment (in the subtree momenta
+from the rates, `_subtree`), and hinge k's momentum gains m . w^{parent} + J G^2 phi_k'
+(m = J G a: the derivative of T_motor). The momentum rates keep their form: the rotor's
+J G (a . w^{parent}' + G phi_k'') is both in the rate of hinge k's momentum and in its joint
+moment (51b), and cancels. M (`reference.mass_matrix`) holds the motors' coupling.
+
 This module is the numpy form (a dense solve of M: for checks and small chains).
 """
 from __future__ import annotations
@@ -77,7 +91,7 @@ def _next_spherical(model: Model) -> np.ndarray:
 
 
 class CanonicalChain:
-    """The chain as a Hamiltonian ODE system z' = f(t, z) (same interface as ChainODE).
+    """The chain (or tree) as a Hamiltonian ODE system z' = f(t, z) (same interface as ChainODE).
 
     Wraps a numpy :class:`gyro_sim.dynamics.system.ChainODE` (its model, held inputs and spins).
     `momenta(t, y)` and `state(t, z)` convert between the package's state y and z.
@@ -118,9 +132,36 @@ class CanonicalChain:
         # (a slide's momentum e . P_k needs no correction: it changes no angular velocity)
         self._hinge_next = np.array([sph_pos[nxt[k]] if nxt[k] >= 0 and not m.is_slide[k] else -1
                                      for k in m.hinge_bodies], dtype=int)
+        if not m.chain:
+            self._tree_maps()
         self._slide_cols = m.col_hinge[m.hinge_slide]
         self._slides = m.hinge_slide
         self._y = np.empty(m.size)  # the coordinates of z in the package's layout (positions)
+
+    def _tree_maps(self) -> None:
+        """A tree's (docs/theory.md section 11) `_sph_next`, `_hinge_next`: a spherical body k
+        can have several next spherical bodies k' (the first ones on each branch below it), and
+        so can a hinge. (ns, ns) `_sph_below`[k, k'] and (nh, ns) `_hinge_below`[l, k'] are 1
+        where k' is one (the path up from k' meets k, or the hinge l, before any other spherical
+        body; slides are passed, as on the chain). Then pi^k = p_rel(k) - sum_k' p_rel(k'),
+        p_phi_l = p_rel(l) - e_l . sum_k' p_rel(k'), and p_rel(k) is the sum of pi over the
+        spherical bodies of k's subtree."""
+        m = self.model
+        ns, nh = len(m.sph_bodies), len(m.hinge_bodies)
+        sph_pos = np.full(m.n, -1, dtype=int)
+        sph_pos[m.sph_bodies] = np.arange(ns)
+        hinge_pos = np.full(m.n, -1, dtype=int)
+        hinge_pos[m.hinge_bodies] = np.arange(nh)
+        self._sph_below = np.zeros((ns, ns))
+        self._hinge_below = np.zeros((nh, ns))
+        for b, k in enumerate(m.sph_bodies):
+            q = m.parent[k]
+            while q >= 0 and m.is_hinge[q]:
+                if not m.is_slide[q]:
+                    self._hinge_below[hinge_pos[q], b] = 1.0
+                q = m.parent[q]
+            if q >= 0:
+                self._sph_below[sph_pos[q], b] = 1.0
 
     # --- the package's state <-> canonical ------------------------------------------------------
     def _subtree(self, t: float, u: np.ndarray):
@@ -132,13 +173,15 @@ class CanonicalChain:
         mom_lin = m.mass[:, None] * d.v_o + cross(d.w, d.h)
         if self._lam_w is not None:
             mom_ang = mom_ang + self._lam_w
-        Hs, Ps = dyn.rcumsum(mom_ang), dyn.rcumsum(mom_lin)
+        if m.motor is not None:  # a geared motor's rotor spin J G phi' a, on its parent (eq 31)
+            mom_ang = mom_ang + dyn.motor_forces(m, d, u[m.col_hinge])
+        Hs, Ps = dyn.subtree_sum(m, mom_ang), dyn.subtree_sum(m, mom_lin)  # a chain's rcumsum
         return Hs - cross(d.O, Ps), Ps
 
     def _relative(self, Hk: np.ndarray, Pk: np.ndarray) -> np.ndarray:
         """The package's joint momenta p_rel (N,) from the subtree momenta."""
         m, d = self.model, self.data
-        p = np.empty(m.N)
+        p = np.empty(m.N, dtype=Hk.dtype)
         if m.free:
             p[m.col_base] = Pk[0]
         p[m.col_sph] = Hk[m.sph_bodies]
@@ -149,17 +192,20 @@ class CanonicalChain:
 
     def _positions(self, t: float, q: np.ndarray, z: np.ndarray) -> None:
         m, y = self.model, self._y
+        if y.dtype != np.result_type(q, z, t):  # a complex step (the tests' derivatives)
+            y = self._y = np.empty(m.size, dtype=np.result_type(q, z, t))
         if m.free:
             y[m.i_r0] = z[self.i_r0]
         y[m.i_quat] = q
         y[m.i_phi] = z[self.i_phi]
         dyn.positions(m, self.data, t, y)
-        self._lam_w = dyn.lam(m, self.data, self.ode.spins(t), None)[0]
+        # the rotors' (a geared motor's part is the rates', added in `_subtree`)
+        self._lam_w = dyn.rotor_lam(m, self.data, self.ode.spins(t), None)[0]
 
     def momenta(self, t: float, y: np.ndarray) -> np.ndarray:
         """z (size,) of the package's state y at time t."""
         m = self.model
-        z = np.empty(self.size)
+        z = np.empty(self.size, dtype=np.result_type(y, t))  # complex for a complex step
         q = y[m.i_quat]
         if m.free:
             z[self.i_r0] = y[m.i_r0]
@@ -170,6 +216,11 @@ class CanonicalChain:
         p_rel = self._relative(Hk, Pk)
         if m.armature is not None:  # a hinge's momentum gains its armature's a phi'
             p_rel[m.col_hinge] += m.armature * y[m.i_vel][m.col_hinge]
+        if m.motor is not None:  # and its geared motor's, m . w^{parent} + J G^2 phi' (eq 51b)
+            rates = y[m.i_vel][m.col_hinge]
+            w_parent = self.data.w_parent[m.hinge_bodies]
+            p_rel[m.col_hinge] += (np.einsum("ni,ni->n", self.data.motor_w, w_parent)
+                                   + m.motor[:, 0] * m.motor[:, 1] ** 2 * rates)
         pi, p_phi, p_r = self._to_absolute(p_rel)
         if m.free:
             z[self.i_pr] = p_r
@@ -182,6 +233,9 @@ class CanonicalChain:
         """(pi (ns, 3), p_phi (nh,), p_r (3,)) from the joint momenta p_rel (N,)."""
         m, d = self.model, self.data
         Ps = p_rel[m.col_sph]  # (ns, 3)
+        if not m.chain:  # a tree: the sums over each body's next spherical bodies
+            p_phi = p_rel[m.col_hinge] - np.einsum("ni,ni->n", d.e_w, self._hinge_below @ Ps)
+            return Ps - self._sph_below @ Ps, p_phi, p_rel[m.col_base]
         pi = Ps.copy()
         has = self._sph_next >= 0
         pi[has] -= Ps[self._sph_next[has]]
@@ -195,12 +249,19 @@ class CanonicalChain:
         """p_rel (N,) from the canonical quasi-momenta (the inverse of `_to_absolute`)."""
         m, d = self.model, self.data
         p = np.empty(m.N)
-        Ps = np.cumsum(pi[::-1], axis=0)[::-1]  # p_rel(k) = sum of pi over spherical bodies >= k
-        p[m.col_sph] = Ps
-        ph = p_phi.copy()
-        hh = self._hinge_next >= 0
-        if hh.any():
-            ph[hh] += np.einsum("ni,ni->n", d.e_w[hh], Ps[self._hinge_next[hh]])
+        if m.chain:
+            Ps = np.cumsum(pi[::-1], axis=0)[::-1]  # p_rel(k) = sum of pi over spherical bodies >= k
+            p[m.col_sph] = Ps
+            ph = p_phi.copy()
+            hh = self._hinge_next >= 0
+            if hh.any():
+                ph[hh] += np.einsum("ni,ni->n", d.e_w[hh], Ps[self._hinge_next[hh]])
+        else:  # a tree: the sums of pi over the spherical bodies of each subtree
+            full = np.zeros((m.n, 3))
+            full[m.sph_bodies] = pi
+            sums = dyn.subtree_sum(m, full)
+            p[m.col_sph] = sums[m.sph_bodies]
+            ph = p_phi + np.einsum("ni,ni->n", d.e_w, sums[m.hinge_bodies]) * ~m.hinge_slide
         p[m.col_hinge] = ph
         if m.free:
             p[m.col_base] = p_r
@@ -244,8 +305,8 @@ class CanonicalChain:
         Hk, Pk = self._subtree(t, u)
         # external wrench on each subtree: gravity, (h x g, m g) about the origin
         if m.gravity is not None:
-            Fl = dyn.rcumsum(m.mass[:, None] * m.gravity)
-            Fa = dyn.rcumsum(cross(d.h, m.gravity[None, :]))
+            Fl = dyn.subtree_sum(m, m.mass[:, None] * m.gravity)  # a chain's rcumsum
+            Fa = dyn.subtree_sum(m, cross(d.h, m.gravity[None, :]))
             Mk = Fa - cross(d.O, Fl)  # about O^k
         else:
             Fl = np.zeros((m.n, 3))
@@ -271,9 +332,13 @@ class CanonicalChain:
         # canonical momenta's rates: the rates of `_to_absolute`'s map, whose hinge rows carry
         # e_l . p_rel(k'), so also - e_l' . p_rel(k')
         dpi, dpphi, _ = self._to_absolute(dp)
-        hh = self._hinge_next >= 0
-        if hh.any():
-            dpphi[hh] -= np.einsum("ni,ni->n", de[hh], p_rel[m.col_sph][self._hinge_next[hh]])
+        if not m.chain:
+            if len(hb):
+                dpphi -= np.einsum("ni,ni->n", de, self._hinge_below @ p_rel[m.col_sph])
+        else:
+            hh = self._hinge_next >= 0
+            if hh.any():
+                dpphi[hh] -= np.einsum("ni,ni->n", de[hh], p_rel[m.col_sph][self._hinge_next[hh]])
         zdot = np.empty(self.size)
         if m.free:
             zdot[self.i_r0] = u[m.col_base]
@@ -296,7 +361,8 @@ class CanonicalChain:
 
     def angular_momentum(self, z: np.ndarray) -> np.ndarray:
         """sum_k pi^k (+ r0 x p_r for a free base): the world angular momentum about the base
-        point (about the origin for a free base), bilinear in z, when body 1 is spherical."""
+        point (about the origin for a free base), bilinear in z, when every body on the base is
+        spherical."""
         Pi = 0.5 * quat_mul(z[self.i_pq], quat_conj(z[self.i_quat]))
         L = Pi[:, 1:].sum(axis=0)
         if self.free:
@@ -306,6 +372,6 @@ class CanonicalChain:
 
 def _pure(v: np.ndarray) -> np.ndarray:
     """(0, v) quaternions of vectors v (n, 3)."""
-    out = np.zeros(v.shape[:-1] + (4,))
+    out = np.zeros(v.shape[:-1] + (4,), dtype=v.dtype)
     out[..., 1:] = v
     return out

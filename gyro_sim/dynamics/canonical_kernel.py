@@ -20,8 +20,16 @@ and of its momentum; `cflags` (i_pr, i_kappa of z, the model's size); `cwork`, t
     field                -> subtree momenta (H_k about O^k, P_k), external wrench (gravity),
                             p_rel' = S' . h + S . F + tau, then the canonical rates
 
+On a tree (ChainModel's `parent`, flags[FLAG_TREE]) the backward sweeps keep each body's sums
+in `cwork` (TREE_BLOCKS) and add a child's into its parent's as they leave it, a moment moved
+by s_w[k] = O^k - O^{parent(k)} (`_to_parent`), where a chain's carry them in scalars from
+O^{k+1} to O^k; the chain's arithmetic is unchanged. Geared motors (flags[FLAG_MOTORS]): the
+elimination takes their columns (`fast.motor_axes`), and each motor's J G phi' a joins its
+parent's subtree momentum.
+
 The derivation and the formulas are in canonical.py's docstring; this is the same arithmetic
-in scalar loops (test/integrators/test_gauss4s.py checks the two against each other).
+in scalar loops (test/integrators/test_gauss4s.py and test_gauss4s_trees.py check the two
+against each other).
 """
 from __future__ import annotations
 
@@ -33,7 +41,7 @@ import numpy as np
 from gyro_sim import jit
 from gyro_sim.dynamics import kernel as fast
 from gyro_sim.dynamics.canonical import CanonicalChain
-from gyro_sim.jit import block2
+from gyro_sim.jit import block2, block3
 
 if jit.compiling():
     from gyro_sim.jit import address_of, call_address, vector_at
@@ -43,14 +51,39 @@ DEPENDENCIES = (*fast.DEPENDENCIES, Path(__file__))
 _njit = jit.njit_with_dependencies(*DEPENDENCIES)
 #: arguments of fast.rhs_kernel after (t, y, out): its records model, data, inputs
 CHAIN_RECORDS = 3
-#: floats of `cwork` per velocity column (p_rel, p_rel', u) and per body (pi, H, P, M, F: 3 each)
+#: a tree's per-body sums in `cwork` (3 floats a body each): the sum A of pi over the subtree,
+#: the subtree's momenta H, P, its external moment M and force F, the sum D of the next spherical
+#: bodies' p_rel' (the chain's sweeps carry them in scalars)
+TREE_BLOCKS = 6
+#: floats of `cwork` per velocity column (p_rel, p_rel', u) and per body (pi, then a tree's sums)
 CWORK_PER_COLUMN = 3
-CWORK_PER_BODY = 15
+CWORK_PER_BODY = 3 + 3 * TREE_BLOCKS
 #: `cflags`: i_pr, i_kappa of z, the model's size, then the address of `canonical_kernel`
 #: compiled as a C function (`canonical_address`), which gauss4's compiled march calls
 #: (`canonical_call`) instead of compiling the field into itself
 CFLAG_KERNEL = 3
 CFLAGS_SIZE = 4
+
+
+@jit.inline_ir
+def _clear(sums, first, last):
+    """Zero blocks first..last - 1 of a tree's `sums` (none on a chain: sums is empty)."""
+    for b in range(first, min(last, sums.shape[0])):
+        for k in range(sums.shape[1]):
+            sums[b, k, 0], sums[b, k, 1], sums[b, k, 2] = 0.0, 0.0, 0.0
+
+
+@jit.inline_ir
+def _to_parent(sums, b, k, kp, s_w, H0, H1, H2, P0, P1, P2):
+    """A child k's subtree sums, a moment H about O^k and a force P, added to its parent kp's in
+    blocks b (the moment, now about O^kp: H + s x P with s = O^k - O^kp = s_w[k]) and b + 1."""
+    s0, s1, s2 = s_w[k, 0], s_w[k, 1], s_w[k, 2]
+    sums[b, kp, 0] += H0 + (s1 * P2 - s2 * P1)
+    sums[b, kp, 1] += H1 + (s2 * P0 - s0 * P2)
+    sums[b, kp, 2] += H2 + (s0 * P1 - s1 * P0)
+    sums[b + 1, kp, 0] += P0
+    sums[b + 1, kp, 1] += P1
+    sums[b + 1, kp, 2] += P2
 
 
 @jit.inline_ir
@@ -106,12 +139,22 @@ def _rates(t, z, model, data, inputs, zrow, cflags, cwork):
     A0, A1, A2 = 0.0, 0.0, 0.0  # sum of pi over the spherical bodies after k (then from k)
     H0, H1, H2 = 0.0, 0.0, 0.0  # b: subtree angular momentum about O^{k+1} (then O^k)
     P0, P1, P2 = 0.0, 0.0, 0.0  # b: subtree linear momentum
+    # a tree's (docs/theory.md section 11): the same sums per body, its children's added to it
+    # (moved from their O^j to O^k) before it is reached: A in `sums` block 0, H, P in 1, 2
+    tree = parent.shape[0] != 0
+    sums = block3(cwork, o + 3 * n, TREE_BLOCKS if tree else 0, n, 3)
+    _clear(sums, 0, 3)
     for k in range(n - 1, -1, -1):
-        # b's subtree momenta moved from O^{k+1} to O^k, body k's own added
-        s0, s1, s2 = s_w[k, 0], s_w[k, 1], s_w[k, 2]
-        H0 += s1 * P2 - s2 * P1
-        H1 += s2 * P0 - s0 * P2
-        H2 += s0 * P1 - s1 * P0
+        if tree:  # the children's sums, already about O^k
+            A0, A1, A2 = sums[0, k, 0], sums[0, k, 1], sums[0, k, 2]
+            H0, H1, H2 = sums[1, k, 0], sums[1, k, 1], sums[1, k, 2]
+            P0, P1, P2 = sums[2, k, 0], sums[2, k, 1], sums[2, k, 2]
+        else:
+            # b's subtree momenta moved from O^{k+1} to O^k, body k's own added
+            s0, s1, s2 = s_w[k, 0], s_w[k, 1], s_w[k, 2]
+            H0 += s1 * P2 - s2 * P1
+            H1 += s2 * P0 - s0 * P2
+            H2 += s0 * P1 - s1 * P0
         h0, h1, h2 = hk[k, 0], hk[k, 1], hk[k, 2]
         m = mass[k]
         H0 += h1 * vb2 - h2 * vb1
@@ -145,7 +188,15 @@ def _rates(t, z, model, data, inputs, zrow, cflags, cwork):
             A1 += x1
             A2 += x2
             prel[jc], prel[jc + 1], prel[jc + 2] = A0 - H0, A1 - H1, A2 - H2
-    if base_type == fast.BASE_FREE:
+        if tree:  # k's A kept (the field's hinges read it); the sums passed to its parent
+            sums[0, k, 0], sums[0, k, 1], sums[0, k, 2] = A0, A1, A2
+            kp = parent[k]
+            if kp >= 0:
+                sums[0, kp, 0] += A0
+                sums[0, kp, 1] += A1
+                sums[0, kp, 2] += A2
+                _to_parent(sums, 1, k, kp, s_w, H0, H1, H2, P0, P1, P2)
+    if base_type == fast.BASE_FREE:  # (P: body 0's subtree, the whole chain or tree)
         prel[0], prel[1], prel[2] = z[i_pr] - P0, z[i_pr + 1] - P1, z[i_pr + 2] - P2
     # rates: M u = p_rel - b, the elimination with no bias force or acceleration
     for k in range(n):
@@ -156,9 +207,13 @@ def _rates(t, z, model, data, inputs, zrow, cflags, cwork):
     for a in range(6):
         a_base[a] = 0.0
     fast.joint_columns_stage(is_hinge, is_slide, own_col, base_type, e_w, S)
+    motor_w = block2(work, 0, 0, 4)
+    if flags[fast.FLAG_MOTORS] != 0:  # geared motors (eq 51b): m = J G a (world), J G^2, for M
+        motor_w = block2(work, fast.motor_offset(work, flags, n), n, 4)
+        fast.motor_axes(model, R, motor_w)
     fast.articulated_solve(is_hinge, col_start,
                            fast.Elimination(S, I6, pb, c, a_base, s_w, U, W, u, Dinv, Ia, pa, Dx, T, G, x, armature,
-                                            block2(work, 0, 0, 4)),  # no motors, no trees: gauss4s refuses them
+                                            motor_w),
                            prel, rate, flags[fast.FLAG_HEAVY], parent)
     for j in range(N):
         y[i_vel + j] = rate[j]
@@ -196,14 +251,26 @@ def _canonical_rhs(t, z, zdot, model, data, inputs, zrow, cflags, cwork):
     # p_rel' of each column
     H0, H1, H2, P0, P1, P2 = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     M0, M1, M2, F0, F1, F2 = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    # a tree's: per body, the children's (about O^k) in `sums` blocks 1-4 (block 0: _rates' A)
+    tree = parent.shape[0] != 0
+    sums = block3(cwork, o + 3 * n, TREE_BLOCKS if tree else 0, n, 3)
+    _clear(sums, 1, TREE_BLOCKS)
+    motors = flags[fast.FLAG_MOTORS] != 0
+    motor_w = block2(work, fast.motor_offset(work, flags, n) if motors else 0, n if motors else 0, 4)  # _rates'
     for k in range(n - 1, -1, -1):
-        s0, s1, s2 = s_w[k, 0], s_w[k, 1], s_w[k, 2]
-        H0 += s1 * P2 - s2 * P1
-        H1 += s2 * P0 - s0 * P2
-        H2 += s0 * P1 - s1 * P0
-        M0 += s1 * F2 - s2 * F1
-        M1 += s2 * F0 - s0 * F2
-        M2 += s0 * F1 - s1 * F0
+        if tree:
+            H0, H1, H2 = sums[1, k, 0], sums[1, k, 1], sums[1, k, 2]
+            P0, P1, P2 = sums[2, k, 0], sums[2, k, 1], sums[2, k, 2]
+            M0, M1, M2 = sums[3, k, 0], sums[3, k, 1], sums[3, k, 2]
+            F0, F1, F2 = sums[4, k, 0], sums[4, k, 1], sums[4, k, 2]
+        else:
+            s0, s1, s2 = s_w[k, 0], s_w[k, 1], s_w[k, 2]
+            H0 += s1 * P2 - s2 * P1
+            H1 += s2 * P0 - s0 * P2
+            H2 += s0 * P1 - s1 * P0
+            M0 += s1 * F2 - s2 * F1
+            M1 += s2 * F0 - s0 * F2
+            M2 += s0 * F1 - s1 * F0
         m = mass[k]
         h0, h1, h2 = hk[k, 0], hk[k, 1], hk[k, 2]
         w0, w1, w2 = w[k, 0], w[k, 1], w[k, 2]
@@ -232,13 +299,14 @@ def _canonical_rhs(t, z, zdot, model, data, inputs, zrow, cflags, cwork):
         G1 = (P2 * v0 - P0 * v2) + M1
         G2 = (P0 * v1 - P1 * v0) + M2
         jc = own_col[k]
+        kp = parent[k] if tree else k - 1
         if is_hinge[k]:
             e0, e1, e2 = e_w[k, 0], e_w[k, 1], e_w[k, 2]
-            if k > 0:
-                a0, a1, a2 = w[k - 1, 0], w[k - 1, 1], w[k - 1, 2]
+            if kp >= 0:
+                a0, a1, a2 = w[kp, 0], w[kp, 1], w[kp, 2]
             else:
                 a0, a1, a2 = 0.0, 0.0, 0.0
-            # (50): e' = w^{k-1} x e
+            # (50): e' = w^{k-1} x e (w of the parent)
             d0, d1, d2 = a1 * e2 - a2 * e1, a2 * e0 - a0 * e2, a0 * e1 - a1 * e0
             if is_slide[k]:  # S = (0, e): (w^{k-1} x e) . P + e . F (canonical.py)
                 dprel[jc] = (d0 * P0 + d1 * P1 + d2 * P2) + (e0 * F0 + e1 * F1 + e2 * F2) + tau[jc]
@@ -248,18 +316,31 @@ def _canonical_rhs(t, z, zdot, model, data, inputs, zrow, cflags, cwork):
                 dprel[jc] += -spring[k, 0] * (z[zrow[k, 0]] - spring[k, 1])
         else:
             dprel[jc], dprel[jc + 1], dprel[jc + 2] = G0, G1, G2
+        if motors and motor_w[k, 3] != 0.0:  # its rotor's spin J G phi' a: the parent's moment (eq 31)
+            H0 += motor_w[k, 0] * rate[jc]
+            H1 += motor_w[k, 1] * rate[jc]
+            H2 += motor_w[k, 2] * rate[jc]
+        if tree and kp >= 0:
+            _to_parent(sums, 1, k, kp, s_w, H0, H1, H2, P0, P1, P2)
+            _to_parent(sums, 3, k, kp, s_w, M0, M1, M2, F0, F1, F2)
     if base_type == fast.BASE_FREE:
         dprel[0], dprel[1], dprel[2] = F0, F1, F2  # the total external force
     # the canonical rates, backward again: B, D the next spherical body's p_rel (the sum of pi
     # from it on) and p_rel'
+    # (a tree's: B is _rates' A, the sum of pi over the subtree; D, per body in `sums` block 5,
+    # the sum of p_rel' over the next spherical bodies on each branch below)
     B0, B1, B2, D0, D1, D2 = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     for k in range(n - 1, -1, -1):
         jc, jq, jm = own_col[k], zrow[k, 0], zrow[k, 1]
         w0, w1, w2 = w[k, 0], w[k, 1], w[k, 2]
+        kp = parent[k] if tree else k - 1
+        if tree:
+            B0, B1, B2 = sums[0, k, 0], sums[0, k, 1], sums[0, k, 2]
+            D0, D1, D2 = sums[5, k, 0], sums[5, k, 1], sums[5, k, 2]
         if is_hinge[k]:
             e0, e1, e2 = e_w[k, 0], e_w[k, 1], e_w[k, 2]
-            if k > 0:
-                a0, a1, a2 = w[k - 1, 0], w[k - 1, 1], w[k - 1, 2]
+            if kp >= 0:
+                a0, a1, a2 = w[kp, 0], w[kp, 1], w[kp, 2]
             else:
                 a0, a1, a2 = 0.0, 0.0, 0.0
             d0, d1, d2 = a1 * e2 - a2 * e1, a2 * e0 - a0 * e2, a0 * e1 - a1 * e0
@@ -290,6 +371,10 @@ def _canonical_rhs(t, z, zdot, model, data, inputs, zrow, cflags, cwork):
             zdot[jq], zdot[jq + 1], zdot[jq + 2], zdot[jq + 3] = fast.quat_rate(q0, q1, q2, q3, w0, w1, w2)
             B0, B1, B2 = B0 + c1, B1 + c2, B2 + c3
             D0, D1, D2 = dprel[jc], dprel[jc + 1], dprel[jc + 2]
+        if tree and kp >= 0:  # what the parent sees below: k's p_rel' (spherical) or k's D
+            sums[5, kp, 0] += D0
+            sums[5, kp, 1] += D1
+            sums[5, kp, 2] += D2
     if base_type == fast.BASE_FREE:
         for a in range(3):
             zdot[a] = rate[a]

@@ -233,7 +233,7 @@ def lam(model: Model, data: Data, p: np.ndarray | None, L_rotor: np.ndarray | No
     A hinge's geared motor adds J G phi_k' a to its parent's lambda (its rotor's spin relative
     to the parent, eq 31 with kappa' = G phi_k'); the rate of that, J G phi_k'' a, is linear in
     the accelerations and so is left to the mass matrix (`mass_matrix`, `motor_forces`)."""
-    lam_w, dlam_w = _rotor_lam(model, data, p, L_rotor)
+    lam_w, dlam_w = rotor_lam(model, data, p, L_rotor)
     if model.motor is None:
         return lam_w, dlam_w
     motor = motor_forces(model, data, data.hinge_rate)
@@ -250,7 +250,7 @@ def motor_forces(model: Model, data: Data, rates: np.ndarray) -> np.ndarray:
     return f
 
 
-def _rotor_lam(model: Model, data: Data, p: np.ndarray | None, L_rotor: np.ndarray | None):
+def rotor_lam(model: Model, data: Data, p: np.ndarray | None, L_rotor: np.ndarray | None):
     """lambda^k and lambda^k' of the rotors (eqs 29, 31), world frame, or (None, None)."""
     lam_b = model.lam_speed.copy() if model.lam_speed is not None else None
     dlam_b = None

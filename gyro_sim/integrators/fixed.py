@@ -1,9 +1,10 @@
 """The node's fixed-step method for a scene: rk4 where it is stable at the step, gauss4s (the
-Gauss method on the chain's canonical equations: A-stable and symplectic, momenta kept to
-round-off) where the scene is stiff ; and the integrator "fixed" that makes
-this choice at the start and again as the motion changes (:class:`SceneFixedStep`, the node's
-default). On a system that is not a chain the implicit rung is gauss4, the same method on the
-system's own state. Below, "gauss4" stands for either where the two behave alike.
+Gauss method on the scene's canonical equations, a chain's or a tree's: A-stable and
+symplectic, momenta kept to round-off) where the scene is stiff ; and the integrator "fixed" that
+makes this choice at the start and again as the motion changes (:class:`SceneFixedStep`, the
+node's default). On a system that is not a scene's (and on stateful actuators) the implicit
+rung is gauss4, the same method on the system's own state. Below, "gauss4" stands
+for either where the two behave alike.
 
 RK4 is stable for h lambda inside its stability region, which reaches RK4_IMAG_LIMIT = 2 sqrt 2
 along the imaginary axis (gyroscopic nutation: eigenvalues +-i w) and 2.785 along the negative
@@ -105,8 +106,8 @@ RECHECK_DIM = 10
 SPIN_RESOLVE = 0.25
 #: most substeps of one physics step
 MAX_SUBSTEPS = 64
-#: "fixed": the method of a stiff chain (symplectic: docs/integrators.md); a system
-#: that is not a chain (no `model`), or a chain of more than IMPLICIT_MAX_BODIES, gets gauss4,
+#: "fixed": the method of a stiff chain or tree (symplectic: docs/integrators.md); a system
+#: that is not a scene's (no `model`), or one of more than IMPLICIT_MAX_BODIES bodies, gets gauss4,
 #: the same method on the package's state
 IMPLICIT = "gauss4s"
 IMPLICIT_PLAIN = "gauss4"
@@ -120,12 +121,12 @@ IMPLICIT_MAX_BODIES = 50
 
 
 def implicit_for(model) -> str:
-    """The implicit rung of "fixed" for a chain's model (None: a system that is not a chain).
-    A model whose actuators are states (friction, max_speed: `Model.stateful`) gets gauss4 on
-    its own state: the canonical equations of gauss4s have no place for them, nor for servos
-    (which make a model stateful) and geared motors, nor for trees (bodies with several children)."""
-    chain = model is not None and not model.stateful and model.motor is None and model.chain
-    return IMPLICIT if chain and model.n <= IMPLICIT_MAX_BODIES else IMPLICIT_PLAIN
+    """The implicit rung of "fixed" for a scene's model, a chain or a tree (None: a system that
+    is not a scene's). A model whose actuators are states (friction, max_speed:
+    `Model.stateful`) gets gauss4 on its own state: the canonical equations of gauss4s have no
+    place for them, nor for servos (which make a model stateful)."""
+    canonical = model is not None and not model.stateful
+    return IMPLICIT if canonical and model.n <= IMPLICIT_MAX_BODIES else IMPLICIT_PLAIN
 #: "fixed": the last resort of a call that rk4 and the implicit method both fail (adaptive,
 #: error-controlled)
 RESCUE = "dop853"
@@ -361,15 +362,15 @@ def _choice(rhs, t: float, y: np.ndarray, h: float, now: str, dim: int = KRYLOV_
 
 class SceneFixedStep(FixedStepIntegrator):
     """"fixed": rk4 where the scene is soft at the step, gauss4s where it is stiff (gauss4 on a
-    system that is not a chain: `implicit`), re-chosen
+    system that is not a scene's: `implicit`), re-chosen
     as the motion and the commands change (see the module docstring). Order 4 (both methods
     are), fixed step, one step per physics step.
 
     Attributes
     ----------
     current : the method stepping now ("rk4", `implicit` or the rescue's "dop853").
-    implicit : "gauss4s" on a chain of at most IMPLICIT_MAX_BODIES, "gauss4" on a longer one or
-        on another system.
+    implicit : "gauss4s" on a chain or tree of at most IMPLICIT_MAX_BODIES bodies, "gauss4" on a
+        larger one, on one with stateful actuators, or on another system.
     substeps : substeps of one step now (1: none): the fastest body turns at most
         SPIN_RESOLVE rad in one.
     reason : one line: why (the substeps, h |lambda| of a substep against rk4's limit).
@@ -407,11 +408,11 @@ class SceneFixedStep(FixedStepIntegrator):
 
         from gyro_sim.integrators.dop853.driver import DOP853
 
-        #: the method of a stiff scene: gauss4s on a chain of at most IMPLICIT_MAX_BODIES,
-        #: gauss4 on a longer one or on a system that is not a chain
+        #: the method of a stiff scene: gauss4s on a chain or tree of at most
+        #: IMPLICIT_MAX_BODIES, gauss4 on a larger one or on a system that is not a scene's
         self.implicit = implicit_for(getattr(system, "model", None))
-        chain = self.implicit == IMPLICIT
-        implicit = Gauss4S(system, **options) if chain else Gauss4(system, **options)
+        symplectic = self.implicit == IMPLICIT
+        implicit = Gauss4S(system, **options) if symplectic else Gauss4(system, **options)
         self._plain = _Plain(system)
         self.methods = {"rk4": RK4(system, **options), self.implicit: implicit,
                         RESCUE: DOP853(self._plain, **{**options, "max_step": self.step,

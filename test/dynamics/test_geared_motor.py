@@ -250,9 +250,15 @@ def test_motor_with_armature_or_on_a_spherical_joint_refused():
         load_scene(scene)
 
 
-def test_gauss4s_refuses_motors():
-    with pytest.raises(ValueError, match="gauss4s does not take geared motors"):
-        Simulator(turntable(), integrator="gauss4s", backend="numpy")
+def test_gauss4s_takes_motors_and_fixed_takes_gauss4s_for_them():
+    """The canonical momenta hold the motors' coupling (test/integrators/test_gauss4s_trees.py
+    checks the field): gauss4s steps the turntable, and "fixed" takes it as its stiff rung."""
+    from gyro_sim.integrators.fixed import IMPLICIT, implicit_for
+
+    sim = Simulator(turntable(), integrator="gauss4s", backend="numpy")
+    sim.advance(0.01)
+    assert np.isfinite(sim.state).all()
+    assert implicit_for(sim.model) == IMPLICIT == "gauss4s"
 
 
 # --- the compiled kernel against the numpy reference ------------------------------------------
@@ -408,8 +414,8 @@ def test_linearisation_matches_the_lagrangian():
     np.testing.assert_allclose(A[2:4], np.array(columns).T, rtol=1e-6, atol=1e-7)
 
 
-@pytest.mark.parametrize("integrator", ["rk4", "dop853", "radau", "gauss4", "lie4", "fixed", "auto"])
-def test_every_integrator_but_gauss4s_takes_motors(integrator):
+@pytest.mark.parametrize("integrator", ["rk4", "dop853", "radau", "gauss4", "gauss4s", "lie4", "fixed", "auto"])
+def test_every_integrator_takes_motors(integrator):
     """A tenth of a second of the turntable with each: its angles and rates within 1e-6 of the
     hand-written Lagrangian's motion."""
     sim = Simulator(turntable(), integrator=integrator, step=1e-3, backend="numpy")

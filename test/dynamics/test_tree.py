@@ -351,13 +351,18 @@ def test_friction_on_a_tree_closes_the_energy_balance_on_both_backends():
     np.testing.assert_allclose(final[3], final[1], rtol=0, atol=1e-9)
 
 
-def test_gauss4s_refuses_a_tree_and_fixed_takes_gauss4_for_it():
-    from gyro_sim.integrators.fixed import IMPLICIT_PLAIN, implicit_for
+def test_gauss4s_takes_a_tree_and_fixed_takes_gauss4s_for_it():
+    """The canonical form on trees (test/integrators/test_gauss4s_trees.py checks it): gauss4s
+    steps the free hub with its panels, and "fixed" takes it as the stiff rung, as on a chain;
+    a stateful tree (friction) still gets gauss4."""
+    from gyro_sim.integrators.fixed import IMPLICIT, IMPLICIT_PLAIN, implicit_for
 
     scene = free_hub_scene(PANELS, False, 0.5)
-    with pytest.raises(ValueError, match="gauss4s integrates chains, not trees"):
-        Simulator(scene, integrator="gauss4s")
-    assert implicit_for(Simulator(scene).model) == IMPLICIT_PLAIN == "gauss4"
+    sim = Simulator(scene, integrator="gauss4s")
+    sim.advance(0.01)
+    assert np.isfinite(sim.state).all()
+    assert implicit_for(Simulator(scene).model) == IMPLICIT == "gauss4s"
+    assert implicit_for(Simulator(_damped_hub()).model) == IMPLICIT_PLAIN == "gauss4"
 
 
 def test_a_tree_of_lagrange_gyroscopes_is_not_a_lagrange_chain():

@@ -1,4 +1,4 @@
-"""gauss4s: the two-stage Gauss-Legendre method on the chain's canonical equations.
+"""gauss4s: the two-stage Gauss-Legendre method on the chain's (or tree's) canonical equations.
 
 The same method and Newton iteration as gauss4 (:mod:`.gauss`), applied to the Hamiltonian form
 of the equations (:mod:`gyro_sim.dynamics.canonical`: quaternions and their conjugate momenta,
@@ -47,7 +47,7 @@ class Gauss4S(FixedStepIntegrator):
 
     Attributes: `canonical` (the Hamiltonian system), `inner` (the gauss4 stepping it; its
     `counts` are this method's); the base's counters mirror the inner ones. The system must be
-    a chain (ChainODE or FastChainODE: it has a `model`).
+    a scene's, a chain or a tree (ChainODE or FastChainODE: it has a `model`).
 
     References
     ----------
@@ -62,12 +62,7 @@ class Gauss4S(FixedStepIntegrator):
     def __init__(self, system: OdeSystem, dense: bool | None = None, kappa: float | None = STRUCTURE_KAPPA,
                  level_max: int = LEVEL_MAX, **options):
         if getattr(system, "model", None) is None:
-            raise ValueError("gauss4s integrates a chain (a system with a `model`), not a general ODE")
-        if system.model.motor is not None:  # its canonical momenta know the armature, not the motor's coupling
-            raise ValueError("gauss4s does not take geared motors on a turning parent (joint motor); use gauss4")
-        if not system.model.chain:  # its canonical momenta are sums along a chain
-            raise ValueError("gauss4s integrates chains, not trees (a body's parent other than the body "
-                             "before it); use gauss4")
+            raise ValueError("gauss4s integrates a chain or tree (a system with a `model`), not a general ODE")
         super().__init__(system, **options)
         if callable(getattr(system, "kernel_arguments", None)):  # compiled: FastChainODE
             from gyro_sim.dynamics.canonical_kernel import FastCanonicalChain
