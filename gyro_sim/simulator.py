@@ -299,11 +299,21 @@ class Simulator:
         methods; None for fixed-step ones): below 1 means within rtol/atol."""
         return self.integrator.error_estimate
 
-    def set_axis_moments(self, values: Sequence[float]) -> None:
-        """Commanded axis moments (N m), one per axis in `axis_names` order, held until changed."""
-        v = np.asarray(values, dtype=float).ravel()
-        if v.shape != (len(self.model.axis_names),):
-            raise ValueError(f"expected {len(self.model.axis_names)} axis moments {self.axis_names}, got {v.size}")
+    def set_axis_moments(self, values: Sequence[float] | Mapping[str, float]) -> None:
+        """Commanded axis moments (N m), held until changed: an array in `axis_names` order, or a
+        mapping from axis names to moments, the others kept (an imported model's commands in
+        another order than the chain's, MuJoCo's actuator order, set by name)."""
+        names = self.model.axis_names
+        if isinstance(values, Mapping):
+            v = self._moments.copy()
+            for name, value in values.items():
+                if name not in names:
+                    raise ValueError(f"no commanded axis named {name!r} (axes: {list(names)})")
+                v[list(names).index(name)] = float(value)
+        else:
+            v = np.asarray(values, dtype=float).ravel()
+        if v.shape != (len(names),):
+            raise ValueError(f"expected {len(names)} axis moments {self.axis_names}, got {v.size}")
         if not np.all(np.isfinite(v)):
             raise ValueError("axis moments must be finite")
         if self._axis_max_torque is not None:

@@ -75,3 +75,32 @@ def test_a_switch_of_backend_keeps_the_run_and_repeats_bit_for_bit():
     c = run("numba")
     assert not np.array_equal(a.state, c.state)  # rounding differs: the switch step matters
     assert np.allclose(a.state, c.state, rtol=0, atol=1e-10)
+
+
+def test_axis_moments_are_set_by_name_in_another_order_than_the_chain():
+    """An imported model's actuators in MuJoCo's order (Gymnasium's ant: hip_4, ankle_4, hip_1,
+    ...) differ from the chain's: a mapping by axis name sets each where it belongs, the others
+    kept; a name that is no axis is refused, naming the axes."""
+    import warnings
+
+    mujoco = pytest.importorskip("mujoco", reason="the model is MJCF: MuJoCo is the optional extra [models]")
+    from gyro_sim import load_scene
+
+    from pathlib import Path
+
+    path = Path(__file__).parent / "scene" / "models" / "gymnasium" / "ant.xml"
+    m = mujoco.MjModel.from_xml_path(str(path))
+    mujoco_order = [m.joint(m.actuator_trnid[i][0]).name for i in range(m.nu)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sim = Simulator(load_scene(path), backend="numpy")
+    assert sorted(mujoco_order) == sorted(sim.axis_names) and mujoco_order != list(sim.axis_names)
+    action = np.arange(1.0, m.nu + 1.0)  # in MuJoCo's order
+    sim.set_axis_moments(dict(zip(mujoco_order, action)))
+    for name, value in zip(mujoco_order, action):
+        assert sim.axis_moments[sim.axis_names.index(name)] == value
+    sim.set_axis_moments({mujoco_order[0]: -5.0})
+    assert sim.axis_moments[sim.axis_names.index(mujoco_order[0])] == -5.0
+    assert sim.axis_moments[sim.axis_names.index(mujoco_order[1])] == action[1]  # kept
+    with pytest.raises(ValueError, match="no commanded axis named 'knee'.*hip_1"):
+        sim.set_axis_moments({"knee": 1.0})
