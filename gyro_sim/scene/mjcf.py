@@ -1123,17 +1123,24 @@ class _Importer:
     def scene_name(self, g: _Group, as_hinge: bool) -> str:
         """The scene name of a group (module docstring): joint first for hinges, slides and rotors;
         an unnamed joint of a body with several joints ``<body>_joint<i>`` (i its place in the
-        body), with ``_`` added until it is no name of the model's."""
+        body), with ``_`` added until it is no name of the model's. The name `base` is the
+        scene's own (a `parent` naming it is the base): a body or joint of that name takes its
+        other name, else ``base_`` (``_`` added likewise)."""
         joint, body = self.joint_name(g.joint), self.body_name(g.root)
+        m, obj = self.m, self.mj.mjtObj
+        taken = {self._name(obj.mjOBJ_JOINT, j) for j in range(m.njnt)} | \
+            {self._name(obj.mjOBJ_BODY, b) for b in range(m.nbody)}
         if not joint and g.root in self.frames:
-            m, obj = self.m, self.mj.mjtObj
-            taken = {self._name(obj.mjOBJ_JOINT, j) for j in range(m.njnt)} | \
-                {self._name(obj.mjOBJ_BODY, b) for b in range(m.nbody)}
             joint = f"{body or f'body{g.root}'}_joint{g.joint - int(m.body_jntadr[g.root])}"
             while joint in taken:
                 joint += "_"
         first = (joint, body) if as_hinge else (body, joint)
-        return next((n for n in first if n), f"joint{g.joint}" if as_hinge else f"body{g.root}")
+        name = next((n for n in first if n and n != BASE_PARENT), "")
+        if not name and BASE_PARENT in first:
+            name = BASE_PARENT + "_"
+            while name in taken:
+                name += "_"
+        return name or (f"joint{g.joint}" if as_hinge else f"body{g.root}")
 
     # --- the scene
     def run(self, keyframe: str | None) -> ImportedModel:
