@@ -795,6 +795,14 @@ class _Importer:
                                           f"{self.body(ends[0])} and {self.body(ends[1])} are welded into "
                                           f"one{by} (it moves nothing)")
                         continue
+                    loop = self.loop_joints(*ends)
+                    self.fail(f"equality {name!r}" if name else f"equality #{e}",
+                              f"equality constraints are not supported (an open tree only): it closes a loop "
+                              f"from {self.body(ends[0])} to {self.body(ends[1])}"
+                              + ("; --lock the joints of the loop to weld it (" + ", ".join(
+                                  repr(self.joint_name(j)) for j in loop) + ")"
+                                 if loop and all(self.lockable(j) for j in loop) else ""))
+                    continue
                 coupled = [int(j) for j in (m.eq_obj1id[e], m.eq_obj2id[e]) if j >= 0]
                 lockable = int(m.eq_type[e]) == int(mj.mjtEq.mjEQ_JOINT) and all(self.lockable(j) for j in coupled)
                 self.fail(f"equality {name!r}" if name else f"equality #{e}",
@@ -1095,6 +1103,25 @@ class _Importer:
             here = len(order) - 1
             todo += [(c, here) for c in reversed(kids) if c not in rotors[g.root]]
         return order, parents, rotors
+
+    def loop_joints(self, a: int, b: int) -> list[int]:
+        """The joints of the loop a connect or weld equality closes between bodies `a` and `b`:
+        those of the bodies from each up to (not including) their nearest common ancestor, in
+        the model's order."""
+        m = self.m
+
+        def chain(body: int) -> list[int]:
+            out = [body]
+            while body:
+                body = int(m.body_parentid[body])
+                out.append(body)
+            return out
+
+        up_a, up_b = chain(a), chain(b)
+        common = next(x for x in up_a if x in up_b)
+        bodies = up_a[:up_a.index(common)] + up_b[:up_b.index(common)]
+        return sorted(j for x in bodies for j in range(int(m.body_jntadr[x]), int(m.body_jntadr[x])
+                                                         + int(m.body_jntnum[x])))
 
     def lockable(self, j: int) -> bool:
         """Whether --lock welds joint `j` (_lock_joints): a named one."""

@@ -29,10 +29,11 @@ from gyro_sim.scene.mjcf import ModelError, caught_warnings, import_model
 from test.scene import test_model_sensors
 from gyro_sim import Simulator
 from gyro_sim.dynamics.model import initial_state
+from gyro_sim.dynamics.rotations import matrix_to_quat
 from gyro_sim.scene.load import load_scene
 from test.scene.test_model_multijoint import judge as without_contacts
 from test.scene.test_model_sensors import deviation, gyro_readings, mujoco_readings
-from test.scene.test_model_trees import MOTION_STEP, judged_copy, probed
+from test.scene.test_model_trees import MOTION_STEP, judged_copy, pose_deviation, probed
 
 #: model -> (its file in Menagerie, the keyframe of its home pose or None, the joints locked)
 MODELS = {
@@ -42,7 +43,10 @@ MODELS = {
     "unitree_h1": ("unitree_h1/h1.xml", None, ()),
     "boston_dynamics_spot": ("boston_dynamics_spot/spot.xml", "home", ()),
     "robotis_op3": ("robotis_op3/op3.xml", None, ()),
-    "agility_cassie": ("agility_cassie/cassie.xml", None, ()),
+    "agility_cassie": ("agility_cassie/cassie.xml", "home", ()),
+    "agility_cassie, its leg linkages locked": ("agility_cassie/cassie.xml", "home", tuple(
+        f"{side}-{joint}" for side in ("left", "right") for joint in
+        ("achilles-rod", "knee", "shin", "tarsus", "heel-spring", "foot-crank", "plantar-rod", "foot"))),
 }
 #: how long the motion runs (s)
 HORIZON = 0.5
@@ -134,11 +138,64 @@ def without_textures(path: Path, tmp: Path) -> Path:
     return out
 
 
+def welded(path: Path, keyframe: str, lock: tuple[str, ...], tmp: Path) -> Path:
+    """`path` with the joints `lock` deleted and their bodies drawn where the keyframe puts
+    them relative to their parents (MuJoCo's own kinematics at the keyframe), the equalities,
+    actuators and sensors on them deleted, the keyframe kept for the joints left: what --lock
+    welds, written out for MuJoCo."""
+    with caught_warnings(mujoco):
+        spec = mujoco.MjSpec.from_file(str(path))
+    m = spec.compile()
+    d = mujoco.MjData(m)
+    key = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, keyframe)
+    mujoco.mj_resetDataKeyframe(m, d, key)
+    mujoco.mj_kinematics(m, d)
+    kept = [j for j in range(m.njnt) if mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j) not in lock]
+    size = {int(mujoco.mjtJoint.mjJNT_FREE): 7, int(mujoco.mjtJoint.mjJNT_BALL): 4}
+    qpos = [x for j in kept for x in d.qpos[m.jnt_qposadr[j]:m.jnt_qposadr[j] + size.get(int(m.jnt_type[j]), 1)]]
+    for name in lock:
+        b = int(m.jnt_bodyid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name)])
+        p = int(m.body_parentid[b])
+        R_p = d.xmat[p].reshape(3, 3)
+        body = spec.body(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, b))
+        body.pos = R_p.T @ (d.xpos[b] - d.xpos[p])
+        body.quat = matrix_to_quat(R_p.T @ d.xmat[b].reshape(3, 3))
+        body.alt.type = mujoco.mjtOrientation.mjORIENTATION_QUAT
+        spec.delete(spec.joint(name))
+    bodies = {mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, int(m.jnt_bodyid[mujoco.mj_name2id(
+        m, mujoco.mjtObj.mjOBJ_JOINT, n)])) for n in lock}
+    for equality in list(spec.equalities):
+        if equality.name1 in bodies or equality.name2 in bodies:
+            spec.delete(equality)
+    for actuator in [a for a in spec.actuators if a.target in lock]:
+        spec.delete(actuator)
+    for sensor in [x for x in spec.sensors if x.objname in lock or x.objtype == mujoco.mjtObj.mjOBJ_ACTUATOR]:
+        spec.delete(sensor)
+    for k in list(spec.keys):
+        spec.delete(k)
+    spec.add_key(name=keyframe, qpos=qpos)
+    out = tmp / f"welded_{path.name}"
+    with caught_warnings(mujoco):
+        out.write_text(spec.to_xml())
+    return out
+
+
 def judge(path: Path, keyframe: str | None, lock: tuple[str, ...], tmp: Path) -> dict:
     row = {"refused": refusal(path, keyframe, lock)}
-    if row["refused"] or lock:
+    if row["refused"]:
         return row
-    copy = judged_copy(without_textures(path, tmp), tmp, dry_friction=False)
+    path = without_textures(path, tmp)
+    if lock:  # the locked tree's frames carry MuJoCo's moving bodies with the locked joints held
+        # at the keyframe; the dynamics judged on the file with the locked joints welded there,
+        # whose scene is the locked one's but for MuJoCo's writing numbers to 6 digits
+        row["poses"] = pose_deviation(path, lock)[0]
+        locked = import_model(path, keyframe, lock=list(lock)).mapping
+        path = welded(path, keyframe, lock, tmp)
+        written = import_model(path, keyframe).mapping
+        row["lock"] = max(float(np.max(np.abs(np.subtract(a[k], b[k])) / max(1e-300, np.max(np.abs(a[k])))))
+                          for a, b in zip(locked["bodies"], written["bodies"]) for k in ("mass", "com", "inertia_com")
+                          if k in a)
+    copy = judged_copy(path, tmp, dry_friction=False)
     free = mujoco.MjModel.from_xml_path(str(copy)).jnt_type[0] == mujoco.mjtJoint.mjJNT_FREE
     row["qacc"] = accelerations(fixed_base(copy, tmp) if free else copy)
     probe, sites = probed(copy, tmp)
@@ -168,7 +225,8 @@ def main(argv: list[str] | None = None) -> int:
     print("| --- | --- | --- | --- | --- | --- |")
     for name in args.models:
         file, keyframe, lock = MODELS[name]
-        options = " ".join([f"--keyframe {keyframe}"] * bool(keyframe) + [f"--lock {j}" for j in lock])
+        options = " ".join([f"--keyframe {keyframe}"] * bool(keyframe) + [f"--lock {j}" for j in lock][:1])
+        options += f" (+{len(lock) - 1} --lock)" if len(lock) > 1 else ""
         t0 = time.perf_counter()
         with tempfile.TemporaryDirectory() as tmp:
             row = judge(args.menagerie / file, keyframe, lock, Path(tmp))
@@ -177,7 +235,9 @@ def main(argv: list[str] | None = None) -> int:
         elif "qacc" not in row:
             print(f"| {name} | {options} | imports | | | |")
         else:
-            print(f"| {name} | {options} | imports ({row['imus']} IMUs, {time.perf_counter() - t0:.0f} s) | "
+            welds = (f"; frames within {row['poses']:.1g} m of MuJoCo's, masses within {row['lock']:.1g} of the "
+                     "welded file's" if lock else "")
+            print(f"| {name} | {options} | imports ({row['imus']} IMUs{welds}, {time.perf_counter() - t0:.0f} s) | "
                   f"{row['qacc']:.1g} | {row['imu']:.1g} | {row['motion']:.1g} (from {row['from']}) |")
         sys.stdout.flush()
     return 0

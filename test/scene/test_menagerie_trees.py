@@ -15,9 +15,10 @@ import pytest
 mujoco = pytest.importorskip("mujoco", reason="MuJoCo is the optional extra [models]")
 
 from gyro_sim.scene.load import load_scene
-from gyro_sim.scene.mjcf import import_model
+from gyro_sim.scene.mjcf import ModelError, import_model
+from test.scene.test_model_import import write
 from test.scene.test_model_sensors import READING_RTOL, deviation, gyro_readings, mujoco_readings
-from test.scene.test_model_trees import FREE, probed, two_arms
+from test.scene.test_model_trees import FREE, POSE_ATOL, pose_deviation, probed, two_arms
 
 
 def test_a_free_body_named_base_takes_another_scene_name(tmp_path):
@@ -49,6 +50,66 @@ def test_a_hinge_named_base_takes_its_bodys_name_or_base_(tmp_path):
     path.write_text(text.replace('<body name="torso" ', '<body ').replace('<body name="tail"', '<body name="base_"'))
     assert import_model(path).mapping["bodies"][0]["name"] == "base__"
     assert [b.name for b in load_scene(path).bodies][0] == "base__"
+
+
+#: a Cassie-like leg on a free pelvis: a hip, a knee, a rod on a ball joint at the hip closing a
+#: loop with the heel (on a spring hinge of the shin) through a `connect`; the rod's joint {rod}
+LEG = """<mujoco model="leg">
+  <worldbody>
+    <body name="pelvis" pos="0 0 1">
+      <freejoint name="root"/>
+      <inertial pos="0 0 0" mass="5" diaginertia="0.1 0.08 0.06"/>
+      <body name="thigh" xyaxes="0 0 -1 0 1 0">
+        <joint name="hip" axis="0 0 1"/>
+        <inertial pos="0.1 0 0" mass="2" diaginertia="0.01 0.02 0.02"/>
+        <body name="rod" pos="0 0 0.04" xyaxes="0.7922 -0.60599 -0.072096 0.60349 0.79547 -0.054922">
+          {rod}
+          <inertial pos="0.2 0 0" mass="0.15" diaginertia="1e-5 0.004 0.004"/>
+        </body>
+        <body name="shin" pos="0.4 0 0">
+          <joint name="knee" axis="0 0 1" ref="-0.7"/>
+          <inertial pos="0.2 0 0" mass="0.6" diaginertia="0.001 0.01 0.01"/>
+          <body name="heel" pos="0.1 0.05 0">
+            <joint name="heel_spring" axis="0 0 1" stiffness="1000"/>
+            <inertial pos="0.05 0 0" mass="0.1" diaginertia="1e-5 1e-4 1e-4"/>
+          </body>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+  <equality>
+    <connect body1="rod" body2="heel" anchor="0.45 0 0"/>
+  </equality>
+  <keyframe>
+    <key name="home" qpos="0 0 1 1 0 0 0 0.3 0.98 0.05 -0.02 0.19 -1.1 0.02"/>
+  </keyframe>
+</mujoco>
+"""
+LOOP = ("'rod', 'knee', 'heel_spring'")
+
+
+def test_a_loop_closed_by_a_connect_is_refused_naming_its_ends_and_the_joints_to_lock(tmp_path):
+    """Cassie's legs close loops through `connect` equalities: the refusal names the bodies it
+    ties and the joints between them (from each end up to their common ancestor), and that
+    --lock (at the keyframe) makes the leg a tree whose frames carry MuJoCo's bodies held there."""
+    path = write(tmp_path, "leg.xml", LEG.format(rod='<joint name="rod" type="ball"/>'))
+    with pytest.raises(ModelError) as info:
+        import_model(path, "home")
+    assert info.value.errors == [
+        f"{path}: equality #0: equality constraints are not supported (an open tree only): it closes a loop from "
+        f"body 'rod' to body 'heel'; --lock the joints of the loop to weld it ({LOOP})"]
+    lock = ("rod", "knee", "heel_spring")
+    imported = import_model(path, "home", lock=list(lock))
+    assert [b["name"] for b in imported.mapping["bodies"]] == ["pelvis", "hip"]
+    assert "equality #0: left out, body 'rod' and body 'heel' are welded into one by --lock (it moves nothing)" \
+        in imported.notes
+    assert imported.mapping["bodies"][1]["mass"] == pytest.approx(2.85)  # the rod, shin and heel welded to the thigh
+    worst, compared = pose_deviation(path, lock)
+    assert compared == 2 and worst <= POSE_ATOL
+    unnamed = write(tmp_path, "unnamed.xml", LEG.format(rod='<joint type="ball"/>'))
+    with pytest.raises(ModelError) as info:
+        import_model(unnamed, "home")
+    assert info.value.errors[0].endswith("it closes a loop from body 'rod' to body 'heel'")  # no lock can weld it
 
 
 @pytest.mark.slow
