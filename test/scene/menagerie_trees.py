@@ -25,12 +25,12 @@ from pathlib import Path
 import numpy as np
 
 import mujoco
-from gyro_sim.scene.mjcf import ModelError, caught_warnings, import_model
+from gyro_sim.scene.mjcf import caught_warnings, import_model
 from test.scene import test_model_sensors
 from gyro_sim import Simulator
 from gyro_sim.dynamics.model import initial_state
 from gyro_sim.dynamics.rotations import matrix_to_quat
-from gyro_sim.scene.load import load_scene
+from gyro_sim.scene.load import SceneError, load_scene
 from test.scene.test_model_multijoint import judge as without_contacts
 from test.scene.test_model_sensors import deviation, gyro_readings, mujoco_readings
 from test.scene.test_model_trees import MOTION_STEP, judged_copy, pose_deviation, probed
@@ -43,6 +43,7 @@ MODELS = {
     "unitree_h1": ("unitree_h1/h1.xml", None, ()),
     "boston_dynamics_spot": ("boston_dynamics_spot/spot.xml", "home", ()),
     "robotis_op3": ("robotis_op3/op3.xml", None, ()),
+    "berkeley_humanoid": ("berkeley_humanoid/berkeley_humanoid.xml", "home", ()),
     "agility_cassie": ("agility_cassie/cassie.xml", "home", ()),
     "agility_cassie, its leg linkages locked": ("agility_cassie/cassie.xml", "home", tuple(
         f"{side}-{joint}" for side in ("left", "right") for joint in
@@ -57,10 +58,10 @@ STEP = MOTION_STEP / 4
 
 
 def refusal(path: Path, keyframe: str | None, lock: tuple[str, ...]) -> str | None:
-    """None if the model imports; else its refusal's first line (and how many more)."""
+    """None if load_scene takes the model; else its refusal's first line (and how many more)."""
     try:
-        import_model(path, keyframe, lock=list(lock))
-    except ModelError as exc:
+        load_scene(path, keyframe, lock=list(lock))
+    except SceneError as exc:
         more = f" (+{len(exc.errors) - 1} more)" if len(exc.errors) > 1 else ""
         return exc.errors[0].split(": ", 1)[-1] + more
     return None
