@@ -41,6 +41,7 @@ MODELS = {
     "unitree_a1": ("unitree_a1/a1.xml", "home", ()),
     "anybotics_anymal_c": ("anybotics_anymal_c/anymal_c.xml", None, ()),
     "unitree_h1": ("unitree_h1/h1.xml", None, ()),
+    "unitree_g1": ("unitree_g1/g1.xml", None, ()),
     "boston_dynamics_spot": ("boston_dynamics_spot/spot.xml", "home", ()),
     "robotis_op3": ("robotis_op3/op3.xml", None, ()),
     "berkeley_humanoid": ("berkeley_humanoid/berkeley_humanoid.xml", "home", ()),
