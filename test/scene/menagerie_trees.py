@@ -43,6 +43,7 @@ MODELS = {
     "unitree_h1": ("unitree_h1/h1.xml", None, ()),
     "unitree_g1": ("unitree_g1/g1.xml", None, ()),
     "boston_dynamics_spot": ("boston_dynamics_spot/spot.xml", "home", ()),
+    "google_barkour_vb": ("google_barkour_vb/barkour_vb.xml", None, ()),
     "robotis_op3": ("robotis_op3/op3.xml", None, ()),
     "berkeley_humanoid": ("berkeley_humanoid/berkeley_humanoid.xml", "home", ()),
     "agility_cassie": ("agility_cassie/cassie.xml", "home", ()),
@@ -124,7 +125,8 @@ def with_home_rates(path: Path, keyframe: str, rng) -> Path:
 
 def without_textures(path: Path, tmp: Path) -> Path:
     """`path` with its textures, meshes and their geoms left out, as the import leaves them
-    out when their files are missing (judged_copy then names its bodies)."""
+    out when their files are missing (judged_copy then names its bodies), and no `/` in a
+    body's name."""
     with caught_warnings(mujoco):
         spec = mujoco.MjSpec.from_file(str(path))
     for texture in list(spec.textures):
@@ -135,6 +137,8 @@ def without_textures(path: Path, tmp: Path) -> Path:
         for geom in [g for g in spec.geoms if g.meshname == mesh.name]:
             spec.delete(geom)
         spec.delete(mesh)
+    for body in spec.bodies:  # probed() names its sites after the bodies (Barkour's "oak/")
+        body.name = body.name.replace("/", "_")
     out = tmp / f"untextured_{path.name}"
     out.write_text(spec.to_xml())
     return out
