@@ -795,6 +795,14 @@ class _Importer:
                                           f"{self.body(ends[0])} and {self.body(ends[1])} are welded into "
                                           f"one{by} (it moves nothing)")
                         continue
+                    loop = self.loop_joints(*ends)
+                    self.fail(f"equality {name!r}" if name else f"equality #{e}",
+                              f"equality constraints are not supported (an open tree only): it closes a loop "
+                              f"from {self.body(ends[0])} to {self.body(ends[1])}"
+                              + ("; --lock the joints of the loop to weld it (" + ", ".join(
+                                  repr(self.joint_name(j)) for j in loop) + ")"
+                                 if loop and all(self.lockable(j) for j in loop) else ""))
+                    continue
                 coupled = [int(j) for j in (m.eq_obj1id[e], m.eq_obj2id[e]) if j >= 0]
                 lockable = int(m.eq_type[e]) == int(mj.mjtEq.mjEQ_JOINT) and all(self.lockable(j) for j in coupled)
                 self.fail(f"equality {name!r}" if name else f"equality #{e}",
@@ -1096,6 +1104,25 @@ class _Importer:
             todo += [(c, here) for c in reversed(kids) if c not in rotors[g.root]]
         return order, parents, rotors
 
+    def loop_joints(self, a: int, b: int) -> list[int]:
+        """The joints of the loop a connect or weld equality closes between bodies `a` and `b`:
+        those of the bodies from each up to (not including) their nearest common ancestor, in
+        the model's order."""
+        m = self.m
+
+        def chain(body: int) -> list[int]:
+            out = [body]
+            while body:
+                body = int(m.body_parentid[body])
+                out.append(body)
+            return out
+
+        up_a, up_b = chain(a), chain(b)
+        common = next(x for x in up_a if x in up_b)
+        bodies = up_a[:up_a.index(common)] + up_b[:up_b.index(common)]
+        return sorted(j for x in bodies for j in range(int(m.body_jntadr[x]), int(m.body_jntadr[x])
+                                                         + int(m.body_jntnum[x])))
+
     def lockable(self, j: int) -> bool:
         """Whether --lock welds joint `j` (_lock_joints): a named one."""
         return bool(self.joint_name(j))
@@ -1123,17 +1150,24 @@ class _Importer:
     def scene_name(self, g: _Group, as_hinge: bool) -> str:
         """The scene name of a group (module docstring): joint first for hinges, slides and rotors;
         an unnamed joint of a body with several joints ``<body>_joint<i>`` (i its place in the
-        body), with ``_`` added until it is no name of the model's."""
+        body), with ``_`` added until it is no name of the model's. The name `base` is the
+        scene's own (a `parent` naming it is the base): a body or joint of that name takes its
+        other name, else ``base_`` (``_`` added likewise)."""
         joint, body = self.joint_name(g.joint), self.body_name(g.root)
+        m, obj = self.m, self.mj.mjtObj
+        taken = {self._name(obj.mjOBJ_JOINT, j) for j in range(m.njnt)} | \
+            {self._name(obj.mjOBJ_BODY, b) for b in range(m.nbody)}
         if not joint and g.root in self.frames:
-            m, obj = self.m, self.mj.mjtObj
-            taken = {self._name(obj.mjOBJ_JOINT, j) for j in range(m.njnt)} | \
-                {self._name(obj.mjOBJ_BODY, b) for b in range(m.nbody)}
             joint = f"{body or f'body{g.root}'}_joint{g.joint - int(m.body_jntadr[g.root])}"
             while joint in taken:
                 joint += "_"
         first = (joint, body) if as_hinge else (body, joint)
-        return next((n for n in first if n), f"joint{g.joint}" if as_hinge else f"body{g.root}")
+        name = next((n for n in first if n and n != BASE_PARENT), "")
+        if not name and BASE_PARENT in first:
+            name = BASE_PARENT + "_"
+            while name in taken:
+                name += "_"
+        return name or (f"joint{g.joint}" if as_hinge else f"body{g.root}")
 
     # --- the scene
     def run(self, keyframe: str | None) -> ImportedModel:

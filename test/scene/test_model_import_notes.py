@@ -142,7 +142,8 @@ def test_equalities_inside_one_welded_body_are_left_out(tmp_path):
     with pytest.raises(ModelError) as info:
         import_model(path, lock=FINGERS[1:])  # the knuckle moves: the loop is a constraint
     assert [e for e in info.value.errors if "equality" in e] == [
-        f"{path}: equality #0: equality constraints are not supported (an open tree only)"]
+        f"{path}: equality #0: equality constraints are not supported (an open tree only): it closes a loop "
+        "from body 'finger' to body 'knuckle'; --lock the joints of the loop to weld it ('knuckle_joint')"]
 
 
 # ------------------------------------------------------------- a keyframe's ctrl against its pose
