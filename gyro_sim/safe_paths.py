@@ -298,25 +298,48 @@ def exit_on_signals(line: Callable[[str], str], code: int,
         signal.signal(s, handler)
 
 
+#: seconds after which a signal whose exception a finalizer swallowed is delivered again
+REDELIVER_DELAY = 0.01
+
+
 @contextlib.contextmanager
 def raise_on_signals(signums: Iterable[int] = (signal.SIGINT, signal.SIGTERM)) -> Iterator[None]:
     """Inside the block, each of `signums` raises :class:`Interrupted` in the main thread (the
-    previous handlers are restored after). Elsewhere than in the main thread it does nothing."""
+    previous handlers are restored after). Elsewhere than in the main thread it does nothing.
+
+    Python runs a signal's handler wherever the main thread is, and that may be inside a
+    finalizer (a `__del__`, a weakref callback, run by the garbage collector at any
+    allocation: numba's and llvmlite's objects have them), which cannot raise: the interpreter
+    reports the exception as unraisable and goes on, and the signal would be lost. Here such an
+    interrupt is not reported: the same signal is delivered again, to the main thread, an
+    instant later (`_thread.interrupt_main`), where it raises."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
+    import _thread
+    import sys
 
     def handler(signum, frame):
         raise Interrupted(signum)
 
+    previous_hook = sys.unraisablehook
+
+    def unraisable(u):
+        if isinstance(u.exc_value, Interrupted):  # ours, swallowed by a finalizer: again
+            threading.Timer(REDELIVER_DELAY, _thread.interrupt_main, (u.exc_value.signum,)).start()
+            return
+        previous_hook(u)
+
     old = {}
     try:
+        sys.unraisablehook = unraisable
         for s in signums:
             old[s] = signal.signal(s, handler)
         yield
     finally:
         for s, h in old.items():
             signal.signal(s, h)
+        sys.unraisablehook = previous_hook
 
 
 def interrupt_behind(exc: BaseException) -> KeyboardInterrupt | None:

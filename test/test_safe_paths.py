@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import stat
 import subprocess
 import sys
@@ -411,3 +412,28 @@ def test_an_output_reserved_but_never_entered_is_removed_at_exit(tmp_path):
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert "KeyboardInterrupt" in r.stderr and "AssertionError" not in r.stderr, r.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+class _SignalledWhileFinalized:
+    """An object whose finalizer is running when SIGINT comes: the handler's exception is raised
+    inside `__del__`, where Python reports it as unraisable and goes on."""
+
+    def __del__(self):
+        signal.raise_signal(signal.SIGINT)  # the handler runs here, in the finalizer
+
+
+def test_a_signal_that_lands_in_a_finalizer_is_not_lost():
+    import time
+
+    from gyro_sim.safe_paths import Interrupted, raise_on_signals
+
+    hook = sys.unraisablehook
+    end = None
+    with pytest.raises(Interrupted):
+        with raise_on_signals():
+            _SignalledWhileFinalized()  # dropped at once: its finalizer runs now
+            end = time.monotonic() + 5.0
+            while time.monotonic() < end:  # the work goes on: the interrupt must reach it
+                time.sleep(0.001)
+    assert time.monotonic() < end, "the interrupt swallowed by the finalizer was lost"
+    assert sys.unraisablehook is hook
