@@ -67,8 +67,10 @@ PENDULUM_URDF = """<?xml version="1.0"?>
 </robot>
 """
 
-#: a wheel on a vertical hinge (gravity along the axis: no moment), inertia J about it
-WHEEL_J = 0.02
+#: a wheel on a vertical hinge (gravity along the axis: no moment), inertia J about it, and its
+#: start (rad/s): braked by 0.01 N m it slips 1.8 s to a tenth of it (the closed forms hold for
+#: any start; a faster one only makes the numpy runs longer)
+WHEEL_J, WHEEL_W0 = 0.02, 1.0
 WHEEL_MJCF = """<mujoco model="braked_wheel">
   <option gravity="0 0 -9.81" integrator="RK4" timestep="1e-4"/>
   <worldbody>
@@ -123,7 +125,7 @@ def braked(w0: float, coulomb: float, viscous: float, t: np.ndarray, J: float = 
 def test_a_braked_wheel_follows_the_closed_form(coulomb, viscous, tmp_path):
     """A wheel slowed by its frictionloss (and damping), gyro_sim against the closed form, until
     its speed is a tenth of the start: rate and angle to 1e-9."""
-    w0 = 3.0
+    w0 = WHEEL_W0
     path = write(tmp_path, "wheel.xml", WHEEL_MJCF.format(viscous=viscous, coulomb=coulomb, J=WHEEL_J, w0=w0))
     sim = Simulator(load_scene(path), integrator="dop853", rtol=1e-12, atol=1e-12, backend="numpy")
     stop = braked_until(w0, coulomb, viscous, 0.1 * w0)
@@ -147,7 +149,7 @@ def test_dry_friction_agrees_with_mujoco_while_the_joint_slips(tmp_path):
     with exactly the frictionloss, as gyro_sim's Coulomb friction does, until the speed nears
     zero (then MuJoCo's soft constraint and gyro_sim's stick_speed both smooth it their own
     way)."""
-    w0, coulomb, viscous = 3.0, 0.01, 0.004
+    w0, coulomb, viscous = WHEEL_W0, 0.01, 0.004
     path = write(tmp_path, "wheel.xml", WHEEL_MJCF.format(viscous=viscous, coulomb=coulomb, J=WHEEL_J, w0=w0))
     m = mujoco.MjModel.from_xml_path(str(path))
     m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
