@@ -112,8 +112,9 @@ COMMON_KERNELS = (("gyro_sim.dynamics.entry", "rhs_entry"), ("gyro_sim.integrato
                   ("gyro_sim.dynamics.outputs", "publication_kernel"),
                   C_KERNEL)
 #: the compiled loop the first step of each integrator runs ("fixed": rk4 on a soft scene, "auto": dop853)
+#: (gauss4s: its march, the state's map and the canonical field's C function, which has the field
+#: compiled in: `canonical_kernel`, the field's entry from Python, is not on its path)
 GAUSS4S = (("gyro_sim.integrators.gauss4.loop", "gauss_march"),
-           ("gyro_sim.dynamics.canonical_kernel", "canonical_kernel"),
            ("gyro_sim.dynamics.canonical_kernel", "state_kernel"),
            C_CANONICAL)
 FIRST_LOOPS = {

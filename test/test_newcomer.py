@@ -220,7 +220,7 @@ def test_cold_cache_is_announced_with_progress_then_silent(tmp_path):
     assert re.fullmatch(r"gyro_sim: compiling the dynamics once, about \d+ s( \(.*\))?; later starts load "
                         r"it from the cache", lines[0]), first.stderr
     compiled = [x for x in lines if x.startswith("  compiled ")]
-    assert any("rhs_kernel" in x for x in compiled) and len(compiled) >= 10, first.stderr
+    assert any("kernel._rhs " in x for x in compiled) and len(compiled) >= 10, first.stderr
     assert list(cache.rglob("*.nbi")), "nothing was cached"
     second = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env(NUMBA_CACHE_DIR=str(cache)),
                             capture_output=True, text=True, timeout=600)
