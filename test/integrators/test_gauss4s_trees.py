@@ -167,20 +167,10 @@ def test_tree_field_is_hamiltonian(case):
     """f = J grad H on a tree: J^T f' is symmetric, also off |q| = 1 and q . p = 0 (the subtree
     sums must make the momenta conjugate to the coordinates, or the Gauss method is not
     symplectic)."""
+    from test.integrators.test_gauss4s import field_hessian
+
     model = _model(case)
-    ode = ChainODE(model)
-    can = CanonicalChain(ode)
-    t = 0.3
-    z = can.momenta(t, initial_state(model))
-    z[can.i_quat] *= 1.3
-    z[can.i_pq] += 0.2 * z[can.i_quat]
-    nq = can.nq
-    D = np.empty((2 * nq, 2 * nq))
-    for j in range(2 * nq):
-        dz = np.zeros(can.size)
-        dz[j] = 1e-6 * max(1.0, abs(z[j]))
-        D[:, j] = (can.rhs(t, z + dz)[:2 * nq] - can.rhs(t, z - dz)[:2 * nq]) / (2 * dz[j])
-    hess = np.vstack([-D[nq:], D[:nq]])
+    hess = field_hessian(model, CanonicalChain(ChainODE(model)))
     assert np.abs(hess - hess.T).max() <= 1e-6 * np.abs(hess).max()
 
 
@@ -212,14 +202,10 @@ def test_compiled_tree_field_matches_numpy(case):
     model = _model(case)
     ode, fode = ChainODE(model), FastChainODE(model)
     hold_random(np.random.default_rng(3), model, ode, fode)
-    can, fc = CanonicalChain(ode), FastCanonicalChain(fode)
-    z = can.momenta(0.3, initial_state(model))
-    z[can.i_quat] *= 1.1
-    z[can.i_pq] += 0.05 * z[can.i_quat]
-    a, b = can.rhs(0.3, z), fc.rhs(0.3, z)
-    assert np.abs(a - b).max() <= 1e-12 * np.abs(a).max()
-    ya, yb = can.state(0.3, z), fc.state(0.3, z)
-    assert np.abs(ya - yb).max() <= 1e-12 * np.abs(ya).max()
+    from test.integrators.test_gauss4s import compiled_against_numpy
+
+    field, state = compiled_against_numpy(model, CanonicalChain(ode), FastCanonicalChain(fode))
+    assert field <= 1e-12 and state <= 1e-12
 
 
 @needs_numba
