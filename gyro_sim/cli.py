@@ -468,11 +468,11 @@ def _warnings_in_one_line(prog: str):
 
 
 class _ReaderMayLeave:
-    """Standard output (or error) whose reader may close it early (`gyro-sim import m.xml | head -1`): the
-    first write that finds the pipe closed sends this and every later write to the null device
-    (the descriptor itself, so that the interpreter's last flush finds nothing to complain
-    about), and the command goes on to its end and its own exit status: what it writes to
-    files is written, what it prints after that is dropped."""
+    """Standard output (or error) whose reader may close it early (`gyro-sim import m.xml |
+    head -1`): the first write that finds the pipe closed sends this and every later write to
+    the null device (the descriptor itself, so that the interpreter's last flush finds nothing
+    to complain about), and the command goes on to its end and its own exit status: what it
+    writes to files is written, what it prints after that is dropped."""
 
     def __init__(self, stream):
         self._stream = stream
@@ -481,8 +481,6 @@ class _ReaderMayLeave:
         try:
             return call(*args)
         except BrokenPipeError:
-            import os
-
             null = os.open(os.devnull, os.O_WRONLY)
             try:
                 os.dup2(null, self._stream.fileno())

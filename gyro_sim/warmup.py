@@ -676,9 +676,9 @@ def foreground_fill(integrator: str = DEFAULT_INTEGRATOR, out=None) -> bool:
     for: what it left, this compiles). False when there was nothing to do."""
     import fcntl
 
-    out = sys.stderr if out is None else out
-
     from gyro_sim.progress import Progress
+
+    out = sys.stderr if out is None else out
 
     with open(_lock_path(), "w") as lock:
         try:

@@ -186,7 +186,7 @@ def cmd_bench_steps(args) -> int:
             print(f"gyro-sim bench steps: --against {args.against}: no gyro_sim package in that directory",
                   file=sys.stderr)
             return 2
-        trees = {"this tree": this_tree(), "against": other}
+        trees["against"] = other
     for s in args.scenes or ():
         if Path(s).suffix and not Path(s).is_file():
             print(f"gyro-sim bench steps: --scenes {s}: no such file", file=sys.stderr)

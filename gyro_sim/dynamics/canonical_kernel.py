@@ -55,9 +55,9 @@ CHAIN_RECORDS = 3
 #: the subtree's momenta H, P, its external moment M and force F, the sum D of the next spherical
 #: bodies' p_rel' (the chain's sweeps carry them in scalars)
 TREE_BLOCKS = 6
-#: floats of `cwork` per velocity column (p_rel, p_rel', u) and per body (pi, then a tree's sums)
+#: floats of `cwork` per velocity column (p_rel, p_rel', u) and per body (pi; a tree's sums after)
 CWORK_PER_COLUMN = 3
-CWORK_PER_BODY = 3 + 3 * TREE_BLOCKS
+CWORK_PER_BODY = 3
 #: `cflags`: i_pr, i_kappa of z, the model's size, then the address of `canonical_kernel`
 #: compiled as a C function (`canonical_address`), which gauss4's compiled march calls
 #: (`canonical_call`) instead of compiling the field into itself
@@ -440,8 +440,10 @@ def state_kernel(t, z, y, model, data, inputs, zrow, cflags, cwork):
 
 
 def canonical_workspace(model, size: int) -> np.ndarray:
-    """`cwork`: the package's state (model.size), then CWORK_PER_COLUMN N + CWORK_PER_BODY n."""
-    return np.zeros(model.size + CWORK_PER_COLUMN * model.N + CWORK_PER_BODY * model.n)
+    """`cwork`: the package's state (model.size), then CWORK_PER_COLUMN N + CWORK_PER_BODY n, and
+    a tree's sums (TREE_BLOCKS blocks of 3 n)."""
+    per_body = CWORK_PER_BODY + (0 if model.chain else 3 * TREE_BLOCKS)
+    return np.zeros(model.size + CWORK_PER_COLUMN * model.N + per_body * model.n)
 
 
 class FastCanonicalChain(CanonicalChain):

@@ -734,6 +734,7 @@ class _Importer:
         self.max_torque: dict[int, float] = {}  # joint of one motor -> its actuatorfrcrange as max_torque
         self.locked: dict[str, float] = {}  # joints welded (gyro_sim.scene.mjcf._lock_joints)
         self.gear: float | None = None  # armatures as geared motors of this ratio (import_model)
+        self._model_names: set[str] | None = None  # every joint's and body's name (`_unused`)
 
     # --- names
     def _name(self, obj: Any, index: int) -> str:
@@ -1154,20 +1155,23 @@ class _Importer:
         scene's own (a `parent` naming it is the base): a body or joint of that name takes its
         other name, else ``base_`` (``_`` added likewise)."""
         joint, body = self.joint_name(g.joint), self.body_name(g.root)
-        m, obj = self.m, self.mj.mjtObj
-        taken = {self._name(obj.mjOBJ_JOINT, j) for j in range(m.njnt)} | \
-            {self._name(obj.mjOBJ_BODY, b) for b in range(m.nbody)}
         if not joint and g.root in self.frames:
-            joint = f"{body or f'body{g.root}'}_joint{g.joint - int(m.body_jntadr[g.root])}"
-            while joint in taken:
-                joint += "_"
+            joint = self._unused(f"{body or f'body{g.root}'}_joint{g.joint - int(self.m.body_jntadr[g.root])}")
         first = (joint, body) if as_hinge else (body, joint)
         name = next((n for n in first if n and n != BASE_PARENT), "")
         if not name and BASE_PARENT in first:
-            name = BASE_PARENT + "_"
-            while name in taken:
-                name += "_"
+            name = self._unused(BASE_PARENT + "_")
         return name or (f"joint{g.joint}" if as_hinge else f"body{g.root}")
+
+    def _unused(self, name: str) -> str:
+        """`name` with ``_`` added until it is no joint's or body's name in the model."""
+        if self._model_names is None:
+            m, obj = self.m, self.mj.mjtObj
+            self._model_names = ({self._name(obj.mjOBJ_JOINT, j) for j in range(m.njnt)}
+                                 | {self._name(obj.mjOBJ_BODY, b) for b in range(m.nbody)})
+        while name in self._model_names:
+            name += "_"
+        return name
 
     # --- the scene
     def run(self, keyframe: str | None) -> ImportedModel:
